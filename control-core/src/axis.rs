@@ -1,0 +1,330 @@
+//! One servo axis: the three cascaded loops, called once per base tick.
+
+use crate::current_loop::{CurrentLoop, CurrentLoopOutput};
+use crate::encoder::{EncoderTracker, EncoderUpdate};
+use crate::excitation::{InjectionPoint, SineGenerator};
+use crate::faults::Faults;
+use crate::params::{ParamError, Params};
+use crate::position_loop::PositionLoop;
+use crate::reference_frames::Dq;
+use crate::velocity_loop::VelocityLoop;
+use crate::TAU;
+
+/// Control mode.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum Mode {
+    /// Torque command drives the current loop directly.
+    #[default]
+    Torque,
+    /// Velocity command drives the velocity loop.
+    Velocity,
+    /// Position command drives the position loop.
+    Position,
+}
+
+impl Mode {
+    pub fn from_code(code: i32) -> Option<Self> {
+        match code {
+            0 => Some(Self::Torque),
+            1 => Some(Self::Velocity),
+            2 => Some(Self::Position),
+            _ => None,
+        }
+    }
+    pub fn code(self) -> i32 {
+        match self {
+            Self::Torque => 0,
+            Self::Velocity => 1,
+            Self::Position => 2,
+        }
+    }
+}
+
+/// Sensor readings for one tick.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct AxisInputs {
+    /// Phase currents a and b (A).
+    pub phase_currents: [f32; 2],
+    /// Raw, wrapping encoder counter.
+    pub encoder_count: i32,
+    /// DC-bus voltage (V).
+    pub bus_voltage: f32,
+}
+
+/// Set-points; which one is used depends on `mode`.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct Commands {
+    pub mode: Mode,
+    /// Position command in encoder counts.
+    pub position: i64,
+    /// Velocity command (rad/s, motor side).
+    pub velocity: f32,
+    /// Torque command (Nm).
+    pub torque: f32,
+}
+
+/// Inverter command for the next PWM period.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct PwmOutput {
+    pub duties: [f32; 3],
+    /// False when a fault has switched the bridge off.
+    pub enabled: bool,
+}
+
+/// Everything worth recording about one tick.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct Telemetry {
+    pub tick: u64,
+    pub mode: Mode,
+    pub position: i64,
+    pub velocity_estimate: f32,
+    pub velocity_reference: f32,
+    pub following_error: f32,
+    pub torque_command: f32,
+    pub current_reference: Dq,
+    pub current: Dq,
+    pub voltage: Dq,
+    pub voltage_saturated: bool,
+    pub faults: Faults,
+}
+
+#[derive(Clone, Copy, Debug)]
+pub struct Axis {
+    params: Params,
+    current_loop: CurrentLoop,
+    velocity_loop: VelocityLoop,
+    position_loop: PositionLoop,
+    encoder: EncoderTracker,
+    excitation: Option<(InjectionPoint, SineGenerator)>,
+    tick: u64,
+    mode: Option<Mode>,
+    position_at_velocity_tick: i64,
+    velocity_estimate: f32,
+    velocity_reference: f32,
+    torque_command: f32,
+    telemetry: Telemetry,
+}
+
+impl Axis {
+    /// Build an axis; refuses parameters that do not validate.
+    pub fn new(params: Params) -> Result<Self, ParamError> {
+        params.validate()?;
+        Ok(Self {
+            params,
+            current_loop: CurrentLoop::new(&params),
+            velocity_loop: VelocityLoop::new(&params),
+            position_loop: PositionLoop::default(),
+            encoder: EncoderTracker::default(),
+            excitation: None,
+            tick: 0,
+            mode: None,
+            position_at_velocity_tick: 0,
+            velocity_estimate: 0.0,
+            velocity_reference: 0.0,
+            torque_command: 0.0,
+            telemetry: Telemetry::default(),
+        })
+    }
+
+    pub fn params(&self) -> &Params {
+        &self.params
+    }
+
+    pub fn telemetry(&self) -> &Telemetry {
+        &self.telemetry
+    }
+
+    pub fn faults(&self) -> Faults {
+        self.telemetry.faults
+    }
+
+    /// Clear latched faults; the loops restart from rest.
+    pub fn clear_faults(&mut self) {
+        self.telemetry.faults = Faults::default();
+        self.current_loop.reset();
+        self.velocity_loop.reset();
+        self.position_loop.reset();
+        self.torque_command = 0.0;
+    }
+
+    /// Add a sine (amplitude in Nm or rad/s depending on the point) from the next tick on.
+    pub fn set_excitation(&mut self, point: InjectionPoint, sine: SineGenerator) {
+        self.excitation = (point != InjectionPoint::Off).then_some((point, sine));
+    }
+
+    /// One base tick: read sensors, run the loops that are due, return the PWM command.
+    pub fn step(&mut self, inputs: &AxisInputs, commands: &Commands) -> PwmOutput {
+        let p = self.params;
+        let mut faults = self.telemetry.faults;
+
+        if !inputs.phase_currents.iter().all(|x| x.is_finite())
+            || !inputs.bus_voltage.is_finite()
+            || !commands.velocity.is_finite()
+            || !commands.torque.is_finite()
+        {
+            faults.latch(Faults::NOT_FINITE);
+        }
+        if self.encoder.update(inputs.encoder_count, p.encoder_counts_per_rev) == EncoderUpdate::Jump {
+            faults.latch(Faults::ENCODER);
+        }
+        let [ia, ib] = inputs.phase_currents;
+        let ic = -(ia + ib);
+        if ia.abs().max(ib.abs()).max(ic.abs()) > p.limits.overcurrent {
+            faults.latch(Faults::OVERCURRENT);
+        }
+        if inputs.bus_voltage < p.limits.bus_undervoltage {
+            faults.latch(Faults::BUS_UNDERVOLTAGE);
+        }
+        if inputs.bus_voltage > p.limits.bus_overvoltage {
+            faults.latch(Faults::BUS_OVERVOLTAGE);
+        }
+
+        // Bumpless mode changes: the outer loops take over the torque now commanded.
+        if self.mode != Some(commands.mode) {
+            self.velocity_loop.preset(self.torque_command);
+            self.position_loop.reset();
+            if commands.mode != Mode::Position {
+                self.telemetry.following_error = 0.0;
+            }
+            self.mode = Some(commands.mode);
+        }
+
+        let excitation = match self.excitation.as_mut() {
+            Some((point, sine)) => (*point, sine.next()),
+            None => (InjectionPoint::Off, 0.0),
+        };
+
+        let vdiv = p.rates.velocity_divider as u64;
+        let pdiv = p.rates.position_divider as u64;
+        let position = self.encoder.position();
+        if self.tick % vdiv == 0 {
+            let counts = position - self.position_at_velocity_tick;
+            self.position_at_velocity_tick = position;
+            if self.tick > 0 {
+                self.velocity_estimate =
+                    counts as f32 * (TAU / p.encoder_counts_per_rev as f32) / p.rates.velocity_period();
+            }
+        }
+        if commands.mode == Mode::Position && self.tick % pdiv == 0 {
+            let out = self.position_loop.step(&p, commands.position, position);
+            self.velocity_reference = out.velocity_reference;
+            self.telemetry.following_error = out.following_error;
+            if out.following_error.abs() > p.limits.following_error {
+                faults.latch(Faults::FOLLOWING_ERROR);
+            }
+        }
+        if commands.mode != Mode::Torque && self.tick % vdiv == 0 {
+            if commands.mode == Mode::Velocity {
+                self.velocity_reference = commands.velocity;
+            }
+            let mut reference = self.velocity_reference;
+            if excitation.0 == InjectionPoint::VelocityCommand {
+                reference += excitation.1;
+            }
+            self.torque_command = self.velocity_loop.step(&p, reference, self.velocity_estimate);
+        }
+        if commands.mode == Mode::Torque {
+            self.torque_command =
+                commands.torque.clamp(-p.velocity.torque_limit, p.velocity.torque_limit);
+        }
+        let mut torque = self.torque_command;
+        if excitation.0 == InjectionPoint::TorqueCommand {
+            torque += excitation.1;
+        }
+
+        let iq_limit = p.current.max_current;
+        let reference = Dq { d: 0.0, q: (torque / p.motor.torque_constant()).clamp(-iq_limit, iq_limit) };
+        let theta_e = self.encoder.electrical_angle(p.encoder_counts_per_rev, p.motor.pole_pairs);
+        let omega_e = self.velocity_estimate * p.motor.pole_pairs as f32;
+        let out: CurrentLoopOutput = if faults.any() {
+            CurrentLoopOutput::default()
+        } else {
+            self.current_loop.step(&p, inputs.phase_currents, theta_e, omega_e, reference, inputs.bus_voltage)
+        };
+        if !(out.voltage.d.is_finite() && out.voltage.q.is_finite() && torque.is_finite()) {
+            faults.latch(Faults::NOT_FINITE);
+        }
+
+        let enabled = !faults.any();
+        if !enabled {
+            self.current_loop.reset();
+            self.velocity_loop.reset();
+            self.torque_command = 0.0;
+        }
+        self.telemetry = Telemetry {
+            tick: self.tick,
+            mode: commands.mode,
+            position,
+            velocity_estimate: self.velocity_estimate,
+            velocity_reference: self.velocity_reference,
+            following_error: self.telemetry.following_error,
+            torque_command: torque,
+            current_reference: reference,
+            current: out.current,
+            voltage: out.voltage,
+            voltage_saturated: out.saturated,
+            faults,
+        };
+        self.tick += 1;
+        PwmOutput { duties: if enabled { out.duties } else { [0.0; 3] }, enabled }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn inputs() -> AxisInputs {
+        AxisInputs { phase_currents: [0.0, 0.0], encoder_count: 0, bus_voltage: 48.0 }
+    }
+
+    #[test]
+    fn refuses_invalid_params() {
+        let mut p = Params::default();
+        p.motor.resistance = f32::NAN;
+        assert!(Axis::new(p).is_err());
+    }
+
+    #[test]
+    fn nan_input_latches_a_fault_and_switches_pwm_off() {
+        let mut axis = Axis::new(Params::default()).unwrap();
+        let mut i = inputs();
+        i.phase_currents[0] = f32::NAN;
+        let out = axis.step(&i, &Commands::default());
+        assert!(!out.enabled);
+        assert!(axis.faults().contains(Faults::NOT_FINITE));
+        // Latched: clean inputs do not clear it.
+        assert!(!axis.step(&inputs(), &Commands::default()).enabled);
+        axis.clear_faults();
+        assert!(axis.step(&inputs(), &Commands::default()).enabled);
+    }
+
+    #[test]
+    fn bus_limits_trip() {
+        let mut axis = Axis::new(Params::default()).unwrap();
+        let mut i = inputs();
+        i.bus_voltage = 70.0;
+        axis.step(&i, &Commands::default());
+        assert!(axis.faults().contains(Faults::BUS_OVERVOLTAGE));
+    }
+
+    #[test]
+    fn torque_command_becomes_q_current_reference() {
+        let mut axis = Axis::new(Params::default()).unwrap();
+        let c = Commands { mode: Mode::Torque, torque: 0.5, ..Default::default() };
+        axis.step(&inputs(), &c);
+        let kt = Params::default().motor.torque_constant();
+        assert!((axis.telemetry().current_reference.q - 0.5 / kt).abs() < 1e-6);
+    }
+
+    #[test]
+    fn mode_switch_from_torque_to_velocity_keeps_the_torque() {
+        let mut axis = Axis::new(Params::default()).unwrap();
+        let c = Commands { mode: Mode::Torque, torque: 0.3, ..Default::default() };
+        axis.step(&inputs(), &c);
+        axis.step(&inputs(), &c);
+        let c = Commands { mode: Mode::Velocity, velocity: 0.0, ..Default::default() };
+        axis.step(&inputs(), &c);
+        assert!((axis.telemetry().torque_command - 0.3).abs() < 1e-6);
+    }
+}

@@ -1,0 +1,81 @@
+//! Incremental-encoder tracking: a wrapping hardware counter turned into an unbounded
+//! position and the electrical angle.
+
+use crate::TAU;
+
+#[derive(Clone, Copy, Debug, Default)]
+pub struct EncoderTracker {
+    last_raw: i32,
+    position: i64,
+    started: bool,
+}
+
+/// What one encoder update found.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum EncoderUpdate {
+    Ok,
+    /// The count moved by more than half a revolution in one tick: a lost or corrupt encoder.
+    Jump,
+}
+
+impl EncoderTracker {
+    /// Accumulated position in counts since the first update (the first raw value is zero).
+    pub fn position(&self) -> i64 {
+        self.position
+    }
+
+    /// Feed the raw (wrapping 32-bit) counter value.
+    pub fn update(&mut self, raw: i32, counts_per_rev: u32) -> EncoderUpdate {
+        if !self.started {
+            self.started = true;
+            self.last_raw = raw;
+            self.position = raw as i64;
+            return EncoderUpdate::Ok;
+        }
+        let delta = raw.wrapping_sub(self.last_raw) as i64;
+        self.last_raw = raw;
+        self.position += delta;
+        if delta.unsigned_abs() > (counts_per_rev / 2) as u64 {
+            EncoderUpdate::Jump
+        } else {
+            EncoderUpdate::Ok
+        }
+    }
+
+    /// Electrical angle in `[0, 2π)` for `pole_pairs`, assuming count 0 is electrical zero.
+    pub fn electrical_angle(&self, counts_per_rev: u32, pole_pairs: u32) -> f32 {
+        let cpr = counts_per_rev as i64;
+        let within_rev = self.position.rem_euclid(cpr);
+        // (count · p) mod cpr stays exact in integers.
+        let e = (within_rev * pole_pairs as i64).rem_euclid(cpr);
+        TAU * (e as f32 / cpr as f32)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn accumulates_across_counter_wrap() {
+        let mut e = EncoderTracker::default();
+        e.update(i32::MAX - 5, 1 << 20);
+        assert_eq!(e.update(i32::MIN + 4, 1 << 20), EncoderUpdate::Ok);
+        assert_eq!(e.position(), i32::MAX as i64 + 5);
+    }
+
+    #[test]
+    fn flags_jumps_over_half_a_revolution() {
+        let mut e = EncoderTracker::default();
+        e.update(0, 1000);
+        assert_eq!(e.update(600, 1000), EncoderUpdate::Jump);
+    }
+
+    #[test]
+    fn electrical_angle_turns_pole_pairs_times_per_revolution() {
+        let mut e = EncoderTracker::default();
+        e.update(0, 1000);
+        e.update(125, 1000); // 1/8 rev, 4 pole pairs → half an electrical turn
+        assert!((e.electrical_angle(1000, 4) - core::f32::consts::PI).abs() < 1e-6);
+    }
+}

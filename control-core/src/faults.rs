@@ -1,0 +1,36 @@
+//! Latched fault flags. Any fault switches the PWM off until cleared.
+
+/// Bit set of latched faults.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct Faults(pub u32);
+
+impl Faults {
+    pub const OVERCURRENT: u32 = 1 << 0;
+    pub const BUS_UNDERVOLTAGE: u32 = 1 << 1;
+    pub const BUS_OVERVOLTAGE: u32 = 1 << 2;
+    pub const FOLLOWING_ERROR: u32 = 1 << 3;
+    pub const NOT_FINITE: u32 = 1 << 4;
+    pub const ENCODER: u32 = 1 << 5;
+
+    pub fn any(self) -> bool {
+        self.0 != 0
+    }
+    pub fn contains(self, bit: u32) -> bool {
+        self.0 & bit != 0
+    }
+    pub fn latch(&mut self, bit: u32) {
+        self.0 |= bit;
+    }
+    /// Names of the set bits, for logs and reports.
+    pub fn names(self) -> impl Iterator<Item = &'static str> {
+        const NAMES: [(u32, &str); 6] = [
+            (Faults::OVERCURRENT, "overcurrent"),
+            (Faults::BUS_UNDERVOLTAGE, "bus undervoltage"),
+            (Faults::BUS_OVERVOLTAGE, "bus overvoltage"),
+            (Faults::FOLLOWING_ERROR, "following error"),
+            (Faults::NOT_FINITE, "non-finite value in the loop"),
+            (Faults::ENCODER, "encoder jump"),
+        ];
+        NAMES.into_iter().filter(move |(b, _)| self.0 & b != 0).map(|(_, n)| n)
+    }
+}

@@ -1,0 +1,29 @@
+//! Servo control core: everything that runs inside the drive.
+//!
+//! `#![no_std]`, no allocation, `f32` arithmetic and `libm` for every transcendental
+//! function, so the host build (FMU, tests) and the Cortex-M4 build produce the same bits.
+//!
+//! The entry point is [`Axis::step`], called once per base tick (the current-loop period).
+//! The velocity loop runs every `velocity_divider` ticks and the position loop every
+//! `position_divider` ticks (defaults 16 kHz / 8 kHz / 4 kHz).
+#![no_std]
+#![forbid(unsafe_code)]
+
+pub mod axis;
+pub mod biquad;
+pub mod current_loop;
+pub mod encoder;
+pub mod excitation;
+pub mod faults;
+pub mod params;
+pub mod pi_controller;
+pub mod position_loop;
+pub mod reference_frames;
+pub mod velocity_loop;
+
+pub use axis::{Axis, AxisInputs, Commands, Mode, PwmOutput, Telemetry};
+pub use faults::Faults;
+pub use params::{ParamError, Params};
+
+/// 2π in f32.
+pub const TAU: f32 = core::f32::consts::TAU;

@@ -1,0 +1,336 @@
+//! Drive parameters and their validation.
+//!
+//! Every number the control core uses comes from [`Params`]; [`Params::validate`] checks them
+//! all before an [`crate::Axis`] is built, and reports the first offending field by name.
+
+use core::fmt;
+
+/// Motor data the controller needs (decoupling, torque constant, electrical angle).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct MotorModel {
+    pub pole_pairs: u32,
+    /// Stator resistance (Ω).
+    pub resistance: f32,
+    /// d-axis inductance (H).
+    pub ld: f32,
+    /// q-axis inductance (H).
+    pub lq: f32,
+    /// Permanent-magnet flux linkage (Wb).
+    pub flux_linkage: f32,
+}
+
+impl MotorModel {
+    /// Torque per q-axis ampere for id = 0: `1.5 · p · ψ` (Nm/A).
+    pub fn torque_constant(&self) -> f32 {
+        1.5 * self.pole_pairs as f32 * self.flux_linkage
+    }
+}
+
+/// Loop rates: the base tick and the dividers of the outer loops.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Rates {
+    /// Current-loop (base tick) frequency in Hz.
+    pub current_loop_hz: f32,
+    /// Velocity loop every this many base ticks.
+    pub velocity_divider: u32,
+    /// Position loop every this many base ticks (a whole multiple of `velocity_divider`).
+    pub position_divider: u32,
+}
+
+impl Rates {
+    pub fn tick_period(&self) -> f32 {
+        1.0 / self.current_loop_hz
+    }
+    pub fn velocity_period(&self) -> f32 {
+        self.velocity_divider as f32 / self.current_loop_hz
+    }
+    pub fn position_period(&self) -> f32 {
+        self.position_divider as f32 / self.current_loop_hz
+    }
+}
+
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct CurrentLoopGains {
+    /// Proportional gain (V/A), both axes.
+    pub kp: f32,
+    /// Integral gain (V/(A·s)), both axes.
+    pub ki: f32,
+    /// Feed-forward of the cross-coupling and back-EMF terms.
+    pub decoupling: bool,
+    /// Electrical-angle advance for the voltage output, in base ticks (compensates the one-tick
+    /// computation delay plus half a tick of PWM averaging: 1.5 is the usual value).
+    pub angle_advance_ticks: f32,
+    /// Largest current the loop may command (A, magnitude of the dq vector).
+    pub max_current: f32,
+}
+
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct VelocityLoopGains {
+    /// Proportional gain (Nm per rad/s).
+    pub kp: f32,
+    /// Integral gain (Nm per rad).
+    pub ki: f32,
+    /// Torque limit (Nm).
+    pub torque_limit: f32,
+}
+
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct PositionLoopGains {
+    /// Proportional gain (1/s: rad/s of velocity command per rad of error).
+    pub kp: f32,
+    /// Velocity feed-forward fraction, 0 to 1.
+    pub velocity_feedforward: f32,
+    /// Velocity command limit (rad/s).
+    pub velocity_limit: f32,
+}
+
+/// Optional torque-command filters; a frequency of 0 switches a filter off.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct TorqueFilters {
+    pub low_pass_hz: f32,
+    pub notch_hz: f32,
+    pub notch_q: f32,
+    /// Gain at the notch centre, 0 (full) to 1 (none).
+    pub notch_depth: f32,
+}
+
+/// Protective limits; crossing one latches a fault and switches the PWM off.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Limits {
+    /// Phase-current magnitude that trips (A).
+    pub overcurrent: f32,
+    pub bus_undervoltage: f32,
+    pub bus_overvoltage: f32,
+    /// Position following error that trips in position mode (rad).
+    pub following_error: f32,
+}
+
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Params {
+    pub motor: MotorModel,
+    /// Encoder counts per mechanical revolution.
+    pub encoder_counts_per_rev: u32,
+    pub rates: Rates,
+    pub current: CurrentLoopGains,
+    pub velocity: VelocityLoopGains,
+    pub position: PositionLoopGains,
+    pub filters: TorqueFilters,
+    pub limits: Limits,
+}
+
+/// Why a parameter set was refused.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum ParamError {
+    /// NaN or infinite.
+    NotFinite { field: &'static str },
+    /// Must be strictly positive.
+    NotPositive { field: &'static str, value: f32 },
+    /// Must lie in `[min, max]`.
+    OutOfRange { field: &'static str, value: f32, min: f32, max: f32 },
+    /// The position divider must be a whole multiple of the velocity divider.
+    RatesNotDivisible { velocity_divider: u32, position_divider: u32 },
+    /// A divider or count of zero.
+    Zero { field: &'static str },
+    /// A filter frequency at or above the Nyquist frequency of the rate it runs at.
+    AboveNyquist { field: &'static str, value: f32, nyquist: f32 },
+    /// Undervoltage limit not below overvoltage limit.
+    BusLimitsInverted { under: f32, over: f32 },
+}
+
+impl fmt::Display for ParamError {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match *self {
+            Self::NotFinite { field } => write!(f, "{field} is not a finite number"),
+            Self::NotPositive { field, value } => write!(f, "{field} must be > 0 (got {value})"),
+            Self::OutOfRange { field, value, min, max } => {
+                write!(f, "{field} = {value} is outside [{min}, {max}]")
+            }
+            Self::RatesNotDivisible { velocity_divider, position_divider } => write!(
+                f,
+                "position_divider ({position_divider}) must be a whole multiple of velocity_divider ({velocity_divider})"
+            ),
+            Self::Zero { field } => write!(f, "{field} must be at least 1"),
+            Self::AboveNyquist { field, value, nyquist } => {
+                write!(f, "{field} = {value} Hz is at or above the Nyquist frequency {nyquist} Hz")
+            }
+            Self::BusLimitsInverted { under, over } => write!(
+                f,
+                "bus_undervoltage ({under} V) must be below bus_overvoltage ({over} V)"
+            ),
+        }
+    }
+}
+
+fn finite(field: &'static str, v: f32) -> Result<f32, ParamError> {
+    if v.is_finite() { Ok(v) } else { Err(ParamError::NotFinite { field }) }
+}
+
+fn positive(field: &'static str, v: f32) -> Result<(), ParamError> {
+    if finite(field, v)? > 0.0 { Ok(()) } else { Err(ParamError::NotPositive { field, value: v }) }
+}
+
+fn in_range(field: &'static str, v: f32, min: f32, max: f32) -> Result<(), ParamError> {
+    let v = finite(field, v)?;
+    if v >= min && v <= max {
+        Ok(())
+    } else {
+        Err(ParamError::OutOfRange { field, value: v, min, max })
+    }
+}
+
+fn nonzero(field: &'static str, v: u32) -> Result<(), ParamError> {
+    if v == 0 { Err(ParamError::Zero { field }) } else { Ok(()) }
+}
+
+fn filter_frequency(field: &'static str, v: f32, rate: f32) -> Result<(), ParamError> {
+    in_range(field, v, 0.0, f32::MAX)?;
+    let nyquist = 0.5 * rate;
+    if v >= nyquist { Err(ParamError::AboveNyquist { field, value: v, nyquist }) } else { Ok(()) }
+}
+
+impl Default for Params {
+    /// A 48 V, 4-pole-pair servo motor of 0.1 Nm/A with a 20-bit encoder, tuned for about
+    /// 1.5 kHz current, 100 Hz velocity and 20 Hz position bandwidth on the default plant.
+    fn default() -> Self {
+        let motor = MotorModel {
+            pole_pairs: 4,
+            resistance: 0.3,
+            ld: 0.5e-3,
+            lq: 0.5e-3,
+            flux_linkage: 0.1 / 6.0,
+        };
+        let current_bw = core::f32::consts::TAU * 1500.0;
+        let velocity_bw = core::f32::consts::TAU * 100.0;
+        let inertia = 1.5e-4;
+        Params {
+            motor,
+            encoder_counts_per_rev: 1 << 20,
+            rates: Rates { current_loop_hz: 16_000.0, velocity_divider: 2, position_divider: 4 },
+            current: CurrentLoopGains {
+                kp: motor.lq * current_bw,
+                ki: motor.resistance * current_bw,
+                decoupling: true,
+                angle_advance_ticks: 1.5,
+                max_current: 20.0,
+            },
+            velocity: VelocityLoopGains {
+                kp: inertia * velocity_bw,
+                ki: inertia * velocity_bw * velocity_bw / 5.0,
+                torque_limit: 2.0,
+            },
+            position: PositionLoopGains {
+                kp: core::f32::consts::TAU * 20.0,
+                velocity_feedforward: 1.0,
+                velocity_limit: 300.0,
+            },
+            filters: TorqueFilters { low_pass_hz: 0.0, notch_hz: 0.0, notch_q: 1.0, notch_depth: 0.0 },
+            limits: Limits {
+                overcurrent: 30.0,
+                bus_undervoltage: 20.0,
+                bus_overvoltage: 60.0,
+                following_error: 1.0,
+            },
+        }
+    }
+}
+
+impl Params {
+    /// Check every field; the first problem found is returned.
+    pub fn validate(&self) -> Result<(), ParamError> {
+        let m = &self.motor;
+        nonzero("motor.pole_pairs", m.pole_pairs)?;
+        in_range("motor.pole_pairs", m.pole_pairs as f32, 1.0, 64.0)?;
+        positive("motor.resistance", m.resistance)?;
+        positive("motor.ld", m.ld)?;
+        positive("motor.lq", m.lq)?;
+        positive("motor.flux_linkage", m.flux_linkage)?;
+        nonzero("encoder_counts_per_rev", self.encoder_counts_per_rev)?;
+        in_range("encoder_counts_per_rev", self.encoder_counts_per_rev as f32, 4.0, (1u32 << 24) as f32)?;
+
+        let r = &self.rates;
+        positive("rates.current_loop_hz", r.current_loop_hz)?;
+        in_range("rates.current_loop_hz", r.current_loop_hz, 1000.0, 200_000.0)?;
+        nonzero("rates.velocity_divider", r.velocity_divider)?;
+        nonzero("rates.position_divider", r.position_divider)?;
+        if r.position_divider % r.velocity_divider != 0 {
+            return Err(ParamError::RatesNotDivisible {
+                velocity_divider: r.velocity_divider,
+                position_divider: r.position_divider,
+            });
+        }
+
+        let c = &self.current;
+        positive("current.kp", c.kp)?;
+        in_range("current.ki", c.ki, 0.0, f32::MAX)?;
+        in_range("current.angle_advance_ticks", c.angle_advance_ticks, 0.0, 4.0)?;
+        positive("current.max_current", c.max_current)?;
+
+        let v = &self.velocity;
+        positive("velocity.kp", v.kp)?;
+        in_range("velocity.ki", v.ki, 0.0, f32::MAX)?;
+        positive("velocity.torque_limit", v.torque_limit)?;
+
+        let p = &self.position;
+        positive("position.kp", p.kp)?;
+        in_range("position.velocity_feedforward", p.velocity_feedforward, 0.0, 1.0)?;
+        positive("position.velocity_limit", p.velocity_limit)?;
+
+        let f = &self.filters;
+        let velocity_rate = r.current_loop_hz / r.velocity_divider as f32;
+        filter_frequency("filters.low_pass_hz", f.low_pass_hz, velocity_rate)?;
+        filter_frequency("filters.notch_hz", f.notch_hz, velocity_rate)?;
+        positive("filters.notch_q", f.notch_q)?;
+        in_range("filters.notch_depth", f.notch_depth, 0.0, 1.0)?;
+
+        let l = &self.limits;
+        positive("limits.overcurrent", l.overcurrent)?;
+        positive("limits.bus_undervoltage", l.bus_undervoltage)?;
+        positive("limits.bus_overvoltage", l.bus_overvoltage)?;
+        if l.bus_undervoltage >= l.bus_overvoltage {
+            return Err(ParamError::BusLimitsInverted { under: l.bus_undervoltage, over: l.bus_overvoltage });
+        }
+        positive("limits.following_error", l.following_error)?;
+        Ok(())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn defaults_are_valid() {
+        assert_eq!(Params::default().validate(), Ok(()));
+    }
+
+    #[test]
+    fn each_kind_of_bad_value_is_named() {
+        let mut p = Params::default();
+        p.velocity.kp = f32::NAN;
+        assert_eq!(p.validate(), Err(ParamError::NotFinite { field: "velocity.kp" }));
+
+        let mut p = Params::default();
+        p.motor.ld = -1e-3;
+        assert!(matches!(p.validate(), Err(ParamError::NotPositive { field: "motor.ld", .. })));
+
+        let mut p = Params::default();
+        p.rates.position_divider = 5;
+        assert!(matches!(p.validate(), Err(ParamError::RatesNotDivisible { .. })));
+
+        let mut p = Params::default();
+        p.rates.velocity_divider = 0;
+        assert_eq!(p.validate(), Err(ParamError::Zero { field: "rates.velocity_divider" }));
+
+        let mut p = Params::default();
+        p.filters.notch_hz = 4000.0;
+        assert!(matches!(p.validate(), Err(ParamError::AboveNyquist { .. })));
+
+        let mut p = Params::default();
+        p.limits.bus_undervoltage = 70.0;
+        assert!(matches!(p.validate(), Err(ParamError::BusLimitsInverted { .. })));
+
+        let mut p = Params::default();
+        p.position.velocity_feedforward = 1.5;
+        assert!(matches!(p.validate(), Err(ParamError::OutOfRange { .. })));
+    }
+}
