@@ -199,27 +199,26 @@ impl Default for Params {
             lq: 0.5e-3,
             flux_linkage: 0.1 / 6.0,
         };
-        let current_bw = core::f32::consts::TAU * 1500.0;
-        let velocity_bw = core::f32::consts::TAU * 100.0;
-        let inertia = 1.5e-4;
+        // Gains (rounded): current kp = Lq·ωc, ki = R·ωc with ωc = 2π·1500 rad/s; velocity
+        // kp = J·ωv, ki = J·ωv²/5 with J = 1.5e-4 kg·m², ωv = 2π·100 rad/s; position 2π·20 1/s.
         Params {
             motor,
             encoder_counts_per_rev: 1 << 20,
             rates: Rates { current_loop_hz: 16_000.0, velocity_divider: 2, position_divider: 4 },
             current: CurrentLoopGains {
-                kp: motor.lq * current_bw,
-                ki: motor.resistance * current_bw,
+                kp: 4.7124,
+                ki: 2827.4,
                 decoupling: true,
                 angle_advance_ticks: 1.5,
                 max_current: 20.0,
             },
             velocity: VelocityLoopGains {
-                kp: inertia * velocity_bw,
-                ki: inertia * velocity_bw * velocity_bw / 5.0,
+                kp: 0.0942,
+                ki: 11.84,
                 torque_limit: 2.0,
             },
             position: PositionLoopGains {
-                kp: core::f32::consts::TAU * 20.0,
+                kp: 125.7,
                 velocity_feedforward: 1.0,
                 velocity_limit: 300.0,
             },

@@ -1,0 +1,576 @@
+//! The FMI 3.0 model: variables, parameter mapping and the co-simulation step.
+//!
+//! Parameters are grouped in three children (`ctrl.*`, `plant.*`, `excitation.*`); their
+//! start values are the control core's and the plant's defaults (a unit test keeps them equal).
+//! All parameters are `fixed`: changing one after initialisation is refused and undone.
+
+use std::panic::{catch_unwind, AssertUnwindSafe};
+
+use control_core::excitation::InjectionPoint;
+use control_core::params::{
+    CurrentLoopGains, Limits, MotorModel, PositionLoopGains, Rates, TorqueFilters, VelocityLoopGains,
+};
+use control_core::{Mode, Params};
+use fmi::fmi3::{Fmi3Error, Fmi3Res, Fmi3Status};
+use fmi_export::fmi3::{CSDoStepResult, Context, DefaultLoggingCategory, UserModel};
+use fmi_export::FmuModel;
+
+use crate::plant::PlantParams;
+use crate::simulation::{AxisSimulation, ExcitationConfig, SimulationConfig, UserInputs};
+
+/// Declares a group of fixed parameters whose `Default` is the start values written into the
+/// model description, so an instance (and `fmi3Reset`) starts from exactly those values.
+macro_rules! parameter_group {
+    ($name:ident { $( $(#[doc = $doc:literal])* $field:ident : $ty:ty = $start:literal, )* }) => {
+        #[derive(FmuModel, Debug, Clone, PartialEq)]
+        #[model()]
+        pub struct $name {
+            $(
+                $(#[doc = $doc])*
+                #[variable(causality = Parameter, variability = Fixed, start = $start)]
+                pub $field: $ty,
+            )*
+        }
+
+        impl Default for $name {
+            fn default() -> Self {
+                Self { $( $field: $start, )* }
+            }
+        }
+    };
+}
+
+// Controller parameters (the drive's own settings).
+parameter_group! {
+    ControllerParameters {
+        /// Current-loop (base tick) rate
+        current_loop_hz: f64 = 16000.0,
+        /// Velocity loop every this many base ticks
+        velocity_divider: i32 = 2,
+        /// Position loop every this many base ticks (multiple of velocity_divider)
+        position_divider: i32 = 4,
+        /// Current-loop proportional gain
+        current_kp: f64 = 4.7124,
+        /// Current-loop integral gain
+        current_ki: f64 = 2827.4,
+        /// Cross-coupling and back-EMF feed-forward on
+        decoupling: bool = true,
+        /// Electrical-angle advance of the voltage output, in base ticks
+        angle_advance_ticks: f64 = 1.5,
+        /// Largest commanded current magnitude
+        max_current: f64 = 20.0,
+        /// Velocity-loop proportional gain
+        velocity_kp: f64 = 0.0942,
+        /// Velocity-loop integral gain
+        velocity_ki: f64 = 11.84,
+        /// Torque limit
+        torque_limit: f64 = 2.0,
+        /// Position-loop gain
+        position_kp: f64 = 125.7,
+        /// Velocity feed-forward fraction
+        velocity_feedforward: f64 = 1.0,
+        /// Velocity command limit
+        velocity_limit: f64 = 300.0,
+        /// Torque-command low-pass cut-off (0 = off)
+        low_pass_hz: f64 = 0.0,
+        /// Torque-command notch centre (0 = off)
+        notch_hz: f64 = 0.0,
+        /// Notch quality factor
+        notch_q: f64 = 1.0,
+        /// Notch gain at the centre (0 = full notch)
+        notch_depth: f64 = 0.0,
+        /// Phase current that trips the overcurrent fault
+        overcurrent: f64 = 30.0,
+        /// Bus voltage below which the drive trips
+        bus_undervoltage: f64 = 20.0,
+        /// Bus voltage above which the drive trips
+        bus_overvoltage: f64 = 60.0,
+        /// Following error that trips in position mode
+        following_error_limit: f64 = 1.0,
+    }
+}
+
+// Motor, mechanics, encoder and sensor parameters of the simulated machine.
+parameter_group! {
+    PlantParameters {
+        /// Motor pole pairs
+        pole_pairs: i32 = 4,
+        /// Stator resistance
+        resistance: f64 = 0.3,
+        /// d-axis inductance
+        ld: f64 = 0.0005,
+        /// q-axis inductance
+        lq: f64 = 0.0005,
+        /// Permanent-magnet flux linkage
+        flux_linkage: f64 = 0.016666666666666666,
+        /// DC-bus voltage
+        bus_voltage: f64 = 48.0,
+        /// Motor (rotor) inertia
+        motor_inertia: f64 = 5.0e-5,
+        /// Load inertia
+        load_inertia: f64 = 1.0e-4,
+        /// Shaft stiffness
+        shaft_stiffness: f64 = 88.83,
+        /// Shaft damping
+        shaft_damping: f64 = 0.009425,
+        /// Motor-side Coulomb friction
+        motor_coulomb: f64 = 0.01,
+        /// Motor-side viscous friction
+        motor_viscous: f64 = 1.0e-5,
+        /// Load-side Coulomb friction
+        load_coulomb: f64 = 0.02,
+        /// Load-side viscous friction
+        load_viscous: f64 = 2.0e-5,
+        /// Velocity scale of the smoothed Coulomb friction
+        coulomb_velocity: f64 = 0.05,
+        /// Encoder counts per motor revolution
+        encoder_counts_per_rev: i32 = 1048576,
+        /// Phase-current sensor noise (standard deviation; 0 = off)
+        current_noise_std: f64 = 0.0,
+        /// Machine-end accelerometer noise (standard deviation; 0 = off)
+        acceleration_noise_std: f64 = 0.0,
+        /// Seed of the sensor noise
+        noise_seed: i32 = 1,
+        /// RK4 sub-steps per base tick
+        substeps: i32 = 4,
+    }
+}
+
+// A sine added inside the drive at the loop rate.
+parameter_group! {
+    ExcitationParameters {
+        /// 0 off, 1 torque command (Nm), 2 velocity command (rad/s)
+        point: i32 = 0,
+        /// Amplitude (Nm or rad/s)
+        amplitude: f64 = 0.0,
+        /// Frequency
+        frequency: f64 = 0.0,
+    }
+}
+
+#[derive(Clone, Debug, PartialEq)]
+struct AppliedParameters {
+    ctrl: ControllerParameters,
+    plant: PlantParameters,
+    excitation: ExcitationParameters,
+}
+
+/// One servo axis: control core (current, velocity, position loops) driving a PMSM with a
+/// two-inertia load.
+#[derive(FmuModel, Default)]
+#[model(model_exchange = false, co_simulation = true, user_model = false)]
+pub struct ServoAxis {
+    #[child(prefix = "ctrl")]
+    pub ctrl: ControllerParameters,
+    #[child(prefix = "plant")]
+    pub plant: PlantParameters,
+    #[child(prefix = "excitation")]
+    pub excitation: ExcitationParameters,
+
+    /// Control mode: 0 torque, 1 velocity, 2 position
+    #[variable(causality = Input, variability = Discrete, start = 2)]
+    pub mode: i32,
+    /// Motor-side position command
+    #[variable(causality = Input, variability = Discrete, start = 0.0)]
+    pub position_command: f64,
+    /// Motor velocity command
+    #[variable(causality = Input, variability = Discrete, start = 0.0)]
+    pub velocity_command: f64,
+    /// Torque command (torque mode)
+    #[variable(causality = Input, variability = Discrete, start = 0.0)]
+    pub torque_command: f64,
+    /// External torque on the load
+    #[variable(causality = Input, variability = Discrete, start = 0.0)]
+    pub disturbance_torque: f64,
+    /// A change from false to true clears latched faults
+    #[variable(causality = Input, variability = Discrete, start = false)]
+    pub fault_reset: bool,
+
+    /// Motor angle (true, not quantised)
+    #[variable(causality = Output, variability = Continuous)]
+    pub motor_position: f64,
+    /// Motor velocity (true)
+    #[variable(causality = Output, variability = Continuous)]
+    pub motor_velocity: f64,
+    /// Load (machine-end) angle
+    #[variable(causality = Output, variability = Continuous)]
+    pub load_position: f64,
+    /// Load (machine-end) velocity
+    #[variable(causality = Output, variability = Continuous)]
+    pub load_velocity: f64,
+    /// Load (machine-end) acceleration, as the accelerometer reads it (with its noise)
+    #[variable(causality = Output, variability = Continuous)]
+    pub load_acceleration: f64,
+    /// Measured q-axis current
+    #[variable(causality = Output, variability = Continuous)]
+    pub iq: f64,
+    /// Measured d-axis current
+    #[variable(causality = Output, variability = Continuous)]
+    pub id: f64,
+    /// Torque command into the current loop (after limits, filters and excitation)
+    #[variable(causality = Output, variability = Continuous)]
+    pub torque_command_out: f64,
+    /// Electromagnetic torque of the motor (true)
+    #[variable(causality = Output, variability = Continuous)]
+    pub electromagnetic_torque: f64,
+    /// Velocity estimated by the drive from the encoder
+    #[variable(causality = Output, variability = Continuous)]
+    pub velocity_estimate: f64,
+    /// Position command minus encoder position (position mode)
+    #[variable(causality = Output, variability = Continuous)]
+    pub following_error: f64,
+    /// Latched fault bits: 1 overcurrent, 2 undervoltage, 4 overvoltage, 8 following error, 16 non-finite, 32 encoder
+    #[variable(causality = Output, variability = Discrete)]
+    pub faults: i32,
+
+    sim: Option<AxisSimulation>,
+    applied: Option<AppliedParameters>,
+    last_fault_reset: bool,
+}
+
+impl ControllerParameters {
+    fn to_params(&self, motor: MotorModel, counts: u32) -> Params {
+        Params {
+            motor,
+            encoder_counts_per_rev: counts,
+            rates: Rates {
+                current_loop_hz: self.current_loop_hz as f32,
+                velocity_divider: self.velocity_divider.max(0) as u32,
+                position_divider: self.position_divider.max(0) as u32,
+            },
+            current: CurrentLoopGains {
+                kp: self.current_kp as f32,
+                ki: self.current_ki as f32,
+                decoupling: self.decoupling,
+                angle_advance_ticks: self.angle_advance_ticks as f32,
+                max_current: self.max_current as f32,
+            },
+            velocity: VelocityLoopGains {
+                kp: self.velocity_kp as f32,
+                ki: self.velocity_ki as f32,
+                torque_limit: self.torque_limit as f32,
+            },
+            position: PositionLoopGains {
+                kp: self.position_kp as f32,
+                velocity_feedforward: self.velocity_feedforward as f32,
+                velocity_limit: self.velocity_limit as f32,
+            },
+            filters: TorqueFilters {
+                low_pass_hz: self.low_pass_hz as f32,
+                notch_hz: self.notch_hz as f32,
+                notch_q: self.notch_q as f32,
+                notch_depth: self.notch_depth as f32,
+            },
+            limits: Limits {
+                overcurrent: self.overcurrent as f32,
+                bus_undervoltage: self.bus_undervoltage as f32,
+                bus_overvoltage: self.bus_overvoltage as f32,
+                following_error: self.following_error_limit as f32,
+            },
+        }
+    }
+}
+
+/// A negative value given for a count parameter.
+fn count(name: &str, v: i32) -> Result<u32, String> {
+    u32::try_from(v).map_err(|_| format!("{name} must not be negative (got {v})"))
+}
+
+impl ServoAxis {
+    fn config(&self) -> Result<SimulationConfig, String> {
+        let pp = &self.plant;
+        let pole_pairs = count("plant.pole_pairs", pp.pole_pairs)?;
+        let counts = count("plant.encoder_counts_per_rev", pp.encoder_counts_per_rev)?;
+        count("ctrl.velocity_divider", self.ctrl.velocity_divider)?;
+        count("ctrl.position_divider", self.ctrl.position_divider)?;
+        let motor = MotorModel {
+            pole_pairs,
+            resistance: pp.resistance as f32,
+            ld: pp.ld as f32,
+            lq: pp.lq as f32,
+            flux_linkage: pp.flux_linkage as f32,
+        };
+        let plant = PlantParams {
+            pole_pairs,
+            resistance: pp.resistance,
+            ld: pp.ld,
+            lq: pp.lq,
+            flux_linkage: pp.flux_linkage,
+            bus_voltage: pp.bus_voltage,
+            motor_inertia: pp.motor_inertia,
+            load_inertia: pp.load_inertia,
+            shaft_stiffness: pp.shaft_stiffness,
+            shaft_damping: pp.shaft_damping,
+            motor_coulomb: pp.motor_coulomb,
+            motor_viscous: pp.motor_viscous,
+            load_coulomb: pp.load_coulomb,
+            load_viscous: pp.load_viscous,
+            coulomb_velocity: pp.coulomb_velocity,
+            encoder_counts_per_rev: counts,
+            current_noise_std: pp.current_noise_std,
+            acceleration_noise_std: pp.acceleration_noise_std,
+            noise_seed: pp.noise_seed as u32 as u64,
+            tick: 1.0 / self.ctrl.current_loop_hz,
+            substeps: count("plant.substeps", pp.substeps)?,
+        };
+        let point = InjectionPoint::from_code(self.excitation.point).ok_or_else(|| {
+            format!("excitation.point must be 0, 1 or 2 (got {})", self.excitation.point)
+        })?;
+        Ok(SimulationConfig {
+            control: self.ctrl.to_params(motor, counts),
+            plant,
+            excitation: ExcitationConfig {
+                point,
+                amplitude: self.excitation.amplitude as f32,
+                frequency_hz: self.excitation.frequency as f32,
+            },
+        })
+    }
+
+    fn applied_now(&self) -> AppliedParameters {
+        AppliedParameters {
+            ctrl: self.ctrl.clone(),
+            plant: self.plant.clone(),
+            excitation: self.excitation.clone(),
+        }
+    }
+
+    fn user_inputs(&self) -> Result<UserInputs, String> {
+        let mode = Mode::from_code(self.mode)
+            .ok_or_else(|| format!("mode must be 0 (torque), 1 (velocity) or 2 (position), got {}", self.mode))?;
+        for (name, v) in [
+            ("position_command", self.position_command),
+            ("velocity_command", self.velocity_command),
+            ("torque_command", self.torque_command),
+            ("disturbance_torque", self.disturbance_torque),
+        ] {
+            if !v.is_finite() {
+                return Err(format!("input {name} is not a finite number ({v})"));
+            }
+        }
+        // Encoder counts are i64 in the core; keep far from overflow.
+        if self.position_command.abs() > 1.0e9 {
+            return Err(format!("position_command {} rad is out of range (|x| <= 1e9)", self.position_command));
+        }
+        Ok(UserInputs {
+            mode,
+            position_command: self.position_command,
+            velocity_command: self.velocity_command,
+            torque_command: self.torque_command,
+            disturbance_torque: self.disturbance_torque,
+        })
+    }
+
+    fn update_outputs(&mut self) {
+        let Some(sim) = self.sim.as_ref() else { return };
+        let x = sim.plant.state;
+        let t = sim.telemetry();
+        self.motor_position = x.motor_angle;
+        self.motor_velocity = x.motor_velocity;
+        self.load_position = x.load_angle;
+        self.load_velocity = x.load_velocity;
+        self.load_acceleration = sim.plant.accelerometer;
+        self.iq = t.current.q as f64;
+        self.id = t.current.d as f64;
+        self.torque_command_out = t.torque_command as f64;
+        self.electromagnetic_torque = sim.plant.electromagnetic_torque;
+        self.velocity_estimate = t.velocity_estimate as f64;
+        self.following_error = t.following_error as f64;
+        self.faults = t.faults.0 as i32;
+    }
+
+    fn step(&mut self, current: f64, h: f64) -> Result<(), String> {
+        let Some(applied) = self.applied.clone() else {
+            return Err("do_step before a successful exit from initialization mode".into());
+        };
+        if applied != self.applied_now() {
+            let changed = describe_changes(&applied, &self.applied_now());
+            self.ctrl = applied.ctrl;
+            self.plant = applied.plant;
+            self.excitation = applied.excitation;
+            return Err(format!(
+                "fixed parameter(s) {changed} changed after initialization; the change was undone \
+                 (set parameters before fmi3ExitInitializationMode)"
+            ));
+        }
+        let inputs = self.user_inputs()?;
+        let sim = self.sim.as_mut().ok_or("model not initialized")?;
+        let period = sim.tick_period() * self.ctrl.position_divider as f64;
+        if !(h.is_finite() && h > 0.0) {
+            return Err(format!("communication step {h} s must be a positive number"));
+        }
+        let n = (h / sim.tick_period()).round();
+        let whole_periods = (h / period).round();
+        if whole_periods < 1.0 || (h - whole_periods * period).abs() > 1e-9 * period.max(h) {
+            return Err(format!(
+                "communication step {h} s is not a whole multiple of the position-loop period {period} s \
+                 (ctrl.position_divider / ctrl.current_loop_hz)"
+            ));
+        }
+        let expected_time = sim.ticks() as f64 * sim.tick_period();
+        if (current - expected_time).abs() > 0.5 * sim.tick_period() {
+            return Err(format!(
+                "current communication point {current} s does not match the model time {expected_time} s"
+            ));
+        }
+        if self.fault_reset && !self.last_fault_reset {
+            sim.axis.clear_faults();
+        }
+        self.last_fault_reset = self.fault_reset;
+        for _ in 0..n as u64 {
+            sim.tick(&inputs);
+        }
+        self.update_outputs();
+        Ok(())
+    }
+
+    fn report(&self, context: &dyn Context<Self>, message: &str) {
+        if context.logging_on(DefaultLoggingCategory::LogAll) {
+            context.log(Fmi3Status::from(Fmi3Error::Error), DefaultLoggingCategory::LogAll, format_args!("{message}"));
+        } else {
+            eprintln!("servo_axis: {message}");
+        }
+    }
+}
+
+fn describe_changes(before: &AppliedParameters, after: &AppliedParameters) -> String {
+    let a = format!("{before:?}");
+    let b = format!("{after:?}");
+    // Field-level diff of the Debug renderings: "name: value" pairs.
+    let fields = |s: &str| -> Vec<String> {
+        s.split([',', '{', '}']).map(|x| x.trim().to_string()).filter(|x| x.contains(':')).collect()
+    };
+    let (fa, fb) = (fields(&a), fields(&b));
+    let changed: Vec<String> = fb
+        .iter()
+        .zip(fa.iter())
+        .filter(|(x, y)| x != y)
+        .map(|(x, _)| x.split(':').next().unwrap_or("?").trim().to_string())
+        .collect();
+    changed.join(", ")
+}
+
+fn panic_message(p: Box<dyn std::any::Any + Send>) -> String {
+    p.downcast_ref::<&str>()
+        .map(|s| s.to_string())
+        .or_else(|| p.downcast_ref::<String>().cloned())
+        .unwrap_or_else(|| "unknown panic".into())
+}
+
+impl UserModel for ServoAxis {
+    type LoggingCategory = DefaultLoggingCategory;
+
+    fn configurate(&mut self, context: &dyn Context<Self>) -> Result<(), Fmi3Error> {
+        let result = catch_unwind(AssertUnwindSafe(|| -> Result<(), String> {
+            let config = self.config()?;
+            let sim = AxisSimulation::new(&config).map_err(|e| e.to_string())?;
+            self.sim = Some(sim);
+            self.applied = Some(self.applied_now());
+            self.last_fault_reset = self.fault_reset;
+            self.update_outputs();
+            Ok(())
+        }));
+        match result {
+            Ok(Ok(())) => Ok(()),
+            Ok(Err(msg)) => {
+                self.report(context, &format!("invalid parameters: {msg}"));
+                Err(Fmi3Error::Error)
+            }
+            Err(p) => {
+                self.report(context, &format!("internal error during initialization: {}", panic_message(p)));
+                Err(Fmi3Error::Error)
+            }
+        }
+    }
+
+    fn calculate_values(&mut self, _context: &dyn Context<Self>) -> Result<Fmi3Res, Fmi3Error> {
+        Ok(Fmi3Res::OK)
+    }
+
+    fn do_step(
+        &mut self,
+        context: &mut dyn Context<Self>,
+        current_communication_point: f64,
+        communication_step_size: f64,
+        _no_set_fmu_state_prior_to_current_point: bool,
+    ) -> Result<CSDoStepResult, Fmi3Error> {
+        let result = catch_unwind(AssertUnwindSafe(|| self.step(current_communication_point, communication_step_size)));
+        match result {
+            Ok(Ok(())) => {
+                let t = self.sim.as_ref().map(|s| s.ticks() as f64 * s.tick_period()).unwrap_or(0.0);
+                context.set_time(t);
+                Ok(CSDoStepResult::completed(t))
+            }
+            Ok(Err(msg)) => {
+                self.report(&*context, &msg);
+                Err(Fmi3Error::Error)
+            }
+            Err(p) => {
+                // The instance may be half-updated: drop it so no further step runs on it.
+                self.sim = None;
+                self.applied = None;
+                self.report(&*context, &format!("internal error in do_step, instance disabled: {}", panic_message(p)));
+                Err(Fmi3Error::Error)
+            }
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use fmi_export::fmi3::Model;
+
+    fn started() -> ServoAxis {
+        let mut m = ServoAxis::default();
+        m.set_start_values();
+        m
+    }
+
+    #[test]
+    fn start_values_are_the_core_and_plant_defaults() {
+        let m = started();
+        let config = m.config().unwrap();
+        let defaults = Params::default();
+        // f64 start values rounded to f32 must equal the core defaults exactly.
+        assert_eq!(config.control, defaults);
+        let mut plant = PlantParams::default();
+        plant.tick = config.plant.tick;
+        assert_eq!(config.plant, plant);
+    }
+
+    #[test]
+    fn step_size_must_be_a_whole_number_of_position_periods() {
+        let mut m = started();
+        m.sim = Some(AxisSimulation::new(&m.config().unwrap()).unwrap());
+        m.applied = Some(m.applied_now());
+        assert!(m.step(0.0, 0.0003).unwrap_err().contains("whole multiple"));
+        assert!(m.step(0.0, 0.00025).is_ok());
+        assert!(m.step(0.00025, 0.0005).is_ok());
+    }
+
+    #[test]
+    fn fixed_parameter_change_is_refused_and_undone() {
+        let mut m = started();
+        m.sim = Some(AxisSimulation::new(&m.config().unwrap()).unwrap());
+        m.applied = Some(m.applied_now());
+        m.ctrl.velocity_kp = 5.0;
+        let err = m.step(0.0, 0.00025).unwrap_err();
+        assert!(err.contains("velocity_kp"), "{err}");
+        assert_eq!(m.ctrl.velocity_kp, ControllerParameters { ..started().ctrl }.velocity_kp);
+    }
+
+    #[test]
+    fn bad_mode_and_nan_inputs_are_refused_without_advancing() {
+        let mut m = started();
+        m.sim = Some(AxisSimulation::new(&m.config().unwrap()).unwrap());
+        m.applied = Some(m.applied_now());
+        m.mode = 7;
+        assert!(m.step(0.0, 0.00025).unwrap_err().contains("mode"));
+        m.mode = 1;
+        m.velocity_command = f64::NAN;
+        assert!(m.step(0.0, 0.00025).unwrap_err().contains("velocity_command"));
+        assert_eq!(m.sim.as_ref().unwrap().ticks(), 0);
+    }
+
+}

@@ -1,0 +1,141 @@
+//! The closed loop of one axis: control core and plant, tick by tick.
+//!
+//! Order within a base tick (as on the drive): sample the sensors, run `Axis::step`, then
+//! let the plant evolve over the tick with the PWM computed in the previous tick (the duty
+//! registers are reloaded at the next PWM period: one tick of computation delay).
+
+use control_core::excitation::{InjectionPoint, SineGenerator};
+use control_core::{Axis, AxisInputs, Commands, Mode, ParamError, Params, PwmOutput, Telemetry};
+
+use crate::plant::{Plant, PlantError, PlantInputs, PlantParams};
+
+/// Sine excitation settings (see `control_core::excitation`).
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct ExcitationConfig {
+    pub point: InjectionPoint,
+    pub amplitude: f32,
+    pub frequency_hz: f32,
+}
+
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct SimulationConfig {
+    pub control: Params,
+    pub plant: PlantParams,
+    pub excitation: ExcitationConfig,
+}
+
+#[derive(Debug)]
+pub enum ConfigError {
+    Control(ParamError),
+    Plant(PlantError),
+    /// Controller and plant disagree on something both must share.
+    Mismatch(String),
+}
+
+impl std::fmt::Display for ConfigError {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            Self::Control(e) => write!(f, "controller parameter: {e}"),
+            Self::Plant(e) => write!(f, "{e}"),
+            Self::Mismatch(s) => f.write_str(s),
+        }
+    }
+}
+
+impl std::error::Error for ConfigError {}
+
+/// Inputs that the user (or the importer) sets between communication points.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct UserInputs {
+    pub mode: Mode,
+    /// Motor-side position command (rad).
+    pub position_command: f64,
+    pub velocity_command: f64,
+    pub torque_command: f64,
+    pub disturbance_torque: f64,
+}
+
+pub struct AxisSimulation {
+    pub axis: Axis,
+    pub plant: Plant,
+    pending: PwmOutput,
+    tick_period: f64,
+    ticks: u64,
+}
+
+impl AxisSimulation {
+    pub fn new(config: &SimulationConfig) -> Result<Self, ConfigError> {
+        let mut plant_params = config.plant;
+        plant_params.tick = 1.0 / config.control.rates.current_loop_hz as f64;
+        if config.control.encoder_counts_per_rev != plant_params.encoder_counts_per_rev {
+            return Err(ConfigError::Mismatch(format!(
+                "controller encoder resolution {} differs from the plant's {}",
+                config.control.encoder_counts_per_rev, plant_params.encoder_counts_per_rev
+            )));
+        }
+        let mut axis = Axis::new(config.control).map_err(ConfigError::Control)?;
+        let e = config.excitation;
+        if !(e.amplitude.is_finite() && e.frequency_hz.is_finite() && e.frequency_hz >= 0.0) {
+            return Err(ConfigError::Mismatch(format!(
+                "excitation amplitude {} / frequency {} Hz must be finite, frequency >= 0",
+                e.amplitude, e.frequency_hz
+            )));
+        }
+        if e.frequency_hz >= 0.5 * config.control.rates.current_loop_hz {
+            return Err(ConfigError::Mismatch(format!(
+                "excitation frequency {} Hz must be below half the loop rate ({} Hz)",
+                e.frequency_hz,
+                0.5 * config.control.rates.current_loop_hz
+            )));
+        }
+        axis.set_excitation(
+            e.point,
+            SineGenerator::new(e.amplitude, e.frequency_hz, config.control.rates.current_loop_hz, 0.0),
+        );
+        let plant = Plant::new(plant_params).map_err(ConfigError::Plant)?;
+        Ok(Self { axis, plant, pending: PwmOutput::default(), tick_period: plant_params.tick, ticks: 0 })
+    }
+
+    pub fn tick_period(&self) -> f64 {
+        self.tick_period
+    }
+
+    pub fn ticks(&self) -> u64 {
+        self.ticks
+    }
+
+    pub fn telemetry(&self) -> &Telemetry {
+        self.axis.telemetry()
+    }
+
+    /// Encoder counts for a motor-side angle in rad.
+    pub fn counts_for(&self, angle: f64) -> i64 {
+        (angle / std::f64::consts::TAU * self.axis.params().encoder_counts_per_rev as f64).round() as i64
+    }
+
+    /// One base tick.
+    pub fn tick(&mut self, u: &UserInputs) {
+        let m = self.plant.measure();
+        let inputs = AxisInputs {
+            phase_currents: [m.phase_currents[0] as f32, m.phase_currents[1] as f32],
+            encoder_count: m.encoder_count,
+            bus_voltage: m.bus_voltage as f32,
+        };
+        let commands = Commands {
+            mode: u.mode,
+            position: self.counts_for(u.position_command),
+            velocity: u.velocity_command as f32,
+            torque: u.torque_command as f32,
+        };
+        let pwm = self.axis.step(&inputs, &commands);
+        let applied = PlantInputs {
+            duties: self.pending.duties.map(|d| d as f64),
+            // A fault switches the bridge off at once, not one tick later.
+            bridge_enabled: self.pending.enabled && pwm.enabled,
+            disturbance_torque: u.disturbance_torque,
+        };
+        self.plant.advance(&applied, self.tick_period);
+        self.pending = pwm;
+        self.ticks += 1;
+    }
+}
