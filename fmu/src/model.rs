@@ -171,16 +171,16 @@ pub struct ServoAxis {
     #[variable(causality = Input, variability = Discrete, start = 2)]
     pub mode: i32,
     /// Motor-side position command
-    #[variable(causality = Input, variability = Discrete, start = 0.0)]
+    #[variable(causality = Input, variability = Continuous, start = 0.0)]
     pub position_command: f64,
     /// Motor velocity command
-    #[variable(causality = Input, variability = Discrete, start = 0.0)]
+    #[variable(causality = Input, variability = Continuous, start = 0.0)]
     pub velocity_command: f64,
     /// Torque command (torque mode)
-    #[variable(causality = Input, variability = Discrete, start = 0.0)]
+    #[variable(causality = Input, variability = Continuous, start = 0.0)]
     pub torque_command: f64,
     /// External torque on the load
-    #[variable(causality = Input, variability = Discrete, start = 0.0)]
+    #[variable(causality = Input, variability = Continuous, start = 0.0)]
     pub disturbance_torque: f64,
     /// A change from false to true clears latched faults
     #[variable(causality = Input, variability = Discrete, start = false)]
