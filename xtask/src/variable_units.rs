@@ -5,24 +5,27 @@
 
 use anyhow::{bail, Result};
 
-/// (unit name, SI base-unit exponents as XML attributes)
-const UNITS: &[(&str, &str)] = &[
-    ("rad", r#"rad="1""#),
-    ("rad/s", r#"s="-1" rad="1""#),
-    ("rad/s2", r#"s="-2" rad="1""#),
-    ("N.m", r#"kg="1" m="2" s="-2""#),
-    ("A", r#"A="1""#),
-    ("V", r#"kg="1" m="2" s="-3" A="-1""#),
-    ("Ohm", r#"kg="1" m="2" s="-3" A="-2""#),
-    ("V/(A.s)", r#"kg="1" m="2" s="-4" A="-2""#),
-    ("H", r#"kg="1" m="2" s="-2" A="-2""#),
-    ("Wb", r#"kg="1" m="2" s="-2" A="-1""#),
-    ("kg.m2", r#"kg="1" m="2""#),
-    ("N.m/rad", r#"kg="1" m="2" s="-2" rad="-1""#),
-    ("N.m.s/rad", r#"kg="1" m="2" s="-1" rad="-1""#),
-    ("Hz", r#"s="-1""#),
-    ("1/s", r#"s="-1""#),
-    ("s", r#"s="1""#),
+/// (unit name, SI base-unit exponents as XML attributes, declared type carrying the unit)
+///
+/// Variables reference their unit through a `Float64Type` (`declaredType`), the form both
+/// fmpy and the Rust importer (fmi-schema 0.8, which has no `unit` attribute on variables) read.
+const UNITS: &[(&str, &str, &str)] = &[
+    ("rad", r#"rad="1""#, "Angle"),
+    ("rad/s", r#"s="-1" rad="1""#, "AngularVelocity"),
+    ("rad/s2", r#"s="-2" rad="1""#, "AngularAcceleration"),
+    ("N.m", r#"kg="1" m="2" s="-2""#, "Torque"),
+    ("A", r#"A="1""#, "Current"),
+    ("V", r#"kg="1" m="2" s="-3" A="-1""#, "Voltage"),
+    ("Ohm", r#"kg="1" m="2" s="-3" A="-2""#, "Resistance"),
+    ("V/(A.s)", r#"kg="1" m="2" s="-4" A="-2""#, "CurrentIntegralGain"),
+    ("H", r#"kg="1" m="2" s="-2" A="-2""#, "Inductance"),
+    ("Wb", r#"kg="1" m="2" s="-2" A="-1""#, "MagneticFlux"),
+    ("kg.m2", r#"kg="1" m="2""#, "Inertia"),
+    ("N.m/rad", r#"kg="1" m="2" s="-2" rad="-1""#, "RotationalStiffness"),
+    ("N.m.s/rad", r#"kg="1" m="2" s="-1" rad="-1""#, "RotationalDamping"),
+    ("Hz", r#"s="-1""#, "Frequency"),
+    ("1/s", r#"s="-1""#, "Rate"),
+    ("s", r#"s="1""#, "Time"),
 ];
 
 /// (variable, unit or "" for none, min, max); None = unbounded.
@@ -121,7 +124,8 @@ pub fn annotate(xml: &str) -> Result<String> {
         out.push_str(&tail[..name_end + 1]);
         let is_float = kind == "Float64";
         if is_float && !unit.is_empty() {
-            out.push_str(&format!(r#" unit="{unit}""#));
+            let Some(&(_, _, ty)) = UNITS.iter().find(|u| u.0 == unit) else { bail!("unit {unit} of {name} is not in UNITS") };
+            out.push_str(&format!(r#" declaredType="{ty}""#));
             if !used_units.contains(&unit) {
                 used_units.push(unit);
             }
@@ -142,11 +146,24 @@ pub fn annotate(xml: &str) -> Result<String> {
     }
 
     let mut defs = String::from("  <UnitDefinitions>\n");
-    for (name, base) in UNITS.iter().filter(|u| used_units.contains(&u.0)) {
-        defs.push_str(&format!("    <Unit name=\"{}\">\n      <BaseUnit {base}/>\n    </Unit>\n", xml_escape(name)));
+    let mut types = String::from("<TypeDefinitions>\n");
+    for (name, base, ty) in UNITS.iter().filter(|u| used_units.contains(&u.0)) {
+        types.push_str(&format!("    <Float64Type name=\"{ty}\" unit=\"{}\"/>\n", xml_escape(name)));
+        if base.contains("A=") {
+            // fmi-schema 0.8 (the Rust importer) spells the ampere exponent `a` and rejects the
+            // standard's `A`; BaseUnit is optional, so these units are declared by name only.
+            defs.push_str(&format!("    <Unit name=\"{}\"/>\n", xml_escape(name)));
+        } else {
+            defs.push_str(&format!("    <Unit name=\"{}\">\n      <BaseUnit {base}/>\n    </Unit>\n", xml_escape(name)));
+        }
     }
     defs.push_str("  </UnitDefinitions>\n  ");
-    let anchor = ["<TypeDefinitions", "<LogCategories", "<DefaultExperiment", "<ModelVariables"]
+    types.push_str("  </TypeDefinitions>\n  ");
+    defs.push_str(&types);
+    if out.contains("<TypeDefinitions") {
+        bail!("modelDescription.xml already has TypeDefinitions; merging is not implemented");
+    }
+    let anchor = ["<LogCategories", "<DefaultExperiment", "<ModelVariables"]
         .iter()
         .filter_map(|a| out.find(a))
         .min();

@@ -1,0 +1,119 @@
+//! `servo bench fmu`: simulated seconds per wall-clock second for the default axis, through
+//! the Rust host and through fmpy, in one run.
+
+use std::path::{Path, PathBuf};
+use std::process::Command;
+use std::time::Instant;
+
+use anyhow::{bail, Context, Result};
+use serde::Serialize;
+
+use crate::fmu_runner::Fmu;
+use crate::paths::workspace_root;
+use crate::scenario::Scenario;
+
+#[derive(Clone, Debug, Serialize)]
+pub struct FmuBench {
+    pub simulated_seconds: f64,
+    pub communication_steps: usize,
+    pub rust_wall_seconds: f64,
+    pub rust_real_time_factor: f64,
+    pub fmpy_wall_seconds: Option<f64>,
+    pub fmpy_real_time_factor: Option<f64>,
+    /// Rust host real-time factor over fmpy's.
+    pub rust_over_fmpy: Option<f64>,
+}
+
+/// The benchmark scenario: default axis in velocity mode, a slow ramp up and down with a
+/// load disturbance, over `seconds` of simulated time.
+pub fn bench_scenario(seconds: f64) -> String {
+    format!(
+        r#"name = "bench_default_axis"
+description = "Default axis, velocity mode, steps up and down with a load disturbance"
+stop_time = {seconds:?}
+
+[[events]]
+time = 0.0
+mode = 1
+velocity_command = 0.0
+
+[[events]]
+time = {t1:?}
+velocity_command = 50.0
+
+[[events]]
+time = {t2:?}
+disturbance_torque = 0.1
+
+[[events]]
+time = {t3:?}
+velocity_command = -50.0
+"#,
+        t1 = grid(0.1 * seconds),
+        t2 = grid(0.4 * seconds),
+        t3 = grid(0.6 * seconds),
+    )
+}
+
+fn grid(t: f64) -> f64 {
+    let h = crate::scenario::DEFAULT_STEP;
+    (t / h).round() * h
+}
+
+/// Path of the project's Python (creates the venv on first use).
+pub fn python() -> Result<PathBuf> {
+    let script = workspace_root().join("scripts/python-env");
+    let out = Command::new(&script).output().with_context(|| format!("cannot run {}", script.display()))?;
+    if !out.status.success() {
+        bail!("{} failed:\n{}", script.display(), String::from_utf8_lossy(&out.stderr));
+    }
+    Ok(PathBuf::from(String::from_utf8_lossy(&out.stdout).trim()))
+}
+
+/// Run a scenario file through fmpy (tests/python/fmpy_run.py); returns the wall time.
+pub fn run_fmpy(fmu: &Path, scenario: &Path, csv: &Path) -> Result<f64> {
+    let timing = csv.with_extension("timing.json");
+    let script = workspace_root().join("tests/python/fmpy_run.py");
+    let status = Command::new(python()?)
+        .arg(&script)
+        .arg(fmu)
+        .arg(scenario)
+        .arg(csv)
+        .arg("--timing")
+        .arg(&timing)
+        .status()
+        .context("cannot start the fmpy runner")?;
+    if !status.success() {
+        bail!("fmpy run of {} failed ({status})", scenario.display());
+    }
+    let t: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(&timing)?)?;
+    t["wall_seconds"].as_f64().context("timing file without wall_seconds")
+}
+
+pub fn bench_fmu(fmu_path: &Path, out: &Path, seconds: f64, with_fmpy: bool, progress: impl FnMut(f64)) -> Result<FmuBench> {
+    std::fs::create_dir_all(out)?;
+    let scenario_path = out.join("bench_default_axis.toml");
+    std::fs::write(&scenario_path, bench_scenario(seconds))?;
+    let scenario = Scenario::load(&scenario_path)?;
+    let fmu = Fmu::load(fmu_path)?;
+    let start = Instant::now();
+    let trace = fmu.run(&scenario, progress)?;
+    let rust_wall = start.elapsed().as_secs_f64();
+    trace.write_csv(&out.join("bench_rust.csv"))?;
+    let fmpy_wall = if with_fmpy {
+        Some(run_fmpy(fmu_path, &scenario_path, &out.join("bench_fmpy.csv"))?)
+    } else {
+        None
+    };
+    let rust_rt = seconds / rust_wall;
+    let fmpy_rt = fmpy_wall.map(|w| seconds / w);
+    Ok(FmuBench {
+        simulated_seconds: seconds,
+        communication_steps: scenario.steps(),
+        rust_wall_seconds: rust_wall,
+        rust_real_time_factor: rust_rt,
+        fmpy_wall_seconds: fmpy_wall,
+        fmpy_real_time_factor: fmpy_rt,
+        rust_over_fmpy: fmpy_rt.map(|f| rust_rt / f),
+    })
+}

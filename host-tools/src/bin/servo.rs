@@ -1,0 +1,291 @@
+//! `servo`: experiments on the servo FMU (default) and, later, on a real drive.
+
+use std::path::{Path, PathBuf};
+use std::process::ExitCode;
+
+use anyhow::{bail, Context, Result};
+use clap::{Parser, Subcommand};
+use indicatif::{ProgressBar, ProgressStyle};
+
+use host_tools::bench;
+use host_tools::fmu_runner::{evaluate_checks, Fmu};
+use host_tools::paths::{default_fmu, default_out, workspace_root};
+use host_tools::plot::plot_signals;
+use host_tools::report::{write_html, ScenarioReport};
+use host_tools::scenario::Scenario;
+use host_tools::trace::{compare_exact, Trace};
+
+#[derive(Parser)]
+#[command(name = "servo", version, about = "Servo-drive toolkit: run experiments on the servo FMU, compare with fmpy, benchmark",
+    long_about = "Servo-drive toolkit.\n\nEvery command runs against the FMU the project builds \
+    (target/fmu/servo_axis.fmu, made by `cargo run -p xtask -- bundle`) unless --fmu says otherwise, \
+    writes its files into out/<command>/ unless --out says otherwise, prints figures as JSON with --json, \
+    and exits with status 1 when a check inside it fails.")]
+struct Cli {
+    #[command(subcommand)]
+    command: Command,
+}
+
+#[derive(clap::Args, Clone)]
+struct Common {
+    /// FMU to run (default: the one the project builds)
+    #[arg(long, global = true)]
+    fmu: Option<PathBuf>,
+    /// Output folder (default: out/<command>/)
+    #[arg(long, global = true)]
+    out: Option<PathBuf>,
+    /// Print machine-readable figures (JSON) on stdout instead of tables
+    #[arg(long, global = true)]
+    json: bool,
+}
+
+#[derive(Subcommand)]
+enum Command {
+    /// Run scenario files (TOML: parameters, input events, stop time, checks) on the FMU.
+    ///
+    /// Writes <name>.csv (all outputs at every communication step), <name>.svg (plot),
+    /// <name>.json (check results) and index.html. With --fmpy the same scenario also runs
+    /// through fmpy and the two traces must be identical bit for bit.
+    /// Without scenario arguments, runs every file in scenarios/.
+    Run {
+        scenarios: Vec<PathBuf>,
+        /// Also run each scenario through fmpy and demand identical outputs
+        #[arg(long)]
+        fmpy: bool,
+        #[command(flatten)]
+        common: Common,
+    },
+    /// Compare two trace CSVs bit for bit on their common columns.
+    Compare { a: PathBuf, b: PathBuf },
+    /// Benchmarks that print the figures the issues ask for.
+    #[command(subcommand)]
+    Bench(BenchCommand),
+}
+
+#[derive(Subcommand)]
+enum BenchCommand {
+    /// Simulated seconds per wall second, Rust host vs fmpy (default axis, 10 s simulated).
+    Fmu {
+        /// Simulated time (s)
+        #[arg(long, default_value_t = 10.0)]
+        seconds: f64,
+        /// Skip the fmpy half
+        #[arg(long)]
+        no_fmpy: bool,
+        /// Fail (exit 1) below this real-time factor through the Rust host
+        #[arg(long, default_value_t = 300.0)]
+        goal: f64,
+        #[command(flatten)]
+        common: Common,
+    },
+    /// Plant integration error: RK4 with the default sub-steps against ten times finer steps.
+    Plant {
+        #[command(flatten)]
+        common: Common,
+    },
+}
+
+fn progress_bar(label: &str, quiet: bool) -> ProgressBar {
+    if quiet {
+        return ProgressBar::hidden();
+    }
+    let pb = ProgressBar::new(1000);
+    pb.set_style(
+        ProgressStyle::with_template("{prefix:>22} [{bar:40}] {percent:>3}% {elapsed_precise}")
+            .unwrap()
+            .progress_chars("=> "),
+    );
+    pb.set_prefix(label.to_string());
+    pb
+}
+
+fn scenario_files(given: &[PathBuf]) -> Result<Vec<PathBuf>> {
+    if !given.is_empty() {
+        return Ok(given.to_vec());
+    }
+    let dir = workspace_root().join("scenarios");
+    let mut v: Vec<PathBuf> = std::fs::read_dir(&dir)
+        .with_context(|| format!("cannot list {}", dir.display()))?
+        .filter_map(|e| e.ok().map(|e| e.path()))
+        .filter(|p| p.extension().is_some_and(|x| x == "toml"))
+        .collect();
+    v.sort();
+    if v.is_empty() {
+        bail!("no scenario files in {}", dir.display());
+    }
+    Ok(v)
+}
+
+const DEFAULT_PLOT: [&str; 5] = ["motor_position", "motor_velocity", "load_velocity", "iq", "torque_command_out"];
+
+fn run(files: &[PathBuf], with_fmpy: bool, common: &Common) -> Result<bool> {
+    let fmu_path = common.fmu.clone().unwrap_or_else(default_fmu);
+    let out = common.out.clone().unwrap_or_else(|| default_out("run"));
+    std::fs::create_dir_all(&out).with_context(|| format!("cannot create {}", out.display()))?;
+    let fmu = Fmu::load(&fmu_path)?;
+    let mut all_ok = true;
+    let mut reports = Vec::new();
+    let mut summary = Vec::new();
+    for file in scenario_files(files)? {
+        let scenario = Scenario::load(&file)?;
+        let pb = progress_bar(&scenario.name, common.json);
+        let trace = fmu.run(&scenario, |f| pb.set_position((f * 1000.0) as u64))?;
+        pb.finish_and_clear();
+        let csv = out.join(format!("{}.csv", scenario.name));
+        trace.write_csv(&csv)?;
+        let checks = evaluate_checks(&scenario, &trace)?;
+        let mut fmpy_verdict = None;
+        let mut traces: Vec<(&str, &Trace)> = vec![("Rust host (fmi crate)", &trace)];
+        let fmpy_trace;
+        if with_fmpy {
+            let fmpy_csv = out.join(format!("{}.fmpy.csv", scenario.name));
+            bench::run_fmpy(&fmu_path, &file, &fmpy_csv)?;
+            fmpy_trace = Trace::read_csv(&fmpy_csv)?;
+            let verdict = match compare_exact(&trace, &fmpy_trace)? {
+                Ok(n) => Ok(format!("identical: {} rows × {} columns, bit for bit", trace.rows.len(), n)),
+                Err(m) => Err(format!(
+                    "differs: {} at row {} (t = {} s): Rust {:?} vs fmpy {:?}",
+                    m.column, m.row, trace.rows[m.row][0], m.left, m.right
+                )),
+            };
+            all_ok &= verdict.is_ok();
+            fmpy_verdict = Some(verdict);
+            traces.push(("fmpy", &fmpy_trace));
+        }
+        let signals: Vec<String> = if scenario.plot.is_empty() {
+            DEFAULT_PLOT.iter().map(|s| s.to_string()).collect()
+        } else {
+            scenario.plot.clone()
+        };
+        let svg = out.join(format!("{}.svg", scenario.name));
+        plot_signals(&svg, &format!("{}: {}", scenario.name, scenario.description), &traces, &signals)?;
+        let passed = checks.iter().all(|c| c.passed);
+        all_ok &= passed;
+        let json = serde_json::json!({
+            "scenario": scenario.name,
+            "passed": passed,
+            "checks": checks,
+            "fmpy": fmpy_verdict.as_ref().map(|v| match v { Ok(s) => serde_json::json!({"identical": true, "detail": s}), Err(s) => serde_json::json!({"identical": false, "detail": s}) }),
+            "csv": csv,
+            "plot": svg,
+        });
+        std::fs::write(out.join(format!("{}.json", scenario.name)), serde_json::to_string_pretty(&json)?)?;
+        if !common.json {
+            println!("{} — {}", scenario.name, scenario.description);
+            for c in &checks {
+                println!(
+                    "  [{}] {:<45} {:<16} observed {:>11.6} … {:<11.6} bounds {} … {}",
+                    if c.passed { "pass" } else { "FAIL" },
+                    c.description,
+                    c.signal,
+                    c.observed.0,
+                    c.observed.1,
+                    c.min.map_or("-inf".into(), |x| x.to_string()),
+                    c.max.map_or("+inf".into(), |x| x.to_string()),
+                );
+            }
+            if let Some(v) = &fmpy_verdict {
+                match v {
+                    Ok(s) => println!("  [pass] fmpy cross-check: {s}"),
+                    Err(s) => println!("  [FAIL] fmpy cross-check: {s}"),
+                }
+            }
+            println!("  → {} , {}", csv.display(), svg.display());
+        }
+        summary.push(json);
+        reports.push(ScenarioReport {
+            name: scenario.name.clone(),
+            description: scenario.description.clone(),
+            checks,
+            fmpy: fmpy_verdict,
+            plot_file: format!("{}.svg", scenario.name),
+            csv_file: format!("{}.csv", scenario.name),
+        });
+    }
+    let index = out.join("index.html");
+    write_html(
+        &index,
+        "Servo axis scenarios",
+        &format!("<p>FMU: <code>{}</code></p>", fmu_path.display()),
+        &reports,
+    )?;
+    if common.json {
+        println!("{}", serde_json::to_string_pretty(&summary)?);
+    } else {
+        println!("report: {}", index.display());
+    }
+    Ok(all_ok)
+}
+
+fn bench_fmu(seconds: f64, no_fmpy: bool, goal: f64, common: &Common) -> Result<bool> {
+    if !(seconds.is_finite() && seconds > 0.0) {
+        bail!("--seconds must be a positive number");
+    }
+    let fmu_path = common.fmu.clone().unwrap_or_else(default_fmu);
+    let out = common.out.clone().unwrap_or_else(|| default_out("bench"));
+    let pb = progress_bar("Rust host", common.json);
+    let r = bench::bench_fmu(&fmu_path, &out, seconds, !no_fmpy, |f| pb.set_position((f * 1000.0) as u64))?;
+    pb.finish_and_clear();
+    let ok = r.rust_real_time_factor >= goal;
+    if common.json {
+        println!("{}", serde_json::to_string_pretty(&serde_json::json!({"bench": "fmu", "result": r, "goal": goal, "passed": ok}))?);
+    } else {
+        println!("servo bench fmu — default axis, {} s simulated, {} communication steps", r.simulated_seconds, r.communication_steps);
+        println!("  Rust host (fmi crate): {:>8.3} s wall  → {:>8.1} x real time", r.rust_wall_seconds, r.rust_real_time_factor);
+        if let (Some(w), Some(f)) = (r.fmpy_wall_seconds, r.fmpy_real_time_factor) {
+            println!("  fmpy                 : {:>8.3} s wall  → {:>8.1} x real time", w, f);
+            println!("  ratio Rust / fmpy    : {:>8.2}", r.rust_over_fmpy.unwrap_or(f64::NAN));
+        }
+        println!("  goal ≥ {goal} x real time through the Rust host: {}", if ok { "met" } else { "NOT met" });
+    }
+    Ok(ok)
+}
+
+fn bench_plant(common: &Common) -> Result<bool> {
+    let r = host_tools::bench_plant::step_error()?;
+    if common.json {
+        println!("{}", serde_json::to_string_pretty(&r)?);
+    } else {
+        println!("servo bench plant — RK4, {} sub-steps per 62.5 µs tick vs {} (reference), {} s closed-loop velocity steps", r.substeps, r.reference_substeps, r.simulated_seconds);
+        for (name, err, scale) in &r.errors {
+            println!("  {name:<16} max |error| {err:>10.3e}  (signal peak {scale:.3e}, relative {:.2e})", err / scale);
+        }
+        println!("  largest relative error: {:.2e} (goal ≤ 1e-4): {}", r.worst_relative, if r.passed { "met" } else { "NOT met" });
+    }
+    Ok(r.passed)
+}
+
+fn main() -> ExitCode {
+    let cli = Cli::parse();
+    let result = match &cli.command {
+        Command::Run { scenarios, fmpy, common } => run(scenarios, *fmpy, common),
+        Command::Compare { a, b } => (|| {
+            let (ta, tb) = (Trace::read_csv(a)?, Trace::read_csv(b)?);
+            match compare_exact(&ta, &tb)? {
+                Ok(n) => {
+                    println!("identical: {} rows × {n} common columns, bit for bit", ta.rows.len());
+                    Ok(true)
+                }
+                Err(m) => {
+                    println!("differ: {} at row {}: {:?} vs {:?}", m.column, m.row, m.left, m.right);
+                    Ok(false)
+                }
+            }
+        })(),
+        Command::Bench(BenchCommand::Fmu { seconds, no_fmpy, goal, common }) => bench_fmu(*seconds, *no_fmpy, *goal, common),
+        Command::Bench(BenchCommand::Plant { common }) => bench_plant(common),
+    };
+    match result {
+        Ok(true) => ExitCode::SUCCESS,
+        Ok(false) => ExitCode::from(1),
+        Err(e) => {
+            eprintln!("error: {e:#}");
+            ExitCode::from(2)
+        }
+    }
+}
+
+#[allow(dead_code)]
+fn exists(p: &Path) -> bool {
+    p.exists()
+}

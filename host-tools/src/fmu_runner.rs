@@ -1,0 +1,239 @@
+//! Run a scenario on the FMU through the `fmi` crate (FMI 3.0 Co-Simulation import).
+
+use std::collections::BTreeMap;
+use std::path::Path;
+
+use anyhow::{anyhow, bail, Context, Result};
+use fmi::fmi3::import::Fmi3Import;
+use fmi::fmi3::instance::InstanceCS;
+use fmi::fmi3::{CoSimulation, Common, Fmi3Model, GetSet};
+use fmi::schema::fmi3::{Causality, VariableType};
+use fmi::traits::FmiImport;
+
+use crate::scenario::{Scenario, Value};
+use crate::trace::Trace;
+
+/// A variable of the model description.
+#[derive(Clone, Debug)]
+pub struct VariableInfo {
+    pub name: String,
+    pub vr: u32,
+    pub kind: Kind,
+    pub causality: Causality,
+}
+
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Kind {
+    Float64,
+    Int32,
+    Boolean,
+}
+
+/// A loaded FMU (unpacked once, instantiated per run).
+pub struct Fmu {
+    import: Fmi3Import,
+    variables: BTreeMap<String, VariableInfo>,
+}
+
+impl Fmu {
+    pub fn load(path: &Path) -> Result<Self> {
+        if !path.exists() {
+            bail!(
+                "FMU {} not found: build it with `cargo run -p xtask -- bundle` (or pass --fmu PATH)",
+                path.display()
+            );
+        }
+        let import: Fmi3Import =
+            fmi::import::from_path(path).map_err(|e| anyhow!("cannot import {}: {e}", path.display()))?;
+        let mut variables = BTreeMap::new();
+        for v in import.model_description().model_variables.iter_abstract() {
+            let kind = match v.data_type() {
+                VariableType::FmiFloat64 => Kind::Float64,
+                VariableType::FmiInt32 => Kind::Int32,
+                VariableType::FmiBoolean => Kind::Boolean,
+                _ => continue,
+            };
+            variables.insert(
+                v.name().to_string(),
+                VariableInfo { name: v.name().to_string(), vr: v.value_reference(), kind, causality: v.causality() },
+            );
+        }
+        Ok(Self { import, variables })
+    }
+
+    pub fn variable(&self, name: &str) -> Result<&VariableInfo> {
+        self.variables.get(name).ok_or_else(|| {
+            let close: Vec<&str> = self
+                .variables
+                .keys()
+                .filter(|k| k.contains(name) || name.contains(k.as_str()))
+                .map(String::as_str)
+                .take(5)
+                .collect();
+            anyhow!("the FMU has no variable `{name}`{}", if close.is_empty() { String::new() } else { format!(" (did you mean {close:?}?)") })
+        })
+    }
+
+    /// All outputs, in model-description order of value reference.
+    pub fn outputs(&self) -> Vec<&VariableInfo> {
+        let mut v: Vec<&VariableInfo> = self.variables.values().filter(|v| v.causality == Causality::Output).collect();
+        v.sort_by_key(|v| v.vr);
+        v
+    }
+
+    fn set(inst: &mut InstanceCS, var: &VariableInfo, value: Value) -> Result<()> {
+        let r = match (var.kind, value) {
+            (Kind::Float64, v) => inst.set_float64(&[var.vr], &[v.as_f64()]),
+            (Kind::Int32, Value::Int(i)) => {
+                let i = i32::try_from(i).map_err(|_| anyhow!("{} = {i} does not fit a 32-bit integer", var.name))?;
+                inst.set_int32(&[var.vr], &[i])
+            }
+            (Kind::Boolean, Value::Bool(b)) => inst.set_boolean(&[var.vr], &[b]),
+            (kind, v) => bail!("{} is {kind:?}; {v:?} is not a value of that type", var.name),
+        };
+        r.map(|_| ()).map_err(|e| anyhow!("the FMU refused {} = {value:?}: {e:?}", var.name))
+    }
+
+    fn get(inst: &mut InstanceCS, var: &VariableInfo) -> Result<f64> {
+        Ok(match var.kind {
+            Kind::Float64 => {
+                let mut v = [0.0];
+                inst.get_float64(&[var.vr], &mut v).map_err(|e| anyhow!("get {}: {e:?}", var.name))?;
+                v[0]
+            }
+            Kind::Int32 => {
+                let mut v = [0];
+                inst.get_int32(&[var.vr], &mut v).map_err(|e| anyhow!("get {}: {e:?}", var.name))?;
+                v[0] as f64
+            }
+            Kind::Boolean => {
+                let mut v = [false];
+                inst.get_boolean(&[var.vr], &mut v).map_err(|e| anyhow!("get {}: {e:?}", var.name))?;
+                v[0] as i32 as f64
+            }
+        })
+    }
+
+    /// Run `scenario`; `progress` is called with the fraction done.
+    pub fn run(&self, scenario: &Scenario, mut progress: impl FnMut(f64)) -> Result<Trace> {
+        let params: Vec<(&VariableInfo, Value)> = scenario
+            .parameters
+            .iter()
+            .map(|(n, v)| {
+                let var = self.variable(n)?;
+                if var.causality != Causality::Parameter {
+                    bail!("`{n}` is not a parameter of the FMU (it is {:?})", var.causality);
+                }
+                Ok((var, *v))
+            })
+            .collect::<Result<_>>()?;
+        let input_names = scenario.input_names();
+        let inputs: Vec<&VariableInfo> = input_names
+            .iter()
+            .map(|n| {
+                let var = self.variable(n)?;
+                if var.causality != Causality::Input {
+                    bail!("event sets `{n}`, which is not an input of the FMU (it is {:?})", var.causality);
+                }
+                Ok(var)
+            })
+            .collect::<Result<_>>()?;
+        let outputs = self.outputs();
+
+        let mut inst = self
+            .import
+            .instantiate_cs(&scenario.name, false, true, false, false, &[])
+            .map_err(|e| anyhow!("cannot instantiate the FMU: {e}"))?;
+        for (var, v) in &params {
+            Self::set(&mut inst, var, *v)?;
+        }
+        let h = scenario.step();
+        let n = scenario.steps();
+        inst.enter_initialization_mode(None, 0.0, Some(scenario.stop_time))
+            .map_err(|e| anyhow!("enter initialization mode failed: {e:?}"))?;
+        let apply = |inst: &mut InstanceCS, k: usize| -> Result<()> {
+            for (var, v) in inputs.iter().zip(scenario.inputs_at(k)) {
+                if let Some(v) = v {
+                    Self::set(inst, var, v)?;
+                }
+            }
+            Ok(())
+        };
+        apply(&mut inst, 0)?;
+        inst.exit_initialization_mode().map_err(|_| {
+            anyhow!("the FMU refused its parameters at initialization (its log above says why)")
+        })?;
+
+        let mut columns = vec!["time".to_string()];
+        columns.extend(outputs.iter().map(|v| v.name.clone()));
+        let mut trace = Trace::new(columns);
+        let record = |inst: &mut InstanceCS, t: f64, trace: &mut Trace| -> Result<()> {
+            let mut row = Vec::with_capacity(outputs.len() + 1);
+            row.push(t);
+            for v in &outputs {
+                row.push(Self::get(inst, v)?);
+            }
+            trace.rows.push(row);
+            Ok(())
+        };
+        record(&mut inst, 0.0, &mut trace)?;
+        let (mut ev, mut term, mut early, mut last) = (false, false, false, 0.0);
+        for k in 0..n {
+            let t = k as f64 * h;
+            apply(&mut inst, k)?;
+            inst.do_step(t, h, true, &mut ev, &mut term, &mut early, &mut last)
+                .map_err(|e| anyhow!("do_step at t = {t} s failed: {e:?} (the FMU log above says why)"))?;
+            record(&mut inst, (k + 1) as f64 * h, &mut trace)?;
+            if k % 256 == 0 {
+                progress(k as f64 / n as f64);
+            }
+        }
+        progress(1.0);
+        inst.terminate().ok();
+        Ok(trace)
+    }
+}
+
+/// Result of one check of a scenario.
+#[derive(Clone, Debug, serde::Serialize)]
+pub struct CheckResult {
+    pub signal: String,
+    pub description: String,
+    pub passed: bool,
+    /// Smallest and largest value of the signal in the window.
+    pub observed: (f64, f64),
+    pub min: Option<f64>,
+    pub max: Option<f64>,
+    pub window: (f64, f64),
+}
+
+pub fn evaluate_checks(scenario: &Scenario, trace: &Trace) -> Result<Vec<CheckResult>> {
+    let time = trace.column("time").context("trace has no time column")?;
+    let mut results = Vec::new();
+    for c in &scenario.checks {
+        let values = trace.column(&c.signal).with_context(|| format!("check: no signal `{}` in the result", c.signal))?;
+        let (from, to) = match c.at {
+            Some(at) => (at, at),
+            None => (c.from.unwrap_or(0.0), c.to.unwrap_or(scenario.stop_time)),
+        };
+        let h = scenario.step();
+        let idx: Vec<usize> = (0..time.len()).filter(|&i| time[i] >= from - 0.5 * h && time[i] <= to + 0.5 * h).collect();
+        if idx.is_empty() {
+            bail!("check on {}: no sample in [{from}, {to}] s", c.signal);
+        }
+        let lo = c.min.unwrap_or(f64::NEG_INFINITY);
+        let hi = c.max.unwrap_or(f64::INFINITY);
+        let observed = idx.iter().fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), &i| (a.min(values[i]), b.max(values[i])));
+        let passed = idx.iter().all(|&i| values[i] >= lo && values[i] <= hi);
+        results.push(CheckResult {
+            signal: c.signal.clone(),
+            description: c.description.clone().unwrap_or_default(),
+            passed,
+            observed,
+            min: c.min,
+            max: c.max,
+            window: (from, to),
+        });
+    }
+    Ok(results)
+}

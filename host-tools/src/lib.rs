@@ -1,0 +1,11 @@
+//! Host side of the servo toolkit: scenarios run against the FMU through FMI 3.0, traces,
+//! plots, reports and benchmarks. The `servo` binary is a thin CLI over this library.
+
+pub mod bench;
+pub mod bench_plant;
+pub mod fmu_runner;
+pub mod paths;
+pub mod plot;
+pub mod report;
+pub mod scenario;
+pub mod trace;

@@ -1,0 +1,217 @@
+//! Scenario files: parameters, input events over time, stop time and checks.
+//!
+//! ```toml
+//! name = "position_step"
+//! description = "1 rad position step on the default axis"
+//! stop_time = 0.3          # s, a whole number of steps
+//! step = 0.00025           # s, optional: communication step (default: position-loop period)
+//!
+//! [parameters]             # FMU parameters by name
+//! "ctrl.position_kp" = 125.7
+//!
+//! [[events]]               # inputs change at `time` and hold until the next event
+//! time = 0.0
+//! mode = 2
+//! [[events]]
+//! time = 0.01
+//! position_command = 1.0
+//!
+//! [[checks]]               # evaluated on the result; a failed check makes `servo` exit 1
+//! signal = "motor_position"
+//! at = 0.3                 # or `from`/`to` for a window
+//! min = 0.99
+//! max = 1.01
+//! ```
+
+use std::collections::BTreeMap;
+use std::path::Path;
+
+use anyhow::{bail, Context, Result};
+use serde::Deserialize;
+
+/// Value of a parameter or an input: a number, an integer or a boolean.
+#[derive(Clone, Copy, Debug, PartialEq, Deserialize)]
+#[serde(untagged)]
+pub enum Value {
+    Bool(bool),
+    Int(i64),
+    Float(f64),
+}
+
+impl Value {
+    pub fn as_f64(self) -> f64 {
+        match self {
+            Value::Bool(b) => b as i64 as f64,
+            Value::Int(i) => i as f64,
+            Value::Float(x) => x,
+        }
+    }
+}
+
+#[derive(Clone, Debug, Deserialize)]
+pub struct Event {
+    pub time: f64,
+    #[serde(flatten)]
+    pub inputs: BTreeMap<String, Value>,
+}
+
+#[derive(Clone, Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Check {
+    pub signal: String,
+    /// Evaluate at this time (the nearest sample).
+    pub at: Option<f64>,
+    /// Or over a window [from, to] (every sample must satisfy the bounds).
+    pub from: Option<f64>,
+    pub to: Option<f64>,
+    pub min: Option<f64>,
+    pub max: Option<f64>,
+    /// Optional text for reports.
+    pub description: Option<String>,
+}
+
+#[derive(Clone, Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Scenario {
+    pub name: String,
+    #[serde(default)]
+    pub description: String,
+    pub stop_time: f64,
+    pub step: Option<f64>,
+    #[serde(default)]
+    pub parameters: BTreeMap<String, Value>,
+    #[serde(default)]
+    pub events: Vec<Event>,
+    #[serde(default)]
+    pub checks: Vec<Check>,
+    /// Signals to plot (default: a standard set).
+    #[serde(default)]
+    pub plot: Vec<String>,
+}
+
+/// Default communication step: the position-loop period of the default parameters.
+pub const DEFAULT_STEP: f64 = 4.0 / 16_000.0;
+
+impl Scenario {
+    pub fn load(path: &Path) -> Result<Self> {
+        let text = std::fs::read_to_string(path).with_context(|| format!("cannot read scenario {}", path.display()))?;
+        let s: Scenario = toml::from_str(&text).with_context(|| format!("scenario {} is malformed", path.display()))?;
+        s.validate().with_context(|| format!("scenario {} is invalid", path.display()))?;
+        Ok(s)
+    }
+
+    pub fn step(&self) -> f64 {
+        self.step.unwrap_or(DEFAULT_STEP)
+    }
+
+    /// Number of communication steps (stop_time / step, which must be whole).
+    pub fn steps(&self) -> usize {
+        (self.stop_time / self.step()).round() as usize
+    }
+
+    pub fn validate(&self) -> Result<()> {
+        let h = self.step();
+        if !(h.is_finite() && h > 0.0) {
+            bail!("step must be a positive number of seconds (got {h})");
+        }
+        if !(self.stop_time.is_finite() && self.stop_time > 0.0) {
+            bail!("stop_time must be a positive number of seconds (got {})", self.stop_time);
+        }
+        let n = self.stop_time / h;
+        if (n - n.round()).abs() > 1e-6 {
+            bail!("stop_time {} s is not a whole number of steps of {h} s", self.stop_time);
+        }
+        for (name, v) in &self.parameters {
+            if !v.as_f64().is_finite() {
+                bail!("parameter {name} is not a finite number");
+            }
+        }
+        let mut last = f64::NEG_INFINITY;
+        for e in &self.events {
+            if !(e.time.is_finite() && e.time >= 0.0 && e.time <= self.stop_time) {
+                bail!("event time {} s is outside [0, stop_time = {}]", e.time, self.stop_time);
+            }
+            if e.time < last {
+                bail!("events must be in time order ({} s comes after {} s)", e.time, last);
+            }
+            let k = e.time / h;
+            if (k - k.round()).abs() > 1e-6 {
+                bail!("event time {} s is not on the communication grid (a multiple of {h} s)", e.time);
+            }
+            last = e.time;
+            if e.inputs.is_empty() {
+                bail!("event at {} s sets no input", e.time);
+            }
+            for (name, v) in &e.inputs {
+                if !v.as_f64().is_finite() {
+                    bail!("event at {} s: input {name} is not a finite number", e.time);
+                }
+            }
+        }
+        for c in &self.checks {
+            if c.at.is_none() && (c.from.is_none() || c.to.is_none()) {
+                bail!("check on {} needs `at` or both `from` and `to`", c.signal);
+            }
+            if c.min.is_none() && c.max.is_none() {
+                bail!("check on {} needs `min` and/or `max`", c.signal);
+            }
+        }
+        Ok(())
+    }
+
+    /// Every input any event sets, sorted by name.
+    pub fn input_names(&self) -> Vec<String> {
+        let mut names: Vec<String> = self.events.iter().flat_map(|e| e.inputs.keys().cloned()).collect();
+        names.sort();
+        names.dedup();
+        names
+    }
+
+    /// Input values in effect for the step starting at step index `k` (time `k·h`): the last
+    /// event at or before that time. Returns one value per name of [`input_names`](Self::input_names);
+    /// `None` while no event has set the input yet (the FMU's start value applies).
+    pub fn inputs_at(&self, k: usize) -> Vec<Option<Value>> {
+        let t = k as f64 * self.step();
+        let names = self.input_names();
+        let mut values = vec![None; names.len()];
+        for e in self.events.iter().filter(|e| e.time <= t + 1e-9 * self.step()) {
+            for (name, v) in &e.inputs {
+                let i = names.iter().position(|n| n == name).expect("name comes from the events");
+                values[i] = Some(*v);
+            }
+        }
+        values
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn parse(s: &str) -> Result<Scenario> {
+        let sc: Scenario = toml::from_str(s)?;
+        sc.validate()?;
+        Ok(sc)
+    }
+
+    #[test]
+    fn events_hold_until_the_next_one() {
+        let s = parse(
+            "name='x'\nstop_time=0.01\n[[events]]\ntime=0.0\nmode=1\n[[events]]\ntime=0.005\nvelocity_command=3.0\n",
+        )
+        .unwrap();
+        assert_eq!(s.input_names(), vec!["mode", "velocity_command"]);
+        assert_eq!(s.inputs_at(0), vec![Some(Value::Int(1)), None]);
+        assert_eq!(s.inputs_at(19), vec![Some(Value::Int(1)), None]);
+        assert_eq!(s.inputs_at(20), vec![Some(Value::Int(1)), Some(Value::Float(3.0))]);
+    }
+
+    #[test]
+    fn refuses_off_grid_events_and_fractional_stop_times() {
+        assert!(parse("name='x'\nstop_time=0.0101\n").is_err());
+        let e = parse("name='x'\nstop_time=0.01\n[[events]]\ntime=0.0001\nmode=1\n").unwrap_err();
+        assert!(e.to_string().contains("grid"), "{e}");
+        assert!(parse("name='x'\nstop_time=0.01\n[[events]]\ntime=0.02\nmode=1\n").is_err());
+        assert!(parse("name='x'\nstop_time=0.01\nbogus=1\n").is_err());
+    }
+}
