@@ -424,12 +424,11 @@ impl ServoAxis {
         Ok(())
     }
 
+    /// Log an error through the importer's logger and on stderr (many importers hide the
+    /// FMI log unless debug logging is on; a refused parameter must never go unexplained).
     fn report(&self, context: &dyn Context<Self>, message: &str) {
-        if context.logging_on(DefaultLoggingCategory::LogAll) {
-            context.log(Fmi3Status::from(Fmi3Error::Error), DefaultLoggingCategory::LogAll, format_args!("{message}"));
-        } else {
-            eprintln!("servo_axis: {message}");
-        }
+        context.log(Fmi3Status::from(Fmi3Error::Error), DefaultLoggingCategory::LogAll, format_args!("{message}"));
+        eprintln!("servo_axis: {message}");
     }
 }
 

@@ -1,0 +1,61 @@
+//! The `servo` binary as a user runs it: exit codes, outputs, error messages.
+
+use std::process::Command;
+
+use host_tools::paths::{default_fmu as fmu_path, workspace_root};
+
+fn servo() -> Command {
+    let mut c = Command::new(env!("CARGO_BIN_EXE_servo"));
+    c.current_dir(std::env::temp_dir());
+    c
+}
+
+fn tmp(name: &str) -> std::path::PathBuf {
+    let d = std::env::temp_dir().join(format!("servo-cli-{}-{name}", std::process::id()));
+    std::fs::create_dir_all(&d).unwrap();
+    d
+}
+
+#[test]
+fn run_writes_csv_plot_json_and_report() {
+    let out = tmp("run");
+    let scenario = workspace_root().join("scenarios/position_step.toml");
+    let o = servo().arg("run").arg(&scenario).arg("--fmu").arg(fmu_path()).arg("--out").arg(&out).arg("--json").output().unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let summary: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+    assert_eq!(summary[0]["passed"], true);
+    for f in ["position_step.csv", "position_step.svg", "position_step.json", "index.html"] {
+        assert!(out.join(f).exists(), "{f} missing");
+    }
+}
+
+#[test]
+fn a_failing_check_gives_exit_status_1() {
+    let out = tmp("fail");
+    let s = out.join("strict.toml");
+    std::fs::write(
+        &s,
+        "name='strict'\nstop_time=0.01\n[[events]]\ntime=0.0\nmode=1\nvelocity_command=10.0\n[[checks]]\nsignal='motor_velocity'\nat=0.01\nmin=1000.0\n",
+    )
+    .unwrap();
+    let o = servo().arg("run").arg(&s).arg("--fmu").arg(fmu_path()).arg("--out").arg(&out).output().unwrap();
+    assert_eq!(o.status.code(), Some(1), "{}", String::from_utf8_lossy(&o.stdout));
+}
+
+#[test]
+fn bad_input_gets_a_clear_error() {
+    let out = tmp("bad");
+    let s = out.join("bad.toml");
+    std::fs::write(&s, "name='bad'\nstop_time=0.01\n[parameters]\n\"ctrl.velocity_kp\" = -1.0\n").unwrap();
+    let o = servo().arg("run").arg(&s).arg("--fmu").arg(fmu_path()).arg("--out").arg(&out).output().unwrap();
+    assert_eq!(o.status.code(), Some(2));
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(err.contains("velocity.kp"), "stderr: {err}");
+
+    std::fs::write(&s, "name='bad'\nstop_time=0.01\n[[events]]\ntime=0.0\nnot_an_input=1.0\n").unwrap();
+    let o = servo().arg("run").arg(&s).arg("--fmu").arg(fmu_path()).arg("--out").arg(&out).output().unwrap();
+    assert!(String::from_utf8_lossy(&o.stderr).contains("not_an_input"));
+
+    let o = servo().arg("run").arg(&s).arg("--fmu").arg("/nonexistent.fmu").output().unwrap();
+    assert!(String::from_utf8_lossy(&o.stderr).contains("xtask -- bundle"));
+}

@@ -1,0 +1,112 @@
+//! Independent physics check: the plant's open-loop responses, measured through the FMU
+//! with the drive's own sine excitation on the torque command, against the analytic
+//! two-inertia transfer functions
+//!   ω_m/T = (J_L s² + c s + k) / (s·D(s)),   a_L/T = (c s + k) / D(s),
+//!   D(s) = J_m J_L s² + (J_m + J_L)(c s + k)
+//! (friction off, so the model is linear). Goal: 0.1 dB and 1 degree from 1 Hz to 1 kHz.
+//!
+//! The drive runs at 64 kHz here (communication step 62.5 µs). Reason: the inverter voltage
+//! is a staircase at the tick rate, so the torque carries images at m·f_tick ± f, and every
+//! such image folds exactly onto f when sampled at f_tick/4. Their share falls as
+//! (f/f_tick)²: at the default 16 kHz it is 1.3 % (0.11 dB) at 1 kHz — a property of the
+//! sampled measurement, not of the plant — and at 64 kHz it is 16 times smaller.
+
+use cross_checks::{frequency_response, load_fmu, wrap_deg, C};
+use host_tools::scenario::Scenario;
+
+const TICK_HZ: f64 = 64_000.0;
+const H: f64 = 4.0 / TICK_HZ;
+
+fn scenario(f: f64, settle: f64, measure: f64) -> Scenario {
+    let stop = ((settle + measure) / H).round() * H;
+    let text = format!(
+        r#"name = "open_loop_{f}"
+stop_time = {stop:?}
+step = {H:?}
+[parameters]
+"ctrl.current_loop_hz" = {TICK_HZ:?}
+"plant.motor_coulomb" = 0.0
+"plant.load_coulomb" = 0.0
+"plant.motor_viscous" = 0.0
+"plant.load_viscous" = 0.0
+"excitation.point" = 1
+"excitation.amplitude" = 0.05
+"excitation.frequency" = {f:?}
+[[events]]
+time = 0.0
+mode = 0
+torque_command = 0.0
+"#
+    );
+    let s: Scenario = toml_from(&text);
+    s.validate().unwrap();
+    s
+}
+
+fn toml_from(text: &str) -> Scenario {
+    // Write and load through the public loader so the test exercises the same path as `servo run`.
+    let dir = std::env::temp_dir().join(format!("servo-physics-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let p = dir.join("s.toml");
+    std::fs::write(&p, text).unwrap();
+    Scenario::load(&p).unwrap()
+}
+
+/// Smallest whole number of periods that is also a whole number of samples.
+fn samples_per_block(f: f64) -> usize {
+    for m in 1..=100 {
+        let n = m as f64 / (f * H);
+        if (n - n.round()).abs() < 1e-9 {
+            return n.round() as usize;
+        }
+    }
+    panic!("no whole block for {f} Hz");
+}
+
+#[test]
+fn open_loop_torque_responses_match_the_two_inertia_model() {
+    let fmu = load_fmu();
+    let (jm, jl, k, c) = (5.0e-5, 1.0e-4, 88.83, 0.009425);
+    let freqs = [1.0, 2.0, 5.0, 10.0, 20.0, 50.0, 100.0, 150.0, 200.0, 250.0, 260.0, 300.0, 400.0, 500.0, 800.0, 1000.0];
+    let mut worst = (0.0f64, 0.0f64);
+    for &f in &freqs {
+        let block = samples_per_block(f);
+        let blocks = ((0.05 / (block as f64 * H)).ceil() as usize).max(2);
+        let measure = (blocks * block) as f64 * H;
+        let settle = (1.0 / f).max(0.1);
+        let s = scenario(f, settle, measure);
+        let trace = fmu.run(&s, |_| {}).unwrap();
+        let n = trace.rows.len();
+        let take = blocks * block;
+        let col = |name: &str| trace.column(name).unwrap()[n - take..].to_vec();
+        let (te, wm, al) = (col("electromagnetic_torque"), col("motor_velocity"), col("load_acceleration"));
+        let t0 = (n - take) as f64 * H;
+        // Time origin does not matter for a ratio; correlate from the first kept sample.
+        let _ = t0;
+        let (g_w, p_w) = frequency_response(&te, &wm, f, H);
+        let (g_a, p_a) = frequency_response(&te, &al, f, H);
+
+        let s_ = C(0.0, std::f64::consts::TAU * f);
+        let d = s_.mul(s_).scale(jm * jl).add(s_.scale(c).add(C(k, 0.0)).scale(jm + jl));
+        let num_w = s_.mul(s_).scale(jl).add(s_.scale(c)).add(C(k, 0.0));
+        let gw = num_w.div(s_.mul(d));
+        let ga = s_.scale(c).add(C(k, 0.0)).div(d);
+
+        let db = |a: f64, b: f64| 20.0 * (a / b).log10();
+        let e = [
+            (db(g_w, gw.abs()), wrap_deg(p_w - gw.arg_deg())),
+            (db(g_a, ga.abs()), wrap_deg(p_a - ga.arg_deg())),
+        ];
+        eprintln!(
+            "{f:>7.1} Hz  ω_m/T: {:+.4} dB {:+.3}°   a_L/T: {:+.4} dB {:+.3}°",
+            e[0].0, e[0].1, e[1].0, e[1].1
+        );
+        for (gdb, ph) in e {
+            worst.0 = worst.0.max(gdb.abs());
+            worst.1 = worst.1.max(ph.abs());
+        }
+    }
+    eprintln!("worst: {:.4} dB, {:.3} degrees", worst.0, worst.1);
+    assert!(worst.0 <= 0.1, "gain error {:.4} dB exceeds 0.1 dB", worst.0);
+    assert!(worst.1 <= 1.0, "phase error {:.3} degrees exceeds 1 degree", worst.1);
+}
