@@ -104,6 +104,11 @@ impl AxisSimulation {
         self.ticks
     }
 
+    /// The PWM command the plant will apply during the next tick.
+    pub fn pending_pwm(&self) -> PwmOutput {
+        self.pending
+    }
+
     pub fn telemetry(&self) -> &Telemetry {
         self.axis.telemetry()
     }

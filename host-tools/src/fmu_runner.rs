@@ -142,7 +142,7 @@ impl Fmu {
 
         let mut inst = self
             .import
-            .instantiate_cs(&scenario.name, false, true, false, false, &[])
+            .instantiate_cs(&scenario.name, false, false, false, false, &[])
             .map_err(|e| anyhow!("cannot instantiate the FMU: {e}"))?;
         for (var, v) in &params {
             Self::set(&mut inst, var, *v)?;

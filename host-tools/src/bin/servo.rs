@@ -246,7 +246,7 @@ fn bench_plant(common: &Common) -> Result<bool> {
     if common.json {
         println!("{}", serde_json::to_string_pretty(&r)?);
     } else {
-        println!("servo bench plant — RK4, {} sub-steps per 62.5 µs tick vs {} (reference), {} s closed-loop velocity steps", r.substeps, r.reference_substeps, r.simulated_seconds);
+        println!("servo bench plant — RK4, {} sub-steps per 62.5 µs tick vs {} (reference), inverter commands of {} s of closed-loop velocity steps replayed open loop", r.substeps, r.reference_substeps, r.simulated_seconds);
         for (name, err, scale) in &r.errors {
             println!("  {name:<16} max |error| {err:>10.3e}  (signal peak {scale:.3e}, relative {:.2e})", err / scale);
         }
