@@ -80,9 +80,7 @@ fn open_loop_torque_responses_match_the_two_inertia_model() {
         let take = blocks * block;
         let col = |name: &str| trace.column(name).unwrap()[n - take..].to_vec();
         let (te, wm, al) = (col("electromagnetic_torque"), col("motor_velocity"), col("load_acceleration"));
-        let t0 = (n - take) as f64 * H;
-        // Time origin does not matter for a ratio; correlate from the first kept sample.
-        let _ = t0;
+        // The time origin does not matter for a ratio: correlate from the first kept sample.
         let (g_w, p_w) = frequency_response(&te, &wm, f, H);
         let (g_a, p_a) = frequency_response(&te, &al, f, H);
 
