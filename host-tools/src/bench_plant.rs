@@ -46,8 +46,8 @@ pub fn step_error() -> Result<StepError> {
     }
     // 2. Replay the same inputs open loop with the default and a ten times finer sub-step:
     //    the difference is the integration error alone (no feedback to amplify it).
-    let mut coarse = Plant::new(sim.plant.params)?;
-    let mut fine_params = sim.plant.params;
+    let mut coarse = Plant::new(*sim.plant.params())?;
+    let mut fine_params = *sim.plant.params();
     fine_params.substeps = substeps * 10;
     let mut fine = Plant::new(fine_params)?;
     let dt = sim.tick_period();

@@ -62,7 +62,10 @@ pub struct Measurements {
 
 #[derive(Clone, Debug)]
 pub struct Plant {
-    pub params: PlantParams,
+    params: PlantParams,
+    /// Built once from `params`: the right-hand side runs 16 times per tick.
+    motor: Pmsm,
+    mechanics: TwoInertia,
     pub state: PlantState,
     /// Load acceleration at the end of the last tick, noise-free (rad/s²).
     pub load_acceleration: f64,
@@ -80,6 +83,8 @@ impl Plant {
         Ok(Self {
             current_noise: GaussianNoise::new(params.noise_seed, params.current_noise_std),
             acceleration_noise: GaussianNoise::new(params.noise_seed ^ 0x9E37_79B9, params.acceleration_noise_std),
+            motor: Pmsm::from(&params),
+            mechanics: TwoInertia::from(&params),
             params,
             state: PlantState::default(),
             load_acceleration: 0.0,
@@ -88,17 +93,18 @@ impl Plant {
         })
     }
 
+    pub fn params(&self) -> &PlantParams {
+        &self.params
+    }
+
     fn derivative(&self, x: &PlantState, u: &PlantInputs) -> PlantState {
-        let p = &self.params;
-        let motor = Pmsm::from(p);
-        let mech = TwoInertia::from(p);
         let (did, diq, torque) = if u.bridge_enabled {
-            let (did, diq) = motor.current_derivative(x, u.duties, p.bus_voltage);
-            (did, diq, motor.torque(x.id, x.iq))
+            let (did, diq) = self.motor.current_derivative(x, u.duties, self.params.bus_voltage);
+            (did, diq, self.motor.torque(x.id, x.iq))
         } else {
             (0.0, 0.0, 0.0)
         };
-        let (dwm, dwl) = mech.acceleration(x, torque, u.disturbance_torque);
+        let (dwm, dwl) = self.mechanics.acceleration(x, torque, u.disturbance_torque);
         PlantState {
             id: did,
             iq: diq,
@@ -148,7 +154,7 @@ impl Plant {
         self.load_acceleration = d.load_velocity;
         self.accelerometer = self.load_acceleration + self.acceleration_noise.sample();
         self.electromagnetic_torque =
-            if u.bridge_enabled { Pmsm::from(&self.params).torque(x.id, x.iq) } else { 0.0 };
+            if u.bridge_enabled { self.motor.torque(x.id, x.iq) } else { 0.0 };
     }
 
     /// Sample the sensors (advances the noise generators).
