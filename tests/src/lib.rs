@@ -4,6 +4,7 @@ use std::path::PathBuf;
 
 use host_tools::fmu_runner::Fmu;
 use host_tools::paths::default_fmu;
+use host_tools::scenario::Scenario;
 
 /// The FMU built by `cargo run -p xtask -- bundle` (scripts/test builds it first).
 pub fn fmu_path() -> PathBuf {
@@ -14,6 +15,15 @@ pub fn fmu_path() -> PathBuf {
 
 pub fn load_fmu() -> Fmu {
     Fmu::load(&fmu_path()).expect("FMU loads")
+}
+
+/// A scenario from TOML text, written to a file and loaded through the same path as `servo run`.
+pub fn scenario_from_text(name: &str, text: &str) -> Scenario {
+    let dir = std::env::temp_dir().join(format!("servo-tests-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let p = dir.join(format!("{name}.toml"));
+    std::fs::write(&p, text).unwrap();
+    Scenario::load(&p).unwrap()
 }
 
 /// Correlate `u` and `y` at frequency `f` (Hz) over samples taken every `h` seconds:

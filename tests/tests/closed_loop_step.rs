@@ -4,8 +4,7 @@
 //! delay, the winding `L di/dt = v − R i` with the back-EMF cancelled by the decoupling
 //! feed-forward) and the linear two-inertia mechanics (friction off).
 
-use cross_checks::load_fmu;
-use host_tools::scenario::Scenario;
+use cross_checks::{load_fmu, scenario_from_text};
 
 // Small enough that neither the torque limit nor the voltage circle (48 V / √3) is reached:
 // the loop stays linear. Velocity quantisation (2^20 counts at 8 kHz) is 0.048 rad/s, 1 %.
@@ -81,11 +80,7 @@ time = 0.01
 velocity_command = {STEP:?}
 "#
     );
-    let dir = std::env::temp_dir().join(format!("servo-step-{}", std::process::id()));
-    std::fs::create_dir_all(&dir).unwrap();
-    let p = dir.join("s.toml");
-    std::fs::write(&p, text).unwrap();
-    let s = Scenario::load(&p).unwrap();
+    let s = scenario_from_text("velocity_step_linear", &text);
     let trace = load_fmu().run(&s, |_| {}).unwrap();
     let w = trace.column("motor_velocity").unwrap();
     let model = linear_model(0.1, 0.01);

@@ -11,7 +11,7 @@
 //! (f/f_tick)²: at the default 16 kHz it is 1.3 % (0.11 dB) at 1 kHz — a property of the
 //! sampled measurement, not of the plant — and at 64 kHz it is 16 times smaller.
 
-use cross_checks::{frequency_response, load_fmu, wrap_deg, C};
+use cross_checks::{frequency_response, load_fmu, scenario_from_text, wrap_deg, C};
 use host_tools::scenario::Scenario;
 
 const TICK_HZ: f64 = 64_000.0;
@@ -38,18 +38,7 @@ mode = 0
 torque_command = 0.0
 "#
     );
-    let s: Scenario = toml_from(&text);
-    s.validate().unwrap();
-    s
-}
-
-fn toml_from(text: &str) -> Scenario {
-    // Write and load through the public loader so the test exercises the same path as `servo run`.
-    let dir = std::env::temp_dir().join(format!("servo-physics-{}", std::process::id()));
-    std::fs::create_dir_all(&dir).unwrap();
-    let p = dir.join("s.toml");
-    std::fs::write(&p, text).unwrap();
-    Scenario::load(&p).unwrap()
+    scenario_from_text(&format!("open_loop_{f}"), &text)
 }
 
 /// Smallest whole number of periods that is also a whole number of samples.
