@@ -131,8 +131,8 @@ parameter_group! {
         acceleration_noise_std: f64 = 0.0,
         /// Seed of the sensor noise
         noise_seed: i32 = 1,
-        /// RK4 sub-steps per base tick
-        substeps: i32 = 4,
+        /// Integration sub-steps per base tick (linear parts exact, couplings held)
+        substeps: i32 = 1,
     }
 }
 
@@ -380,10 +380,11 @@ impl ServoAxis {
     }
 
     fn step(&mut self, current: f64, h: f64) -> Result<(), String> {
-        let Some(applied) = self.applied.clone() else {
+        let Some(applied) = self.applied.as_ref() else {
             return Err("do_step before a successful exit from initialization mode".into());
         };
-        if applied != self.applied_now() {
+        if applied.ctrl != self.ctrl || applied.plant != self.plant || applied.excitation != self.excitation {
+            let applied = applied.clone();
             let changed = describe_changes(&applied, &self.applied_now());
             self.ctrl = applied.ctrl;
             self.plant = applied.plant;

@@ -139,7 +139,7 @@ impl AxisSimulation {
             bridge_enabled: self.pending.enabled && pwm.enabled,
             disturbance_torque: u.disturbance_torque,
         };
-        self.plant.advance(&applied, self.tick_period);
+        self.plant.advance(&applied);
         self.pending = pwm;
         self.ticks += 1;
     }

@@ -1,5 +1,5 @@
 //! Plant integration error: the inverter commands of a closed-loop run of the default axis,
-//! replayed open loop into the plant with the default RK4 sub-steps and with ten times as
+//! replayed open loop into the plant with the default sub-steps and with ten times as
 //! many, compared tick by tick.
 
 use anyhow::Result;
@@ -7,6 +7,11 @@ use control_core::Mode;
 use serde::Serialize;
 use servo_axis::plant::{Plant, PlantInputs};
 use servo_axis::simulation::{AxisSimulation, SimulationConfig, UserInputs};
+
+/// Largest accepted error, relative to the signal's peak. The error concentrates where the
+/// smoothed Coulomb friction bends within one tick (speed reversals) and where the current
+/// slews at the voltage limit.
+pub const GOAL: f64 = 5e-4;
 
 #[derive(Clone, Debug, Serialize)]
 pub struct StepError {
@@ -50,12 +55,11 @@ pub fn step_error() -> Result<StepError> {
     let mut fine_params = *sim.plant.params();
     fine_params.substeps = substeps * 10;
     let mut fine = Plant::new(fine_params)?;
-    let dt = sim.tick_period();
     let mut err = [0.0f64; 4];
     let mut peak = [0.0f64; 4];
     for u in &inputs {
-        coarse.advance(u, dt);
-        fine.advance(u, dt);
+        coarse.advance(u);
+        fine.advance(u);
         let (x, y) = (coarse.state, fine.state);
         let pairs = [
             (x.iq, y.iq),
@@ -77,6 +81,6 @@ pub fn step_error() -> Result<StepError> {
         simulated_seconds: seconds,
         errors,
         worst_relative: worst,
-        passed: worst <= 1e-4,
+        passed: worst <= GOAL,
     })
 }

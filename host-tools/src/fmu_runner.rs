@@ -94,26 +94,6 @@ impl Fmu {
         r.map(|_| ()).map_err(|e| anyhow!("the FMU refused {} = {value:?}: {e:?}", var.name))
     }
 
-    fn get(inst: &mut InstanceCS, var: &VariableInfo) -> Result<f64> {
-        Ok(match var.kind {
-            Kind::Float64 => {
-                let mut v = [0.0];
-                inst.get_float64(&[var.vr], &mut v).map_err(|e| anyhow!("get {}: {e:?}", var.name))?;
-                v[0]
-            }
-            Kind::Int32 => {
-                let mut v = [0];
-                inst.get_int32(&[var.vr], &mut v).map_err(|e| anyhow!("get {}: {e:?}", var.name))?;
-                v[0] as f64
-            }
-            Kind::Boolean => {
-                let mut v = [false];
-                inst.get_boolean(&[var.vr], &mut v).map_err(|e| anyhow!("get {}: {e:?}", var.name))?;
-                v[0] as i32 as f64
-            }
-        })
-    }
-
     /// Run `scenario`; `progress` is called with the fraction done.
     pub fn run(&self, scenario: &Scenario, mut progress: impl FnMut(f64)) -> Result<Trace> {
         let params: Vec<(&VariableInfo, Value)> = scenario
@@ -127,15 +107,22 @@ impl Fmu {
                 Ok((var, *v))
             })
             .collect::<Result<_>>()?;
-        let input_names = scenario.input_names();
-        let inputs: Vec<&VariableInfo> = input_names
-            .iter()
-            .map(|n| {
-                let var = self.variable(n)?;
-                if var.causality != Causality::Input {
-                    bail!("event sets `{n}`, which is not an input of the FMU (it is {:?})", var.causality);
-                }
-                Ok(var)
+        // Inputs are set when they change, not at every step.
+        let changes: Vec<(usize, Vec<(&VariableInfo, Value)>)> = scenario
+            .changes()
+            .into_iter()
+            .map(|(k, group)| {
+                let group = group
+                    .into_iter()
+                    .map(|(n, v)| {
+                        let var = self.variable(n)?;
+                        if var.causality != Causality::Input {
+                            bail!("event sets `{n}`, which is not an input of the FMU (it is {:?})", var.causality);
+                        }
+                        Ok((var, v))
+                    })
+                    .collect::<Result<Vec<_>>>()?;
+                Ok((k, group))
             })
             .collect::<Result<_>>()?;
         let outputs = self.outputs();
@@ -151,10 +138,11 @@ impl Fmu {
         let n = scenario.steps();
         inst.enter_initialization_mode(None, 0.0, Some(scenario.stop_time))
             .map_err(|e| anyhow!("enter initialization mode failed: {e:?}"))?;
-        let apply = |inst: &mut InstanceCS, k: usize| -> Result<()> {
-            for (var, v) in inputs.iter().zip(scenario.inputs_at(k)) {
-                if let Some(v) = v {
-                    Self::set(inst, var, v)?;
+        let mut pending = changes.iter().peekable();
+        let mut apply = |inst: &mut InstanceCS, k: usize| -> Result<()> {
+            while let Some((_, group)) = pending.next_if(|(j, _)| *j <= k) {
+                for (var, v) in group {
+                    Self::set(inst, var, *v)?;
                 }
             }
             Ok(())
@@ -167,11 +155,35 @@ impl Fmu {
         let mut columns = vec!["time".to_string()];
         columns.extend(outputs.iter().map(|v| v.name.clone()));
         let mut trace = Trace::new(columns);
-        let record = |inst: &mut InstanceCS, t: f64, trace: &mut Trace| -> Result<()> {
-            let mut row = Vec::with_capacity(outputs.len() + 1);
-            row.push(t);
-            for v in &outputs {
-                row.push(Self::get(inst, v)?);
+        // Outputs are read in one call per type, then put back in column order.
+        let of_kind = |kind: Kind| -> (Vec<usize>, Vec<u32>) {
+            outputs.iter().enumerate().filter(|(_, v)| v.kind == kind).map(|(i, v)| (i, v.vr)).unzip()
+        };
+        let (f64_cols, f64_vrs) = of_kind(Kind::Float64);
+        let (i32_cols, i32_vrs) = of_kind(Kind::Int32);
+        let (bool_cols, bool_vrs) = of_kind(Kind::Boolean);
+        let (mut f64_buf, mut i32_buf, mut bool_buf) =
+            (vec![0.0; f64_vrs.len()], vec![0; i32_vrs.len()], vec![false; bool_vrs.len()]);
+        let mut record = |inst: &mut InstanceCS, t: f64, trace: &mut Trace| -> Result<()> {
+            let mut row = vec![0.0; outputs.len() + 1];
+            row[0] = t;
+            if !f64_vrs.is_empty() {
+                inst.get_float64(&f64_vrs, &mut f64_buf).map_err(|e| anyhow!("get outputs: {e:?}"))?;
+            }
+            if !i32_vrs.is_empty() {
+                inst.get_int32(&i32_vrs, &mut i32_buf).map_err(|e| anyhow!("get outputs: {e:?}"))?;
+            }
+            if !bool_vrs.is_empty() {
+                inst.get_boolean(&bool_vrs, &mut bool_buf).map_err(|e| anyhow!("get outputs: {e:?}"))?;
+            }
+            for (c, v) in f64_cols.iter().zip(&f64_buf) {
+                row[c + 1] = *v;
+            }
+            for (c, v) in i32_cols.iter().zip(&i32_buf) {
+                row[c + 1] = *v as f64;
+            }
+            for (c, v) in bool_cols.iter().zip(&bool_buf) {
+                row[c + 1] = *v as i32 as f64;
             }
             trace.rows.push(row);
             Ok(())

@@ -167,21 +167,25 @@ impl Scenario {
         names
     }
 
-    /// Input values in effect for the step starting at step index `k` (time `k·h`): the last
-    /// event at or before that time. Returns one value per name of [`input_names`](Self::input_names);
-    /// `None` while no event has set the input yet (the FMU's start value applies).
-    pub fn inputs_at(&self, k: usize) -> Vec<Option<Value>> {
-        let t = k as f64 * self.step();
-        let names = self.input_names();
-        let mut values = vec![None; names.len()];
-        for e in self.events.iter().filter(|e| e.time <= t + 1e-9 * self.step()) {
+    /// Input changes by step index: the events at time `k·h`, in file order (a later event at
+    /// the same time wins). Inputs hold between changes.
+    pub fn changes(&self) -> Vec<(usize, Vec<(&str, Value)>)> {
+        let h = self.step();
+        let mut out: Vec<(usize, Vec<(&str, Value)>)> = Vec::new();
+        for e in &self.events {
+            let k = (e.time / h).round() as usize;
+            if out.last().map(|(j, _)| *j) != Some(k) {
+                out.push((k, Vec::new()));
+            }
+            let group = &mut out.last_mut().expect("pushed above").1;
             for (name, v) in &e.inputs {
-                let i = names.iter().position(|n| n == name).expect("name comes from the events");
-                values[i] = Some(*v);
+                group.retain(|(n, _)| n != name);
+                group.push((name.as_str(), *v));
             }
         }
-        values
+        out
     }
+
 }
 
 #[cfg(test)]
@@ -195,15 +199,16 @@ mod tests {
     }
 
     #[test]
-    fn events_hold_until_the_next_one() {
+    fn events_become_changes_at_their_step() {
         let s = parse(
             "name='x'\nstop_time=0.01\n[[events]]\ntime=0.0\nmode=1\n[[events]]\ntime=0.005\nvelocity_command=3.0\n",
         )
         .unwrap();
         assert_eq!(s.input_names(), vec!["mode", "velocity_command"]);
-        assert_eq!(s.inputs_at(0), vec![Some(Value::Int(1)), None]);
-        assert_eq!(s.inputs_at(19), vec![Some(Value::Int(1)), None]);
-        assert_eq!(s.inputs_at(20), vec![Some(Value::Int(1)), Some(Value::Float(3.0))]);
+        assert_eq!(
+            s.changes(),
+            vec![(0, vec![("mode", Value::Int(1))]), (20, vec![("velocity_command", Value::Float(3.0))])]
+        );
     }
 
     #[test]

@@ -1,6 +1,13 @@
 //! Permanent-magnet synchronous motor in the rotor (d, q) frame, fed by an average-model
 //! inverter whose pole voltages are `duty · V_bus`.
+//!
+//! Over a sub-step the electrical speed in the winding matrix is held at its mid-step value;
+//! the stator voltage, fixed in the stator frame, turns in the rotor frame and is replaced by
+//! a ramp with the right mean (the mid-step value shrunk by `sinc` of half the step's turn)
+//! and the right slope. The winding equations are then linear with a ramp input and are
+//! solved exactly with the closed-form 2 × 2 matrix exponential.
 
+use super::discretisation::{cosh_sinhc, sin_cos};
 use super::{PlantParams, PlantState};
 
 #[derive(Clone, Copy, Debug)]
@@ -10,38 +17,105 @@ pub struct Pmsm {
     pub ld: f64,
     pub lq: f64,
     pub flux_linkage: f64,
-}
-
-impl From<&PlantParams> for Pmsm {
-    fn from(p: &PlantParams) -> Self {
-        Self {
-            pole_pairs: p.pole_pairs as f64,
-            resistance: p.resistance,
-            ld: p.ld,
-            lq: p.lq,
-            flux_linkage: p.flux_linkage,
-        }
-    }
+    substep: f64,
+    /// `A = m·I + N` splits the winding matrix into its mean decay rate `m` and a traceless
+    /// part whose diagonal is `±n`; `e^{m·h}` does not depend on the speed.
+    half_difference: f64,
+    mean_decay: f64,
+    /// `1/J_motor`: the rotor's own response to a torque change within a step.
+    inverse_motor_inertia: f64,
+    /// Reciprocals and ratios the per-step code multiplies by.
+    inv_ld: f64,
+    inv_lq: f64,
+    lq_over_ld: f64,
+    ld_over_lq: f64,
 }
 
 impl Pmsm {
-    /// Stator voltage in the rotor frame for the given duties and rotor angle.
-    pub fn dq_voltage(&self, duties: [f64; 3], bus_voltage: f64, motor_angle: f64) -> (f64, f64) {
-        let [a, b, c] = duties;
-        // Line-to-line voltages only depend on duty differences: the common mode drops out.
-        let v_alpha = bus_voltage * (2.0 * a - b - c) / 3.0;
-        let v_beta = bus_voltage * (b - c) / 3f64.sqrt();
-        let (s, co) = (self.pole_pairs * motor_angle).sin_cos();
-        (v_alpha * co + v_beta * s, -v_alpha * s + v_beta * co)
+    pub fn new(p: &PlantParams, substep: f64) -> Self {
+        let (r, ld, lq) = (p.resistance, p.ld, p.lq);
+        let mean_rate = -0.5 * (r / ld + r / lq);
+        Self {
+            pole_pairs: p.pole_pairs as f64,
+            resistance: r,
+            ld,
+            lq,
+            flux_linkage: p.flux_linkage,
+            substep,
+            half_difference: 0.5 * (r / lq - r / ld),
+            mean_decay: (mean_rate * substep).exp(),
+            inverse_motor_inertia: 1.0 / p.motor_inertia,
+            inv_ld: 1.0 / ld,
+            inv_lq: 1.0 / lq,
+            lq_over_ld: lq / ld,
+            ld_over_lq: ld / lq,
+        }
     }
 
-    /// `(did/dt, diq/dt)`.
-    pub fn current_derivative(&self, x: &PlantState, duties: [f64; 3], bus_voltage: f64) -> (f64, f64) {
-        let (vd, vq) = self.dq_voltage(duties, bus_voltage, x.motor_angle);
-        let we = self.pole_pairs * x.motor_velocity;
-        let did = (vd - self.resistance * x.id + we * self.lq * x.iq) / self.ld;
-        let diq = (vq - self.resistance * x.iq - we * (self.ld * x.id + self.flux_linkage)) / self.lq;
-        (did, diq)
+    /// Stator-frame voltage `(v_α, v_β)` for the given duties.
+    pub fn stator_voltage(duties: [f64; 3], bus_voltage: f64) -> (f64, f64) {
+        let [a, b, c] = duties;
+        // Line-to-line voltages only depend on duty differences: the common mode drops out.
+        (bus_voltage * (2.0 * a - b - c) / 3.0, bus_voltage * (b - c) / 3f64.sqrt())
+    }
+
+    /// Advance `(id, iq)` of `x` by one sub-step under the stator voltage `(v_α, v_β)`;
+    /// `motor_acceleration` (at the start) and the torque rise the step itself causes give
+    /// the speed in the middle of the step. Returns the torque's rate of change at the start
+    /// of the step (Nm/s), for the mechanics' quadratic torque hold.
+    pub fn advance_currents(
+        &self,
+        x: &mut PlantState,
+        (v_alpha, v_beta): (f64, f64),
+        motor_acceleration: f64,
+    ) -> f64 {
+        let h = self.substep;
+        let (p, r, ld, lq, psi) = (self.pole_pairs, self.resistance, self.ld, self.lq, self.flux_linkage);
+        let mid_angle = p * (x.motor_angle + 0.5 * h * x.motor_velocity + 0.125 * h * h * motor_acceleration);
+        let half_turn = 0.5 * h * p * (x.motor_velocity + 0.5 * h * motor_acceleration);
+        let (s, c) = sin_cos(mid_angle);
+        let shrink = cosh_sinhc(-half_turn * half_turn).1; // sin(x)/x
+        let vd = shrink * (v_alpha * c + v_beta * s);
+        let vq = shrink * (-v_alpha * s + v_beta * c);
+        // The acceleration changes within the step as the current (and so the torque) moves:
+        // estimate its slope from the current rates at the start, on the rotor alone (the
+        // shaft passes the torque on only later).
+        let we0 = p * x.motor_velocity;
+        let (inv_ld, inv_lq) = (self.inv_ld, self.inv_lq);
+        let did = (vd - r * x.id + we0 * lq * x.iq) * inv_ld;
+        let diq = (vq - r * x.iq - we0 * (ld * x.id + psi)) * inv_lq;
+        let jerk = 1.5 * p * (psi * diq + (ld - lq) * (did * x.iq + x.id * diq)) * self.inverse_motor_inertia;
+        let we = p * (x.motor_velocity + 0.5 * h * motor_acceleration + 0.125 * h * h * jerk);
+        let mid_acceleration = motor_acceleration + 0.5 * h * jerk;
+        // x' = A·x + b(t) with A = [[−R/Ld, ωe·Lq/Ld], [−ωe·Ld/Lq, −R/Lq]] and b ramping
+        // through the step: the rotor-frame voltage turns at ωe (d/dt (vd, vq) = ωe·(vq, −vd))
+        // and the back-EMF follows the acceleration.
+        let a01 = we * self.lq_over_ld;
+        let a10 = -we * self.ld_over_lq;
+        let (a00, a11) = (-r * inv_ld, -r * inv_lq);
+        let b_mid = [vd * inv_ld, (vq - we * psi) * inv_lq];
+        let b_rise = [h * we * vq * inv_ld, h * (-we * vd - p * mid_acceleration * psi) * inv_lq];
+        let b0 = [b_mid[0] - 0.5 * b_rise[0], b_mid[1] - 0.5 * b_rise[1]];
+        // e^{A·h} = e^{m·h}·(C·I + h·S·N), N² = (n² + a01·a10)·I.
+        let n = self.half_difference;
+        let (cz, sz) = cosh_sinhc((n * n + a01 * a10) * h * h);
+        let (g, hs) = (self.mean_decay, self.mean_decay * h * sz);
+        let phi = [[g * cz + hs * n, hs * a01], [hs * a10, g * cz - hs * n]];
+        let inv_det = 1.0 / (a00 * a11 - a01 * a10);
+        let solve = |v: [f64; 2]| [(a11 * v[0] - a01 * v[1]) * inv_det, (-a10 * v[0] + a00 * v[1]) * inv_det];
+        let phi_minus_one = |v: [f64; 2]| {
+            [(phi[0][0] - 1.0) * v[0] + phi[0][1] * v[1], phi[1][0] * v[0] + (phi[1][1] - 1.0) * v[1]]
+        };
+        // x(h) = Φ·x0 + Γ0·b0 + Γ1·(b1 − b0), Γ0 = A⁻¹(Φ − I), Γ1 = A⁻¹(Γ0 − h·I)/h.
+        let held = solve(phi_minus_one(b0));
+        let g0_rise = solve(phi_minus_one(b_rise));
+        let ramp = solve([g0_rise[0] / h - b_rise[0], g0_rise[1] / h - b_rise[1]]);
+        let (id, iq) = (x.id, x.iq);
+        x.id = phi[0][0] * id + phi[0][1] * iq + held[0] + ramp[0];
+        x.iq = phi[1][0] * id + phi[1][1] * iq + held[1] + ramp[1];
+        let did0 = a00 * id + a01 * iq + b0[0];
+        let diq0 = a10 * id + a11 * iq + b0[1];
+        1.5 * p * (psi * diq0 + (ld - lq) * (did0 * iq + id * diq0))
     }
 
     /// Electromagnetic torque `1.5·p·(ψ·iq + (Ld − Lq)·id·iq)`.
