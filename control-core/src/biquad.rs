@@ -25,6 +25,16 @@ impl Default for Biquad {
 }
 
 impl Biquad {
+    /// A section with the given normalised coefficients and zero state.
+    pub const fn new(b0: f32, b1: f32, b2: f32, a1: f32, a2: f32) -> Self {
+        Self { b0, b1, b2, a1, a2, s1: 0.0, s2: 0.0 }
+    }
+
+    /// The transposed-direct-form-II state `(s1, s2)`.
+    pub fn state(&self) -> (f32, f32) {
+        (self.s1, self.s2)
+    }
+
     /// Pass-through section.
     pub const fn identity() -> Self {
         Self { b0: 1.0, b1: 0.0, b2: 0.0, a1: 0.0, a2: 0.0, s1: 0.0, s2: 0.0 }

@@ -9,6 +9,7 @@
 #![no_std]
 #![forbid(unsafe_code)]
 
+pub mod acc_dec;
 pub mod axis;
 pub mod biquad;
 pub mod current_loop;

@@ -1,0 +1,71 @@
+//! The prior art's acc/dec: one to three cascaded moving averages on pulses per tick, in
+//! integer arithmetic. Each stage emits `floor((window sum + remainder) / n)` and keeps the
+//! remainder, so every pulse that goes in comes out.
+
+use super::AccDecError;
+
+pub const MAX_MOVING_AVERAGE_STAGES: usize = 3;
+/// Longest window (samples); the delay lines are fixed arrays (no allocation).
+pub const MAX_MOVING_AVERAGE_LENGTH: u32 = 512;
+
+#[derive(Clone, Copy, Debug, PartialEq)]
+struct Stage {
+    length: u32,
+    window: [i64; MAX_MOVING_AVERAGE_LENGTH as usize],
+    next: usize,
+    sum: i64,
+    remainder: i64,
+}
+
+impl Stage {
+    fn step(&mut self, x: i64) -> i64 {
+        let n = self.length as i64;
+        let oldest = core::mem::replace(&mut self.window[self.next], x);
+        self.next = (self.next + 1) % self.length as usize;
+        self.sum += x - oldest;
+        let total = self.sum + self.remainder;
+        self.remainder = total.rem_euclid(n);
+        total.div_euclid(n)
+    }
+}
+
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct MovingAverageCascade {
+    stages: [Stage; MAX_MOVING_AVERAGE_STAGES],
+    count: usize,
+}
+
+impl MovingAverageCascade {
+    /// `lengths`: one window length (samples) per stage, 1 to 3 stages.
+    pub fn new(lengths: &[u32]) -> Result<Self, AccDecError> {
+        if lengths.is_empty() || lengths.len() > MAX_MOVING_AVERAGE_STAGES {
+            return Err(AccDecError::Stages(lengths.len()));
+        }
+        for (stage, &length) in lengths.iter().enumerate() {
+            if length == 0 || length > MAX_MOVING_AVERAGE_LENGTH {
+                return Err(AccDecError::Length { stage: stage + 1, length });
+            }
+        }
+        let empty =
+            Stage { length: 1, window: [0; MAX_MOVING_AVERAGE_LENGTH as usize], next: 0, sum: 0, remainder: 0 };
+        let mut stages = [empty; MAX_MOVING_AVERAGE_STAGES];
+        for (s, &length) in stages.iter_mut().zip(lengths) {
+            s.length = length;
+        }
+        Ok(Self { stages, count: lengths.len() })
+    }
+
+    /// Total delay to the middle of the response: Σ (n − 1)/2 samples.
+    pub fn group_delay_samples(&self) -> f32 {
+        self.stages[..self.count].iter().map(|s| (s.length - 1) as f32 / 2.0).sum()
+    }
+
+    /// One tick: `pulses` in, whole pulses out.
+    pub fn step(&mut self, pulses: i32) -> i64 {
+        let mut v = pulses as i64;
+        for s in &mut self.stages[..self.count] {
+            v = s.step(v);
+        }
+        v
+    }
+}
