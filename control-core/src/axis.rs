@@ -1,5 +1,7 @@
 //! One servo axis: the three cascaded loops, called once per base tick.
 
+use crate::acc_dec::AccDecFilter;
+use crate::command_path::{CommandPath, Move};
 use crate::current_loop::{CurrentLoop, CurrentLoopOutput};
 use crate::encoder::{EncoderTracker, EncoderUpdate};
 use crate::excitation::{InjectionPoint, SineGenerator};
@@ -55,8 +57,13 @@ pub struct AxisInputs {
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub struct Commands {
     pub mode: Mode,
-    /// Position command in encoder counts.
+    /// Position input in encoder counts: streamed (its increments are followed) when
+    /// `move_speed` is 0, else the target of a positioning move.
     pub position: i64,
+    /// Positioning speed (rad/s, motor side; the sign is ignored); 0 streams `position`.
+    pub move_speed: f32,
+    /// Jog speed (rad/s, signed); non-zero overrides `position`.
+    pub jog_velocity: f32,
     /// Velocity command (rad/s, motor side).
     pub velocity: f32,
     /// Torque command (Nm).
@@ -77,6 +84,10 @@ pub struct Telemetry {
     pub tick: u64,
     pub mode: Mode,
     pub position: i64,
+    /// Position command after interpolation and acc/dec filter (counts).
+    pub position_command: i64,
+    /// Its pulses in the last position tick.
+    pub command_pulses: i64,
     pub velocity_estimate: f32,
     pub velocity_reference: f32,
     pub following_error: f32,
@@ -94,6 +105,7 @@ pub struct Axis {
     current_loop: CurrentLoop,
     velocity_loop: VelocityLoop,
     position_loop: PositionLoop,
+    command_path: CommandPath,
     encoder: EncoderTracker,
     excitation: Option<(InjectionPoint, SineGenerator)>,
     tick: u64,
@@ -109,11 +121,14 @@ impl Axis {
     /// Build an axis; refuses parameters that do not validate.
     pub fn new(params: Params) -> Result<Self, ParamError> {
         params.validate()?;
+        let acc_dec = AccDecFilter::new(&params.acc_dec, params.rates.position_period())
+            .map_err(ParamError::AccDec)?;
         Ok(Self {
             params,
             current_loop: CurrentLoop::new(&params),
             velocity_loop: VelocityLoop::new(&params),
             position_loop: PositionLoop::default(),
+            command_path: CommandPath::new(acc_dec),
             encoder: EncoderTracker::default(),
             excitation: None,
             tick: 0,
@@ -161,6 +176,8 @@ impl Axis {
             || !inputs.bus_voltage.is_finite()
             || !commands.velocity.is_finite()
             || !commands.torque.is_finite()
+            || !commands.move_speed.is_finite()
+            || !commands.jog_velocity.is_finite()
         {
             faults.latch(Faults::NOT_FINITE);
         }
@@ -183,6 +200,14 @@ impl Axis {
         if self.mode != Some(commands.mode) {
             self.velocity_loop.preset(self.torque_command);
             self.position_loop.reset();
+            // Streaming starts at the streamed position (a step, as a position command
+            // always was); a move or a jog starts where the axis is.
+            let start = if commands.move_speed == 0.0 && commands.jog_velocity == 0.0 {
+                commands.position
+            } else {
+                self.encoder.position()
+            };
+            self.command_path.reset(start);
             if commands.mode != Mode::Position {
                 self.telemetry.following_error = 0.0;
             }
@@ -206,7 +231,21 @@ impl Axis {
             }
         }
         if commands.mode == Mode::Position && self.tick % pdiv == 0 {
-            let out = self.position_loop.step(&p, commands.position, position);
+            let counts_per_tick = p.encoder_counts_per_rev as f32 / TAU * p.rates.position_period();
+            let motion = if commands.jog_velocity != 0.0 {
+                Move::Jog(commands.jog_velocity * counts_per_tick)
+            } else if commands.move_speed != 0.0 {
+                Move::Absolute { target: commands.position, speed: commands.move_speed.abs() * counts_per_tick }
+            } else {
+                Move::Stream
+            };
+            // A non-finite speed has latched a fault above; it must not reach the carry.
+            let command = if commands.move_speed.is_finite() && commands.jog_velocity.is_finite() {
+                self.command_path.step(motion, commands.position)
+            } else {
+                self.command_path.position()
+            };
+            let out = self.position_loop.step(&p, command, position);
             self.velocity_reference = out.velocity_reference;
             self.telemetry.following_error = out.following_error;
             if out.following_error.abs() > p.limits.following_error {
@@ -255,6 +294,8 @@ impl Axis {
             tick: self.tick,
             mode: commands.mode,
             position,
+            position_command: self.command_path.position(),
+            command_pulses: self.command_path.pulses(),
             velocity_estimate: self.velocity_estimate,
             velocity_reference: self.velocity_reference,
             following_error: self.telemetry.following_error,

@@ -12,6 +12,7 @@
 pub mod acc_dec;
 pub mod axis;
 pub mod biquad;
+pub mod command_path;
 pub mod current_loop;
 pub mod encoder;
 pub mod excitation;

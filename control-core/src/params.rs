@@ -5,6 +5,8 @@
 
 use core::fmt;
 
+use crate::acc_dec::{AccDecError, AccDecFilter, AccDecParams};
+
 /// Motor data the controller needs (decoupling, torque constant, electrical angle).
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct MotorModel {
@@ -116,6 +118,8 @@ pub struct Params {
     pub position: PositionLoopGains,
     pub filters: TorqueFilters,
     pub limits: Limits,
+    /// Acceleration/deceleration filter of the position command path.
+    pub acc_dec: AccDecParams,
 }
 
 /// Why a parameter set was refused.
@@ -135,6 +139,8 @@ pub enum ParamError {
     AboveNyquist { field: &'static str, value: f32, nyquist: f32 },
     /// Undervoltage limit not below overvoltage limit.
     BusLimitsInverted { under: f32, over: f32 },
+    /// The acc/dec filter cannot be built.
+    AccDec(AccDecError),
 }
 
 impl fmt::Display for ParamError {
@@ -157,6 +163,7 @@ impl fmt::Display for ParamError {
                 f,
                 "bus_undervoltage ({under} V) must be below bus_overvoltage ({over} V)"
             ),
+            Self::AccDec(e) => write!(f, "acc/dec filter: {e}"),
         }
     }
 }
@@ -229,6 +236,7 @@ impl Default for Params {
                 bus_overvoltage: 60.0,
                 following_error: 1.0,
             },
+            acc_dec: AccDecParams::default(),
         }
     }
 }
@@ -289,6 +297,7 @@ impl Params {
             return Err(ParamError::BusLimitsInverted { under: l.bus_undervoltage, over: l.bus_overvoltage });
         }
         positive("limits.following_error", l.following_error)?;
+        AccDecFilter::new(&self.acc_dec, r.position_period()).map_err(ParamError::AccDec)?;
         Ok(())
     }
 }

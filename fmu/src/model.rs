@@ -10,6 +10,7 @@ use control_core::excitation::InjectionPoint;
 use control_core::params::{
     CurrentLoopGains, Limits, MotorModel, PositionLoopGains, Rates, TorqueFilters, VelocityLoopGains,
 };
+use control_core::acc_dec::{AccDecKind, AccDecParams};
 use control_core::{Mode, Params};
 use fmi::fmi3::{Fmi3Error, Fmi3Res, Fmi3Status};
 use fmi_export::fmi3::{CSDoStepResult, Context, DefaultLoggingCategory, UserModel};
@@ -148,11 +149,51 @@ parameter_group! {
     }
 }
 
+// Acceleration/deceleration filter between the position command and the position loop.
+parameter_group! {
+    AccDecParameters {
+        /// 0 none, 1 cascaded moving averages, 2 Butterworth (pole-zero matched)
+        filter: i32 = 0,
+        /// Butterworth order (1 to 6)
+        order: i32 = 3,
+        /// Butterworth cut-off (at most the position loop's Nyquist frequency)
+        cutoff_hz: f64 = 40.0,
+        /// Moving-average stages in use (1 to 3)
+        ma_stages: i32 = 3,
+        /// Length of moving-average stage 1 (position ticks)
+        ma_length_1: i32 = 16,
+        /// Length of moving-average stage 2 (position ticks)
+        ma_length_2: i32 = 16,
+        /// Length of moving-average stage 3 (position ticks)
+        ma_length_3: i32 = 16,
+    }
+}
+
+impl AccDecParameters {
+    fn to_params(&self) -> Result<AccDecParams, String> {
+        let kind = AccDecKind::from_code(self.filter).ok_or_else(|| {
+            format!("accdec.filter must be 0 (none), 1 (moving averages) or 2 (Butterworth), got {}", self.filter)
+        })?;
+        Ok(AccDecParams {
+            kind,
+            order: count("accdec.order", self.order)?,
+            cutoff_hz: self.cutoff_hz as f32,
+            ma_stages: count("accdec.ma_stages", self.ma_stages)?,
+            ma_lengths: [
+                count("accdec.ma_length_1", self.ma_length_1)?,
+                count("accdec.ma_length_2", self.ma_length_2)?,
+                count("accdec.ma_length_3", self.ma_length_3)?,
+            ],
+        })
+    }
+}
+
 #[derive(Clone, Debug, PartialEq)]
 struct AppliedParameters {
     ctrl: ControllerParameters,
     plant: PlantParameters,
     excitation: ExcitationParameters,
+    accdec: AccDecParameters,
 }
 
 /// One servo axis: control core (current, velocity, position loops) driving a PMSM with a
@@ -166,13 +207,21 @@ pub struct ServoAxis {
     pub plant: PlantParameters,
     #[child(prefix = "excitation")]
     pub excitation: ExcitationParameters,
+    #[child(prefix = "accdec")]
+    pub accdec: AccDecParameters,
 
     /// Control mode: 0 torque, 1 velocity, 2 position
     #[variable(causality = Input, variability = Discrete, start = 2)]
     pub mode: i32,
-    /// Motor-side position command
+    /// Motor-side position command: streamed through the acc/dec filter, or the target of a move when move_speed > 0
     #[variable(causality = Input, variability = Continuous, start = 0.0)]
     pub position_command: f64,
+    /// Positioning speed towards position_command (0: stream position_command)
+    #[variable(causality = Input, variability = Continuous, start = 0.0)]
+    pub move_speed: f64,
+    /// Jog speed in position mode (non-zero overrides position_command)
+    #[variable(causality = Input, variability = Continuous, start = 0.0)]
+    pub jog_velocity: f64,
     /// Motor velocity command
     #[variable(causality = Input, variability = Continuous, start = 0.0)]
     pub velocity_command: f64,
@@ -219,6 +268,12 @@ pub struct ServoAxis {
     /// Position command minus encoder position (position mode)
     #[variable(causality = Output, variability = Continuous)]
     pub following_error: f64,
+    /// Position command after interpolation and acc/dec filter (position mode)
+    #[variable(causality = Output, variability = Continuous)]
+    pub position_command_out: f64,
+    /// Speed of that command (its pulses per position tick)
+    #[variable(causality = Output, variability = Continuous)]
+    pub command_velocity: f64,
     /// Latched fault bits: 1 overcurrent, 2 undervoltage, 4 overvoltage, 8 following error, 16 non-finite, 32 encoder
     #[variable(causality = Output, variability = Discrete)]
     pub faults: i32,
@@ -267,6 +322,8 @@ impl ControllerParameters {
                 bus_overvoltage: self.bus_overvoltage as f32,
                 following_error: self.following_error_limit as f32,
             },
+            // Set from the `accdec` group by `ServoAxis::config`.
+            acc_dec: AccDecParams::default(),
         }
     }
 }
@@ -316,8 +373,10 @@ impl ServoAxis {
         let point = InjectionPoint::from_code(self.excitation.point).ok_or_else(|| {
             format!("excitation.point must be 0, 1 or 2 (got {})", self.excitation.point)
         })?;
+        let mut control = self.ctrl.to_params(motor, counts);
+        control.acc_dec = self.accdec.to_params()?;
         Ok(SimulationConfig {
-            control: self.ctrl.to_params(motor, counts),
+            control,
             plant,
             excitation: ExcitationConfig {
                 point,
@@ -332,6 +391,7 @@ impl ServoAxis {
             ctrl: self.ctrl.clone(),
             plant: self.plant.clone(),
             excitation: self.excitation.clone(),
+            accdec: self.accdec.clone(),
         }
     }
 
@@ -340,6 +400,8 @@ impl ServoAxis {
             .ok_or_else(|| format!("mode must be 0 (torque), 1 (velocity) or 2 (position), got {}", self.mode))?;
         for (name, v) in [
             ("position_command", self.position_command),
+            ("move_speed", self.move_speed),
+            ("jog_velocity", self.jog_velocity),
             ("velocity_command", self.velocity_command),
             ("torque_command", self.torque_command),
             ("disturbance_torque", self.disturbance_torque),
@@ -352,9 +414,14 @@ impl ServoAxis {
         if self.position_command.abs() > 1.0e9 {
             return Err(format!("position_command {} rad is out of range (|x| <= 1e9)", self.position_command));
         }
+        if self.move_speed < 0.0 {
+            return Err(format!("move_speed {} rad/s must be >= 0 (the direction comes from the target)", self.move_speed));
+        }
         Ok(UserInputs {
             mode,
             position_command: self.position_command,
+            move_speed: self.move_speed,
+            jog_velocity: self.jog_velocity,
             velocity_command: self.velocity_command,
             torque_command: self.torque_command,
             disturbance_torque: self.disturbance_torque,
@@ -376,6 +443,10 @@ impl ServoAxis {
         self.electromagnetic_torque = sim.plant.electromagnetic_torque;
         self.velocity_estimate = t.velocity_estimate as f64;
         self.following_error = t.following_error as f64;
+        let rad_per_count = std::f64::consts::TAU / sim.axis.params().encoder_counts_per_rev as f64;
+        self.position_command_out = t.position_command as f64 * rad_per_count;
+        self.command_velocity =
+            t.command_pulses as f64 * rad_per_count / sim.axis.params().rates.position_period() as f64;
         self.faults = t.faults.0 as i32;
     }
 
@@ -383,12 +454,17 @@ impl ServoAxis {
         let Some(applied) = self.applied.as_ref() else {
             return Err("do_step before a successful exit from initialization mode".into());
         };
-        if applied.ctrl != self.ctrl || applied.plant != self.plant || applied.excitation != self.excitation {
+        if applied.ctrl != self.ctrl
+            || applied.plant != self.plant
+            || applied.excitation != self.excitation
+            || applied.accdec != self.accdec
+        {
             let applied = applied.clone();
             let changed = describe_changes(&applied, &self.applied_now());
             self.ctrl = applied.ctrl;
             self.plant = applied.plant;
             self.excitation = applied.excitation;
+            self.accdec = applied.accdec;
             return Err(format!(
                 "fixed parameter(s) {changed} changed after initialization; the change was undone \
                  (set parameters before fmi3ExitInitializationMode)"
@@ -573,4 +649,36 @@ mod tests {
         assert_eq!(m.sim.as_ref().unwrap().ticks(), 0);
     }
 
+    #[test]
+    fn bad_acc_dec_settings_are_refused_with_the_reason() {
+        let mut m = started();
+        let build = |m: &ServoAxis| -> Result<(), String> {
+            AxisSimulation::new(&m.config()?).map(|_| ()).map_err(|e| e.to_string())
+        };
+        m.accdec.filter = 2;
+        m.accdec.cutoff_hz = 5000.0; // position loop 4 kHz: Nyquist 2 kHz
+        assert!(build(&m).unwrap_err().contains("Nyquist"), "{:?}", build(&m));
+        m.accdec.cutoff_hz = 40.0;
+        m.accdec.order = 7;
+        assert!(build(&m).unwrap_err().contains("order"), "{:?}", build(&m));
+        m.accdec.order = 3;
+        m.accdec.filter = 1;
+        m.accdec.ma_length_2 = 0;
+        assert!(build(&m).unwrap_err().contains("length"), "{:?}", build(&m));
+        m.accdec.ma_length_2 = 16;
+        m.accdec.filter = 3;
+        assert!(build(&m).unwrap_err().contains("accdec.filter"));
+        m.accdec.filter = 2;
+        assert!(build(&m).is_ok());
+    }
+
+    #[test]
+    fn negative_move_speed_is_refused_without_advancing() {
+        let mut m = started();
+        m.sim = Some(AxisSimulation::new(&m.config().unwrap()).unwrap());
+        m.applied = Some(m.applied_now());
+        m.move_speed = -1.0;
+        assert!(m.step(0.0, 0.00025).unwrap_err().contains("move_speed"));
+        assert_eq!(m.sim.as_ref().unwrap().ticks(), 0);
+    }
 }

@@ -48,8 +48,12 @@ impl std::error::Error for ConfigError {}
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub struct UserInputs {
     pub mode: Mode,
-    /// Motor-side position command (rad).
+    /// Motor-side position command (rad): streamed, or the target of a move.
     pub position_command: f64,
+    /// Positioning speed (rad/s); 0 streams `position_command` through the acc/dec filter.
+    pub move_speed: f64,
+    /// Jog speed (rad/s); non-zero overrides `position_command`.
+    pub jog_velocity: f64,
     pub velocity_command: f64,
     pub torque_command: f64,
     pub disturbance_torque: f64,
@@ -129,6 +133,8 @@ impl AxisSimulation {
         let commands = Commands {
             mode: u.mode,
             position: self.counts_for(u.position_command),
+            move_speed: u.move_speed as f32,
+            jog_velocity: u.jog_velocity as f32,
             velocity: u.velocity_command as f32,
             torque: u.torque_command as f32,
         };

@@ -177,7 +177,7 @@ impl ButterworthPulseFilter {
     }
 
     /// One tick: `pulses` in, whole pulses out.
-    pub fn step(&mut self, pulses: i32) -> i64 {
+    pub fn step(&mut self, pulses: i64) -> i64 {
         let d = &mut self.design;
         let mut v = pulses as f32;
         let mut pending = 0.0;
@@ -192,7 +192,7 @@ impl ButterworthPulseFilter {
         }
         // Keep exactly round(pending) pulses inside; give out the rest.
         let keep = libm::roundf(pending) as i64;
-        let out = self.stock + pulses as i64 - keep;
+        let out = self.stock + pulses - keep;
         self.stock = keep;
         out
     }

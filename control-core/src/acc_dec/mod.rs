@@ -14,6 +14,83 @@ pub use moving_average::{MovingAverageCascade, MAX_MOVING_AVERAGE_LENGTH, MAX_MO
 
 use core::fmt;
 
+/// Which acc/dec filter sits between the interpolator and the position loop.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum AccDecKind {
+    /// Pulses pass unchanged.
+    #[default]
+    None,
+    MovingAverage,
+    Butterworth,
+}
+
+impl AccDecKind {
+    pub fn from_code(code: i32) -> Option<Self> {
+        match code {
+            0 => Some(Self::None),
+            1 => Some(Self::MovingAverage),
+            2 => Some(Self::Butterworth),
+            _ => None,
+        }
+    }
+}
+
+/// Acc/dec settings (part of [`crate::Params`]).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct AccDecParams {
+    pub kind: AccDecKind,
+    /// Butterworth order, 1 to 6.
+    pub order: u32,
+    /// Butterworth cut-off (Hz); at most the position loop's Nyquist frequency.
+    pub cutoff_hz: f32,
+    /// Moving-average stages in use (1 to 3) and their lengths (position ticks).
+    pub ma_stages: u32,
+    pub ma_lengths: [u32; MAX_MOVING_AVERAGE_STAGES],
+}
+
+impl Default for AccDecParams {
+    /// Off; when switched on: 3rd-order Butterworth at 40 Hz (twice the default position
+    /// loop's 20 Hz bandwidth, the seed's rule), or three 16-tick moving averages.
+    fn default() -> Self {
+        Self { kind: AccDecKind::None, order: 3, cutoff_hz: 40.0, ma_stages: 3, ma_lengths: [16; 3] }
+    }
+}
+
+/// The configured filter, running on pulses per position tick.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum AccDecFilter {
+    None,
+    MovingAverage(MovingAverageCascade),
+    Butterworth(ButterworthPulseFilter),
+}
+
+impl AccDecFilter {
+    /// Build from settings at the position-loop period (s). Every setting is checked, also
+    /// those of the kinds not selected, so that switching kind later cannot fail.
+    pub fn new(p: &AccDecParams, sample_period: f32) -> Result<Self, AccDecError> {
+        let stages = p.ma_stages as usize;
+        if !(1..=MAX_MOVING_AVERAGE_STAGES).contains(&stages) {
+            return Err(AccDecError::Stages(stages));
+        }
+        let ma = MovingAverageCascade::new(&p.ma_lengths[..stages])?;
+        let bw = ButterworthDesign::new(p.order, p.cutoff_hz, sample_period)?;
+        Ok(match p.kind {
+            AccDecKind::None => Self::None,
+            AccDecKind::MovingAverage => Self::MovingAverage(ma),
+            AccDecKind::Butterworth => Self::Butterworth(ButterworthPulseFilter::new(bw)),
+        })
+    }
+
+    /// One position tick: pulses in, whole pulses out.
+    pub fn step(&mut self, pulses: i64) -> i64 {
+        match self {
+            Self::None => pulses,
+            Self::MovingAverage(m) => m.step(pulses),
+            Self::Butterworth(b) => b.step(pulses),
+        }
+    }
+}
+
 /// Why an acc/dec filter cannot be built. Nothing is configured when one is returned.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub enum AccDecError {

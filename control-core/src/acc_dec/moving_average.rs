@@ -61,8 +61,8 @@ impl MovingAverageCascade {
     }
 
     /// One tick: `pulses` in, whole pulses out.
-    pub fn step(&mut self, pulses: i32) -> i64 {
-        let mut v = pulses as i64;
+    pub fn step(&mut self, pulses: i64) -> i64 {
+        let mut v = pulses;
         for s in &mut self.stages[..self.count] {
             v = s.step(v);
         }

@@ -16,13 +16,13 @@ impl Random {
     fn unit(&mut self) -> f32 {
         (self.next() >> 40) as f32 / (1u64 << 24) as f32
     }
-    fn pulses(&mut self) -> i32 {
+    fn pulses(&mut self) -> i64 {
         // Mostly moderate rates, sometimes large, both signs, often zero.
         match self.below(4) {
             0 => 0,
-            1 => self.below(201) as i32 - 100,
-            2 => self.below(40_001) as i32 - 20_000,
-            _ => self.below(2_000_001) as i32 - 1_000_000,
+            1 => self.below(201) as i64 - 100,
+            2 => self.below(40_001) as i64 - 20_000,
+            _ => self.below(2_000_001) as i64 - 1_000_000,
         }
     }
 }
@@ -107,7 +107,7 @@ fn no_pulse_is_lost_or_created_over_ten_thousand_random_sequences() {
         let n = 1 + rng.below(200);
         for _ in 0..n {
             let x = rng.pulses();
-            sum_in += x as i64;
+            sum_in += x;
             sum_bw += bw.step(x);
             sum_ma += ma.step(x);
             // Exact bookkeeping at every tick.

@@ -1,0 +1,178 @@
+//! Position command path of the drive: interpolator, then acc/dec filter, then the position
+//! loop (seed 003: acceleration/deceleration *after* interpolation).
+//!
+//! The interpolator turns a move into pulses (encoder counts) per position tick:
+//! - **stream**: the increments of an externally streamed position input (the host or a CNC
+//!   sends absolute positions; their differences are the pulses);
+//! - **absolute** / **relative positioning**: a constant speed until the target, the last
+//!   tick taking the remainder (a rectangular speed profile; the filter shapes it);
+//! - **jog**: a constant speed until told otherwise.
+//!
+//! Fractional pulses of a speed are carried from tick to tick; the filter conserves whole
+//! pulses; so the filtered command ends exactly on the target.
+
+use crate::acc_dec::AccDecFilter;
+
+/// What the interpolator does this tick.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum Move {
+    /// Follow the increments of the position input.
+    Stream,
+    /// Go to this position (counts) at this speed (counts per tick, > 0).
+    Absolute { target: i64, speed: f32 },
+    /// Jog at this signed speed (counts per tick).
+    Jog(f32),
+}
+
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct CommandPath {
+    /// Interpolated (unfiltered) position (counts).
+    interpolated: i64,
+    /// Last streamed input, for its increments.
+    last_stream_input: i64,
+    /// Fraction of a pulse carried by the speed moves.
+    carry: f32,
+    /// The configured filter as built (reset copies it back).
+    fresh_filter: AccDecFilter,
+    filter: AccDecFilter,
+    /// Filtered position command (counts) and the last tick's pulses.
+    position: i64,
+    pulses: i64,
+}
+
+impl CommandPath {
+    pub fn new(filter: AccDecFilter) -> Self {
+        Self {
+            interpolated: 0,
+            last_stream_input: 0,
+            carry: 0.0,
+            fresh_filter: filter,
+            filter,
+            position: 0,
+            pulses: 0,
+        }
+    }
+
+    /// Start from rest at `position` (counts): empty filter, no carry.
+    pub fn reset(&mut self, position: i64) {
+        *self = Self { interpolated: position, last_stream_input: position, position, ..Self::new(self.fresh_filter) };
+    }
+
+    /// Position the interpolator has reached, before the filter (counts).
+    pub fn interpolated(&self) -> i64 {
+        self.interpolated
+    }
+
+    /// Filtered position command (counts).
+    pub fn position(&self) -> i64 {
+        self.position
+    }
+
+    /// Filtered pulses of the last tick.
+    pub fn pulses(&self) -> i64 {
+        self.pulses
+    }
+
+    /// A relative move of `distance` counts from where the interpolator is now.
+    pub fn relative(&self, distance: i64, speed: f32) -> Move {
+        Move::Absolute { target: self.interpolated.saturating_add(distance), speed }
+    }
+
+    fn speed_pulses(&mut self, speed: f32) -> i64 {
+        let total = self.carry + speed;
+        let whole = libm::floorf(total);
+        self.carry = total - whole;
+        whole as i64
+    }
+
+    /// One position tick; returns the filtered position command (counts). `position_input`
+    /// is the streamed absolute position (counts); its increments are followed only in
+    /// [`Move::Stream`], but it is watched in every tick so that returning to streaming after
+    /// a jog or a positioning move never jumps.
+    pub fn step(&mut self, m: Move, position_input: i64) -> i64 {
+        let increment = position_input.wrapping_sub(self.last_stream_input);
+        self.last_stream_input = position_input;
+        let pulses = match m {
+            Move::Stream => {
+                self.carry = 0.0;
+                increment
+            }
+            Move::Absolute { target, speed } => {
+                let remaining = target - self.interpolated;
+                let step = self.speed_pulses(speed.abs());
+                if step >= remaining.abs() {
+                    self.carry = 0.0;
+                    remaining
+                } else {
+                    step * remaining.signum()
+                }
+            }
+            Move::Jog(speed) => {
+                let step = self.speed_pulses(speed.abs());
+                if speed < 0.0 { -step } else { step }
+            }
+        };
+        self.interpolated = self.interpolated.wrapping_add(pulses);
+        self.pulses = self.filter.step(pulses);
+        self.position = self.position.wrapping_add(self.pulses);
+        self.position
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::acc_dec::{AccDecKind, AccDecParams};
+
+    fn path(kind: AccDecKind) -> CommandPath {
+        let p = AccDecParams { kind, ..AccDecParams::default() };
+        CommandPath::new(AccDecFilter::new(&p, 0.00025).unwrap())
+    }
+
+    #[test]
+    fn absolute_move_ends_exactly_on_target_at_the_asked_speed() {
+        for kind in [AccDecKind::None, AccDecKind::MovingAverage, AccDecKind::Butterworth] {
+            let mut c = path(kind);
+            c.reset(1000);
+            let mut fastest = 0;
+            for _ in 0..2000 {
+                let before = c.interpolated();
+                c.step(Move::Absolute { target: 1000 + 123_457, speed: 333.3 }, 0);
+                fastest = fastest.max(c.interpolated() - before);
+            }
+            assert_eq!(c.interpolated(), 124_457);
+            assert_eq!(c.position(), 124_457, "{kind:?}");
+            // The interpolator never goes faster than asked (the carry rounds up to 334).
+            assert_eq!(fastest, 334, "{kind:?}");
+        }
+    }
+
+    #[test]
+    fn jog_speed_is_exact_on_average_and_stops_without_a_jump() {
+        let mut c = path(AccDecKind::Butterworth);
+        c.reset(0);
+        for _ in 0..4000 {
+            c.step(Move::Jog(-12.25), 777);
+        }
+        assert_eq!(c.interpolated(), -49_000);
+        // Jog released: stream from wherever the input is now; only increments move.
+        for _ in 0..2000 {
+            c.step(Move::Stream, 777);
+        }
+        assert_eq!(c.position(), -49_000);
+    }
+
+    #[test]
+    fn stream_passes_increments_and_relative_moves_add_up() {
+        let mut c = path(AccDecKind::MovingAverage);
+        c.reset(50);
+        for k in 0..100 {
+            c.step(Move::Stream, 50 + 7 * k);
+        }
+        let m = c.relative(-1000, 10.0);
+        for _ in 0..400 {
+            c.step(m, 50 + 7 * 99);
+        }
+        assert_eq!(c.position(), 50 + 7 * 99 - 1000);
+    }
+}
