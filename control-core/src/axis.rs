@@ -231,7 +231,7 @@ impl Axis {
             }
         }
         if commands.mode == Mode::Position && self.tick % pdiv == 0 {
-            let counts_per_tick = p.encoder_counts_per_rev as f32 / TAU * p.rates.position_period();
+            let counts_per_tick = p.counts_per_position_tick();
             let motion = if commands.jog_velocity != 0.0 {
                 Move::Jog(commands.jog_velocity * counts_per_tick)
             } else if commands.move_speed != 0.0 {

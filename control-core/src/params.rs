@@ -243,6 +243,12 @@ impl Default for Params {
 
 impl Params {
     /// Check every field; the first problem found is returned.
+    /// Encoder counts per position tick at 1 rad/s: the scale from a speed to the
+    /// interpolator's pulses per tick.
+    pub fn counts_per_position_tick(&self) -> f32 {
+        self.encoder_counts_per_rev as f32 / crate::TAU * self.rates.position_period()
+    }
+
     pub fn validate(&self) -> Result<(), ParamError> {
         let m = &self.motor;
         nonzero("motor.pole_pairs", m.pole_pairs)?;

@@ -1,7 +1,10 @@
 //! Host side of the servo toolkit: scenarios run against the FMU through FMI 3.0, traces,
 //! plots, reports and benchmarks. The `servo` binary is a thin CLI over this library.
 
+pub mod acc_dec_report;
+pub mod acc_dec_study;
 pub mod bench;
+pub mod bench_accdec;
 pub mod bench_plant;
 pub mod fmu_runner;
 pub mod paths;

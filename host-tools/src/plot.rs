@@ -40,8 +40,21 @@ fn escape(s: &str) -> String {
     s.replace('&', "&amp;").replace('<', "&lt;").replace('>', "&gt;")
 }
 
-/// Plot `signals` of every `(label, trace)` into `path`.
+/// Plot `signals` of every `(label, trace)` into `path`, against time.
 pub fn plot_signals(path: &Path, title: &str, traces: &[(&str, &Trace)], signals: &[String]) -> Result<()> {
+    plot_against(path, title, traces, "time", "time (s)", signals)
+}
+
+/// Plot `signals` of every `(label, trace)` into `path`, against the column `x` (for
+/// example a swept parameter). A trace without a signal's column is left out of its panel.
+pub fn plot_against(
+    path: &Path,
+    title: &str,
+    traces: &[(&str, &Trace)],
+    x: &str,
+    x_label: &str,
+    signals: &[String],
+) -> Result<()> {
     let height = TOP + signals.len() as f64 * (PANEL_H + GAP) + 30.0;
     let mut svg = String::new();
     writeln!(
@@ -60,7 +73,7 @@ pub fn plot_signals(path: &Path, title: &str, traces: &[(&str, &Trace)], signals
         let y0 = TOP + si as f64 * (PANEL_H + GAP);
         let series: Vec<(Vec<f64>, Vec<f64>)> = traces
             .iter()
-            .filter_map(|(_, t)| Some((t.column("time")?, t.column(signal)?)))
+            .filter_map(|(_, t)| Some((t.column(x)?, t.column(signal)?)))
             .collect();
         let (mut tmin, mut tmax, mut vmin, mut vmax) = (f64::INFINITY, f64::NEG_INFINITY, f64::INFINITY, f64::NEG_INFINITY);
         for (t, v) in &series {
@@ -121,7 +134,7 @@ pub fn plot_signals(path: &Path, title: &str, traces: &[(&str, &Trace)], signals
             writeln!(svg, r#"<polyline fill="none" stroke="{}" stroke-width="1.3"{dash} points="{pts}"/>"#, COLOURS[ci % 4])?;
         }
     }
-    writeln!(svg, r#"<text x="{}" y="{}" text-anchor="middle">time (s)</text>"#, LEFT + plot_w / 2.0, height - 8.0)?;
+    writeln!(svg, r#"<text x="{}" y="{}" text-anchor="middle">{}</text>"#, LEFT + plot_w / 2.0, height - 8.0, escape(x_label))?;
     svg.push_str("</svg>\n");
     std::fs::write(path, svg).with_context(|| format!("cannot write {}", path.display()))
 }

@@ -1,9 +1,11 @@
 //! Butterworth low-pass acc/dec filter discretised by pole-zero matching (seed 003).
 //!
-//! Design: the `N` analogue poles `p = ωc·e^{jθ}` map to `z = e^{p·T}`; of the `N` zeros at
-//! infinity, `N − 1` map to `z = −1` and one stays as a one-sample delay (the seed's
-//! convention; python-control's `matched` keeps every zero at infinity as a delay, which
-//! gives the same poles and a `z^{-N}` numerator); the gain makes `G(1) = 1`.
+//! Design: the `N` analogue poles `p = ωc·e^{jθ}` map to `z = e^{p·T}`; the gain makes
+//! `G(1) = 1`. The `N` zeros at infinity are placed by [`ZeroPlacement`]: the seed maps
+//! `N − 1` of them to `z = −1` and keeps one as a one-sample delay
+//! (`K·z⁻¹(1 + z⁻¹)^{N−1}/A(z)`: the output reacts one tick after the input and the Nyquist
+//! frequency is nulled), python-control's `sample_system(method='matched')` keeps every one as
+//! a delay (`K·z⁻ᴺ/A(z)`: same poles, `N` ticks of dead time, no null at Nyquist).
 //!
 //! Realisation: cascaded second-order sections (one first-order section for odd orders) in
 //! transposed direct form II. A direct form with one delay line, as the seed draws it,
@@ -45,13 +47,24 @@ impl FirstOrderSection {
     }
 }
 
+/// Where the `N` zeros at infinity of the analogue Butterworth go in `z`.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum ZeroPlacement {
+    /// `N − 1` at `z = −1`, one kept as a one-sample delay (seed 003's worked example).
+    #[default]
+    Seed,
+    /// All `N` kept as delays (python-control's `matched`).
+    AllDelays,
+}
+
 /// A designed filter: sections, and the direct-form polynomials for reports.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct ButterworthDesign {
     pub order: u32,
+    pub zeros: ZeroPlacement,
     pub cutoff_hz: f32,
     pub sample_period: f32,
-    /// Overall gain `K` of `G(z) = K·z⁻¹·(1 + z⁻¹)^{N−1} / A(z)`.
+    /// Overall gain `K` of `G(z) = K·z⁻¹·(1 + z⁻¹)^{N−1} / A(z)` (or `K·z⁻ᴺ / A(z)`).
     pub gain: f32,
     biquads: [Biquad; MAX_BIQUADS],
     biquad_count: usize,
@@ -59,7 +72,17 @@ pub struct ButterworthDesign {
 }
 
 impl ButterworthDesign {
+    /// The seed's design: [`ZeroPlacement::Seed`].
     pub fn new(order: u32, cutoff_hz: f32, sample_period: f32) -> Result<Self, AccDecError> {
+        Self::with_zeros(order, cutoff_hz, sample_period, ZeroPlacement::Seed)
+    }
+
+    pub fn with_zeros(
+        order: u32,
+        cutoff_hz: f32,
+        sample_period: f32,
+        zeros: ZeroPlacement,
+    ) -> Result<Self, AccDecError> {
         if !(1..=MAX_ORDER).contains(&order) {
             return Err(AccDecError::Order(order));
         }
@@ -88,8 +111,10 @@ impl ButterworthDesign {
             let a2 = radius * radius;
             let dc = 1.0 + a1 + a2;
             // (1 + z⁻¹)² has DC value 4; the section carrying the delay of an even order
-            // has z⁻¹(1 + z⁻¹) with DC value 2.
-            *section = if n % 2 == 0 && k == 0 {
+            // has z⁻¹(1 + z⁻¹) with DC value 2; z⁻² has DC value 1.
+            *section = if zeros == ZeroPlacement::AllDelays {
+                Biquad::new(0.0, 0.0, dc, a1, a2)
+            } else if n % 2 == 0 && k == 0 {
                 Biquad::new(0.0, dc / 2.0, dc / 2.0, a1, a2)
             } else {
                 Biquad::new(dc / 4.0, dc / 2.0, dc / 4.0, a1, a2)
@@ -100,10 +125,18 @@ impl ButterworthDesign {
             FirstOrderSection { b1: 1.0 + a1, a1, s: 0.0 }
         });
         let mut design =
-            Self { order, cutoff_hz, sample_period, gain: 0.0, biquads, biquad_count: n / 2, first_order };
-        let den = design.denominator();
-        // G(1) = 1: K·2^{N−1} = A(1).
-        design.gain = den.iter().take(n + 1).sum::<f32>() / (1u32 << (n - 1)) as f32;
+            Self { order, zeros, cutoff_hz, sample_period, gain: 0.0, biquads, biquad_count: n / 2, first_order };
+        // G(1) = 1: K·2^{N−1} = A(1) (seed), K = A(1) (all delays). A(1) is the product of
+        // the sections' DC values, each `1 + a1 + a2` (or `1 + a1`): with poles near z = 1
+        // these sums are exact in f32 (Sterbenz), whereas summing the expanded direct-form
+        // coefficients would cancel catastrophically at high orders and low cut-offs.
+        let a_at_1 = design.biquads().iter().map(|b| 1.0 + b.a1 + b.a2).product::<f32>()
+            * design.first_order.map_or(1.0, |f| 1.0 + f.a1);
+        let numerator_dc = match zeros {
+            ZeroPlacement::Seed => (1u32 << (n - 1)) as f32,
+            ZeroPlacement::AllDelays => 1.0,
+        };
+        design.gain = a_at_1 / numerator_dc;
         Ok(design)
     }
 
@@ -131,9 +164,13 @@ impl ButterworthDesign {
         poly
     }
 
-    /// `[0, b1, …, bN, 0, …]`: `K·z⁻¹·(1 + z⁻¹)^{N−1}` of the direct form.
+    /// `[0, b1, …, bN, 0, …]`: `K·z⁻¹·(1 + z⁻¹)^{N−1}` (or `K·z⁻ᴺ`) of the direct form.
     pub fn numerator(&self) -> [f32; MAX_ORDER as usize + 1] {
         let mut poly = [0.0f32; MAX_ORDER as usize + 1];
+        if self.zeros == ZeroPlacement::AllDelays {
+            poly[self.order as usize] = self.gain;
+            return poly;
+        }
         // Binomial coefficients of (1 + z⁻¹)^{N−1}, shifted by the delay.
         let mut c = 1.0f32;
         let m = self.order - 1;

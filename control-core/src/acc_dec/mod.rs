@@ -9,7 +9,7 @@
 mod butterworth;
 mod moving_average;
 
-pub use butterworth::{ButterworthDesign, ButterworthPulseFilter, FirstOrderSection, MAX_ORDER};
+pub use butterworth::{ButterworthDesign, ButterworthPulseFilter, FirstOrderSection, ZeroPlacement, MAX_ORDER};
 pub use moving_average::{MovingAverageCascade, MAX_MOVING_AVERAGE_LENGTH, MAX_MOVING_AVERAGE_STAGES};
 
 use core::fmt;

@@ -44,14 +44,21 @@ fn seed_example_coefficients_to_its_printed_digits() {
 
 #[test]
 fn every_order_has_unit_dc_gain_and_stable_poles() {
+    // G(1) = K·2^{N−1} / A(1) with A(1) evaluated in f64 from the f32 sections the filter
+    // runs (an f32 sum of the expanded direct form cancels: at order 6 and 5 Hz its terms
+    // are ~20 and A(1) ~1e-11).
     for order in 1..=MAX_ORDER {
-        for cutoff in [5.0, 100.0, 1000.0, 1900.0] {
-            let d = ButterworthDesign::new(order, cutoff, 0.00025).unwrap();
-            let (a, b) = (d.denominator(), d.numerator());
-            let dc = b.iter().sum::<f32>() / a.iter().sum::<f32>();
-            assert!((dc - 1.0).abs() < 2e-4, "order {order}, {cutoff} Hz: G(1) = {dc}");
-            for s in d.biquads() {
-                assert!(s.a2 < 1.0 && s.a1.abs() < 1.0 + s.a2, "unstable section {s:?}");
+        for cutoff in [5.0, 100.0, 1000.0, 1900.0, 2000.0] {
+            for zeros in [ZeroPlacement::Seed, ZeroPlacement::AllDelays] {
+                let d = ButterworthDesign::with_zeros(order, cutoff, 0.00025, zeros).unwrap();
+                let a_at_1 = d.biquads().iter().map(|b| 1.0 + b.a1 as f64 + b.a2 as f64).product::<f64>()
+                    * d.first_order().map_or(1.0, |f| 1.0 + f.a1 as f64);
+                let b_at_1 = d.numerator().iter().map(|&b| b as f64).sum::<f64>();
+                let dc = b_at_1 / a_at_1;
+                assert!((dc - 1.0).abs() < 1e-5, "order {order}, {cutoff} Hz, {zeros:?}: G(1) = {dc}");
+                for s in d.biquads() {
+                    assert!(s.a2 < 1.0 && s.a1.abs() < 1.0 + s.a2, "unstable section {s:?}");
+                }
             }
         }
     }
@@ -127,9 +134,16 @@ fn no_pulse_is_lost_or_created_over_ten_thousand_random_sequences() {
 #[test]
 fn whole_pulse_output_follows_the_direct_form_transfer_function() {
     // The sections against an f64 direct-form simulation of G(z) built from the printed
-    // polynomials: cumulative pulses within one pulse (plus the f32 coefficient error).
-    for order in 1..=MAX_ORDER {
-        let d = ButterworthDesign::new(order, 700.0, 0.0005).unwrap();
+    // polynomials: cumulative pulses within one pulse (plus the f32 coefficient error), for
+    // both placements of the zeros at infinity.
+    for (order, zeros) in (1..=MAX_ORDER).flat_map(|n| [(n, ZeroPlacement::Seed), (n, ZeroPlacement::AllDelays)]) {
+        let d = ButterworthDesign::with_zeros(order, 700.0, 0.0005, zeros).unwrap();
+        let b_sum: f32 = d.numerator().iter().sum();
+        let a_sum: f32 = d.denominator().iter().sum();
+        assert!((b_sum - a_sum).abs() < 1e-6, "G(1) = 1: {b_sum} vs {a_sum}");
+        let first_nonzero = d.numerator().iter().position(|&c| c != 0.0).unwrap();
+        let delay = if zeros == ZeroPlacement::Seed { 1 } else { order as usize };
+        assert_eq!(first_nonzero, delay, "dead time of {zeros:?}");
         let (a, b) = (d.denominator().map(f64::from), d.numerator().map(f64::from));
         let mut f = ButterworthPulseFilter::new(d);
         let (mut xs, mut ys) = ([0.0f64; 7], [0.0f64; 7]);
@@ -143,7 +157,7 @@ fn whole_pulse_output_follows_the_direct_form_transfer_function() {
             ys[0] = y;
             cum_ref += y;
             cum_out += f.step(x);
-            assert!((cum_out as f64 - cum_ref).abs() <= 0.5 + 0.01, "order {order}, k {k}: {cum_out} vs {cum_ref}");
+            assert!((cum_out as f64 - cum_ref).abs() <= 0.5 + 0.01, "order {order} {zeros:?}, k {k}: {cum_out} vs {cum_ref}");
         }
         assert_eq!(cum_out, 3000);
     }

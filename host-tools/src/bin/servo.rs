@@ -55,6 +55,69 @@ enum Command {
         #[command(flatten)]
         common: Common,
     },
+    /// Acc/dec after interpolation (seed 003): a pole-zero-matched Butterworth against
+    /// cascaded moving averages.
+    ///
+    /// Prints the Butterworth's coefficients (direct form and the sections the drive runs),
+    /// runs the same move (--distance at --speed, in the drive's whole pulses) through both
+    /// filters and reports their delay (velocity-step response: time to 50 % and until it
+    /// stays within 1 %), peak acceleration and jerk; runs the move on the FMU's two-inertia
+    /// load for each --resonance and reports the load's residual vibration after the command
+    /// arrives; sweeps the cut-off to show the delay / jerk / vibration trade-off. Unless
+    /// --ma-lengths is given, the moving averages are three stages matched to the
+    /// Butterworth's 99 % delay, so the comparison is at equal delay.
+    ///
+    /// Writes profiles.svg, profile_*.csv, vibration_<Hz>hz.svg/.csv, sweep.csv/.svg and
+    /// accdec.json into --out (default out/accdec/).
+    ///
+    /// Example (the seed's worked example): servo accdec --cutoff 1000 --order 3 --sample-period 0.0005
+    Accdec {
+        /// Butterworth order (1 to 6)
+        #[arg(long, default_value_t = 3)]
+        order: u32,
+        /// Butterworth cut-off (Hz); default: twice the position loop's bandwidth kp/2π
+        #[arg(long)]
+        cutoff: Option<f32>,
+        /// Sample period of the filter = the position-loop period (s)
+        #[arg(long, default_value_t = 0.00025)]
+        sample_period: f32,
+        /// Keep every zero at infinity as a delay (python-control's `matched`) instead of the
+        /// seed's N-1 zeros at z = -1 plus one delay (host only; the FMU runs the seed's form)
+        #[arg(long)]
+        zeros_as_delays: bool,
+        /// Moving-average lengths in ticks, comma separated (1 to 3 stages); default: three
+        /// stages matched to the Butterworth's 99 % delay
+        #[arg(long, value_delimiter = ',')]
+        ma_lengths: Option<Vec<u32>>,
+        /// Move distance (rad, motor side)
+        #[arg(long, default_value_t = 2.0)]
+        distance: f64,
+        /// Move speed (rad/s)
+        #[arg(long, default_value_t = 50.0)]
+        speed: f64,
+        /// Encoder counts per revolution (the FMU's default)
+        #[arg(long, default_value_t = 1 << 20)]
+        counts_per_rev: u32,
+        /// Load resonances to test on the FMU (Hz, comma separated): the load's natural
+        /// frequency against a locked motor
+        #[arg(long, value_delimiter = ',', default_values_t = [20.0, 60.0])]
+        resonance: Vec<f64>,
+        /// Damping ratio of those resonances
+        #[arg(long, default_value_t = 0.02)]
+        damping_ratio: f64,
+        /// Cut-offs to sweep (Hz, comma separated); default: 1/4, 1/2, 1, 2 and 4 times the
+        /// cut-off (up to the Nyquist frequency)
+        #[arg(long, value_delimiter = ',')]
+        sweep: Option<Vec<f32>>,
+        /// No cut-off sweep
+        #[arg(long)]
+        no_sweep: bool,
+        /// Filters only: no FMU runs
+        #[arg(long)]
+        no_fmu: bool,
+        #[command(flatten)]
+        common: Common,
+    },
     /// Compare two trace CSVs bit for bit on their common columns.
     Compare { a: PathBuf, b: PathBuf },
     /// Benchmarks that print the figures the issues ask for.
@@ -82,6 +145,29 @@ enum BenchCommand {
     Plant {
         #[command(flatten)]
         common: Common,
+    },
+    /// Acc/dec filters (seed 003): seed digits, python-control `matched` poles (both zero
+    /// conventions), pulse conservation, residual vibration at equal delay, cost per tick.
+    Accdec {
+        /// Random pulse sequences for the conservation property
+        #[arg(long, default_value_t = 10_000)]
+        sequences: usize,
+        /// Load resonances for the equal-delay vibration comparison (Hz)
+        #[arg(long, value_delimiter = ',', default_values_t = [20.0, 60.0])]
+        resonance: Vec<f64>,
+        /// Skip the instruction count (needs valgrind)
+        #[arg(long)]
+        no_cost: bool,
+        #[command(flatten)]
+        common: Common,
+    },
+    /// Run a filter for the instruction count of `servo bench accdec` (valgrind runs this).
+    #[command(hide = true)]
+    AccdecProbe {
+        #[arg(long)]
+        filter: String,
+        #[arg(long)]
+        ticks: usize,
     },
 }
 
@@ -255,6 +341,138 @@ fn bench_plant(common: &Common) -> Result<bool> {
     Ok(r.passed)
 }
 
+#[allow(clippy::too_many_arguments)]
+fn accdec(
+    order: u32,
+    cutoff: Option<f32>,
+    sample_period: f32,
+    zeros_as_delays: bool,
+    ma_lengths: &Option<Vec<u32>>,
+    distance: f64,
+    speed: f64,
+    counts_per_rev: u32,
+    resonance: &[f64],
+    damping_ratio: f64,
+    sweep: &Option<Vec<f32>>,
+    no_sweep: bool,
+    no_fmu: bool,
+    common: &Common,
+) -> Result<bool> {
+    let cutoff = cutoff.unwrap_or_else(host_tools::acc_dec_report::default_cutoff_hz);
+    let nyquist = 0.5 / sample_period;
+    let sweep = match (no_sweep, sweep) {
+        (true, _) => vec![],
+        (false, Some(s)) => s.clone(),
+        (false, None) => [0.25, 0.5, 1.0, 2.0, 4.0].iter().map(|f| f * cutoff).filter(|&c| c <= nyquist).collect(),
+    };
+    let request = host_tools::acc_dec_report::AccDecRequest {
+        order,
+        cutoff_hz: cutoff,
+        sample_period,
+        all_delays: zeros_as_delays,
+        ma_lengths: ma_lengths.clone(),
+        distance_rad: distance,
+        speed_rad_s: speed,
+        counts_per_rev,
+        resonances: resonance
+            .iter()
+            .map(|&hz| host_tools::acc_dec_study::Resonance { hz, damping_ratio })
+            .collect(),
+        sweep,
+        fmu: (!no_fmu && !zeros_as_delays).then(|| common.fmu.clone().unwrap_or_else(default_fmu)),
+        out: common.out.clone().unwrap_or_else(|| default_out("accdec")),
+    };
+    if zeros_as_delays && !no_fmu && !common.json {
+        eprintln!("note: --zeros-as-delays runs on the host only (the FMU's filter keeps the seed's zeros): no FMU runs");
+    }
+    let pb = progress_bar("accdec", common.json);
+    let report = host_tools::acc_dec_report::run(&request, |label, f| {
+        pb.set_prefix(label.to_string());
+        pb.set_position((f * 1000.0) as u64)
+    })?;
+    pb.finish_and_clear();
+    if common.json {
+        println!("{}", serde_json::to_string_pretty(&report)?);
+    } else {
+        report.print();
+    }
+    Ok(report.butterworth.shape.pulse_balance == 0 && report.moving_average.shape.pulse_balance == 0)
+}
+
+fn bench_accdec(sequences: usize, resonance: &[f64], no_cost: bool, common: &Common) -> Result<bool> {
+    use host_tools::bench_accdec as b;
+    let fmu_path = common.fmu.clone().unwrap_or_else(default_fmu);
+    let pb = progress_bar("seed digits", common.json);
+    let digits = b::seed_digits()?;
+    pb.set_prefix("python-control");
+    pb.set_position(100);
+    let matched = b::matched_comparison()?;
+    pb.set_prefix("pulse conservation");
+    pb.set_position(300);
+    let props = b::properties(sequences);
+    pb.set_prefix("FMU vibration");
+    pb.set_position(600);
+    let vibration = b::equal_delay_vibration(&fmu_path, resonance)?;
+    pb.set_prefix("instruction count");
+    pb.set_position(700);
+    let costs = if no_cost { vec![] } else { b::filter_costs()? };
+    pb.finish_and_clear();
+    let worst = |f: fn(&b::MatchedComparison) -> f64| matched.iter().map(f).fold(0.0, f64::max);
+    let (pole, den, gd, gs) =
+        (worst(|m| m.pole_error), worst(|m| m.denominator_error), worst(|m| m.all_delays_gain_error), worst(|m| m.seed_gain_error));
+    let ok = digits.iter().all(|d| d.equal)
+        && pole < 1e-5
+        && gd < 1e-4
+        && gs < 1e-4
+        && props.conservation_failures == 0
+        && props.zero_input_nonzero_outputs == 0;
+    if common.json {
+        println!(
+            "{}",
+            serde_json::to_string_pretty(&serde_json::json!({
+                "bench": "accdec", "seed_digits": digits, "matched": matched, "properties": props,
+                "equal_delay_vibration": vibration, "costs": costs, "passed": ok
+            }))?
+        );
+        return Ok(ok);
+    }
+    println!("servo bench accdec — seed 003");
+    println!("  1. seed example, 3rd order, 1 kHz, 0.5 ms (printed digits):");
+    for d in &digits {
+        println!("     {:<20} seed {:>11}  ours {:>13.8}  {}", d.name, d.printed, d.ours, if d.equal { "equal" } else { "DIFFERENT" });
+    }
+    println!("  2. against python-control sample_system(method='matched'), orders 1-6 at {} (Hz, s):", b::MATCHED_CASES.map(|(c, t)| format!("{c}/{t}")).join(", "));
+    println!("     largest pole error |z - z_py|            {pole:.2e}");
+    println!("     largest denominator coefficient error    {den:.2e}");
+    println!("     gain, every zero at infinity a delay: K = A(1), relative error {gd:.2e}  (python-control's convention)");
+    println!("     gain, seed: N-1 zeros at z = -1 + one delay: K·2^(N-1) = A(1), relative error {gs:.2e}");
+    println!("     (same poles; the seed's form answers one tick after the input and nulls Nyquist, python-control's waits N ticks)");
+    println!("  3. properties of the whole-pulse filters (random Butterworth 1-6 / moving-average cascades):");
+    println!("     {} random sequences: {} with output sum != input sum", props.sequences, props.conservation_failures);
+    println!("     {} ticks of zero input: {} non-zero outputs", props.zero_input_ticks, props.zero_input_nonzero_outputs);
+    println!("  4. residual load vibration at equal 99 % delay (2 rad at 50 rad/s, 2 % damping, friction off):");
+    println!(
+        "     {} (t50 {:.2} ms, t99 {:.2} ms) vs {} (t50 {:.2} ms, t99 {:.2} ms)",
+        vibration.butterworth,
+        vibration.butterworth_t50 * 1e3,
+        vibration.butterworth_t99 * 1e3,
+        vibration.moving_average,
+        vibration.moving_average_t50 * 1e3,
+        vibration.moving_average_t99 * 1e3
+    );
+    for (hz, bw, ma, ratio) in &vibration.resonances {
+        println!("     {hz:>5} Hz load resonance: peak twist Butterworth {bw:.3e} rad, moving average {ma:.3e} rad, ratio BW/MA {ratio:.3}");
+    }
+    if !costs.is_empty() {
+        println!("  5. cost per tick (x86-64 instructions, valgrind; the probe's own input generation subtracted):");
+        for c in &costs {
+            println!("     {:<22} {:>7.1}", c.filter, c.instructions_per_tick);
+        }
+    }
+    println!("  checks (seed digits, poles < 1e-5, gains < 1e-4, conservation, zero in -> zero out): {}", if ok { "pass" } else { "FAIL" });
+    Ok(ok)
+}
+
 fn main() -> ExitCode {
     let cli = Cli::parse();
     let result = match &cli.command {
@@ -272,8 +490,48 @@ fn main() -> ExitCode {
                 }
             }
         })(),
+        Command::Accdec {
+            order,
+            cutoff,
+            sample_period,
+            zeros_as_delays,
+            ma_lengths,
+            distance,
+            speed,
+            counts_per_rev,
+            resonance,
+            damping_ratio,
+            sweep,
+            no_sweep,
+            no_fmu,
+            common,
+        } => accdec(
+            *order,
+            *cutoff,
+            *sample_period,
+            *zeros_as_delays,
+            ma_lengths,
+            *distance,
+            *speed,
+            *counts_per_rev,
+            resonance,
+            *damping_ratio,
+            sweep,
+            *no_sweep,
+            *no_fmu,
+            common,
+        ),
         Command::Bench(BenchCommand::Fmu { seconds, no_fmpy, goal, common }) => bench_fmu(*seconds, *no_fmpy, *goal, common),
         Command::Bench(BenchCommand::Plant { common }) => bench_plant(common),
+        Command::Bench(BenchCommand::Accdec { sequences, resonance, no_cost, common }) => {
+            bench_accdec(*sequences, resonance, *no_cost, common)
+        }
+        Command::Bench(BenchCommand::AccdecProbe { filter, ticks }) => {
+            host_tools::bench_accdec::cost_probe(filter, *ticks).map(|s| {
+                println!("{s}");
+                true
+            })
+        }
     };
     match result {
         Ok(true) => ExitCode::SUCCESS,
