@@ -222,7 +222,7 @@ impl Axis {
         let vdiv = p.rates.velocity_divider as u64;
         let pdiv = p.rates.position_divider as u64;
         let position = self.encoder.position();
-        if self.tick % vdiv == 0 {
+        if self.tick.is_multiple_of(vdiv) {
             let counts = position - self.position_at_velocity_tick;
             self.position_at_velocity_tick = position;
             if self.tick > 0 {
@@ -230,7 +230,7 @@ impl Axis {
                     counts as f32 * (TAU / p.encoder_counts_per_rev as f32) / p.rates.velocity_period();
             }
         }
-        if commands.mode == Mode::Position && self.tick % pdiv == 0 {
+        if commands.mode == Mode::Position && self.tick.is_multiple_of(pdiv) {
             let counts_per_tick = p.counts_per_position_tick();
             let motion = if commands.jog_velocity != 0.0 {
                 Move::Jog(commands.jog_velocity * counts_per_tick)
@@ -252,7 +252,7 @@ impl Axis {
                 faults.latch(Faults::FOLLOWING_ERROR);
             }
         }
-        if commands.mode != Mode::Torque && self.tick % vdiv == 0 {
+        if commands.mode != Mode::Torque && self.tick.is_multiple_of(vdiv) {
             if commands.mode == Mode::Velocity {
                 self.velocity_reference = commands.velocity;
             }

@@ -32,8 +32,6 @@ pub struct CommandPath {
     last_stream_input: i64,
     /// Fraction of a pulse carried by the speed moves.
     carry: f32,
-    /// The configured filter as built (reset copies it back).
-    fresh_filter: AccDecFilter,
     filter: AccDecFilter,
     /// Filtered position command (counts) and the last tick's pulses.
     position: i64,
@@ -46,7 +44,6 @@ impl CommandPath {
             interpolated: 0,
             last_stream_input: 0,
             carry: 0.0,
-            fresh_filter: filter,
             filter,
             position: 0,
             pulses: 0,
@@ -55,7 +52,8 @@ impl CommandPath {
 
     /// Start from rest at `position` (counts): empty filter, no carry.
     pub fn reset(&mut self, position: i64) {
-        *self = Self { interpolated: position, last_stream_input: position, position, ..Self::new(self.fresh_filter) };
+        self.filter.reset();
+        *self = Self { interpolated: position, last_stream_input: position, position, ..Self::new(self.filter) };
     }
 
     /// Position the interpolator has reached, before the filter (counts).

@@ -265,7 +265,7 @@ impl Params {
         in_range("rates.current_loop_hz", r.current_loop_hz, 1000.0, 200_000.0)?;
         nonzero("rates.velocity_divider", r.velocity_divider)?;
         nonzero("rates.position_divider", r.position_divider)?;
-        if r.position_divider % r.velocity_divider != 0 {
+        if !r.position_divider.is_multiple_of(r.velocity_divider) {
             return Err(ParamError::RatesNotDivisible {
                 velocity_divider: r.velocity_divider,
                 position_divider: r.position_divider,

@@ -95,6 +95,8 @@ impl FilterSpec {
 
     /// The same transfer function in f64 without rounding: the ideal output for `input`.
     pub fn ideal_response(&self, period: f32, input: &[f64]) -> Result<Vec<f64>> {
+        // Refuse what the drive would refuse (length 0, order 7, …) with its reason.
+        self.build(period)?;
         match self {
             Self::Butterworth { .. } => {
                 let d = self.design(period)?.expect("a design");

@@ -59,3 +59,43 @@ fn bad_input_gets_a_clear_error() {
     let o = servo().arg("run").arg(&s).arg("--fmu").arg("/nonexistent.fmu").output().unwrap();
     assert!(String::from_utf8_lossy(&o.stderr).contains("xtask -- bundle"));
 }
+
+#[test]
+fn accdec_prints_the_seed_design_and_writes_its_files() {
+    let out = tmp("accdec");
+    let o = servo()
+        .args(["accdec", "--cutoff", "1000", "--order", "3", "--sample-period", "0.0005", "--no-sweep", "--json"])
+        .arg("--fmu")
+        .arg(fmu_path())
+        .arg("--out")
+        .arg(&out)
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let r: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+    let den = r["design"]["denominator"].as_array().unwrap();
+    assert!((den[1].as_f64().unwrap() - 0.33626).abs() < 5e-6, "{den:?}");
+    assert_eq!(r["butterworth"]["shape"]["pulse_balance"], 0);
+    assert_eq!(r["moving_average"]["shape"]["pulse_balance"], 0);
+    assert_eq!(r["vibration"].as_array().unwrap().len(), 4, "two filters on two resonances");
+    for f in ["profiles.svg", "profile_butterworth.csv", "profile_moving_average.csv", "vibration_20hz.svg", "accdec.json"] {
+        assert!(out.join(f).exists(), "{f} missing");
+    }
+}
+
+#[test]
+fn accdec_refuses_bad_designs_with_the_reason() {
+    for (args, reason) in [
+        (vec!["--order", "7"], "order 7"),
+        (vec!["--order", "0"], "order 0"),
+        (vec!["--cutoff", "2500"], "Nyquist"),
+        (vec!["--cutoff", "NaN"], "cut-off"),
+        (vec!["--ma-lengths", "16,0,16"], "length 0"),
+        (vec!["--speed=-1"], "--speed"),
+    ] {
+        let o = servo().arg("accdec").args(&args).args(["--no-fmu", "--no-sweep"]).arg("--out").arg(tmp("accdec-bad")).output().unwrap();
+        let err = String::from_utf8_lossy(&o.stderr);
+        assert_eq!(o.status.code(), Some(2), "{args:?}: {err}");
+        assert!(err.contains(reason), "{args:?}: {err}");
+    }
+}

@@ -114,7 +114,7 @@ impl ButterworthDesign {
             // has z⁻¹(1 + z⁻¹) with DC value 2; z⁻² has DC value 1.
             *section = if zeros == ZeroPlacement::AllDelays {
                 Biquad::new(0.0, 0.0, dc, a1, a2)
-            } else if n % 2 == 0 && k == 0 {
+            } else if n.is_multiple_of(2) && k == 0 {
                 Biquad::new(0.0, dc / 2.0, dc / 2.0, a1, a2)
             } else {
                 Biquad::new(dc / 4.0, dc / 2.0, dc / 4.0, a1, a2)
@@ -211,6 +211,17 @@ impl ButterworthPulseFilter {
     /// Pulses inside the filter (taken in, not yet given out).
     pub fn stock(&self) -> i64 {
         self.stock
+    }
+
+    /// Empty the filter: zero state, no pulse inside.
+    pub fn reset(&mut self) {
+        for b in &mut self.design.biquads {
+            b.reset();
+        }
+        if let Some(f) = &mut self.design.first_order {
+            f.s = 0.0;
+        }
+        self.stock = 0;
     }
 
     /// One tick: `pulses` in, whole pulses out.

@@ -57,6 +57,10 @@ impl Default for AccDecParams {
 }
 
 /// The configured filter, running on pulses per position tick.
+///
+/// Sized for the largest variant (three 512-tick windows, 12 KB): without an allocator the
+/// axis must hold room for any filter the parameters may select.
+#[allow(clippy::large_enum_variant)]
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub enum AccDecFilter {
     None,
@@ -79,6 +83,15 @@ impl AccDecFilter {
             AccDecKind::MovingAverage => Self::MovingAverage(ma),
             AccDecKind::Butterworth => Self::Butterworth(ButterworthPulseFilter::new(bw)),
         })
+    }
+
+    /// Empty the filter (as built; settings kept).
+    pub fn reset(&mut self) {
+        match self {
+            Self::None => {}
+            Self::MovingAverage(m) => m.reset(),
+            Self::Butterworth(b) => b.reset(),
+        }
     }
 
     /// One position tick: pulses in, whole pulses out.

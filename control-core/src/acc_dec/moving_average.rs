@@ -60,6 +60,14 @@ impl MovingAverageCascade {
         self.stages[..self.count].iter().map(|s| (s.length - 1) as f32 / 2.0).sum()
     }
 
+    /// Empty every window (no pulse inside, no remainder); lengths are kept.
+    pub fn reset(&mut self) {
+        for s in &mut self.stages {
+            s.window = [0; MAX_MOVING_AVERAGE_LENGTH as usize];
+            (s.next, s.sum, s.remainder) = (0, 0, 0);
+        }
+    }
+
     /// One tick: `pulses` in, whole pulses out.
     pub fn step(&mut self, pulses: i64) -> i64 {
         let mut v = pulses;

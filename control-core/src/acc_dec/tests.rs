@@ -170,3 +170,19 @@ fn one_moving_average_ramps_linearly() {
     let out: [i64; 10] = core::array::from_fn(|k| m.step(if k < 6 { 100 } else { 0 }));
     assert_eq!(out, [25, 50, 75, 100, 100, 100, 75, 50, 25, 0]);
 }
+
+#[test]
+fn reset_gives_back_a_fresh_filter() {
+    let mut rng = Random(99);
+    for kind in [AccDecKind::MovingAverage, AccDecKind::Butterworth] {
+        let params = AccDecParams { kind, ma_lengths: [5, 9, 3], ..Default::default() };
+        let fresh = AccDecFilter::new(&params, 0.00025).unwrap();
+        let mut f = fresh;
+        for _ in 0..50 {
+            f.step(rng.pulses());
+        }
+        assert_ne!(f, fresh);
+        f.reset();
+        assert_eq!(f, fresh, "{kind:?}");
+    }
+}
