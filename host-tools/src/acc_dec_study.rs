@@ -99,21 +99,31 @@ impl FilterSpec {
         self.build(period)?;
         match self {
             Self::Butterworth { .. } => {
+                // The drive's sections (f32 coefficients) evaluated in f64: the transfer
+                // function the drive runs, without its rounding to whole pulses. (The
+                // expanded direct form in f32 would move the poles at low cut-offs.)
                 let d = self.design(period)?.expect("a design");
-                let (b, a) = (d.numerator().map(f64::from), d.denominator().map(f64::from));
-                let n = b.len();
-                let (mut xs, mut ys) = (vec![0.0; n], vec![0.0; n]);
-                Ok(input
-                    .iter()
-                    .map(|&x| {
-                        xs.rotate_right(1);
-                        ys.rotate_right(1);
-                        xs[0] = x;
-                        let y = (0..n).map(|i| b[i] * xs[i]).sum::<f64>() - (1..n).map(|i| a[i] * ys[i]).sum::<f64>();
-                        ys[0] = y;
-                        y
-                    })
-                    .collect())
+                let mut v = input.to_vec();
+                for b in d.biquads() {
+                    let [b0, b1, b2, a1, a2] = [b.b0, b.b1, b.b2, b.a1, b.a2].map(f64::from);
+                    let (mut s1, mut s2) = (0.0, 0.0);
+                    for x in &mut v {
+                        let y = b0 * *x + s1;
+                        s1 = b1 * *x - a1 * y + s2;
+                        s2 = b2 * *x - a2 * y;
+                        *x = y;
+                    }
+                }
+                if let Some(f) = d.first_order() {
+                    let (b1, a1) = (f64::from(f.b1), f64::from(f.a1));
+                    let mut s = 0.0;
+                    for x in &mut v {
+                        let y = s;
+                        s = b1 * *x - a1 * y;
+                        *x = y;
+                    }
+                }
+                Ok(v)
             }
             Self::MovingAverage { lengths } => {
                 let mut v = input.to_vec();
@@ -168,9 +178,24 @@ pub fn delay(spec: &FilterSpec, period: f32) -> Result<Delay> {
     }
 }
 
+/// Which delay two filters are matched on.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize)]
+pub enum DelayMatch {
+    /// Equal time to 50 % of the commanded velocity (s).
+    T50(f64),
+    /// Equal time until within 1 % for good (s).
+    T99(f64),
+}
+
 /// Three equal (or nearly equal: lengths differ by at most one) moving averages whose 99 %
 /// delay is closest to `t99`.
 pub fn matching_moving_average(t99: f64, period: f32, stages: usize) -> Result<FilterSpec> {
+    moving_average_matched_on(DelayMatch::T99(t99), period, stages)
+}
+
+/// `stages` equal (or nearly equal) moving averages whose delay is closest to `target`.
+pub fn moving_average_matched_on(target: DelayMatch, period: f32, stages: usize) -> Result<FilterSpec> {
+    let (DelayMatch::T50(t) | DelayMatch::T99(t)) = target;
     let mut best: Option<(f64, FilterSpec)> = None;
     for base in 1..=MAX_MOVING_AVERAGE_LENGTH {
         for extra in 0..stages {
@@ -180,17 +205,20 @@ pub fn matching_moving_average(t99: f64, period: f32, stages: usize) -> Result<F
             }
             let spec = FilterSpec::MovingAverage { lengths };
             let d = delay(&spec, period)?;
-            let err = (d.t99 - t99).abs();
+            let err = match target {
+                DelayMatch::T50(t50) => (d.t50 - t50).abs(),
+                DelayMatch::T99(t99) => (d.t99 - t99).abs(),
+            };
             if best.as_ref().is_none_or(|(e, _)| err < *e) {
                 best = Some((err, spec));
             }
         }
-        // The 99 % delay grows with the length: stop once well past the target.
-        if base as f64 * period as f64 > t99 + 1e-12 {
+        // Both delays grow with the length and exceed one window: stop once past the target.
+        if base as f64 * period as f64 > t + 1e-12 {
             break;
         }
     }
-    best.map(|(_, s)| s).ok_or_else(|| anyhow!("no moving average matches a 99 % delay of {t99} s"))
+    best.map(|(_, s)| s).ok_or_else(|| anyhow!("no moving average matches a delay of {target:?} s"))
 }
 
 /// A positioning move in encoder counts, as the drive's interpolator gets it.

@@ -16,7 +16,9 @@ use anyhow::{bail, Context, Result};
 use control_core::acc_dec::{AccDecFilter, ButterworthDesign, MovingAverageCascade, ZeroPlacement, MAX_ORDER};
 use serde::Serialize;
 
-use crate::acc_dec_study::{delay, matching_moving_average, profile, residual_vibration, FilterSpec, PulseMove, Resonance};
+use crate::acc_dec_study::{
+    delay, moving_average_matched_on, profile, residual_vibration, DelayMatch, FilterSpec, PulseMove, Resonance,
+};
 use crate::bench::python;
 use crate::fmu_runner::Fmu;
 use crate::paths::workspace_root;
@@ -41,6 +43,24 @@ pub fn seed_digits() -> Result<Vec<SeedDigit>> {
             SeedDigit { name, printed, ours, equal: format!("{ours:.decimals$}") == printed }
         })
         .collect())
+}
+
+/// The seed's own test: 100 pulses per sample for 30 samples through the 3rd-order filter at
+/// 0.5 ms, cut-off 1 kHz and 300 Hz (the seed's result tables were lost); whole-pulse output
+/// until the filter is empty.
+pub fn seed_test() -> Result<Vec<(f32, Vec<i64>)>> {
+    [1000.0f32, 300.0]
+        .iter()
+        .map(|&cutoff| {
+            let d = ButterworthDesign::new(3, cutoff, 0.0005).map_err(|e| anyhow::anyhow!("{e}"))?;
+            let mut f = control_core::acc_dec::ButterworthPulseFilter::new(d);
+            let mut out: Vec<i64> = (0..200).map(|k| f.step(if k < 30 { 100 } else { 0 })).collect();
+            while out.len() > 31 && out.last() == Some(&0) {
+                out.pop();
+            }
+            Ok((cutoff, out))
+        })
+        .collect()
 }
 
 #[derive(Clone, Debug, Serialize)]
@@ -245,6 +265,8 @@ pub fn properties(sequences: usize) -> Properties {
 
 #[derive(Clone, Debug, Serialize)]
 pub struct EqualDelayVibration {
+    /// What the two filters are matched on.
+    pub matched_on: &'static str,
     pub butterworth: String,
     pub moving_average: String,
     pub butterworth_t99: f64,
@@ -258,13 +280,16 @@ pub struct EqualDelayVibration {
 /// The default move (2 rad at 50 rad/s) with the default Butterworth (order 3, twice the
 /// position bandwidth) and three moving averages matched to its 99 % delay, on two load
 /// resonances (one below, one above the cut-off), 2 % damping, friction off.
-pub fn equal_delay_vibration(fmu_path: &Path, resonances_hz: &[f64]) -> Result<EqualDelayVibration> {
+/// With `on_t50`, the moving averages are matched on the 50 % delay instead (a second view:
+/// the Butterworth's overshoot and ringing make its 99 % delay long for its 50 % delay).
+pub fn equal_delay_vibration(fmu_path: &Path, resonances_hz: &[f64], on_t50: bool) -> Result<EqualDelayVibration> {
     let period = 0.00025f32;
     let (distance, speed) = (2.0, 50.0);
     let cutoff = crate::acc_dec_report::default_cutoff_hz();
     let bw = FilterSpec::butterworth(3, cutoff);
     let bd = delay(&bw, period)?;
-    let ma = matching_moving_average(bd.t99, period, 3)?;
+    let target = if on_t50 { DelayMatch::T50(bd.t50) } else { DelayMatch::T99(bd.t99) };
+    let ma = moving_average_matched_on(target, period, 3)?;
     let md = delay(&ma, period)?;
     let cpr = servo_axis::plant::PlantParams::default().encoder_counts_per_rev;
     let m = PulseMove {
@@ -285,6 +310,7 @@ pub fn equal_delay_vibration(fmu_path: &Path, resonances_hz: &[f64]) -> Result<E
         rows.push((hz, vb.residual, vm.residual, vb.residual / vm.residual));
     }
     Ok(EqualDelayVibration {
+        matched_on: if on_t50 { "50 % delay" } else { "99 % delay" },
         butterworth: bw.label(),
         moving_average: ma.label(),
         butterworth_t99: bd.t99,

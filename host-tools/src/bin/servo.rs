@@ -404,6 +404,7 @@ fn bench_accdec(sequences: usize, resonance: &[f64], no_cost: bool, common: &Com
     let fmu_path = common.fmu.clone().unwrap_or_else(default_fmu);
     let pb = progress_bar("seed digits", common.json);
     let digits = b::seed_digits()?;
+    let seed_test = b::seed_test()?;
     pb.set_prefix("python-control");
     pb.set_position(100);
     let matched = b::matched_comparison()?;
@@ -412,7 +413,8 @@ fn bench_accdec(sequences: usize, resonance: &[f64], no_cost: bool, common: &Com
     let props = b::properties(sequences);
     pb.set_prefix("FMU vibration");
     pb.set_position(600);
-    let vibration = b::equal_delay_vibration(&fmu_path, resonance)?;
+    let vibration = b::equal_delay_vibration(&fmu_path, resonance, false)?;
+    let vibration_t50 = b::equal_delay_vibration(&fmu_path, resonance, true)?;
     pb.set_prefix("instruction count");
     pb.set_position(700);
     let costs = if no_cost { vec![] } else { b::filter_costs()? };
@@ -430,8 +432,8 @@ fn bench_accdec(sequences: usize, resonance: &[f64], no_cost: bool, common: &Com
         println!(
             "{}",
             serde_json::to_string_pretty(&serde_json::json!({
-                "bench": "accdec", "seed_digits": digits, "matched": matched, "properties": props,
-                "equal_delay_vibration": vibration, "costs": costs, "passed": ok
+                "bench": "accdec", "seed_digits": digits, "seed_test": seed_test, "matched": matched, "properties": props,
+                "equal_delay_vibration": [vibration, vibration_t50], "costs": costs, "passed": ok
             }))?
         );
         return Ok(ok);
@@ -440,6 +442,14 @@ fn bench_accdec(sequences: usize, resonance: &[f64], no_cost: bool, common: &Com
     println!("  1. seed example, 3rd order, 1 kHz, 0.5 ms (printed digits):");
     for d in &digits {
         println!("     {:<20} seed {:>11}  ours {:>13.8}  {}", d.name, d.printed, d.ours, if d.equal { "equal" } else { "DIFFERENT" });
+    }
+    for (cutoff, out) in &seed_test {
+        println!(
+            "     seed's test, 100 pulses x 30 samples, {cutoff} Hz: {} pulses out over {} samples: {}",
+            out.iter().sum::<i64>(),
+            out.len(),
+            out.iter().map(i64::to_string).collect::<Vec<_>>().join(" ")
+        );
     }
     println!("  2. against python-control sample_system(method='matched'), orders 1-6 at {} (Hz, s):", b::MATCHED_CASES.map(|(c, t)| format!("{c}/{t}")).join(", "));
     println!("     largest pole error |z - z_py|            {pole:.2e}");
@@ -450,18 +460,21 @@ fn bench_accdec(sequences: usize, resonance: &[f64], no_cost: bool, common: &Com
     println!("  3. properties of the whole-pulse filters (random Butterworth 1-6 / moving-average cascades):");
     println!("     {} random sequences: {} with output sum != input sum", props.sequences, props.conservation_failures);
     println!("     {} ticks of zero input: {} non-zero outputs", props.zero_input_ticks, props.zero_input_nonzero_outputs);
-    println!("  4. residual load vibration at equal 99 % delay (2 rad at 50 rad/s, 2 % damping, friction off):");
-    println!(
-        "     {} (t50 {:.2} ms, t99 {:.2} ms) vs {} (t50 {:.2} ms, t99 {:.2} ms)",
-        vibration.butterworth,
-        vibration.butterworth_t50 * 1e3,
-        vibration.butterworth_t99 * 1e3,
-        vibration.moving_average,
-        vibration.moving_average_t50 * 1e3,
-        vibration.moving_average_t99 * 1e3
-    );
-    for (hz, bw, ma, ratio) in &vibration.resonances {
-        println!("     {hz:>5} Hz load resonance: peak twist Butterworth {bw:.3e} rad, moving average {ma:.3e} rad, ratio BW/MA {ratio:.3}");
+    println!("  4. residual load vibration (peak shaft twist after end of interpolation + 99 % delay; 2 rad at 50 rad/s, 2 % damping, friction off):");
+    for v in [&vibration, &vibration_t50] {
+        println!(
+            "     at equal {}: {} (t50 {:.2} ms, t99 {:.2} ms) vs {} (t50 {:.2} ms, t99 {:.2} ms)",
+            v.matched_on,
+            v.butterworth,
+            v.butterworth_t50 * 1e3,
+            v.butterworth_t99 * 1e3,
+            v.moving_average,
+            v.moving_average_t50 * 1e3,
+            v.moving_average_t99 * 1e3
+        );
+        for (hz, bw, ma, ratio) in &v.resonances {
+            println!("     {hz:>7} Hz load resonance: Butterworth {bw:.3e} rad, moving average {ma:.3e} rad, ratio BW/MA {ratio:.3}");
+        }
     }
     if !costs.is_empty() {
         println!("  5. cost per tick (x86-64 instructions, valgrind; the probe's own input generation subtracted):");
