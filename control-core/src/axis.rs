@@ -9,6 +9,7 @@ use crate::faults::Faults;
 use crate::params::{ParamError, Params};
 use crate::position_loop::PositionLoop;
 use crate::reference_frames::Dq;
+use crate::stop_sequence::{Refusal, SequenceEvent, SequenceStatus, StopSequence};
 use crate::velocity_loop::VelocityLoop;
 use crate::TAU;
 
@@ -22,6 +23,8 @@ pub enum Mode {
     Velocity,
     /// Position command drives the position loop.
     Position,
+    /// The stop / zero-servo / fine-adjust sequence drives the velocity loop (seed 004).
+    Sequence,
 }
 
 impl Mode {
@@ -30,6 +33,7 @@ impl Mode {
             0 => Some(Self::Torque),
             1 => Some(Self::Velocity),
             2 => Some(Self::Position),
+            3 => Some(Self::Sequence),
             _ => None,
         }
     }
@@ -38,6 +42,7 @@ impl Mode {
             Self::Torque => 0,
             Self::Velocity => 1,
             Self::Position => 2,
+            Self::Sequence => 3,
         }
     }
 }
@@ -97,6 +102,8 @@ pub struct Telemetry {
     pub voltage: Dq,
     pub voltage_saturated: bool,
     pub faults: Faults,
+    /// Stop sequence status (meaningful in [`Mode::Sequence`]).
+    pub sequence: SequenceStatus,
 }
 
 #[derive(Clone, Copy, Debug)]
@@ -106,6 +113,7 @@ pub struct Axis {
     velocity_loop: VelocityLoop,
     position_loop: PositionLoop,
     command_path: CommandPath,
+    sequence: StopSequence,
     encoder: EncoderTracker,
     excitation: Option<(InjectionPoint, SineGenerator)>,
     tick: u64,
@@ -129,6 +137,7 @@ impl Axis {
             velocity_loop: VelocityLoop::new(&params),
             position_loop: PositionLoop::default(),
             command_path: CommandPath::new(acc_dec),
+            sequence: StopSequence::default(),
             encoder: EncoderTracker::default(),
             excitation: None,
             tick: 0,
@@ -160,6 +169,47 @@ impl Axis {
         self.velocity_loop.reset();
         self.position_loop.reset();
         self.torque_command = 0.0;
+    }
+
+    /// An event for the stop sequence (keys, network); refused with the reason, and counted,
+    /// outside [`Mode::Sequence`] or when the sequence's state does not allow it.
+    pub fn sequence_event(&mut self, e: SequenceEvent) -> Result<(), Refusal> {
+        if self.mode != Some(Mode::Sequence) {
+            return self.sequence.refuse(Refusal::NotInSequenceMode);
+        }
+        let r = self.sequence.event(&self.params.sequence, e);
+        self.telemetry.sequence = *self.sequence.status();
+        r
+    }
+
+    /// Switch to `commands.mode` now if it differs (the next [`Axis::step`] would do it):
+    /// lets events for the new mode be applied before that step.
+    pub fn apply_mode(&mut self, commands: &Commands) {
+        if self.mode == Some(commands.mode) {
+            return;
+        }
+        // Bumpless mode changes: the outer loops take over the torque now commanded.
+        self.velocity_loop.preset(self.torque_command);
+        self.position_loop.reset();
+        // Streaming starts at the streamed position (a step, as a position command
+        // always was); a move or a jog starts where the axis is.
+        let start = if commands.move_speed == 0.0 && commands.jog_velocity == 0.0 {
+            commands.position
+        } else {
+            self.encoder.position()
+        };
+        self.command_path.reset(start);
+        if commands.mode == Mode::Sequence {
+            // The sequence starts idle at the present speed, keeping the selected gain.
+            let gain = self.sequence.status().gain_index;
+            self.sequence.enter(self.encoder.position(), self.velocity_estimate, gain);
+            self.velocity_reference = self.velocity_estimate;
+        }
+        if commands.mode != Mode::Position {
+            self.telemetry.following_error = 0.0;
+        }
+        self.telemetry.sequence = *self.sequence.status();
+        self.mode = Some(commands.mode);
     }
 
     /// Add a sine (amplitude in Nm or rad/s depending on the point) from the next tick on.
@@ -196,23 +246,7 @@ impl Axis {
             faults.latch(Faults::BUS_OVERVOLTAGE);
         }
 
-        // Bumpless mode changes: the outer loops take over the torque now commanded.
-        if self.mode != Some(commands.mode) {
-            self.velocity_loop.preset(self.torque_command);
-            self.position_loop.reset();
-            // Streaming starts at the streamed position (a step, as a position command
-            // always was); a move or a jog starts where the axis is.
-            let start = if commands.move_speed == 0.0 && commands.jog_velocity == 0.0 {
-                commands.position
-            } else {
-                self.encoder.position()
-            };
-            self.command_path.reset(start);
-            if commands.mode != Mode::Position {
-                self.telemetry.following_error = 0.0;
-            }
-            self.mode = Some(commands.mode);
-        }
+        self.apply_mode(commands);
 
         let excitation = match self.excitation.as_mut() {
             Some((point, sine)) => (*point, sine.next()),
@@ -251,6 +285,15 @@ impl Axis {
             if out.following_error.abs() > p.limits.following_error {
                 faults.latch(Faults::FOLLOWING_ERROR);
             }
+        }
+        if commands.mode == Mode::Sequence && self.tick.is_multiple_of(pdiv) {
+            self.velocity_reference = self.sequence.step(
+                &p.sequence,
+                p.encoder_counts_per_rev,
+                position,
+                self.velocity_estimate,
+                p.rates.position_period(),
+            );
         }
         if commands.mode != Mode::Torque && self.tick.is_multiple_of(vdiv) {
             if commands.mode == Mode::Velocity {
@@ -305,6 +348,7 @@ impl Axis {
             voltage: out.voltage,
             voltage_saturated: out.saturated,
             faults,
+            sequence: *self.sequence.status(),
         };
         self.tick += 1;
         PwmOutput { duties: if enabled { out.duties } else { [0.0; 3] }, enabled }

@@ -21,6 +21,7 @@ pub mod params;
 pub mod pi_controller;
 pub mod position_loop;
 pub mod reference_frames;
+pub mod stop_sequence;
 pub mod velocity_loop;
 
 pub use axis::{Axis, AxisInputs, Commands, Mode, PwmOutput, Telemetry};

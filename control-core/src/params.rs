@@ -6,6 +6,7 @@
 use core::fmt;
 
 use crate::acc_dec::{AccDecError, AccDecFilter, AccDecParams};
+use crate::stop_sequence::{SequenceParamError, SequenceParams};
 
 /// Motor data the controller needs (decoupling, torque constant, electrical angle).
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -120,6 +121,8 @@ pub struct Params {
     pub limits: Limits,
     /// Acceleration/deceleration filter of the position command path.
     pub acc_dec: AccDecParams,
+    /// Stop / zero-servo / fine-adjust sequence (seed 004).
+    pub sequence: SequenceParams,
 }
 
 /// Why a parameter set was refused.
@@ -141,6 +144,8 @@ pub enum ParamError {
     BusLimitsInverted { under: f32, over: f32 },
     /// The acc/dec filter cannot be built.
     AccDec(AccDecError),
+    /// The stop sequence's settings are invalid.
+    Sequence(SequenceParamError),
 }
 
 impl fmt::Display for ParamError {
@@ -164,6 +169,7 @@ impl fmt::Display for ParamError {
                 "bus_undervoltage ({under} V) must be below bus_overvoltage ({over} V)"
             ),
             Self::AccDec(e) => write!(f, "acc/dec filter: {e}"),
+            Self::Sequence(e) => write!(f, "stop sequence: {e}"),
         }
     }
 }
@@ -237,18 +243,19 @@ impl Default for Params {
                 following_error: 1.0,
             },
             acc_dec: AccDecParams::default(),
+            sequence: SequenceParams::default(),
         }
     }
 }
 
 impl Params {
-    /// Check every field; the first problem found is returned.
     /// Encoder counts per position tick at 1 rad/s: the scale from a speed to the
     /// interpolator's pulses per tick.
     pub fn counts_per_position_tick(&self) -> f32 {
         self.encoder_counts_per_rev as f32 / crate::TAU * self.rates.position_period()
     }
 
+    /// Check every field; the first problem found is returned.
     pub fn validate(&self) -> Result<(), ParamError> {
         let m = &self.motor;
         nonzero("motor.pole_pairs", m.pole_pairs)?;
@@ -304,6 +311,7 @@ impl Params {
         }
         positive("limits.following_error", l.following_error)?;
         AccDecFilter::new(&self.acc_dec, r.position_period()).map_err(ParamError::AccDec)?;
+        self.sequence.validate().map_err(ParamError::Sequence)?;
         Ok(())
     }
 }

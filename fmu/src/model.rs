@@ -11,6 +11,7 @@ use control_core::params::{
     CurrentLoopGains, Limits, MotorModel, PositionLoopGains, Rates, TorqueFilters, VelocityLoopGains,
 };
 use control_core::acc_dec::{AccDecKind, AccDecParams};
+use control_core::stop_sequence::{SequenceEvent, SequenceParams};
 use control_core::{Mode, Params};
 use fmi::fmi3::{Fmi3Error, Fmi3Res, Fmi3Status};
 use fmi_export::fmi3::{CSDoStepResult, Context, DefaultLoggingCategory, UserModel};
@@ -188,12 +189,88 @@ impl AccDecParameters {
     }
 }
 
+// Stop / zero-servo / fine-adjust sequence (seed 004), used in mode 3.
+parameter_group! {
+    SequenceParameters {
+        /// Speed of a run, and the speed limit of every positioning move
+        target_speed: f64 = 100.0,
+        /// Acceleration/deceleration gradient of the speed reference
+        acceleration: f64 = 2000.0,
+        /// A stop is accepted at or below this speed
+        zero_speed: f64 = 2.0,
+        /// Base position gain (speed reference per radian of deviation)
+        position_gain: f64 = 20.0,
+        /// Completion while |deviation| <= this many encoder counts
+        completion_counts: i32 = 2,
+        /// Entries of the gain table in use (1 to 8)
+        gain_count: i32 = 4,
+        /// Gain-table multiplier 1
+        gain_1: f64 = 1.0,
+        /// Gain-table multiplier 2
+        gain_2: f64 = 2.0,
+        /// Gain-table multiplier 3
+        gain_3: f64 = 4.0,
+        /// Gain-table multiplier 4
+        gain_4: f64 = 8.0,
+        /// Gain-table multiplier 5
+        gain_5: f64 = 0.5,
+        /// Gain-table multiplier 6
+        gain_6: f64 = 0.25,
+        /// Gain-table multiplier 7
+        gain_7: f64 = 16.0,
+        /// Gain-table multiplier 8
+        gain_8: f64 = 32.0,
+        /// Lowest allowed target
+        soft_limit_min: f64 = -6283.185307179586,
+        /// Highest allowed target
+        soft_limit_max: f64 = 6283.185307179586,
+    }
+}
+
+impl SequenceParameters {
+    fn to_params(&self, counts_per_rev: u32) -> Result<SequenceParams, String> {
+        let gains = [
+            self.gain_1, self.gain_2, self.gain_3, self.gain_4, self.gain_5, self.gain_6, self.gain_7, self.gain_8,
+        ]
+        .map(|g| g as f32);
+        let counts = |name: &str, rad: f64| -> Result<i64, String> {
+            if !(rad.is_finite() && rad.abs() <= 1.0e9) {
+                return Err(format!("{name} {rad} rad must be a finite angle within ±1e9 rad"));
+            }
+            Ok((rad / std::f64::consts::TAU * counts_per_rev as f64).round() as i64)
+        };
+        Ok(SequenceParams {
+            target_speed: self.target_speed as f32,
+            acceleration: self.acceleration as f32,
+            zero_speed: self.zero_speed as f32,
+            position_gain: self.position_gain as f32,
+            completion_counts: count("seq.completion_counts", self.completion_counts)?,
+            gains,
+            gain_count: count("seq.gain_count", self.gain_count)? as usize,
+            soft_limit_min: counts("seq.soft_limit_min", self.soft_limit_min)?,
+            soft_limit_max: counts("seq.soft_limit_max", self.soft_limit_max)?,
+        })
+    }
+}
+
+/// Sequence inputs as last seen: presses are increases of a counter input.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+struct SequenceInputsSeen {
+    run: bool,
+    gain_index: i32,
+    stop: i32,
+    release: i32,
+    moves: i32,
+    returns: i32,
+}
+
 #[derive(Clone, Debug, PartialEq)]
 struct AppliedParameters {
     ctrl: ControllerParameters,
     plant: PlantParameters,
     excitation: ExcitationParameters,
     accdec: AccDecParameters,
+    seq: SequenceParameters,
 }
 
 /// One servo axis: control core (current, velocity, position loops) driving a PMSM with a
@@ -209,8 +286,10 @@ pub struct ServoAxis {
     pub excitation: ExcitationParameters,
     #[child(prefix = "accdec")]
     pub accdec: AccDecParameters,
+    #[child(prefix = "seq")]
+    pub seq: SequenceParameters,
 
-    /// Control mode: 0 torque, 1 velocity, 2 position
+    /// Control mode: 0 torque, 1 velocity, 2 position, 3 stop sequence (seq_* inputs)
     #[variable(causality = Input, variability = Discrete, start = 2)]
     pub mode: i32,
     /// Motor-side position command: streamed through the acc/dec filter, or the target of a move when move_speed > 0
@@ -234,6 +313,27 @@ pub struct ServoAxis {
     /// A change from false to true clears latched faults
     #[variable(causality = Input, variability = Discrete, start = false)]
     pub fault_reset: bool,
+    /// Sequence run switch (mode 3): non-zero = run at seq.target_speed, 0 = decelerate
+    #[variable(causality = Input, variability = Discrete, start = 0)]
+    pub seq_run: i32,
+    /// Sequence stop key: each increase is one press (accepted at or below seq.zero_speed, held pending while decelerating)
+    #[variable(causality = Input, variability = Discrete, start = 0)]
+    pub seq_stop: i32,
+    /// Sequence position-command blocking release key: each increase is one press
+    #[variable(causality = Input, variability = Discrete, start = 0)]
+    pub seq_release: i32,
+    /// Sequence move key: each increase moves to seq_target (fine adjust only)
+    #[variable(causality = Input, variability = Discrete, start = 0)]
+    pub seq_move: i32,
+    /// Sequence return-to-start key: each increase is one press
+    #[variable(causality = Input, variability = Discrete, start = 0)]
+    pub seq_return: i32,
+    /// Target of the sequence move key (motor side)
+    #[variable(causality = Input, variability = Discrete, start = 0.0)]
+    pub seq_target: f64,
+    /// Selected gain-table entry (0-based); a change selects it
+    #[variable(causality = Input, variability = Discrete, start = 0)]
+    pub seq_gain_index: i32,
 
     /// Motor angle (true, not quantised)
     #[variable(causality = Output, variability = Continuous)]
@@ -274,6 +374,30 @@ pub struct ServoAxis {
     /// Speed of that command (its pulses per position tick)
     #[variable(causality = Output, variability = Continuous)]
     pub command_velocity: f64,
+    /// Sequence state: 0 idle, 1 running, 2 decelerating, 3 servo lock, 4 fine adjust
+    #[variable(causality = Output, variability = Discrete)]
+    pub seq_state: i32,
+    /// Zero-servo / fine-adjust completion (|deviation| <= seq.completion_counts)
+    #[variable(causality = Output, variability = Discrete)]
+    pub seq_complete: i32,
+    /// Deviation counter: target minus position, in encoder counts (saturates at the Int32 range)
+    #[variable(causality = Output, variability = Discrete)]
+    pub seq_deviation: i32,
+    /// Position the sequence holds or moves to (the accepted stop position in servo lock)
+    #[variable(causality = Output, variability = Discrete)]
+    pub seq_hold_position: f64,
+    /// Speed reference the sequence hands to the velocity loop
+    #[variable(causality = Output, variability = Continuous)]
+    pub seq_speed_reference: f64,
+    /// Gain multiplier in use
+    #[variable(causality = Output, variability = Discrete)]
+    pub seq_gain: f64,
+    /// Sequence events refused so far
+    #[variable(causality = Output, variability = Discrete)]
+    pub seq_refused: i32,
+    /// Reason of the last refusal: 0 none, 1 already running, 2 not running, 3 stop while running, 4 already stopped, 5 no accepted stop, 6 target blocked, 7 beyond soft limits, 8 gain index, 9 not in sequence mode
+    #[variable(causality = Output, variability = Discrete)]
+    pub seq_last_refusal: i32,
     /// Latched fault bits: 1 overcurrent, 2 undervoltage, 4 overvoltage, 8 following error, 16 non-finite, 32 encoder
     #[variable(causality = Output, variability = Discrete)]
     pub faults: i32,
@@ -281,6 +405,9 @@ pub struct ServoAxis {
     sim: Option<AxisSimulation>,
     applied: Option<AppliedParameters>,
     last_fault_reset: bool,
+    seen: SequenceInputsSeen,
+    /// Refused sequence events of the last step, for the log.
+    refusals: Vec<String>,
 }
 
 impl ControllerParameters {
@@ -322,8 +449,9 @@ impl ControllerParameters {
                 bus_overvoltage: self.bus_overvoltage as f32,
                 following_error: self.following_error_limit as f32,
             },
-            // Set from the `accdec` group by `ServoAxis::config`.
+            // Set from the `accdec` and `seq` groups by `ServoAxis::config`.
             acc_dec: AccDecParams::default(),
+            sequence: SequenceParams::default(),
         }
     }
 }
@@ -375,6 +503,7 @@ impl ServoAxis {
         })?;
         let mut control = self.ctrl.to_params(motor, counts);
         control.acc_dec = self.accdec.to_params()?;
+        control.sequence = self.seq.to_params(counts)?;
         Ok(SimulationConfig {
             control,
             plant,
@@ -392,12 +521,13 @@ impl ServoAxis {
             plant: self.plant.clone(),
             excitation: self.excitation.clone(),
             accdec: self.accdec.clone(),
+            seq: self.seq.clone(),
         }
     }
 
     fn user_inputs(&self) -> Result<UserInputs, String> {
         let mode = Mode::from_code(self.mode)
-            .ok_or_else(|| format!("mode must be 0 (torque), 1 (velocity) or 2 (position), got {}", self.mode))?;
+            .ok_or_else(|| format!("mode must be 0 (torque), 1 (velocity), 2 (position) or 3 (stop sequence), got {}", self.mode))?;
         for (name, v) in [
             ("position_command", self.position_command),
             ("move_speed", self.move_speed),
@@ -405,6 +535,7 @@ impl ServoAxis {
             ("velocity_command", self.velocity_command),
             ("torque_command", self.torque_command),
             ("disturbance_torque", self.disturbance_torque),
+            ("seq_target", self.seq_target),
         ] {
             if !v.is_finite() {
                 return Err(format!("input {name} is not a finite number ({v})"));
@@ -447,7 +578,59 @@ impl ServoAxis {
         self.position_command_out = t.position_command as f64 * rad_per_count;
         self.command_velocity =
             t.command_pulses as f64 * rad_per_count / sim.axis.params().rates.position_period() as f64;
+        let q = &t.sequence;
+        self.seq_state = q.state.code();
+        self.seq_complete = q.complete as i32;
+        self.seq_deviation = q.deviation.clamp(i32::MIN as i64, i32::MAX as i64) as i32;
+        self.seq_hold_position = q.target as f64 * rad_per_count;
+        self.seq_speed_reference = q.speed_reference as f64;
+        self.seq_gain = sim.axis.params().sequence.gains[q.gain_index] as f64;
+        self.seq_refused = q.refused.min(i32::MAX as u32) as i32;
+        self.seq_last_refusal = q.last_refusal.map_or(0, |r| r.code());
         self.faults = t.faults.0 as i32;
+    }
+
+    /// Turn changes of the sequence inputs into events, in a fixed order: gain, run, stop,
+    /// release, move, return. A refused event is reported (logged), not an FMI error.
+    fn sequence_events(&mut self, inputs: &UserInputs) {
+        let Some(sim) = self.sim.as_mut() else { return };
+        sim.apply_mode(inputs);
+        let seen = self.seen;
+        let pressed = |now: i32, before: i32| now > before;
+        let mut events = Vec::new();
+        if self.seq_gain_index != seen.gain_index {
+            // A negative index is as far outside the table as a large one.
+            events.push(SequenceEvent::SelectGain(usize::try_from(self.seq_gain_index).unwrap_or(usize::MAX)));
+        }
+        let run = self.seq_run != 0;
+        if run != seen.run {
+            events.push(if run { SequenceEvent::RunOn } else { SequenceEvent::RunOff });
+        }
+        if pressed(self.seq_stop, seen.stop) {
+            events.push(SequenceEvent::Stop);
+        }
+        if pressed(self.seq_release, seen.release) {
+            events.push(SequenceEvent::ReleaseBlocking);
+        }
+        if pressed(self.seq_move, seen.moves) {
+            events.push(SequenceEvent::MoveTo(sim.counts_for(self.seq_target)));
+        }
+        if pressed(self.seq_return, seen.returns) {
+            events.push(SequenceEvent::ReturnToStart);
+        }
+        for e in events {
+            if let Err(reason) = sim.axis.sequence_event(e) {
+                self.refusals.push(format!("sequence event {e:?} at t = {} s: {reason}", sim.ticks() as f64 * sim.tick_period()));
+            }
+        }
+        self.seen = SequenceInputsSeen {
+            run,
+            gain_index: self.seq_gain_index,
+            stop: self.seq_stop,
+            release: self.seq_release,
+            moves: self.seq_move,
+            returns: self.seq_return,
+        };
     }
 
     fn step(&mut self, current: f64, h: f64) -> Result<(), String> {
@@ -458,6 +641,7 @@ impl ServoAxis {
             || applied.plant != self.plant
             || applied.excitation != self.excitation
             || applied.accdec != self.accdec
+            || applied.seq != self.seq
         {
             let applied = applied.clone();
             let changed = describe_changes(&applied, &self.applied_now());
@@ -465,6 +649,7 @@ impl ServoAxis {
             self.plant = applied.plant;
             self.excitation = applied.excitation;
             self.accdec = applied.accdec;
+            self.seq = applied.seq;
             return Err(format!(
                 "fixed parameter(s) {changed} changed after initialization; the change was undone \
                  (set parameters before fmi3ExitInitializationMode)"
@@ -494,6 +679,8 @@ impl ServoAxis {
             sim.axis.clear_faults();
         }
         self.last_fault_reset = self.fault_reset;
+        self.sequence_events(&inputs);
+        let sim = self.sim.as_mut().ok_or("model not initialized")?;
         for _ in 0..n as u64 {
             sim.tick(&inputs);
         }
@@ -543,6 +730,15 @@ impl UserModel for ServoAxis {
             self.sim = Some(sim);
             self.applied = Some(self.applied_now());
             self.last_fault_reset = self.fault_reset;
+            // Presses count from the values at initialization; the run switch and the gain
+            // index act from their defaults (off, entry 0), so start values of 1 take effect.
+            self.seen = SequenceInputsSeen {
+                stop: self.seq_stop,
+                release: self.seq_release,
+                moves: self.seq_move,
+                returns: self.seq_return,
+                ..Default::default()
+            };
             self.update_outputs();
             Ok(())
         }));
@@ -571,6 +767,9 @@ impl UserModel for ServoAxis {
         _no_set_fmu_state_prior_to_current_point: bool,
     ) -> Result<CSDoStepResult, Fmi3Error> {
         let result = catch_unwind(AssertUnwindSafe(|| self.step(current_communication_point, communication_step_size)));
+        for note in std::mem::take(&mut self.refusals) {
+            context.log(Fmi3Status::from(Fmi3Res::Warning), DefaultLoggingCategory::LogAll, format_args!("{note}"));
+        }
         match result {
             Ok(Ok(())) => {
                 let t = self.sim.as_ref().map(|s| s.ticks() as f64 * s.tick_period()).unwrap_or(0.0);

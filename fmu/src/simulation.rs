@@ -122,6 +122,23 @@ impl AxisSimulation {
         (angle / std::f64::consts::TAU * self.axis.params().encoder_counts_per_rev as f64).round() as i64
     }
 
+    fn commands(&self, u: &UserInputs) -> Commands {
+        Commands {
+            mode: u.mode,
+            position: self.counts_for(u.position_command),
+            move_speed: u.move_speed as f32,
+            jog_velocity: u.jog_velocity as f32,
+            velocity: u.velocity_command as f32,
+            torque: u.torque_command as f32,
+        }
+    }
+
+    /// Enter the inputs' mode now (before events meant for it); see `Axis::apply_mode`.
+    pub fn apply_mode(&mut self, u: &UserInputs) {
+        let commands = self.commands(u);
+        self.axis.apply_mode(&commands);
+    }
+
     /// One base tick.
     pub fn tick(&mut self, u: &UserInputs) {
         let m = self.plant.measure();
@@ -130,14 +147,7 @@ impl AxisSimulation {
             encoder_count: m.encoder_count,
             bus_voltage: m.bus_voltage as f32,
         };
-        let commands = Commands {
-            mode: u.mode,
-            position: self.counts_for(u.position_command),
-            move_speed: u.move_speed as f32,
-            jog_velocity: u.jog_velocity as f32,
-            velocity: u.velocity_command as f32,
-            torque: u.torque_command as f32,
-        };
+        let commands = self.commands(u);
         let pwm = self.axis.step(&inputs, &commands);
         let applied = PlantInputs {
             duties: self.pending.duties.map(|d| d as f64),

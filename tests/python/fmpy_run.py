@@ -11,8 +11,9 @@ the two importers. Semantics, as in the Rust host:
 fmpy applies continuous inputs by linear interpolation: the input table has one row per
 communication point (t_k = k*h), so at t_k the interpolation weight of the previous row is
 exactly 0 and the value is the row's own, bit for bit. fmpy applies discrete inputs (Int32,
-Boolean) only at initialisation in co-simulation without event mode, so they are set in the
-step_finished callback, before the next step, from the same table.
+Boolean, and Float64 of discrete variability) only at initialisation in co-simulation without
+event mode, so they are set in the step_finished callback, before the next step, from the
+same table.
 
 Usage: fmpy_run.py FMU SCENARIO.toml OUT.csv [--timing OUT.json]
 """
@@ -82,7 +83,9 @@ def main():
         rows.append(tuple([0.0 + k * h] + [vals[nm] for nm in names]))
     signals = np.array(rows, dtype=dtype)
 
-    discrete = [nm for nm in names if variables[nm].type in ("Int32", "Boolean")]
+    discrete = [
+        nm for nm in names if variables[nm].type in ("Int32", "Boolean") or variables[nm].variability == "discrete"
+    ]
 
     def step_finished(t, recorder):
         if discrete:
@@ -92,6 +95,8 @@ def main():
                 v = variables[nm]
                 if v.type == "Int32":
                     recorder.fmu.setInt32([v.valueReference], [int(vals[nm])])
+                elif v.type == "Float64":
+                    recorder.fmu.setFloat64([v.valueReference], [float(vals[nm])])
                 else:
                     recorder.fmu.setBoolean([v.valueReference], [bool(vals[nm])])
         return True

@@ -1,0 +1,483 @@
+//! Stop, zero-servo and fine-adjust sequence (seed 004) on top of the velocity loop.
+//!
+//! - **Running**: speed control; the speed reference ramps to the target speed with the
+//!   acceleration gradient.
+//! - **Decelerating** (run switched off): the reference ramps to zero.
+//! - **Stop**: accepted only when |actual speed| ≤ the zero-speed level. Pressed while
+//!   decelerating (or idle) above that level it is *held pending* and accepted by itself the
+//!   first tick the speed is low enough; pressed while running it is *refused* (the run
+//!   switch is on: the motor would never slow down).
+//! - **Servo lock** (zero servo): position control holds the position at acceptance — the
+//!   deviation counter starts at zero there, no position command needed; speed reference =
+//!   deviation × position gain × the selected gain-table multiplier, limited to the target
+//!   speed and slewed with the acceleration gradient (so neither the hand-over nor a gain
+//!   change can step the speed reference, hence the torque). Completion is signalled while
+//!   |deviation| ≤ the completion width. New targets are refused (blocked).
+//! - **Fine adjust** (after a blocking release, allowed only from servo lock): a new target
+//!   within the soft limits moves the axis there with the same law; completion again.
+//! - **Return to start** (from servo lock or fine adjust): the target becomes the position
+//!   where the last run began.
+//! - **Run on** again leaves stop mode for speed control from the present speed.
+//!
+//! Every event either applies completely or is refused with a [`Refusal`] (counted); a
+//! refused event changes nothing else.
+
+use core::fmt;
+
+use crate::TAU;
+
+/// Largest gain table.
+pub const MAX_GAINS: usize = 8;
+
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct SequenceParams {
+    /// Speed of a run and limit of every positioning move (rad/s, > 0).
+    pub target_speed: f32,
+    /// Acceleration/deceleration gradient of the speed reference (rad/s², > 0).
+    pub acceleration: f32,
+    /// A stop is accepted at or below this speed (rad/s, ≥ 0).
+    pub zero_speed: f32,
+    /// Base position gain (1/s, > 0): speed reference per radian of deviation.
+    pub position_gain: f32,
+    /// Completion while |deviation| ≤ this many counts.
+    pub completion_counts: u32,
+    /// Gain-table multipliers (the first `gain_count` are used; each > 0).
+    pub gains: [f32; MAX_GAINS],
+    pub gain_count: usize,
+    /// Targets must lie within [min, max] (counts).
+    pub soft_limit_min: i64,
+    pub soft_limit_max: i64,
+}
+
+impl Default for SequenceParams {
+    /// 100 rad/s runs at 2000 rad/s², stop below 2 rad/s, base gain 20/s with the table
+    /// 1×, 2×, 4×, 8×, completion within 2 counts, soft limits ±1000 revolutions at 2^20.
+    fn default() -> Self {
+        let mut gains = [0.0; MAX_GAINS];
+        gains[..4].copy_from_slice(&[1.0, 2.0, 4.0, 8.0]);
+        Self {
+            target_speed: 100.0,
+            acceleration: 2000.0,
+            zero_speed: 2.0,
+            position_gain: 20.0,
+            completion_counts: 2,
+            gains,
+            gain_count: 4,
+            soft_limit_min: -1000 << 20,
+            soft_limit_max: 1000 << 20,
+        }
+    }
+}
+
+/// Why sequence parameters were refused.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum SequenceParamError {
+    /// Must be a finite number > 0 (or ≥ 0 for the zero-speed level).
+    NotPositive { field: &'static str, value: f32 },
+    /// Gain table of 0 or more than [`MAX_GAINS`] entries.
+    GainCount(usize),
+    /// A multiplier that is not a finite number > 0.
+    Gain { index: usize, value: f32 },
+    /// Soft limits not in order.
+    SoftLimits { min: i64, max: i64 },
+}
+
+impl fmt::Display for SequenceParamError {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match *self {
+            Self::NotPositive { field, value } => write!(f, "sequence {field} must be a positive number (got {value})"),
+            Self::GainCount(n) => write!(f, "gain table of {n} entries: use 1..={MAX_GAINS}"),
+            Self::Gain { index, value } => write!(f, "gain-table entry {index} must be > 0 (got {value})"),
+            Self::SoftLimits { min, max } => write!(f, "soft limits {min}..{max} counts: min must be below max"),
+        }
+    }
+}
+
+impl SequenceParams {
+    pub fn validate(&self) -> Result<(), SequenceParamError> {
+        let positive = |field, value: f32, allow_zero: bool| {
+            let ok = value.is_finite() && (value > 0.0 || (allow_zero && value == 0.0));
+            if ok { Ok(()) } else { Err(SequenceParamError::NotPositive { field, value }) }
+        };
+        positive("target_speed", self.target_speed, false)?;
+        positive("acceleration", self.acceleration, false)?;
+        positive("zero_speed", self.zero_speed, true)?;
+        positive("position_gain", self.position_gain, false)?;
+        if !(1..=MAX_GAINS).contains(&self.gain_count) {
+            return Err(SequenceParamError::GainCount(self.gain_count));
+        }
+        for (index, &value) in self.gains[..self.gain_count].iter().enumerate() {
+            if !(value.is_finite() && value > 0.0) {
+                return Err(SequenceParamError::Gain { index, value });
+            }
+        }
+        if self.soft_limit_min >= self.soft_limit_max {
+            return Err(SequenceParamError::SoftLimits { min: self.soft_limit_min, max: self.soft_limit_max });
+        }
+        Ok(())
+    }
+}
+
+/// Where the sequence is.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum SequenceState {
+    /// Speed control at zero speed (after entering the mode).
+    #[default]
+    Idle,
+    Running,
+    Decelerating,
+    /// Stopped under position control; position commands blocked.
+    ServoLock,
+    /// Stopped under position control; position commands accepted.
+    FineAdjust,
+}
+
+impl SequenceState {
+    pub fn code(self) -> i32 {
+        match self {
+            Self::Idle => 0,
+            Self::Running => 1,
+            Self::Decelerating => 2,
+            Self::ServoLock => 3,
+            Self::FineAdjust => 4,
+        }
+    }
+
+    pub fn name(self) -> &'static str {
+        match self {
+            Self::Idle => "idle",
+            Self::Running => "running",
+            Self::Decelerating => "decelerating",
+            Self::ServoLock => "servo_lock",
+            Self::FineAdjust => "fine_adjust",
+        }
+    }
+
+    fn position_control(self) -> bool {
+        matches!(self, Self::ServoLock | Self::FineAdjust)
+    }
+}
+
+/// What the user (keys, network) asks.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum SequenceEvent {
+    RunOn,
+    RunOff,
+    Stop,
+    ReleaseBlocking,
+    /// Go to this position (counts); only in fine adjust.
+    MoveTo(i64),
+    ReturnToStart,
+    /// Select a gain-table entry.
+    SelectGain(usize),
+}
+
+/// Why an event was refused; the state is unchanged.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Refusal {
+    /// Run on while already running.
+    AlreadyRunning,
+    /// Run off while not running.
+    NotRunning,
+    /// Stop while the run switch is on.
+    StopWhileRunning,
+    /// Stop while already stopped.
+    AlreadyStopped,
+    /// Blocking release or return to start without an accepted stop.
+    NoAcceptedStop,
+    /// A target while position commands are blocked (servo lock).
+    TargetBlocked,
+    /// A target outside the soft limits.
+    BeyondSoftLimits,
+    /// A gain index outside the table.
+    GainIndex,
+    /// The axis is not in sequence mode.
+    NotInSequenceMode,
+}
+
+impl Refusal {
+    pub fn code(self) -> i32 {
+        self as i32 + 1
+    }
+}
+
+impl fmt::Display for Refusal {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str(match self {
+            Self::AlreadyRunning => "run on refused: already running",
+            Self::NotRunning => "run off refused: the run switch is not on",
+            Self::StopWhileRunning => "stop refused: the run switch is on (switch it off first)",
+            Self::AlreadyStopped => "stop refused: already stopped under position control",
+            Self::NoAcceptedStop => "refused: only after an accepted stop (servo lock or fine adjust)",
+            Self::TargetBlocked => "target refused: position commands are blocked (release the blocking first)",
+            Self::BeyondSoftLimits => "target refused: beyond the soft limits",
+            Self::GainIndex => "gain selection refused: index outside the gain table",
+            Self::NotInSequenceMode => "sequence event refused: the axis is not in sequence mode (mode 3)",
+        })
+    }
+}
+
+/// The sequence's outputs for telemetry.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct SequenceStatus {
+    pub state: SequenceState,
+    /// Completion (zero servo or fine adjust inside the completion width).
+    pub complete: bool,
+    /// Target − position (counts); 0 outside position control.
+    pub deviation: i64,
+    /// Position control target (counts).
+    pub target: i64,
+    /// A stop is waiting for the speed to fall to the zero-speed level.
+    pub stop_pending: bool,
+    pub gain_index: usize,
+    pub refused: u32,
+    pub last_refusal: Option<Refusal>,
+    /// Speed reference handed to the velocity loop (rad/s).
+    pub speed_reference: f32,
+}
+
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct StopSequence {
+    status: SequenceStatus,
+    /// Where the last run began (counts).
+    start: i64,
+    /// Position and speed at the last step (for events between steps).
+    position: i64,
+}
+
+impl StopSequence {
+    /// Enter the sequence at `position` moving at `speed` (rad/s): idle, speed reference
+    /// = the present speed (it then ramps to zero), nothing pending.
+    pub fn enter(&mut self, position: i64, speed: f32, gain_index: usize) {
+        let refused = self.status.refused;
+        self.status = SequenceStatus { speed_reference: speed, gain_index, refused, target: position, ..Default::default() };
+        self.start = position;
+        self.position = position;
+    }
+
+    pub fn status(&self) -> &SequenceStatus {
+        &self.status
+    }
+
+    /// Apply an event, or refuse it with the reason (counted) and change nothing else.
+    pub fn event(&mut self, p: &SequenceParams, e: SequenceEvent) -> Result<(), Refusal> {
+        match self.try_event(p, e) {
+            Ok(()) => Ok(()),
+            Err(reason) => self.refuse(reason),
+        }
+    }
+
+    /// Count a refusal decided elsewhere (for example by the axis).
+    pub fn refuse(&mut self, reason: Refusal) -> Result<(), Refusal> {
+        self.status.refused = self.status.refused.saturating_add(1);
+        self.status.last_refusal = Some(reason);
+        Err(reason)
+    }
+
+    fn try_event(&mut self, p: &SequenceParams, e: SequenceEvent) -> Result<(), Refusal> {
+        use SequenceState::*;
+        let s = &mut self.status;
+        match e {
+            SequenceEvent::RunOn => {
+                if s.state == Running {
+                    return Err(Refusal::AlreadyRunning);
+                }
+                if s.state != Decelerating {
+                    self.start = self.position;
+                }
+                s.state = Running;
+                s.stop_pending = false;
+            }
+            SequenceEvent::RunOff => {
+                if s.state != Running {
+                    return Err(Refusal::NotRunning);
+                }
+                s.state = Decelerating;
+            }
+            SequenceEvent::Stop => match s.state {
+                Running => return Err(Refusal::StopWhileRunning),
+                ServoLock | FineAdjust => return Err(Refusal::AlreadyStopped),
+                Idle | Decelerating => s.stop_pending = true,
+            },
+            SequenceEvent::ReleaseBlocking => match s.state {
+                ServoLock => s.state = FineAdjust,
+                _ => return Err(Refusal::NoAcceptedStop),
+            },
+            SequenceEvent::MoveTo(target) => match s.state {
+                FineAdjust if (p.soft_limit_min..=p.soft_limit_max).contains(&target) => s.target = target,
+                FineAdjust => return Err(Refusal::BeyondSoftLimits),
+                ServoLock => return Err(Refusal::TargetBlocked),
+                _ => return Err(Refusal::NoAcceptedStop),
+            },
+            SequenceEvent::ReturnToStart => {
+                if !s.state.position_control() {
+                    return Err(Refusal::NoAcceptedStop);
+                }
+                if !(p.soft_limit_min..=p.soft_limit_max).contains(&self.start) {
+                    return Err(Refusal::BeyondSoftLimits);
+                }
+                s.target = self.start;
+            }
+            SequenceEvent::SelectGain(i) => {
+                if i >= p.gain_count {
+                    return Err(Refusal::GainIndex);
+                }
+                s.gain_index = i;
+            }
+        }
+        Ok(())
+    }
+
+    /// One position-loop tick: `position` (counts), measured `speed` (rad/s), period `dt`
+    /// (s). Returns the speed reference for the velocity loop (rad/s).
+    pub fn step(&mut self, p: &SequenceParams, counts_per_rev: u32, position: i64, speed: f32, dt: f32) -> f32 {
+        use SequenceState::*;
+        self.position = position;
+        let s = &mut self.status;
+        if s.stop_pending && speed.abs() <= p.zero_speed {
+            // Servo lock at the position of acceptance: the deviation counter starts at 0.
+            s.stop_pending = false;
+            s.state = ServoLock;
+            s.target = position;
+        }
+        let wanted = match s.state {
+            Running => p.target_speed,
+            Idle | Decelerating => 0.0,
+            ServoLock | FineAdjust => {
+                let gain = p.position_gain * p.gains[s.gain_index];
+                let deviation = (s.target - position) as f32 * (TAU / counts_per_rev as f32);
+                (gain * deviation).clamp(-p.target_speed, p.target_speed)
+            }
+        };
+        let max_change = p.acceleration * dt;
+        s.speed_reference += (wanted - s.speed_reference).clamp(-max_change, max_change);
+        if s.state.position_control() {
+            s.deviation = s.target - position;
+            s.complete = s.deviation.unsigned_abs() <= p.completion_counts as u64;
+        } else {
+            s.deviation = 0;
+            s.complete = false;
+        }
+        s.speed_reference
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    const CPR: u32 = 1 << 20;
+    const DT: f32 = 0.00025;
+
+    /// A perfect velocity loop: the speed equals the reference; position integrates it.
+    fn run(seq: &mut StopSequence, p: &SequenceParams, position: &mut f64, ticks: usize) -> f32 {
+        let mut speed = 0.0;
+        for _ in 0..ticks {
+            speed = seq.step(p, CPR, position.round() as i64, speed, DT);
+            *position += speed as f64 * DT as f64 * CPR as f64 / core::f64::consts::TAU;
+        }
+        speed
+    }
+
+    #[test]
+    fn run_stop_lock_fine_adjust_and_return() {
+        let p = SequenceParams::default();
+        let mut seq = StopSequence::default();
+        let mut x = 0.0;
+        seq.enter(0, 0.0, 0);
+        seq.event(&p, SequenceEvent::RunOn).unwrap();
+        let v = run(&mut seq, &p, &mut x, 1000);
+        assert!((v - p.target_speed).abs() < 1e-3, "reached the target speed: {v}");
+        assert_eq!(seq.event(&p, SequenceEvent::Stop), Err(Refusal::StopWhileRunning));
+        seq.event(&p, SequenceEvent::RunOff).unwrap();
+        seq.event(&p, SequenceEvent::Stop).unwrap();
+        assert!(seq.status().stop_pending);
+        run(&mut seq, &p, &mut x, 400);
+        assert_eq!(seq.status().state, SequenceState::ServoLock);
+        let lock = seq.status().target;
+        run(&mut seq, &p, &mut x, 4000);
+        assert!(seq.status().complete && (x.round() as i64 - lock).abs() <= 2);
+        assert_eq!(seq.event(&p, SequenceEvent::MoveTo(lock + 1000)), Err(Refusal::TargetBlocked));
+        seq.event(&p, SequenceEvent::ReleaseBlocking).unwrap();
+        seq.event(&p, SequenceEvent::MoveTo(lock + 100_000)).unwrap();
+        assert!(!{
+            run(&mut seq, &p, &mut x, 1);
+            seq.status().complete
+        });
+        run(&mut seq, &p, &mut x, 8000);
+        assert!(seq.status().complete, "{:?}", seq.status());
+        seq.event(&p, SequenceEvent::ReturnToStart).unwrap();
+        run(&mut seq, &p, &mut x, 20000);
+        assert!(seq.status().complete && x.round().abs() <= 2.0, "back at the start: {x}");
+        assert_eq!(seq.status().refused, 2);
+    }
+
+    #[test]
+    fn refused_events_change_nothing_but_the_counter() {
+        let p = SequenceParams::default();
+        let mut seq = StopSequence::default();
+        seq.enter(0, 0.0, 0);
+        let before = seq;
+        for (e, why) in [
+            (SequenceEvent::RunOff, Refusal::NotRunning),
+            (SequenceEvent::ReleaseBlocking, Refusal::NoAcceptedStop),
+            (SequenceEvent::MoveTo(5), Refusal::NoAcceptedStop),
+            (SequenceEvent::ReturnToStart, Refusal::NoAcceptedStop),
+            (SequenceEvent::SelectGain(4), Refusal::GainIndex),
+        ] {
+            assert_eq!(seq.event(&p, e), Err(why));
+        }
+        assert_eq!(seq.status().refused, 5);
+        assert_eq!(seq.status().last_refusal, Some(Refusal::GainIndex));
+        let mut after = seq;
+        after.status.refused = 0;
+        after.status.last_refusal = None;
+        assert_eq!(after, before);
+    }
+
+    #[test]
+    fn soft_limits_refuse_far_targets() {
+        let p = SequenceParams { soft_limit_min: -1000, soft_limit_max: 1000, ..Default::default() };
+        let mut seq = StopSequence::default();
+        seq.enter(0, 0.0, 0);
+        seq.event(&p, SequenceEvent::Stop).unwrap();
+        seq.step(&p, CPR, 0, 0.0, DT);
+        seq.event(&p, SequenceEvent::ReleaseBlocking).unwrap();
+        assert_eq!(seq.event(&p, SequenceEvent::MoveTo(1001)), Err(Refusal::BeyondSoftLimits));
+        assert_eq!(seq.status().target, 0);
+        seq.event(&p, SequenceEvent::MoveTo(1000)).unwrap();
+    }
+
+    #[test]
+    fn gain_change_never_steps_the_speed_reference() {
+        let p = SequenceParams::default();
+        let mut seq = StopSequence::default();
+        let mut x = 0.0;
+        seq.enter(0, 0.0, 0);
+        seq.event(&p, SequenceEvent::Stop).unwrap();
+        run(&mut seq, &p, &mut x, 1);
+        seq.event(&p, SequenceEvent::ReleaseBlocking).unwrap();
+        seq.event(&p, SequenceEvent::MoveTo(200_000)).unwrap();
+        let mut previous = run(&mut seq, &p, &mut x, 40);
+        seq.event(&p, SequenceEvent::SelectGain(3)).unwrap();
+        for _ in 0..200 {
+            let v = run(&mut seq, &p, &mut x, 1);
+            assert!((v - previous).abs() <= p.acceleration * DT * 1.0001, "{previous} -> {v}");
+            previous = v;
+        }
+    }
+
+    #[test]
+    fn bad_parameters_are_named() {
+        let mut p = SequenceParams { zero_speed: -1.0, ..Default::default() };
+        assert!(matches!(p.validate(), Err(SequenceParamError::NotPositive { field: "zero_speed", .. })));
+        p = SequenceParams { gain_count: 0, ..Default::default() };
+        assert_eq!(p.validate(), Err(SequenceParamError::GainCount(0)));
+        p = SequenceParams::default();
+        p.gains[1] = f32::NAN;
+        assert!(matches!(p.validate(), Err(SequenceParamError::Gain { index: 1, .. })));
+        p = SequenceParams { soft_limit_min: 5, soft_limit_max: 5, ..Default::default() };
+        assert!(matches!(p.validate(), Err(SequenceParamError::SoftLimits { .. })));
+        assert_eq!(SequenceParams::default().validate(), Ok(()));
+    }
+}
