@@ -10,8 +10,9 @@
 //! - **Servo lock** (zero servo): position control holds the position at acceptance — the
 //!   deviation counter starts at zero there, no position command needed; speed reference =
 //!   deviation × position gain × the selected gain-table multiplier, limited to the target
-//!   speed and slewed with the acceleration gradient (so neither the hand-over nor a gain
-//!   change can step the speed reference, hence the torque). Completion is signalled while
+//!   speed and to the speed from which the acceleration gradient stops on the target, and
+//!   slewed with that gradient (so neither the hand-over nor a gain change can step the speed
+//!   reference, hence the torque). Completion is signalled while
 //!   |deviation| ≤ the completion width. New targets are refused (blocked).
 //! - **Fine adjust** (after a blocking release, allowed only from servo lock): a new target
 //!   within the soft limits moves the axis there with the same law; completion again.
@@ -51,17 +52,17 @@ pub struct SequenceParams {
 
 impl Default for SequenceParams {
     /// 100 rad/s runs at 2000 rad/s², stop below 2 rad/s, base gain 20/s with the table
-    /// 1×, 2×, 4×, 8×, completion within 2 counts, soft limits ±1000 revolutions at 2^20.
+    /// 1×, 2×, 4×, 8× in use, completion within 8 counts (48 µrad at 2^20 counts per revolution),
+    /// soft limits ±1000 revolutions at 2^20.
     fn default() -> Self {
-        let mut gains = [0.0; MAX_GAINS];
-        gains[..4].copy_from_slice(&[1.0, 2.0, 4.0, 8.0]);
         Self {
             target_speed: 100.0,
             acceleration: 2000.0,
             zero_speed: 2.0,
             position_gain: 20.0,
-            completion_counts: 2,
-            gains,
+            completion_counts: 8,
+            // Entries 5–8 (½, ¼, 16, 32) are there to be switched on with `gain_count`.
+            gains: [1.0, 2.0, 4.0, 8.0, 0.5, 0.25, 16.0, 32.0],
             gain_count: 4,
             soft_limit_min: -1000 << 20,
             soft_limit_max: 1000 << 20,
@@ -344,9 +345,16 @@ impl StopSequence {
             Running => p.target_speed,
             Idle | Decelerating => 0.0,
             ServoLock | FineAdjust => {
+                // Position → speed conversion: deviation × gain near the target; farther
+                // out, the speed from which the gradient stops the axis on the target
+                // (√(a·|e|), decelerating at a/2) and the target speed, whichever is lower.
+                // The P branch decelerates at gain²·|e| ≤ a, so no gain in the table can
+                // make the slewed reference lag behind and overshoot.
                 let gain = p.position_gain * p.gains[s.gain_index];
                 let deviation = (s.target - position) as f32 * (TAU / counts_per_rev as f32);
-                (gain * deviation).clamp(-p.target_speed, p.target_speed)
+                let magnitude = deviation.abs();
+                let speed = (gain * magnitude).min(libm::sqrtf(p.acceleration * magnitude)).min(p.target_speed);
+                libm::copysignf(speed, deviation)
             }
         };
         let max_change = p.acceleration * dt;

@@ -201,7 +201,7 @@ parameter_group! {
         /// Base position gain (speed reference per radian of deviation)
         position_gain: f64 = 20.0,
         /// Completion while |deviation| <= this many encoder counts
-        completion_counts: i32 = 2,
+        completion_counts: i32 = 8,
         /// Entries of the gain table in use (1 to 8)
         gain_count: i32 = 4,
         /// Gain-table multiplier 1
@@ -730,15 +730,10 @@ impl UserModel for ServoAxis {
             self.sim = Some(sim);
             self.applied = Some(self.applied_now());
             self.last_fault_reset = self.fault_reset;
-            // Presses count from the values at initialization; the run switch and the gain
-            // index act from their defaults (off, entry 0), so start values of 1 take effect.
-            self.seen = SequenceInputsSeen {
-                stop: self.seq_stop,
-                release: self.seq_release,
-                moves: self.seq_move,
-                returns: self.seq_return,
-                ..Default::default()
-            };
+            // Every sequence input acts from its declared start value (0): a key counter set
+            // to 1 before the first step is one press at the first step, a run switch set to
+            // 1 starts a run, a gain index selects its entry.
+            self.seen = SequenceInputsSeen::default();
             self.update_outputs();
             Ok(())
         }));
@@ -869,6 +864,50 @@ mod tests {
         assert!(build(&m).unwrap_err().contains("accdec.filter"));
         m.accdec.filter = 2;
         assert!(build(&m).is_ok());
+    }
+
+    #[test]
+    fn bad_sequence_settings_are_refused_with_the_reason() {
+        let build = |m: &ServoAxis| -> Result<(), String> {
+            AxisSimulation::new(&m.config()?).map(|_| ()).map_err(|e| e.to_string())
+        };
+        let mut m = started();
+        m.seq.completion_counts = -1;
+        assert!(build(&m).unwrap_err().contains("seq.completion_counts"));
+        m = started();
+        m.seq.gain_count = 9;
+        assert!(build(&m).unwrap_err().contains("gain table of 9"));
+        m = started();
+        m.seq.gain_2 = -1.0;
+        assert!(build(&m).unwrap_err().contains("gain-table entry 1"));
+        m = started();
+        m.seq.soft_limit_min = 10.0;
+        m.seq.soft_limit_max = -10.0;
+        assert!(build(&m).unwrap_err().contains("soft limits"));
+        m = started();
+        m.seq.zero_speed = f64::NAN;
+        assert!(build(&m).unwrap_err().contains("zero_speed"));
+        assert!(build(&started()).is_ok());
+    }
+
+    #[test]
+    fn sequence_keys_are_presses_and_refusals_are_counted_not_errors() {
+        let mut m = started();
+        m.sim = Some(AxisSimulation::new(&m.config().unwrap()).unwrap());
+        m.applied = Some(m.applied_now());
+        m.mode = 3;
+        m.seq_release = 1; // no accepted stop yet: refused, counted
+        m.step(0.0, 0.00025).unwrap();
+        assert_eq!((m.seq_refused, m.seq_last_refusal, m.seq_state), (1, 5, 0));
+        m.step(0.00025, 0.00025).unwrap(); // unchanged counter: no second press
+        assert_eq!(m.seq_refused, 1);
+        m.seq_stop = 1; // at rest: accepted at the next position tick
+        m.step(0.0005, 0.00025).unwrap();
+        assert_eq!(m.seq_state, 3);
+        m.seq_gain_index = -1;
+        m.step(0.00075, 0.00025).unwrap();
+        assert_eq!((m.seq_refused, m.seq_last_refusal, m.seq_gain), (2, 8, 1.0));
+        assert_eq!(m.refusals.len(), 2, "both refusals wait for do_step to log them");
     }
 
     #[test]

@@ -186,6 +186,31 @@ impl Scenario {
         out
     }
 
+    /// The scenario as TOML (name, step, stop time, parameters, events; not checks or plot):
+    /// what the fmpy runner reads when a scenario was built in code.
+    pub fn to_toml(&self) -> String {
+        let value = |v: &Value| match v {
+            Value::Bool(b) => b.to_string(),
+            Value::Int(i) => i.to_string(),
+            // `{:?}` is the shortest text that reads back to the same bits.
+            Value::Float(x) => format!("{x:?}"),
+        };
+        let mut t = format!("name = {:?}\nstop_time = {:?}\n", self.name, self.stop_time);
+        if let Some(h) = self.step {
+            t += &format!("step = {h:?}\n");
+        }
+        t += "\n[parameters]\n";
+        for (k, v) in &self.parameters {
+            t += &format!("{k:?} = {}\n", value(v));
+        }
+        for e in &self.events {
+            t += &format!("\n[[events]]\ntime = {:?}\n", e.time);
+            for (k, v) in &e.inputs {
+                t += &format!("{k} = {}\n", value(v));
+            }
+        }
+        t
+    }
 }
 
 #[cfg(test)]
@@ -209,6 +234,18 @@ mod tests {
             s.changes(),
             vec![(0, vec![("mode", Value::Int(1))]), (20, vec![("velocity_command", Value::Float(3.0))])]
         );
+    }
+
+    #[test]
+    fn toml_round_trip_keeps_every_bit() {
+        let s = parse(
+            "name='x'\nstop_time=0.01\n[parameters]\n\"ctrl.velocity_kp\"=0.1\n[[events]]\ntime=0.0\nmode=3\nseq_target=0.30000000000000004\n",
+        )
+        .unwrap();
+        let back = parse(&s.to_toml()).unwrap();
+        assert_eq!(back.parameters, s.parameters);
+        assert_eq!(back.changes(), s.changes());
+        assert_eq!(back.stop_time.to_bits(), s.stop_time.to_bits());
     }
 
     #[test]

@@ -99,3 +99,19 @@ fn accdec_refuses_bad_designs_with_the_reason() {
         assert!(err.contains(reason), "{args:?}: {err}");
     }
 }
+
+#[test]
+fn sequence_reports_failed_expectations_and_refuses_malformed_timelines() {
+    let out = tmp("sequence");
+    let strict = out.join("strict.toml");
+    std::fs::write(&strict, "name='strict'\nstop_time=0.2\n[[events]]\ntime=0.0\nevent='run'\n[[expect]]\nstate='servo_lock'\nat=0.1\n").unwrap();
+    let o = servo().arg("sequence").arg(&strict).arg("--fmu").arg(fmu_path()).arg("--out").arg(&out).output().unwrap();
+    assert_eq!(o.status.code(), Some(1), "{}", String::from_utf8_lossy(&o.stdout));
+    assert!(String::from_utf8_lossy(&o.stdout).contains("[FAIL] state servo_lock"));
+    assert!(out.join("strict.svg").exists() && out.join("strict.csv").exists() && out.join("strict.json").exists());
+    let bad = out.join("bad.toml");
+    std::fs::write(&bad, "name='bad'\nstop_time=0.2\n[[events]]\ntime=0.0\nevent='move'\n").unwrap();
+    let o = servo().arg("sequence").arg(&bad).arg("--fmu").arg(fmu_path()).arg("--out").arg(&out).output().unwrap();
+    assert_eq!(o.status.code(), Some(2));
+    assert!(String::from_utf8_lossy(&o.stderr).contains("needs `target`"));
+}
