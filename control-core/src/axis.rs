@@ -6,6 +6,7 @@ use crate::current_loop::{CurrentLoop, CurrentLoopOutput};
 use crate::encoder::{EncoderTracker, EncoderUpdate};
 use crate::excitation::{InjectionPoint, SineGenerator};
 use crate::faults::Faults;
+use crate::friction_compensation::FrictionCompensation;
 use crate::params::{ParamError, Params};
 use crate::position_loop::PositionLoop;
 use crate::reference_frames::Dq;
@@ -114,6 +115,7 @@ pub struct Axis {
     position_loop: PositionLoop,
     command_path: CommandPath,
     sequence: StopSequence,
+    friction: FrictionCompensation,
     encoder: EncoderTracker,
     excitation: Option<(InjectionPoint, SineGenerator)>,
     tick: u64,
@@ -138,6 +140,7 @@ impl Axis {
             position_loop: PositionLoop::default(),
             command_path: CommandPath::new(acc_dec),
             sequence: StopSequence::default(),
+            friction: FrictionCompensation::new(&params.friction, params.rates.velocity_period()),
             encoder: EncoderTracker::default(),
             excitation: None,
             tick: 0,
@@ -165,6 +168,7 @@ impl Axis {
     /// Clear latched faults; the loops restart from rest.
     pub fn clear_faults(&mut self) {
         self.telemetry.faults = Faults::default();
+        self.friction.reset();
         self.current_loop.reset();
         self.velocity_loop.reset();
         self.position_loop.reset();
@@ -303,7 +307,15 @@ impl Axis {
             if excitation.0 == InjectionPoint::VelocityCommand {
                 reference += excitation.1;
             }
-            self.torque_command = self.velocity_loop.step(&p, reference, self.velocity_estimate);
+            // Friction compensation follows the commanded motion, not the feedback.
+            let commanded = match commands.mode {
+                Mode::Velocity => commands.velocity,
+                Mode::Sequence => self.sequence.status().speed_reference,
+                _ => self.command_path.pulses() as f32,
+            };
+            let compensation = self.friction.step(commanded);
+            let torque = self.velocity_loop.step(&p, reference, self.velocity_estimate) + compensation;
+            self.torque_command = torque.clamp(-p.velocity.torque_limit, p.velocity.torque_limit);
         }
         if commands.mode == Mode::Torque {
             self.torque_command =

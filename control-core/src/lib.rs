@@ -17,6 +17,7 @@ pub mod current_loop;
 pub mod encoder;
 pub mod excitation;
 pub mod faults;
+pub mod friction_compensation;
 pub mod params;
 pub mod pi_controller;
 pub mod position_loop;

@@ -6,6 +6,7 @@
 use core::fmt;
 
 use crate::acc_dec::{AccDecError, AccDecFilter, AccDecParams};
+use crate::friction_compensation::{FrictionCompensationError, FrictionCompensationParams};
 use crate::stop_sequence::{SequenceParamError, SequenceParams};
 
 /// Motor data the controller needs (decoupling, torque constant, electrical angle).
@@ -123,6 +124,8 @@ pub struct Params {
     pub acc_dec: AccDecParams,
     /// Stop / zero-servo / fine-adjust sequence (seed 004).
     pub sequence: SequenceParams,
+    /// Torque pulse at each reversal of the commanded velocity.
+    pub friction: FrictionCompensationParams,
 }
 
 /// Why a parameter set was refused.
@@ -146,6 +149,8 @@ pub enum ParamError {
     AccDec(AccDecError),
     /// The stop sequence's settings are invalid.
     Sequence(SequenceParamError),
+    /// The friction compensation's settings are invalid.
+    Friction(FrictionCompensationError),
 }
 
 impl fmt::Display for ParamError {
@@ -170,6 +175,7 @@ impl fmt::Display for ParamError {
             ),
             Self::AccDec(e) => write!(f, "acc/dec filter: {e}"),
             Self::Sequence(e) => write!(f, "stop sequence: {e}"),
+            Self::Friction(e) => write!(f, "{e}"),
         }
     }
 }
@@ -244,6 +250,7 @@ impl Default for Params {
             },
             acc_dec: AccDecParams::default(),
             sequence: SequenceParams::default(),
+            friction: FrictionCompensationParams::default(),
         }
     }
 }
@@ -312,6 +319,7 @@ impl Params {
         positive("limits.following_error", l.following_error)?;
         AccDecFilter::new(&self.acc_dec, r.position_period()).map_err(ParamError::AccDec)?;
         self.sequence.validate().map_err(ParamError::Sequence)?;
+        self.friction.validate().map_err(ParamError::Friction)?;
         Ok(())
     }
 }

@@ -11,6 +11,7 @@ use control_core::params::{
     CurrentLoopGains, Limits, MotorModel, PositionLoopGains, Rates, TorqueFilters, VelocityLoopGains,
 };
 use control_core::acc_dec::{AccDecKind, AccDecParams};
+use control_core::friction_compensation::FrictionCompensationParams;
 use control_core::stop_sequence::{SequenceEvent, SequenceParams};
 use control_core::{Mode, Params};
 use fmi::fmi3::{Fmi3Error, Fmi3Res, Fmi3Status};
@@ -89,6 +90,10 @@ parameter_group! {
         bus_overvoltage: f64 = 60.0,
         /// Following error that trips in position mode
         following_error_limit: f64 = 1.0,
+        /// Friction-compensation torque pulse at each reversal of the commanded velocity (0 = off)
+        friction_comp_amplitude: f64 = 0.0,
+        /// Decay time constant of that pulse
+        friction_comp_decay: f64 = 0.01,
     }
 }
 
@@ -448,6 +453,10 @@ impl ControllerParameters {
                 bus_undervoltage: self.bus_undervoltage as f32,
                 bus_overvoltage: self.bus_overvoltage as f32,
                 following_error: self.following_error_limit as f32,
+            },
+            friction: FrictionCompensationParams {
+                amplitude: self.friction_comp_amplitude as f32,
+                decay: self.friction_comp_decay as f32,
             },
             // Set from the `accdec` and `seq` groups by `ServoAxis::config`.
             acc_dec: AccDecParams::default(),

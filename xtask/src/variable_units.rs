@@ -56,6 +56,8 @@ const VARIABLES: &[Row] = &[
     ("ctrl.bus_undervoltage", "V", POS, None),
     ("ctrl.bus_overvoltage", "V", POS, None),
     ("ctrl.following_error_limit", "rad", POS, None),
+    ("ctrl.friction_comp_amplitude", "N.m", POS, None),
+    ("ctrl.friction_comp_decay", "s", POS, None),
     ("plant.pole_pairs", "", Some(1.0), Some(64.0)),
     ("plant.resistance", "Ohm", POS, None),
     ("plant.ld", "H", POS, None),
