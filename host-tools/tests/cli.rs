@@ -115,3 +115,32 @@ fn sequence_reports_failed_expectations_and_refuses_malformed_timelines() {
     assert_eq!(o.status.code(), Some(2));
     assert!(String::from_utf8_lossy(&o.stderr).contains("needs `target`"));
 }
+
+#[test]
+fn circle_refuses_what_cannot_make_a_circle_test() {
+    for (args, reason) in [
+        (vec!["--radius", "0"], "radius must be a positive"),
+        (vec!["--radius", "0.001", "--feed", "10"], "at least 8"),
+        (vec!["--feed", "6.0"], "whole number of"),
+        (vec!["--single", "x", "--feed", "2513.2741228718346"], "multiple of 4"),
+        (vec!["--set", "plant.load_coulomb"], "NAME=VALUE"),
+    ] {
+        let o = servo().arg("circle").args(&args).arg("--fmu").arg(fmu_path()).arg("--out").arg(tmp("circle-bad")).output().unwrap();
+        let err = String::from_utf8_lossy(&o.stderr);
+        assert_eq!(o.status.code(), Some(2), "{args:?}: {err}");
+        assert!(err.contains(reason), "{args:?}: {err}");
+    }
+}
+
+#[test]
+fn circle_writes_plot_points_and_figures() {
+    let out = tmp("circle");
+    let o = servo().args(["circle", "--json", "--compare", "ctrl.friction_comp_amplitude=0.06"]).arg("--fmu").arg(fmu_path()).arg("--out").arg(&out).output().unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let r: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+    assert_eq!(r["circle"]["runs"].as_array().unwrap().len(), 2);
+    assert_eq!(r["circle"]["runs"][0]["feedback"]["protrusions"].as_array().unwrap().len(), 4);
+    for f in ["circle.svg", "circle.csv", "circle_compare.csv", "circle.json"] {
+        assert!(out.join(f).exists(), "{f} missing");
+    }
+}

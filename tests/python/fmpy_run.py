@@ -30,15 +30,20 @@ from fmpy import read_model_description
 DEFAULT_STEP = 4.0 / 16000.0
 
 
-def inputs_at(events, names, k, h, start):
-    t = k * h
+def input_table(events, names, n, h, start):
+    """Input values at every communication point k = 0..n (events in time order; one pass)."""
+    rows = []
     values = dict(start)
-    for e in events:
-        if e["time"] <= t + 1e-9 * h:
-            for n in names:
-                if n in e:
-                    values[n] = e[n]
-    return values
+    i = 0
+    for k in range(n + 1):
+        t = k * h
+        while i < len(events) and events[i]["time"] <= t + 1e-9 * h:
+            for nm in names:
+                if nm in events[i]:
+                    values[nm] = events[i][nm]
+            i += 1
+        rows.append(dict(values))
+    return rows
 
 
 def main():
@@ -77,10 +82,8 @@ def main():
     for nm in names:
         t = variables[nm].type
         dtype.append((nm, np.int32 if t == "Int32" else (np.bool_ if t == "Boolean" else np.float64)))
-    rows = []
-    for k in range(n + 1):
-        vals = inputs_at(events, names, k, h, start)
-        rows.append(tuple([0.0 + k * h] + [vals[nm] for nm in names]))
+    table = input_table(events, names, n, h, start)
+    rows = [tuple([0.0 + k * h] + [table[k][nm] for nm in names]) for k in range(n + 1)]
     signals = np.array(rows, dtype=dtype)
 
     discrete = [
@@ -89,8 +92,8 @@ def main():
 
     def step_finished(t, recorder):
         if discrete:
-            k = int(round(t / h))
-            vals = inputs_at(events, names, k, h, start)
+            k = min(int(round(t / h)), n)
+            vals = table[k]
             for nm in discrete:
                 v = variables[nm]
                 if v.type == "Int32":

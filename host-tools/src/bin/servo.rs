@@ -136,6 +136,64 @@ enum Command {
         #[command(flatten)]
         common: Common,
     },
+    /// Circle tests (seed 002): the two-axis XY circle, or the single-axis pseudo-circle.
+    ///
+    /// Two axes (default): two FMU instances, each with its own parameters (--x-set, --y-set;
+    /// --set for both), follow X = R·sin ωt and Y = R − R·cos ωt (feed = R·ω); the plot shows
+    /// the machine-end (or --measure motor) path about the centre with the radial error
+    /// magnified, over the commanded circle. Single axis (--single x): one axis follows
+    /// R·sin ωt and its feedback is drawn against its own copy a quarter period later,
+    /// (x(t), x(t − T/4)); the same construction on the command is the reference, and the
+    /// feedback against the shifted command is drawn too. The first --lead-in revolutions
+    /// settle the start; the last one is measured.
+    ///
+    /// Figures: roundness (max − min radius), mean radius error, quadrant protrusion heights
+    /// and angles (at the axis reversals 0°, 90°, 180°, 270°). --compare NAME=VALUE[,...]
+    /// runs a second time with those parameters and overlays both (for example
+    /// --compare ctrl.friction_comp_amplitude=0.03). Writes circle.svg / pseudo_circle.svg,
+    /// the points and traces as CSV, and the figures as JSON into --out (default out/circle/).
+    ///
+    /// Example: servo circle --radius 1 --feed 6.283185307179586 --compare ctrl.friction_comp_amplitude=0.03
+    Circle {
+        /// Axes of the XY test (only "x,y")
+        #[arg(long, default_value = "x,y")]
+        axes: String,
+        /// Single-axis pseudo-circle on this axis (x or y: whose parameters it takes)
+        #[arg(long)]
+        single: Option<String>,
+        /// Radius (rad of axis travel)
+        #[arg(long, default_value_t = 1.0)]
+        radius: f64,
+        /// Feed: tangential speed (rad/s); the revolution must be a whole number of 250 µs samples
+        #[arg(long, default_value_t = std::f64::consts::TAU)]
+        feed: f64,
+        /// Clockwise (two-axis test)
+        #[arg(long)]
+        cw: bool,
+        /// Revolutions before the measured one
+        #[arg(long, default_value_t = 1)]
+        lead_in: u32,
+        /// Position measured: load (machine end) or motor
+        #[arg(long, default_value = "load")]
+        measure: String,
+        /// FMU parameter for both axes, NAME=VALUE (repeatable)
+        #[arg(long = "set")]
+        set: Vec<String>,
+        /// FMU parameter for the X axis only
+        #[arg(long = "x-set")]
+        x_set: Vec<String>,
+        /// FMU parameter for the Y axis only
+        #[arg(long = "y-set")]
+        y_set: Vec<String>,
+        /// Second run with these parameter overrides, overlaid (NAME=VALUE, comma separated)
+        #[arg(long, value_delimiter = ',')]
+        compare: Vec<String>,
+        /// Single axis: also run through fmpy and demand the same feedback trace
+        #[arg(long)]
+        fmpy: bool,
+        #[command(flatten)]
+        common: Common,
+    },
     /// Compare two trace CSVs bit for bit on their common columns.
     Compare { a: PathBuf, b: PathBuf },
     /// Benchmarks that print the figures the issues ask for.
@@ -186,6 +244,12 @@ enum BenchCommand {
         /// Zero-speed levels to try (rad/s, comma separated)
         #[arg(long, value_delimiter = ',', default_values_t = [0.5, 1.0, 2.0, 5.0, 10.0, 20.0, 50.0])]
         zero_speed: Vec<f64>,
+        #[command(flatten)]
+        common: Common,
+    },
+    /// Circle tests (seed 002): quadrant protrusion with friction compensation off and on;
+    /// pseudo-circle of one friction-free axis against the two-axis circle.
+    Circle {
         #[command(flatten)]
         common: Common,
     },
@@ -628,11 +692,124 @@ fn bench_sequence(zero_speed: &[f64], common: &Common) -> Result<bool> {
     Ok(r.settle_falls_with_gain)
 }
 
+#[allow(clippy::too_many_arguments)]
+fn circle(
+    axes: &str,
+    single: &Option<String>,
+    radius: f64,
+    feed: f64,
+    cw: bool,
+    lead_in: u32,
+    measure: &str,
+    set: &[String],
+    x_set: &[String],
+    y_set: &[String],
+    compare: &[String],
+    with_fmpy: bool,
+    common: &Common,
+) -> Result<bool> {
+    use host_tools::circle_report::{axis_parameters, parse_assignment, run};
+    use host_tools::circle_test::{CircleRequest, Direction, Measure};
+    if axes.replace(' ', "") != "x,y" {
+        bail!("--axes: the XY test runs the axes x,y (got `{axes}`)");
+    }
+    let measure = match measure {
+        "load" => Measure::Load,
+        "motor" => Measure::Motor,
+        other => bail!("--measure must be load or motor (got `{other}`)"),
+    };
+    let (xp, yp) = (axis_parameters(set, x_set)?, axis_parameters(set, y_set)?);
+    let (x_parameters, y_parameters) = match single.as_deref() {
+        None | Some("x") => (xp, yp),
+        Some("y") => (yp.clone(), yp),
+        Some(other) => bail!("--single takes x or y (got `{other}`)"),
+    };
+    if lead_in == 0 && single.is_some() {
+        bail!("--lead-in must be at least 1 for the single-axis test (the quarter-period copy needs history)");
+    }
+    let request = CircleRequest {
+        radius,
+        feed,
+        direction: if cw { Direction::Clockwise } else { Direction::CounterClockwise },
+        lead_in,
+        measure,
+        x_parameters,
+        y_parameters,
+    };
+    let compare: Vec<_> = compare.iter().map(|s| parse_assignment(s)).collect::<Result<_>>()?;
+    let out = common.out.clone().unwrap_or_else(|| default_out("circle"));
+    let fmu_path = common.fmu.clone().unwrap_or_else(default_fmu);
+    let fmu = Fmu::load(&fmu_path)?;
+    let second = compare.iter().map(|(k, v)| format!("{k} = {}", v.as_f64())).collect::<Vec<_>>().join(", ");
+    let labels = ("as given", second.as_str());
+    let pb = progress_bar("circle", common.json);
+    pb.set_position(100);
+    let (report, pseudo) = run(&fmu, &request, single.is_some(), &compare, labels, &out)?;
+    pb.finish_and_clear();
+    let mut ok = true;
+    let mut fmpy_note = None;
+    if with_fmpy {
+        let Some((_, first)) = pseudo.first() else {
+            bail!("--fmpy cross-checks the single-axis run: add --single x");
+        };
+        let inputs = out.join("pseudo_circle.inputs.toml");
+        std::fs::write(&inputs, first.scenario.to_toml())?;
+        let csv = out.join("pseudo_circle.fmpy.csv");
+        bench::run_fmpy(&fmu_path, &inputs, &csv)?;
+        let verdict = match compare_exact(&first.trace, &Trace::read_csv(&csv)?)? {
+            Ok(n) => Ok(format!("identical: {} rows × {n} columns, bit for bit", first.trace.rows.len())),
+            Err(m) => Err(format!("differs: {} at row {}: {:?} vs {:?}", m.column, m.row, m.left, m.right)),
+        };
+        ok &= verdict.is_ok();
+        fmpy_note = Some(verdict);
+    }
+    if common.json {
+        println!("{}", serde_json::to_string_pretty(&serde_json::json!({"circle": report, "fmpy": fmpy_note.map(|v| v.map_err(|e| e))}))?);
+    } else {
+        report.print();
+        match fmpy_note {
+            Some(Ok(t)) => println!("  [pass] fmpy cross-check of the single-axis feedback: {t}"),
+            Some(Err(t)) => println!("  [FAIL] fmpy cross-check of the single-axis feedback: {t}"),
+            None => {}
+        }
+    }
+    Ok(ok)
+}
+
+fn bench_circle(common: &Common) -> Result<bool> {
+    let fmu = Fmu::load(&common.fmu.clone().unwrap_or_else(default_fmu))?;
+    let r = host_tools::bench_circle::bench(&fmu)?;
+    let ok = r.pseudo_vs_two_axis_relative <= 1e-3 && r.protrusion_ratio < 1.0;
+    if common.json {
+        println!("{}", serde_json::to_string_pretty(&serde_json::json!({"bench": "circle", "result": r, "passed": ok}))?);
+        return Ok(ok);
+    }
+    println!("servo bench circle — seed 002, radius {} rad, feed {} rad/s (1 revolution per second), machine-end positions", r.radius, r.feed);
+    println!("  demo axis (default Coulomb friction 0.01 N·m motor, 0.02 N·m load), two-axis circle:");
+    println!("    compensation off: largest quadrant protrusion {:.3e} rad, roundness {:.3e} rad", r.protrusion_off, r.roundness_off);
+    println!(
+        "    compensation on ({}): largest quadrant protrusion {:.3e} rad, roundness {:.3e} rad",
+        host_tools::bench_circle::COMPENSATION.map(|(k, v)| format!("{k} = {v}")).join(", "),
+        r.protrusion_on,
+        r.roundness_on
+    );
+    println!("    ratio on / off: {:.3}", r.protrusion_ratio);
+    println!(
+        "  friction-free axis: pseudo-circle (x(t), x(t - T/4)) vs two-axis circle of two identical axes: largest radial difference {:.3e} rad = {:.5} % of the radius (goal <= 0.1 %)",
+        r.pseudo_vs_two_axis,
+        r.pseudo_vs_two_axis_relative * 100.0
+    );
+    Ok(ok)
+}
+
 fn main() -> ExitCode {
     let cli = Cli::parse();
     let result = match &cli.command {
         Command::Run { scenarios, fmpy, common } => run(scenarios, *fmpy, common),
         Command::Sequence { files, fmpy, common } => sequence(files, *fmpy, common),
+        Command::Circle { axes, single, radius, feed, cw, lead_in, measure, set, x_set, y_set, compare, fmpy, common } => {
+            circle(axes, single, *radius, *feed, *cw, *lead_in, measure, set, x_set, y_set, compare, *fmpy, common)
+        }
         Command::Compare { a, b } => (|| {
             let (ta, tb) = (Trace::read_csv(a)?, Trace::read_csv(b)?);
             match compare_exact(&ta, &tb)? {
@@ -683,6 +860,7 @@ fn main() -> ExitCode {
             bench_accdec(*sequences, resonance, *no_cost, common)
         }
         Command::Bench(BenchCommand::Sequence { zero_speed, common }) => bench_sequence(zero_speed, common),
+        Command::Bench(BenchCommand::Circle { common }) => bench_circle(common),
         Command::Bench(BenchCommand::AccdecProbe { filter, ticks }) => {
             host_tools::bench_accdec::cost_probe(filter, *ticks).map(|s| {
                 println!("{s}");
