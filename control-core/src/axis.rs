@@ -7,6 +7,7 @@ use crate::encoder::{EncoderTracker, EncoderUpdate};
 use crate::excitation::{InjectionPoint, SineGenerator};
 use crate::faults::Faults;
 use crate::friction_compensation::FrictionCompensation;
+use crate::phase_shifted_sweep::{PhaseShiftedSweep, SweepError, SweepStatus};
 use crate::params::{ParamError, Params};
 use crate::position_loop::PositionLoop;
 use crate::reference_frames::Dq;
@@ -105,6 +106,8 @@ pub struct Telemetry {
     pub faults: Faults,
     /// Stop sequence status (meaningful in [`Mode::Sequence`]).
     pub sequence: SequenceStatus,
+    /// Frequency-response sweep status and last acquisition sample.
+    pub sweep: SweepStatus,
 }
 
 #[derive(Clone, Copy, Debug)]
@@ -116,6 +119,9 @@ pub struct Axis {
     command_path: CommandPath,
     sequence: StopSequence,
     friction: FrictionCompensation,
+    sweep: PhaseShiftedSweep,
+    /// Velocity-loop inputs of the last velocity tick: reference and feedback as used.
+    velocity_loop_inputs: (f32, f32),
     encoder: EncoderTracker,
     excitation: Option<(InjectionPoint, SineGenerator)>,
     tick: u64,
@@ -141,6 +147,8 @@ impl Axis {
             command_path: CommandPath::new(acc_dec),
             sequence: StopSequence::default(),
             friction: FrictionCompensation::new(&params.friction, params.rates.velocity_period()),
+            sweep: PhaseShiftedSweep::new(params.sweep, params.rates.current_loop_hz),
+            velocity_loop_inputs: (0.0, 0.0),
             encoder: EncoderTracker::default(),
             excitation: None,
             tick: 0,
@@ -216,6 +224,21 @@ impl Axis {
         self.mode = Some(commands.mode);
     }
 
+    /// Start the frequency-response sweep of `Params::sweep` (seed 000). Velocity-command and
+    /// feedback injection need the velocity loop running.
+    pub fn start_sweep(&mut self) -> Result<(), SweepError> {
+        let point = self.params.sweep.point;
+        let velocity_loop = matches!(self.mode, Some(Mode::Velocity | Mode::Position | Mode::Sequence));
+        if point == InjectionPoint::Off || (point != InjectionPoint::TorqueCommand && !velocity_loop) {
+            return Err(SweepError::PointUnusable);
+        }
+        self.sweep.start()
+    }
+
+    pub fn sweep(&self) -> &PhaseShiftedSweep {
+        &self.sweep
+    }
+
     /// Add a sine (amplitude in Nm or rad/s depending on the point) from the next tick on.
     pub fn set_excitation(&mut self, point: InjectionPoint, sine: SineGenerator) {
         self.excitation = (point != InjectionPoint::Off).then_some((point, sine));
@@ -252,9 +275,10 @@ impl Axis {
 
         self.apply_mode(commands);
 
-        let excitation = match self.excitation.as_mut() {
-            Some((point, sine)) => (*point, sine.next()),
-            None => (InjectionPoint::Off, 0.0),
+        let excitation = match (self.sweep.excitation(self.tick), self.excitation.as_mut()) {
+            (Some(e), _) => e,
+            (None, Some((point, sine))) => (*point, sine.next()),
+            (None, None) => (InjectionPoint::Off, 0.0),
         };
 
         let vdiv = p.rates.velocity_divider as u64;
@@ -314,7 +338,12 @@ impl Axis {
                 _ => self.command_path.pulses() as f32,
             };
             let compensation = self.friction.step(commanded);
-            let torque = self.velocity_loop.step(&p, reference, self.velocity_estimate) + compensation;
+            let mut feedback = self.velocity_estimate;
+            if excitation.0 == InjectionPoint::VelocityFeedback {
+                feedback += excitation.1;
+            }
+            self.velocity_loop_inputs = (reference, feedback);
+            let torque = self.velocity_loop.step(&p, reference, feedback) + compensation;
             self.torque_command = torque.clamp(-p.velocity.torque_limit, p.velocity.torque_limit);
         }
         if commands.mode == Mode::Torque {
@@ -325,6 +354,13 @@ impl Axis {
         if excitation.0 == InjectionPoint::TorqueCommand {
             torque += excitation.1;
         }
+        // The sweep's U and Y (see `phase_shifted_sweep`): Y is always the velocity estimate.
+        let u = match excitation.0 {
+            InjectionPoint::VelocityCommand => self.velocity_loop_inputs.0,
+            InjectionPoint::VelocityFeedback => self.velocity_loop_inputs.1,
+            _ => torque,
+        };
+        self.sweep.end_tick(self.tick, u, self.velocity_estimate);
 
         let iq_limit = p.current.max_current;
         let reference = Dq { d: 0.0, q: (torque / p.motor.torque_constant()).clamp(-iq_limit, iq_limit) };
@@ -361,6 +397,7 @@ impl Axis {
             voltage_saturated: out.saturated,
             faults,
             sequence: *self.sequence.status(),
+            sweep: *self.sweep.status(),
         };
         self.tick += 1;
         PwmOutput { duties: if enabled { out.duties } else { [0.0; 3] }, enabled }

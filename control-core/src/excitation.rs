@@ -15,6 +15,8 @@ pub enum InjectionPoint {
     TorqueCommand,
     /// Added to the velocity command in front of the velocity loop (rad/s).
     VelocityCommand,
+    /// Added to the velocity feedback the velocity loop sees (rad/s): the open loop.
+    VelocityFeedback,
 }
 
 impl InjectionPoint {
@@ -23,6 +25,7 @@ impl InjectionPoint {
             0 => Some(Self::Off),
             1 => Some(Self::TorqueCommand),
             2 => Some(Self::VelocityCommand),
+            3 => Some(Self::VelocityFeedback),
             _ => None,
         }
     }

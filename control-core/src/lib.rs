@@ -19,6 +19,7 @@ pub mod excitation;
 pub mod faults;
 pub mod friction_compensation;
 pub mod params;
+pub mod phase_shifted_sweep;
 pub mod pi_controller;
 pub mod position_loop;
 pub mod reference_frames;

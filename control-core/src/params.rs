@@ -6,6 +6,7 @@
 use core::fmt;
 
 use crate::acc_dec::{AccDecError, AccDecFilter, AccDecParams};
+use crate::phase_shifted_sweep::{SweepError, SweepParams};
 use crate::friction_compensation::{FrictionCompensationError, FrictionCompensationParams};
 use crate::stop_sequence::{SequenceParamError, SequenceParams};
 
@@ -126,6 +127,8 @@ pub struct Params {
     pub sequence: SequenceParams,
     /// Torque pulse at each reversal of the commanded velocity.
     pub friction: FrictionCompensationParams,
+    /// Frequency-response measurement (seed 000).
+    pub sweep: SweepParams,
 }
 
 /// Why a parameter set was refused.
@@ -151,6 +154,8 @@ pub enum ParamError {
     Sequence(SequenceParamError),
     /// The friction compensation's settings are invalid.
     Friction(FrictionCompensationError),
+    /// The sweep's settings are invalid.
+    Sweep(SweepError),
 }
 
 impl fmt::Display for ParamError {
@@ -176,6 +181,7 @@ impl fmt::Display for ParamError {
             Self::AccDec(e) => write!(f, "acc/dec filter: {e}"),
             Self::Sequence(e) => write!(f, "stop sequence: {e}"),
             Self::Friction(e) => write!(f, "{e}"),
+            Self::Sweep(e) => write!(f, "{e}"),
         }
     }
 }
@@ -251,6 +257,7 @@ impl Default for Params {
             acc_dec: AccDecParams::default(),
             sequence: SequenceParams::default(),
             friction: FrictionCompensationParams::default(),
+            sweep: SweepParams::default(),
         }
     }
 }
@@ -320,6 +327,7 @@ impl Params {
         AccDecFilter::new(&self.acc_dec, r.position_period()).map_err(ParamError::AccDec)?;
         self.sequence.validate().map_err(ParamError::Sequence)?;
         self.friction.validate().map_err(ParamError::Friction)?;
+        self.sweep.validate(r.current_loop_hz, r.velocity_divider).map_err(ParamError::Sweep)?;
         Ok(())
     }
 }

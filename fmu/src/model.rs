@@ -12,6 +12,7 @@ use control_core::params::{
 };
 use control_core::acc_dec::{AccDecKind, AccDecParams};
 use control_core::friction_compensation::FrictionCompensationParams;
+use control_core::phase_shifted_sweep::{SweepParams, SweepSignal};
 use control_core::stop_sequence::{SequenceEvent, SequenceParams};
 use control_core::{Mode, Params};
 use fmi::fmi3::{Fmi3Error, Fmi3Res, Fmi3Status};
@@ -258,6 +259,81 @@ impl SequenceParameters {
     }
 }
 
+// Frequency-response sweep (seed 000), started by `sweep_start`.
+parameter_group! {
+    SweepParameters {
+        /// Injection point: 1 torque command, 2 velocity command, 3 velocity feedback (open loop)
+        point: i32 = 2,
+        /// 0 stepped sine (phase shifted above the threshold), 1 PRBS (broadband baseline)
+        signal: i32 = 0,
+        /// Sine or PRBS amplitude (rad/s or N.m, as the point)
+        amplitude: f64 = 2.0,
+        /// First frequency
+        start_hz: f64 = 10.0,
+        /// Last frequency
+        stop_hz: f64 = 3000.0,
+        /// Frequencies from start to stop, both included
+        points: i32 = 40,
+        /// 1 logarithmic, 0 linear spacing
+        logarithmic: i32 = 1,
+        /// One more frequency inserted in order (0 = none)
+        extra_hz: f64 = 2000.0,
+        /// Settling before each record, in cycles (at least min_settle_s)
+        settle_cycles: f64 = 2.0,
+        /// Shortest settling
+        min_settle_s: f64 = 0.02,
+        /// Measurement of each record, in cycles (at least min_measure_s)
+        measure_cycles: f64 = 4.0,
+        /// Shortest measurement
+        min_measure_s: f64 = 0.02,
+        /// Phase step 2*pi/shifts between the repeats of one frequency
+        shifts: i32 = 3,
+        /// Records per frequency at and above the threshold
+        repeats: i32 = 3,
+        /// Phase shifting from this frequency up (0 = the acquisition Nyquist frequency)
+        threshold_hz: f64 = 0.0,
+        /// Base ticks per acquisition sample (4 = 4 kHz at 16 kHz)
+        acquisition_divider: i32 = 4,
+        /// PRBS: base ticks per chip
+        prbs_divider: i32 = 1,
+        /// PRBS: measured duration
+        prbs_seconds: f64 = 5.0,
+    }
+}
+
+impl SweepParameters {
+    fn to_params(&self) -> Result<SweepParams, String> {
+        let point = InjectionPoint::from_code(self.point)
+            .filter(|p| *p != InjectionPoint::Off)
+            .ok_or_else(|| format!("sweep.point must be 1 (torque), 2 (velocity command) or 3 (velocity feedback), got {}", self.point))?;
+        let signal = match self.signal {
+            0 => SweepSignal::SteppedSine,
+            1 => SweepSignal::Prbs,
+            other => return Err(format!("sweep.signal must be 0 (stepped sine) or 1 (PRBS), got {other}")),
+        };
+        Ok(SweepParams {
+            point,
+            signal,
+            amplitude: self.amplitude as f32,
+            start_hz: self.start_hz as f32,
+            stop_hz: self.stop_hz as f32,
+            points: count("sweep.points", self.points)?,
+            logarithmic: self.logarithmic != 0,
+            extra_hz: self.extra_hz as f32,
+            settle_cycles: self.settle_cycles as f32,
+            min_settle_s: self.min_settle_s as f32,
+            measure_cycles: self.measure_cycles as f32,
+            min_measure_s: self.min_measure_s as f32,
+            shifts: count("sweep.shifts", self.shifts)?,
+            repeats: count("sweep.repeats", self.repeats)?,
+            threshold_hz: self.threshold_hz as f32,
+            acquisition_divider: count("sweep.acquisition_divider", self.acquisition_divider)?,
+            prbs_divider: count("sweep.prbs_divider", self.prbs_divider)?,
+            prbs_seconds: self.prbs_seconds as f32,
+        })
+    }
+}
+
 /// Sequence inputs as last seen: presses are increases of a counter input.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 struct SequenceInputsSeen {
@@ -276,6 +352,7 @@ struct AppliedParameters {
     excitation: ExcitationParameters,
     accdec: AccDecParameters,
     seq: SequenceParameters,
+    sweep: SweepParameters,
 }
 
 /// One servo axis: control core (current, velocity, position loops) driving a PMSM with a
@@ -293,6 +370,8 @@ pub struct ServoAxis {
     pub accdec: AccDecParameters,
     #[child(prefix = "seq")]
     pub seq: SequenceParameters,
+    #[child(prefix = "sweep")]
+    pub sweep: SweepParameters,
 
     /// Control mode: 0 torque, 1 velocity, 2 position, 3 stop sequence (seq_* inputs)
     #[variable(causality = Input, variability = Discrete, start = 2)]
@@ -336,6 +415,9 @@ pub struct ServoAxis {
     /// Target of the sequence move key (motor side)
     #[variable(causality = Input, variability = Discrete, start = 0.0)]
     pub seq_target: f64,
+    /// Frequency-response sweep start key: each increase starts the sweep of the sweep.* parameters
+    #[variable(causality = Input, variability = Discrete, start = 0)]
+    pub sweep_start: i32,
     /// Selected gain-table entry (0-based); a change selects it
     #[variable(causality = Input, variability = Discrete, start = 0)]
     pub seq_gain_index: i32,
@@ -403,6 +485,48 @@ pub struct ServoAxis {
     /// Reason of the last refusal: 0 none, 1 already running, 2 not running, 3 stop while running, 4 already stopped, 5 no accepted stop, 6 target blocked, 7 beyond soft limits, 8 gain index, 9 not in sequence mode
     #[variable(causality = Output, variability = Discrete)]
     pub seq_last_refusal: i32,
+    /// Sweep state: 0 idle, 1 settling, 2 measuring, 3 done
+    #[variable(causality = Output, variability = Discrete)]
+    pub sweep_state: i32,
+    /// Index of the frequency being measured
+    #[variable(causality = Output, variability = Discrete)]
+    pub sweep_point: i32,
+    /// Record (phase-shifted repeat) of that frequency
+    #[variable(causality = Output, variability = Discrete)]
+    pub sweep_record: i32,
+    /// Frequency being measured
+    #[variable(causality = Output, variability = Discrete)]
+    pub sweep_frequency: f64,
+    /// Frequencies measured so far (the on-line correlator's results)
+    #[variable(causality = Output, variability = Discrete)]
+    pub sweep_done_points: i32,
+    /// Last measured frequency
+    #[variable(causality = Output, variability = Discrete)]
+    pub sweep_last_frequency: f64,
+    /// Its gain (on-line correlator, on the drive)
+    #[variable(causality = Output, variability = Discrete)]
+    pub sweep_last_gain_db: f64,
+    /// Its phase
+    #[variable(causality = Output, variability = Discrete)]
+    pub sweep_last_phase_deg: f64,
+    /// Its quality: fraction of U's AC power at the excitation frequency
+    #[variable(causality = Output, variability = Discrete)]
+    pub sweep_last_quality: f64,
+    /// Time of the last acquisition sample (the base tick it was taken at)
+    #[variable(causality = Output, variability = Discrete)]
+    pub acq_time: f64,
+    /// Acquired U (see the README for what it is per injection point)
+    #[variable(causality = Output, variability = Discrete)]
+    pub acq_u: f64,
+    /// Acquired Y (the velocity estimate)
+    #[variable(causality = Output, variability = Discrete)]
+    pub acq_y: f64,
+    /// Excitation phase at that sample
+    #[variable(causality = Output, variability = Discrete)]
+    pub acq_phase: f64,
+    /// 1 if the sample belongs to a measured record
+    #[variable(causality = Output, variability = Discrete)]
+    pub acq_measuring: i32,
     /// Latched fault bits: 1 overcurrent, 2 undervoltage, 4 overvoltage, 8 following error, 16 non-finite, 32 encoder
     #[variable(causality = Output, variability = Discrete)]
     pub faults: i32,
@@ -411,6 +535,7 @@ pub struct ServoAxis {
     applied: Option<AppliedParameters>,
     last_fault_reset: bool,
     seen: SequenceInputsSeen,
+    seen_sweep_start: i32,
     /// Refused sequence events of the last step, for the log.
     refusals: Vec<String>,
 }
@@ -458,9 +583,10 @@ impl ControllerParameters {
                 amplitude: self.friction_comp_amplitude as f32,
                 decay: self.friction_comp_decay as f32,
             },
-            // Set from the `accdec` and `seq` groups by `ServoAxis::config`.
+            // Set from the `accdec`, `seq` and `sweep` groups by `ServoAxis::config`.
             acc_dec: AccDecParams::default(),
             sequence: SequenceParams::default(),
+            sweep: SweepParams::default(),
         }
     }
 }
@@ -513,6 +639,7 @@ impl ServoAxis {
         let mut control = self.ctrl.to_params(motor, counts);
         control.acc_dec = self.accdec.to_params()?;
         control.sequence = self.seq.to_params(counts)?;
+        control.sweep = self.sweep.to_params()?;
         Ok(SimulationConfig {
             control,
             plant,
@@ -531,6 +658,7 @@ impl ServoAxis {
             excitation: self.excitation.clone(),
             accdec: self.accdec.clone(),
             seq: self.seq.clone(),
+            sweep: self.sweep.clone(),
         }
     }
 
@@ -596,6 +724,21 @@ impl ServoAxis {
         self.seq_gain = sim.axis.params().sequence.gains[q.gain_index] as f64;
         self.seq_refused = q.refused.min(i32::MAX as u32) as i32;
         self.seq_last_refusal = q.last_refusal.map_or(0, |r| r.code());
+        let w = &t.sweep;
+        self.sweep_state = w.state.code();
+        self.sweep_point = w.point as i32;
+        self.sweep_record = w.record as i32;
+        self.sweep_frequency = w.frequency as f64;
+        self.sweep_done_points = w.done_points as i32;
+        self.sweep_last_frequency = w.last.frequency as f64;
+        self.sweep_last_gain_db = w.last.gain_db() as f64;
+        self.sweep_last_phase_deg = w.last.phase_deg() as f64;
+        self.sweep_last_quality = w.last.quality as f64;
+        self.acq_time = w.sample.tick as f64 * sim.tick_period();
+        self.acq_u = w.sample.u as f64;
+        self.acq_y = w.sample.y as f64;
+        self.acq_phase = w.sample.phase as f64;
+        self.acq_measuring = w.sample.measuring as i32;
         self.faults = t.faults.0 as i32;
     }
 
@@ -651,6 +794,7 @@ impl ServoAxis {
             || applied.excitation != self.excitation
             || applied.accdec != self.accdec
             || applied.seq != self.seq
+            || applied.sweep != self.sweep
         {
             let applied = applied.clone();
             let changed = describe_changes(&applied, &self.applied_now());
@@ -659,6 +803,7 @@ impl ServoAxis {
             self.excitation = applied.excitation;
             self.accdec = applied.accdec;
             self.seq = applied.seq;
+            self.sweep = applied.sweep;
             return Err(format!(
                 "fixed parameter(s) {changed} changed after initialization; the change was undone \
                  (set parameters before fmi3ExitInitializationMode)"
@@ -690,6 +835,10 @@ impl ServoAxis {
         self.last_fault_reset = self.fault_reset;
         self.sequence_events(&inputs);
         let sim = self.sim.as_mut().ok_or("model not initialized")?;
+        if self.sweep_start > self.seen_sweep_start {
+            sim.axis.start_sweep().map_err(|e| format!("sweep_start refused: {e}"))?;
+            self.seen_sweep_start = self.sweep_start;
+        }
         for _ in 0..n as u64 {
             sim.tick(&inputs);
         }
@@ -743,6 +892,7 @@ impl UserModel for ServoAxis {
             // to 1 before the first step is one press at the first step, a run switch set to
             // 1 starts a run, a gain index selects its entry.
             self.seen = SequenceInputsSeen::default();
+            self.seen_sweep_start = 0;
             self.update_outputs();
             Ok(())
         }));

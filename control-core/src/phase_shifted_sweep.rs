@@ -1,0 +1,597 @@
+//! Frequency-response measurement on the drive (seed 000): a stepped sine whose repeats are
+//! phase shifted, so the response stays measurable above the acquisition's Nyquist frequency.
+//!
+//! The loop runs faster than the acquisition. A sine of frequency f is injected at the loop
+//! rate; U and Y are acquired every `acquisition_divider` base ticks, each sample with the
+//! excitation's phase θ at that instant. The response is `G = Σ y·e^{−jθ} / Σ u·e^{−jθ}`:
+//! the phase, not the sample time, is the time base, so records with different initial
+//! phases add up as one equivalent-time record. At and above `threshold_hz` (default: the
+//! acquisition Nyquist frequency) each frequency is measured `repeats` times with initial
+//! phases `r·2π/shifts` (claims 5 and 6); below, once, unshifted. A single record sampled at
+//! exactly fs/2 sees the sine at one phase (and its opposite) only: the image term
+//! `Σ e^{−2jθ}` is as large as the wanted one. Over records shifted by 2π/3 it sums to zero.
+//!
+//! What U and Y are, per injection point (the sine s is added there):
+//! - velocity command: U = velocity reference + s, Y = velocity estimate → closed velocity
+//!   loop T = CP/(1 + CP);
+//! - torque command: U = torque command + s, Y = velocity estimate → plant P (torque to motor
+//!   velocity, measured inside the running loop);
+//! - velocity feedback (the seed's figure): the controller sees estimate + s; U = estimate + s,
+//!   Y = estimate → `−Y/U` is the open loop L = CP (the sign is applied in the result).
+//!
+//! The on-line correlator keeps four accumulators per frequency (no sample buffers); results
+//! for up to [`MAX_SWEEP_POINTS`] frequencies are kept. A PRBS mode (maximum-length sequence,
+//! degree 15) feeds the same acquisition for broadband baselines computed on the host.
+
+use core::fmt;
+
+use crate::excitation::{InjectionPoint, SineGenerator};
+use crate::TAU;
+
+pub const MAX_SWEEP_POINTS: usize = 128;
+const MAX_SHIFTS: u32 = 16;
+
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum SweepSignal {
+    #[default]
+    SteppedSine,
+    /// Maximum-length binary sequence, ±amplitude.
+    Prbs,
+}
+
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct SweepParams {
+    pub point: InjectionPoint,
+    pub signal: SweepSignal,
+    /// Sine or PRBS amplitude (rad/s or Nm, as the point).
+    pub amplitude: f32,
+    pub start_hz: f32,
+    pub stop_hz: f32,
+    /// Frequencies between start and stop, both included (≥ 2).
+    pub points: u32,
+    pub logarithmic: bool,
+    /// One more frequency inserted in order (0: none), for example the acquisition Nyquist.
+    pub extra_hz: f32,
+    /// Settling before each record: the longer of so many cycles and `min_settle_s`.
+    pub settle_cycles: f32,
+    pub min_settle_s: f32,
+    /// Measurement of each record: the longer of so many cycles and `min_measure_s`.
+    pub measure_cycles: f32,
+    pub min_measure_s: f32,
+    /// Phase step 2π/shifts between repeats.
+    pub shifts: u32,
+    /// Records per frequency at and above the threshold.
+    pub repeats: u32,
+    /// Phase shifting from this frequency up (0: the acquisition Nyquist frequency).
+    pub threshold_hz: f32,
+    /// Base ticks per acquisition sample (a multiple of the velocity divider).
+    pub acquisition_divider: u32,
+    /// PRBS: base ticks per chip, and the measured duration after `min_settle_s`.
+    pub prbs_divider: u32,
+    pub prbs_seconds: f32,
+}
+
+impl Default for SweepParams {
+    /// Velocity-command injection, 10 Hz to 3 kHz in 40 log steps plus 2 kHz, 2 settle and
+    /// 4 measure cycles (at least 20 ms each), 3 records shifted by 2π/3 from the acquisition
+    /// Nyquist frequency up, acquisition every 4 ticks (4 kHz at 16 kHz).
+    fn default() -> Self {
+        Self {
+            point: InjectionPoint::VelocityCommand,
+            signal: SweepSignal::SteppedSine,
+            amplitude: 2.0,
+            start_hz: 10.0,
+            stop_hz: 3000.0,
+            points: 40,
+            logarithmic: true,
+            extra_hz: 2000.0,
+            settle_cycles: 2.0,
+            min_settle_s: 0.02,
+            measure_cycles: 4.0,
+            min_measure_s: 0.02,
+            shifts: 3,
+            repeats: 3,
+            threshold_hz: 0.0,
+            acquisition_divider: 4,
+            prbs_divider: 1,
+            prbs_seconds: 5.0,
+        }
+    }
+}
+
+/// Why sweep settings or a start were refused.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum SweepError {
+    /// A value outside its range: the field and the value.
+    Setting { field: &'static str, value: f32 },
+    /// A frequency at or above the loop's Nyquist frequency, where the injected sine aliases.
+    AboveLoopNyquist { frequency: f32, nyquist: f32 },
+    /// More frequencies than the result table holds.
+    TooManyPoints(u32),
+    /// The acquisition divider is not a multiple of the velocity divider.
+    AcquisitionDivider { acquisition: u32, velocity: u32 },
+    /// Injection point off, or a velocity-loop point while the velocity loop does not run.
+    PointUnusable,
+    /// A sweep is already running.
+    Busy,
+}
+
+impl fmt::Display for SweepError {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match *self {
+            Self::Setting { field, value } => write!(f, "sweep {field} = {value} is out of range"),
+            Self::AboveLoopNyquist { frequency, nyquist } => {
+                write!(f, "sweep frequency {frequency} Hz is at or above the loop's Nyquist frequency {nyquist} Hz")
+            }
+            Self::TooManyPoints(n) => write!(f, "{n} sweep frequencies: at most {MAX_SWEEP_POINTS}"),
+            Self::AcquisitionDivider { acquisition, velocity } => write!(
+                f,
+                "acquisition every {acquisition} ticks is not a multiple of the velocity loop's {velocity} ticks"
+            ),
+            Self::PointUnusable => write!(
+                f,
+                "the sweep needs an injection point, and velocity-command or feedback injection needs the velocity loop (velocity, position or sequence mode)"
+            ),
+            Self::Busy => write!(f, "a sweep is already running"),
+        }
+    }
+}
+
+impl SweepParams {
+    /// Number of frequencies (with the extra one).
+    pub fn count(&self) -> usize {
+        let extra = self.extra_hz > 0.0 && !(0..self.points as usize).any(|i| self.base(i) == self.extra_hz);
+        self.points as usize + extra as usize
+    }
+
+    fn base(&self, i: usize) -> f32 {
+        let x = i as f32 / (self.points - 1) as f32;
+        if self.logarithmic {
+            self.start_hz * libm::powf(self.stop_hz / self.start_hz, x)
+        } else {
+            self.start_hz + (self.stop_hz - self.start_hz) * x
+        }
+    }
+
+    /// The i-th frequency in ascending order.
+    pub fn frequency(&self, i: usize) -> f32 {
+        if self.count() == self.points as usize {
+            return self.base(i);
+        }
+        let at = (0..self.points as usize).filter(|&j| self.base(j) < self.extra_hz).count();
+        match i.cmp(&at) {
+            core::cmp::Ordering::Less => self.base(i),
+            core::cmp::Ordering::Equal => self.extra_hz,
+            core::cmp::Ordering::Greater => self.base(i - 1),
+        }
+    }
+
+    /// Phase shifting from this frequency up.
+    pub fn threshold(&self, base_rate_hz: f32) -> f32 {
+        if self.threshold_hz > 0.0 { self.threshold_hz } else { 0.5 * base_rate_hz / self.acquisition_divider as f32 }
+    }
+
+    /// Records at frequency f.
+    pub fn records(&self, f: f32, base_rate_hz: f32) -> u32 {
+        if f >= self.threshold(base_rate_hz) { self.repeats } else { 1 }
+    }
+
+    /// Settling ticks (a whole number of acquisition periods) and measured samples of one
+    /// record at f.
+    pub fn record_length(&self, f: f32, base_rate_hz: f32) -> (u64, u64) {
+        let d = self.acquisition_divider as f32;
+        let settle = libm::ceilf(self.min_settle_s.max(self.settle_cycles / f) * base_rate_hz / d) as u64;
+        let samples = (libm::roundf(self.min_measure_s.max(self.measure_cycles / f) * base_rate_hz / d) as u64).max(1);
+        (settle * self.acquisition_divider as u64, samples)
+    }
+
+    /// Base ticks from the start to the end of the sweep.
+    pub fn total_ticks(&self, base_rate_hz: f32) -> u64 {
+        let d = self.acquisition_divider as u64;
+        match self.signal {
+            SweepSignal::Prbs => {
+                let settle = libm::ceilf(self.min_settle_s * base_rate_hz / d as f32) as u64 * d;
+                settle + libm::roundf(self.prbs_seconds * base_rate_hz / d as f32) as u64 * d
+            }
+            SweepSignal::SteppedSine => (0..self.count())
+                .map(|i| {
+                    let f = self.frequency(i);
+                    let (settle, samples) = self.record_length(f, base_rate_hz);
+                    self.records(f, base_rate_hz) as u64 * (settle + samples * d)
+                })
+                .sum(),
+        }
+    }
+
+    pub fn validate(&self, base_rate_hz: f32, velocity_divider: u32) -> Result<(), SweepError> {
+        let finite_positive = |field, value: f32| {
+            if value.is_finite() && value > 0.0 { Ok(()) } else { Err(SweepError::Setting { field, value }) }
+        };
+        let finite_non_negative = |field, value: f32| {
+            if value.is_finite() && value >= 0.0 { Ok(()) } else { Err(SweepError::Setting { field, value }) }
+        };
+        finite_positive("amplitude", self.amplitude)?;
+        finite_positive("start_hz", self.start_hz)?;
+        finite_positive("stop_hz", self.stop_hz)?;
+        if self.stop_hz <= self.start_hz {
+            return Err(SweepError::Setting { field: "stop_hz (must exceed start_hz)", value: self.stop_hz });
+        }
+        finite_non_negative("extra_hz", self.extra_hz)?;
+        if self.points < 2 {
+            return Err(SweepError::Setting { field: "points", value: self.points as f32 });
+        }
+        if self.points as usize + 1 > MAX_SWEEP_POINTS {
+            return Err(SweepError::TooManyPoints(self.points));
+        }
+        finite_non_negative("settle_cycles", self.settle_cycles)?;
+        finite_non_negative("min_settle_s", self.min_settle_s)?;
+        finite_positive("measure_cycles", self.measure_cycles)?;
+        finite_non_negative("min_measure_s", self.min_measure_s)?;
+        if !(1..=MAX_SHIFTS).contains(&self.shifts) {
+            return Err(SweepError::Setting { field: "shifts", value: self.shifts as f32 });
+        }
+        if !(1..=MAX_SHIFTS).contains(&self.repeats) {
+            return Err(SweepError::Setting { field: "repeats", value: self.repeats as f32 });
+        }
+        finite_non_negative("threshold_hz", self.threshold_hz)?;
+        if self.acquisition_divider == 0 || !self.acquisition_divider.is_multiple_of(velocity_divider) {
+            return Err(SweepError::AcquisitionDivider { acquisition: self.acquisition_divider, velocity: velocity_divider });
+        }
+        if self.prbs_divider == 0 {
+            return Err(SweepError::Setting { field: "prbs_divider", value: 0.0 });
+        }
+        finite_positive("prbs_seconds", self.prbs_seconds)?;
+        // The sine is updated at the velocity-loop rate for velocity-loop points.
+        let loop_rate = if self.point == InjectionPoint::TorqueCommand { base_rate_hz } else { base_rate_hz / velocity_divider as f32 };
+        let top = self.stop_hz.max(self.extra_hz);
+        if top >= 0.5 * loop_rate {
+            return Err(SweepError::AboveLoopNyquist { frequency: top, nyquist: 0.5 * loop_rate });
+        }
+        Ok(())
+    }
+}
+
+/// One measured frequency.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct SweepResult {
+    pub frequency: f32,
+    /// G = Y/U (−Y/U for feedback injection).
+    pub re: f32,
+    pub im: f32,
+    /// Fraction of U's AC power at the excitation frequency (1: a clean sine was seen; near 0:
+    /// the samples could not see it, as a single record at exactly fs/2).
+    pub quality: f32,
+}
+
+impl SweepResult {
+    pub fn gain_db(&self) -> f32 {
+        20.0 * libm::log10f(libm::hypotf(self.re, self.im))
+    }
+    pub fn phase_deg(&self) -> f32 {
+        libm::atan2f(self.im, self.re) * (360.0 / TAU)
+    }
+}
+
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum SweepState {
+    #[default]
+    Idle,
+    Settling,
+    Measuring,
+    Done,
+}
+
+impl SweepState {
+    pub fn code(self) -> i32 {
+        match self {
+            Self::Idle => 0,
+            Self::Settling => 1,
+            Self::Measuring => 2,
+            Self::Done => 3,
+        }
+    }
+}
+
+/// The last acquisition sample.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct AcquisitionSample {
+    /// Base tick of the sample.
+    pub tick: u64,
+    pub u: f32,
+    pub y: f32,
+    /// Excitation phase at the sample (rad, [0, 2π)); 0 in PRBS mode.
+    pub phase: f32,
+    /// The sample belongs to a measured record.
+    pub measuring: bool,
+    pub point: u32,
+    pub record: u32,
+}
+
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct SweepStatus {
+    pub state: SweepState,
+    pub point: u32,
+    pub record: u32,
+    pub frequency: f32,
+    pub done_points: u32,
+    pub last: SweepResult,
+    pub sample: AcquisitionSample,
+}
+
+#[derive(Clone, Copy, Debug, Default)]
+struct Accumulators {
+    u_re: f32,
+    u_im: f32,
+    y_re: f32,
+    y_im: f32,
+    u_sum: f32,
+    u_sq: f32,
+    n: u32,
+}
+
+#[derive(Clone, Copy, Debug)]
+pub struct PhaseShiftedSweep {
+    params: SweepParams,
+    base_rate_hz: f32,
+    status: SweepStatus,
+    generator: SineGenerator,
+    /// Ticks left in the present state.
+    left: u64,
+    acc: Accumulators,
+    lfsr: u16,
+    chip: f32,
+    /// The excitation value and phase of the present tick.
+    value: f32,
+    phase: f32,
+    results: [SweepResult; MAX_SWEEP_POINTS],
+}
+
+impl PhaseShiftedSweep {
+    pub fn new(params: SweepParams, base_rate_hz: f32) -> Self {
+        Self {
+            params,
+            base_rate_hz,
+            status: SweepStatus::default(),
+            generator: SineGenerator::default(),
+            left: 0,
+            acc: Accumulators::default(),
+            lfsr: 1,
+            chip: 0.0,
+            value: 0.0,
+            phase: 0.0,
+            results: [SweepResult::default(); MAX_SWEEP_POINTS],
+        }
+    }
+
+    pub fn params(&self) -> &SweepParams {
+        &self.params
+    }
+
+    pub fn status(&self) -> &SweepStatus {
+        &self.status
+    }
+
+    pub fn running(&self) -> bool {
+        matches!(self.status.state, SweepState::Settling | SweepState::Measuring)
+    }
+
+    /// Results measured so far, in frequency order.
+    pub fn results(&self) -> &[SweepResult] {
+        &self.results[..self.status.done_points as usize]
+    }
+
+    /// Start from the first frequency (validated settings; refused while running).
+    pub fn start(&mut self) -> Result<(), SweepError> {
+        if self.running() {
+            return Err(SweepError::Busy);
+        }
+        self.status = SweepStatus::default();
+        self.lfsr = 0x4A5D;
+        self.begin_record(0, 0);
+        Ok(())
+    }
+
+    fn begin_record(&mut self, point: u32, record: u32) {
+        let p = &self.params;
+        self.status.point = point;
+        self.status.record = record;
+        self.status.state = SweepState::Settling;
+        if p.signal == SweepSignal::Prbs {
+            let d = p.acquisition_divider as u64;
+            self.left = libm::ceilf(p.min_settle_s * self.base_rate_hz / d as f32) as u64 * d;
+            self.status.frequency = 0.0;
+            return;
+        }
+        let f = p.frequency(point as usize);
+        self.status.frequency = f;
+        let initial = record as f32 * TAU / p.shifts as f32;
+        self.generator = SineGenerator::new(p.amplitude, f, self.base_rate_hz, initial);
+        self.left = p.record_length(f, self.base_rate_hz).0;
+        if record == 0 {
+            self.acc = Accumulators::default();
+        }
+    }
+
+    /// Excitation for this base tick (call once per tick, before the loops): the value to
+    /// add at the injection point, or None when no sweep runs.
+    pub fn excitation(&mut self, tick: u64) -> Option<(InjectionPoint, f32)> {
+        if !self.running() {
+            return None;
+        }
+        let p = &self.params;
+        match p.signal {
+            SweepSignal::SteppedSine => {
+                self.phase = self.generator.phase();
+                self.value = self.generator.next();
+            }
+            SweepSignal::Prbs => {
+                if tick.is_multiple_of(p.prbs_divider as u64) {
+                    // x^15 + x^14 + 1: period 32767 chips.
+                    let bit = ((self.lfsr >> 14) ^ (self.lfsr >> 13)) & 1;
+                    self.lfsr = ((self.lfsr << 1) | bit) & 0x7FFF;
+                    self.chip = if bit == 1 { p.amplitude } else { -p.amplitude };
+                }
+                self.value = self.chip;
+                self.phase = 0.0;
+            }
+        }
+        Some((p.point, self.value))
+    }
+
+    /// End of a base tick: `u` and `y` as defined for the injection point (read only on
+    /// acquisition ticks). Advances the schedule.
+    pub fn end_tick(&mut self, tick: u64, u: f32, y: f32) {
+        if !self.running() {
+            return;
+        }
+        let p = self.params;
+        let acquire = tick.is_multiple_of(p.acquisition_divider as u64);
+        if acquire {
+            let measuring = self.status.state == SweepState::Measuring;
+            self.status.sample = AcquisitionSample {
+                tick,
+                u,
+                y,
+                phase: self.phase,
+                measuring,
+                point: self.status.point,
+                record: self.status.record,
+            };
+            if measuring && p.signal == SweepSignal::SteppedSine {
+                let (s, c) = libm::sincosf(self.phase);
+                let a = &mut self.acc;
+                a.u_re += u * c;
+                a.u_im -= u * s;
+                a.y_re += y * c;
+                a.y_im -= y * s;
+                a.u_sum += u;
+                a.u_sq += u * u;
+                a.n += 1;
+            }
+        }
+        self.left = self.left.saturating_sub(1);
+        if self.left > 0 {
+            return;
+        }
+        match self.status.state {
+            SweepState::Settling => {
+                self.status.state = SweepState::Measuring;
+                self.left = match p.signal {
+                    SweepSignal::Prbs => libm::roundf(p.prbs_seconds * self.base_rate_hz / p.acquisition_divider as f32) as u64,
+                    SweepSignal::SteppedSine => p.record_length(self.status.frequency, self.base_rate_hz).1,
+                } * p.acquisition_divider as u64;
+            }
+            SweepState::Measuring if p.signal == SweepSignal::Prbs => self.status.state = SweepState::Done,
+            SweepState::Measuring => {
+                let f = self.status.frequency;
+                if self.status.record + 1 < p.records(f, self.base_rate_hz) {
+                    self.begin_record(self.status.point, self.status.record + 1);
+                    return;
+                }
+                self.finish_point();
+                let next = self.status.point + 1;
+                if (next as usize) < p.count() {
+                    self.begin_record(next, 0);
+                } else {
+                    self.status.state = SweepState::Done;
+                }
+            }
+            _ => {}
+        }
+    }
+
+    fn finish_point(&mut self) {
+        let a = self.acc;
+        let den = a.u_re * a.u_re + a.u_im * a.u_im;
+        let (mut re, mut im) = if den > 0.0 {
+            ((a.y_re * a.u_re + a.y_im * a.u_im) / den, (a.y_im * a.u_re - a.y_re * a.u_im) / den)
+        } else {
+            (f32::NAN, f32::NAN)
+        };
+        if self.params.point == InjectionPoint::VelocityFeedback {
+            re = -re;
+            im = -im;
+        }
+        let n = a.n.max(1) as f32;
+        let ac_power = a.u_sq - a.u_sum * a.u_sum / n;
+        let quality = if ac_power > 0.0 { (2.0 * den / n / ac_power).min(1.0) } else { 0.0 };
+        let r = SweepResult { frequency: self.status.frequency, re, im, quality };
+        self.results[self.status.point as usize] = r;
+        self.status.last = r;
+        self.status.done_points = self.status.point + 1;
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    const FS: f32 = 16_000.0;
+
+    /// Drive the sweep with a known linear response y = |G|·sin(θ + φ) (times A), u = the
+    /// injected sine, sampled exactly as the axis would.
+    fn measure(params: SweepParams, gain: f32, phase: f32) -> [SweepResult; 2] {
+        let mut s = PhaseShiftedSweep::new(params, FS);
+        s.start().unwrap();
+        let mut tick = 0u64;
+        while s.running() {
+            let (_, u) = s.excitation(tick).unwrap();
+            let y = gain * params.amplitude * libm::sinf(s.phase + phase);
+            s.end_tick(tick, u, y);
+            tick += 1;
+        }
+        assert_eq!(tick, params.total_ticks(FS), "the schedule the host computes is the one the drive runs");
+        [s.results()[0], *s.results().last().unwrap()]
+    }
+
+    fn at(f: f32, shifts: u32, repeats: u32) -> SweepParams {
+        SweepParams {
+            start_hz: f,
+            stop_hz: f * 1.001,
+            points: 2,
+            extra_hz: 0.0,
+            shifts,
+            repeats,
+            threshold_hz: 1000.0,
+            ..Default::default()
+        }
+    }
+
+    #[test]
+    fn phase_shifted_records_measure_exactly_at_the_acquisition_nyquist_frequency() {
+        // 2 kHz sampled at 4 kHz: one record sees the wave at two phases only.
+        let [shifted, _] = measure(at(2000.0, 3, 3), 0.5, -1.0);
+        assert!((shifted.gain_db() - 20.0 * libm::log10f(0.5)).abs() < 1e-3, "{shifted:?}");
+        assert!((shifted.phase_deg() + 1.0f32.to_degrees()).abs() < 0.05, "{shifted:?}");
+        assert!(shifted.quality > 0.99);
+        let [single, _] = measure(at(2000.0, 1, 1), 0.5, -1.0);
+        let gain_error = (single.gain_db() - 20.0 * libm::log10f(0.5)).abs();
+        let phase_error = (single.phase_deg() + 1.0f32.to_degrees()).abs();
+        assert!(gain_error > 3.0 || phase_error > 10.0 || !gain_error.is_finite(), "single phase must fail: {single:?}");
+    }
+
+    #[test]
+    fn below_the_threshold_one_record_measures_exactly() {
+        let [r, _] = measure(at(123.0, 3, 3), 2.0, 0.7);
+        assert!((r.gain_db() - 20.0 * libm::log10f(2.0)).abs() < 1e-3 && (r.phase_deg() - 0.7f32.to_degrees()).abs() < 0.05, "{r:?}");
+    }
+
+    #[test]
+    fn the_frequency_list_includes_the_extra_point_in_order() {
+        let p = SweepParams::default();
+        assert_eq!(p.count(), 41);
+        let f: [f32; 41] = core::array::from_fn(|i| p.frequency(i));
+        assert!(f.windows(2).all(|w| w[0] < w[1]));
+        assert!(f.contains(&2000.0) && (f[0] - 10.0).abs() < 1e-4 && (f[40] - 3000.0).abs() < 0.1);
+    }
+
+    #[test]
+    fn bad_settings_are_named() {
+        let v = |p: SweepParams| p.validate(FS, 2);
+        assert_eq!(v(SweepParams { stop_hz: 4000.0, ..Default::default() }), Err(SweepError::AboveLoopNyquist { frequency: 4000.0, nyquist: 4000.0 }));
+        assert!(matches!(v(SweepParams { amplitude: f32::NAN, ..Default::default() }), Err(SweepError::Setting { field: "amplitude", .. })));
+        assert_eq!(v(SweepParams { acquisition_divider: 3, ..Default::default() }), Err(SweepError::AcquisitionDivider { acquisition: 3, velocity: 2 }));
+        assert_eq!(v(SweepParams { points: 200, ..Default::default() }), Err(SweepError::TooManyPoints(200)));
+        assert_eq!(v(SweepParams::default()), Ok(()));
+    }
+}
