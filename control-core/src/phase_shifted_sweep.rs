@@ -3,13 +3,14 @@
 //!
 //! The loop runs faster than the acquisition. A sine of frequency f is injected at the loop
 //! rate; U and Y are acquired every `acquisition_divider` base ticks, each sample with the
-//! excitation's phase θ at that instant. The response is `G = Σ y·e^{−jθ} / Σ u·e^{−jθ}`:
-//! the phase, not the sample time, is the time base, so records with different initial
-//! phases add up as one equivalent-time record. At and above `threshold_hz` (default: the
-//! acquisition Nyquist frequency) each frequency is measured `repeats` times with initial
-//! phases `r·2π/shifts` (claims 5 and 6); below, once, unshifted. A single record sampled at
-//! exactly fs/2 sees the sine at one phase (and its opposite) only: the image term
-//! `Σ e^{−2jθ}` is as large as the wanted one. Over records shifted by 2π/3 it sums to zero.
+//! excitation's phase θ at that instant. The response is `G = Y/U`, the complex amplitudes
+//! of sines fitted to y and u at those phases: the phase, not the sample time, is the time
+//! base, so records with different initial phases add up as one equivalent-time record. At
+//! and above `threshold_hz` (default: the acquisition Nyquist frequency) each frequency is
+//! measured `repeats` times with initial phases `r·2π/shifts` (claims 5 and 6); below, once,
+//! unshifted. A single record sampled at exactly fs/2 sees the sine at one phase and its
+//! opposite only: cos θ and sin θ are collinear and the sine cannot be told apart from its
+//! phase. Records shifted by 2π/3 spread the phases over the circle.
 //!
 //! What U and Y are, per injection point (the sine s is added there):
 //! - velocity command: U = velocity reference + s, Y = velocity estimate → closed velocity
@@ -19,7 +20,8 @@
 //! - velocity feedback (the seed's figure): the controller sees estimate + s; U = estimate + s,
 //!   Y = estimate → `−Y/U` is the open loop L = CP (the sign is applied in the result).
 //!
-//! The on-line correlator keeps four accumulators per frequency (no sample buffers); results
+//! The on-line correlator keeps the sums of a three-parameter sine fit per frequency (no
+//! sample buffers; see [`SineFitSums`]); results
 //! for up to [`MAX_SWEEP_POINTS`] frequencies are kept. A PRBS mode (maximum-length sequence,
 //! degree 15) feeds the same acquisition for broadband baselines computed on the host.
 
@@ -258,8 +260,8 @@ pub struct SweepResult {
     /// G = Y/U (−Y/U for feedback injection).
     pub re: f32,
     pub im: f32,
-    /// Fraction of U's AC power at the excitation frequency (1: a clean sine was seen; near 0:
-    /// the samples could not see it, as a single record at exactly fs/2).
+    /// How well the samples' phases determine a sine, 0..1: 1 when they spread over the
+    /// circle, 0 when they sit at one phase and its opposite (a single record at exactly fs/2).
     pub quality: f32,
 }
 
@@ -318,15 +320,61 @@ pub struct SweepStatus {
     pub sample: AcquisitionSample,
 }
 
+/// Sums of a three-parameter sine fit (IEEE 1057 with known frequency) of u and y:
+/// `x ≈ x̄ + b·cos θ + c·sin θ`, the complex amplitude `X = b − j·c`. Unlike a plain
+/// correlation it leaks neither the constant speed the sweep rides on nor the image at
+/// fs − f when a record is not a whole number of cycles; and it tells how well the sample
+/// phases determine the sine: the determinant of the (cos, sin) covariance, 0 when all
+/// samples sit at one phase and its opposite (a single record at exactly fs/2).
 #[derive(Clone, Copy, Debug, Default)]
-struct Accumulators {
-    u_re: f32,
-    u_im: f32,
-    y_re: f32,
-    y_im: f32,
-    u_sum: f32,
-    u_sq: f32,
-    n: u32,
+struct SineFitSums {
+    n: f32,
+    c: f32,
+    s: f32,
+    cc: f32,
+    ss: f32,
+    cs: f32,
+    u: f32,
+    uc: f32,
+    us: f32,
+    y: f32,
+    yc: f32,
+    ys: f32,
+}
+
+impl SineFitSums {
+    fn add(&mut self, u: f32, y: f32, phase: f32) {
+        let (s, c) = libm::sincosf(phase);
+        self.n += 1.0;
+        self.c += c;
+        self.s += s;
+        self.cc += c * c;
+        self.ss += s * s;
+        self.cs += c * s;
+        self.u += u;
+        self.uc += u * c;
+        self.us += u * s;
+        self.y += y;
+        self.yc += y * c;
+        self.ys += y * s;
+    }
+
+    /// (U, Y) complex amplitudes and the conditioning of the phases (0..1).
+    fn solve(&self) -> ((f32, f32), (f32, f32), f32) {
+        let n = self.n.max(1.0);
+        let scc = self.cc - self.c * self.c / n;
+        let sss = self.ss - self.s * self.s / n;
+        let scs = self.cs - self.c * self.s / n;
+        let det = scc * sss - scs * scs;
+        let amplitude = |x: f32, xc: f32, xs: f32| {
+            let (pc, ps) = (xc - x * self.c / n, xs - x * self.s / n);
+            let b = (sss * pc - scs * ps) / det;
+            let c = (scc * ps - scs * pc) / det;
+            (b, -c)
+        };
+        let conditioning = (det / (0.25 * n * n)).clamp(0.0, 1.0);
+        (amplitude(self.u, self.uc, self.us), amplitude(self.y, self.yc, self.ys), conditioning)
+    }
 }
 
 #[derive(Clone, Copy, Debug)]
@@ -337,7 +385,7 @@ pub struct PhaseShiftedSweep {
     generator: SineGenerator,
     /// Ticks left in the present state.
     left: u64,
-    acc: Accumulators,
+    acc: SineFitSums,
     lfsr: u16,
     chip: f32,
     /// The excitation value and phase of the present tick.
@@ -354,7 +402,7 @@ impl PhaseShiftedSweep {
             status: SweepStatus::default(),
             generator: SineGenerator::default(),
             left: 0,
-            acc: Accumulators::default(),
+            acc: SineFitSums::default(),
             lfsr: 1,
             chip: 0.0,
             value: 0.0,
@@ -408,7 +456,7 @@ impl PhaseShiftedSweep {
         self.generator = SineGenerator::new(p.amplitude, f, self.base_rate_hz, initial);
         self.left = p.record_length(f, self.base_rate_hz).0;
         if record == 0 {
-            self.acc = Accumulators::default();
+            self.acc = SineFitSums::default();
         }
     }
 
@@ -458,15 +506,7 @@ impl PhaseShiftedSweep {
                 record: self.status.record,
             };
             if measuring && p.signal == SweepSignal::SteppedSine {
-                let (s, c) = libm::sincosf(self.phase);
-                let a = &mut self.acc;
-                a.u_re += u * c;
-                a.u_im -= u * s;
-                a.y_re += y * c;
-                a.y_im -= y * s;
-                a.u_sum += u;
-                a.u_sq += u * u;
-                a.n += 1;
+                self.acc.add(u, y, self.phase);
             }
         }
         self.left = self.left.saturating_sub(1);
@@ -501,10 +541,10 @@ impl PhaseShiftedSweep {
     }
 
     fn finish_point(&mut self) {
-        let a = self.acc;
-        let den = a.u_re * a.u_re + a.u_im * a.u_im;
-        let (mut re, mut im) = if den > 0.0 {
-            ((a.y_re * a.u_re + a.y_im * a.u_im) / den, (a.y_im * a.u_re - a.y_re * a.u_im) / den)
+        let ((u_re, u_im), (y_re, y_im), quality) = self.acc.solve();
+        let den = u_re * u_re + u_im * u_im;
+        let (mut re, mut im) = if den > 0.0 && quality > 0.0 {
+            ((y_re * u_re + y_im * u_im) / den, (y_im * u_re - y_re * u_im) / den)
         } else {
             (f32::NAN, f32::NAN)
         };
@@ -512,9 +552,6 @@ impl PhaseShiftedSweep {
             re = -re;
             im = -im;
         }
-        let n = a.n.max(1) as f32;
-        let ac_power = a.u_sq - a.u_sum * a.u_sum / n;
-        let quality = if ac_power > 0.0 { (2.0 * den / n / ac_power).min(1.0) } else { 0.0 };
         let r = SweepResult { frequency: self.status.frequency, re, im, quality };
         self.results[self.status.point as usize] = r;
         self.status.last = r;

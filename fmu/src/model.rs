@@ -527,6 +527,12 @@ pub struct ServoAxis {
     /// 1 if the sample belongs to a measured record
     #[variable(causality = Output, variability = Discrete)]
     pub acq_measuring: i32,
+    /// Frequency index the sample belongs to
+    #[variable(causality = Output, variability = Discrete)]
+    pub acq_point: i32,
+    /// Record (phase-shifted repeat) the sample belongs to
+    #[variable(causality = Output, variability = Discrete)]
+    pub acq_record: i32,
     /// Latched fault bits: 1 overcurrent, 2 undervoltage, 4 overvoltage, 8 following error, 16 non-finite, 32 encoder
     #[variable(causality = Output, variability = Discrete)]
     pub faults: i32,
@@ -739,6 +745,8 @@ impl ServoAxis {
         self.acq_y = w.sample.y as f64;
         self.acq_phase = w.sample.phase as f64;
         self.acq_measuring = w.sample.measuring as i32;
+        self.acq_point = w.sample.point as i32;
+        self.acq_record = w.sample.record as i32;
         self.faults = t.faults.0 as i32;
     }
 

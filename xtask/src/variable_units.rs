@@ -172,6 +172,8 @@ const VARIABLES: &[Row] = &[
     ("acq_y", "rad/s", None, None),
     ("acq_phase", "rad", None, None),
     ("acq_measuring", "", Some(0.0), Some(1.0)),
+    ("acq_point", "", Some(0.0), None),
+    ("acq_record", "", Some(0.0), None),
     ("faults", "", Some(0.0), None),
 ];
 

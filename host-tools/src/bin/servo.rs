@@ -194,6 +194,74 @@ enum Command {
         #[command(flatten)]
         common: Common,
     },
+    /// Frequency response with phase-shifted sine repeats (seed 000), beyond the acquisition
+    /// Nyquist frequency.
+    ///
+    /// The drive injects a stepped sine (velocity command by default: closed velocity loop;
+    /// torque: the plant inside the loop; feedback: the open loop, G = −Y/U) and acquires U
+    /// and Y every --acquisition-divider ticks with the excitation's phase. At and above the
+    /// threshold (default: the acquisition Nyquist frequency, 2 kHz) each frequency is
+    /// measured --repeats times with the initial phase shifted by 2π/--shifts; the host
+    /// computes G from the acquisition stream in equivalent time and reads the drive's
+    /// on-line correlator results; the two must agree. --oracle also measures the same loop
+    /// with acquisition at the full velocity-loop rate and ten times longer records and
+    /// reports the errors against it. Writes sweep.csv (frequency, gain, phase, quality, the
+    /// on-line values), bode.svg and sweep.json into --out (default out/sweep/).
+    Sweep {
+        /// Injection point: velocity, torque or feedback
+        #[arg(long, default_value = "velocity")]
+        point: String,
+        /// Sine amplitude (rad/s for velocity/feedback, N·m for torque); default 2 rad/s or 0.05 N·m
+        #[arg(long)]
+        amplitude: Option<f64>,
+        #[arg(long, default_value_t = 10.0)]
+        start: f64,
+        #[arg(long, default_value_t = 3000.0)]
+        stop: f64,
+        /// Frequencies from start to stop (log spaced unless --linear)
+        #[arg(long, default_value_t = 40)]
+        points: u32,
+        #[arg(long)]
+        linear: bool,
+        /// One more frequency (Hz) inserted in order; 0 for none
+        #[arg(long, default_value_t = 2000.0)]
+        extra: f64,
+        #[arg(long, default_value_t = 2.0)]
+        settle_cycles: f64,
+        #[arg(long, default_value_t = 4.0)]
+        measure_cycles: f64,
+        /// Shortest settling and measurement per record (s)
+        #[arg(long, default_value_t = 0.02)]
+        min_settle: f64,
+        #[arg(long, default_value_t = 0.02)]
+        min_measure: f64,
+        /// Phase step 2π/shifts between repeats
+        #[arg(long, default_value_t = 3)]
+        shifts: u32,
+        /// Records per frequency at and above the threshold
+        #[arg(long, default_value_t = 3)]
+        repeats: u32,
+        /// Phase shifting from this frequency (Hz) up; 0 = the acquisition Nyquist frequency
+        #[arg(long, default_value_t = 0.0)]
+        threshold: f64,
+        /// Base ticks (62.5 µs) per acquisition sample
+        #[arg(long, default_value_t = 4)]
+        acquisition_divider: u32,
+        /// Constant speed the sweep rides on (rad/s; keeps friction on one side)
+        #[arg(long, default_value_t = 50.0)]
+        velocity: f64,
+        /// FMU parameter NAME=VALUE (repeatable), e.g. plant.current_noise_std=0.05
+        #[arg(long = "set")]
+        set: Vec<String>,
+        /// Also measure the oracle and report the errors against it
+        #[arg(long)]
+        oracle: bool,
+        /// Overlay a reference curve (CSV with frequency, gain_db, phase_deg)
+        #[arg(long)]
+        reference: Option<PathBuf>,
+        #[command(flatten)]
+        common: Common,
+    },
     /// Compare two trace CSVs bit for bit on their common columns.
     Compare { a: PathBuf, b: PathBuf },
     /// Benchmarks that print the figures the issues ask for.
@@ -802,11 +870,113 @@ fn bench_circle(common: &Common) -> Result<bool> {
     Ok(ok)
 }
 
+/// Sweep settings from the command line.
+#[allow(clippy::too_many_arguments)]
+fn sweep_settings(
+    point: &str,
+    amplitude: Option<f64>,
+    start: f64,
+    stop: f64,
+    points: u32,
+    linear: bool,
+    extra: f64,
+    settle_cycles: f64,
+    measure_cycles: f64,
+    min_settle: f64,
+    min_measure: f64,
+    shifts: u32,
+    repeats: u32,
+    threshold: f64,
+    acquisition_divider: u32,
+) -> Result<control_core::phase_shifted_sweep::SweepParams> {
+    use control_core::excitation::InjectionPoint;
+    let (point, default_amplitude) = match point {
+        "velocity" => (InjectionPoint::VelocityCommand, 2.0),
+        "torque" => (InjectionPoint::TorqueCommand, 0.05),
+        "feedback" => (InjectionPoint::VelocityFeedback, 2.0),
+        other => bail!("--point must be velocity, torque or feedback (got `{other}`)"),
+    };
+    Ok(control_core::phase_shifted_sweep::SweepParams {
+        point,
+        signal: control_core::phase_shifted_sweep::SweepSignal::SteppedSine,
+        amplitude: amplitude.unwrap_or(default_amplitude) as f32,
+        start_hz: start as f32,
+        stop_hz: stop as f32,
+        points,
+        logarithmic: !linear,
+        extra_hz: extra as f32,
+        settle_cycles: settle_cycles as f32,
+        min_settle_s: min_settle as f32,
+        measure_cycles: measure_cycles as f32,
+        min_measure_s: min_measure as f32,
+        shifts,
+        repeats,
+        threshold_hz: threshold as f32,
+        acquisition_divider,
+        ..Default::default()
+    })
+}
+
 fn main() -> ExitCode {
     let cli = Cli::parse();
     let result = match &cli.command {
         Command::Run { scenarios, fmpy, common } => run(scenarios, *fmpy, common),
         Command::Sequence { files, fmpy, common } => sequence(files, *fmpy, common),
+        Command::Sweep {
+            point,
+            amplitude,
+            start,
+            stop,
+            points,
+            linear,
+            extra,
+            settle_cycles,
+            measure_cycles,
+            min_settle,
+            min_measure,
+            shifts,
+            repeats,
+            threshold,
+            acquisition_divider,
+            velocity,
+            set,
+            oracle,
+            reference,
+            common,
+        } => (|| {
+            let settings = sweep_settings(
+                point, *amplitude, *start, *stop, *points, *linear, *extra, *settle_cycles, *measure_cycles, *min_settle,
+                *min_measure, *shifts, *repeats, *threshold, *acquisition_divider,
+            )?;
+            let parameters = host_tools::circle_report::axis_parameters(set, &[])?;
+            let run = host_tools::frequency_response::SweepRun { settings, parameters, velocity: *velocity };
+            let reference = match reference {
+                Some(p) => Some((p.display().to_string(), host_tools::sweep_report::read_reference(p)?)),
+                None => None,
+            };
+            let fmu = Fmu::load(&common.fmu.clone().unwrap_or_else(default_fmu))?;
+            let out = common.out.clone().unwrap_or_else(|| default_out("sweep"));
+            let pb = progress_bar("sweep", common.json);
+            let r = host_tools::sweep_report::run(
+                &fmu,
+                &run,
+                *oracle,
+                reference.as_ref().map(|(l, v)| (l.as_str(), v.clone())),
+                &out,
+                |label, f| {
+                    pb.set_prefix(label.to_string());
+                    pb.set_position((f * 1000.0) as u64)
+                },
+            )?;
+            pb.finish_and_clear();
+            if common.json {
+                println!("{}", serde_json::to_string_pretty(&r)?);
+            } else {
+                r.print();
+            }
+            // The drive's correlator and the host's equivalent-time estimate must agree.
+            Ok(r.stream_vs_online.0 <= 0.01 && r.stream_vs_online.1 <= 0.1)
+        })(),
         Command::Circle { axes, single, radius, feed, cw, lead_in, measure, set, x_set, y_set, compare, fmpy, common } => {
             circle(axes, single, *radius, *feed, *cw, *lead_in, measure, set, x_set, y_set, compare, *fmpy, common)
         }
