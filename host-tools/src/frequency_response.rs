@@ -217,7 +217,11 @@ pub fn stream_results(t: &Trace, settings: &SweepParams) -> Result<Vec<ResponseP
 
 /// H1 = S_uy / S_uu (Welch, Hann windows, 50 % overlap) of a PRBS run's acquisition stream,
 /// read at `frequencies` (linear interpolation between bins); points above the acquisition
-/// Nyquist frequency cannot be estimated and are left out.
+/// Nyquist frequency cannot be estimated and are left out. Between two acquisition samples the
+/// loop reads the same chip at each of its m ticks, so H1 (from the sampled u) sees the loop's
+/// response times that hold, `(1/m)·Σ e^{−jωiT}`; the known factor is divided out (chips
+/// must change only at acquisition ticks: a `prbs_divider` multiple of the acquisition
+/// divider).
 pub fn prbs_results(t: &Trace, settings: &SweepParams, frequencies: &[f64], segment: usize) -> Result<Vec<ResponsePoint>> {
     let [measuring, u, y, time] = columns(t, ["acq_measuring", "acq_u", "acq_y", "acq_time"])?;
     let (mut us, mut ys) = (Vec::new(), Vec::new());
@@ -233,6 +237,19 @@ pub fn prbs_results(t: &Trace, settings: &SweepParams, frequencies: &[f64], segm
     let (h, coherence) = welch_h1(&us, &ys, segment)?;
     let df = fs / segment as f64;
     let sign = if settings.point == InjectionPoint::VelocityFeedback { -1.0 } else { 1.0 };
+    let rates = control_core::Params::default().rates;
+    let loop_ticks = if settings.point == InjectionPoint::TorqueCommand { 1 } else { rates.velocity_divider };
+    let m = (settings.acquisition_divider / loop_ticks).max(1);
+    let loop_period = loop_ticks as f64 / rates.current_loop_hz as f64;
+    let hold = |f: f64| {
+        (0..m)
+            .map(|i| {
+                let a = -std::f64::consts::TAU * f * i as f64 * loop_period;
+                Complex::new(a.cos(), a.sin())
+            })
+            .fold(Complex::default(), Complex::add)
+            .scale(1.0 / m as f64)
+    };
     Ok(frequencies
         .iter()
         .filter(|&&f| f < fs / 2.0)
@@ -240,7 +257,7 @@ pub fn prbs_results(t: &Trace, settings: &SweepParams, frequencies: &[f64], segm
             let x = f / df;
             let k = (x.floor() as usize).min(h.len() - 2);
             let w = x - k as f64;
-            let g = h[k].scale(1.0 - w).add(h[k + 1].scale(w)).scale(sign);
+            let g = h[k].scale(1.0 - w).add(h[k + 1].scale(w)).scale(sign).div(hold(f));
             ResponsePoint::from_complex(f, g, coherence[k] * (1.0 - w) + coherence[k + 1] * w)
         })
         .collect())

@@ -8,6 +8,7 @@ pub mod bench_accdec;
 pub mod bench_circle;
 pub mod bench_plant;
 pub mod bench_sequence;
+pub mod bench_sweep;
 pub mod bode_plot;
 pub mod circle_plot;
 pub mod circle_report;

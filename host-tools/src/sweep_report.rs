@@ -62,6 +62,7 @@ pub fn run(
     std::fs::create_dir_all(out)?;
     let fs = control_core::Params::default().rates.current_loop_hz;
     let pdiv = control_core::Params::default().rates.position_divider;
+    sweep.scenario()?; // refuses invalid settings with the drive's reason first
     if sweep.settings.acquisition_divider != pdiv {
         bail!(
             "the acquisition stream reaches the host once per communication step ({pdiv} ticks): use --acquisition-divider {pdiv} (the oracle uses the drive's own correlator at any rate)"

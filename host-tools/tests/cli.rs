@@ -144,3 +144,32 @@ fn circle_writes_plot_points_and_figures() {
         assert!(out.join(f).exists(), "{f} missing");
     }
 }
+
+#[test]
+fn sweep_refuses_bad_settings_with_the_reason() {
+    for (args, reason) in [
+        (vec!["--point", "current"], "--point must be"),
+        (vec!["--stop", "5000"], "Nyquist"),
+        (vec!["--acquisition-divider", "3"], "multiple of the velocity"),
+        (vec!["--start", "100", "--stop", "50"], "stop_hz"),
+        (vec!["--amplitude=-1"], "amplitude"),
+        (vec!["--acquisition-divider", "8"], "once per communication step"),
+    ] {
+        let o = servo().arg("sweep").args(&args).arg("--fmu").arg(fmu_path()).arg("--out").arg(tmp("sweep-bad")).output().unwrap();
+        let err = String::from_utf8_lossy(&o.stderr);
+        assert_eq!(o.status.code(), Some(2), "{args:?}: {err}");
+        assert!(err.contains(reason), "{args:?}: {err}");
+    }
+}
+
+#[test]
+fn sweep_writes_csv_bode_and_json() {
+    let out = tmp("sweep");
+    let o = servo().args(["sweep", "--json", "--start", "100", "--stop", "3000", "--points", "6"]).arg("--fmu").arg(fmu_path()).arg("--out").arg(&out).output().unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let r: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+    assert_eq!(r["stream"].as_array().unwrap().len(), 7, "6 points and 2 kHz");
+    for f in ["sweep.csv", "bode.svg", "sweep.json"] {
+        assert!(out.join(f).exists(), "{f} missing");
+    }
+}

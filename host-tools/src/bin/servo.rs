@@ -321,6 +321,16 @@ enum BenchCommand {
         #[command(flatten)]
         common: Common,
     },
+    /// Frequency response (seed 000): errors against the oracle below and above 2 kHz with
+    /// and without phase shifting, the 2 kHz point, measurement time, PRBS/H1 baseline,
+    /// analytic model at low frequencies, error against measurement time with sensor noise.
+    Sweep {
+        /// Current-sensor noise for the noise comparison (A, standard deviation)
+        #[arg(long, default_value_t = 0.05)]
+        noise: f64,
+        #[command(flatten)]
+        common: Common,
+    },
     /// Run a filter for the instruction count of `servo bench accdec` (valgrind runs this).
     #[command(hide = true)]
     AccdecProbe {
@@ -917,6 +927,58 @@ fn sweep_settings(
     })
 }
 
+fn bench_sweep(noise: f64, common: &Common) -> Result<bool> {
+    if !(noise.is_finite() && noise > 0.0) {
+        bail!("--noise must be a positive current (A)");
+    }
+    let fmu = Fmu::load(&common.fmu.clone().unwrap_or_else(default_fmu))?;
+    let pb = progress_bar("sweep bench", common.json);
+    let r = host_tools::bench_sweep::bench(&fmu, noise, |f| pb.set_position((f * 1000.0) as u64))?;
+    pb.finish_and_clear();
+    let e = &r.ours.errors;
+    let ok = e.below_gain_db.max(e.above_gain_db) <= 0.1 && e.below_phase_deg.max(e.above_phase_deg) <= 1.0 && r.ours.measurement_time_s <= 10.0;
+    if common.json {
+        println!("{}", serde_json::to_string_pretty(&serde_json::json!({"bench": "sweep", "result": r, "passed": ok}))?);
+        return Ok(ok);
+    }
+    println!("servo bench sweep — seed 000: velocity loop 8 kHz, acquisition 4 kHz, 10 Hz to 3 kHz (41 points incl. 2 kHz), velocity-command injection 2 rad/s on 50 rad/s");
+    println!("  max error against the oracle (acquisition 8 kHz, records 10x longer):");
+    println!("  {:<58} {:>8} {:>22} {:>22}", "method", "time s", "below 2 kHz dB / deg", "2 kHz and up dB / deg");
+    for m in [&r.ours, &r.single_phase, &r.prbs] {
+        let x = &m.errors;
+        println!(
+            "  {:<58} {:>8.3} {:>10.3} / {:>9.2} {:>10.3} / {:>9.2}{}",
+            m.method,
+            m.measurement_time_s,
+            x.below_gain_db,
+            x.below_phase_deg,
+            x.above_gain_db,
+            x.above_phase_deg,
+            if m.unmeasured.is_empty() { String::new() } else { format!("   cannot measure {} point(s): {:?} Hz", m.unmeasured.len(), m.unmeasured.iter().map(|f| f.round()).collect::<Vec<_>>()) }
+        );
+    }
+    let [o, ours, single] = r.at_nyquist;
+    println!(
+        "  at exactly 2 kHz: oracle {:.3} dB / {:.2} deg; phase shifted {:.3} dB / {:.2} deg (quality {:.3}); single phase {:.3} dB / {:.2} deg (quality {:.3})",
+        o.gain_db, o.phase_deg, ours.gain_db, ours.phase_deg, ours.quality, single.gain_db, single.phase_deg, single.quality
+    );
+    println!("  equivalent-time stream vs the drive's on-line correlator: {:.1e} dB, {:.1e} deg", r.stream_vs_online.0, r.stream_vs_online.1);
+    println!("  analytic linear model vs oracle up to 30 Hz: {:.3} dB, {:.2} deg", r.analytic_low_frequency.0, r.analytic_low_frequency.1);
+    println!(
+        "  goal: full Bode in <= 10 s with <= 0.1 dB / 1 deg everywhere: {:.2} s, {:.3} dB, {:.2} deg: {}",
+        r.ours.measurement_time_s,
+        e.below_gain_db.max(e.above_gain_db),
+        e.below_phase_deg.max(e.above_phase_deg),
+        if ok { "met" } else { "NOT met" }
+    );
+    println!("  with current-sensor noise {} A: max error up to 1.9 kHz against measurement time", r.noise_std_a);
+    println!("  {:>10} {:>24} {:>24}", "time s", "ours dB / deg", "PRBS H1 dB / deg");
+    for n in &r.noise {
+        println!("  {:>10.2} {:>12.3} / {:>9.2} {:>12.3} / {:>9.2}", n.measurement_time_s, n.ours.0, n.ours.1, n.prbs.0, n.prbs.1);
+    }
+    Ok(ok)
+}
+
 fn main() -> ExitCode {
     let cli = Cli::parse();
     let result = match &cli.command {
@@ -1031,6 +1093,7 @@ fn main() -> ExitCode {
         }
         Command::Bench(BenchCommand::Sequence { zero_speed, common }) => bench_sequence(zero_speed, common),
         Command::Bench(BenchCommand::Circle { common }) => bench_circle(common),
+        Command::Bench(BenchCommand::Sweep { noise, common }) => bench_sweep(*noise, common),
         Command::Bench(BenchCommand::AccdecProbe { filter, ticks }) => {
             host_tools::bench_accdec::cost_probe(filter, *ticks).map(|s| {
                 println!("{s}");

@@ -1,0 +1,179 @@
+//! `servo bench sweep`: the figures of the frequency-response issue (seed 000), on the default
+//! axis: velocity loop 8 kHz, acquisition 4 kHz, 10 Hz to 3 kHz (plus 2 kHz exactly),
+//! velocity-command injection riding on 50 rad/s.
+//!
+//! - errors against the oracle below and above 2 kHz, with phase shifting (ours) and without
+//!   (the same records all at phase 0: the same measurement time), and the 2 kHz point itself;
+//! - simulated measurement time of the full Bode;
+//! - PRBS with an H1 (Welch) estimate over the same measurement time;
+//! - the analytic linear model of the loop at low frequencies;
+//! - with current-sensor noise: error against measurement time, ours against PRBS.
+
+use std::collections::BTreeMap;
+
+use anyhow::{anyhow, Result};
+use control_core::phase_shifted_sweep::{SweepParams, SweepSignal};
+use serde::Serialize;
+
+use crate::frequency_response::{errors, online_results, prbs_results, stream_results, ErrorSummary, ResponsePoint, SweepRun};
+use crate::fmu_runner::Fmu;
+use crate::scenario::Value;
+use crate::spectral::Complex;
+use crate::sweep_report::oracle_settings;
+
+pub const VELOCITY: f64 = 50.0;
+/// Welch segment (samples at 4 kHz): 1 s, 1 Hz bins.
+pub const SEGMENT: usize = 4096;
+
+#[derive(Clone, Debug, Serialize)]
+pub struct MethodErrors {
+    pub method: String,
+    pub measurement_time_s: f64,
+    pub errors: ErrorSummary,
+    /// Frequencies the method could not measure (non-finite result).
+    pub unmeasured: Vec<f64>,
+}
+
+#[derive(Clone, Debug, Serialize)]
+pub struct NoisePoint {
+    pub measurement_time_s: f64,
+    /// Largest error up to 1.9 kHz (where PRBS at 4 kHz acquisition still works): dB, deg.
+    pub ours: (f64, f64),
+    pub prbs: (f64, f64),
+}
+
+#[derive(Clone, Debug, Serialize)]
+pub struct SweepBench {
+    pub ours: MethodErrors,
+    pub single_phase: MethodErrors,
+    pub prbs: MethodErrors,
+    /// The 2 kHz point: oracle, ours, single phase.
+    pub at_nyquist: [ResponsePoint; 3],
+    /// Largest |stream − on-line| difference of our run (dB, deg).
+    pub stream_vs_online: (f64, f64),
+    /// Analytic model against the oracle up to 30 Hz: largest dB, deg.
+    pub analytic_low_frequency: (f64, f64),
+    pub noise_std_a: f64,
+    pub noise: Vec<NoisePoint>,
+}
+
+fn base(parameters: BTreeMap<String, Value>, settings: SweepParams) -> SweepRun {
+    SweepRun { settings, parameters, velocity: VELOCITY }
+}
+
+fn unmeasured(points: &[ResponsePoint]) -> Vec<f64> {
+    points.iter().filter(|p| !(p.gain_db.is_finite() && p.phase_deg.is_finite())).map(|p| p.frequency).collect()
+}
+
+/// Largest gain/phase error up to `max_hz`.
+fn worst_up_to(a: &[ResponsePoint], reference: &[ResponsePoint], max_hz: f64) -> (f64, f64) {
+    let e = errors(&a.iter().copied().filter(|p| p.frequency <= max_hz).collect::<Vec<_>>(), reference, f64::INFINITY);
+    (e.below_gain_db, e.below_phase_deg)
+}
+
+/// Closed velocity loop of the default axis, linearised: PI velocity controller, two-inertia
+/// plant (motor side), backward-difference velocity estimate (half a velocity period of
+/// delay) and one and a half base ticks of torque delay (computation and PWM hold).
+pub fn analytic_closed_loop(f: f64) -> ResponsePoint {
+    let p = control_core::Params::default();
+    let plant = servo_axis::plant::PlantParams::default();
+    let w = std::f64::consts::TAU * f;
+    let s = Complex::new(0.0, w);
+    let (jm, jl, k, c) = (plant.motor_inertia, plant.load_inertia, plant.shaft_stiffness, plant.shaft_damping);
+    let (bm, bl) = (plant.motor_viscous, plant.load_viscous);
+    // Motor velocity / torque: (JL s + bl + (cs + k)/s) / ((Jm s + bm)(JL s + bl) + (Jm s + bm + JL s + bl)(cs + k)/s).
+    let spring = Complex::new(k, c * w).div(s);
+    let load = s.scale(jl).add(Complex::new(bl, 0.0));
+    let motor = s.scale(jm).add(Complex::new(bm, 0.0));
+    let plant_tf = load.add(spring).div(motor.mul(load).add(motor.add(load).mul(spring)));
+    let controller = Complex::new(p.velocity.kp as f64, 0.0).add(Complex::new(p.velocity.ki as f64, 0.0).div(s));
+    let delay = |t: f64| Complex::new((w * t).cos(), -(w * t).sin());
+    let tick = 1.0 / p.rates.current_loop_hz as f64;
+    let feedback = delay(0.5 * p.rates.velocity_period() as f64);
+    let forward = controller.mul(plant_tf).mul(delay(1.5 * tick));
+    let loop_gain = forward.mul(feedback);
+    let t = loop_gain.div(Complex::new(1.0, 0.0).add(loop_gain));
+    ResponsePoint::from_complex(f, t, 1.0)
+}
+
+pub fn bench(fmu: &Fmu, noise_std: f64, mut progress: impl FnMut(f64)) -> Result<SweepBench> {
+    let fs = control_core::Params::default().rates.current_loop_hz;
+    let ours_settings = SweepParams::default();
+    let split = ours_settings.threshold(fs) as f64;
+    let clean = BTreeMap::new();
+    progress(0.0);
+    let oracle_run = base(clean.clone(), oracle_settings(&ours_settings));
+    let oracle = online_results(&oracle_run.run(fmu, |_| {})?)?;
+    progress(0.2);
+    let ours_run = base(clean.clone(), ours_settings);
+    let ours_trace = ours_run.run(fmu, |_| {})?;
+    let ours = stream_results(&ours_trace, &ours_settings)?;
+    let online = online_results(&ours_trace)?;
+    let stream_vs_online = ours.iter().zip(&online).filter(|(a, _)| a.quality > 0.01).fold((0.0f64, 0.0f64), |(g, p), (a, b)| {
+        let (dg, dp) = crate::frequency_response::difference(a, b);
+        (g.max(dg.abs()), p.max(dp.abs()))
+    });
+    progress(0.35);
+    let single_settings = SweepParams { shifts: 1, ..ours_settings };
+    let single_run = base(clean.clone(), single_settings);
+    let single = stream_results(&single_run.run(fmu, |_| {})?, &single_settings)?;
+    progress(0.5);
+    let time = ours_run.measurement_time();
+    // Chips at half the acquisition rate (2 kHz): every chip is seen by two samples, none
+    // between them; the hold between samples is divided out (see `prbs_results`).
+    let prbs_settings = SweepParams {
+        signal: SweepSignal::Prbs,
+        prbs_seconds: time as f32,
+        amplitude: 2.0,
+        prbs_divider: 2 * ours_settings.acquisition_divider,
+        ..ours_settings
+    };
+    let prbs_run = base(clean.clone(), prbs_settings);
+    let frequencies: Vec<f64> = oracle.iter().map(|p| p.frequency).collect();
+    let prbs = prbs_results(&prbs_run.run(fmu, |_| {})?, &prbs_settings, &frequencies, SEGMENT)?;
+    progress(0.6);
+    let find = |v: &[ResponsePoint], f: f64| v.iter().copied().find(|p| (p.frequency - f).abs() < 1e-3).ok_or_else(|| anyhow!("no {f} Hz point"));
+    let at_nyquist = [find(&oracle, 2000.0)?, find(&ours, 2000.0)?, find(&single, 2000.0)?];
+    let analytic: Vec<ResponsePoint> = oracle.iter().filter(|p| p.frequency <= 30.0).map(|p| analytic_closed_loop(p.frequency)).collect();
+    let analytic_low_frequency = worst_up_to(&analytic, &oracle, 30.0);
+
+    // Noise: our sweep with longer records against PRBS over the same time.
+    let noisy: BTreeMap<String, Value> = [("plant.current_noise_std".to_string(), Value::Float(noise_std))].into_iter().collect();
+    let mut noise = Vec::new();
+    for (i, scale) in [1.0f32, 2.0, 4.0].iter().enumerate() {
+        let settings = SweepParams { measure_cycles: ours_settings.measure_cycles * scale, min_measure_s: ours_settings.min_measure_s * scale, ..ours_settings };
+        let run = base(noisy.clone(), settings);
+        let ours_noisy = stream_results(&run.run(fmu, |_| {})?, &settings)?;
+        let t = run.measurement_time();
+        let p_settings = SweepParams { prbs_seconds: t as f32, ..prbs_settings };
+        let p_run = base(noisy.clone(), p_settings);
+        let prbs_noisy = prbs_results(&p_run.run(fmu, |_| {})?, &p_settings, &frequencies, SEGMENT)?;
+        noise.push(NoisePoint {
+            measurement_time_s: t,
+            ours: worst_up_to(&ours_noisy, &oracle, 1900.0),
+            prbs: worst_up_to(&prbs_noisy, &oracle, 1900.0),
+        });
+        progress(0.6 + 0.13 * (i + 1) as f64);
+    }
+    progress(1.0);
+    Ok(SweepBench {
+        ours: MethodErrors { method: "phase-shifted stepped sine".into(), measurement_time_s: time, errors: errors(&ours, &oracle, split), unmeasured: unmeasured(&ours) },
+        single_phase: MethodErrors {
+            method: "single-phase stepped sine (same records, all at phase 0)".into(),
+            measurement_time_s: single_run.measurement_time(),
+            errors: errors(&single, &oracle, split),
+            unmeasured: unmeasured(&single),
+        },
+        prbs: MethodErrors {
+            method: format!("PRBS 2 kHz chips, H1 Welch ({SEGMENT}-sample Hann)"),
+            measurement_time_s: prbs_run.measurement_time(),
+            errors: errors(&prbs, &oracle, split),
+            unmeasured: frequencies.iter().copied().filter(|f| !prbs.iter().any(|p| p.frequency == *f)).collect(),
+        },
+        at_nyquist,
+        stream_vs_online,
+        analytic_low_frequency,
+        noise_std_a: noise_std,
+        noise,
+    })
+}
