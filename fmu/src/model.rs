@@ -129,6 +129,12 @@ parameter_group! {
         load_coulomb: f64 = 0.02,
         /// Load-side viscous friction
         load_viscous: f64 = 2.0e-5,
+        /// Second mode on the load: absorber inertia (0 = none); anti-resonance sqrt(k/J)
+        absorber_inertia: f64 = 0.0,
+        /// Absorber spring to the load
+        absorber_stiffness: f64 = 0.0,
+        /// Absorber damping to the load
+        absorber_damping: f64 = 0.0,
         /// Velocity scale of the smoothed Coulomb friction
         coulomb_velocity: f64 = 0.05,
         /// Encoder counts per motor revolution
@@ -631,6 +637,9 @@ impl ServoAxis {
             motor_viscous: pp.motor_viscous,
             load_coulomb: pp.load_coulomb,
             load_viscous: pp.load_viscous,
+            absorber_inertia: pp.absorber_inertia,
+            absorber_stiffness: pp.absorber_stiffness,
+            absorber_damping: pp.absorber_damping,
             coulomb_velocity: pp.coulomb_velocity,
             encoder_counts_per_rev: counts,
             current_noise_std: pp.current_noise_std,

@@ -18,12 +18,17 @@ const TICK_HZ: f64 = 64_000.0;
 const H: f64 = 4.0 / TICK_HZ;
 
 fn scenario(f: f64, settle: f64, measure: f64) -> Scenario {
+    scenario_with(f, settle, measure, "")
+}
+
+fn scenario_with(f: f64, settle: f64, measure: f64, extra: &str) -> Scenario {
     let stop = ((settle + measure) / H).round() * H;
     let text = format!(
         r#"name = "open_loop_{f}"
 stop_time = {stop:?}
 step = {H:?}
 [parameters]
+{extra}
 "ctrl.current_loop_hz" = {TICK_HZ:?}
 "plant.motor_coulomb" = 0.0
 "plant.load_coulomb" = 0.0
@@ -96,4 +101,46 @@ fn open_loop_torque_responses_match_the_two_inertia_model() {
     eprintln!("worst: {:.4} dB, {:.3} degrees", worst.0, worst.1);
     assert!(worst.0 <= 0.1, "gain error {:.4} dB exceeds 0.1 dB", worst.0);
     assert!(worst.1 <= 1.0, "phase error {:.3} degrees exceeds 1 degree", worst.1);
+}
+
+#[test]
+fn an_absorber_on_the_load_puts_anti_resonance_zeros_into_torque_to_machine_end() {
+    // Second mode (seed 001): absorber Ja on a spring ka to the load; a_L/T is the two-inertia
+    // formula with the load inertia replaced by J_L + Ja·Za/(Ja s² + Za), Za = ca s + ka, so
+    // its zeros are Ja s² + ca s + ka: an anti-resonance at √(ka/Ja).
+    let fmu = load_fmu();
+    let (jm, jl, k, c) = (5.0e-5, 1.0e-4, 88.83, 0.009425);
+    let ja = 1.0e-4;
+    let wz = std::f64::consts::TAU * 60.0;
+    let (ka, ca) = (ja * wz * wz, 2.0 * 0.03 * ja * wz);
+    let extra = format!("\"plant.absorber_inertia\" = {ja:?}\n\"plant.absorber_stiffness\" = {ka:?}\n\"plant.absorber_damping\" = {ca:?}");
+    let mut worst = (0.0f64, 0.0f64);
+    let mut gains = Vec::new();
+    for &f in &[10.0, 30.0, 50.0, 55.0, 60.0, 65.0, 70.0, 100.0, 200.0, 400.0] {
+        let block = samples_per_block(f);
+        let blocks = ((0.2 / (block as f64 * H)).ceil() as usize).max(2);
+        let measure = (blocks * block) as f64 * H;
+        // The absorber rings at 3 % damping: let it settle (time constant 1/(ζω) ≈ 90 ms).
+        let s = scenario_with(f, 0.8, measure, &extra);
+        let trace = fmu.run(&s, |_| {}).unwrap();
+        let n = trace.rows.len();
+        let take = blocks * block;
+        let col = |name: &str| trace.column(name).unwrap()[n - take..].to_vec();
+        let (te, al) = (col("electromagnetic_torque"), col("load_acceleration"));
+        let (g_a, p_a) = frequency_response(&te, &al, f, H);
+        let s_ = C(0.0, std::f64::consts::TAU * f);
+        let za = s_.scale(ca).add(C(ka, 0.0));
+        let jl_eff = C(jl, 0.0).add(za.scale(ja).div(s_.mul(s_).scale(ja).add(za)));
+        let shaft = s_.scale(c).add(C(k, 0.0));
+        let d = s_.mul(s_).mul(jl_eff).scale(jm).add(shaft.mul(jl_eff.add(C(jm, 0.0))));
+        let ga = shaft.div(d);
+        let e = (20.0 * (g_a / ga.abs()).log10(), wrap_deg(p_a - ga.arg_deg()));
+        eprintln!("{f:>6.1} Hz  a_L/T: model {:+.2} dB, error {:+.4} dB {:+.3}°", 20.0 * ga.abs().log10(), e.0, e.1);
+        gains.push((f, 20.0 * g_a.log10()));
+        worst = (worst.0.max(e.0.abs()), worst.1.max(e.1.abs()));
+    }
+    assert!(worst.0 <= 0.1 && worst.1 <= 1.0, "worst {worst:?}");
+    // The notch: the measured gain at 60 Hz lies well below its neighbours.
+    let at = |f: f64| gains.iter().find(|g| g.0 == f).unwrap().1;
+    assert!(at(60.0) < at(30.0) - 10.0 && at(60.0) < at(100.0) - 10.0, "{gains:?}");
 }

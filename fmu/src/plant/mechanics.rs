@@ -1,5 +1,7 @@
 //! Two-inertia mechanics: motor and load coupled by a shaft of stiffness k and damping c,
-//! with Coulomb (smoothed) and viscous friction on both sides.
+//! with Coulomb (smoothed) and viscous friction on both sides; optionally a second mode on the
+//! load: an absorber inertia `Ja` on a spring `ka` (damping `ca`), which puts anti-resonance
+//! zeros `Ja·s² + ca·s + ka` into the torque → machine-end transfer function (seed 001).
 //!
 //! The linear part (shaft, viscous friction, inertias) is discretised exactly over the
 //! sub-step. The motor torque enters through a quadratic hold (start value, start slope, end
@@ -10,11 +12,24 @@
 use super::discretisation::PolynomialHold;
 use super::{PlantParams, PlantState};
 
-/// Discrete state `[θm − θL, ωm, ωL, θL]`: the twist is integrated directly, so that the
-/// large absolute angles never enter the shaft equations.
-type MechState = [f64; 4];
-
+/// Discrete state `[θm − θL, ωm, ωL, θL]` (and `θL − θa, ωa` with the absorber): the twists
+/// are integrated directly, so that the large absolute angles never enter the spring
+/// equations. Velocities are at indices 1 and 2 in both layouts.
 const CORRECTOR_PASSES: usize = 1;
+
+/// The optional second mode on the load.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Absorber {
+    pub inertia: f64,
+    pub stiffness: f64,
+    pub damping: f64,
+}
+
+#[derive(Clone, Copy, Debug)]
+enum Discrete {
+    TwoInertia(PolynomialHold<4, 2>),
+    WithAbsorber(PolynomialHold<6, 2>),
+}
 
 #[derive(Clone, Copy, Debug)]
 pub struct TwoInertia {
@@ -27,9 +42,10 @@ pub struct TwoInertia {
     pub load_coulomb: f64,
     pub load_viscous: f64,
     pub coulomb_velocity: f64,
+    pub absorber: Option<Absorber>,
     substep: f64,
     /// Exact discretisation over one sub-step, inputs `[motor-side, load-side]` torque.
-    discrete: PolynomialHold<4, 2>,
+    discrete: Discrete,
 }
 
 impl TwoInertia {
@@ -42,6 +58,30 @@ impl TwoInertia {
             [0.0, 0.0, 1.0, 0.0],
         ];
         let b = [[0.0, 0.0], [1.0 / jm, 0.0], [0.0, 1.0 / jl], [0.0, 0.0]];
+        let absorber = (p.absorber_inertia > 0.0).then_some(Absorber {
+            inertia: p.absorber_inertia,
+            stiffness: p.absorber_stiffness,
+            damping: p.absorber_damping,
+        });
+        let discrete = match absorber {
+            None => Discrete::TwoInertia(PolynomialHold::new::<10>(&a, &b, substep)),
+            Some(ab) => {
+                let (ja, ka, ca) = (ab.inertia, ab.stiffness, ab.damping);
+                let mut a6 = [[0.0; 6]; 6];
+                for (row, src) in a6.iter_mut().zip(a) {
+                    row[..4].copy_from_slice(&src);
+                }
+                // The absorber pulls on the load: −ka·(θL − θa) − ca·(ωL − ωa).
+                a6[2][4] = -ka / jl;
+                a6[2][2] -= ca / jl;
+                a6[2][5] = ca / jl;
+                a6[4] = [0.0, 0.0, 1.0, 0.0, 0.0, -1.0];
+                a6[5] = [0.0, 0.0, ca / ja, 0.0, ka / ja, -ca / ja];
+                let mut b6 = [[0.0; 2]; 6];
+                b6[..4].copy_from_slice(&b);
+                Discrete::WithAbsorber(PolynomialHold::new::<12>(&a6, &b6, substep))
+            }
+        };
         Self {
             motor_inertia: jm,
             load_inertia: jl,
@@ -52,8 +92,9 @@ impl TwoInertia {
             load_coulomb: p.load_coulomb,
             load_viscous: p.load_viscous,
             coulomb_velocity: p.coulomb_velocity,
+            absorber,
             substep,
-            discrete: PolynomialHold::new::<10>(&a, &b, substep),
+            discrete,
         }
     }
 
@@ -76,33 +117,59 @@ impl TwoInertia {
         let shaft = self.shaft_torque(x);
         let fm = coulomb[0] + self.motor_viscous * x.motor_velocity;
         let fl = coulomb[1] + self.load_viscous * x.load_velocity;
-        ((tm - shaft - fm) / self.motor_inertia, (shaft - fl + td) / self.load_inertia)
+        let absorber = self.absorber.map_or(0.0, |a| {
+            a.stiffness * x.absorber_twist + a.damping * (x.load_velocity - x.absorber_velocity)
+        });
+        ((tm - shaft - fm) / self.motor_inertia, (shaft - fl + td - absorber) / self.load_inertia)
     }
 
     /// Advance the mechanical part of `x` by one sub-step: the motor torque goes from
     /// `torque0` (rising at `torque_rate`, Nm/s) to `torque1`, the disturbance `td` is held,
     /// `coulomb0` is the Coulomb friction at the start.
     pub fn advance(&self, x: &mut PlantState, torque0: f64, torque_rate: f64, torque1: f64, td: f64, coulomb0: [f64; 2]) {
-        let y: MechState = [x.motor_angle - x.load_angle, x.motor_velocity, x.load_velocity, x.load_angle];
+        let base = [x.motor_angle - x.load_angle, x.motor_velocity, x.load_velocity, x.load_angle];
+        let inputs = (torque0, torque_rate, torque1, td, coulomb0);
+        let y = match &self.discrete {
+            Discrete::TwoInertia(hold) => {
+                let y = self.linear_step(hold, base, inputs);
+                [y[0], y[1], y[2], y[3], 0.0, 0.0]
+            }
+            Discrete::WithAbsorber(hold) => {
+                let full = [base[0], base[1], base[2], base[3], x.absorber_twist, x.absorber_velocity];
+                self.linear_step(hold, full, inputs)
+            }
+        };
+        x.load_angle = y[3];
+        x.motor_angle = y[3] + y[0];
+        x.motor_velocity = y[1];
+        x.load_velocity = y[2];
+        x.absorber_twist = y[4];
+        x.absorber_velocity = y[5];
+    }
+
+    /// One sub-step of the linear part with the torque held as a quadratic and the Coulomb
+    /// friction as a ramp: predictor (friction held), then one corrector.
+    fn linear_step<const N: usize>(
+        &self,
+        hold: &PolynomialHold<N, 2>,
+        y: [f64; N],
+        (torque0, torque_rate, torque1, td, coulomb0): (f64, f64, f64, f64, [f64; 2]),
+    ) -> [f64; N] {
         let u0 = [torque0 - coulomb0[0], td - coulomb0[1]];
         let rise = self.substep * torque_rate;
         // Predictor: Coulomb friction held at its start value.
-        let y1 = self.discrete.step(&y, &u0, &[rise, 0.0], &[torque1 - torque0 - rise, 0.0]);
+        let y1 = hold.step(&y, &u0, &[rise, 0.0], &[torque1 - torque0 - rise, 0.0]);
         // Corrector: friction ramps to its value at the predicted end velocities (more passes
         // were tried: they do not reduce the error, which comes from the friction's bend
         // within the step near zero speed, not from the predicted end value).
         let mut y_end = y1;
         for _ in 0..CORRECTOR_PASSES {
             let coulomb1 = self.coulomb(y_end[1], y_end[2]);
-            let correction = self.discrete.slope_response(&[coulomb0[0] - coulomb1[0], coulomb0[1] - coulomb1[1]]);
+            let correction = hold.slope_response(&[coulomb0[0] - coulomb1[0], coulomb0[1] - coulomb1[1]]);
             for ((v, base), c) in y_end.iter_mut().zip(y1).zip(correction) {
                 *v = base + c;
             }
         }
-        let y1 = y_end;
-        x.load_angle = y1[3];
-        x.motor_angle = y1[3] + y1[0];
-        x.motor_velocity = y1[1];
-        x.load_velocity = y1[2];
+        y_end
     }
 }

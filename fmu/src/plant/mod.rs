@@ -14,7 +14,7 @@ mod noise;
 mod params;
 mod pmsm;
 
-pub use mechanics::TwoInertia;
+pub use mechanics::{Absorber, TwoInertia};
 pub use noise::GaussianNoise;
 pub use params::{PlantError, PlantParams};
 pub use pmsm::Pmsm;
@@ -30,6 +30,9 @@ pub struct PlantState {
     pub motor_velocity: f64,
     pub load_angle: f64,
     pub load_velocity: f64,
+    /// Load angle minus absorber angle, and the absorber's velocity (0 without absorber).
+    pub absorber_twist: f64,
+    pub absorber_velocity: f64,
 }
 
 

@@ -18,6 +18,11 @@ pub struct PlantParams {
     pub motor_viscous: f64,
     pub load_coulomb: f64,
     pub load_viscous: f64,
+    /// Optional second mode on the load (seed 001's anti-resonance): absorber inertia
+    /// (0 = none), its spring and damping to the load.
+    pub absorber_inertia: f64,
+    pub absorber_stiffness: f64,
+    pub absorber_damping: f64,
     /// Velocity scale of the smoothed Coulomb friction `Fc·tanh(ω/ω_s)` (rad/s).
     pub coulomb_velocity: f64,
     pub encoder_counts_per_rev: u32,
@@ -48,6 +53,9 @@ impl Default for PlantParams {
             motor_viscous: 1.0e-5,
             load_coulomb: 0.02,
             load_viscous: 2.0e-5,
+            absorber_inertia: 0.0,
+            absorber_stiffness: 0.0,
+            absorber_damping: 0.0,
             coulomb_velocity: 0.05,
             encoder_counts_per_rev: 1 << 20,
             current_noise_std: 0.0,
@@ -130,6 +138,13 @@ impl PlantParams {
         non_negative("load_coulomb", self.load_coulomb)?;
         non_negative("load_viscous", self.load_viscous)?;
         positive("coulomb_velocity", self.coulomb_velocity)?;
+        non_negative("absorber_inertia", self.absorber_inertia)?;
+        non_negative("absorber_damping", self.absorber_damping)?;
+        if self.absorber_inertia > 0.0 {
+            positive("absorber_stiffness", self.absorber_stiffness)?;
+        } else {
+            non_negative("absorber_stiffness", self.absorber_stiffness)?;
+        }
         positive("encoder_counts_per_rev", self.encoder_counts_per_rev as f64)?;
         non_negative("current_noise_std", self.current_noise_std)?;
         non_negative("acceleration_noise_std", self.acceleration_noise_std)?;
