@@ -11,6 +11,7 @@ use crate::phase_shifted_sweep::{PhaseShiftedSweep, SweepError, SweepStatus};
 use crate::params::{ParamError, Params};
 use crate::position_loop::PositionLoop;
 use crate::reference_frames::Dq;
+use crate::response_correction::{CorrectionError, CorrectionParams, ResponseCorrection};
 use crate::stop_sequence::{Refusal, SequenceEvent, SequenceStatus, StopSequence};
 use crate::velocity_loop::VelocityLoop;
 use crate::TAU;
@@ -144,7 +145,11 @@ impl Axis {
             current_loop: CurrentLoop::new(&params),
             velocity_loop: VelocityLoop::new(&params),
             position_loop: PositionLoop::default(),
-            command_path: CommandPath::new(acc_dec),
+            command_path: CommandPath::with_correction(
+                acc_dec,
+                ResponseCorrection::new(&params.correction, params.rates.position_period())
+                    .map_err(ParamError::Correction)?,
+            ),
             sequence: StopSequence::default(),
             friction: FrictionCompensation::new(&params.friction, params.rates.velocity_period()),
             sweep: PhaseShiftedSweep::new(params.sweep, params.rates.current_loop_hz),
@@ -233,6 +238,14 @@ impl Axis {
             return Err(SweepError::PointUnusable);
         }
         self.sweep.start()
+    }
+
+    /// Load response-correction coefficients (seed 001) while running; refused, with nothing
+    /// changed, while a command is in motion through the filter or when they are invalid.
+    pub fn load_correction(&mut self, p: &CorrectionParams) -> Result<(), CorrectionError> {
+        self.command_path.load_correction(p, self.params.rates.position_period())?;
+        self.params.correction = *p;
+        Ok(())
     }
 
     pub fn sweep(&self) -> &PhaseShiftedSweep {

@@ -12,6 +12,7 @@
 //! pulses; so the filtered command ends exactly on the target.
 
 use crate::acc_dec::AccDecFilter;
+use crate::response_correction::{CorrectionError, CorrectionParams, ResponseCorrection};
 
 /// What the interpolator does this tick.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -33,6 +34,8 @@ pub struct CommandPath {
     /// Fraction of a pulse carried by the speed moves.
     carry: f32,
     filter: AccDecFilter,
+    /// Response correction after the acc/dec filter (seed 001).
+    correction: ResponseCorrection,
     /// Filtered position command (counts) and the last tick's pulses.
     position: i64,
     pulses: i64,
@@ -40,11 +43,16 @@ pub struct CommandPath {
 
 impl CommandPath {
     pub fn new(filter: AccDecFilter) -> Self {
+        Self::with_correction(filter, ResponseCorrection::default())
+    }
+
+    pub fn with_correction(filter: AccDecFilter, correction: ResponseCorrection) -> Self {
         Self {
             interpolated: 0,
             last_stream_input: 0,
             carry: 0.0,
             filter,
+            correction,
             position: 0,
             pulses: 0,
         }
@@ -53,7 +61,13 @@ impl CommandPath {
     /// Start from rest at `position` (counts): empty filter, no carry.
     pub fn reset(&mut self, position: i64) {
         self.filter.reset();
-        *self = Self { interpolated: position, last_stream_input: position, position, ..Self::new(self.filter) };
+        self.correction.reset();
+        *self = Self {
+            interpolated: position,
+            last_stream_input: position,
+            position,
+            ..Self::with_correction(self.filter, self.correction)
+        };
     }
 
     /// Position the interpolator has reached, before the filter (counts).
@@ -64,6 +78,11 @@ impl CommandPath {
     /// Filtered position command (counts).
     pub fn position(&self) -> i64 {
         self.position
+    }
+
+    /// Load response-correction coefficients; refused while command pulses are in flight.
+    pub fn load_correction(&mut self, p: &CorrectionParams, period: f32) -> Result<(), CorrectionError> {
+        self.correction.load(p, period)
     }
 
     /// Filtered pulses of the last tick.
@@ -111,7 +130,7 @@ impl CommandPath {
             }
         };
         self.interpolated = self.interpolated.wrapping_add(pulses);
-        self.pulses = self.filter.step(pulses);
+        self.pulses = self.correction.step(self.filter.step(pulses));
         self.position = self.position.wrapping_add(self.pulses);
         self.position
     }

@@ -17,12 +17,14 @@ pub mod current_loop;
 pub mod encoder;
 pub mod excitation;
 pub mod faults;
+pub mod m_sequence;
 pub mod friction_compensation;
 pub mod params;
 pub mod phase_shifted_sweep;
 pub mod pi_controller;
 pub mod position_loop;
 pub mod reference_frames;
+pub mod response_correction;
 pub mod stop_sequence;
 pub mod velocity_loop;
 

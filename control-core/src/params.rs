@@ -7,6 +7,7 @@ use core::fmt;
 
 use crate::acc_dec::{AccDecError, AccDecFilter, AccDecParams};
 use crate::phase_shifted_sweep::{SweepError, SweepParams};
+use crate::response_correction::{CorrectionError, CorrectionParams};
 use crate::friction_compensation::{FrictionCompensationError, FrictionCompensationParams};
 use crate::stop_sequence::{SequenceParamError, SequenceParams};
 
@@ -129,6 +130,8 @@ pub struct Params {
     pub friction: FrictionCompensationParams,
     /// Frequency-response measurement (seed 000).
     pub sweep: SweepParams,
+    /// Response-correction filter in front of the position loop (seed 001).
+    pub correction: CorrectionParams,
 }
 
 /// Why a parameter set was refused.
@@ -156,6 +159,8 @@ pub enum ParamError {
     Friction(FrictionCompensationError),
     /// The sweep's settings are invalid.
     Sweep(SweepError),
+    /// The response-correction sections are invalid.
+    Correction(CorrectionError),
 }
 
 impl fmt::Display for ParamError {
@@ -182,6 +187,7 @@ impl fmt::Display for ParamError {
             Self::Sequence(e) => write!(f, "stop sequence: {e}"),
             Self::Friction(e) => write!(f, "{e}"),
             Self::Sweep(e) => write!(f, "{e}"),
+            Self::Correction(e) => write!(f, "{e}"),
         }
     }
 }
@@ -258,6 +264,7 @@ impl Default for Params {
             sequence: SequenceParams::default(),
             friction: FrictionCompensationParams::default(),
             sweep: SweepParams::default(),
+            correction: CorrectionParams::default(),
         }
     }
 }
@@ -328,6 +335,7 @@ impl Params {
         self.sequence.validate().map_err(ParamError::Sequence)?;
         self.friction.validate().map_err(ParamError::Friction)?;
         self.sweep.validate(r.current_loop_hz, r.velocity_divider).map_err(ParamError::Sweep)?;
+        self.correction.validate(r.position_period()).map_err(ParamError::Correction)?;
         Ok(())
     }
 }

@@ -22,12 +22,13 @@
 //!
 //! The on-line correlator keeps the sums of a three-parameter sine fit per frequency (no
 //! sample buffers; see [`SineFitSums`]); results
-//! for up to [`MAX_SWEEP_POINTS`] frequencies are kept. A PRBS mode (maximum-length sequence,
-//! degree 15) feeds the same acquisition for broadband baselines computed on the host.
+//! for up to [`MAX_SWEEP_POINTS`] frequencies are kept. A PRBS mode (an M-sequence of configurable
+//! degree and chip rate: seed 001's identification excitation) feeds the same acquisition.
 
 use core::fmt;
 
 use crate::excitation::{InjectionPoint, SineGenerator};
+use crate::m_sequence::MSequence;
 use crate::TAU;
 
 pub const MAX_SWEEP_POINTS: usize = 128;
@@ -68,7 +69,9 @@ pub struct SweepParams {
     pub threshold_hz: f32,
     /// Base ticks per acquisition sample (a multiple of the velocity divider).
     pub acquisition_divider: u32,
-    /// PRBS: base ticks per chip, and the measured duration after `min_settle_s`.
+    /// PRBS: M-sequence degree (period 2^n − 1 chips), base ticks per chip, and the measured
+    /// duration after `min_settle_s`.
+    pub prbs_degree: u32,
     pub prbs_divider: u32,
     pub prbs_seconds: f32,
 }
@@ -95,6 +98,7 @@ impl Default for SweepParams {
             repeats: 3,
             threshold_hz: 0.0,
             acquisition_divider: 4,
+            prbs_degree: 15,
             prbs_divider: 1,
             prbs_seconds: 5.0,
         }
@@ -238,6 +242,9 @@ impl SweepParams {
         finite_non_negative("threshold_hz", self.threshold_hz)?;
         if self.acquisition_divider == 0 || !self.acquisition_divider.is_multiple_of(velocity_divider) {
             return Err(SweepError::AcquisitionDivider { acquisition: self.acquisition_divider, velocity: velocity_divider });
+        }
+        if MSequence::new(self.prbs_degree).is_err() {
+            return Err(SweepError::Setting { field: "prbs_degree (2 to 20)", value: self.prbs_degree as f32 });
         }
         if self.prbs_divider == 0 {
             return Err(SweepError::Setting { field: "prbs_divider", value: 0.0 });
@@ -386,7 +393,7 @@ pub struct PhaseShiftedSweep {
     /// Ticks left in the present state.
     left: u64,
     acc: SineFitSums,
-    lfsr: u16,
+    sequence: MSequence,
     chip: f32,
     /// The excitation value and phase of the present tick.
     value: f32,
@@ -403,7 +410,8 @@ impl PhaseShiftedSweep {
             generator: SineGenerator::default(),
             left: 0,
             acc: SineFitSums::default(),
-            lfsr: 1,
+            // Validated with the parameters; the fallback only keeps this constructor total.
+            sequence: MSequence::new(params.prbs_degree).unwrap_or(MSequence::DEGREE_15),
             chip: 0.0,
             value: 0.0,
             phase: 0.0,
@@ -434,7 +442,7 @@ impl PhaseShiftedSweep {
             return Err(SweepError::Busy);
         }
         self.status = SweepStatus::default();
-        self.lfsr = 0x4A5D;
+        self.sequence.restart();
         self.begin_record(0, 0);
         Ok(())
     }
@@ -474,10 +482,7 @@ impl PhaseShiftedSweep {
             }
             SweepSignal::Prbs => {
                 if tick.is_multiple_of(p.prbs_divider as u64) {
-                    // x^15 + x^14 + 1: period 32767 chips.
-                    let bit = ((self.lfsr >> 14) ^ (self.lfsr >> 13)) & 1;
-                    self.lfsr = ((self.lfsr << 1) | bit) & 0x7FFF;
-                    self.chip = if bit == 1 { p.amplitude } else { -p.amplitude };
+                    self.chip = p.amplitude * self.sequence.next_chip() as f32;
                 }
                 self.value = self.chip;
                 self.phase = 0.0;

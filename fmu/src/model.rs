@@ -13,6 +13,7 @@ use control_core::params::{
 use control_core::acc_dec::{AccDecKind, AccDecParams};
 use control_core::friction_compensation::FrictionCompensationParams;
 use control_core::phase_shifted_sweep::{SweepParams, SweepSignal};
+use control_core::response_correction::{CorrectionParams, CorrectionSection, SecondOrder};
 use control_core::stop_sequence::{SequenceEvent, SequenceParams};
 use control_core::{Mode, Params};
 use fmi::fmi3::{Fmi3Error, Fmi3Res, Fmi3Status};
@@ -300,6 +301,8 @@ parameter_group! {
         threshold_hz: f64 = 0.0,
         /// Base ticks per acquisition sample (4 = 4 kHz at 16 kHz)
         acquisition_divider: i32 = 4,
+        /// PRBS: M-sequence degree (2 to 20; period 2^n - 1 chips)
+        prbs_degree: i32 = 15,
         /// PRBS: base ticks per chip
         prbs_divider: i32 = 1,
         /// PRBS: measured duration
@@ -334,9 +337,69 @@ impl SweepParameters {
             repeats: count("sweep.repeats", self.repeats)?,
             threshold_hz: self.threshold_hz as f32,
             acquisition_divider: count("sweep.acquisition_divider", self.acquisition_divider)?,
+            prbs_degree: count("sweep.prbs_degree", self.prbs_degree)?,
             prbs_divider: count("sweep.prbs_divider", self.prbs_divider)?,
             prbs_seconds: self.prbs_seconds as f32,
         })
+    }
+}
+
+// Response-correction filter in front of the position loop (seed 001): `servo tune` writes it.
+parameter_group! {
+    CorrectionParameters {
+        /// Sections in use (0 = no correction, up to 4)
+        count: i32 = 0,
+        /// Section 1: anti-resonance numerator frequency (0 = no zeros in this section)
+        zero_hz_1: f64 = 0.0,
+        /// Section 1: anti-resonance numerator damping
+        zero_damping_1: f64 = 0.0,
+        /// Section 1: low-pass pole-pair frequency
+        pole_hz_1: f64 = 100.0,
+        /// Section 1: low-pass pole-pair damping
+        pole_damping_1: f64 = 1.0,
+        /// Section 2: anti-resonance numerator frequency (0 = no zeros in this section)
+        zero_hz_2: f64 = 0.0,
+        /// Section 2: anti-resonance numerator damping
+        zero_damping_2: f64 = 0.0,
+        /// Section 2: low-pass pole-pair frequency
+        pole_hz_2: f64 = 100.0,
+        /// Section 2: low-pass pole-pair damping
+        pole_damping_2: f64 = 1.0,
+        /// Section 3: anti-resonance numerator frequency (0 = no zeros in this section)
+        zero_hz_3: f64 = 0.0,
+        /// Section 3: anti-resonance numerator damping
+        zero_damping_3: f64 = 0.0,
+        /// Section 3: low-pass pole-pair frequency
+        pole_hz_3: f64 = 100.0,
+        /// Section 3: low-pass pole-pair damping
+        pole_damping_3: f64 = 1.0,
+        /// Section 4: anti-resonance numerator frequency (0 = no zeros in this section)
+        zero_hz_4: f64 = 0.0,
+        /// Section 4: anti-resonance numerator damping
+        zero_damping_4: f64 = 0.0,
+        /// Section 4: low-pass pole-pair frequency
+        pole_hz_4: f64 = 100.0,
+        /// Section 4: low-pass pole-pair damping
+        pole_damping_4: f64 = 1.0,
+    }
+}
+
+impl CorrectionParameters {
+    fn to_params(&self) -> Result<CorrectionParams, String> {
+        let raw = [
+            (self.zero_hz_1, self.zero_damping_1, self.pole_hz_1, self.pole_damping_1),
+            (self.zero_hz_2, self.zero_damping_2, self.pole_hz_2, self.pole_damping_2),
+            (self.zero_hz_3, self.zero_damping_3, self.pole_hz_3, self.pole_damping_3),
+            (self.zero_hz_4, self.zero_damping_4, self.pole_hz_4, self.pole_damping_4),
+        ];
+        let mut p = CorrectionParams { count: count("corr.count", self.count)? as usize, ..Default::default() };
+        for (s, (zh, zd, ph, pd)) in p.sections.iter_mut().zip(raw) {
+            *s = CorrectionSection {
+                zeros: (zh != 0.0).then_some(SecondOrder { hz: zh as f32, damping: zd as f32 }),
+                poles: SecondOrder { hz: ph as f32, damping: pd as f32 },
+            };
+        }
+        Ok(p)
     }
 }
 
@@ -359,6 +422,7 @@ struct AppliedParameters {
     accdec: AccDecParameters,
     seq: SequenceParameters,
     sweep: SweepParameters,
+    corr: CorrectionParameters,
 }
 
 /// One servo axis: control core (current, velocity, position loops) driving a PMSM with a
@@ -378,6 +442,8 @@ pub struct ServoAxis {
     pub seq: SequenceParameters,
     #[child(prefix = "sweep")]
     pub sweep: SweepParameters,
+    #[child(prefix = "corr")]
+    pub corr: CorrectionParameters,
 
     /// Control mode: 0 torque, 1 velocity, 2 position, 3 stop sequence (seq_* inputs)
     #[variable(causality = Input, variability = Discrete, start = 2)]
@@ -599,6 +665,7 @@ impl ControllerParameters {
             acc_dec: AccDecParams::default(),
             sequence: SequenceParams::default(),
             sweep: SweepParams::default(),
+            correction: CorrectionParams::default(),
         }
     }
 }
@@ -655,6 +722,7 @@ impl ServoAxis {
         control.acc_dec = self.accdec.to_params()?;
         control.sequence = self.seq.to_params(counts)?;
         control.sweep = self.sweep.to_params()?;
+        control.correction = self.corr.to_params()?;
         Ok(SimulationConfig {
             control,
             plant,
@@ -674,6 +742,7 @@ impl ServoAxis {
             accdec: self.accdec.clone(),
             seq: self.seq.clone(),
             sweep: self.sweep.clone(),
+            corr: self.corr.clone(),
         }
     }
 
@@ -812,6 +881,7 @@ impl ServoAxis {
             || applied.accdec != self.accdec
             || applied.seq != self.seq
             || applied.sweep != self.sweep
+            || applied.corr != self.corr
         {
             let applied = applied.clone();
             let changed = describe_changes(&applied, &self.applied_now());
@@ -821,6 +891,7 @@ impl ServoAxis {
             self.accdec = applied.accdec;
             self.seq = applied.seq;
             self.sweep = applied.sweep;
+            self.corr = applied.corr;
             return Err(format!(
                 "fixed parameter(s) {changed} changed after initialization; the change was undone \
                  (set parameters before fmi3ExitInitializationMode)"

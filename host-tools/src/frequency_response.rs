@@ -75,6 +75,7 @@ fn sweep_parameters(s: &SweepParams) -> Vec<(String, Value)> {
         ("sweep.repeats".into(), i(s.repeats)),
         ("sweep.threshold_hz".into(), f(s.threshold_hz)),
         ("sweep.acquisition_divider".into(), i(s.acquisition_divider)),
+        ("sweep.prbs_degree".into(), i(s.prbs_degree)),
         ("sweep.prbs_divider".into(), i(s.prbs_divider)),
         ("sweep.prbs_seconds".into(), f(s.prbs_seconds)),
     ]
