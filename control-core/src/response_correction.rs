@@ -27,10 +27,17 @@ pub struct SecondOrder {
 }
 
 /// One section: optional zeros (an anti-resonance numerator), poles (a low-pass factor).
-#[derive(Clone, Copy, Debug, Default, PartialEq)]
+#[derive(Clone, Copy, Debug, PartialEq)]
 pub struct CorrectionSection {
     pub zeros: Option<SecondOrder>,
     pub poles: SecondOrder,
+}
+
+impl Default for CorrectionSection {
+    /// No zeros; a critically damped 100 Hz pole pair (unused until counted in).
+    fn default() -> Self {
+        Self { zeros: None, poles: SecondOrder { hz: 100.0, damping: 1.0 } }
+    }
 }
 
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
