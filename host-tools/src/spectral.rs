@@ -3,7 +3,7 @@
 
 use anyhow::{bail, Result};
 
-#[derive(Clone, Copy, Debug, Default, PartialEq)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct Complex {
     pub re: f64,
     pub im: f64,
