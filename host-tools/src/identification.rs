@@ -1,8 +1,8 @@
 //! Identification of an axis's anti-resonance (seed 001) on the FMU.
 //!
 //! The drive adds an M-sequence to its torque command (degree 11: 2047 chips at 1 kHz, one
-//! period = 2.05 s) while it holds a constant speed (friction stays on one side). After one
-//! period for the transients, one full period of torque command u and machine-end
+//! period = 2.05 s) while it holds a constant speed (friction stays on one side). After
+//! 0.5 s for the transients, one full period of the motor torque u and the machine-end
 //! acceleration y is recorded; with a periodic excitation the DFT ratio `H = Y/U` at the
 //! period's harmonics has no leakage, and the accelerometer noise (not fed back: the loop
 //! closes on the encoder) only adds variance.
@@ -32,6 +32,9 @@ pub const DEGREE: u32 = 11;
 pub const DIVIDER: u32 = 4;
 pub const CHIP_DIVIDER: u32 = 16;
 pub const SPEED: f64 = 20.0;
+/// Excitation before the measured period, for the transients to die out (the response is
+/// periodic after them; any window of one period is then a full period).
+pub const TRANSIENT_S: f64 = 0.5;
 /// The torque the identification relates the acceleration to: the motor's torque, as the
 /// drive estimates it from its measured q current (the FMU gives it exactly). The torque
 /// *command* would add the current loop's lag and delay, which the rational model has no
@@ -81,6 +84,8 @@ impl AxisModel {
 pub struct Measured {
     pub frequencies: Vec<f64>,
     pub response: Vec<Complex>,
+    /// |U|² per frequency: the inverse variance of H under output noise (fit weights).
+    pub input_power: Vec<f64>,
 }
 
 impl Measured {
@@ -102,7 +107,7 @@ pub fn measure(fmu: &Fmu, parameters: &BTreeMap<String, Value>, amplitude: f64, 
         prbs_degree: DEGREE,
         prbs_divider: CHIP_DIVIDER,
         acquisition_divider: DIVIDER,
-        prbs_seconds: (2.0 * period) as f32,
+        prbs_seconds: (TRANSIENT_S + period) as f32,
         min_settle_s: 0.0,
         ..Default::default()
     };
@@ -120,8 +125,8 @@ pub fn measure(fmu: &Fmu, parameters: &BTreeMap<String, Value>, amplitude: f64, 
     // Rows following a measuring step; the last full period of them.
     let rows: Vec<usize> = (1..measuring.len()).filter(|&i| measuring[i] != 0.0).collect();
     let n = (chips * (CHIP_DIVIDER / DIVIDER) as u64) as usize;
-    if rows.len() < 2 * n {
-        bail!("{} samples recorded, {} needed (two periods of the M-sequence)", rows.len(), 2 * n);
+    if rows.len() < n {
+        bail!("{} samples recorded, {} needed (a period of the M-sequence)", rows.len(), n);
     }
     let last = &rows[rows.len() - n..];
     let u: Vec<f64> = last.iter().map(|&i| u_all[i]).collect();
@@ -142,11 +147,14 @@ pub fn measure(fmu: &Fmu, parameters: &BTreeMap<String, Value>, amplitude: f64, 
     };
     let mut frequencies = Vec::new();
     let mut response = Vec::new();
+    let mut input_power = Vec::new();
     for k in k0.max(1)..=k1 {
+        let uk = dft(&u, k);
         frequencies.push(k as f64 * df);
-        response.push(dft(&y, k).div(dft(&u, k)));
+        response.push(dft(&y, k).div(uk));
+        input_power.push(uk.norm_sqr());
     }
-    Ok(Measured { frequencies, response })
+    Ok(Measured { frequencies, response, input_power })
 }
 
 /// Noise-free run, to set the accelerometer noise for a signal-to-noise ratio.
@@ -293,8 +301,11 @@ impl RationalFit {
 /// Fit `B(s)/A(s)` of orders (nb, na) over the band by Levy's linearised least squares with
 /// Sanathanan–Koerner reweighting (s normalised by the band's centre).
 pub fn fit_rational(m: &Measured, band: (f64, f64), nb: usize, na: usize) -> Result<RationalFit> {
-    let pts: Vec<(f64, Complex)> =
-        m.frequencies.iter().zip(&m.response).filter(|(f, _)| **f >= band.0 && **f <= band.1).map(|(f, h)| (*f, *h)).collect();
+    let selected: Vec<usize> = (0..m.frequencies.len()).filter(|&i| m.frequencies[i] >= band.0 && m.frequencies[i] <= band.1).collect();
+    let pts: Vec<(f64, Complex)> = selected.iter().map(|&i| (m.frequencies[i], m.response[i])).collect();
+    // Inverse-variance weights of H under accelerometer noise, normalised.
+    let mean_power = selected.iter().map(|&i| m.input_power[i]).sum::<f64>() / selected.len().max(1) as f64;
+    let confidence: Vec<f64> = selected.iter().map(|&i| m.input_power[i] / mean_power.max(1e-300)).collect();
     let unknowns = nb + 1 + na;
     if pts.len() < 2 * unknowns {
         bail!("{} frequencies in the fit band {:?} Hz: too few for {unknowns} coefficients (record longer or widen the band)", pts.len(), band);
@@ -307,7 +318,7 @@ pub fn fit_rational(m: &Measured, band: (f64, f64), nb: usize, na: usize) -> Res
         2 => (-x.powi(i as i32), 0.0),
         _ => (0.0, -x.powi(i as i32)),
     };
-    let mut weight = vec![1.0; pts.len()];
+    let mut weight = confidence.clone();
     let mut theta = vec![0.0; unknowns];
     for _ in 0..10 {
         let mut ata = vec![vec![0.0; unknowns]; unknowns];
@@ -340,8 +351,8 @@ pub fn fit_rational(m: &Measured, band: (f64, f64), nb: usize, na: usize) -> Res
         theta = solve(ata, atb)?;
         let mut den = vec![1.0];
         den.extend_from_slice(&theta[nb + 1..]);
-        for ((f, _), w) in pts.iter().zip(weight.iter_mut()) {
-            *w = 1.0 / poly_at(&den, std::f64::consts::TAU * f / w0).norm_sqr();
+        for (((f, _), w), c) in pts.iter().zip(weight.iter_mut()).zip(&confidence) {
+            *w = c / poly_at(&den, std::f64::consts::TAU * f / w0).norm_sqr();
         }
     }
     let numerator = theta[..=nb].to_vec();

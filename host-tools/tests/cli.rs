@@ -173,3 +173,26 @@ fn sweep_writes_csv_bode_and_json() {
         assert!(out.join(f).exists(), "{f} missing");
     }
 }
+
+#[test]
+fn ident_writes_models_and_refuses_unusable_models() {
+    let out = tmp("ident");
+    let o = servo().args(["ident", "--anti-resonance", "x=40,y=70", "--json"]).arg("--fmu").arg(fmu_path()).arg("--out").arg(&out).output().unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    for f in ["x.model.json", "y.model.json", "x.measured.csv", "ident.svg"] {
+        assert!(out.join(f).exists(), "{f} missing");
+    }
+    // An edited model re-plots; one with zeros in the right half plane is refused.
+    let o = servo().arg("ident").arg("--model").arg(out.join("x.model.json")).arg("--out").arg(&out).output().unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let text = std::fs::read_to_string(out.join("y.model.json")).unwrap();
+    let mut m: serde_json::Value = serde_json::from_str(&text).unwrap();
+    m["anti_resonance"]["damping"] = serde_json::json!(-0.1);
+    std::fs::write(out.join("y.model.json"), m.to_string()).unwrap();
+    let o = servo().arg("ident").arg("--model").arg(out.join("y.model.json")).arg("--out").arg(&out).output().unwrap();
+    assert_eq!(o.status.code(), Some(2));
+    assert!(String::from_utf8_lossy(&o.stderr).contains("right half plane"));
+    let o = servo().args(["ident", "--anti-resonance", "q=40"]).arg("--fmu").arg(fmu_path()).arg("--out").arg(&out).output().unwrap();
+    assert_eq!(o.status.code(), Some(2));
+    assert!(String::from_utf8_lossy(&o.stderr).contains("no axis `q`"));
+}

@@ -262,6 +262,39 @@ enum Command {
         #[command(flatten)]
         common: Common,
     },
+    /// Identify each axis's anti-resonance (seed 001) on the FMU: an M-sequence on the torque
+    /// command, the machine-end acceleration recorded, the response searched for an
+    /// anti-resonance (moving-average-smoothed minimum; none means N = 1) and a rational
+    /// model fitted around it.
+    ///
+    /// Axes are named by --axes (default x,y); each gets its own FMU parameters with
+    /// --set AXIS:NAME=VALUE (for example y:plant.absorber_stiffness=19.34), or an absorber
+    /// (second mode) at a given anti-resonance with --anti-resonance AXIS=HZ. Writes
+    /// <axis>.model.json (editable), <axis>.measured.csv and ident.svg (measured response and
+    /// model) into --out (default out/ident/). With --model FILE... it only re-plots edited
+    /// models against the measurements saved next to them.
+    Ident {
+        #[arg(long, value_delimiter = ',', default_value = "x,y")]
+        axes: Vec<String>,
+        /// AXIS:NAME=VALUE FMU parameter of one axis (repeatable)
+        #[arg(long = "set")]
+        set: Vec<String>,
+        /// AXIS=HZ: an absorber on that axis's load with this anti-resonance (5 % damping,
+        /// absorber inertia equal to the load's)
+        #[arg(long = "anti-resonance", value_delimiter = ',')]
+        anti_resonance: Vec<String>,
+        /// M-sequence amplitude on the torque command (N·m)
+        #[arg(long, default_value_t = 0.05)]
+        amplitude: f64,
+        /// Accelerometer noise for this signal-to-noise ratio (dB); default: the FMU's setting
+        #[arg(long)]
+        snr_db: Option<f64>,
+        /// Re-plot these (edited) model files instead of identifying
+        #[arg(long, num_args = 1..)]
+        model: Vec<PathBuf>,
+        #[command(flatten)]
+        common: Common,
+    },
     /// Compare two trace CSVs bit for bit on their common columns.
     Compare { a: PathBuf, b: PathBuf },
     /// Benchmarks that print the figures the issues ask for.
@@ -328,6 +361,12 @@ enum BenchCommand {
         /// Current-sensor noise for the noise comparison (A, standard deviation)
         #[arg(long, default_value_t = 0.05)]
         noise: f64,
+        #[command(flatten)]
+        common: Common,
+    },
+    /// Identification (seed 001): anti-resonance frequency and damping errors against the
+    /// plant's truth at 20 dB SNR with 2 s of excitation, two and three axes, a rigid axis.
+    Ident {
         #[command(flatten)]
         common: Common,
     },
@@ -979,11 +1018,161 @@ fn bench_sweep(noise: f64, common: &Common) -> Result<bool> {
     Ok(ok)
 }
 
+#[allow(clippy::too_many_arguments)]
+fn ident(
+    axes: &[String],
+    set: &[String],
+    anti_resonance: &[String],
+    amplitude: f64,
+    snr_db: Option<f64>,
+    model: &[PathBuf],
+    common: &Common,
+) -> Result<bool> {
+    use host_tools::ident_report::{identify_axis, plot, replot};
+    let out = common.out.clone().unwrap_or_else(|| default_out("ident"));
+    if !model.is_empty() {
+        let svg = replot(model, &out)?;
+        println!("re-plotted {} model(s) → {}", model.len(), svg.display());
+        return Ok(true);
+    }
+    let mut parameters: std::collections::BTreeMap<String, std::collections::BTreeMap<String, host_tools::scenario::Value>> =
+        axes.iter().map(|a| (a.clone(), Default::default())).collect();
+    for s in set {
+        let (axis, rest) = s.split_once(':').ok_or_else(|| anyhow::anyhow!("--set `{s}`: use AXIS:NAME=VALUE"))?;
+        let (k, v) = host_tools::circle_report::parse_assignment(rest)?;
+        parameters.get_mut(axis).ok_or_else(|| anyhow::anyhow!("--set `{s}`: no axis `{axis}` in --axes"))?.insert(k, v);
+    }
+    for s in anti_resonance {
+        let (axis, hz) = s.split_once('=').ok_or_else(|| anyhow::anyhow!("--anti-resonance `{s}`: use AXIS=HZ"))?;
+        let hz: f64 = hz.parse().map_err(|_| anyhow::anyhow!("--anti-resonance `{s}`: `{hz}` is not a frequency"))?;
+        if !(hz.is_finite() && hz > 0.0) {
+            bail!("--anti-resonance `{s}`: the frequency must be positive");
+        }
+        let load = servo_axis::plant::PlantParams::default().load_inertia;
+        parameters
+            .get_mut(axis)
+            .ok_or_else(|| anyhow::anyhow!("--anti-resonance `{s}`: no axis `{axis}` in --axes"))?
+            .extend(host_tools::identification::absorber_parameters(hz, 0.05, load));
+    }
+    let fmu = Fmu::load(&common.fmu.clone().unwrap_or_else(default_fmu))?;
+    let pb = progress_bar("identification", common.json);
+    let mut results = Vec::new();
+    for (i, axis) in axes.iter().enumerate() {
+        pb.set_prefix(format!("axis {axis}"));
+        pb.set_position((i * 1000 / axes.len()) as u64);
+        results.push(identify_axis(&fmu, axis, &parameters[axis], amplitude, snr_db, &out)?);
+    }
+    pb.finish_and_clear();
+    let plotted: Vec<_> = results
+        .iter()
+        .map(|r| {
+            let t = Trace::read_csv(&r.files[1])?;
+            let (f, g, p) = (t.column("frequency").unwrap_or_default(), t.column("gain_db").unwrap_or_default(), t.column("phase_deg").unwrap_or_default());
+            let pts = (0..f.len()).map(|i| host_tools::frequency_response::ResponsePoint { frequency: f[i], gain_db: g[i], phase_deg: p[i], quality: 1.0 }).collect();
+            Ok((r.model.clone(), pts))
+        })
+        .collect::<Result<_>>()?;
+    let svg = out.join("ident.svg");
+    plot(&svg, &plotted)?;
+    if common.json {
+        println!("{}", serde_json::to_string_pretty(&serde_json::json!({"axes": results, "plot": svg}))?);
+        return Ok(true);
+    }
+    println!("servo ident — M-sequence degree {} at 1 kHz on the torque, one 2.05 s period measured after one for the transients", host_tools::identification::DEGREE);
+    for r in &results {
+        let m = &r.model;
+        match (m.anti_resonance, m.resonance) {
+            (Some(z), p) => println!(
+                "  {}: anti-resonance {:.3} Hz, damping {:.4}; resonance {}; gain {:.4e}; fit band {:.1}–{:.1} Hz, rms fit error {:.1} %{}",
+                m.axis,
+                z.hz,
+                z.damping,
+                p.map_or("-".into(), |p| format!("{:.2} Hz, damping {:.4}", p.hz, p.damping)),
+                m.gain,
+                m.band.0,
+                m.band.1,
+                m.fit_error * 100.0,
+                r.snr_db.map_or(String::new(), |s| format!(" (accelerometer noise {:.3e} rad/s² for {s} dB SNR)", r.noise_std))
+            ),
+            (None, _) => println!("  {}: no anti-resonance found (rigid axis, N = 1); gain {:.4e}", m.axis, m.gain),
+        }
+        for f in &r.files {
+            println!("    → {}", f.display());
+        }
+    }
+    println!("  → {}", svg.display());
+    Ok(true)
+}
+
+fn bench_ident(common: &Common) -> Result<bool> {
+    use host_tools::identification::{absorber_parameters, true_anti_resonance};
+    let fmu = Fmu::load(&common.fmu.clone().unwrap_or_else(default_fmu))?;
+    let out = common.out.clone().unwrap_or_else(|| default_out("bench/ident"));
+    let load = servo_axis::plant::PlantParams::default().load_inertia;
+    let cases: Vec<(&str, Vec<(&str, Option<f64>)>)> = vec![
+        ("two axes", vec![("x", Some(40.0)), ("y", Some(70.0))]),
+        ("three axes", vec![("x", Some(40.0)), ("y", Some(70.0)), ("z", Some(55.0))]),
+        ("rigid axis", vec![("w", None)]),
+    ];
+    let mut rows = Vec::new();
+    let mut ok = true;
+    let pb = progress_bar("ident bench", common.json);
+    let total: usize = cases.iter().map(|c| c.1.len()).sum();
+    let mut done = 0;
+    for (case, axes) in &cases {
+        for (axis, hz) in axes {
+            pb.set_position((done * 1000 / total) as u64);
+            done += 1;
+            let params = hz.map(|h| absorber_parameters(h, 0.05, load)).unwrap_or_default();
+            let r = host_tools::ident_report::identify_axis(&fmu, axis, &params, 0.05, Some(20.0), &out.join(case.replace(' ', "_")))?;
+            let truth = hz.map(|h| {
+                let w = std::f64::consts::TAU * h;
+                true_anti_resonance(load, load * w * w, 2.0 * 0.05 * load * w)
+            });
+            let (f_err, d_err) = match (truth, r.model.anti_resonance) {
+                (Some(t), Some(z)) => ((z.hz - t.hz) / t.hz, (z.damping - t.damping) / t.damping),
+                (None, None) => (0.0, 0.0),
+                _ => (f64::INFINITY, f64::INFINITY),
+            };
+            ok &= f_err.abs() <= 0.01 && d_err.abs() <= 0.2;
+            rows.push(serde_json::json!({"case": case, "axis": axis, "truth": truth, "model": r.model, "frequency_error": f_err, "damping_error": d_err}));
+        }
+    }
+    pb.finish_and_clear();
+    if common.json {
+        println!("{}", serde_json::to_string_pretty(&serde_json::json!({"bench": "ident", "rows": rows, "passed": ok}))?);
+        return Ok(ok);
+    }
+    println!("servo bench ident — seed 001: accelerometer noise at 20 dB SNR, 2.05 s of M-sequence measured (after one period for the transients)");
+    println!("  {:<11} {:<5} {:>12} {:>12} {:>12} {:>12} {:>10} {:>10}", "case", "axis", "true Hz", "found Hz", "true ζ", "found ζ", "Hz err %", "ζ err %");
+    for r in &rows {
+        let t = &r["truth"];
+        let m = &r["model"]["anti_resonance"];
+        let num = |v: &serde_json::Value, k: &str| v.get(k).and_then(|x| x.as_f64()).map_or("-".to_string(), |x| format!("{x:.4}"));
+        println!(
+            "  {:<11} {:<5} {:>12} {:>12} {:>12} {:>12} {:>10.3} {:>10.2}",
+            r["case"].as_str().unwrap_or(""),
+            r["axis"].as_str().unwrap_or(""),
+            num(t, "hz"),
+            num(m, "hz"),
+            num(t, "damping"),
+            num(m, "damping"),
+            r["frequency_error"].as_f64().unwrap_or(f64::NAN) * 100.0,
+            r["damping_error"].as_f64().unwrap_or(f64::NAN) * 100.0
+        );
+    }
+    println!("  goal: at most 1 % in frequency and 20 % in damping: {}", if ok { "met" } else { "NOT met" });
+    Ok(ok)
+}
+
 fn main() -> ExitCode {
     let cli = Cli::parse();
     let result = match &cli.command {
         Command::Run { scenarios, fmpy, common } => run(scenarios, *fmpy, common),
         Command::Sequence { files, fmpy, common } => sequence(files, *fmpy, common),
+        Command::Ident { axes, set, anti_resonance, amplitude, snr_db, model, common } => {
+            ident(axes, set, anti_resonance, *amplitude, *snr_db, model, common)
+        }
         Command::Sweep {
             point,
             amplitude,
@@ -1093,6 +1282,7 @@ fn main() -> ExitCode {
         }
         Command::Bench(BenchCommand::Sequence { zero_speed, common }) => bench_sequence(zero_speed, common),
         Command::Bench(BenchCommand::Circle { common }) => bench_circle(common),
+        Command::Bench(BenchCommand::Ident { common }) => bench_ident(common),
         Command::Bench(BenchCommand::Sweep { noise, common }) => bench_sweep(*noise, common),
         Command::Bench(BenchCommand::AccdecProbe { filter, ticks }) => {
             host_tools::bench_accdec::cost_probe(filter, *ticks).map(|s| {

@@ -1,0 +1,44 @@
+//! Anti-resonance identification (seed 001) on the FMU against the plant's truth (the
+//! absorber's √(ka/Ja) and ca/(2√(ka·Ja))), with and without accelerometer noise, and the
+//! refusals of unusable data.
+
+use std::collections::BTreeMap;
+
+use cross_checks::load_fmu;
+use host_tools::identification::{absorber_parameters, identify, measure, true_anti_resonance};
+use host_tools::ident_report::identify_axis;
+use host_tools::scenario::Value;
+
+const LOAD: f64 = 1.0e-4;
+
+fn truth(hz: f64) -> host_tools::identification::Factor {
+    let w = std::f64::consts::TAU * hz;
+    true_anti_resonance(LOAD, LOAD * w * w, 2.0 * 0.05 * LOAD * w)
+}
+
+#[test]
+fn anti_resonances_are_found_within_one_percent_at_20_db_snr() {
+    let fmu = load_fmu();
+    let out = std::env::temp_dir().join(format!("servo-ident-{}", std::process::id()));
+    for hz in [40.0, 55.0, 70.0] {
+        let r = identify_axis(&fmu, "x", &absorber_parameters(hz, 0.05, LOAD), 0.05, Some(20.0), &out).unwrap();
+        let (z, t) = (r.model.anti_resonance.expect("an anti-resonance"), truth(hz));
+        assert!(((z.hz - t.hz) / t.hz).abs() <= 0.01, "{hz} Hz: found {z:?}, truth {t:?}");
+        assert!(((z.damping - t.damping) / t.damping).abs() <= 0.2, "{hz} Hz: found {z:?}, truth {t:?}");
+    }
+}
+
+#[test]
+fn a_rigid_axis_has_no_anti_resonance() {
+    let m = measure(&load_fmu(), &BTreeMap::new(), 0.05, 5.0, 500.0).unwrap();
+    let model = identify("w", &m).unwrap();
+    assert_eq!(model.anti_resonance, None, "{model:?}");
+}
+
+#[test]
+fn saturated_torque_is_refused_with_the_reason() {
+    let mut p = absorber_parameters(40.0, 0.05, LOAD);
+    p.insert("plant.motor_coulomb".into(), Value::Float(0.01));
+    let e = measure(&load_fmu(), &p, 3.0, 5.0, 500.0).unwrap_err();
+    assert!(format!("{e:#}").contains("saturated"), "{e:#}");
+}
