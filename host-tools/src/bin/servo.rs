@@ -1078,7 +1078,7 @@ fn ident(
         println!("{}", serde_json::to_string_pretty(&serde_json::json!({"axes": results, "plot": svg}))?);
         return Ok(true);
     }
-    println!("servo ident — M-sequence degree {} at 1 kHz on the torque, one 2.05 s period measured after one for the transients", host_tools::identification::DEGREE);
+    println!("servo ident — M-sequence degree {} at 1 kHz on the torque, one 2.05 s period measured after 0.5 s of transients", host_tools::identification::DEGREE);
     for r in &results {
         let m = &r.model;
         match (m.anti_resonance, m.resonance) {
@@ -1143,7 +1143,7 @@ fn bench_ident(common: &Common) -> Result<bool> {
         println!("{}", serde_json::to_string_pretty(&serde_json::json!({"bench": "ident", "rows": rows, "passed": ok}))?);
         return Ok(ok);
     }
-    println!("servo bench ident — seed 001: accelerometer noise at 20 dB SNR, 2.05 s of M-sequence measured (after one period for the transients)");
+    println!("servo bench ident — seed 001: accelerometer noise at 20 dB SNR, 2.05 s of M-sequence measured after 0.5 s of transients");
     println!("  {:<11} {:<5} {:>12} {:>12} {:>12} {:>12} {:>10} {:>10}", "case", "axis", "true Hz", "found Hz", "true ζ", "found ζ", "Hz err %", "ζ err %");
     for r in &rows {
         let t = &r["truth"];
