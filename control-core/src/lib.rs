@@ -19,6 +19,7 @@ pub mod excitation;
 pub mod faults;
 pub mod m_sequence;
 pub mod friction_compensation;
+pub mod golden_vectors;
 pub mod params;
 pub mod phase_shifted_sweep;
 pub mod pi_controller;

@@ -141,6 +141,11 @@ impl AxisSimulation {
 
     /// One base tick.
     pub fn tick(&mut self, u: &UserInputs) {
+        self.tick_traced(u);
+    }
+
+    /// One base tick; returns what the control core was given (for golden vectors).
+    pub fn tick_traced(&mut self, u: &UserInputs) -> (AxisInputs, Commands) {
         let m = self.plant.measure();
         let inputs = AxisInputs {
             phase_currents: [m.phase_currents[0] as f32, m.phase_currents[1] as f32],
@@ -158,5 +163,6 @@ impl AxisSimulation {
         self.plant.advance(&applied);
         self.pending = pwm;
         self.ticks += 1;
+        (inputs, commands)
     }
 }

@@ -1,0 +1,268 @@
+//! Golden vectors: recorded inputs of the axis, replayed through [`Axis::step`] with a digest
+//! of every output. The host records them from closed-loop simulations and replays them
+//! natively; the firmware's `core-vectors` binary replays the same bytes on a Cortex-M4F
+//! (QEMU). Equal digests mean the core computes the same bits on both.
+//!
+//! Format (little-endian): `b"SVV1"`, scenario count (u32); per scenario: parameter preset
+//! (u32), tick count (u32), event count (u32), the events (tick u32, kind u8, value i64), then
+//! per tick the sensor inputs and the commands ([`TICK_BYTES`] bytes).
+
+use core::fmt;
+
+use crate::acc_dec::AccDecKind;
+use crate::axis::{Axis, AxisInputs, Commands, Mode};
+use crate::params::Params;
+use crate::response_correction::{CorrectionSection, SecondOrder};
+use crate::stop_sequence::SequenceEvent;
+
+pub const MAGIC: &[u8; 4] = b"SVV1";
+pub const TICK_BYTES: usize = 41;
+pub const EVENT_BYTES: usize = 13;
+
+/// Parameter sets the vectors may use (both sides build them the same way).
+pub fn preset(id: u32) -> Option<Params> {
+    let mut p = Params::default();
+    match id {
+        0 => {}
+        1 => p.acc_dec.kind = AccDecKind::Butterworth,
+        2 => {
+            p.friction.amplitude = 0.06;
+            p.friction.decay = 0.2;
+        }
+        3 => {
+            p.correction.count = 2;
+            p.correction.sections[0] = CorrectionSection {
+                zeros: Some(SecondOrder { hz: 70.0, damping: 0.05 }),
+                poles: SecondOrder { hz: 100.0, damping: 1.0 },
+            };
+            p.correction.sections[1] = CorrectionSection { zeros: None, poles: SecondOrder { hz: 100.0, damping: 1.0 } };
+        }
+        4 => p.acc_dec.kind = AccDecKind::MovingAverage,
+        _ => return None,
+    }
+    Some(p)
+}
+
+/// What can happen between ticks.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum VectorEvent {
+    Sequence(SequenceEvent),
+    StartSweep,
+}
+
+impl VectorEvent {
+    pub fn encode(self) -> (u8, i64) {
+        match self {
+            Self::Sequence(SequenceEvent::RunOn) => (1, 0),
+            Self::Sequence(SequenceEvent::RunOff) => (2, 0),
+            Self::Sequence(SequenceEvent::Stop) => (3, 0),
+            Self::Sequence(SequenceEvent::ReleaseBlocking) => (4, 0),
+            Self::Sequence(SequenceEvent::MoveTo(t)) => (5, t),
+            Self::Sequence(SequenceEvent::ReturnToStart) => (6, 0),
+            Self::Sequence(SequenceEvent::SelectGain(i)) => (7, i as i64),
+            Self::StartSweep => (8, 0),
+        }
+    }
+
+    pub fn decode(kind: u8, value: i64) -> Option<Self> {
+        Some(match kind {
+            1 => Self::Sequence(SequenceEvent::RunOn),
+            2 => Self::Sequence(SequenceEvent::RunOff),
+            3 => Self::Sequence(SequenceEvent::Stop),
+            4 => Self::Sequence(SequenceEvent::ReleaseBlocking),
+            5 => Self::Sequence(SequenceEvent::MoveTo(value)),
+            6 => Self::Sequence(SequenceEvent::ReturnToStart),
+            7 => Self::Sequence(SequenceEvent::SelectGain(usize::try_from(value).ok()?)),
+            8 => Self::StartSweep,
+            _ => return None,
+        })
+    }
+}
+
+/// One tick's inputs as bytes.
+pub fn encode_tick(i: &AxisInputs, c: &Commands, out: &mut [u8; TICK_BYTES]) {
+    let mut w = Writer { buf: out, at: 0 };
+    w.put(&i.phase_currents[0].to_le_bytes());
+    w.put(&i.phase_currents[1].to_le_bytes());
+    w.put(&i.encoder_count.to_le_bytes());
+    w.put(&i.bus_voltage.to_le_bytes());
+    w.put(&[c.mode.code() as u8]);
+    w.put(&c.position.to_le_bytes());
+    w.put(&c.move_speed.to_le_bytes());
+    w.put(&c.jog_velocity.to_le_bytes());
+    w.put(&c.velocity.to_le_bytes());
+    w.put(&c.torque.to_le_bytes());
+}
+
+struct Writer<'a> {
+    buf: &'a mut [u8],
+    at: usize,
+}
+
+impl Writer<'_> {
+    fn put(&mut self, b: &[u8]) {
+        self.buf[self.at..self.at + b.len()].copy_from_slice(b);
+        self.at += b.len();
+    }
+}
+
+struct Reader<'a> {
+    buf: &'a [u8],
+    at: usize,
+}
+
+impl<'a> Reader<'a> {
+    fn take<const N: usize>(&mut self) -> Result<[u8; N], VectorError> {
+        let b = self.buf.get(self.at..self.at + N).ok_or(VectorError::Truncated(self.at))?;
+        self.at += N;
+        let mut out = [0u8; N];
+        out.copy_from_slice(b);
+        Ok(out)
+    }
+    fn u32(&mut self) -> Result<u32, VectorError> {
+        Ok(u32::from_le_bytes(self.take()?))
+    }
+    fn f32(&mut self) -> Result<f32, VectorError> {
+        Ok(f32::from_le_bytes(self.take()?))
+    }
+}
+
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum VectorError {
+    Magic,
+    Truncated(usize),
+    Preset(u32),
+    Mode(u8),
+    Event(u8),
+}
+
+impl fmt::Display for VectorError {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match self {
+            Self::Magic => write!(f, "not a golden-vector file (magic)"),
+            Self::Truncated(at) => write!(f, "golden vectors truncated at byte {at}"),
+            Self::Preset(p) => write!(f, "unknown parameter preset {p}"),
+            Self::Mode(m) => write!(f, "unknown mode {m}"),
+            Self::Event(e) => write!(f, "unknown event kind {e}"),
+        }
+    }
+}
+
+/// FNV-1a, 64 bit.
+#[derive(Clone, Copy, Debug)]
+pub struct Digest(pub u64);
+
+impl Default for Digest {
+    fn default() -> Self {
+        Self(0xcbf2_9ce4_8422_2325)
+    }
+}
+
+impl Digest {
+    pub fn bytes(&mut self, b: &[u8]) {
+        for &x in b {
+            self.0 ^= x as u64;
+            self.0 = self.0.wrapping_mul(0x0000_0100_0000_01B3);
+        }
+    }
+    fn f32(&mut self, x: f32) {
+        self.bytes(&x.to_bits().to_le_bytes());
+    }
+}
+
+/// Replay every scenario; returns (ticks, digest). Events apply before the tick they carry.
+pub fn replay(bytes: &[u8]) -> Result<(u64, u64), VectorError> {
+    let mut r = Reader { buf: bytes, at: 0 };
+    if &r.take::<4>()? != MAGIC {
+        return Err(VectorError::Magic);
+    }
+    let scenarios = r.u32()?;
+    let mut digest = Digest::default();
+    let mut total = 0u64;
+    for _ in 0..scenarios {
+        let id = r.u32()?;
+        let params = preset(id).ok_or(VectorError::Preset(id))?;
+        let mut axis = Axis::new(params).map_err(|_| VectorError::Preset(id))?;
+        let ticks = r.u32()?;
+        let events = r.u32()?;
+        let events_at = r.at;
+        r.at += events as usize * EVENT_BYTES;
+        let mut next_event = 0u32;
+        for tick in 0..ticks {
+            let inputs = AxisInputs { phase_currents: [r.f32()?, r.f32()?], encoder_count: i32::from_le_bytes(r.take()?), bus_voltage: r.f32()? };
+            let code = r.take::<1>()?[0];
+            let mode = Mode::from_code(code as i32).ok_or(VectorError::Mode(code))?;
+            let commands = Commands {
+                mode,
+                position: i64::from_le_bytes(r.take()?),
+                move_speed: r.f32()?,
+                jog_velocity: r.f32()?,
+                velocity: r.f32()?,
+                torque: r.f32()?,
+            };
+            axis.apply_mode(&commands);
+            while next_event < events {
+                let mut e = Reader { buf: bytes, at: events_at + next_event as usize * EVENT_BYTES };
+                if e.u32()? != tick {
+                    break;
+                }
+                let kind = e.take::<1>()?[0];
+                let value = i64::from_le_bytes(e.take()?);
+                // A refused event is part of the behaviour being compared, not an error.
+                let result = match VectorEvent::decode(kind, value).ok_or(VectorError::Event(kind))? {
+                    VectorEvent::Sequence(s) => axis.sequence_event(s).is_ok(),
+                    VectorEvent::StartSweep => axis.start_sweep().is_ok(),
+                };
+                digest.bytes(&[result as u8]);
+                next_event += 1;
+            }
+            let pwm = axis.step(&inputs, &commands);
+            let t = axis.telemetry();
+            for d in pwm.duties {
+                digest.f32(d);
+            }
+            digest.bytes(&[pwm.enabled as u8]);
+            digest.bytes(&t.position.to_le_bytes());
+            digest.bytes(&t.position_command.to_le_bytes());
+            for x in [t.velocity_estimate, t.velocity_reference, t.following_error, t.torque_command, t.current.d, t.current.q, t.voltage.d, t.voltage.q] {
+                digest.f32(x);
+            }
+            digest.bytes(&t.faults.0.to_le_bytes());
+            digest.bytes(&t.sequence.deviation.to_le_bytes());
+            digest.bytes(&[t.sequence.state.code() as u8, t.sweep.state.code() as u8]);
+            for x in [t.sequence.speed_reference, t.sweep.last.re, t.sweep.last.im, t.sweep.sample.u, t.sweep.sample.y] {
+                digest.f32(x);
+            }
+        }
+        total += ticks as u64;
+    }
+    Ok((total, digest.0))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_tick_round_trips_and_bad_files_are_refused() {
+        let i = AxisInputs { phase_currents: [1.5, -0.25], encoder_count: -12345, bus_voltage: 48.0 };
+        let c = Commands { mode: Mode::Position, position: -1 << 40, move_speed: 3.0, jog_velocity: 0.0, velocity: 1.0, torque: -0.5 };
+        let mut tick = [0u8; TICK_BYTES];
+        encode_tick(&i, &c, &mut tick);
+        let mut file = [0u8; 4 + 4 + 12 + TICK_BYTES];
+        file[..4].copy_from_slice(MAGIC);
+        file[4..8].copy_from_slice(&1u32.to_le_bytes());
+        file[12..16].copy_from_slice(&1u32.to_le_bytes());
+        file[20..].copy_from_slice(&tick);
+        let (n, d1) = replay(&file).unwrap();
+        assert_eq!(n, 1);
+        // The same bytes give the same digest; one changed input bit changes it.
+        assert_eq!(replay(&file).unwrap().1, d1);
+        file[20] ^= 1;
+        assert_ne!(replay(&file).unwrap().1, d1);
+        assert_eq!(replay(&file[..30]), Err(VectorError::Truncated(28)));
+        assert_eq!(replay(b"XXXX"), Err(VectorError::Magic));
+        file[8..12].copy_from_slice(&9u32.to_le_bytes());
+        assert_eq!(replay(&file), Err(VectorError::Preset(9)));
+    }
+}

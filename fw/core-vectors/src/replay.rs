@@ -1,0 +1,41 @@
+//! Replay the vector file given at build time (`CORE_VECTORS_FILE`) and print the digest.
+
+use core::fmt::Write as _;
+
+use control_core::golden_vectors::replay;
+
+use crate::semihosting::write;
+
+static VECTORS: &[u8] = include_bytes!(env!("CORE_VECTORS_FILE"));
+
+/// A line buffer for `write!`.
+struct Line {
+    buf: [u8; 128],
+    len: usize,
+}
+
+impl core::fmt::Write for Line {
+    fn write_str(&mut self, s: &str) -> core::fmt::Result {
+        let b = s.as_bytes();
+        let n = b.len().min(self.buf.len() - self.len);
+        self.buf[self.len..self.len + n].copy_from_slice(&b[..n]);
+        self.len += n;
+        Ok(())
+    }
+}
+
+pub fn run() -> bool {
+    let mut line = Line { buf: [0; 128], len: 0 };
+    let ok = match replay(VECTORS) {
+        Ok((ticks, digest)) => {
+            let _ = writeln!(line, "core-vectors ticks {ticks} digest {digest:016x}");
+            true
+        }
+        Err(e) => {
+            let _ = writeln!(line, "core-vectors error {e}");
+            false
+        }
+    };
+    write(core::str::from_utf8(&line.buf[..line.len]).unwrap_or("core-vectors: bad line\n"));
+    ok
+}

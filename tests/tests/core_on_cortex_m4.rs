@@ -1,0 +1,134 @@
+//! The control core on the target ISA: closed-loop simulations record what the core was
+//! given every tick (golden vectors); the host replays them through `Axis::step` and so does
+//! the firmware's `core-vectors` binary on a Cortex-M4F in QEMU (netduinoplus2). The digests
+//! of every output of every tick must be equal: the core computes the same bits on both.
+//!
+//! Needs the firmware toolchain and QEMU; `scripts/fw` installs them (apt) on first use.
+
+use std::path::PathBuf;
+use std::process::Command;
+
+use control_core::golden_vectors::{encode_tick, preset, replay, VectorEvent, EVENT_BYTES, MAGIC, TICK_BYTES};
+use control_core::stop_sequence::SequenceEvent;
+use control_core::Mode;
+use host_tools::paths::workspace_root;
+use servo_axis::simulation::{AxisSimulation, SimulationConfig, UserInputs};
+
+struct Recording {
+    preset: u32,
+    ticks: Vec<[u8; TICK_BYTES]>,
+    events: Vec<(u32, VectorEvent)>,
+}
+
+/// Run a closed loop with `inputs(t)` and events at times, recording the core's inputs.
+fn record(preset_id: u32, seconds: f64, inputs: impl Fn(f64) -> UserInputs, events: &[(f64, VectorEvent)]) -> Recording {
+    let config = SimulationConfig { control: preset(preset_id).unwrap(), ..Default::default() };
+    let mut sim = AxisSimulation::new(&config).unwrap();
+    let n = (seconds / sim.tick_period()).round() as u32;
+    let mut rec = Recording { preset: preset_id, ticks: Vec::new(), events: Vec::new() };
+    for k in 0..n {
+        let t = k as f64 * sim.tick_period();
+        let u = inputs(t);
+        sim.apply_mode(&u);
+        for (at, e) in events {
+            if (at / sim.tick_period()).round() as u32 == k {
+                rec.events.push((k, *e));
+                let _ = match e {
+                    VectorEvent::Sequence(s) => sim.axis.sequence_event(*s).is_ok(),
+                    VectorEvent::StartSweep => sim.axis.start_sweep().is_ok(),
+                };
+            }
+        }
+        let (i, c) = sim.tick_traced(&u);
+        let mut bytes = [0u8; TICK_BYTES];
+        encode_tick(&i, &c, &mut bytes);
+        rec.ticks.push(bytes);
+    }
+    rec
+}
+
+fn inputs(mode: Mode) -> UserInputs {
+    UserInputs { mode, ..Default::default() }
+}
+
+/// The shipped scenarios' situations, and the features they do not cover, kept under the
+/// 1 MB of the target's flash.
+fn recordings() -> Vec<Recording> {
+    let seq = |e| VectorEvent::Sequence(e);
+    vec![
+        record(0, 0.15, |t| UserInputs { position_command: if t >= 0.01 { 1.0 } else { 0.0 }, ..inputs(Mode::Position) }, &[]),
+        record(0, 0.1, |t| UserInputs { velocity_command: if t < 0.05 { 100.0 } else { -50.0 }, ..inputs(Mode::Velocity) }, &[]),
+        record(1, 0.2, |_| UserInputs { position_command: 2.0, move_speed: 50.0, ..inputs(Mode::Position) }, &[]),
+        record(
+            0,
+            0.5,
+            |_| UserInputs { position_command: 0.0, ..inputs(Mode::Sequence) },
+            &[
+                (0.0, seq(SequenceEvent::RunOn)),
+                (0.05, seq(SequenceEvent::RunOff)),
+                (0.05, seq(SequenceEvent::Stop)),
+                (0.2, seq(SequenceEvent::ReleaseBlocking)),
+                (0.2, seq(SequenceEvent::MoveTo(800_000))),
+                (0.3, seq(SequenceEvent::SelectGain(3))),
+                (0.35, seq(SequenceEvent::ReturnToStart)),
+                (0.4, seq(SequenceEvent::SelectGain(9))),
+            ],
+        ),
+        record(0, 0.1, |_| UserInputs { velocity_command: 50.0, ..inputs(Mode::Velocity) }, &[(0.01, VectorEvent::StartSweep)]),
+        record(2, 0.15, |t| UserInputs { position_command: (std::f64::consts::TAU * 5.0 * t).sin(), ..inputs(Mode::Position) }, &[]),
+        record(3, 0.1, |t| UserInputs { position_command: 3.0 * t, ..inputs(Mode::Position) }, &[]),
+    ]
+}
+
+fn encode(recs: &[Recording]) -> Vec<u8> {
+    let mut out = MAGIC.to_vec();
+    out.extend((recs.len() as u32).to_le_bytes());
+    for r in recs {
+        out.extend(r.preset.to_le_bytes());
+        out.extend((r.ticks.len() as u32).to_le_bytes());
+        out.extend((r.events.len() as u32).to_le_bytes());
+        for (tick, e) in &r.events {
+            let (kind, value) = e.encode();
+            let start = out.len();
+            out.extend(tick.to_le_bytes());
+            out.push(kind);
+            out.extend(value.to_le_bytes());
+            assert_eq!(out.len() - start, EVENT_BYTES);
+        }
+        for t in &r.ticks {
+            out.extend(t);
+        }
+    }
+    out
+}
+
+#[test]
+fn the_core_gives_the_same_bits_on_a_cortex_m4_as_on_the_host() {
+    let bytes = encode(&recordings());
+    assert!(bytes.len() < 960 * 1024, "{} bytes of vectors do not fit the target's flash", bytes.len());
+    let (ticks, host_digest) = replay(&bytes).unwrap();
+    let dir = workspace_root().join("target/fw");
+    std::fs::create_dir_all(&dir).unwrap();
+    let file: PathBuf = dir.join("golden-vectors.bin");
+    std::fs::write(&file, &bytes).unwrap();
+
+    let build = Command::new(workspace_root().join("scripts/fw"))
+        .args(["--release", "-q"])
+        .env("CORE_VECTORS_FILE", &file)
+        .output()
+        .expect("scripts/fw runs");
+    assert!(build.status.success(), "firmware build failed:\n{}", String::from_utf8_lossy(&build.stderr));
+    let elf = dir.join("thumbv7em-none-eabihf/release/core-vectors");
+    let run = Command::new("timeout")
+        .args(["120", "qemu-system-arm", "-machine", "netduinoplus2", "-nographic", "-monitor", "none", "-serial", "none"])
+        .args(["-semihosting-config", "enable=on,target=native", "-kernel"])
+        .arg(&elf)
+        .output()
+        .expect("qemu-system-arm runs");
+    // Semihosting output goes to QEMU's stderr when stdout is not a terminal.
+    let text = format!("{}{}", String::from_utf8_lossy(&run.stdout), String::from_utf8_lossy(&run.stderr));
+    assert!(run.status.success(), "QEMU run failed ({}): {text}", run.status);
+    let expected = format!("core-vectors ticks {ticks} digest {host_digest:016x}");
+    eprintln!("host:   {expected}\ntarget: {}", text.trim());
+    assert_eq!(text.trim(), expected, "the Cortex-M4 replay differs from the host's");
+}
