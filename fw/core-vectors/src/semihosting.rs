@@ -17,14 +17,6 @@ pub fn write(s: &str) {
     }
 }
 
-/// SYS_ELAPSED (0x30): target ticks since start (QEMU: nanoseconds of its virtual clock, one
-/// per instruction with `-icount shift=0`).
-pub fn elapsed() -> u64 {
-    let mut v = [0u32; 2];
-    call(0x30, v.as_mut_ptr() as *const u8);
-    (v[1] as u64) << 32 | v[0] as u64
-}
-
 pub fn exit(ok: bool) -> ! {
     // ADP_Stopped_ApplicationExit (0x20026) or ADP_Stopped_InternalError (0x20024).
     let reason: u32 = if ok { 0x20026 } else { 0x20024 };
