@@ -22,6 +22,7 @@ use crate::acc_dec_study::{
 use crate::bench::python;
 use crate::fmu_runner::Fmu;
 use crate::paths::workspace_root;
+use crate::polynomial::roots;
 
 /// The seed's printed example: (name, printed text, our value).
 #[derive(Clone, Debug, Serialize)]
@@ -84,39 +85,6 @@ pub struct MatchedComparison {
 /// at 250 µs, and the Nyquist frequency itself.
 pub const MATCHED_CASES: [(f32, f32); 4] = [(1000.0, 0.0005), (300.0, 0.0005), (40.0, 0.00025), (2000.0, 0.00025)];
 
-fn roots(coefficients: &[f64]) -> Vec<(f64, f64)> {
-    // Durand–Kerner on the monic polynomial z^N + a1 z^(N−1) + … + aN.
-    let n = coefficients.len() - 1;
-    let mut z: Vec<(f64, f64)> = (0..n)
-        .map(|k| {
-            let angle = 0.4 + std::f64::consts::TAU * k as f64 / n as f64;
-            (0.9 * angle.cos(), 0.9 * angle.sin())
-        })
-        .collect();
-    let mul = |a: (f64, f64), b: (f64, f64)| (a.0 * b.0 - a.1 * b.1, a.0 * b.1 + a.1 * b.0);
-    let div = |a: (f64, f64), b: (f64, f64)| {
-        let d = b.0 * b.0 + b.1 * b.1;
-        ((a.0 * b.0 + a.1 * b.1) / d, (a.1 * b.0 - a.0 * b.1) / d)
-    };
-    for _ in 0..500 {
-        for i in 0..n {
-            // Horner from the leading 1.
-            let mut value = (1.0, 0.0);
-            for c in &coefficients[1..] {
-                value = mul(value, z[i]);
-                value.0 += c;
-            }
-            let mut denominator = (1.0, 0.0);
-            for j in (0..n).filter(|&j| j != i) {
-                denominator = mul(denominator, (z[i].0 - z[j].0, z[i].1 - z[j].1));
-            }
-            let step = div(value, denominator);
-            z[i] = (z[i].0 - step.0, z[i].1 - step.1);
-        }
-    }
-    z
-}
-
 fn pole_distance(a: &[(f64, f64)], b: &[(f64, f64)]) -> f64 {
     // Each pole of `a` to its nearest in `b`.
     a.iter()
@@ -168,7 +136,9 @@ pub fn matched_comparison() -> Result<Vec<MatchedComparison>> {
         if let Some(f) = seed.first_order() {
             our_poles.push((-(f.a1 as f64), 0.0));
         }
-        let their_poles = roots(&den);
+        // den = [1, a1, …, aN] of z^N + a1·z^(N−1) + …: ascending order is its reverse.
+        let ascending: Vec<f64> = den.iter().rev().copied().collect();
+        let their_poles: Vec<(f64, f64)> = roots(&ascending).iter().map(|z| (z.re, z.im)).collect();
         let pole_error = pole_distance(&our_poles, &their_poles).max(pole_distance(&their_poles, &our_poles));
         rows.push(MatchedComparison {
             order,

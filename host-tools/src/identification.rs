@@ -23,6 +23,7 @@ use serde::{Deserialize, Serialize};
 use crate::fmu_runner::Fmu;
 use crate::frequency_response::{ResponsePoint, SweepRun};
 use crate::scenario::Value;
+use crate::polynomial::roots;
 use crate::spectral::Complex;
 
 pub const DEGREE: u32 = 11;
@@ -225,29 +226,6 @@ pub fn find_anti_resonance(m: &Measured, depth_db: f64) -> Option<f64> {
     };
     let (left, right) = (around(0.6 * f, 0.8 * f), around(1.25 * f, 1.4 * f));
     (left.is_finite() && right.is_finite() && left - min >= depth_db && right - min >= depth_db).then_some(f)
-}
-
-/// Roots of a real polynomial `c[0] + c[1]·x + … + c[n]·x^n` (Durand–Kerner).
-fn roots(c: &[f64]) -> Vec<Complex> {
-    let n = c.len() - 1;
-    let lead = c[n];
-    let mut z: Vec<Complex> = (0..n)
-        .map(|k| {
-            let a = 0.4 + std::f64::consts::TAU * k as f64 / n as f64;
-            Complex::new(0.9 * a.cos(), 0.9 * a.sin())
-        })
-        .collect();
-    let eval = |x: Complex| c.iter().rev().fold(Complex::default(), |acc, &ci| acc.mul(x).add(Complex::new(ci / lead, 0.0)));
-    for _ in 0..2000 {
-        for i in 0..n {
-            let mut den = Complex::new(1.0, 0.0);
-            for j in (0..n).filter(|&j| j != i) {
-                den = den.mul(z[i].sub(z[j]));
-            }
-            z[i] = z[i].sub(eval(z[i]).div(den));
-        }
-    }
-    z
 }
 
 /// Polynomial in s = jx at x.

@@ -19,6 +19,7 @@ pub mod ident_report;
 pub mod identification;
 pub mod paths;
 pub mod plot;
+pub mod polynomial;
 pub mod report;
 pub mod scenario;
 pub mod sequence_scenario;
