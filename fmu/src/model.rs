@@ -430,8 +430,70 @@ struct AppliedParameters {
 #[derive(FmuModel, Default)]
 #[model(model_exchange = false, co_simulation = true, user_model = false)]
 pub struct ServoAxis {
-    // Outputs first, then inputs, then the parameter groups: fmi-export routes a value
-    // reference through the fields in order, and outputs are read at every step.
+    #[child(prefix = "ctrl")]
+    pub ctrl: ControllerParameters,
+    #[child(prefix = "plant")]
+    pub plant: PlantParameters,
+    #[child(prefix = "excitation")]
+    pub excitation: ExcitationParameters,
+    #[child(prefix = "accdec")]
+    pub accdec: AccDecParameters,
+    #[child(prefix = "seq")]
+    pub seq: SequenceParameters,
+    #[child(prefix = "sweep")]
+    pub sweep: SweepParameters,
+    #[child(prefix = "corr")]
+    pub corr: CorrectionParameters,
+
+    /// Control mode: 0 torque, 1 velocity, 2 position, 3 stop sequence (seq_* inputs)
+    #[variable(causality = Input, variability = Discrete, start = 2)]
+    pub mode: i32,
+    /// Motor-side position command: streamed through the acc/dec filter, or the target of a move when move_speed > 0
+    #[variable(causality = Input, variability = Continuous, start = 0.0)]
+    pub position_command: f64,
+    /// Positioning speed towards position_command (0: stream position_command)
+    #[variable(causality = Input, variability = Continuous, start = 0.0)]
+    pub move_speed: f64,
+    /// Jog speed in position mode (non-zero overrides position_command)
+    #[variable(causality = Input, variability = Continuous, start = 0.0)]
+    pub jog_velocity: f64,
+    /// Motor velocity command
+    #[variable(causality = Input, variability = Continuous, start = 0.0)]
+    pub velocity_command: f64,
+    /// Torque command (torque mode)
+    #[variable(causality = Input, variability = Continuous, start = 0.0)]
+    pub torque_command: f64,
+    /// External torque on the load
+    #[variable(causality = Input, variability = Continuous, start = 0.0)]
+    pub disturbance_torque: f64,
+    /// A change from false to true clears latched faults
+    #[variable(causality = Input, variability = Discrete, start = false)]
+    pub fault_reset: bool,
+    /// Sequence run switch (mode 3): non-zero = run at seq.target_speed, 0 = decelerate
+    #[variable(causality = Input, variability = Discrete, start = 0)]
+    pub seq_run: i32,
+    /// Sequence stop key: each increase is one press (accepted at or below seq.zero_speed, held pending while decelerating)
+    #[variable(causality = Input, variability = Discrete, start = 0)]
+    pub seq_stop: i32,
+    /// Sequence position-command blocking release key: each increase is one press
+    #[variable(causality = Input, variability = Discrete, start = 0)]
+    pub seq_release: i32,
+    /// Sequence move key: each increase moves to seq_target (fine adjust only)
+    #[variable(causality = Input, variability = Discrete, start = 0)]
+    pub seq_move: i32,
+    /// Sequence return-to-start key: each increase is one press
+    #[variable(causality = Input, variability = Discrete, start = 0)]
+    pub seq_return: i32,
+    /// Target of the sequence move key (motor side)
+    #[variable(causality = Input, variability = Discrete, start = 0.0)]
+    pub seq_target: f64,
+    /// Frequency-response sweep start key: each increase starts the sweep of the sweep.* parameters
+    #[variable(causality = Input, variability = Discrete, start = 0)]
+    pub sweep_start: i32,
+    /// Selected gain-table entry (0-based); a change selects it
+    #[variable(causality = Input, variability = Discrete, start = 0)]
+    pub seq_gain_index: i32,
+
     /// Motor angle (true, not quantised)
     #[variable(causality = Output, variability = Continuous)]
     pub motor_position: f64,
@@ -546,70 +608,6 @@ pub struct ServoAxis {
     /// Latched fault bits: 1 overcurrent, 2 undervoltage, 4 overvoltage, 8 following error, 16 non-finite, 32 encoder
     #[variable(causality = Output, variability = Discrete)]
     pub faults: i32,
-
-    /// Control mode: 0 torque, 1 velocity, 2 position, 3 stop sequence (seq_* inputs)
-    #[variable(causality = Input, variability = Discrete, start = 2)]
-    pub mode: i32,
-    /// Motor-side position command: streamed through the acc/dec filter, or the target of a move when move_speed > 0
-    #[variable(causality = Input, variability = Continuous, start = 0.0)]
-    pub position_command: f64,
-    /// Positioning speed towards position_command (0: stream position_command)
-    #[variable(causality = Input, variability = Continuous, start = 0.0)]
-    pub move_speed: f64,
-    /// Jog speed in position mode (non-zero overrides position_command)
-    #[variable(causality = Input, variability = Continuous, start = 0.0)]
-    pub jog_velocity: f64,
-    /// Motor velocity command
-    #[variable(causality = Input, variability = Continuous, start = 0.0)]
-    pub velocity_command: f64,
-    /// Torque command (torque mode)
-    #[variable(causality = Input, variability = Continuous, start = 0.0)]
-    pub torque_command: f64,
-    /// External torque on the load
-    #[variable(causality = Input, variability = Continuous, start = 0.0)]
-    pub disturbance_torque: f64,
-    /// A change from false to true clears latched faults
-    #[variable(causality = Input, variability = Discrete, start = false)]
-    pub fault_reset: bool,
-    /// Sequence run switch (mode 3): non-zero = run at seq.target_speed, 0 = decelerate
-    #[variable(causality = Input, variability = Discrete, start = 0)]
-    pub seq_run: i32,
-    /// Sequence stop key: each increase is one press (accepted at or below seq.zero_speed, held pending while decelerating)
-    #[variable(causality = Input, variability = Discrete, start = 0)]
-    pub seq_stop: i32,
-    /// Sequence position-command blocking release key: each increase is one press
-    #[variable(causality = Input, variability = Discrete, start = 0)]
-    pub seq_release: i32,
-    /// Sequence move key: each increase moves to seq_target (fine adjust only)
-    #[variable(causality = Input, variability = Discrete, start = 0)]
-    pub seq_move: i32,
-    /// Sequence return-to-start key: each increase is one press
-    #[variable(causality = Input, variability = Discrete, start = 0)]
-    pub seq_return: i32,
-    /// Target of the sequence move key (motor side)
-    #[variable(causality = Input, variability = Discrete, start = 0.0)]
-    pub seq_target: f64,
-    /// Frequency-response sweep start key: each increase starts the sweep of the sweep.* parameters
-    #[variable(causality = Input, variability = Discrete, start = 0)]
-    pub sweep_start: i32,
-    /// Selected gain-table entry (0-based); a change selects it
-    #[variable(causality = Input, variability = Discrete, start = 0)]
-    pub seq_gain_index: i32,
-
-    #[child(prefix = "ctrl")]
-    pub ctrl: ControllerParameters,
-    #[child(prefix = "plant")]
-    pub plant: PlantParameters,
-    #[child(prefix = "excitation")]
-    pub excitation: ExcitationParameters,
-    #[child(prefix = "accdec")]
-    pub accdec: AccDecParameters,
-    #[child(prefix = "seq")]
-    pub seq: SequenceParameters,
-    #[child(prefix = "sweep")]
-    pub sweep: SweepParameters,
-    #[child(prefix = "corr")]
-    pub corr: CorrectionParameters,
 
     sim: Option<AxisSimulation>,
     applied: Option<AppliedParameters>,
