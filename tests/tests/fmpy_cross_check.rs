@@ -45,3 +45,13 @@ fn every_shipped_scenario_is_bit_identical_in_fmpy() {
     }
     assert!(n >= 2, "expected the shipped scenarios, found {n}");
 }
+
+#[test]
+fn every_parameter_and_input_reads_back_its_start_value_in_fmpy() {
+    // Each value reference must reach its own variable (the FMU routes them through its fields).
+    let script = workspace_root().join("tests/python/fmpy_start_values.py");
+    let out = Command::new(python().unwrap()).arg(&script).arg(fmu_path()).output().unwrap();
+    let text = String::from_utf8_lossy(&out.stdout);
+    assert!(out.status.success(), "{text}{}", String::from_utf8_lossy(&out.stderr));
+    assert!(text.contains(", 0 mismatches"), "{text}");
+}
