@@ -17,7 +17,7 @@ use crate::velocity_loop::VelocityLoop;
 use crate::TAU;
 
 /// Control mode.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
 pub enum Mode {
     /// Torque command drives the current loop directly.
     #[default]
@@ -62,7 +62,7 @@ pub struct AxisInputs {
 }
 
 /// Set-points; which one is used depends on `mode`.
-#[derive(Clone, Copy, Debug, Default, PartialEq)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct Commands {
     pub mode: Mode,
     /// Position input in encoder counts: streamed (its increments are followed) when
@@ -87,7 +87,7 @@ pub struct PwmOutput {
 }
 
 /// Everything worth recording about one tick.
-#[derive(Clone, Copy, Debug, Default, PartialEq)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct Telemetry {
     pub tick: u64,
     pub mode: Mode,

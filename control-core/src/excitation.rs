@@ -7,7 +7,7 @@
 use crate::TAU;
 
 /// Where an excitation signal is added in the loop.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
 pub enum InjectionPoint {
     #[default]
     Off,

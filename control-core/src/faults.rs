@@ -1,7 +1,7 @@
 //! Latched fault flags. Any fault switches the PWM off until cleared.
 
 /// Bit set of latched faults.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
 pub struct Faults(pub u32);
 
 impl Faults {

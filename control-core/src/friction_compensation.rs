@@ -10,7 +10,7 @@
 
 use core::fmt;
 
-#[derive(Clone, Copy, Debug, PartialEq)]
+#[derive(Clone, Copy, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct FrictionCompensationParams {
     /// Pulse amplitude (Nm, ≥ 0; 0 switches the compensation off).
     pub amplitude: f32,

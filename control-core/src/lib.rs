@@ -24,6 +24,7 @@ pub mod params;
 pub mod phase_shifted_sweep;
 pub mod pi_controller;
 pub mod position_loop;
+pub mod protocol;
 pub mod reference_frames;
 pub mod response_correction;
 pub mod stop_sequence;

@@ -12,7 +12,7 @@ use crate::friction_compensation::{FrictionCompensationError, FrictionCompensati
 use crate::stop_sequence::{SequenceParamError, SequenceParams};
 
 /// Motor data the controller needs (decoupling, torque constant, electrical angle).
-#[derive(Clone, Copy, Debug, PartialEq)]
+#[derive(Clone, Copy, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct MotorModel {
     pub pole_pairs: u32,
     /// Stator resistance (Ω).
@@ -33,7 +33,7 @@ impl MotorModel {
 }
 
 /// Loop rates: the base tick and the dividers of the outer loops.
-#[derive(Clone, Copy, Debug, PartialEq)]
+#[derive(Clone, Copy, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct Rates {
     /// Current-loop (base tick) frequency in Hz.
     pub current_loop_hz: f32,
@@ -55,7 +55,7 @@ impl Rates {
     }
 }
 
-#[derive(Clone, Copy, Debug, PartialEq)]
+#[derive(Clone, Copy, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct CurrentLoopGains {
     /// Proportional gain (V/A), both axes.
     pub kp: f32,
@@ -70,7 +70,7 @@ pub struct CurrentLoopGains {
     pub max_current: f32,
 }
 
-#[derive(Clone, Copy, Debug, PartialEq)]
+#[derive(Clone, Copy, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct VelocityLoopGains {
     /// Proportional gain (Nm per rad/s).
     pub kp: f32,
@@ -80,7 +80,7 @@ pub struct VelocityLoopGains {
     pub torque_limit: f32,
 }
 
-#[derive(Clone, Copy, Debug, PartialEq)]
+#[derive(Clone, Copy, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct PositionLoopGains {
     /// Proportional gain (1/s: rad/s of velocity command per rad of error).
     pub kp: f32,
@@ -91,7 +91,7 @@ pub struct PositionLoopGains {
 }
 
 /// Optional torque-command filters; a frequency of 0 switches a filter off.
-#[derive(Clone, Copy, Debug, PartialEq)]
+#[derive(Clone, Copy, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct TorqueFilters {
     pub low_pass_hz: f32,
     pub notch_hz: f32,
@@ -101,7 +101,7 @@ pub struct TorqueFilters {
 }
 
 /// Protective limits; crossing one latches a fault and switches the PWM off.
-#[derive(Clone, Copy, Debug, PartialEq)]
+#[derive(Clone, Copy, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct Limits {
     /// Phase-current magnitude that trips (A).
     pub overcurrent: f32,
@@ -111,7 +111,7 @@ pub struct Limits {
     pub following_error: f32,
 }
 
-#[derive(Clone, Copy, Debug, PartialEq)]
+#[derive(Clone, Copy, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct Params {
     pub motor: MotorModel,
     /// Encoder counts per mechanical revolution.

@@ -34,7 +34,7 @@ use crate::TAU;
 pub const MAX_SWEEP_POINTS: usize = 128;
 const MAX_SHIFTS: u32 = 16;
 
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
 pub enum SweepSignal {
     #[default]
     SteppedSine,
@@ -42,7 +42,7 @@ pub enum SweepSignal {
     Prbs,
 }
 
-#[derive(Clone, Copy, Debug, PartialEq)]
+#[derive(Clone, Copy, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct SweepParams {
     pub point: InjectionPoint,
     pub signal: SweepSignal,
@@ -261,7 +261,7 @@ impl SweepParams {
 }
 
 /// One measured frequency.
-#[derive(Clone, Copy, Debug, Default, PartialEq)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct SweepResult {
     pub frequency: f32,
     /// G = Y/U (−Y/U for feedback injection).
@@ -281,7 +281,7 @@ impl SweepResult {
     }
 }
 
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
 pub enum SweepState {
     #[default]
     Idle,
@@ -302,7 +302,7 @@ impl SweepState {
 }
 
 /// The last acquisition sample.
-#[derive(Clone, Copy, Debug, Default, PartialEq)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct AcquisitionSample {
     /// Base tick of the sample.
     pub tick: u64,
@@ -316,7 +316,7 @@ pub struct AcquisitionSample {
     pub record: u32,
 }
 
-#[derive(Clone, Copy, Debug, Default, PartialEq)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct SweepStatus {
     pub state: SweepState,
     pub point: u32,

@@ -13,7 +13,7 @@ pub struct AlphaBeta {
 }
 
 /// A two-component vector in the rotor (d, q) frame.
-#[derive(Clone, Copy, Debug, Default, PartialEq)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct Dq {
     pub d: f32,
     pub q: f32,

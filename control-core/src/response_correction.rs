@@ -20,14 +20,14 @@ use crate::TAU;
 pub const MAX_SECTIONS: usize = 4;
 
 /// A second-order factor `s²/ω² + 2ζ·s/ω + 1` (frequency in Hz).
-#[derive(Clone, Copy, Debug, Default, PartialEq)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct SecondOrder {
     pub hz: f32,
     pub damping: f32,
 }
 
 /// One section: optional zeros (an anti-resonance numerator), poles (a low-pass factor).
-#[derive(Clone, Copy, Debug, PartialEq)]
+#[derive(Clone, Copy, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct CorrectionSection {
     pub zeros: Option<SecondOrder>,
     pub poles: SecondOrder,
@@ -40,7 +40,7 @@ impl Default for CorrectionSection {
     }
 }
 
-#[derive(Clone, Copy, Debug, Default, PartialEq)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct CorrectionParams {
     pub sections: [CorrectionSection; MAX_SECTIONS],
     /// Sections in use (0: no correction).

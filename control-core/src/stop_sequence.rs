@@ -30,7 +30,7 @@ use crate::TAU;
 /// Largest gain table.
 pub const MAX_GAINS: usize = 8;
 
-#[derive(Clone, Copy, Debug, PartialEq)]
+#[derive(Clone, Copy, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct SequenceParams {
     /// Speed of a run and limit of every positioning move (rad/s, > 0).
     pub target_speed: f32,
@@ -120,7 +120,7 @@ impl SequenceParams {
 }
 
 /// Where the sequence is.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
 pub enum SequenceState {
     /// Speed control at zero speed (after entering the mode).
     #[default]
@@ -160,7 +160,7 @@ impl SequenceState {
 }
 
 /// What the user (keys, network) asks.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
 pub enum SequenceEvent {
     RunOn,
     RunOff,
@@ -174,7 +174,7 @@ pub enum SequenceEvent {
 }
 
 /// Why an event was refused; the state is unchanged.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
 pub enum Refusal {
     /// Run on while already running.
     AlreadyRunning,
@@ -219,7 +219,7 @@ impl fmt::Display for Refusal {
 }
 
 /// The sequence's outputs for telemetry.
-#[derive(Clone, Copy, Debug, Default, PartialEq)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct SequenceStatus {
     pub state: SequenceState,
     /// Completion (zero servo or fine adjust inside the completion width).

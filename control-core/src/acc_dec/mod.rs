@@ -15,7 +15,7 @@ pub use moving_average::{MovingAverageCascade, MAX_MOVING_AVERAGE_LENGTH, MAX_MO
 use core::fmt;
 
 /// Which acc/dec filter sits between the interpolator and the position loop.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
 pub enum AccDecKind {
     /// Pulses pass unchanged.
     #[default]
@@ -36,7 +36,7 @@ impl AccDecKind {
 }
 
 /// Acc/dec settings (part of [`crate::Params`]).
-#[derive(Clone, Copy, Debug, PartialEq)]
+#[derive(Clone, Copy, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct AccDecParams {
     pub kind: AccDecKind,
     /// Butterworth order, 1 to 6.
