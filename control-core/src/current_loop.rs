@@ -52,7 +52,7 @@ impl CurrentLoop {
         bus_voltage: f32,
     ) -> CurrentLoopOutput {
         let dt = p.rates.tick_period();
-        let (s, c) = libm::sincosf(theta_e);
+        let (s, c) = crate::trigonometry::sin_cos(theta_e);
         let i = park(clarke(phase_currents[0], phase_currents[1]), s, c);
 
         let ed = reference.d - i.d;
@@ -84,7 +84,7 @@ impl CurrentLoop {
         }
 
         let theta_out = theta_e + omega_e * dt * p.current.angle_advance_ticks;
-        let (so, co) = libm::sincosf(theta_out);
+        let (so, co) = crate::trigonometry::sin_cos(theta_out);
         let v = Dq { d: vd, q: vq };
         let duties = space_vector_duties(inverse_park(v, so, co), bus_voltage);
         CurrentLoopOutput { current: i, voltage: v, duties, saturated: sat_d || sat_q }

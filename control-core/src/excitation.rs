@@ -62,7 +62,7 @@ impl SineGenerator {
     }
 
     pub fn next(&mut self) -> f32 {
-        let y = self.amplitude * libm::sinf(self.phase());
+        let y = self.amplitude * crate::trigonometry::sin(self.phase());
         self.phase = self.phase.wrapping_add(self.increment);
         y
     }

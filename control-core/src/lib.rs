@@ -28,6 +28,7 @@ pub mod protocol;
 pub mod reference_frames;
 pub mod response_correction;
 pub mod stop_sequence;
+pub mod trigonometry;
 pub mod velocity_loop;
 
 pub use axis::{Axis, AxisInputs, Commands, Mode, PwmOutput, Telemetry};

@@ -292,7 +292,7 @@ parameter_group! {
         /// Measurement of each record, in cycles (at least min_measure_s)
         measure_cycles: f64 = 4.0,
         /// Shortest measurement
-        min_measure_s: f64 = 0.02,
+        min_measure_s: f64 = 0.08,
         /// Phase step 2*pi/shifts between the repeats of one frequency
         shifts: i32 = 3,
         /// Records per frequency at and above the threshold

@@ -22,7 +22,7 @@ pub fn oracle_settings(s: &SweepParams) -> SweepParams {
         shifts: 1,
         repeats: 1,
         measure_cycles: s.measure_cycles * 10.0,
-        min_measure_s: (s.min_measure_s * 10.0).max(0.2),
+        min_measure_s: (s.min_measure_s * 10.0).max(1.0),
         settle_cycles: s.settle_cycles * 2.0,
         min_settle_s: s.min_settle_s.max(0.05),
         ..*s

@@ -120,7 +120,10 @@ fn the_core_gives_the_same_bits_on_a_cortex_m4_as_on_the_host() {
     assert!(build.status.success(), "firmware build failed:\n{}", String::from_utf8_lossy(&build.stderr));
     let elf = dir.join("thumbv7em-none-eabihf/release/core-vectors");
     let run = Command::new("timeout")
+        // -icount shift=0: the virtual clock advances with the instructions executed, so the
+        // SysTick count the binary prints (calibrated on a loop of known length) measures them.
         .args(["120", "qemu-system-arm", "-machine", "netduinoplus2", "-nographic", "-monitor", "none", "-serial", "none"])
+        .args(["-icount", "shift=0"])
         .args(["-semihosting-config", "enable=on,target=native", "-kernel"])
         .arg(&elf)
         .output()
@@ -131,5 +134,15 @@ fn the_core_gives_the_same_bits_on_a_cortex_m4_as_on_the_host() {
     let expected = format!("core-vectors ticks {ticks} digest {host_digest:016x}");
     let result = text.lines().find(|l| l.contains("digest")).unwrap_or("").trim();
     eprintln!("host:   {expected}\ntarget: {result}");
+    // "core-vectors clock C calibration K for N instructions"
+    if let Some(line) = text.lines().find(|l| l.starts_with("core-vectors clock")) {
+        let w: Vec<f64> = line.split_whitespace().filter_map(|x| x.parse().ok()).collect();
+        if let [clock, calibration, instructions] = w[..] {
+            eprintln!(
+                "Cortex-M4 (QEMU icount): {:.0} instructions per tick, replay decoding and output digest included",
+                clock * instructions / calibration / ticks as f64
+            );
+        }
+    }
     assert_eq!(result, expected, "the Cortex-M4 replay differs from the host's");
 }

@@ -8,6 +8,7 @@
 #![no_std]
 #![no_main]
 
+mod clock;
 mod replay;
 mod semihosting;
 
@@ -26,6 +27,9 @@ extern "C" {
 #[derive(Clone, Copy)]
 pub union Vector {
     handler: unsafe extern "C" fn() -> !,
+    /// An exception handler that returns (Cortex-M stacks the caller-saved registers, so a
+    /// plain AAPCS function can be one).
+    exception: unsafe extern "C" fn(),
     stack: *const u32,
     reserved: usize,
 }
@@ -52,9 +56,17 @@ pub static VECTORS: [Vector; 16] = {
         fault,
         Vector { reserved: 0 },
         fault,
-        fault,
+        Vector { exception: systick },
     ]
 };
+
+/// SysTick wraps (every 2^24 clock ticks), counted for `clock::ticks`.
+pub static mut SYSTICK_WRAPS: u32 = 0;
+
+unsafe extern "C" fn systick() {
+    let wraps = core::ptr::addr_of_mut!(SYSTICK_WRAPS);
+    wraps.write_volatile(wraps.read_volatile().wrapping_add(1));
+}
 
 unsafe extern "C" fn fault() -> ! {
     semihosting::write("core-vectors: fault\n");

@@ -26,9 +26,22 @@ impl core::fmt::Write for Line {
 
 pub fn run() -> bool {
     let mut line = Line { buf: [0; 128], len: 0 };
-    let ok = match replay(VECTORS) {
+    crate::clock::start();
+    // Calibration: a loop of known length (2 instructions per pass).
+    let passes: u32 = 100_000;
+    let c0 = crate::clock::ticks();
+    // SAFETY: a register-only countdown loop.
+    unsafe { core::arch::asm!("1:", "subs {0}, {0}, #1", "bne 1b", inout(reg) passes => _, options(nostack)) };
+    let calibration = crate::clock::ticks() - c0;
+    let before = crate::clock::ticks();
+    let result = replay(VECTORS);
+    let clocks = crate::clock::ticks() - before;
+    let ok = match result {
         Ok((ticks, digest)) => {
             let _ = writeln!(line, "core-vectors ticks {ticks} digest {digest:016x}");
+            let mut cost = Line { buf: [0; 128], len: 0 };
+            let _ = writeln!(cost, "core-vectors clock {clocks} calibration {calibration} for {} instructions", 2 * passes);
+            write(core::str::from_utf8(&cost.buf[..cost.len]).unwrap_or(""));
             true
         }
         Err(e) => {

@@ -233,7 +233,7 @@ enum Command {
         /// Shortest settling and measurement per record (s)
         #[arg(long, default_value_t = 0.02)]
         min_settle: f64,
-        #[arg(long, default_value_t = 0.02)]
+        #[arg(long, default_value_t = 0.08)]
         min_measure: f64,
         /// Phase step 2π/shifts between repeats
         #[arg(long, default_value_t = 3)]
