@@ -1,0 +1,157 @@
+//! `servo run`, `servo bench fmu`, `servo bench plant`: scenarios on the FMU and the backbone benchmarks.
+
+use super::*;
+
+pub fn scenario_files(given: &[PathBuf]) -> Result<Vec<PathBuf>> {
+    if !given.is_empty() {
+        return Ok(given.to_vec());
+    }
+    let dir = workspace_root().join("scenarios");
+    let mut v: Vec<PathBuf> = std::fs::read_dir(&dir)
+        .with_context(|| format!("cannot list {}", dir.display()))?
+        .filter_map(|e| e.ok().map(|e| e.path()))
+        .filter(|p| p.extension().is_some_and(|x| x == "toml"))
+        .collect();
+    v.sort();
+    if v.is_empty() {
+        bail!("no scenario files in {}", dir.display());
+    }
+    Ok(v)
+}
+
+pub fn run(files: &[PathBuf], with_fmpy: bool, common: &Common) -> Result<bool> {
+    let fmu_path = common.fmu.clone().unwrap_or_else(default_fmu);
+    let out = common.out.clone().unwrap_or_else(|| default_out("run"));
+    std::fs::create_dir_all(&out).with_context(|| format!("cannot create {}", out.display()))?;
+    let fmu = Fmu::load(&fmu_path)?;
+    let mut all_ok = true;
+    let mut reports = Vec::new();
+    let mut summary = Vec::new();
+    for file in scenario_files(files)? {
+        let scenario = Scenario::load(&file)?;
+        let pb = progress_bar(&scenario.name, common.json);
+        let trace = fmu.run(&scenario, |f| pb.set_position((f * 1000.0) as u64))?;
+        pb.finish_and_clear();
+        let csv = out.join(format!("{}.csv", scenario.name));
+        trace.write_csv(&csv)?;
+        let checks = evaluate_checks(&scenario, &trace)?;
+        let mut fmpy_verdict = None;
+        let mut traces: Vec<(&str, &Trace)> = vec![("Rust host (fmi crate)", &trace)];
+        let fmpy_trace;
+        if with_fmpy {
+            let fmpy_csv = out.join(format!("{}.fmpy.csv", scenario.name));
+            bench::run_fmpy(&fmu_path, &file, &fmpy_csv)?;
+            fmpy_trace = Trace::read_csv(&fmpy_csv)?;
+            let verdict = match compare_exact(&trace, &fmpy_trace)? {
+                Ok(n) => Ok(format!("identical: {} rows × {} columns, bit for bit", trace.rows.len(), n)),
+                Err(m) => Err(format!(
+                    "differs: {} at row {} (t = {} s): Rust {:?} vs fmpy {:?}",
+                    m.column, m.row, trace.rows[m.row][0], m.left, m.right
+                )),
+            };
+            all_ok &= verdict.is_ok();
+            fmpy_verdict = Some(verdict);
+            traces.push(("fmpy", &fmpy_trace));
+        }
+        let signals: Vec<String> = if scenario.plot.is_empty() {
+            DEFAULT_PLOT.iter().map(|s| s.to_string()).collect()
+        } else {
+            scenario.plot.clone()
+        };
+        let svg = out.join(format!("{}.svg", scenario.name));
+        plot_signals(&svg, &format!("{}: {}", scenario.name, scenario.description), &traces, &signals)?;
+        let passed = checks.iter().all(|c| c.passed);
+        all_ok &= passed;
+        let json = serde_json::json!({
+            "scenario": scenario.name,
+            "passed": passed,
+            "checks": checks,
+            "fmpy": fmpy_verdict.as_ref().map(|v| match v { Ok(s) => serde_json::json!({"identical": true, "detail": s}), Err(s) => serde_json::json!({"identical": false, "detail": s}) }),
+            "csv": csv,
+            "plot": svg,
+        });
+        std::fs::write(out.join(format!("{}.json", scenario.name)), serde_json::to_string_pretty(&json)?)?;
+        if !common.json {
+            println!("{} — {}", scenario.name, scenario.description);
+            for c in &checks {
+                println!(
+                    "  [{}] {:<45} {:<16} observed {:>11.6} … {:<11.6} bounds {} … {}",
+                    if c.passed { "pass" } else { "FAIL" },
+                    c.description,
+                    c.signal,
+                    c.observed.0,
+                    c.observed.1,
+                    c.min.map_or("-inf".into(), |x| x.to_string()),
+                    c.max.map_or("+inf".into(), |x| x.to_string()),
+                );
+            }
+            if let Some(v) = &fmpy_verdict {
+                match v {
+                    Ok(s) => println!("  [pass] fmpy cross-check: {s}"),
+                    Err(s) => println!("  [FAIL] fmpy cross-check: {s}"),
+                }
+            }
+            println!("  → {} , {}", csv.display(), svg.display());
+        }
+        summary.push(json);
+        reports.push(ScenarioReport {
+            name: scenario.name.clone(),
+            description: scenario.description.clone(),
+            checks,
+            fmpy: fmpy_verdict,
+            plot_file: format!("{}.svg", scenario.name),
+            csv_file: format!("{}.csv", scenario.name),
+        });
+    }
+    let index = out.join("index.html");
+    write_html(
+        &index,
+        "Servo axis scenarios",
+        &format!("<p>FMU: <code>{}</code></p>", fmu_path.display()),
+        &reports,
+    )?;
+    if common.json {
+        println!("{}", serde_json::to_string_pretty(&summary)?);
+    } else {
+        println!("report: {}", index.display());
+    }
+    Ok(all_ok)
+}
+
+pub fn bench_fmu(seconds: f64, no_fmpy: bool, goal: f64, common: &Common) -> Result<bool> {
+    if !(seconds.is_finite() && seconds > 0.0) {
+        bail!("--seconds must be a positive number");
+    }
+    let fmu_path = common.fmu.clone().unwrap_or_else(default_fmu);
+    let out = common.out.clone().unwrap_or_else(|| default_out("bench"));
+    let pb = progress_bar("Rust host", common.json);
+    let r = bench::bench_fmu(&fmu_path, &out, seconds, !no_fmpy, |f| pb.set_position((f * 1000.0) as u64))?;
+    pb.finish_and_clear();
+    let ok = r.rust_real_time_factor >= goal;
+    if common.json {
+        println!("{}", serde_json::to_string_pretty(&serde_json::json!({"bench": "fmu", "result": r, "goal": goal, "passed": ok}))?);
+    } else {
+        println!("servo bench fmu — default axis, {} s simulated, {} communication steps", r.simulated_seconds, r.communication_steps);
+        println!("  Rust host (fmi crate): {:>8.3} s wall  → {:>8.1} x real time", r.rust_wall_seconds, r.rust_real_time_factor);
+        if let (Some(w), Some(f)) = (r.fmpy_wall_seconds, r.fmpy_real_time_factor) {
+            println!("  fmpy                 : {:>8.3} s wall  → {:>8.1} x real time", w, f);
+            println!("  ratio Rust / fmpy    : {:>8.2}", r.rust_over_fmpy.unwrap_or(f64::NAN));
+        }
+        println!("  goal ≥ {goal} x real time through the Rust host: {}", if ok { "met" } else { "NOT met" });
+    }
+    Ok(ok)
+}
+
+pub fn bench_plant(common: &Common) -> Result<bool> {
+    let r = host_tools::bench_plant::step_error()?;
+    if common.json {
+        println!("{}", serde_json::to_string_pretty(&r)?);
+    } else {
+        println!("servo bench plant — exact linear parts, {} sub-step(s) per 62.5 µs tick vs {} (reference), inverter commands of {} s of closed-loop velocity steps replayed open loop", r.substeps, r.reference_substeps, r.simulated_seconds);
+        for (name, err, scale) in &r.errors {
+            println!("  {name:<16} max |error| {err:>10.3e}  (signal peak {scale:.3e}, relative {:.2e})", err / scale);
+        }
+        println!("  largest relative error: {:.2e} (goal ≤ {:.0e}): {}", r.worst_relative, host_tools::bench_plant::GOAL, if r.passed { "met" } else { "NOT met" });
+    }
+    Ok(r.passed)
+}

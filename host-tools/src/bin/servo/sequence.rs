@@ -1,0 +1,117 @@
+//! `servo sequence` and `servo bench sequence` (seed 004).
+
+use super::*;
+
+pub fn sequence(files: &[PathBuf], with_fmpy: bool, common: &Common) -> Result<bool> {
+    use host_tools::sequence_scenario::{SequenceScenario, PLOT};
+    let fmu_path = common.fmu.clone().unwrap_or_else(default_fmu);
+    let out = common.out.clone().unwrap_or_else(|| default_out("sequence"));
+    std::fs::create_dir_all(&out).with_context(|| format!("cannot create {}", out.display()))?;
+    let files = if files.is_empty() {
+        let dir = workspace_root().join("scenarios/sequences");
+        let mut v: Vec<PathBuf> = std::fs::read_dir(&dir)
+            .with_context(|| format!("cannot list {}", dir.display()))?
+            .filter_map(|e| e.ok().map(|e| e.path()))
+            .filter(|p| p.extension().is_some_and(|x| x == "toml"))
+            .collect();
+        v.sort();
+        v
+    } else {
+        files.to_vec()
+    };
+    let fmu = Fmu::load(&fmu_path)?;
+    let mut all_ok = true;
+    let mut summary = Vec::new();
+    for file in files {
+        let s = SequenceScenario::load(&file)?;
+        let scenario = s.to_scenario();
+        let pb = progress_bar(&s.name, common.json);
+        let trace = fmu.run(&scenario, |f| pb.set_position((f * 1000.0) as u64))?;
+        pb.finish_and_clear();
+        let csv = out.join(format!("{}.csv", s.name));
+        trace.write_csv(&csv)?;
+        let outcomes = s.evaluate(&trace)?;
+        let mut traces: Vec<(&str, &Trace)> = vec![("Rust host", &trace)];
+        let fmpy_trace;
+        let mut fmpy_verdict = None;
+        if with_fmpy {
+            let inputs = out.join(format!("{}.inputs.toml", s.name));
+            std::fs::write(&inputs, scenario.to_toml())?;
+            let fmpy_csv = out.join(format!("{}.fmpy.csv", s.name));
+            bench::run_fmpy(&fmu_path, &inputs, &fmpy_csv)?;
+            fmpy_trace = Trace::read_csv(&fmpy_csv)?;
+            let v = match compare_exact(&trace, &fmpy_trace)? {
+                Ok(n) => Ok(format!("identical: {} rows × {n} columns, bit for bit", trace.rows.len())),
+                Err(m) => Err(format!("differs: {} at row {}: {:?} vs {:?}", m.column, m.row, m.left, m.right)),
+            };
+            all_ok &= v.is_ok();
+            fmpy_verdict = Some(v);
+            traces.push(("fmpy", &fmpy_trace));
+        }
+        let svg = out.join(format!("{}.svg", s.name));
+        plot_signals(&svg, &format!("{}: {}", s.name, s.description), &traces, &PLOT.map(String::from))?;
+        let passed = outcomes.iter().all(|o| o.passed);
+        all_ok &= passed;
+        let json = serde_json::json!({
+            "scenario": s.name, "passed": passed, "expectations": outcomes,
+            "fmpy": fmpy_verdict.as_ref().map(|v| match v { Ok(t) => serde_json::json!({"identical": true, "detail": t}), Err(t) => serde_json::json!({"identical": false, "detail": t}) }),
+            "csv": csv, "plot": svg,
+        });
+        std::fs::write(out.join(format!("{}.json", s.name)), serde_json::to_string_pretty(&json)?)?;
+        if !common.json {
+            println!("{} — {}", s.name, s.description);
+            for o in &outcomes {
+                println!("  [{}] {:<52} {:<48} asked: {}", if o.passed { "pass" } else { "FAIL" }, o.description, o.observed, o.bound);
+            }
+            if let Some(v) = &fmpy_verdict {
+                match v {
+                    Ok(t) => println!("  [pass] fmpy cross-check: {t}"),
+                    Err(t) => println!("  [FAIL] fmpy cross-check: {t}"),
+                }
+            }
+            println!("  → {} , {}", csv.display(), svg.display());
+        }
+        summary.push(json);
+    }
+    if common.json {
+        println!("{}", serde_json::to_string_pretty(&summary)?);
+    }
+    Ok(all_ok)
+}
+
+pub fn bench_sequence(zero_speed: &[f64], common: &Common) -> Result<bool> {
+    let fmu = Fmu::load(&common.fmu.clone().unwrap_or_else(default_fmu))?;
+    let pb = progress_bar("sequence bench", common.json);
+    let r = host_tools::bench_sequence::bench(&fmu, zero_speed, |f| pb.set_position((f * 1000.0) as u64))?;
+    pb.finish_and_clear();
+    if common.json {
+        println!("{}", serde_json::to_string_pretty(&serde_json::json!({"bench": "sequence", "result": r}))?);
+        return Ok(r.settle_falls_with_gain);
+    }
+    println!("servo bench sequence — seed 004, default axis and friction, run at 100 rad/s, gradient 2000 rad/s², base gain 20/s, completion width 8 counts");
+    println!("  stop at speed (run off + stop key at 0.3 s, zero-speed level 2 rad/s) and a 1 rad fine adjustment, per gain multiplier:");
+    println!(
+        "  {:>6} {:>12} {:>12} {:>16} {:>18} {:>14} {:>12} {:>16}",
+        "gain", "accept ms", "settle ms", "overshoot cnt", "error@complete cnt", "error@rest cnt", "move ms", "move overshoot"
+    );
+    for g in &r.gains {
+        println!(
+            "  {:>5}x {:>12.2} {:>12.2} {:>16} {:>18} {:>14} {:>12.2} {:>16}",
+            g.multiplier,
+            g.acceptance * 1e3,
+            g.stop_settle * 1e3,
+            g.stop_overshoot_counts,
+            g.stop_error_at_completion,
+            g.stop_error_at_rest,
+            g.move_settle * 1e3,
+            g.move_overshoot_counts
+        );
+    }
+    println!("  settle time falls as the gain rises (stop and move): {}", if r.settle_falls_with_gain { "yes" } else { "NO" });
+    println!("  time from the stop key to acceptance against the zero-speed level (deceleration from 100 rad/s):");
+    println!("  {:>12} {:>14} {:>22}", "level rad/s", "measured ms", "ramp (V-VH)/a ms");
+    for a in &r.acceptance {
+        println!("  {:>12} {:>14.2} {:>22.2}", a.zero_speed, a.measured * 1e3, a.ramp * 1e3);
+    }
+    Ok(r.settle_falls_with_gain)
+}
