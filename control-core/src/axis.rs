@@ -123,6 +123,9 @@ pub struct Axis {
     sweep: PhaseShiftedSweep,
     /// Velocity-loop inputs of the last velocity tick: reference and feedback as used.
     velocity_loop_inputs: (f32, f32),
+    /// Ticks since the last velocity, position, acquisition and PRBS-chip tick (`tick` modulo
+    /// each divider, counted: a 64-bit modulo is software on a Cortex-M4).
+    phases: [u32; 4],
     encoder: EncoderTracker,
     excitation: Option<(InjectionPoint, SineGenerator)>,
     tick: u64,
@@ -154,6 +157,7 @@ impl Axis {
             friction: FrictionCompensation::new(&params.friction, params.rates.velocity_period()),
             sweep: PhaseShiftedSweep::new(params.sweep, params.rates.current_loop_hz),
             velocity_loop_inputs: (0.0, 0.0),
+            phases: [0; 4],
             encoder: EncoderTracker::default(),
             excitation: None,
             tick: 0,
@@ -259,8 +263,10 @@ impl Axis {
 
     /// One base tick: read sensors, run the loops that are due, return the PWM command.
     pub fn step(&mut self, inputs: &AxisInputs, commands: &Commands) -> PwmOutput {
-        let p = self.params;
+        // A reference, not a copy: the parameters are hundreds of bytes, and copying them every
+        // tick cost a Cortex-M4 about 800 instructions.
         let mut faults = self.telemetry.faults;
+        let p = &self.params;
 
         if !inputs.phase_currents.iter().all(|x| x.is_finite())
             || !inputs.bus_voltage.is_finite()
@@ -287,25 +293,25 @@ impl Axis {
         }
 
         self.apply_mode(commands);
+        let p = &self.params;
 
-        let excitation = match (self.sweep.excitation(self.tick), self.excitation.as_mut()) {
+        let [velocity_due, position_due, acquire, chip_due] = self.phases.map(|ph| ph == 0);
+        let excitation = match (self.sweep.excitation(chip_due), self.excitation.as_mut()) {
             (Some(e), _) => e,
             (None, Some((point, sine))) => (*point, sine.next()),
             (None, None) => (InjectionPoint::Off, 0.0),
         };
 
-        let vdiv = p.rates.velocity_divider as u64;
-        let pdiv = p.rates.position_divider as u64;
         let position = self.encoder.position();
-        if self.tick.is_multiple_of(vdiv) {
+        if velocity_due {
             let counts = position - self.position_at_velocity_tick;
             self.position_at_velocity_tick = position;
             if self.tick > 0 {
                 self.velocity_estimate =
-                    counts as f32 * (TAU / p.encoder_counts_per_rev as f32) / p.rates.velocity_period();
+                    crate::counts_to_f32(counts) * (TAU / p.encoder_counts_per_rev as f32) / p.rates.velocity_period();
             }
         }
-        if commands.mode == Mode::Position && self.tick.is_multiple_of(pdiv) {
+        if commands.mode == Mode::Position && position_due {
             let counts_per_tick = p.counts_per_position_tick();
             let motion = if commands.jog_velocity != 0.0 {
                 Move::Jog(commands.jog_velocity * counts_per_tick)
@@ -320,14 +326,14 @@ impl Axis {
             } else {
                 self.command_path.position()
             };
-            let out = self.position_loop.step(&p, command, position);
+            let out = self.position_loop.step(p, command, position);
             self.velocity_reference = out.velocity_reference;
             self.telemetry.following_error = out.following_error;
             if out.following_error.abs() > p.limits.following_error {
                 faults.latch(Faults::FOLLOWING_ERROR);
             }
         }
-        if commands.mode == Mode::Sequence && self.tick.is_multiple_of(pdiv) {
+        if commands.mode == Mode::Sequence && position_due {
             self.velocity_reference = self.sequence.step(
                 &p.sequence,
                 p.encoder_counts_per_rev,
@@ -336,7 +342,7 @@ impl Axis {
                 p.rates.position_period(),
             );
         }
-        if commands.mode != Mode::Torque && self.tick.is_multiple_of(vdiv) {
+        if commands.mode != Mode::Torque && velocity_due {
             if commands.mode == Mode::Velocity {
                 self.velocity_reference = commands.velocity;
             }
@@ -348,7 +354,7 @@ impl Axis {
             let commanded = match commands.mode {
                 Mode::Velocity => commands.velocity,
                 Mode::Sequence => self.sequence.status().speed_reference,
-                _ => self.command_path.pulses() as f32,
+                _ => crate::counts_to_f32(self.command_path.pulses()),
             };
             let compensation = self.friction.step(commanded);
             let mut feedback = self.velocity_estimate;
@@ -356,7 +362,7 @@ impl Axis {
                 feedback += excitation.1;
             }
             self.velocity_loop_inputs = (reference, feedback);
-            let torque = self.velocity_loop.step(&p, reference, feedback) + compensation;
+            let torque = self.velocity_loop.step(p, reference, feedback) + compensation;
             self.torque_command = torque.clamp(-p.velocity.torque_limit, p.velocity.torque_limit);
         }
         if commands.mode == Mode::Torque {
@@ -373,7 +379,7 @@ impl Axis {
             InjectionPoint::VelocityFeedback => self.velocity_loop_inputs.1,
             _ => torque,
         };
-        self.sweep.end_tick(self.tick, u, self.velocity_estimate);
+        self.sweep.end_tick(self.tick, acquire, u, self.velocity_estimate);
 
         let iq_limit = p.current.max_current;
         let reference = Dq { d: 0.0, q: (torque / p.motor.torque_constant()).clamp(-iq_limit, iq_limit) };
@@ -382,7 +388,7 @@ impl Axis {
         let out: CurrentLoopOutput = if faults.any() {
             CurrentLoopOutput::default()
         } else {
-            self.current_loop.step(&p, inputs.phase_currents, theta_e, omega_e, reference, inputs.bus_voltage)
+            self.current_loop.step(p, inputs.phase_currents, theta_e, omega_e, reference, inputs.bus_voltage)
         };
         if !(out.voltage.d.is_finite() && out.voltage.q.is_finite() && torque.is_finite()) {
             faults.latch(Faults::NOT_FINITE);
@@ -394,25 +400,39 @@ impl Axis {
             self.velocity_loop.reset();
             self.torque_command = 0.0;
         }
-        self.telemetry = Telemetry {
-            tick: self.tick,
-            mode: commands.mode,
-            position,
-            position_command: self.command_path.position(),
-            command_pulses: self.command_path.pulses(),
-            velocity_estimate: self.velocity_estimate,
-            velocity_reference: self.velocity_reference,
-            following_error: self.telemetry.following_error,
-            torque_command: torque,
-            current_reference: reference,
-            current: out.current,
-            voltage: out.voltage,
-            voltage_saturated: out.saturated,
-            faults,
-            sequence: *self.sequence.status(),
-            sweep: *self.sweep.status(),
-        };
+        // In place, field by field: building a new record copied all of it every tick.
+        let t = &mut self.telemetry;
+        t.tick = self.tick;
+        t.mode = commands.mode;
+        t.position = position;
+        t.position_command = self.command_path.position();
+        t.command_pulses = self.command_path.pulses();
+        t.velocity_estimate = self.velocity_estimate;
+        t.velocity_reference = self.velocity_reference;
+        t.torque_command = torque;
+        t.current_reference = reference;
+        t.current = out.current;
+        t.voltage = out.voltage;
+        t.voltage_saturated = out.saturated;
+        t.faults = faults;
+        // The sequence changes on position ticks (and events, which copy it themselves); the
+        // sweep while it runs and on the tick it ends.
+        if position_due {
+            t.sequence = *self.sequence.status();
+        }
+        if self.sweep.running() || t.sweep.state != self.sweep.status().state {
+            t.sweep = *self.sweep.status();
+        }
         self.tick += 1;
+        let dividers = [
+            p.rates.velocity_divider,
+            p.rates.position_divider,
+            p.sweep.acquisition_divider,
+            p.sweep.prbs_divider,
+        ];
+        for (phase, divider) in self.phases.iter_mut().zip(dividers) {
+            *phase = if *phase + 1 >= divider { 0 } else { *phase + 1 };
+        }
         PwmOutput { duties: if enabled { out.duties } else { [0.0; 3] }, enabled }
     }
 }

@@ -7,6 +7,9 @@ use crate::TAU;
 pub struct EncoderTracker {
     last_raw: i32,
     position: i64,
+    /// `position` modulo the counts per revolution, kept up to date with the small per-tick
+    /// steps (a 64-bit remainder every tick is software on a Cortex-M4).
+    within_rev: u32,
     started: bool,
 }
 
@@ -26,15 +29,27 @@ impl EncoderTracker {
 
     /// Feed the raw (wrapping 32-bit) counter value.
     pub fn update(&mut self, raw: i32, counts_per_rev: u32) -> EncoderUpdate {
+        let cpr = counts_per_rev as i64;
         if !self.started {
             self.started = true;
             self.last_raw = raw;
             self.position = raw as i64;
+            self.within_rev = self.position.rem_euclid(cpr) as u32;
             return EncoderUpdate::Ok;
         }
         let delta = raw.wrapping_sub(self.last_raw) as i64;
         self.last_raw = raw;
         self.position += delta;
+        let w = self.within_rev as i64 + delta;
+        self.within_rev = if (0..cpr).contains(&w) {
+            w as u32
+        } else if (-cpr..0).contains(&w) {
+            (w + cpr) as u32
+        } else if (cpr..2 * cpr).contains(&w) {
+            (w - cpr) as u32
+        } else {
+            self.position.rem_euclid(cpr) as u32
+        };
         if delta.unsigned_abs() > (counts_per_rev / 2) as u64 {
             EncoderUpdate::Jump
         } else {
@@ -44,11 +59,10 @@ impl EncoderTracker {
 
     /// Electrical angle in `[0, 2π)` for `pole_pairs`, assuming count 0 is electrical zero.
     pub fn electrical_angle(&self, counts_per_rev: u32, pole_pairs: u32) -> f32 {
-        let cpr = counts_per_rev as i64;
-        let within_rev = self.position.rem_euclid(cpr);
-        // (count · p) mod cpr stays exact in integers.
-        let e = (within_rev * pole_pairs as i64).rem_euclid(cpr);
-        TAU * (e as f32 / cpr as f32)
+        // (count · p) mod cpr stays exact in integers: within_rev < 2²⁴ and p ≤ 64 (validated),
+        // so the product fits 32 bits.
+        let e = (self.within_rev * pole_pairs) % counts_per_rev;
+        TAU * (e as f32 / counts_per_rev as f32)
     }
 }
 

@@ -172,6 +172,15 @@ impl Digest {
 
 /// Replay every scenario; returns (ticks, digest). Events apply before the tick they carry.
 pub fn replay(bytes: &[u8]) -> Result<(u64, u64), VectorError> {
+    replay_with(bytes, true)
+}
+
+/// Replay without digesting the outputs (to measure what the core itself costs).
+pub fn replay_only(bytes: &[u8]) -> Result<u64, VectorError> {
+    replay_with(bytes, false).map(|(ticks, _)| ticks)
+}
+
+fn replay_with(bytes: &[u8], outputs: bool) -> Result<(u64, u64), VectorError> {
     let mut r = Reader { buf: bytes, at: 0 };
     if &r.take::<4>()? != MAGIC {
         return Err(VectorError::Magic);
@@ -217,6 +226,10 @@ pub fn replay(bytes: &[u8]) -> Result<(u64, u64), VectorError> {
                 next_event += 1;
             }
             let pwm = axis.step(&inputs, &commands);
+            if !outputs {
+                digest.bytes(&[pwm.enabled as u8]);
+                continue;
+            }
             let t = axis.telemetry();
             for d in pwm.duties {
                 digest.f32(d);

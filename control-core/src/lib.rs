@@ -37,3 +37,14 @@ pub use params::{ParamError, Params};
 
 /// 2π in f32.
 pub const TAU: f32 = core::f32::consts::TAU;
+
+/// `x as f32` for encoder counts, through 32 bits when they fit: the same rounding (one
+/// exact integer rounded to f32 either way), but an i64 → f32 conversion is a library call on
+/// a Cortex-M4 and an i32 → f32 one is one instruction.
+#[inline]
+pub fn counts_to_f32(x: i64) -> f32 {
+    match i32::try_from(x) {
+        Ok(v) => v as f32,
+        Err(_) => x as f32,
+    }
+}

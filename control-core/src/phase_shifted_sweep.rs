@@ -471,8 +471,10 @@ impl PhaseShiftedSweep {
     }
 
     /// Excitation for this base tick (call once per tick, before the loops): the value to
-    /// add at the injection point, or None when no sweep runs.
-    pub fn excitation(&mut self, tick: u64) -> Option<(InjectionPoint, f32)> {
+    /// add at the injection point, or None when no sweep runs. `chip_due`: the tick is a
+    /// multiple of `prbs_divider` (the caller counts ticks; a 64-bit modulo is software on a
+    /// Cortex-M4).
+    pub fn excitation(&mut self, chip_due: bool) -> Option<(InjectionPoint, f32)> {
         if !self.running() {
             return None;
         }
@@ -483,7 +485,7 @@ impl PhaseShiftedSweep {
                 self.value = self.generator.next();
             }
             SweepSignal::Prbs => {
-                if tick.is_multiple_of(p.prbs_divider as u64) {
+                if chip_due {
                     self.chip = p.amplitude * self.sequence.next_chip() as f32;
                 }
                 self.value = self.chip;
@@ -494,13 +496,13 @@ impl PhaseShiftedSweep {
     }
 
     /// End of a base tick: `u` and `y` as defined for the injection point (read only on
-    /// acquisition ticks). Advances the schedule.
-    pub fn end_tick(&mut self, tick: u64, u: f32, y: f32) {
+    /// acquisition ticks: `acquire` when the tick is a multiple of `acquisition_divider`).
+    /// Advances the schedule.
+    pub fn end_tick(&mut self, tick: u64, acquire: bool, u: f32, y: f32) {
         if !self.running() {
             return;
         }
         let p = self.params;
-        let acquire = tick.is_multiple_of(p.acquisition_divider as u64);
         if acquire {
             let measuring = self.status.state == SweepState::Measuring;
             self.status.sample = AcquisitionSample {
@@ -579,9 +581,9 @@ mod tests {
         s.start().unwrap();
         let mut tick = 0u64;
         while s.running() {
-            let (_, u) = s.excitation(tick).unwrap();
+            let (_, u) = s.excitation(tick.is_multiple_of(params.prbs_divider as u64)).unwrap();
             let y = gain * params.amplitude * libm::sinf(s.phase + phase);
-            s.end_tick(tick, u, y);
+            s.end_tick(tick, tick.is_multiple_of(params.acquisition_divider as u64), u, y);
             tick += 1;
         }
         assert_eq!(tick, params.total_ticks(FS), "the schedule the host computes is the one the drive runs");

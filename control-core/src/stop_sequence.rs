@@ -351,7 +351,7 @@ impl StopSequence {
                 // The P branch decelerates at gain²·|e| ≤ a, so no gain in the table can
                 // make the slewed reference lag behind and overshoot.
                 let gain = p.position_gain * p.gains[s.gain_index];
-                let deviation = (s.target - position) as f32 * (TAU / counts_per_rev as f32);
+                let deviation = crate::counts_to_f32(s.target - position) * (TAU / counts_per_rev as f32);
                 let magnitude = deviation.abs();
                 let speed = (gain * magnitude).min(libm::sqrtf(p.acceleration * magnitude)).min(p.target_speed);
                 libm::copysignf(speed, deviation)
