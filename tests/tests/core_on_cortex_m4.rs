@@ -148,3 +148,41 @@ fn the_core_gives_the_same_bits_on_a_cortex_m4_as_on_the_host() {
     }
     assert_eq!(result, expected, "the Cortex-M4 replay differs from the host's");
 }
+
+/// (name, address, size) of the allocated sections of a 32-bit little-endian ELF file.
+fn sections(elf: &[u8]) -> Vec<(String, u32, u32)> {
+    let u16_at = |o: usize| u16::from_le_bytes([elf[o], elf[o + 1]]) as usize;
+    let u32_at = |o: usize| u32::from_le_bytes([elf[o], elf[o + 1], elf[o + 2], elf[o + 3]]);
+    assert_eq!(&elf[..5], b"\x7fELF\x01", "a 32-bit ELF file");
+    let (shoff, shentsize, shnum, shstrndx) = (u32_at(0x20) as usize, u16_at(0x2E), u16_at(0x30), u16_at(0x32));
+    let header = |i: usize| shoff + i * shentsize;
+    let strtab = u32_at(header(shstrndx) + 0x10) as usize;
+    (0..shnum)
+        .filter(|&i| u32_at(header(i) + 0x08) & 0x2 != 0) // SHF_ALLOC
+        .map(|i| {
+            let h = header(i);
+            let name_at = strtab + u32_at(h) as usize;
+            let end = elf[name_at..].iter().position(|&b| b == 0).unwrap_or(0);
+            (String::from_utf8_lossy(&elf[name_at..name_at + end]).into_owned(), u32_at(h + 0x0C), u32_at(h + 0x14))
+        })
+        .collect()
+}
+
+#[test]
+fn the_drive_firmware_builds_within_its_flash_and_ram_budget() {
+    let build = Command::new(workspace_root().join("scripts/fw"))
+        .args(["--release", "-q", "-p", "drive-g474"])
+        .output()
+        .expect("scripts/fw runs");
+    assert!(build.status.success(), "firmware build failed:\n{}", String::from_utf8_lossy(&build.stderr));
+    let elf = std::fs::read(workspace_root().join("target/fw/thumbv7em-none-eabihf/release/drive-g474")).unwrap();
+    let s = sections(&elf);
+    // Flash holds everything placed there and the initial image of .data; RAM what lives there.
+    let in_flash: u32 = s.iter().filter(|(_, a, _)| (0x0800_0000..0x0900_0000).contains(a)).map(|x| x.2).sum();
+    let data: u32 = s.iter().filter(|(n, _, _)| n == ".data").map(|x| x.2).sum();
+    let in_ram: u32 = s.iter().filter(|(_, a, _)| (0x2000_0000..0x2010_0000).contains(a)).map(|x| x.2).sum();
+    let (flash, ram) = (in_flash + data, in_ram);
+    eprintln!("drive-g474: flash {flash} bytes ({:.1} KiB of 128), static RAM {ram} bytes ({:.1} KiB of 48; stack not included)", flash as f64 / 1024.0, ram as f64 / 1024.0);
+    assert!(flash <= 128 * 1024, "flash {flash} bytes");
+    assert!(ram <= 48 * 1024, "RAM {ram} bytes");
+}
