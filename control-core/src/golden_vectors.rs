@@ -172,15 +172,27 @@ impl Digest {
 
 /// Replay every scenario; returns (ticks, digest). Events apply before the tick they carry.
 pub fn replay(bytes: &[u8]) -> Result<(u64, u64), VectorError> {
-    replay_with(bytes, true)
+    replay_with(bytes, Work::StepAndDigest)
 }
 
 /// Replay without digesting the outputs (to measure what the core itself costs).
 pub fn replay_only(bytes: &[u8]) -> Result<u64, VectorError> {
-    replay_with(bytes, false).map(|(ticks, _)| ticks)
+    replay_with(bytes, Work::Step).map(|(ticks, _)| ticks)
 }
 
-fn replay_with(bytes: &[u8], outputs: bool) -> Result<(u64, u64), VectorError> {
+/// Decode the inputs without stepping the axis (the decoding's share of the cost).
+pub fn decode_only(bytes: &[u8]) -> Result<u64, VectorError> {
+    replay_with(bytes, Work::Decode).map(|(ticks, _)| ticks)
+}
+
+#[derive(Clone, Copy, PartialEq, Eq)]
+enum Work {
+    Decode,
+    Step,
+    StepAndDigest,
+}
+
+fn replay_with(bytes: &[u8], work: Work) -> Result<(u64, u64), VectorError> {
     let mut r = Reader { buf: bytes, at: 0 };
     if &r.take::<4>()? != MAGIC {
         return Err(VectorError::Magic);
@@ -225,8 +237,14 @@ fn replay_with(bytes: &[u8], outputs: bool) -> Result<(u64, u64), VectorError> {
                 digest.bytes(&[result as u8]);
                 next_event += 1;
             }
+            if work == Work::Decode {
+                // Keep the decoded values alive so the decoding is not optimised away.
+                digest.bytes(&inputs.encoder_count.to_le_bytes());
+                digest.f32(inputs.phase_currents[0] + commands.velocity);
+                continue;
+            }
             let pwm = axis.step(&inputs, &commands);
-            if !outputs {
+            if work == Work::Step {
                 digest.bytes(&[pwm.enabled as u8]);
                 continue;
             }
