@@ -487,7 +487,7 @@ pub struct ServoAxis {
     /// Target of the sequence move key (motor side)
     #[variable(causality = Input, variability = Discrete, start = 0.0)]
     pub seq_target: f64,
-    /// Frequency-response sweep start key: each increase starts the sweep of the sweep.* parameters
+    /// Frequency-response sweep start key: each increase starts the sweep of the sweep.* parameters (refused with a logged warning in torque mode for a velocity-loop injection point)
     #[variable(causality = Input, variability = Discrete, start = 0)]
     pub sweep_start: i32,
     /// Selected gain-table entry (0-based); a change selects it
@@ -924,7 +924,12 @@ impl ServoAxis {
         self.sequence_events(&inputs);
         let sim = self.sim.as_mut().ok_or("model not initialized")?;
         if self.sweep_start > self.seen_sweep_start {
-            sim.axis.start_sweep().map_err(|e| format!("sweep_start refused: {e}"))?;
+            // Like a refused sequence key: logged as a warning, nothing else changes (the
+            // sweep stays idle, sweep_state says so); not an FMI error, which would leave the
+            // sequence events of this step half applied.
+            if let Err(e) = sim.axis.start_sweep() {
+                self.refusals.push(format!("sweep_start refused at t = {} s: {e}", sim.ticks() as f64 * sim.tick_period()));
+            }
             self.seen_sweep_start = self.sweep_start;
         }
         for _ in 0..n as u64 {
@@ -1155,6 +1160,22 @@ mod tests {
         m.step(0.00075, 0.00025).unwrap();
         assert_eq!((m.seq_refused, m.seq_last_refusal, m.seq_gain), (2, 8, 1.0));
         assert_eq!(m.refusals.len(), 2, "both refusals wait for do_step to log them");
+    }
+
+    #[test]
+    fn a_sweep_start_the_mode_cannot_take_is_a_logged_refusal() {
+        let mut m = started();
+        m.sim = Some(AxisSimulation::new(&m.config().unwrap()).unwrap());
+        m.applied = Some(m.applied_now());
+        m.mode = 0; // torque mode: no velocity loop for the default velocity-command injection
+        m.sweep_start = 1;
+        m.step(0.0, 0.00025).unwrap();
+        assert_eq!(m.sweep_state, 0);
+        assert!(m.refusals.iter().any(|r| r.contains("sweep_start refused")), "{:?}", m.refusals);
+        m.mode = 1;
+        m.sweep_start = 2;
+        m.step(0.00025, 0.00025).unwrap();
+        assert_eq!(m.sweep_state, 1, "settling after a start in velocity mode");
     }
 
     #[test]
