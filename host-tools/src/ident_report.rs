@@ -55,7 +55,9 @@ pub fn identify_axis(fmu: &Fmu, axis: &str, parameters: &BTreeMap<String, Value>
         p.insert("plant.acceleration_noise_std".into(), Value::Float(noise_std));
     }
     let m = measure(fmu, &p, amplitude, BAND.0, BAND.1).with_context(|| format!("axis {axis}"))?;
-    let model = identify(axis, &m).with_context(|| format!("axis {axis}"))?;
+    let mut model = identify(axis, &m).with_context(|| format!("axis {axis}"))?;
+    // The plant as given (without the measurement noise), for `servo tune`'s check runs.
+    model.fmu_parameters = parameters.iter().map(|(k, v)| (k.clone(), v.as_f64())).collect();
     std::fs::create_dir_all(out)?;
     let model_path = out.join(format!("{axis}.model.json"));
     std::fs::write(&model_path, serde_json::to_string_pretty(&model)?)?;

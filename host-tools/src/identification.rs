@@ -64,12 +64,15 @@ pub struct AxisModel {
     pub anti_resonance: Option<Factor>,
     /// The pole pair fitted with it (the absorber's resonance).
     pub resonance: Option<Factor>,
-    /// High-frequency... low-frequency gain K of torque → acceleration (1/J, 1/(kg·m²)).
+    /// Gain of the model at low frequencies: torque → acceleration, 1/J (1/(kg·m²)).
     pub gain: f64,
     /// Band the model was fitted over (Hz).
     pub band: (f64, f64),
     /// RMS relative error of the fit over the band.
     pub fit_error: f64,
+    /// The FMU parameters the axis was identified with (for `servo tune`'s check runs).
+    #[serde(default)]
+    pub fmu_parameters: BTreeMap<String, f64>,
 }
 
 impl AxisModel {
@@ -355,6 +358,7 @@ pub fn identify(axis: &str, m: &Measured) -> Result<AxisModel> {
             gain: low_gain,
             band: (m.frequencies[0], *m.frequencies.last().unwrap_or(&0.0)),
             fit_error: 0.0,
+            fmu_parameters: BTreeMap::new(),
         }),
         Some(f) => {
             // Numerator: the anti-resonance pair and the shaft's real zero; denominator: the
@@ -377,7 +381,15 @@ pub fn identify(axis: &str, m: &Measured) -> Result<AxisModel> {
             }
             let pole = poles.iter().copied().filter(|p| p.hz > zero.hz).min_by(|a, b| a.hz.total_cmp(&b.hz));
             let gain = fit.numerator[0];
-            Ok(AxisModel { axis: axis.into(), anti_resonance: Some(zero), resonance: pole, gain, band, fit_error: fit.fit_error })
+            Ok(AxisModel {
+                axis: axis.into(),
+                anti_resonance: Some(zero),
+                resonance: pole,
+                gain,
+                band,
+                fit_error: fit.fit_error,
+                fmu_parameters: BTreeMap::new(),
+            })
         }
     }
 }

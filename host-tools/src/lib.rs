@@ -26,3 +26,4 @@ pub mod sequence_scenario;
 pub mod spectral;
 pub mod sweep_report;
 pub mod trace;
+pub mod tuning;

@@ -196,3 +196,22 @@ fn ident_writes_models_and_refuses_unusable_models() {
     assert_eq!(o.status.code(), Some(2));
     assert!(String::from_utf8_lossy(&o.stderr).contains("no axis `q`"));
 }
+
+#[test]
+fn tune_writes_each_axis_correction_and_refuses_unusable_models() {
+    let out = tmp("tune");
+    let o = servo().args(["ident", "--anti-resonance", "x=40,y=70"]).arg("--fmu").arg(fmu_path()).arg("--out").arg(&out).output().unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let (x, y) = (out.join("x.model.json"), out.join("y.model.json"));
+    let o = servo().args(["tune", "--json", "--model"]).arg(&x).arg(&y).arg("--fmu").arg(fmu_path()).arg("--out").arg(&out).output().unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let r: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+    // x carries y's numerator (70 Hz) and y carries x's (40 Hz), each over the same F.
+    let zero = |axis: usize| r["filters"][axis]["sections"][0]["zeros"][0].as_f64().unwrap();
+    assert!((zero(0) - 70.0).abs() < 1.0 && (zero(1) - 40.0).abs() < 1.0, "{r}");
+    let text = std::fs::read_to_string(out.join("x.corr.toml")).unwrap();
+    assert!(text.contains("\"corr.count\" = 2"), "{text}");
+    let o = servo().args(["tune", "--no-check", "--model"]).arg(&x).arg("--out").arg(&out).output().unwrap();
+    assert_eq!(o.status.code(), Some(2));
+    assert!(String::from_utf8_lossy(&o.stderr).contains("at least two"));
+}

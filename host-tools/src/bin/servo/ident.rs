@@ -148,3 +148,88 @@ pub fn bench_ident(common: &Common) -> Result<bool> {
     println!("  goal: at most 1 % in frequency and 20 % in damping: {}", if ok { "met" } else { "NOT met" });
     Ok(ok)
 }
+
+pub fn tune(models: &[PathBuf], no_check: bool, common: &Common) -> Result<bool> {
+    use host_tools::frequency_response::ResponsePoint;
+    use host_tools::identification::AxisModel;
+    use host_tools::tuning::{command_to_load, corrections, spread};
+    let out = common.out.clone().unwrap_or_else(|| default_out("tune"));
+    std::fs::create_dir_all(&out)?;
+    let models: Vec<AxisModel> = models
+        .iter()
+        .map(|p| -> Result<AxisModel> {
+            let text = std::fs::read_to_string(p).with_context(|| format!("cannot read {}", p.display()))?;
+            serde_json::from_str(&text).with_context(|| format!("{} is not a model file", p.display()))
+        })
+        .collect::<Result<_>>()?;
+    if models.len() < 2 {
+        bail!("tuning makes axes alike: give at least two model files");
+    }
+    let defaults = control_core::Params::default();
+    let bandwidth = defaults.position.kp as f64 / std::f64::consts::TAU;
+    let (pole_hz, filters) = corrections(&models, bandwidth)?;
+    for f in &filters {
+        let text: String = f.parameters().iter().map(|(k, v)| format!("{k:?} = {}\n", match v {
+            host_tools::scenario::Value::Int(i) => i.to_string(),
+            other => format!("{:?}", other.as_f64()),
+        })).collect();
+        std::fs::write(out.join(format!("{}.corr.toml", f.axis)), format!("# servo tune: response correction of axis {}\n{text}", f.axis))?;
+    }
+    let mut report = serde_json::json!({"f_pole_hz": pole_hz, "position_bandwidth_hz": bandwidth, "filters": filters});
+    if !no_check {
+        let fmu = Fmu::load(&common.fmu.clone().unwrap_or_else(default_fmu))?;
+        let frequencies: Vec<u32> = (1..=(2.0 * bandwidth).round() as u32).collect();
+        let pb = progress_bar("tune check", common.json);
+        let mut before = Vec::new();
+        let mut after = Vec::new();
+        for (i, (m, f)) in models.iter().zip(&filters).enumerate() {
+            pb.set_position((i * 1000 / models.len()) as u64);
+            let mut p: std::collections::BTreeMap<String, host_tools::scenario::Value> =
+                m.fmu_parameters.iter().map(|(k, v)| (k.clone(), host_tools::scenario::Value::Float(*v))).collect();
+            p.insert("plant.motor_coulomb".into(), host_tools::scenario::Value::Float(0.0));
+            p.insert("plant.load_coulomb".into(), host_tools::scenario::Value::Float(0.0));
+            before.push(command_to_load(&fmu, &p, &frequencies)?);
+            p.extend(f.parameters());
+            after.push(command_to_load(&fmu, &p, &frequencies)?);
+        }
+        pb.finish_and_clear();
+        let upto = |r: &[Vec<ResponsePoint>]| -> Vec<Vec<ResponsePoint>> {
+            r.iter().map(|v| v.iter().copied().filter(|p| p.frequency <= bandwidth + 1e-9).collect()).collect()
+        };
+        let (b, a) = (spread(&upto(&before)), spread(&upto(&after)));
+        let mut curves: Vec<(String, Vec<ResponsePoint>)> = Vec::new();
+        for (m, (bv, av)) in models.iter().zip(before.iter().zip(&after)) {
+            curves.push((format!("{} before", m.axis), bv.clone()));
+            curves.push((format!("{} after", m.axis), av.clone()));
+        }
+        let refs: Vec<(&str, &[ResponsePoint])> = curves.iter().map(|(l, c)| (l.as_str(), c.as_slice())).collect();
+        let svg = out.join("tune.svg");
+        host_tools::bode_plot::plot_bode(&svg, "Command → machine-end position, before and after the correction", &refs, Some(bandwidth))?;
+        report["check"] = serde_json::json!({"spread_before": b, "spread_after": a, "up_to_hz": bandwidth, "plot": svg});
+    }
+    std::fs::write(out.join("tune.json"), serde_json::to_string_pretty(&report)?)?;
+    if common.json {
+        println!("{}", serde_json::to_string_pretty(&report)?);
+        return Ok(true);
+    }
+    println!("servo tune — F: critically damped pole pairs at {pole_hz:.1} Hz (position bandwidth {bandwidth:.1} Hz)");
+    for f in &filters {
+        let secs: Vec<String> = f
+            .sections
+            .iter()
+            .map(|s| match s.zeros {
+                Some((hz, d)) => format!("N({hz:.2} Hz, ζ {d:.3})/F"),
+                None => "1/F".into(),
+            })
+            .collect();
+        println!("  {}: {}  → {}", f.axis, secs.join(" · "), out.join(format!("{}.corr.toml", f.axis)).display());
+    }
+    if let Some(c) = report.get("check") {
+        println!(
+            "  largest difference between axes' command → machine-end responses up to {:.1} Hz: before {:.3} dB / {:.2}°, after {:.3} dB / {:.2}°",
+            bandwidth, c["spread_before"][0].as_f64().unwrap_or(f64::NAN), c["spread_before"][1].as_f64().unwrap_or(f64::NAN),
+            c["spread_after"][0].as_f64().unwrap_or(f64::NAN), c["spread_after"][1].as_f64().unwrap_or(f64::NAN)
+        );
+    }
+    Ok(true)
+}

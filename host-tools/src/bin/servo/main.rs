@@ -302,6 +302,24 @@ enum Command {
         #[command(flatten)]
         common: Common,
     },
+    /// Response-correction filters from identified models (seed 001): every axis gets the
+    /// OTHER axes' anti-resonance numerators over a common low-pass F, F·Π N_other.
+    ///
+    /// Reads the model files `servo ident` wrote (edited or not), writes <axis>.corr.toml
+    /// (the FMU's corr.* parameters, ready for a scenario's [parameters] or --set) and
+    /// tune.json, then checks on the FMU: each axis's command → machine-end response before
+    /// and after (a periodic multisine on the position command, friction off), the largest
+    /// difference between axes up to the position-loop bandwidth, and tune.svg.
+    Tune {
+        /// Model files from `servo ident`
+        #[arg(long = "model", num_args = 1.., required = true)]
+        models: Vec<PathBuf>,
+        /// Skip the check runs on the FMU
+        #[arg(long)]
+        no_check: bool,
+        #[command(flatten)]
+        common: Common,
+    },
     /// Compare two trace CSVs bit for bit on their common columns.
     Compare { a: PathBuf, b: PathBuf },
     /// Benchmarks that print the figures the issues ask for.
@@ -408,6 +426,7 @@ fn main() -> ExitCode {
     let result = match &cli.command {
         Command::Run { scenarios, fmpy, common } => backbone::run(scenarios, *fmpy, common),
         Command::Sequence { files, fmpy, common } => sequence::sequence(files, *fmpy, common),
+        Command::Tune { models, no_check, common } => ident::tune(models, *no_check, common),
         Command::Ident { axes, set, anti_resonance, amplitude, snr_db, model, common } => {
             ident::ident(axes, set, anti_resonance, *amplitude, *snr_db, model, common)
         }
