@@ -11,6 +11,7 @@ use serde::Serialize;
 use crate::fmu_runner::Fmu;
 use crate::paths::workspace_root;
 use crate::scenario::Scenario;
+use crate::trace::{compare_exact, Trace};
 
 #[derive(Clone, Debug, Serialize)]
 pub struct FmuBench {
@@ -88,6 +89,40 @@ pub fn run_fmpy(fmu: &Path, scenario: &Path, csv: &Path) -> Result<f64> {
     }
     let t: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(&timing)?)?;
     t["wall_seconds"].as_f64().context("timing file without wall_seconds")
+}
+
+/// What fmpy says about a run: Ok(how much was identical) or Err(the first difference).
+pub type FmpyVerdict = std::result::Result<String, String>;
+
+/// Run `scenario_file` through fmpy into `csv` and compare it bit for bit with the Rust host's
+/// trace `rust` of the same scenario; returns the verdict and fmpy's trace.
+pub fn fmpy_cross_check(fmu: &Path, scenario_file: &Path, rust: &Trace, csv: &Path) -> Result<(FmpyVerdict, Trace)> {
+    run_fmpy(fmu, scenario_file, csv)?;
+    let fmpy = Trace::read_csv(csv)?;
+    let verdict = match compare_exact(rust, &fmpy)? {
+        Ok(n) => Ok(format!("identical: {} rows × {n} columns, bit for bit", rust.rows.len())),
+        Err(m) => Err(format!(
+            "differs: {} at row {} (t = {} s): Rust {:?} vs fmpy {:?}",
+            m.column, m.row, rust.rows[m.row][0], m.left, m.right
+        )),
+    };
+    Ok((verdict, fmpy))
+}
+
+/// The verdict as the commands' JSON reports it.
+pub fn verdict_json(v: &FmpyVerdict) -> serde_json::Value {
+    match v {
+        Ok(s) => serde_json::json!({"identical": true, "detail": s}),
+        Err(s) => serde_json::json!({"identical": false, "detail": s}),
+    }
+}
+
+/// The verdict as the commands print it.
+pub fn print_verdict(what: &str, v: &FmpyVerdict) {
+    match v {
+        Ok(s) => println!("  [pass] {what}: {s}"),
+        Err(s) => println!("  [FAIL] {what}: {s}"),
+    }
 }
 
 pub fn bench_fmu(fmu_path: &Path, out: &Path, seconds: f64, with_fmpy: bool, progress: impl FnMut(f64)) -> Result<FmuBench> {

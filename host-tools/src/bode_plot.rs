@@ -8,6 +8,7 @@ use std::path::Path;
 use anyhow::{Context, Result};
 
 use crate::frequency_response::ResponsePoint;
+use crate::plot::{escape, tick_step};
 
 const WIDTH: f64 = 900.0;
 const PANEL_H: f64 = 220.0;
@@ -17,16 +18,6 @@ const TOP: f64 = 60.0;
 const GAP: f64 = 40.0;
 const COLOURS: [&str; 6] = ["#444444", "#d62728", "#1f77b4", "#2ca02c", "#9467bd", "#ff7f0e"];
 
-fn escape(s: &str) -> String {
-    s.replace('&', "&amp;").replace('<', "&lt;").replace('>', "&gt;")
-}
-
-fn nice(span: f64) -> f64 {
-    let raw = span / 5.0;
-    let mag = 10f64.powf(raw.log10().floor());
-    let n = raw / mag;
-    (if n < 1.5 { 1.0 } else if n < 3.5 { 2.0 } else if n < 7.5 { 5.0 } else { 10.0 }) * mag
-}
 
 /// `curves`: (label, points); non-finite values are skipped.
 pub fn plot_bode(path: &Path, title: &str, curves: &[(&str, &[ResponsePoint])], marker_hz: Option<f64>) -> Result<()> {
@@ -57,7 +48,7 @@ pub fn plot_bode(path: &Path, title: &str, curves: &[(&str, &[ResponsePoint])], 
             vmin -= 1.0;
             vmax += 1.0;
         }
-        let step = nice(vmax - vmin);
+        let step = tick_step(vmax - vmin);
         let (vmin, vmax) = ((vmin / step).floor() * step, (vmax / step).ceil() * step);
         let y = |v: f64| y0 + PANEL_H - (v - vmin) / (vmax - vmin) * PANEL_H;
         writeln!(svg, r##"<rect x="{LEFT}" y="{y0}" width="{plot_w}" height="{PANEL_H}" fill="none" stroke="#888"/>"##)?;

@@ -7,16 +7,14 @@ use std::path::Path;
 use anyhow::{Context, Result};
 
 use crate::circle_test::Figure;
+use crate::plot::{escape, nice_step};
 
 const SIZE: f64 = 640.0;
 const COLOURS: [&str; 4] = ["#888888", "#d62728", "#1f77b4", "#2ca02c"];
 
 /// A "nice" radial-error scale: rad per ring such that `max_error` spans about two rings.
 pub fn ring_step(max_error: f64) -> f64 {
-    let raw = (max_error / 2.0).max(1e-12);
-    let mag = 10f64.powf(raw.log10().floor());
-    let norm = raw / mag;
-    (if norm < 1.5 { 1.0 } else if norm < 3.5 { 2.0 } else if norm < 7.5 { 5.0 } else { 10.0 }) * mag
+    nice_step((max_error / 2.0).max(1e-12))
 }
 
 /// Plot `figures` (label, figure; the first is drawn grey as the reference) about the nominal
@@ -77,8 +75,4 @@ pub fn plot_circle(path: &Path, title: &str, notes: &[String], radius: f64, figu
 
 fn fmt(x: f64) -> String {
     format!("{x:.0e}")
-}
-
-fn escape(s: &str) -> String {
-    s.replace('&', "&amp;").replace('<', "&lt;").replace('>', "&gt;")
 }

@@ -21,7 +21,7 @@ use anyhow::{anyhow, bail, Result};
 use serde::Serialize;
 
 use crate::fmu_runner::Fmu;
-use crate::scenario::{Event, Scenario, Value, DEFAULT_STEP};
+use crate::scenario::{Scenario, Value, DEFAULT_STEP};
 use crate::trace::Trace;
 
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize)]
@@ -97,29 +97,6 @@ impl CircleRequest {
             bail!("a quarter period ({} s) is not a whole number of samples: {n} samples per revolution is not a multiple of 4", period / 4.0);
         }
         Ok(n / 4)
-    }
-}
-
-/// Commanded positions of an axis at every step.
-fn axis_scenario(name: &str, parameters: &BTreeMap<String, Value>, commands: &[f64]) -> Scenario {
-    let mut events = Vec::with_capacity(commands.len());
-    for (k, &c) in commands.iter().enumerate() {
-        let mut inputs: BTreeMap<String, Value> = [("position_command".to_string(), Value::Float(c))].into_iter().collect();
-        if k == 0 {
-            inputs.insert("mode".into(), Value::Int(2));
-            inputs.insert("move_speed".into(), Value::Float(0.0));
-        }
-        events.push(Event { time: k as f64 * DEFAULT_STEP, inputs });
-    }
-    Scenario {
-        name: name.into(),
-        description: String::new(),
-        stop_time: (commands.len()) as f64 * DEFAULT_STEP,
-        step: Some(DEFAULT_STEP),
-        parameters: parameters.clone(),
-        events,
-        checks: vec![],
-        plot: vec![],
     }
 }
 
@@ -207,8 +184,8 @@ pub fn two_axis(fmu: &Fmu, r: &CircleRequest) -> Result<CircleRun> {
     let sign = if r.direction == Direction::CounterClockwise { 1.0 } else { -1.0 };
     let xc: Vec<f64> = (0..steps).map(|k| r.radius * (omega * k as f64 * DEFAULT_STEP).sin()).collect();
     let yc: Vec<f64> = (0..steps).map(|k| sign * (r.radius - r.radius * (omega * k as f64 * DEFAULT_STEP).cos())).collect();
-    let tx = fmu.run(&axis_scenario("circle_x", &r.x_parameters, &xc), |_| {})?;
-    let ty = fmu.run(&axis_scenario("circle_y", &r.y_parameters, &yc), |_| {})?;
+    let tx = fmu.run(&Scenario::streamed_position("circle_x", &r.x_parameters, &xc), |_| {})?;
+    let ty = fmu.run(&Scenario::streamed_position("circle_y", &r.y_parameters, &yc), |_| {})?;
     let fx = tx.column(r.measure.column()).ok_or_else(|| anyhow!("no {}", r.measure.column()))?;
     let fy = ty.column(r.measure.column()).ok_or_else(|| anyhow!("no {}", r.measure.column()))?;
     // Feedback row k+1 answers command k: compare each command with the position one step on.
@@ -239,7 +216,7 @@ pub fn single_axis(fmu: &Fmu, r: &CircleRequest) -> Result<PseudoCircleRun> {
     let (omega, _, n) = r.timing()?;
     let steps = n * (r.lead_in.max(1) as usize + 1);
     let c: Vec<f64> = (0..steps).map(|k| r.radius * (omega * k as f64 * DEFAULT_STEP).sin()).collect();
-    let scenario = axis_scenario("pseudo_circle", &r.x_parameters, &c);
+    let scenario = Scenario::streamed_position("pseudo_circle", &r.x_parameters, &c);
     let trace = fmu.run(&scenario, |_| {})?;
     let x = trace.column(r.measure.column()).ok_or_else(|| anyhow!("no {}", r.measure.column()))?;
     let w = measured_window(steps, n);

@@ -24,7 +24,7 @@ use crate::fmu_runner::Fmu;
 use crate::frequency_response::{ResponsePoint, SweepRun};
 use crate::scenario::Value;
 use crate::polynomial::roots;
-use crate::spectral::Complex;
+use crate::spectral::{dft_bin, Complex};
 
 pub const DEGREE: u32 = 11;
 /// Base ticks per acquisition sample (4 kHz) and per chip (1 kHz: the chips' spectrum has its
@@ -98,12 +98,8 @@ impl Measured {
     }
 }
 
-/// Run the excitation on an axis with `parameters` and return the measured response between
-/// `f_min` and `f_max`.
-pub fn measure(fmu: &Fmu, parameters: &BTreeMap<String, Value>, amplitude: f64, f_min: f64, f_max: f64) -> Result<Measured> {
-    let chips = (1u64 << DEGREE) - 1;
-    let fs = control_core::Params::default().rates.current_loop_hz as f64;
-    let period = chips as f64 * CHIP_DIVIDER as f64 / fs;
+/// The drive's M-sequence on the torque command for `seconds`, at constant speed.
+fn excitation(parameters: &BTreeMap<String, Value>, amplitude: f64, seconds: f64) -> SweepRun {
     let settings = SweepParams {
         point: InjectionPoint::TorqueCommand,
         signal: SweepSignal::Prbs,
@@ -111,12 +107,20 @@ pub fn measure(fmu: &Fmu, parameters: &BTreeMap<String, Value>, amplitude: f64, 
         prbs_degree: DEGREE,
         prbs_divider: CHIP_DIVIDER,
         acquisition_divider: DIVIDER,
-        prbs_seconds: (TRANSIENT_S + period) as f32,
+        prbs_seconds: seconds as f32,
         min_settle_s: 0.0,
         ..Default::default()
     };
-    let run = SweepRun { settings, parameters: parameters.clone(), velocity: SPEED };
-    let trace = run.run(fmu, |_| {})?;
+    SweepRun { settings, parameters: parameters.clone(), velocity: SPEED }
+}
+
+/// Run the excitation on an axis with `parameters` and return the measured response between
+/// `f_min` and `f_max`.
+pub fn measure(fmu: &Fmu, parameters: &BTreeMap<String, Value>, amplitude: f64, f_min: f64, f_max: f64) -> Result<Measured> {
+    let chips = (1u64 << DEGREE) - 1;
+    let fs = control_core::Params::default().rates.current_loop_hz as f64;
+    let period = chips as f64 * CHIP_DIVIDER as f64 / fs;
+    let trace = excitation(parameters, amplitude, TRANSIENT_S + period).run(fmu, |_| {})?;
     let col = |n: &str| trace.column(n).ok_or_else(|| anyhow!("the FMU has no output {n}"));
     let (measuring, u_all, y_all, faults) = (col("acq_measuring")?, col(INPUT_SIGNAL)?, col("load_acceleration")?, col("faults")?);
     if faults.iter().any(|&f| f != 0.0) {
@@ -142,20 +146,13 @@ pub fn measure(fmu: &Fmu, parameters: &BTreeMap<String, Value>, amplitude: f64, 
     let fa = fs / DIVIDER as f64;
     let df = fa / n as f64;
     let (k0, k1) = ((f_min / df).ceil() as usize, (f_max / df).floor() as usize);
-    let dft = |x: &[f64], k: usize| {
-        let w = -std::f64::consts::TAU * k as f64 / n as f64;
-        x.iter().enumerate().fold(Complex::default(), |acc, (i, v)| {
-            let a = w * i as f64;
-            acc.add(Complex::new(v * a.cos(), v * a.sin()))
-        })
-    };
     let mut frequencies = Vec::new();
     let mut response = Vec::new();
     let mut input_power = Vec::new();
     for k in k0.max(1)..=k1 {
-        let uk = dft(&u, k);
+        let uk = dft_bin(&u, k as f64);
         frequencies.push(k as f64 * df);
-        response.push(dft(&y, k).div(uk));
+        response.push(dft_bin(&y, k as f64).div(uk));
         input_power.push(uk.norm_sqr());
     }
     Ok(Measured { frequencies, response, input_power })
@@ -163,18 +160,7 @@ pub fn measure(fmu: &Fmu, parameters: &BTreeMap<String, Value>, amplitude: f64, 
 
 /// Noise-free run, to set the accelerometer noise for a signal-to-noise ratio.
 pub fn acceleration_rms(fmu: &Fmu, parameters: &BTreeMap<String, Value>, amplitude: f64) -> Result<f64> {
-    let settings = SweepParams {
-        point: InjectionPoint::TorqueCommand,
-        signal: SweepSignal::Prbs,
-        amplitude: amplitude as f32,
-        prbs_degree: DEGREE,
-        prbs_divider: CHIP_DIVIDER,
-        acquisition_divider: DIVIDER,
-        prbs_seconds: 0.5,
-        min_settle_s: 0.0,
-        ..Default::default()
-    };
-    let trace = SweepRun { settings, parameters: parameters.clone(), velocity: SPEED }.run(fmu, |_| {})?;
+    let trace = excitation(parameters, amplitude, 0.5).run(fmu, |_| {})?;
     let (m, a) = (trace.column("acq_measuring").unwrap_or_default(), trace.column("load_acceleration").unwrap_or_default());
     let v: Vec<f64> = (0..a.len()).filter(|&i| m[i] != 0.0).map(|i| a[i]).collect();
     let mean = v.iter().sum::<f64>() / v.len().max(1) as f64;

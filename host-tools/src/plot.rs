@@ -16,13 +16,17 @@ const TOP: f64 = 40.0;
 const GAP: f64 = 30.0;
 const COLOURS: [&str; 4] = ["#1f77b4", "#d62728", "#2ca02c", "#9467bd"];
 
-/// "Nice" tick spacing for a span.
-fn tick_step(span: f64) -> f64 {
-    let raw = span / 5.0;
+/// A raw step rounded to 1, 2, 5 or 10 times a power of ten.
+pub(crate) fn nice_step(raw: f64) -> f64 {
     let mag = 10f64.powf(raw.log10().floor());
     let norm = raw / mag;
     let nice = if norm < 1.5 { 1.0 } else if norm < 3.5 { 2.0 } else if norm < 7.5 { 5.0 } else { 10.0 };
     nice * mag
+}
+
+/// "Nice" tick spacing for a span: about five ticks.
+pub(crate) fn tick_step(span: f64) -> f64 {
+    nice_step(span / 5.0)
 }
 
 fn label(x: f64) -> String {
@@ -36,7 +40,8 @@ fn label(x: f64) -> String {
     }
 }
 
-fn escape(s: &str) -> String {
+/// Text made safe for SVG.
+pub(crate) fn escape(s: &str) -> String {
     s.replace('&', "&amp;").replace('<', "&lt;").replace('>', "&gt;")
 }
 

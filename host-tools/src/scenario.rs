@@ -186,6 +186,33 @@ impl Scenario {
         out
     }
 
+    /// Position mode with the position command streamed: `commands[k]` (rad) for the step
+    /// starting at `k·DEFAULT_STEP`, no acc/dec move (`move_speed` 0).
+    pub fn streamed_position(name: &str, parameters: &BTreeMap<String, Value>, commands: &[f64]) -> Self {
+        let events = commands
+            .iter()
+            .enumerate()
+            .map(|(k, &c)| {
+                let mut inputs: BTreeMap<String, Value> = [("position_command".to_string(), Value::Float(c))].into_iter().collect();
+                if k == 0 {
+                    inputs.insert("mode".into(), Value::Int(2));
+                    inputs.insert("move_speed".into(), Value::Float(0.0));
+                }
+                Event { time: k as f64 * DEFAULT_STEP, inputs }
+            })
+            .collect();
+        Self {
+            name: name.into(),
+            description: String::new(),
+            stop_time: commands.len() as f64 * DEFAULT_STEP,
+            step: Some(DEFAULT_STEP),
+            parameters: parameters.clone(),
+            events,
+            checks: vec![],
+            plot: vec![],
+        }
+    }
+
     /// The scenario as TOML (name, step, stop time, parameters, events; not checks or plot):
     /// what the fmpy runner reads when a scenario was built in code.
     pub fn to_toml(&self) -> String {

@@ -42,6 +42,16 @@ impl Complex {
     }
 }
 
+/// One DFT bin: `Σ x[i]·e^{−j2πki/N}` over the whole record (k may be any harmonic of the
+/// record, for periodic excitations whose period is the record).
+pub fn dft_bin(x: &[f64], k: f64) -> Complex {
+    let w = -std::f64::consts::TAU * k / x.len() as f64;
+    x.iter().enumerate().fold(Complex::default(), |acc, (i, v)| {
+        let a = w * i as f64;
+        acc.add(Complex::new(v * a.cos(), v * a.sin()))
+    })
+}
+
 /// In-place radix-2 FFT (length a power of two).
 pub fn fft(x: &mut [Complex]) {
     let n = x.len();
@@ -116,6 +126,16 @@ mod tests {
         for (k, v) in x.iter().enumerate() {
             let expect = if k == 5 || k == n - 5 { n as f64 / 2.0 } else { 0.0 };
             assert!((v.abs() - expect).abs() < 1e-9, "bin {k}: {v:?}");
+        }
+    }
+
+    #[test]
+    fn one_bin_equals_the_fft() {
+        let x: Vec<f64> = (0..64).map(|i| ((i * 37 % 11) as f64 - 5.0) * 0.3).collect();
+        let mut f: Vec<Complex> = x.iter().map(|&v| Complex::new(v, 0.0)).collect();
+        fft(&mut f);
+        for k in [0usize, 1, 7, 31] {
+            assert!(dft_bin(&x, k as f64).sub(f[k]).abs() < 1e-9, "bin {k}");
         }
     }
 

@@ -21,8 +21,8 @@ use serde::Serialize;
 use crate::fmu_runner::Fmu;
 use crate::frequency_response::ResponsePoint;
 use crate::identification::AxisModel;
-use crate::scenario::{Event, Scenario, Value, DEFAULT_STEP};
-use crate::spectral::Complex;
+use crate::scenario::{Scenario, Value, DEFAULT_STEP};
+use crate::spectral::dft_bin;
 
 /// One correction section as the FMU takes it.
 #[derive(Clone, Copy, Debug, Serialize, PartialEq)]
@@ -112,36 +112,13 @@ pub fn multisine(frequencies: &[u32], amplitude: f64, steps: usize) -> Vec<f64> 
 pub fn command_to_load(fmu: &Fmu, parameters: &BTreeMap<String, Value>, frequencies: &[u32]) -> Result<Vec<ResponsePoint>> {
     let period = (1.0 / DEFAULT_STEP).round() as usize; // one second
     let command = multisine(frequencies, 2.0e-3, 2 * period);
-    let events = command
-        .iter()
-        .enumerate()
-        .map(|(k, &c)| {
-            let mut inputs: BTreeMap<String, Value> = [("position_command".to_string(), Value::Float(c))].into_iter().collect();
-            if k == 0 {
-                inputs.insert("mode".into(), Value::Int(2));
-            }
-            Event { time: k as f64 * DEFAULT_STEP, inputs }
-        })
-        .collect();
-    let scenario = Scenario {
-        name: "command_to_load".into(),
-        description: String::new(),
-        stop_time: 2.0 * period as f64 * DEFAULT_STEP,
-        step: Some(DEFAULT_STEP),
-        parameters: parameters.clone(),
-        events,
-        checks: vec![],
-        plot: vec![],
-    };
+    let scenario = Scenario::streamed_position("command_to_load", parameters, &command);
     let trace = fmu.run(&scenario, |_| {})?;
     let load = trace.column("load_position").unwrap_or_default();
     // Row k+1 follows command k: the last period of both.
     let (u, y): (Vec<f64>, Vec<f64>) = (period..2 * period).map(|k| (command[k], load[k + 1])).unzip();
-    let dft = |x: &[f64], f: u32| {
-        let w = -std::f64::consts::TAU * f as f64 / x.len() as f64;
-        x.iter().enumerate().fold(Complex::default(), |a, (i, v)| a.add(Complex::new(v * (w * i as f64).cos(), v * (w * i as f64).sin())))
-    };
-    Ok(frequencies.iter().map(|&f| ResponsePoint::from_complex(f as f64, dft(&y, f).div(dft(&u, f)), 1.0)).collect())
+    // The record is one second: frequency f Hz is bin f.
+    Ok(frequencies.iter().map(|&f| ResponsePoint::from_complex(f as f64, dft_bin(&y, f as f64).div(dft_bin(&u, f as f64)), 1.0)).collect())
 }
 
 /// Largest gain (dB) and phase (deg) difference between any two axes' responses.

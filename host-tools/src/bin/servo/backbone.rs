@@ -40,15 +40,8 @@ pub fn run(files: &[PathBuf], with_fmpy: bool, common: &Common) -> Result<bool> 
         let fmpy_trace;
         if with_fmpy {
             let fmpy_csv = out.join(format!("{}.fmpy.csv", scenario.name));
-            bench::run_fmpy(&fmu_path, &file, &fmpy_csv)?;
-            fmpy_trace = Trace::read_csv(&fmpy_csv)?;
-            let verdict = match compare_exact(&trace, &fmpy_trace)? {
-                Ok(n) => Ok(format!("identical: {} rows × {} columns, bit for bit", trace.rows.len(), n)),
-                Err(m) => Err(format!(
-                    "differs: {} at row {} (t = {} s): Rust {:?} vs fmpy {:?}",
-                    m.column, m.row, trace.rows[m.row][0], m.left, m.right
-                )),
-            };
+            let verdict;
+            (verdict, fmpy_trace) = bench::fmpy_cross_check(&fmu_path, &file, &trace, &fmpy_csv)?;
             all_ok &= verdict.is_ok();
             fmpy_verdict = Some(verdict);
             traces.push(("fmpy", &fmpy_trace));
@@ -66,7 +59,7 @@ pub fn run(files: &[PathBuf], with_fmpy: bool, common: &Common) -> Result<bool> 
             "scenario": scenario.name,
             "passed": passed,
             "checks": checks,
-            "fmpy": fmpy_verdict.as_ref().map(|v| match v { Ok(s) => serde_json::json!({"identical": true, "detail": s}), Err(s) => serde_json::json!({"identical": false, "detail": s}) }),
+            "fmpy": fmpy_verdict.as_ref().map(bench::verdict_json),
             "csv": csv,
             "plot": svg,
         });
@@ -86,10 +79,7 @@ pub fn run(files: &[PathBuf], with_fmpy: bool, common: &Common) -> Result<bool> 
                 );
             }
             if let Some(v) = &fmpy_verdict {
-                match v {
-                    Ok(s) => println!("  [pass] fmpy cross-check: {s}"),
-                    Err(s) => println!("  [FAIL] fmpy cross-check: {s}"),
-                }
+                bench::print_verdict("fmpy cross-check", v);
             }
             println!("  → {} , {}", csv.display(), svg.display());
         }

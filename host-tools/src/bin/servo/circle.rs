@@ -65,22 +65,16 @@ pub fn circle(
         let inputs = out.join("pseudo_circle.inputs.toml");
         std::fs::write(&inputs, first.scenario.to_toml())?;
         let csv = out.join("pseudo_circle.fmpy.csv");
-        bench::run_fmpy(&fmu_path, &inputs, &csv)?;
-        let verdict = match compare_exact(&first.trace, &Trace::read_csv(&csv)?)? {
-            Ok(n) => Ok(format!("identical: {} rows × {n} columns, bit for bit", first.trace.rows.len())),
-            Err(m) => Err(format!("differs: {} at row {}: {:?} vs {:?}", m.column, m.row, m.left, m.right)),
-        };
+        let (verdict, _) = bench::fmpy_cross_check(&fmu_path, &inputs, &first.trace, &csv)?;
         ok &= verdict.is_ok();
         fmpy_note = Some(verdict);
     }
     if common.json {
-        println!("{}", serde_json::to_string_pretty(&serde_json::json!({"circle": report, "fmpy": fmpy_note.map(|v| v.map_err(|e| e))}))?);
+        println!("{}", serde_json::to_string_pretty(&serde_json::json!({"circle": report, "fmpy": fmpy_note.as_ref().map(bench::verdict_json)}))?);
     } else {
         report.print();
-        match fmpy_note {
-            Some(Ok(t)) => println!("  [pass] fmpy cross-check of the single-axis feedback: {t}"),
-            Some(Err(t)) => println!("  [FAIL] fmpy cross-check of the single-axis feedback: {t}"),
-            None => {}
+        if let Some(v) = &fmpy_note {
+            bench::print_verdict("fmpy cross-check of the single-axis feedback", v);
         }
     }
     Ok(ok)

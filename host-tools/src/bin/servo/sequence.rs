@@ -38,12 +38,8 @@ pub fn sequence(files: &[PathBuf], with_fmpy: bool, common: &Common) -> Result<b
             let inputs = out.join(format!("{}.inputs.toml", s.name));
             std::fs::write(&inputs, scenario.to_toml())?;
             let fmpy_csv = out.join(format!("{}.fmpy.csv", s.name));
-            bench::run_fmpy(&fmu_path, &inputs, &fmpy_csv)?;
-            fmpy_trace = Trace::read_csv(&fmpy_csv)?;
-            let v = match compare_exact(&trace, &fmpy_trace)? {
-                Ok(n) => Ok(format!("identical: {} rows × {n} columns, bit for bit", trace.rows.len())),
-                Err(m) => Err(format!("differs: {} at row {}: {:?} vs {:?}", m.column, m.row, m.left, m.right)),
-            };
+            let v;
+            (v, fmpy_trace) = bench::fmpy_cross_check(&fmu_path, &inputs, &trace, &fmpy_csv)?;
             all_ok &= v.is_ok();
             fmpy_verdict = Some(v);
             traces.push(("fmpy", &fmpy_trace));
@@ -54,7 +50,7 @@ pub fn sequence(files: &[PathBuf], with_fmpy: bool, common: &Common) -> Result<b
         all_ok &= passed;
         let json = serde_json::json!({
             "scenario": s.name, "passed": passed, "expectations": outcomes,
-            "fmpy": fmpy_verdict.as_ref().map(|v| match v { Ok(t) => serde_json::json!({"identical": true, "detail": t}), Err(t) => serde_json::json!({"identical": false, "detail": t}) }),
+            "fmpy": fmpy_verdict.as_ref().map(bench::verdict_json),
             "csv": csv, "plot": svg,
         });
         std::fs::write(out.join(format!("{}.json", s.name)), serde_json::to_string_pretty(&json)?)?;
@@ -64,10 +60,7 @@ pub fn sequence(files: &[PathBuf], with_fmpy: bool, common: &Common) -> Result<b
                 println!("  [{}] {:<52} {:<48} asked: {}", if o.passed { "pass" } else { "FAIL" }, o.description, o.observed, o.bound);
             }
             if let Some(v) = &fmpy_verdict {
-                match v {
-                    Ok(t) => println!("  [pass] fmpy cross-check: {t}"),
-                    Err(t) => println!("  [FAIL] fmpy cross-check: {t}"),
-                }
+                bench::print_verdict("fmpy cross-check", v);
             }
             println!("  → {} , {}", csv.display(), svg.display());
         }
