@@ -61,7 +61,7 @@ impl SineGenerator {
         (self.phase >> 8) as f32 * (TAU / 16_777_216.0)
     }
 
-    pub fn next(&mut self) -> f32 {
+    pub fn next_sample(&mut self) -> f32 {
         let y = self.amplitude * crate::trigonometry::sin(self.phase());
         self.phase = self.phase.wrapping_add(self.increment);
         y
@@ -83,7 +83,7 @@ mod tests {
         let mut g = SineGenerator::new(2.0, 1000.0, fs, 0.0);
         // 1 kHz at 16 kHz repeats every 16 samples exactly.
         for k in 0..160_000u32 {
-            let y = g.next();
+            let y = g.next_sample();
             let expect = 2.0 * libm::sinf(TAU * ((k % 16) as f32) / 16.0);
             assert!((y - expect).abs() < 1e-5, "sample {k}: {y} vs {expect}");
         }

@@ -482,7 +482,7 @@ impl PhaseShiftedSweep {
         match p.signal {
             SweepSignal::SteppedSine => {
                 self.phase = self.generator.phase();
-                self.value = self.generator.next();
+                self.value = self.generator.next_sample();
             }
             SweepSignal::Prbs => {
                 if chip_due {

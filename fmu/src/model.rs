@@ -347,7 +347,7 @@ impl SweepParameters {
 // Response-correction filter in front of the position loop (seed 001): `servo tune` writes it.
 parameter_group! {
     CorrectionParameters {
-        /// Sections in use (0 = no correction, up to 4)
+        /// Sections in use (0 = no correction, up to 8)
         count: i32 = 0,
         /// Section 1: anti-resonance numerator frequency (0 = no zeros in this section)
         zero_hz_1: f64 = 0.0,
@@ -381,6 +381,38 @@ parameter_group! {
         pole_hz_4: f64 = 100.0,
         /// Section 4: low-pass pole-pair damping
         pole_damping_4: f64 = 1.0,
+        /// Section 5: anti-resonance numerator frequency (0 = no zeros in this section)
+        zero_hz_5: f64 = 0.0,
+        /// Section 5: anti-resonance numerator damping
+        zero_damping_5: f64 = 0.0,
+        /// Section 5: low-pass pole-pair frequency
+        pole_hz_5: f64 = 100.0,
+        /// Section 5: low-pass pole-pair damping
+        pole_damping_5: f64 = 1.0,
+        /// Section 6: anti-resonance numerator frequency (0 = no zeros in this section)
+        zero_hz_6: f64 = 0.0,
+        /// Section 6: anti-resonance numerator damping
+        zero_damping_6: f64 = 0.0,
+        /// Section 6: low-pass pole-pair frequency
+        pole_hz_6: f64 = 100.0,
+        /// Section 6: low-pass pole-pair damping
+        pole_damping_6: f64 = 1.0,
+        /// Section 7: anti-resonance numerator frequency (0 = no zeros in this section)
+        zero_hz_7: f64 = 0.0,
+        /// Section 7: anti-resonance numerator damping
+        zero_damping_7: f64 = 0.0,
+        /// Section 7: low-pass pole-pair frequency
+        pole_hz_7: f64 = 100.0,
+        /// Section 7: low-pass pole-pair damping
+        pole_damping_7: f64 = 1.0,
+        /// Section 8: anti-resonance numerator frequency (0 = no zeros in this section)
+        zero_hz_8: f64 = 0.0,
+        /// Section 8: anti-resonance numerator damping
+        zero_damping_8: f64 = 0.0,
+        /// Section 8: low-pass pole-pair frequency
+        pole_hz_8: f64 = 100.0,
+        /// Section 8: low-pass pole-pair damping
+        pole_damping_8: f64 = 1.0,
     }
 }
 
@@ -391,6 +423,10 @@ impl CorrectionParameters {
             (self.zero_hz_2, self.zero_damping_2, self.pole_hz_2, self.pole_damping_2),
             (self.zero_hz_3, self.zero_damping_3, self.pole_hz_3, self.pole_damping_3),
             (self.zero_hz_4, self.zero_damping_4, self.pole_hz_4, self.pole_damping_4),
+            (self.zero_hz_5, self.zero_damping_5, self.pole_hz_5, self.pole_damping_5),
+            (self.zero_hz_6, self.zero_damping_6, self.pole_hz_6, self.pole_damping_6),
+            (self.zero_hz_7, self.zero_damping_7, self.pole_hz_7, self.pole_damping_7),
+            (self.zero_hz_8, self.zero_damping_8, self.pole_hz_8, self.pole_damping_8),
         ];
         let mut p = CorrectionParams { count: count("corr.count", self.count)? as usize, ..Default::default() };
         for (s, (zh, zd, ph, pd)) in p.sections.iter_mut().zip(raw) {

@@ -51,6 +51,8 @@ pub struct CircleReport {
     pub runs: Vec<CircleFigures>,
     /// With a comparison: largest protrusion of the second run over the first's.
     pub protrusion_ratio: Option<f64>,
+    /// With a comparison: roundness of the second run over the first's.
+    pub roundness_ratio: Option<f64>,
     pub files: Vec<PathBuf>,
 }
 
@@ -65,12 +67,26 @@ fn write_points(path: &Path, command: &Figure, feedback: &Figure) -> Result<()> 
     t.write_csv(path)
 }
 
+/// Overrides of the second run: for both axes, and for each axis alone.
+#[derive(Clone, Debug, Default)]
+pub struct Comparison {
+    pub both: Vec<(String, Value)>,
+    pub x: BTreeMap<String, Value>,
+    pub y: BTreeMap<String, Value>,
+}
+
+impl Comparison {
+    pub fn is_empty(&self) -> bool {
+        self.both.is_empty() && self.x.is_empty() && self.y.is_empty()
+    }
+}
+
 /// Run one or two configurations (`compare` = overrides of the second run).
 pub fn run(
     fmu: &Fmu,
     request: &CircleRequest,
     single: bool,
-    compare: &[(String, Value)],
+    compare: &Comparison,
     labels: (&str, &str),
     out: &Path,
 ) -> Result<(CircleReport, Vec<(String, crate::circle_test::PseudoCircleRun)>)> {
@@ -82,10 +98,12 @@ pub fn run(
     let mut requests = vec![(labels.0.to_string(), request.clone())];
     if !compare.is_empty() {
         let mut second = request.clone();
-        for (k, v) in compare {
+        for (k, v) in &compare.both {
             second.x_parameters.insert(k.clone(), *v);
             second.y_parameters.insert(k.clone(), *v);
         }
+        second.x_parameters.extend(compare.x.clone());
+        second.y_parameters.extend(compare.y.clone());
         requests.push((labels.1.to_string(), second));
     }
     let mut runs = Vec::new();
@@ -149,6 +167,7 @@ pub fn run(
     plot_circle(&svg, &title, &notes, request.radius, &plotted)?;
     files.push(svg);
     let protrusion_ratio = (runs.len() == 2).then(|| runs[1].feedback.max_protrusion / runs[0].feedback.max_protrusion);
+    let roundness_ratio = (runs.len() == 2).then(|| runs[1].feedback.roundness / runs[0].feedback.roundness);
     let report = CircleReport {
         mode: if single { "single" } else { "two-axis" },
         radius: request.radius,
@@ -156,6 +175,7 @@ pub fn run(
         samples_per_revolution: n,
         runs,
         protrusion_ratio,
+        roundness_ratio,
         files: files.clone(),
     };
     let json = out.join(if single { "pseudo_circle.json" } else { "circle.json" });
@@ -187,6 +207,9 @@ impl CircleReport {
         if let Some(ratio) = self.protrusion_ratio {
             println!("  largest quadrant protrusion, second run / first: {ratio:.3}");
         }
+        if let Some(ratio) = self.roundness_ratio {
+            println!("  roundness, second run / first: {ratio:.4} ({:.1}× {})", 1.0 / ratio, if ratio < 1.0 { "smaller" } else { "LARGER" });
+        }
         for f in &self.files {
             println!("  → {}", f.display());
         }
@@ -204,4 +227,31 @@ pub fn axis_parameters(
         m.insert(k, v);
     }
     Ok(m)
+}
+
+/// One tuned axis: the FMU parameters the tuning measured it with, its correction parameters.
+pub type TunedAxisParameters = (BTreeMap<String, Value>, BTreeMap<String, Value>);
+
+/// The x and y axes of a `servo tune` output directory.
+pub fn tuned_axes(dir: &Path) -> Result<[TunedAxisParameters; 2]> {
+    let path = dir.join("tune.json");
+    let text = std::fs::read_to_string(&path).with_context(|| format!("cannot read {} (run `servo tune --out {}` first)", path.display(), dir.display()))?;
+    let json: serde_json::Value = serde_json::from_str(&text).with_context(|| format!("{} is not a tuning file", path.display()))?;
+    let axes = json["axes"].as_array().ok_or_else(|| anyhow::anyhow!("{}: no axes", path.display()))?;
+    let axis = |name: &str| -> Result<TunedAxisParameters> {
+        let a = axes
+            .iter()
+            .find(|a| a["axis"] == name)
+            .ok_or_else(|| anyhow::anyhow!("{}: no axis `{name}` (the XY circle needs axes x and y)", path.display()))?;
+        let floats = |v: &serde_json::Value| -> BTreeMap<String, Value> {
+            v.as_object().map(|o| o.iter().filter_map(|(k, v)| v.as_f64().map(|x| (k.clone(), Value::Float(x)))).collect()).unwrap_or_default()
+        };
+        let base = floats(&a["fmu_parameters"]);
+        let correction: crate::tuning::AxisCorrection = serde_json::from_value(a["correction"].clone())
+            .with_context(|| format!("{}: axis {name}: the correction is not readable", path.display()))?;
+        crate::tuning::validate(&correction)?;
+        let corr = correction.parameters();
+        Ok((base, corr))
+    };
+    Ok([axis("x")?, axis("y")?])
 }

@@ -21,6 +21,7 @@ pub mod paths;
 pub mod plot;
 pub mod polynomial;
 pub mod report;
+pub mod response_model;
 pub mod scenario;
 pub mod sequence_scenario;
 pub mod spectral;

@@ -203,14 +203,41 @@ fn tune_writes_each_axis_correction_and_refuses_unusable_models() {
     let o = servo().args(["ident", "--anti-resonance", "x=40,y=70"]).arg("--fmu").arg(fmu_path()).arg("--out").arg(&out).output().unwrap();
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
     let (x, y) = (out.join("x.model.json"), out.join("y.model.json"));
-    let o = servo().args(["tune", "--json", "--model"]).arg(&x).arg(&y).arg("--fmu").arg(fmu_path()).arg("--out").arg(&out).output().unwrap();
-    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    // The seed as written: x carries y's numerator (70 Hz) and y carries x's (40 Hz), each
+    // over the same F.
+    let o = servo().args(["tune", "--method", "zeros", "--json", "--model"]).arg(&x).arg(&y).arg("--fmu").arg(fmu_path()).arg("--out").arg(&out).output().unwrap();
     let r: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
-    // x carries y's numerator (70 Hz) and y carries x's (40 Hz), each over the same F.
-    let zero = |axis: usize| r["filters"][axis]["sections"][0]["zeros"][0].as_f64().unwrap();
+    let zero = |axis: usize| r["tuning"]["axes"][axis]["correction"]["sections"][0]["zeros"][0].as_f64().unwrap();
     assert!((zero(0) - 70.0).abs() < 1.0 && (zero(1) - 40.0).abs() < 1.0, "{r}");
     let text = std::fs::read_to_string(out.join("x.corr.toml")).unwrap();
     assert!(text.contains("\"corr.count\" = 2"), "{text}");
+    // ...which does not bring these axes closer: reported, and the exit status says so.
+    assert_eq!(r["improved"], false, "{r}");
+    assert!(!o.status.success());
+
+    // The default (measured models) does, and the circle of the tuned axes gets rounder.
+    let o = servo().args(["tune", "--json", "--model"]).arg(&x).arg(&y).arg("--fmu").arg(fmu_path()).arg("--out").arg(&out).output().unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let r: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+    let (before, after) = (r["tuning"]["spread_before"][0].as_f64().unwrap(), r["tuning"]["spread_after"][0].as_f64().unwrap());
+    assert!(after < before / 10.0, "{r}");
+    let circle = tmp("tune-circle");
+    let o = servo()
+        .args(["circle", "--json", "--radius", "0.05", "--feed", "6.283185307179586", "--lead-in", "30", "--tuned"])
+        .arg(&out)
+        .arg("--fmu")
+        .arg(fmu_path())
+        .arg("--out")
+        .arg(&circle)
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let c: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+    assert!(c["circle"]["roundness_ratio"].as_f64().unwrap() < 0.05, "{c}");
+
+    let o = servo().args(["tune", "--method", "poles", "--model"]).arg(&x).arg(&y).arg("--out").arg(&out).output().unwrap();
+    assert_eq!(o.status.code(), Some(2));
+    assert!(String::from_utf8_lossy(&o.stderr).contains("response or zeros"));
     let o = servo().args(["tune", "--no-check", "--model"]).arg(&x).arg("--out").arg(&out).output().unwrap();
     assert_eq!(o.status.code(), Some(2));
     assert!(String::from_utf8_lossy(&o.stderr).contains("at least two"));

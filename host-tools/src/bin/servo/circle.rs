@@ -15,6 +15,7 @@ pub fn circle(
     x_set: &[String],
     y_set: &[String],
     compare: &[String],
+    tuned: &Option<PathBuf>,
     with_fmpy: bool,
     common: &Common,
 ) -> Result<bool> {
@@ -28,7 +29,19 @@ pub fn circle(
         "motor" => Measure::Motor,
         other => bail!("--measure must be load or motor (got `{other}`)"),
     };
-    let (xp, yp) = (axis_parameters(set, x_set)?, axis_parameters(set, y_set)?);
+    let (mut xp, mut yp) = (axis_parameters(set, x_set)?, axis_parameters(set, y_set)?);
+    let mut comparison = host_tools::circle_report::Comparison::default();
+    let mut labels = ("as given".to_string(), String::new());
+    if let Some(dir) = tuned {
+        // The axes as `servo tune` measured them (--set / --x-set / --y-set still apply on
+        // top); the second run adds each axis's correction.
+        let [(x_base, x_corr), (y_base, y_corr)] = host_tools::circle_report::tuned_axes(dir)?;
+        xp = x_base.into_iter().chain(xp).collect();
+        yp = y_base.into_iter().chain(yp).collect();
+        comparison.x = x_corr;
+        comparison.y = y_corr;
+        labels = ("without correction".into(), "with correction".into());
+    }
     let (x_parameters, y_parameters) = match single.as_deref() {
         None | Some("x") => (xp, yp),
         Some("y") => (yp.clone(), yp),
@@ -46,15 +59,19 @@ pub fn circle(
         x_parameters,
         y_parameters,
     };
-    let compare: Vec<_> = compare.iter().map(|s| parse_assignment(s)).collect::<Result<_>>()?;
+    comparison.both = compare.iter().map(|s| parse_assignment(s)).collect::<Result<_>>()?;
+    if tuned.is_some() && !comparison.both.is_empty() {
+        bail!("--tuned compares without and with the correction: leave out --compare");
+    }
     let out = common.out.clone().unwrap_or_else(|| default_out("circle"));
     let fmu_path = common.fmu.clone().unwrap_or_else(default_fmu);
     let fmu = Fmu::load(&fmu_path)?;
-    let second = compare.iter().map(|(k, v)| format!("{k} = {}", v.as_f64())).collect::<Vec<_>>().join(", ");
-    let labels = ("as given", second.as_str());
+    if tuned.is_none() {
+        labels.1 = comparison.both.iter().map(|(k, v)| format!("{k} = {}", v.as_f64())).collect::<Vec<_>>().join(", ");
+    }
     let pb = progress_bar("circle", common.json);
     pb.set_position(100);
-    let (report, pseudo) = run(&fmu, &request, single.is_some(), &compare, labels, &out)?;
+    let (report, pseudo) = run(&fmu, &request, single.is_some(), &comparison, (&labels.0, &labels.1), &out)?;
     pb.finish_and_clear();
     let mut ok = true;
     let mut fmpy_note = None;

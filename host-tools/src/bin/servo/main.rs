@@ -195,6 +195,10 @@ enum Command {
         /// Second run with these parameter overrides, overlaid (NAME=VALUE, comma separated)
         #[arg(long, value_delimiter = ',')]
         compare: Vec<String>,
+        /// A `servo tune` output directory: run its x and y axes without and then with their
+        /// response corrections (seed 001), overlaid, and print the roundness ratio
+        #[arg(long)]
+        tuned: Option<PathBuf>,
         /// Single axis: also run through fmpy and demand the same feedback trace
         #[arg(long)]
         fmpy: bool,
@@ -302,19 +306,36 @@ enum Command {
         #[command(flatten)]
         common: Common,
     },
-    /// Response-correction filters from identified models (seed 001): every axis gets the
-    /// OTHER axes' anti-resonance numerators over a common low-pass F, F·Π N_other.
+    /// Response-correction filters that make every axis's command → machine-end response
+    /// the same (seed 001).
     ///
-    /// Reads the model files `servo ident` wrote (edited or not), writes <axis>.corr.toml
-    /// (the FMU's corr.* parameters, ready for a scenario's [parameters] or --set) and
-    /// tune.json, then checks on the FMU: each axis's command → machine-end response before
-    /// and after (a periodic multisine on the position command, friction off), the largest
-    /// difference between axes up to the position-loop bandwidth, and tune.svg.
+    /// Reads the model files `servo ident` wrote (edited or not) and runs each axis on the
+    /// FMU with the parameters it was identified with (friction off).
+    ///
+    /// --method response (default): measures each axis's command → machine-end response
+    /// (a periodic multisine on the position command, 1 Hz to twice the position-loop
+    /// bandwidth), fits a model of second-order factors to it, and gives every axis the
+    /// OTHER axes' models: all axes then answer the product of all models, alike whatever
+    /// their closed-loop denominators. --method zeros: the seed as written, F·Π N_other from
+    /// the identified anti-resonances over a critically damped F; it equalises only when all
+    /// axes have the same closed-loop denominator, which a loop closed on the motor encoder
+    /// does not give (`servo bench ident` shows both).
+    ///
+    /// Writes <axis>.corr.toml (the FMU's corr.* parameters, ready for a scenario's
+    /// [parameters] or --set), tune.json (read by `servo circle --tuned DIR`) and tune.svg
+    /// (every axis before and after), and prints the largest difference between axes up to
+    /// the position-loop bandwidth before and after. The exit status is non-zero when the
+    /// correction does not bring the axes closer.
+    ///
+    /// Example: servo ident --anti-resonance x=40,y=70 && servo tune --model out/ident/x.model.json out/ident/y.model.json
     Tune {
         /// Model files from `servo ident`
         #[arg(long = "model", num_args = 1.., required = true)]
         models: Vec<PathBuf>,
-        /// Skip the check runs on the FMU
+        /// response (measured closed-loop models) or zeros (the seed's F·Π N_other)
+        #[arg(long, default_value = "response")]
+        method: String,
+        /// Skip the check runs on the FMU (the response method still measures once)
         #[arg(long)]
         no_check: bool,
         #[command(flatten)]
@@ -426,7 +447,7 @@ fn main() -> ExitCode {
     let result = match &cli.command {
         Command::Run { scenarios, fmpy, common } => backbone::run(scenarios, *fmpy, common),
         Command::Sequence { files, fmpy, common } => sequence::sequence(files, *fmpy, common),
-        Command::Tune { models, no_check, common } => ident::tune(models, *no_check, common),
+        Command::Tune { models, method, no_check, common } => ident::tune(models, method, *no_check, common),
         Command::Ident { axes, set, anti_resonance, amplitude, snr_db, model, common } => {
             ident::ident(axes, set, anti_resonance, *amplitude, *snr_db, model, common)
         }
@@ -485,8 +506,8 @@ fn main() -> ExitCode {
             // The drive's correlator and the host's equivalent-time estimate must agree.
             Ok(r.stream_vs_online.0 <= 0.01 && r.stream_vs_online.1 <= 0.1)
         })(),
-        Command::Circle { axes, single, radius, feed, cw, lead_in, measure, set, x_set, y_set, compare, fmpy, common } => {
-            circle::circle(axes, single, *radius, *feed, *cw, *lead_in, measure, set, x_set, y_set, compare, *fmpy, common)
+        Command::Circle { axes, single, radius, feed, cw, lead_in, measure, set, x_set, y_set, compare, tuned, fmpy, common } => {
+            circle::circle(axes, single, *radius, *feed, *cw, *lead_in, measure, set, x_set, y_set, compare, tuned, *fmpy, common)
         }
         Command::Compare { a, b } => (|| {
             let (ta, tb) = (Trace::read_csv(a)?, Trace::read_csv(b)?);
