@@ -236,8 +236,10 @@ pub fn response_corrections(models: &[ResponseModel]) -> Result<Vec<AxisCorrecti
         .collect()
 }
 
-/// Check a correction against the core's own rules before any FMU or drive sees it.
-pub fn validate(c: &AxisCorrection) -> Result<()> {
+/// The core's filter parameters of a correction (what the FMU builds from the `corr.*`
+/// parameters and the drive receives in a `LoadCorrection` frame), checked against the core's
+/// own rules before any FMU or drive sees them.
+pub fn core_parameters(c: &AxisCorrection) -> Result<control_core::response_correction::CorrectionParams> {
     use control_core::response_correction::{CorrectionParams, CorrectionSection, SecondOrder};
     let mut p = CorrectionParams { count: c.sections.len(), ..Default::default() };
     if c.sections.len() > p.sections.len() {
@@ -250,7 +252,23 @@ pub fn validate(c: &AxisCorrection) -> Result<()> {
         };
     }
     let period = control_core::Params::default().rates.position_period();
-    p.validate(period).map_err(|e| anyhow::anyhow!("axis {}: {e}", c.axis))
+    p.validate(period).map_err(|e| anyhow::anyhow!("axis {}: {e}", c.axis))?;
+    Ok(p)
+}
+
+/// Check a correction against the core's rules.
+pub fn validate(c: &AxisCorrection) -> Result<()> {
+    core_parameters(c).map(|_| ())
+}
+
+/// The drive's `LoadCorrection` request for a correction, as one framed message (postcard,
+/// CRC-16, COBS, zero delimiter) ready for the link.
+pub fn drive_frame(c: &AxisCorrection) -> Result<Vec<u8>> {
+    use control_core::protocol::{encode, Request, MAX_FRAME};
+    let mut buf = vec![0u8; MAX_FRAME + 8];
+    let n = encode(&Request::LoadCorrection(core_parameters(c)?), &mut buf).map_err(|e| anyhow::anyhow!("axis {}: {e}", c.axis))?;
+    buf.truncate(n);
+    Ok(buf)
 }
 
 /// Measure, fit, correct and (with `check`) measure again. `progress` gets 0..1.
@@ -333,7 +351,9 @@ pub fn tune(fmu: &Fmu, models: &[AxisModel], method: Method, check: bool, mut pr
     })
 }
 
-/// `<axis>.corr.toml` per axis, tune.json and (when measured) tune.svg; returns the files.
+/// `<axis>.corr.toml` (FMU parameters) and `<axis>.corr.frame` (the drive's framed
+/// `LoadCorrection` request) per axis, tune.json and (when measured) tune.svg; returns the
+/// files.
 pub fn write(t: &Tuning, out: &std::path::Path) -> Result<Vec<std::path::PathBuf>> {
     std::fs::create_dir_all(out)?;
     let mut files = Vec::new();
@@ -350,6 +370,9 @@ pub fn write(t: &Tuning, out: &std::path::Path) -> Result<Vec<std::path::PathBuf
         let path = out.join(format!("{}.corr.toml", a.axis));
         std::fs::write(&path, format!("# servo tune ({:?} method): response correction of axis {}\n{text}", t.method, a.axis))?;
         files.push(path);
+        let frame = out.join(format!("{}.corr.frame", a.axis));
+        std::fs::write(&frame, drive_frame(&a.correction)?)?;
+        files.push(frame);
     }
     let json = out.join("tune.json");
     std::fs::write(&json, serde_json::to_string_pretty(t)?)?;

@@ -68,3 +68,33 @@ fn bad_tuning_requests_are_refused_with_the_reason() {
     let e = host_tools::circle_report::tuned_axes(std::path::Path::new("/nonexistent/tune")).unwrap_err().to_string();
     assert!(e.contains("servo tune"), "{e}");
 }
+
+#[test]
+fn the_drive_accepts_the_correction_frame_the_fmu_runs() {
+    use control_core::protocol::{decode, handle, Request, Response};
+    let t = tune(&load_fmu(), &[axis("x", 40.0), axis("y", 70.0)], Method::Response, false, |_| {}).unwrap();
+    let dir = std::env::temp_dir().join(format!("servo-tune-frame-{}", std::process::id()));
+    let files = host_tools::tuning::write(&t, &dir).unwrap();
+    for a in &t.axes {
+        let path = dir.join(format!("{}.corr.frame", a.axis));
+        assert!(files.contains(&path));
+        let mut frame = std::fs::read(&path).unwrap();
+        let request: Request = decode(&mut frame).unwrap();
+        let Request::LoadCorrection(p) = request else { panic!("{request:?}") };
+        // The same sections as the FMU parameters in <axis>.corr.toml, at f32.
+        assert_eq!(p.count, a.correction.sections.len());
+        for (s, q) in p.sections.iter().zip(&a.correction.sections) {
+            assert_eq!(s.poles.hz, q.pole_hz as f32);
+            assert_eq!(s.poles.damping, q.pole_damping as f32);
+            assert_eq!(s.zeros.map(|z| (z.hz, z.damping)), q.zeros.map(|(h, d)| (h as f32, d as f32)));
+        }
+        let params = control_core::Params::default();
+        let mut drive = control_core::Axis::new(params).unwrap();
+        let mut commands = control_core::Commands::default();
+        assert_eq!(handle(&mut drive, &mut commands, Request::LoadCorrection(p)), Response::Done);
+        // A corrupted frame is refused before anything is acted on.
+        let mut bad = std::fs::read(&path).unwrap();
+        bad[3] ^= 0x40;
+        assert!(decode::<Request>(&mut bad).is_err());
+    }
+}

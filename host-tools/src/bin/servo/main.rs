@@ -322,7 +322,8 @@ enum Command {
     /// does not give (`servo bench ident` shows both).
     ///
     /// Writes <axis>.corr.toml (the FMU's corr.* parameters, ready for a scenario's
-    /// [parameters] or --set), tune.json (read by `servo circle --tuned DIR`) and tune.svg
+    /// [parameters] or --set), <axis>.corr.frame (the drive's LoadCorrection request, framed
+    /// for the link), tune.json (read by `servo circle --tuned DIR`) and tune.svg
     /// (every axis before and after), and prints the largest difference between axes up to
     /// the position-loop bandwidth before and after. The exit status is non-zero when the
     /// correction does not bring the axes closer.
