@@ -183,6 +183,12 @@ impl Axis {
     }
 
     /// Clear latched faults; the loops restart from rest.
+    /// Latch a fault found outside the core (the power stage's break input, current sensing):
+    /// the next [`Axis::step`] switches the PWM off, like any fault, until cleared.
+    pub fn latch_fault(&mut self, bit: u32) {
+        self.telemetry.faults.latch(bit);
+    }
+
     pub fn clear_faults(&mut self) {
         self.telemetry.faults = Faults::default();
         self.friction.reset();
@@ -462,6 +468,19 @@ mod tests {
         assert!(axis.faults().contains(Faults::NOT_FINITE));
         // Latched: clean inputs do not clear it.
         assert!(!axis.step(&inputs(), &Commands::default()).enabled);
+        axis.clear_faults();
+        assert!(axis.step(&inputs(), &Commands::default()).enabled);
+    }
+
+    #[test]
+    fn an_outside_fault_switches_the_pwm_off_at_the_next_tick_until_cleared() {
+        let mut axis = Axis::new(Params::default()).unwrap();
+        assert!(axis.step(&inputs(), &Commands::default()).enabled);
+        axis.latch_fault(Faults::HARDWARE_BREAK);
+        let out = axis.step(&inputs(), &Commands::default());
+        assert!(!out.enabled && out.duties == [0.0; 3]);
+        assert!(axis.faults().contains(Faults::HARDWARE_BREAK));
+        assert!(axis.faults().names().any(|n| n == "hardware break input"));
         axis.clear_faults();
         assert!(axis.step(&inputs(), &Commands::default()).enabled);
     }

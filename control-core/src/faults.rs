@@ -11,6 +11,10 @@ impl Faults {
     pub const FOLLOWING_ERROR: u32 = 1 << 3;
     pub const NOT_FINITE: u32 = 1 << 4;
     pub const ENCODER: u32 = 1 << 5;
+    /// The power stage's own protection (the timer's break input) switched the bridge off.
+    pub const HARDWARE_BREAK: u32 = 1 << 6;
+    /// Current sensing is not calibrated or its offsets are implausible.
+    pub const SENSING: u32 = 1 << 7;
 
     pub fn any(self) -> bool {
         self.0 != 0
@@ -23,13 +27,15 @@ impl Faults {
     }
     /// Names of the set bits, for logs and reports.
     pub fn names(self) -> impl Iterator<Item = &'static str> {
-        const NAMES: [(u32, &str); 6] = [
+        const NAMES: [(u32, &str); 8] = [
             (Faults::OVERCURRENT, "overcurrent"),
             (Faults::BUS_UNDERVOLTAGE, "bus undervoltage"),
             (Faults::BUS_OVERVOLTAGE, "bus overvoltage"),
             (Faults::FOLLOWING_ERROR, "following error"),
             (Faults::NOT_FINITE, "non-finite value in the loop"),
             (Faults::ENCODER, "encoder jump"),
+            (Faults::HARDWARE_BREAK, "hardware break input"),
+            (Faults::SENSING, "current sensing not calibrated"),
         ];
         NAMES.into_iter().filter(move |(b, _)| self.0 & b != 0).map(|(_, n)| n)
     }

@@ -19,6 +19,9 @@ pub const MAGIC: &[u8; 4] = b"SVV1";
 pub const TICK_BYTES: usize = 41;
 pub const EVENT_BYTES: usize = 13;
 
+/// The preset with every feature on (for the per-tick cost with everything at once).
+pub const ALL_FEATURES: u32 = 5;
+
 /// Parameter sets the vectors may use (both sides build them the same way).
 pub fn preset(id: u32) -> Option<Params> {
     let mut p = Params::default();
@@ -38,6 +41,28 @@ pub fn preset(id: u32) -> Option<Params> {
             p.correction.sections[1] = CorrectionSection { zeros: None, poles: SecondOrder { hz: 100.0, damping: 1.0 } };
         }
         4 => p.acc_dec.kind = AccDecKind::MovingAverage,
+        // Every feature at once, at its most expensive: 6th-order Butterworth acc/dec, eight
+        // correction sections, friction compensation, torque low-pass and notch, and (with a
+        // sweep start event) a sweep injecting on the torque while the position loop runs.
+        ALL_FEATURES => {
+            p.acc_dec.kind = AccDecKind::Butterworth;
+            p.acc_dec.order = 6;
+            p.friction.amplitude = 0.06;
+            p.friction.decay = 0.2;
+            p.filters.low_pass_hz = 1500.0;
+            p.filters.notch_hz = 900.0;
+            p.filters.notch_q = 2.0;
+            p.filters.notch_depth = 0.1;
+            p.sweep.point = crate::excitation::InjectionPoint::TorqueCommand;
+            p.sweep.amplitude = 0.05;
+            p.correction.count = crate::response_correction::MAX_SECTIONS;
+            for (i, s) in p.correction.sections.iter_mut().enumerate() {
+                *s = CorrectionSection {
+                    zeros: Some(SecondOrder { hz: 40.0 + 10.0 * i as f32, damping: 0.05 }),
+                    poles: SecondOrder { hz: 45.0 + 10.0 * i as f32, damping: 0.3 },
+                };
+            }
+        }
         _ => return None,
     }
     Some(p)

@@ -10,10 +10,12 @@
 #![forbid(unsafe_code)]
 
 pub mod acc_dec;
+pub mod acquisition_stream;
 pub mod axis;
 pub mod biquad;
 pub mod command_path;
 pub mod current_loop;
+pub mod current_sensing;
 pub mod encoder;
 pub mod excitation;
 pub mod faults;

@@ -13,10 +13,11 @@ use serde::{de::DeserializeOwned, Deserialize, Serialize};
 
 use crate::axis::{Axis, Commands, Mode, Telemetry};
 use crate::params::Params;
+use crate::acquisition_stream::{AcquisitionStream, SampleBatch};
 use crate::response_correction::CorrectionParams;
 use crate::stop_sequence::{Refusal, SequenceEvent};
 
-pub const VERSION: u16 = 1;
+pub const VERSION: u16 = 2;
 /// Largest encoded frame (a full parameter set fits with room to spare).
 pub const MAX_FRAME: usize = 1024;
 
@@ -37,6 +38,8 @@ pub enum Request {
     LoadCorrection(CorrectionParams),
     ClearFaults,
     GetTelemetry,
+    /// Stream acquisition samples (`Response::Samples` frames, unasked) or stop.
+    Stream { enabled: bool },
 }
 
 /// Why a request was refused.
@@ -89,6 +92,8 @@ pub enum Response {
     Refused(RefusalReason),
     Telemetry(Telemetry),
     FrameError(FrameError),
+    /// Streamed acquisition samples (sent by the drive while streaming is on).
+    Samples(SampleBatch),
 }
 
 /// CRC-16/CCITT-FALSE (poly 0x1021, init 0xFFFF).
@@ -183,8 +188,8 @@ pub fn decode<T: DeserializeOwned>(frame: &mut [u8]) -> Result<T, FrameError> {
     postcard::from_bytes(payload).map_err(|_| FrameError::Message)
 }
 
-/// The drive's side: carry out one request on `axis` (and its `commands`).
-pub fn handle(axis: &mut Axis, commands: &mut Commands, request: Request) -> Response {
+/// The drive's side: carry out one request on `axis` (its `commands`, its sample `stream`).
+pub fn handle(axis: &mut Axis, commands: &mut Commands, stream: &mut AcquisitionStream, request: Request) -> Response {
     let refused = Response::Refused;
     match request {
         Request::Hello { version } if version != VERSION => Response::FrameError(FrameError::Version { got: version }),
@@ -233,6 +238,10 @@ pub fn handle(axis: &mut Axis, commands: &mut Commands, request: Request) -> Res
             Response::Done
         }
         Request::GetTelemetry => Response::Telemetry(*axis.telemetry()),
+        Request::Stream { enabled } => {
+            stream.set_enabled(enabled);
+            Response::Done
+        }
     }
 }
 
@@ -291,21 +300,40 @@ mod tests {
     fn refused_requests_change_nothing() {
         let mut axis = Axis::new(Params::default()).unwrap();
         let mut commands = Commands { mode: Mode::Velocity, velocity: 10.0, ..Default::default() };
+        let mut stream = AcquisitionStream::default();
         let before = *axis.params();
         let mut bad = Params::default();
         bad.velocity.kp = f32::NAN;
-        assert_eq!(handle(&mut axis, &mut commands, Request::SetParams(Params::default())), Response::Refused(RefusalReason::Busy));
+        assert_eq!(handle(&mut axis, &mut commands, &mut stream, Request::SetParams(Params::default())), Response::Refused(RefusalReason::Busy));
         commands = Commands::default();
-        assert_eq!(handle(&mut axis, &mut commands, Request::SetParams(bad)), Response::Refused(RefusalReason::InvalidParams));
+        assert_eq!(handle(&mut axis, &mut commands, &mut stream, Request::SetParams(bad)), Response::Refused(RefusalReason::InvalidParams));
         assert_eq!(*axis.params(), before);
         let nan = Commands { torque: f32::NAN, ..Default::default() };
-        assert_eq!(handle(&mut axis, &mut commands, Request::SetCommands(nan)), Response::Refused(RefusalReason::NotFinite));
+        assert_eq!(handle(&mut axis, &mut commands, &mut stream, Request::SetCommands(nan)), Response::Refused(RefusalReason::NotFinite));
         assert_eq!(commands, Commands::default());
         assert_eq!(
-            handle(&mut axis, &mut commands, Request::Sequence(SequenceEvent::Stop)),
+            handle(&mut axis, &mut commands, &mut stream, Request::Sequence(SequenceEvent::Stop)),
             Response::Refused(RefusalReason::Sequence(Refusal::NotInSequenceMode))
         );
-        assert_eq!(handle(&mut axis, &mut commands, Request::Hello { version: 7 }), Response::FrameError(FrameError::Version { got: 7 }));
-        assert_eq!(handle(&mut axis, &mut commands, Request::Hello { version: VERSION }), Response::Hello { version: VERSION });
+        assert_eq!(handle(&mut axis, &mut commands, &mut stream, Request::Hello { version: 7 }), Response::FrameError(FrameError::Version { got: 7 }));
+        assert_eq!(handle(&mut axis, &mut commands, &mut stream, Request::Hello { version: VERSION }), Response::Hello { version: VERSION });
+    }
+
+    #[test]
+    fn streaming_is_switched_over_the_link_and_batches_fit_a_frame() {
+        let mut axis = Axis::new(Params::default()).unwrap();
+        let mut commands = Commands::default();
+        let mut stream = AcquisitionStream::default();
+        assert_eq!(handle(&mut axis, &mut commands, &mut stream, Request::Stream { enabled: true }), Response::Done);
+        assert!(stream.enabled());
+        for t in 0..64u64 {
+            stream.offer(&crate::phase_shifted_sweep::AcquisitionSample { tick: t, u: 1.5, y: -2.5, phase: 3.0, measuring: true, point: 7, record: 2 });
+        }
+        let batch = stream.take_batch().unwrap();
+        let mut buf = [0u8; MAX_FRAME + 8];
+        let n = encode(&Response::Samples(batch), &mut buf).unwrap();
+        assert_eq!(decode::<Response>(&mut buf[..n]), Ok(Response::Samples(batch)));
+        assert_eq!(handle(&mut axis, &mut commands, &mut stream, Request::Stream { enabled: false }), Response::Done);
+        assert!(stream.take_batch().is_none());
     }
 }

@@ -13,6 +13,7 @@ pub mod bode_plot;
 pub mod circle_plot;
 pub mod circle_report;
 pub mod circle_test;
+pub mod firmware;
 pub mod fmu_runner;
 pub mod frequency_response;
 pub mod ident_report;

@@ -91,7 +91,8 @@ fn the_drive_accepts_the_correction_frame_the_fmu_runs() {
         let params = control_core::Params::default();
         let mut drive = control_core::Axis::new(params).unwrap();
         let mut commands = control_core::Commands::default();
-        assert_eq!(handle(&mut drive, &mut commands, Request::LoadCorrection(p)), Response::Done);
+        let mut stream = control_core::acquisition_stream::AcquisitionStream::default();
+        assert_eq!(handle(&mut drive, &mut commands, &mut stream, Request::LoadCorrection(p)), Response::Done);
         // A corrupted frame is refused before anything is acted on.
         let mut bad = std::fs::read(&path).unwrap();
         bad[3] ^= 0x40;

@@ -1,32 +1,44 @@
-//! The control loop: `Axis::step` at the base tick, the same function the FMU calls.
+//! The control loop: `Axis::step` in the ADC's end-of-conversion interrupt at the base tick,
+//! the same function the FMU calls; a task in the high-priority executor, woken from that
+//! interrupt once per position tick, does what may wait a little (fault logs, health).
 //!
-//! Status: the encoder is read (its 16-bit counter extended to the core's wrapping 32 bits)
-//! and the core runs at 16 kHz from a high-priority executor; the phase currents and the bus
-//! voltage are NOT measured yet (the ADC injected conversions triggered by TIM1 are still to
-//! be written). Until they are, the bridge stays disabled whatever the core computes: a
-//! current loop fed with made-up currents must never drive a motor.
+//! Per tick, in the interrupt:
+//! 1. take the sampled phase currents and bus voltage, the encoder count and the break flag;
+//! 2. until the current offsets are calibrated (bridge off), feed the calibration instead;
+//!    implausible offsets latch a sensing fault and the bridge never comes on;
+//! 3. a break (the power stage's own overcurrent comparator) latches a core fault;
+//! 4. `Axis::step`; the duties go to TIM1 and the gate drive follows the core's `enabled`
+//!    at once, so any fault the core sees (overcurrent, bus over/under-voltage, following
+//!    error, encoder jump, a non-finite value) switches the PWM off within the tick;
+//! 5. the latest acquisition sample is offered to the link's stream.
 
 use core::cell::RefCell;
 use core::mem::MaybeUninit;
+use core::sync::atomic::{AtomicU32, Ordering};
 
+use control_core::acquisition_stream::AcquisitionStream;
+use control_core::current_sensing::CurrentSensing;
+use control_core::faults::Faults;
 use control_core::{Axis, AxisInputs, Commands, Params, Telemetry};
-use embassy_stm32::timer::complementary_pwm::ComplementaryPwm;
-use embassy_stm32::timer::qei::Qei;
-use embassy_stm32::{peripherals, timer::Channel};
+use embassy_stm32::interrupt;
 use embassy_sync::blocking_mutex::raw::CriticalSectionRawMutex;
 use embassy_sync::blocking_mutex::Mutex;
-use embassy_time::{Duration, Ticker};
+use embassy_sync::signal::Signal;
+
+use crate::board;
 
 /// What the link and the loop share.
 pub struct Shared {
     pub axis: Axis,
     pub commands: Commands,
     pub telemetry: Telemetry,
+    pub sensing: CurrentSensing,
+    pub stream: AcquisitionStream,
 }
 
-/// The shared state, filled once by [`install`]. Uninitialised until then, so that its 16 KB
-/// (the axis holds room for the largest acc/dec filter) go to `.bss`, not into flash as an
-/// initial image (an `Option` would have put them in `.data`).
+/// The shared state, filled once by [`install`]. Uninitialised until then, so that its
+/// kilobytes (the axis holds room for the largest acc/dec filter) go to `.bss`, not into
+/// flash as an initial image (an `Option` would have put them in `.data`).
 pub struct Slot {
     installed: bool,
     value: MaybeUninit<Shared>,
@@ -42,62 +54,100 @@ impl Slot {
 pub static SHARED: Mutex<CriticalSectionRawMutex, RefCell<Slot>> =
     Mutex::new(RefCell::new(Slot { installed: false, value: MaybeUninit::uninit() }));
 
-pub fn install(params: Params) -> Result<(), control_core::ParamError> {
-    let axis = Axis::new(params)?;
+/// Woken once per position tick from the interrupt.
+static POSITION_TICK: Signal<CriticalSectionRawMutex, Faults> = Signal::new();
+/// Interrupts since start (health: the link can read it in logs).
+static TICKS: AtomicU32 = AtomicU32::new(0);
+
+pub fn install(params: Params) -> Result<(), &'static str> {
+    let axis = Axis::new(params).map_err(|_| "parameters refused by the core")?;
+    let sensing = CurrentSensing::new(board::SCALES).map_err(|_| "sensing scales refused by the core")?;
     SHARED.lock(|s| {
         let mut s = s.borrow_mut();
         if !s.installed {
-            s.value.write(Shared { axis, commands: Commands::default(), telemetry: Telemetry::default() });
+            s.value.write(Shared {
+                axis,
+                commands: Commands::default(),
+                telemetry: Telemetry::default(),
+                sensing,
+                stream: AcquisitionStream::default(),
+            });
             s.installed = true;
         }
     });
     Ok(())
 }
 
-/// The 16-bit quadrature counter extended to a wrapping 32-bit count.
-struct EncoderCount {
-    last: u16,
-    count: i32,
+/// Enable the sampling interrupt at the highest priority.
+pub fn start(priority: interrupt::Priority) {
+    use embassy_stm32::interrupt::InterruptExt;
+    board::SAMPLE_INTERRUPT.set_priority(priority);
+    // SAFETY: the handler below touches only `SHARED` (under its mutex) and the board's
+    // registers that nothing else writes after `board::init`.
+    unsafe { board::SAMPLE_INTERRUPT.enable() };
 }
 
-impl EncoderCount {
-    fn update(&mut self, raw: u16) -> i32 {
-        self.count = self.count.wrapping_add(raw.wrapping_sub(self.last) as i16 as i32);
-        self.last = raw;
-        self.count
+/// One control tick; called from the sampling interrupt (the binary binds it).
+pub fn on_sample() {
+    let (currents, bus) = board::take_sample();
+    let count = board::encoder_count();
+    let broke = board::break_tripped();
+    let position_tick = SHARED.lock(|s| {
+        let mut s = s.borrow_mut();
+        let Some(s) = s.get() else {
+            board::set_outputs(false);
+            return None;
+        };
+        let Some((phase_currents, bus_voltage)) = s.sensing.convert(currents, bus) else {
+            // Calibrating with the bridge off; a failure latches a fault for good.
+            board::set_outputs(false);
+            if s.sensing.calibrate(currents).is_err() {
+                s.axis.latch_fault(Faults::SENSING);
+                s.telemetry = *s.axis.telemetry();
+            }
+            return None;
+        };
+        if broke {
+            s.axis.latch_fault(Faults::HARDWARE_BREAK);
+        }
+        let inputs = AxisInputs { phase_currents, encoder_count: count, bus_voltage };
+        let commands = s.commands;
+        let pwm = s.axis.step(&inputs, &commands);
+        board::write_duties(pwm.duties);
+        board::set_outputs(pwm.enabled);
+        let t = s.axis.telemetry();
+        s.stream.offer(&t.sweep.sample);
+        s.telemetry = *t;
+        let divider = s.axis.params().rates.position_divider;
+        // A u32 counter: a 64-bit modulo is a library call on the Cortex-M4.
+        (TICKS.load(Ordering::Relaxed) % divider == 0).then_some(t.faults)
+    });
+    TICKS.fetch_add(1, Ordering::Relaxed);
+    if let Some(faults) = position_tick {
+        POSITION_TICK.signal(faults);
     }
 }
 
+/// Position-tick housekeeping in the high-priority executor: fault changes are logged when
+/// they happen, and a heartbeat once a second.
 #[embassy_executor::task]
-pub async fn control_loop(mut bridge: ComplementaryPwm<'static, peripherals::TIM1>, encoder: Qei<'static, peripherals::TIM2>) {
-    let period = Duration::from_hz(control_core::Params::default().rates.current_loop_hz as u64);
-    let mut ticker = Ticker::every(period);
-    let mut count = EncoderCount { last: encoder.count(), count: 0 };
-    let max = bridge.get_max_duty();
-    let mut ticks: u32 = 0;
+pub async fn position_tick_task() {
+    let mut last = Faults::default();
+    let mut n: u32 = 0;
     loop {
-        ticker.next().await;
-        let raw = count.update(encoder.count());
-        let duties = SHARED.lock(|s| {
-            let mut s = s.borrow_mut();
-            let s = s.get()?;
-            // Not measured yet (see the module doc): zero currents, nominal bus.
-            let inputs = AxisInputs { phase_currents: [0.0, 0.0], encoder_count: raw, bus_voltage: 48.0 };
-            let commands = s.commands;
-            let pwm = s.axis.step(&inputs, &commands);
-            s.telemetry = *s.axis.telemetry();
-            Some(pwm.duties)
-        });
-        if let Some(d) = duties {
-            for (ch, duty) in [Channel::Ch1, Channel::Ch2, Channel::Ch3].into_iter().zip(d) {
-                bridge.set_duty(ch, (duty.clamp(0.0, 1.0) * max as f32) as u32);
+        let faults = POSITION_TICK.wait().await;
+        if faults != last {
+            for name in faults.names() {
+                defmt::warn!("fault latched: {} (PWM off until ClearFaults)", name);
             }
+            if !faults.any() {
+                defmt::info!("faults cleared");
+            }
+            last = faults;
         }
-        // The bridge stays off until the currents are measured (see the module doc).
-        bridge.set_master_output_enable(false);
-        ticks = ticks.wrapping_add(1);
-        if ticks % 16_000 == 0 {
-            defmt::info!("control loop alive, encoder {}", raw);
+        n = n.wrapping_add(1);
+        if n % 4_000 == 0 {
+            defmt::info!("control loop alive: {} ticks, faults {:#x}", TICKS.load(Ordering::Relaxed), faults.0);
         }
     }
 }

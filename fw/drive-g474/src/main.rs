@@ -1,13 +1,15 @@
-//! Servo drive firmware: the control core (`control-core`) in Embassy tasks on an STM32G474.
-//! Board code in `board`, application code in `control` (the loop) and `link` (the host
-//! protocol).
+//! Servo drive firmware: the control core (`control-core`) around an STM32G474. The library
+//! holds board code (`board`) and application code (`control`: the loop, `link`: the host
+//! protocol); this binary wires interrupts and tasks. On-target tests: `fw/tests`.
+//!
+//! Interrupt priorities (lower number = more urgent): the sampling interrupt that runs the
+//! loop P0; the high-priority executor (position-tick housekeeping) P1; Embassy's own time
+//! driver (TIM4) and the link's USART2 P3, so nothing of theirs delays a control tick.
 
 #![no_std]
 #![no_main]
 
-mod board;
-mod control;
-mod link;
+use drive_g474::{board, control, link};
 
 use defmt_rtt as _;
 use embassy_executor::{InterruptExecutor, Spawner};
@@ -16,8 +18,6 @@ use embassy_stm32::interrupt::{InterruptExt, Priority};
 use panic_probe as _;
 use static_cell::StaticCell;
 
-/// The control loop's executor, run from a spare interrupt at the highest priority so that
-/// nothing of Embassy's own (time driver, UART) delays it.
 static CONTROL_EXECUTOR: InterruptExecutor = InterruptExecutor::new();
 
 #[interrupt]
@@ -25,20 +25,33 @@ unsafe fn UART4() {
     CONTROL_EXECUTOR.on_interrupt()
 }
 
+/// ADC1's end of injected sequence: one control tick.
+#[interrupt]
+fn ADC1_2() {
+    control::on_sample()
+}
+
 static TX: StaticCell<[u8; 1024]> = StaticCell::new();
 static RX: StaticCell<[u8; 1024]> = StaticCell::new();
 
 #[embassy_executor::main]
 async fn main(spawner: Spawner) {
-    let p = embassy_stm32::init(Default::default());
+    let p = embassy_stm32::init(board::clocks());
+    interrupt::TIM4.set_priority(Priority::P3);
+    interrupt::USART2.set_priority(Priority::P3);
     let board = board::init(p, TX.init([0; 1024]), RX.init([0; 1024]));
     if let Err(e) = control::install(control_core::Params::default()) {
-        defmt::error!("default parameters refused: {}", defmt::Debug2Format(&e));
+        defmt::error!("control core not installed: {}", e);
         return;
     }
     interrupt::UART4.set_priority(Priority::P1);
-    let control = CONTROL_EXECUTOR.start(interrupt::UART4);
-    control.spawn(control::control_loop(board.bridge, board.encoder).expect("control task"));
+    let housekeeping = CONTROL_EXECUTOR.start(interrupt::UART4);
+    housekeeping.spawn(control::position_tick_task().expect("position-tick task"));
     spawner.spawn(link::link_task(board.link).expect("link task"));
-    defmt::info!("drive-g474 running: control loop at 16 kHz, host link on USART2 (bridge disabled until current sensing exists)");
+    control::start(Priority::P0);
+    defmt::info!(
+        "drive-g474 running: loop at 16 kHz in ADC1_2 (bridge off until the current offsets are calibrated), host link on USART2 at 921600 Bd"
+    );
+    // The timer and encoder stay owned for the program's life.
+    core::mem::forget((board.bridge, board.encoder));
 }

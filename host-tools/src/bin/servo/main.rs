@@ -3,6 +3,7 @@
 mod acc_dec;
 mod backbone;
 mod circle;
+mod firmware;
 mod ident;
 mod sequence;
 mod sweep;
@@ -351,6 +352,15 @@ enum Command {
 
 #[derive(Subcommand)]
 enum BenchCommand {
+    /// The firmware's figures (issue 8): flash and RAM of the drive image; golden vectors
+    /// replayed bit for bit on a Cortex-M4F in QEMU against the host; instructions per 16 kHz
+    /// tick on the Cortex-M4 (QEMU -icount: instructions, not cycles), on average over the
+    /// vectors and with every feature on at once. Builds the firmware first (scripts/fw
+    /// installs the toolchain and QEMU on first use).
+    Firmware {
+        #[command(flatten)]
+        common: Common,
+    },
     /// Simulated seconds per wall second, Rust host vs fmpy (default axis, 10 s simulated).
     Fmu {
         /// Simulated time (s)
@@ -556,6 +566,7 @@ fn main() -> ExitCode {
         ),
         Command::Bench(BenchCommand::Fmu { seconds, no_fmpy, goal, common }) => backbone::bench_fmu(*seconds, *no_fmpy, *goal, common),
         Command::Bench(BenchCommand::Plant { common }) => backbone::bench_plant(common),
+        Command::Bench(BenchCommand::Firmware { common }) => firmware::bench_firmware(common),
         Command::Bench(BenchCommand::Accdec { sequences, resonance, no_cost, common }) => {
             acc_dec::bench_accdec(*sequences, resonance, *no_cost, common)
         }

@@ -1,0 +1,239 @@
+//! The firmware's figures (issue 8), shared by `servo bench firmware` and the tests: golden
+//! vectors recorded from closed-loop simulations and replayed bit for bit on a Cortex-M4F in
+//! QEMU (netduinoplus2, `-icount shift=0`: the virtual clock counts instructions, so the
+//! SysTick count the replay prints, calibrated on a loop of known length, gives instructions
+//! — not cycles: QEMU does not model the M4's pipeline or flash wait states); the drive
+//! image's flash and RAM use. Needs the firmware toolchain and QEMU; `scripts/fw` installs
+//! them (apt) on first use.
+
+use std::path::{Path, PathBuf};
+use std::process::Command;
+
+use anyhow::{bail, Context, Result};
+use control_core::golden_vectors::{encode_tick, preset, replay, VectorEvent, ALL_FEATURES, EVENT_BYTES, MAGIC, TICK_BYTES};
+use control_core::stop_sequence::SequenceEvent;
+use control_core::Mode;
+use serde::Serialize;
+use servo_axis::simulation::{AxisSimulation, SimulationConfig, UserInputs};
+
+use crate::paths::workspace_root;
+
+pub struct Recording {
+    preset: u32,
+    ticks: Vec<[u8; TICK_BYTES]>,
+    events: Vec<(u32, VectorEvent)>,
+}
+
+/// Run a closed loop with `inputs(t)` and events at times, recording the core's inputs.
+pub fn record(preset_id: u32, seconds: f64, inputs: impl Fn(f64) -> UserInputs, events: &[(f64, VectorEvent)]) -> Recording {
+    let config = SimulationConfig { control: preset(preset_id).unwrap(), ..Default::default() };
+    let mut sim = AxisSimulation::new(&config).unwrap();
+    let n = (seconds / sim.tick_period()).round() as u32;
+    let mut rec = Recording { preset: preset_id, ticks: Vec::new(), events: Vec::new() };
+    for k in 0..n {
+        let t = k as f64 * sim.tick_period();
+        let u = inputs(t);
+        sim.apply_mode(&u);
+        for (at, e) in events {
+            if (at / sim.tick_period()).round() as u32 == k {
+                rec.events.push((k, *e));
+                let _ = match e {
+                    VectorEvent::Sequence(s) => sim.axis.sequence_event(*s).is_ok(),
+                    VectorEvent::StartSweep => sim.axis.start_sweep().is_ok(),
+                };
+            }
+        }
+        let (i, c) = sim.tick_traced(&u);
+        let mut bytes = [0u8; TICK_BYTES];
+        encode_tick(&i, &c, &mut bytes);
+        rec.ticks.push(bytes);
+    }
+    rec
+}
+
+fn inputs(mode: Mode) -> UserInputs {
+    UserInputs { mode, ..Default::default() }
+}
+
+/// The shipped scenarios' situations, and the features they do not cover, kept under the
+/// 1 MB of the target's flash.
+pub fn recordings() -> Vec<Recording> {
+    let seq = |e| VectorEvent::Sequence(e);
+    vec![
+        record(0, 0.15, |t| UserInputs { position_command: if t >= 0.01 { 1.0 } else { 0.0 }, ..inputs(Mode::Position) }, &[]),
+        record(0, 0.1, |t| UserInputs { velocity_command: if t < 0.05 { 100.0 } else { -50.0 }, ..inputs(Mode::Velocity) }, &[]),
+        record(1, 0.2, |_| UserInputs { position_command: 2.0, move_speed: 50.0, ..inputs(Mode::Position) }, &[]),
+        record(
+            0,
+            0.5,
+            |_| UserInputs { position_command: 0.0, ..inputs(Mode::Sequence) },
+            &[
+                (0.0, seq(SequenceEvent::RunOn)),
+                (0.05, seq(SequenceEvent::RunOff)),
+                (0.05, seq(SequenceEvent::Stop)),
+                (0.2, seq(SequenceEvent::ReleaseBlocking)),
+                (0.2, seq(SequenceEvent::MoveTo(800_000))),
+                (0.3, seq(SequenceEvent::SelectGain(3))),
+                (0.35, seq(SequenceEvent::ReturnToStart)),
+                (0.4, seq(SequenceEvent::SelectGain(9))),
+            ],
+        ),
+        record(0, 0.1, |_| UserInputs { velocity_command: 50.0, ..inputs(Mode::Velocity) }, &[(0.01, VectorEvent::StartSweep)]),
+        record(2, 0.15, |t| UserInputs { position_command: (std::f64::consts::TAU * 5.0 * t).sin(), ..inputs(Mode::Position) }, &[]),
+        record(3, 0.1, |t| UserInputs { position_command: 3.0 * t, ..inputs(Mode::Position) }, &[]),
+    ]
+}
+
+pub fn encode(recs: &[Recording]) -> Vec<u8> {
+    let mut out = MAGIC.to_vec();
+    out.extend((recs.len() as u32).to_le_bytes());
+    for r in recs {
+        out.extend(r.preset.to_le_bytes());
+        out.extend((r.ticks.len() as u32).to_le_bytes());
+        out.extend((r.events.len() as u32).to_le_bytes());
+        for (tick, e) in &r.events {
+            let (kind, value) = e.encode();
+            let start = out.len();
+            out.extend(tick.to_le_bytes());
+            out.push(kind);
+            out.extend(value.to_le_bytes());
+            assert_eq!(out.len() - start, EVENT_BYTES);
+        }
+        for t in &r.ticks {
+            out.extend(t);
+        }
+    }
+    out
+}
+
+/// (name, address, size) of the allocated sections of a 32-bit little-endian ELF file.
+pub fn sections(elf: &[u8]) -> Vec<(String, u32, u32)> {
+    let u16_at = |o: usize| u16::from_le_bytes([elf[o], elf[o + 1]]) as usize;
+    let u32_at = |o: usize| u32::from_le_bytes([elf[o], elf[o + 1], elf[o + 2], elf[o + 3]]);
+    if elf.len() < 0x34 || &elf[..5] != b"\x7fELF\x01" {
+        return Vec::new(); // not a 32-bit ELF file: no sections
+    }
+    let (shoff, shentsize, shnum, shstrndx) = (u32_at(0x20) as usize, u16_at(0x2E), u16_at(0x30), u16_at(0x32));
+    let header = |i: usize| shoff + i * shentsize;
+    let strtab = u32_at(header(shstrndx) + 0x10) as usize;
+    (0..shnum)
+        .filter(|&i| u32_at(header(i) + 0x08) & 0x2 != 0) // SHF_ALLOC
+        .map(|i| {
+            let h = header(i);
+            let name_at = strtab + u32_at(h) as usize;
+            let end = elf[name_at..].iter().position(|&b| b == 0).unwrap_or(0);
+            (String::from_utf8_lossy(&elf[name_at..name_at + end]).into_owned(), u32_at(h + 0x0C), u32_at(h + 0x14))
+        })
+        .collect()
+}
+
+
+/// Every feature on at once: a position move and a streamed sine through the 6th-order
+/// acc/dec and eight correction sections, friction compensation, torque filters, and a
+/// sweep injecting on the torque.
+pub fn all_features_recordings() -> Vec<Recording> {
+    vec![
+        record(ALL_FEATURES, 0.1, |_| UserInputs { position_command: 2.0, move_speed: 50.0, ..inputs(Mode::Position) }, &[(0.0, VectorEvent::StartSweep)]),
+        record(
+            ALL_FEATURES,
+            0.1,
+            |t| UserInputs { position_command: (std::f64::consts::TAU * 5.0 * t).sin(), ..inputs(Mode::Position) },
+            &[(0.0, VectorEvent::StartSweep)],
+        ),
+    ]
+}
+
+/// Run `scripts/fw` with these cargo arguments (and environment).
+pub fn build(args: &[&str], env: &[(&str, &Path)]) -> Result<()> {
+    let mut cmd = Command::new(workspace_root().join("scripts/fw"));
+    cmd.args(args);
+    for (k, v) in env {
+        cmd.env(k, v);
+    }
+    let out = cmd.output().context("cannot run scripts/fw")?;
+    if !out.status.success() {
+        bail!("firmware build ({}) failed:\n{}", args.join(" "), String::from_utf8_lossy(&out.stderr));
+    }
+    Ok(())
+}
+
+/// One replay of a vector set on both sides.
+#[derive(Clone, Debug, Serialize)]
+pub struct CoreReplay {
+    pub ticks: u64,
+    pub host_digest: String,
+    /// The target's line, `core-vectors ticks N digest D`.
+    pub target: String,
+    pub identical: bool,
+    /// Instructions per tick for `Axis::step` (input decoding subtracted) and for the whole
+    /// replay with the output digest.
+    pub instructions_per_tick: Option<f64>,
+    pub instructions_per_tick_with_digest: Option<f64>,
+}
+
+/// Replay `bytes` on the host and on the Cortex-M4 in QEMU (`name` keeps the files apart).
+pub fn replay_on_cortex_m4(bytes: &[u8], name: &str) -> Result<CoreReplay> {
+    if bytes.len() >= 960 * 1024 {
+        bail!("{} bytes of vectors do not fit the target's flash", bytes.len());
+    }
+    let (ticks, digest) = replay(bytes).map_err(|e| anyhow::anyhow!("host replay: {e}"))?;
+    // One vector file is built into the binary at a time: callers in parallel (tests) take
+    // turns from the build to the end of the run.
+    static ONE_AT_A_TIME: std::sync::Mutex<()> = std::sync::Mutex::new(());
+    let _turn = ONE_AT_A_TIME.lock().unwrap_or_else(|e| e.into_inner());
+    let dir = workspace_root().join("target/fw");
+    std::fs::create_dir_all(&dir)?;
+    let file: PathBuf = dir.join(format!("{name}.bin"));
+    std::fs::write(&file, bytes)?;
+    build(&["--release", "-q", "-p", "core-vectors"], &[("CORE_VECTORS_FILE", &file)])?;
+    let elf = dir.join("thumbv7em-none-eabihf/release/core-vectors");
+    let run = Command::new("timeout")
+        .args(["300", "qemu-system-arm", "-machine", "netduinoplus2", "-nographic", "-monitor", "none", "-serial", "none"])
+        .args(["-icount", "shift=0"])
+        .args(["-semihosting-config", "enable=on,target=native", "-kernel"])
+        .arg(&elf)
+        .output()
+        .context("cannot run qemu-system-arm (scripts/fw installs it)")?;
+    // Semihosting output goes to QEMU's stderr when stdout is not a terminal.
+    let text = format!("{}{}", String::from_utf8_lossy(&run.stdout), String::from_utf8_lossy(&run.stderr));
+    if !run.status.success() {
+        bail!("QEMU run failed ({}): {text}", run.status);
+    }
+    let expected = format!("core-vectors ticks {ticks} digest {digest:016x}");
+    let target = text.lines().find(|l| l.contains("digest")).unwrap_or("").trim().to_string();
+    let (mut core, mut whole) = (None, None);
+    if let Some(cost) = text.lines().find(|l| l.contains("calibration")) {
+        let w: Vec<f64> = cost.split_whitespace().filter_map(|x| x.parse().ok()).collect();
+        if let [clock, core_clocks, calibration, instructions] = w[..] {
+            let per_tick = |c: f64| c * instructions / calibration / ticks as f64;
+            core = Some(per_tick(core_clocks));
+            whole = Some(per_tick(clock));
+        }
+    }
+    Ok(CoreReplay {
+        ticks,
+        host_digest: format!("{digest:016x}"),
+        identical: target == expected,
+        target,
+        instructions_per_tick: core,
+        instructions_per_tick_with_digest: whole,
+    })
+}
+
+/// Flash and static RAM of the drive image (bytes).
+#[derive(Clone, Copy, Debug, Serialize)]
+pub struct ImageSize {
+    pub flash: u32,
+    pub ram: u32,
+}
+
+pub fn drive_image_size() -> Result<ImageSize> {
+    build(&["--release", "-q", "-p", "drive-g474"], &[])?;
+    let elf = std::fs::read(workspace_root().join("target/fw/thumbv7em-none-eabihf/release/drive-g474"))?;
+    let s = sections(&elf);
+    // Flash holds everything placed there and the initial image of .data; RAM what lives there.
+    let in_flash: u32 = s.iter().filter(|(_, a, _)| (0x0800_0000..0x0900_0000).contains(a)).map(|x| x.2).sum();
+    let data: u32 = s.iter().filter(|(n, _, _)| n == ".data").map(|x| x.2).sum();
+    let in_ram: u32 = s.iter().filter(|(_, a, _)| (0x2000_0000..0x2010_0000).contains(a)).map(|x| x.2).sum();
+    Ok(ImageSize { flash: in_flash + data, ram: in_ram })
+}
