@@ -97,9 +97,9 @@ impl CommandPath {
 
     fn speed_pulses(&mut self, speed: f32) -> i64 {
         let total = self.carry + speed;
-        let whole = libm::floorf(total);
+        let (whole, counts) = crate::floor_to_counts(total);
         self.carry = total - whole;
-        whole as i64
+        counts
     }
 
     /// One position tick; returns the filtered position command (counts). `position_input`

@@ -62,9 +62,25 @@ impl SineGenerator {
     }
 
     pub fn next_sample(&mut self) -> f32 {
-        let y = self.amplitude * crate::trigonometry::sin(self.phase());
+        self.next_with_sin_cos().0
+    }
+
+    /// The sample, and the sine and cosine of its phase (for a correlator on the same tick:
+    /// one evaluation instead of two).
+    pub fn next_with_sin_cos(&mut self) -> (f32, (f32, f32)) {
+        let (s, c) = crate::trigonometry::sin_cos(self.phase());
+        self.advance();
+        (self.amplitude * s, (s, c))
+    }
+
+    /// Move the phase on by one tick.
+    pub fn advance(&mut self) {
         self.phase = self.phase.wrapping_add(self.increment);
-        y
+    }
+
+    /// `(sin, cos)` of the phase step per tick, for rotating a known `(sin, cos)` on.
+    pub fn step_sin_cos(&self) -> (f32, f32) {
+        crate::trigonometry::sin_cos((self.increment as f64 * (core::f64::consts::TAU / TURN)) as f32)
     }
 }
 

@@ -322,3 +322,22 @@ mod tests {
         assert_eq!(replay(&file), Err(VectorError::Preset(9)));
     }
 }
+
+#[cfg(test)]
+mod all_features_tests {
+    use super::*;
+    use crate::phase_shifted_sweep::SweepState;
+
+    #[test]
+    fn the_all_features_preset_runs_its_sweep_in_position_mode() {
+        let mut axis = Axis::new(preset(ALL_FEATURES).unwrap()).unwrap();
+        let c = Commands { mode: Mode::Position, position: 1000, move_speed: 50.0, ..Default::default() };
+        axis.apply_mode(&c);
+        assert!(axis.start_sweep().is_ok());
+        let i = AxisInputs { phase_currents: [0.0, 0.0], encoder_count: 0, bus_voltage: 48.0 };
+        for _ in 0..1000 {
+            axis.step(&i, &c);
+        }
+        assert_ne!(axis.telemetry().sweep.state, SweepState::Idle, "{:?}", axis.telemetry().sweep);
+    }
+}

@@ -7,6 +7,7 @@
 //! The velocity loop runs every `velocity_divider` ticks and the position loop every
 //! `position_divider` ticks (defaults 16 kHz / 8 kHz / 4 kHz).
 #![no_std]
+#![cfg_attr(feature = "fpu-sqrt", feature(core_float_math))]
 #![forbid(unsafe_code)]
 
 pub mod acc_dec;
@@ -29,6 +30,7 @@ pub mod position_loop;
 pub mod protocol;
 pub mod reference_frames;
 pub mod response_correction;
+pub mod square_root;
 pub mod stop_sequence;
 pub mod trigonometry;
 pub mod velocity_loop;
@@ -48,5 +50,69 @@ pub fn counts_to_f32(x: i64) -> f32 {
     match i32::try_from(x) {
         Ok(v) => v as f32,
         Err(_) => x as f32,
+    }
+}
+
+/// Below this magnitude an f32 converts through 32 bits (one instruction on a Cortex-M4;
+/// f32 → i64 is a library call) and `x − trunc(x)` is exact.
+const I32_SAFE: f32 = 2_147_483_520.0; // the largest f32 below 2³¹
+
+/// `libm::roundf(x) as i64` (half away from zero), bit for bit, without the library calls
+/// for the usual magnitudes.
+#[inline]
+pub fn round_to_counts(x: f32) -> i64 {
+    if x.abs() < 8_388_608.0 {
+        // |x| < 2²³: the fraction is exact.
+        let t = x as i32;
+        let frac = x - t as f32;
+        (if frac >= 0.5 {
+            t + 1
+        } else if frac <= -0.5 {
+            t - 1
+        } else {
+            t
+        }) as i64
+    } else {
+        libm::roundf(x) as i64
+    }
+}
+
+/// `(libm::floorf(x), libm::floorf(x) as i64)`, bit for bit, without the library calls for
+/// the usual magnitudes.
+#[inline]
+pub fn floor_to_counts(x: f32) -> (f32, i64) {
+    if x.abs() < I32_SAFE {
+        let t = x as i32;
+        let t = if (t as f32) > x { t - 1 } else { t };
+        // floor(−0) is −0: keep the zero's sign as the library does.
+        (if x == 0.0 { x } else { t as f32 }, t as i64)
+    } else {
+        let f = libm::floorf(x);
+        (f, f as i64)
+    }
+}
+
+#[cfg(test)]
+mod conversion_tests {
+    extern crate std;
+    use std::vec::Vec;
+
+    /// The fast conversions equal the library's on every kind of value: ties, negatives,
+    /// integers, both sides of 2²³ and 2³¹, huge, infinite and NaN.
+    #[test]
+    fn fast_conversions_equal_libm() {
+        let mut values: Vec<f32> = [0.0f32, -0.0, 0.5, -0.5, 1.5, -1.5, 2.5, -2.5, 0.49999997, -0.49999997, 8_388_607.5, -8_388_607.5, 8_388_608.0, 16_777_217.0,
+            2_147_483_520.0, -2_147_483_520.0, 2_147_483_648.0, -2_147_483_648.0, 1.0e12, -1.0e12, f32::MAX, f32::MIN, f32::INFINITY, f32::NEG_INFINITY, f32::NAN]
+        .to_vec();
+        let mut x = 1.0e-3f32;
+        while x < 1.0e11 {
+            values.extend([x, -x, x + 0.5, -x - 0.5]);
+            x *= 1.013;
+        }
+        for v in values {
+            assert_eq!(super::round_to_counts(v), libm::roundf(v) as i64, "round {v}");
+            let (f, c) = super::floor_to_counts(v);
+            assert_eq!((f.to_bits(), c), (libm::floorf(v).to_bits(), libm::floorf(v) as i64), "floor {v}");
+        }
     }
 }

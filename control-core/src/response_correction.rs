@@ -182,14 +182,14 @@ impl ResponseCorrection {
         if self.count == 0 {
             return pulses;
         }
-        let mut v = pulses as f32;
+        let mut v = crate::counts_to_f32(pulses);
         let mut pending = 0.0;
         for b in &mut self.sections[..self.count] {
             v = b.process(v);
             let (s1, s2) = b.state();
             pending += (s1 + s2) / (1.0 + b.a1 + b.a2);
         }
-        let keep = libm::roundf(pending) as i64;
+        let keep = crate::round_to_counts(pending);
         let out = self.stock + pulses - keep;
         self.stock = keep;
         out

@@ -353,7 +353,7 @@ impl StopSequence {
                 let gain = p.position_gain * p.gains[s.gain_index];
                 let deviation = crate::counts_to_f32(s.target - position) * (TAU / counts_per_rev as f32);
                 let magnitude = deviation.abs();
-                let speed = (gain * magnitude).min(libm::sqrtf(p.acceleration * magnitude)).min(p.target_speed);
+                let speed = (gain * magnitude).min(crate::square_root::sqrt(p.acceleration * magnitude)).min(p.target_speed);
                 libm::copysignf(speed, deviation)
             }
         };

@@ -227,7 +227,7 @@ impl ButterworthPulseFilter {
     /// One tick: `pulses` in, whole pulses out.
     pub fn step(&mut self, pulses: i64) -> i64 {
         let d = &mut self.design;
-        let mut v = pulses as f32;
+        let mut v = crate::counts_to_f32(pulses);
         let mut pending = 0.0;
         for b in &mut d.biquads[..d.biquad_count] {
             v = b.process(v);
@@ -239,7 +239,7 @@ impl ButterworthPulseFilter {
             pending += f.pending();
         }
         // Keep exactly round(pending) pulses inside; give out the rest.
-        let keep = libm::roundf(pending) as i64;
+        let keep = crate::round_to_counts(pending);
         let out = self.stock + pulses - keep;
         self.stock = keep;
         out
