@@ -302,7 +302,7 @@ impl Axis {
         let p = &self.params;
 
         let [velocity_due, position_due, acquire, chip_due] = self.phases.map(|ph| ph == 0);
-        let excitation = match (self.sweep.excitation(chip_due, acquire), self.excitation.as_mut()) {
+        let excitation = match (self.sweep.excitation(chip_due), self.excitation.as_mut()) {
             (Some(e), _) => e,
             (None, Some((point, sine))) => (*point, sine.next_sample()),
             (None, None) => (InjectionPoint::Off, 0.0),

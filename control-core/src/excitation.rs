@@ -69,18 +69,8 @@ impl SineGenerator {
     /// one evaluation instead of two).
     pub fn next_with_sin_cos(&mut self) -> (f32, (f32, f32)) {
         let (s, c) = crate::trigonometry::sin_cos(self.phase());
-        self.advance();
-        (self.amplitude * s, (s, c))
-    }
-
-    /// Move the phase on by one tick.
-    pub fn advance(&mut self) {
         self.phase = self.phase.wrapping_add(self.increment);
-    }
-
-    /// `(sin, cos)` of the phase step per tick, for rotating a known `(sin, cos)` on.
-    pub fn step_sin_cos(&self) -> (f32, f32) {
-        crate::trigonometry::sin_cos((self.increment as f64 * (core::f64::consts::TAU / TURN)) as f32)
+        (self.amplitude * s, (s, c))
     }
 }
 
