@@ -19,7 +19,7 @@ use core::sync::atomic::{AtomicU32, Ordering};
 use control_core::acquisition_stream::AcquisitionStream;
 use control_core::current_sensing::CurrentSensing;
 use control_core::faults::Faults;
-use control_core::{Axis, AxisInputs, Commands, Params, Telemetry};
+use control_core::{Axis, AxisInputs, Commands, Params};
 use embassy_stm32::interrupt;
 use embassy_sync::blocking_mutex::raw::CriticalSectionRawMutex;
 use embassy_sync::blocking_mutex::Mutex;
@@ -31,7 +31,6 @@ use crate::board;
 pub struct Shared {
     pub axis: Axis,
     pub commands: Commands,
-    pub telemetry: Telemetry,
     pub sensing: CurrentSensing,
     pub stream: AcquisitionStream,
 }
@@ -68,7 +67,6 @@ pub fn install(params: Params) -> Result<(), &'static str> {
             s.value.write(Shared {
                 axis,
                 commands: Commands::default(),
-                telemetry: Telemetry::default(),
                 sensing,
                 stream: AcquisitionStream::default(),
             });
@@ -103,7 +101,6 @@ pub fn on_sample() {
             board::set_outputs(false);
             if s.sensing.calibrate(currents).is_err() {
                 s.axis.latch_fault(Faults::SENSING);
-                s.telemetry = *s.axis.telemetry();
             }
             return None;
         };
@@ -115,9 +112,10 @@ pub fn on_sample() {
         let pwm = s.axis.step(&inputs, &commands);
         board::write_duties(pwm.duties);
         board::set_outputs(pwm.enabled);
+        // The link reads the axis's own telemetry under the lock: no per-tick copy (a
+        // memcpy of a few hundred instructions on the M4).
         let t = s.axis.telemetry();
         s.stream.offer(&t.sweep.sample);
-        s.telemetry = *t;
         let divider = s.axis.params().rates.position_divider;
         // A u32 counter: a 64-bit modulo is a library call on the Cortex-M4.
         (TICKS.load(Ordering::Relaxed) % divider == 0).then_some(t.faults)
