@@ -83,52 +83,11 @@ impl CurrentLoop {
             self.q.commit(iq_int.clamp(-vmax, vmax));
         }
 
-        // The output angle is the sampling angle advanced by δ = ωe·T·ticks, a small angle:
-        // rotate (s, c) by δ with its Taylor series instead of a second sin/cos. To δ⁵ and δ⁶
-        // the error is below 3·10⁻¹⁰ for |δ| ≤ 0.125 (300 rad/s, 4 pole pairs, 1.5 ticks);
-        // larger advances take the full evaluation.
-        let delta = omega_e * dt * p.current.angle_advance_ticks;
-        let (so, co) = if delta.abs() <= MAX_ROTATION {
-            rotate(s, c, delta)
-        } else {
-            crate::trigonometry::sin_cos(theta_e + delta)
-        };
+        let theta_out = theta_e + omega_e * dt * p.current.angle_advance_ticks;
+        let (so, co) = crate::trigonometry::sin_cos(theta_out);
         let v = Dq { d: vd, q: vq };
         let duties = space_vector_duties(inverse_park(v, so, co), bus_voltage);
         CurrentLoopOutput { current: i, voltage: v, duties, saturated: sat_d || sat_q }
     }
 }
 
-/// Largest angle advance taken by [`rotate`] (rad).
-const MAX_ROTATION: f32 = 0.125;
-
-/// `(sin(θ+δ), cos(θ+δ))` from `(sin θ, cos θ)` for a small δ (Taylor series of sin δ to δ⁵
-/// and cos δ to δ⁶).
-fn rotate(s: f32, c: f32, delta: f32) -> (f32, f32) {
-    let d2 = delta * delta;
-    let sd = delta * (1.0 - d2 * (1.0 / 6.0) * (1.0 - d2 * (1.0 / 20.0)));
-    let cd = 1.0 - d2 * 0.5 * (1.0 - d2 * (1.0 / 12.0) * (1.0 - d2 * (1.0 / 30.0)));
-    (s * cd + c * sd, c * cd - s * sd)
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    /// Against f64 sin/cos of the sum: as good as a fresh f32 evaluation.
-    #[test]
-    fn the_small_angle_rotation_matches_the_sum_angle() {
-        let mut worst = 0.0f64;
-        for i in 0..=360 {
-            let theta = i as f32 * (crate::TAU / 360.0);
-            let (s, c) = crate::trigonometry::sin_cos(theta);
-            for j in -50..=50 {
-                let delta = j as f32 * (MAX_ROTATION / 50.0);
-                let (so, co) = rotate(s, c, delta);
-                let x = theta as f64 + delta as f64;
-                worst = worst.max((so as f64 - libm::sin(x)).abs()).max((co as f64 - libm::cos(x)).abs());
-            }
-        }
-        assert!(worst < 5e-7, "largest error {worst:e}");
-    }
-}
