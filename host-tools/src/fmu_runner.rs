@@ -88,6 +88,10 @@ impl Fmu {
                 let i = i32::try_from(i).map_err(|_| anyhow!("{} = {i} does not fit a 32-bit integer", var.name))?;
                 inst.set_int32(&[var.vr], &[i])
             }
+            // Model files keep every parameter as a number: a whole one sets an integer.
+            (Kind::Int32, Value::Float(f)) if f.fract() == 0.0 && f >= i32::MIN as f64 && f <= i32::MAX as f64 => {
+                inst.set_int32(&[var.vr], &[f as i32])
+            }
             (Kind::Boolean, Value::Bool(b)) => inst.set_boolean(&[var.vr], &[b]),
             (kind, v) => bail!("{} is {kind:?}; {v:?} is not a value of that type", var.name),
         };

@@ -65,6 +65,15 @@ fn bad_tuning_requests_are_refused_with_the_reason() {
     weak.fmu_parameters.insert("ctrl.max_current".into(), 0.05);
     let e = tune(&fmu, &[axis("x", 40.0), weak], Method::Response, true, |_| {}).unwrap_err().to_string();
     assert!(e.contains("limit") || e.contains("tripped"), "{e}");
+    // Integer parameters come back from model files as numbers: whole ones are taken,
+    // others refused with the name.
+    let mut odd = axis("y", 70.0);
+    odd.fmu_parameters.insert("ctrl.position_divider".into(), 4.5);
+    let e = format!("{:#}", tune(&fmu, &[axis("x", 40.0), odd], Method::Response, false, |_| {}).unwrap_err());
+    assert!(e.contains("ctrl.position_divider"), "{e}");
+    let mut whole = axis("y", 70.0);
+    whole.fmu_parameters.insert("ctrl.position_divider".into(), 4.0);
+    assert!(tune(&fmu, &[axis("x", 40.0), whole], Method::Response, false, |_| {}).is_ok());
     let e = host_tools::circle_report::tuned_axes(std::path::Path::new("/nonexistent/tune")).unwrap_err().to_string();
     assert!(e.contains("servo tune"), "{e}");
 }
