@@ -20,14 +20,16 @@ const COLOURS: [&str; 6] = ["#444444", "#d62728", "#1f77b4", "#2ca02c", "#9467bd
 
 
 /// `curves`: (label, points); non-finite values are skipped.
-pub fn plot_bode(path: &Path, title: &str, curves: &[(&str, &[ResponsePoint])], marker_hz: Option<f64>) -> Result<()> {
+pub fn plot_bode(path: &Path, title: &str, curves: &[(&str, &[ResponsePoint])], marker: Option<(f64, &str)>) -> Result<()> {
+    // Room for the legend's rows above the panels.
+    let top = TOP.max(30.0 + curves.len().div_ceil(3) as f64 * 14.0 + 16.0);
     let all = || curves.iter().flat_map(|(_, c)| c.iter()).filter(|p| p.gain_db.is_finite() && p.phase_deg.is_finite());
     let fmin = all().map(|p| p.frequency).fold(f64::INFINITY, f64::min);
     let fmax = all().map(|p| p.frequency).fold(f64::NEG_INFINITY, f64::max);
     let (l0, l1) = (fmin.max(1e-6).log10().floor(), fmax.max(1e-6).log10().ceil().max(fmin.log10().floor() + 1.0));
     let plot_w = WIDTH - LEFT - RIGHT;
     let x = |f: f64| LEFT + (f.log10() - l0) / (l1 - l0) * plot_w;
-    let height = TOP + 2.0 * (PANEL_H + GAP) + 10.0;
+    let height = top + 2.0 * (PANEL_H + GAP) + 10.0;
     let mut svg = String::new();
     writeln!(svg, r#"<svg xmlns="http://www.w3.org/2000/svg" width="{WIDTH}" height="{height}" viewBox="0 0 {WIDTH} {height}" font-family="sans-serif" font-size="11">"#)?;
     writeln!(svg, r#"<rect width="100%" height="100%" fill="white"/>"#)?;
@@ -38,7 +40,7 @@ pub fn plot_bode(path: &Path, title: &str, curves: &[(&str, &[ResponsePoint])], 
         writeln!(svg, r#"<line x1="{lx}" y1="{ly}" x2="{}" y2="{ly}" stroke="{}" stroke-width="2"/><text x="{}" y="{}">{}</text>"#, lx + 20.0, COLOURS[i % 6], lx + 24.0, ly + 4.0, escape(label))?;
     }
     for (panel, name) in [(0, "gain (dB)"), (1, "phase (deg)")] {
-        let y0 = TOP + panel as f64 * (PANEL_H + GAP);
+        let y0 = top + panel as f64 * (PANEL_H + GAP);
         let values: Vec<f64> = all().map(|p| if panel == 0 { p.gain_db } else { p.phase_deg }).collect();
         let (mut vmin, mut vmax) = values.iter().fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), v| (a.min(*v), b.max(*v)));
         if !(vmin.is_finite() && vmax.is_finite()) {
@@ -72,8 +74,8 @@ pub fn plot_bode(path: &Path, title: &str, curves: &[(&str, &[ResponsePoint])], 
             }
             decade += 1.0;
         }
-        if let Some(m) = marker_hz {
-            writeln!(svg, r##"<line x1="{:.1}" y1="{y0}" x2="{:.1}" y2="{}" stroke="#999" stroke-dasharray="4,3"/><text x="{:.1}" y="{}" fill="#666">acquisition Nyquist</text>"##, x(m), x(m), y0 + PANEL_H, x(m) + 3.0, y0 + 12.0)?;
+        if let Some((m, label)) = marker {
+            writeln!(svg, r##"<line x1="{:.1}" y1="{y0}" x2="{:.1}" y2="{}" stroke="#999" stroke-dasharray="4,3"/><text x="{:.1}" y="{}" fill="#666">{}</text>"##, x(m), x(m), y0 + PANEL_H, x(m) + 3.0, y0 + 12.0, escape(label))?;
         }
         writeln!(svg, r#"<text x="{}" y="{}" font-weight="bold">{name}</text>"#, LEFT + 5.0, y0 - 4.0)?;
         for (i, (_, c)) in curves.iter().enumerate() {

@@ -19,10 +19,24 @@ pub fn ring_step(max_error: f64) -> f64 {
 
 /// Plot `figures` (label, figure; the first is drawn grey as the reference) about the nominal
 /// radius; radial errors are drawn `rings × ring` wide in a band of 30 % of the radius.
-pub fn plot_circle(path: &Path, title: &str, notes: &[String], radius: f64, figures: &[(&str, &Figure)]) -> Result<()> {
+/// `about_own_mean`: each figure's radial error is drawn about its own mean radius (its shape,
+/// for comparing roundness when the runs' radii differ), not about the nominal radius.
+pub fn plot_circle(path: &Path, title: &str, notes: &[String], radius: f64, figures: &[(&str, &Figure)], about_own_mean: bool) -> Result<()> {
+    // The radius each figure's error is measured from.
+    let reference = |f: &Figure| {
+        if about_own_mean {
+            let p = f.polar();
+            p.iter().map(|(_, r)| r).sum::<f64>() / p.len().max(1) as f64
+        } else {
+            radius
+        }
+    };
     let max_error = figures
         .iter()
-        .flat_map(|(_, f)| f.polar().into_iter().map(|(_, r)| (r - radius).abs()))
+        .flat_map(|(_, f)| {
+            let r0 = reference(f);
+            f.polar().into_iter().map(move |(_, r)| (r - r0).abs())
+        })
         .fold(0.0, f64::max);
     let ring = ring_step(max_error);
     let rings = 3.0;
@@ -49,9 +63,10 @@ pub fn plot_circle(path: &Path, title: &str, notes: &[String], radius: f64, figu
     for (i, (label, f)) in figures.iter().enumerate() {
         let mut pts = String::new();
         let polar = f.polar();
+        let r0 = reference(f);
         let stride = (polar.len() / 2000).max(1);
         for (angle, r) in polar.iter().step_by(stride).chain(polar.first()) {
-            let rp = nominal + (r - radius) * per_error;
+            let rp = nominal + (r - r0) * per_error;
             let (s, c) = angle.to_radians().sin_cos();
             write!(pts, "{:.2},{:.2} ", cx + rp * c, cy - rp * s)?;
         }
@@ -62,7 +77,8 @@ pub fn plot_circle(path: &Path, title: &str, notes: &[String], radius: f64, figu
         writeln!(svg, r#"<line x1="12" y1="{y}" x2="32" y2="{y}" stroke="{colour}" stroke-width="2"/><text x="36" y="{}">{}</text>"#, y + 4.0, escape(label))?;
     }
     let mut y = SIZE + 20.0;
-    for n in [format!("rings every {} rad of radial error (magnified {:.3e}×); nominal radius {radius} rad", fmt(ring), per_error * radius / nominal)]
+    let about = if about_own_mean { "about each figure's own mean radius" } else { "about the nominal radius" };
+    for n in [format!("rings every {} rad of radial error {about} (magnified {:.3e}×); nominal radius {radius} rad", fmt(ring), per_error * radius / nominal)]
         .iter()
         .chain(notes)
     {

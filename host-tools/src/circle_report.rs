@@ -73,6 +73,9 @@ pub struct Comparison {
     pub both: Vec<(String, Value)>,
     pub x: BTreeMap<String, Value>,
     pub y: BTreeMap<String, Value>,
+    /// Plot each run's shape about its own mean radius (the runs' radii differ by more
+    /// than their roundness, as with and without a response correction).
+    pub shape_only: bool,
 }
 
 impl Comparison {
@@ -164,7 +167,7 @@ pub fn run(
         request.feed,
         n
     );
-    plot_circle(&svg, &title, &notes, request.radius, &plotted)?;
+    plot_circle(&svg, &title, &notes, request.radius, &plotted, compare.shape_only)?;
     files.push(svg);
     let protrusion_ratio = (runs.len() == 2).then(|| runs[1].feedback.max_protrusion / runs[0].feedback.max_protrusion);
     let roundness_ratio = (runs.len() == 2).then(|| runs[1].feedback.roundness / runs[0].feedback.roundness);

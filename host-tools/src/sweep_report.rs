@@ -125,7 +125,7 @@ pub fn run(
         &svg,
         &format!("Frequency response, {:.2} s of measurement, acquisition {acquisition_hz} Hz", sweep.measurement_time()),
         &curves,
-        Some(acquisition_hz / 2.0),
+        Some((acquisition_hz / 2.0, "acquisition Nyquist")),
     )?;
     files.push(svg);
     let report = SweepReport {

@@ -386,7 +386,7 @@ pub fn write(t: &Tuning, out: &std::path::Path) -> Result<Vec<std::path::PathBuf
         }
         let refs: Vec<(&str, &[ResponsePoint])> = curves.iter().map(|(l, c)| (l.as_str(), c.as_slice())).collect();
         let svg = out.join("tune.svg");
-        crate::bode_plot::plot_bode(&svg, "Command → machine-end position, before and after the correction", &refs, Some(t.position_bandwidth_hz))?;
+        crate::bode_plot::plot_bode(&svg, "Command → machine-end position, before and after the correction", &refs, Some((t.position_bandwidth_hz, "position-loop bandwidth")))?;
         files.push(svg);
     }
     Ok(files)

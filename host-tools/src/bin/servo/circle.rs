@@ -40,6 +40,7 @@ pub fn circle(
         yp = y_base.into_iter().chain(yp).collect();
         comparison.x = x_corr;
         comparison.y = y_corr;
+        comparison.shape_only = true;
         labels = ("without correction".into(), "with correction".into());
     }
     let (x_parameters, y_parameters) = match single.as_deref() {
