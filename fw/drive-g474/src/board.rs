@@ -157,6 +157,7 @@ fn adc_injected() {
             w.set_adcal(true);
         });
         while adc.cr().read().adcal() {}
+        cortex_m::asm::delay(100); // ADEN at least 4 ADC clocks after the calibration
         adc.isr().write(|w| w.set_adrdy(true));
         adc.cr().modify(|w| w.set_aden(true));
         while !adc.isr().read().adrdy() {}

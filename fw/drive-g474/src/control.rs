@@ -96,6 +96,10 @@ pub fn on_sample() {
             board::set_outputs(false);
             return None;
         };
+        // The break flag is read (and cleared) every tick: latch it even while calibrating.
+        if broke {
+            s.axis.latch_fault(Faults::HARDWARE_BREAK);
+        }
         let Some((phase_currents, bus_voltage)) = s.sensing.convert(currents, bus) else {
             // Calibrating with the bridge off; a failure latches a fault for good.
             board::set_outputs(false);
@@ -104,9 +108,6 @@ pub fn on_sample() {
             }
             return None;
         };
-        if broke {
-            s.axis.latch_fault(Faults::HARDWARE_BREAK);
-        }
         let inputs = AxisInputs { phase_currents, encoder_count: count, bus_voltage };
         let commands = s.commands;
         let pwm = s.axis.step(&inputs, &commands);

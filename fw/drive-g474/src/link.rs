@@ -6,7 +6,7 @@
 use control_core::protocol::{decode, encode, handle, FrameError, Request, Response, MAX_FRAME};
 use embassy_futures::select::{select, Either};
 use embassy_stm32::usart::BufferedUart;
-use embassy_time::Timer;
+use embassy_time::{Duration, Ticker};
 use embedded_io_async::{Read, Write};
 
 use crate::control::SHARED;
@@ -23,8 +23,10 @@ pub async fn link_task(mut uart: BufferedUart<'static>) {
     let mut frame = [0u8; MAX_FRAME + 1];
     let mut len = 0usize;
     let mut byte = [0u8; 1];
+    // A ticker, not a fresh timer per byte: incoming traffic must not hold the stream back.
+    let mut ticker = Ticker::every(Duration::from_millis(2));
     loop {
-        match select(uart.read(&mut byte), Timer::after_millis(2)).await {
+        match select(uart.read(&mut byte), ticker.next()).await {
             Either::First(Ok(1)) => {}
             Either::First(_) => continue,
             Either::Second(()) => {
