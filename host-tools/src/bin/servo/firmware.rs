@@ -1,4 +1,4 @@
-//! `servo bench firmware` (issue 8).
+//! `servo bench firmware`: the drive image and the core on a Cortex-M4.
 
 use super::*;
 

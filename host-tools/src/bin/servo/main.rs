@@ -352,7 +352,7 @@ enum Command {
 
 #[derive(Subcommand)]
 enum BenchCommand {
-    /// The firmware's figures (issue 8): flash and RAM of the drive image; golden vectors
+    /// The firmware's figures: flash and RAM of the drive image; golden vectors
     /// replayed bit for bit on a Cortex-M4F in QEMU against the host; instructions per 16 kHz
     /// tick on the Cortex-M4 (QEMU -icount: instructions, not cycles), on average over the
     /// vectors and with every feature on at once. Builds the firmware first (scripts/fw
@@ -421,8 +421,11 @@ enum BenchCommand {
         #[command(flatten)]
         common: Common,
     },
-    /// Identification (seed 001): anti-resonance frequency and damping errors against the
-    /// plant's truth at 20 dB SNR with 2 s of excitation, two and three axes, a rigid axis.
+    /// Identification and correction (seed 001): anti-resonance frequency and damping errors
+    /// against the plant's truth at 20 dB SNR with 2 s of excitation (two and three axes, a
+    /// rigid axis); the axes' largest response difference before and after `servo tune`
+    /// (measured models, and the seed's zeros-only form); the XY circle's roundness without
+    /// and with the correction.
     Ident {
         #[command(flatten)]
         common: Common,
