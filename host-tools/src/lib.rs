@@ -13,6 +13,7 @@ pub mod bode_plot;
 pub mod circle_plot;
 pub mod circle_report;
 pub mod circle_test;
+pub mod device_link;
 pub mod firmware;
 pub mod fmu_runner;
 pub mod frequency_response;

@@ -242,3 +242,21 @@ fn tune_writes_each_axis_correction_and_refuses_unusable_models() {
     assert_eq!(o.status.code(), Some(2));
     assert!(String::from_utf8_lossy(&o.stderr).contains("at least two"));
 }
+
+#[test]
+fn device_refuses_what_it_cannot_send_before_touching_a_port() {
+    let err = |args: &[&str]| {
+        let o = servo().args(["device", "--port", "/nonexistent/tty"]).args(args).output().unwrap();
+        assert_eq!(o.status.code(), Some(2), "{args:?}");
+        String::from_utf8_lossy(&o.stderr).into_owned()
+    };
+    assert!(err(&["load-correction"]).contains("corr.frame"));
+    assert!(err(&["stream", "--seconds=-1"]).contains("between 0 and 3600"));
+    assert!(err(&["reboot"]).contains("unknown action"));
+    let not_a_frame = tmp("device").join("x.corr.toml");
+    std::fs::create_dir_all(not_a_frame.parent().unwrap()).unwrap();
+    std::fs::write(&not_a_frame, "\"corr.count\" = 2\n").unwrap();
+    assert!(err(&["load-correction", not_a_frame.to_str().unwrap()]).contains("not a frame"));
+    // A valid request, but no drive there: the port is named in the error.
+    assert!(err(&["hello"]).contains("/nonexistent/tty"));
+}

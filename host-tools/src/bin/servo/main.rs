@@ -3,6 +3,7 @@
 mod acc_dec;
 mod backbone;
 mod circle;
+mod device;
 mod firmware;
 mod ident;
 mod sequence;
@@ -345,6 +346,35 @@ enum Command {
     },
     /// Compare two trace CSVs bit for bit on their common columns.
     Compare { a: PathBuf, b: PathBuf },
+    /// Talk to a real drive (drive-g474) over its serial link: the core's protocol, version
+    /// checked first. The NUCLEO's ST-LINK virtual COM port is usually /dev/ttyACM0.
+    ///
+    /// Actions: hello (version handshake), telemetry (one record, printed as JSON),
+    /// clear-faults, start-sweep, load-correction FILE (an <axis>.corr.frame from
+    /// `servo tune`, checked to be a correction request before it is sent), stream (turn
+    /// acquisition streaming on for --seconds, write the samples to <out>/stream.csv, report
+    /// how many arrived and how many the drive had to drop).
+    ///
+    /// Example: servo device --port /dev/ttyACM0 load-correction out/tune/x.corr.frame
+    Device {
+        /// Serial port of the drive
+        #[arg(long)]
+        port: String,
+        /// Baud rate (the firmware's USART2 runs at 921600)
+        #[arg(long, default_value_t = 921_600)]
+        baud: u32,
+        /// How long to wait for each answer (ms)
+        #[arg(long, default_value_t = 500)]
+        timeout_ms: u64,
+        /// Streaming time (s), for `stream`
+        #[arg(long, default_value_t = 1.0)]
+        seconds: f64,
+        /// hello, telemetry, clear-faults, start-sweep, load-correction FILE, stream
+        #[arg(num_args = 1..=2, required = true)]
+        action: Vec<String>,
+        #[command(flatten)]
+        common: Common,
+    },
     /// Benchmarks that print the figures the issues ask for.
     #[command(subcommand)]
     Bench(BenchCommand),
@@ -523,6 +553,7 @@ fn main() -> ExitCode {
         Command::Circle { axes, single, radius, feed, cw, lead_in, measure, set, x_set, y_set, compare, tuned, fmpy, common } => {
             circle::circle(axes, single, *radius, *feed, *cw, *lead_in, measure, set, x_set, y_set, compare, tuned, *fmpy, common)
         }
+        Command::Device { port, baud, timeout_ms, seconds, action, common } => device::device(port, *baud, *timeout_ms, *seconds, action, common),
         Command::Compare { a, b } => (|| {
             let (ta, tb) = (Trace::read_csv(a)?, Trace::read_csv(b)?);
             match compare_exact(&ta, &tb)? {
