@@ -90,6 +90,12 @@ impl Biquad {
         self.s1 = y - self.b0 * x;
     }
 
+    /// Sum of every future output if the input stopped now (whole-pulse filters keep this
+    /// many pulses inside).
+    pub fn pending_output(&self) -> f32 {
+        (self.s1 + self.s2) / (1.0 + self.a1 + self.a2)
+    }
+
     pub fn process(&mut self, x: f32) -> f32 {
         let y = self.b0 * x + self.s1;
         self.s1 = self.b1 * x - self.a1 * y + self.s2;

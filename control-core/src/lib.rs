@@ -56,6 +56,16 @@ pub fn counts_to_f32(x: i64) -> f32 {
     }
 }
 
+/// Whole-pulse output of a filter on pulses: keep exactly `round(pending)` pulses inside
+/// (`stock`) and give out the rest of what came in, so the sum out equals the sum in.
+#[inline]
+pub(crate) fn release_whole_pulses(stock: &mut i64, pulses: i64, pending: f32) -> i64 {
+    let keep = round_to_counts(pending);
+    let out = *stock + pulses - keep;
+    *stock = keep;
+    out
+}
+
 /// Below this magnitude an f32 converts through 32 bits (one instruction on a Cortex-M4;
 /// f32 → i64 is a library call) and `x − trunc(x)` is exact.
 const I32_SAFE: f32 = 2_147_483_520.0; // the largest f32 below 2³¹

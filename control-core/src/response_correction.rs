@@ -186,13 +186,9 @@ impl ResponseCorrection {
         let mut pending = 0.0;
         for b in &mut self.sections[..self.count] {
             v = b.process(v);
-            let (s1, s2) = b.state();
-            pending += (s1 + s2) / (1.0 + b.a1 + b.a2);
+            pending += b.pending_output();
         }
-        let keep = crate::round_to_counts(pending);
-        let out = self.stock + pulses - keep;
-        self.stock = keep;
-        out
+        crate::release_whole_pulses(&mut self.stock, pulses, pending)
     }
 }
 

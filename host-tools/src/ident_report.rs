@@ -86,8 +86,7 @@ pub fn plot(path: &Path, axes: &[(AxisModel, Vec<ResponsePoint>)]) -> Result<()>
 pub fn replot(models: &[PathBuf], out: &Path) -> Result<PathBuf> {
     let mut axes = Vec::new();
     for path in models {
-        let model: AxisModel = serde_json::from_str(&std::fs::read_to_string(path).with_context(|| format!("cannot read {}", path.display()))?)
-            .with_context(|| format!("{} is not a model file", path.display()))?;
+        let model = AxisModel::load(path)?;
         if let Some(z) = model.anti_resonance {
             if !(z.hz.is_finite() && z.hz > 0.0 && z.damping.is_finite() && z.damping >= 0.0) {
                 bail!("{}: the anti-resonance must have a positive frequency and a damping >= 0 (zeros in the right half plane cannot be used)", path.display());

@@ -119,13 +119,8 @@ pub const MULTISINE_AMPLITUDE: f64 = 1.0e-3;
 /// encoder-quantisation noise.
 pub const MEASURED_PERIODS: usize = 4;
 
-/// Command → machine-end response of one axis at `frequencies` (Hz, whole numbers).
-pub fn command_to_load(fmu: &Fmu, parameters: &BTreeMap<String, Value>, frequencies: &[u32]) -> Result<Vec<ResponsePoint>> {
-    Ok(command_to_load_complex(fmu, parameters, frequencies)?.into_iter().map(|(f, h)| ResponsePoint::from_complex(f, h, 1.0)).collect())
-}
-
 /// Command → machine-end response of one axis at `frequencies` (Hz, whole numbers), complex.
-pub fn command_to_load_complex(fmu: &Fmu, parameters: &BTreeMap<String, Value>, frequencies: &[u32]) -> Result<Vec<(f64, Complex)>> {
+pub fn command_to_load(fmu: &Fmu, parameters: &BTreeMap<String, Value>, frequencies: &[u32]) -> Result<Vec<(f64, Complex)>> {
     let period = (1.0 / DEFAULT_STEP).round() as usize; // one second
     let command = multisine(frequencies, MULTISINE_AMPLITUDE, (1 + MEASURED_PERIODS) * period);
     let scenario = Scenario::streamed_position("command_to_load", parameters, &command);
@@ -288,10 +283,11 @@ pub fn tune(fmu: &Fmu, models: &[AxisModel], method: Method, check: bool, mut pr
     let runs = models.len() as f64 * if check { 2.0 } else { 1.0 };
     let mut done = 0.0;
     let measure_before = check || method == Method::Response;
+    let parameters: Vec<BTreeMap<String, Value>> = models.iter().map(measurement_parameters).collect();
     let mut before = Vec::new();
     if measure_before {
-        for m in models {
-            before.push(command_to_load_complex(fmu, &measurement_parameters(m), &frequencies)?);
+        for p in &parameters {
+            before.push(command_to_load(fmu, p, &frequencies)?);
             done += 1.0;
             progress(done / runs);
         }
@@ -317,10 +313,10 @@ pub fn tune(fmu: &Fmu, models: &[AxisModel], method: Method, check: bool, mut pr
     }
     let mut after = Vec::new();
     if check {
-        for (m, f) in models.iter().zip(&filters) {
-            let mut p = measurement_parameters(m);
+        for (p, f) in parameters.iter().zip(&filters) {
+            let mut p = p.clone();
             p.extend(f.parameters());
-            after.push(command_to_load_complex(fmu, &p, &frequencies)?);
+            after.push(command_to_load(fmu, &p, &frequencies)?);
             done += 1.0;
             progress(done / runs);
         }
@@ -330,11 +326,12 @@ pub fn tune(fmu: &Fmu, models: &[AxisModel], method: Method, check: bool, mut pr
     };
     let axes = models
         .iter()
+        .zip(parameters)
         .zip(filters)
         .zip(response_models)
-        .map(|((m, correction), response_model)| TunedAxis {
+        .map(|(((m, p), correction), response_model)| TunedAxis {
             axis: m.axis.clone(),
-            fmu_parameters: measurement_parameters(m).into_iter().map(|(k, v)| (k, v.as_f64())).collect(),
+            fmu_parameters: p.into_iter().map(|(k, v)| (k, v.as_f64())).collect(),
             correction,
             response_model,
         })

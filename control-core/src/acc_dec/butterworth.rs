@@ -231,17 +231,12 @@ impl ButterworthPulseFilter {
         let mut pending = 0.0;
         for b in &mut d.biquads[..d.biquad_count] {
             v = b.process(v);
-            let (s1, s2) = b.state();
-            pending += (s1 + s2) / (1.0 + b.a1 + b.a2);
+            pending += b.pending_output();
         }
         if let Some(f) = &mut d.first_order {
             f.process(v);
             pending += f.pending();
         }
-        // Keep exactly round(pending) pulses inside; give out the rest.
-        let keep = crate::round_to_counts(pending);
-        let out = self.stock + pulses - keep;
-        self.stock = keep;
-        out
+        crate::release_whole_pulses(&mut self.stock, pulses, pending)
     }
 }

@@ -2,17 +2,23 @@
 
 use super::*;
 
-pub fn scenario_files(given: &[PathBuf]) -> Result<Vec<PathBuf>> {
-    if !given.is_empty() {
-        return Ok(given.to_vec());
-    }
-    let dir = workspace_root().join("scenarios");
-    let mut v: Vec<PathBuf> = std::fs::read_dir(&dir)
+/// The `.toml` files of a folder, sorted.
+pub fn toml_files_in(dir: &std::path::Path) -> Result<Vec<PathBuf>> {
+    let mut v: Vec<PathBuf> = std::fs::read_dir(dir)
         .with_context(|| format!("cannot list {}", dir.display()))?
         .filter_map(|e| e.ok().map(|e| e.path()))
         .filter(|p| p.extension().is_some_and(|x| x == "toml"))
         .collect();
     v.sort();
+    Ok(v)
+}
+
+pub fn scenario_files(given: &[PathBuf]) -> Result<Vec<PathBuf>> {
+    if !given.is_empty() {
+        return Ok(given.to_vec());
+    }
+    let dir = workspace_root().join("scenarios");
+    let v = toml_files_in(&dir)?;
     if v.is_empty() {
         bail!("no scenario files in {}", dir.display());
     }

@@ -208,13 +208,7 @@ pub fn tune(models: &[PathBuf], method: &str, no_check: bool, common: &Common) -
     let method: Method = method.parse()?;
     let out = common.out.clone().unwrap_or_else(|| default_out("tune"));
     std::fs::create_dir_all(&out).with_context(|| format!("cannot create {}", out.display()))?;
-    let models: Vec<AxisModel> = models
-        .iter()
-        .map(|p| -> Result<AxisModel> {
-            let text = std::fs::read_to_string(p).with_context(|| format!("cannot read {}", p.display()))?;
-            serde_json::from_str(&text).with_context(|| format!("{} is not a model file", p.display()))
-        })
-        .collect::<Result<_>>()?;
+    let models: Vec<AxisModel> = models.iter().map(|p| AxisModel::load(p)).collect::<Result<_>>()?;
     let fmu = Fmu::load(&common.fmu.clone().unwrap_or_else(default_fmu))?;
     let pb = progress_bar("tune", common.json);
     let tuning = host_tools::tuning::tune(&fmu, &models, method, !no_check, |x| pb.set_position((x * 1000.0) as u64))?;

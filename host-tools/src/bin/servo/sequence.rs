@@ -7,18 +7,7 @@ pub fn sequence(files: &[PathBuf], with_fmpy: bool, common: &Common) -> Result<b
     let fmu_path = common.fmu.clone().unwrap_or_else(default_fmu);
     let out = common.out.clone().unwrap_or_else(|| default_out("sequence"));
     std::fs::create_dir_all(&out).with_context(|| format!("cannot create {}", out.display()))?;
-    let files = if files.is_empty() {
-        let dir = workspace_root().join("scenarios/sequences");
-        let mut v: Vec<PathBuf> = std::fs::read_dir(&dir)
-            .with_context(|| format!("cannot list {}", dir.display()))?
-            .filter_map(|e| e.ok().map(|e| e.path()))
-            .filter(|p| p.extension().is_some_and(|x| x == "toml"))
-            .collect();
-        v.sort();
-        v
-    } else {
-        files.to_vec()
-    };
+    let files = if files.is_empty() { super::backbone::toml_files_in(&workspace_root().join("scenarios/sequences"))? } else { files.to_vec() };
     let fmu = Fmu::load(&fmu_path)?;
     let mut all_ok = true;
     let mut summary = Vec::new();
