@@ -33,6 +33,8 @@ use crate::TAU;
 
 pub const MAX_SWEEP_POINTS: usize = 128;
 const MAX_SHIFTS: u32 = 16;
+/// Upper bound of `SweepParams::max_extensions`.
+pub const MAX_EXTENSIONS: u32 = 64;
 
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
 pub enum SweepSignal {
@@ -74,6 +76,16 @@ pub struct SweepParams {
     pub prbs_degree: u32,
     pub prbs_divider: u32,
     pub prbs_seconds: f32,
+    /// Stepped sine: lengthen a frequency's records by whole blocks so that the standard
+    /// error of its gain (predicted from the fit's residual after the first block: mostly
+    /// encoder quantisation) is at most this (dB; 0: fixed records). At low-gain points (a deep anti-resonance, the top of the sweep) the
+    /// response is a few encoder counts and the base record leaves about 0.1 dB of error
+    /// whose size depends on the fine detail of the motion; the well-measured points are not
+    /// lengthened.
+    pub precision_db: f32,
+    /// At most so many extra blocks (each as long as one record's base measurement) per
+    /// record of a frequency.
+    pub max_extensions: u32,
 }
 
 impl Default for SweepParams {
@@ -103,6 +115,8 @@ impl Default for SweepParams {
             prbs_degree: 15,
             prbs_divider: 1,
             prbs_seconds: 5.0,
+            precision_db: 0.03,
+            max_extensions: 8,
         }
     }
 }
@@ -193,8 +207,20 @@ impl SweepParams {
         (settle * self.acquisition_divider as u64, samples)
     }
 
-    /// Base ticks from the start to the end of the sweep.
+    /// Base ticks from the start to the end of the sweep when no frequency is extended (the
+    /// sweep's length when `precision_db` is 0 or every point meets it at once).
     pub fn total_ticks(&self, base_rate_hz: f32) -> u64 {
+        self.ticks_with_extensions(base_rate_hz, 0)
+    }
+
+    /// Base ticks of the sweep when every frequency takes all `max_extensions` blocks: the
+    /// longest it can run.
+    pub fn max_total_ticks(&self, base_rate_hz: f32) -> u64 {
+        let extensions = if self.precision_db > 0.0 { self.max_extensions } else { 0 };
+        self.ticks_with_extensions(base_rate_hz, extensions)
+    }
+
+    fn ticks_with_extensions(&self, base_rate_hz: f32, extensions: u32) -> u64 {
         let d = self.acquisition_divider as u64;
         match self.signal {
             SweepSignal::Prbs => {
@@ -205,7 +231,7 @@ impl SweepParams {
                 .map(|i| {
                     let f = self.frequency(i);
                     let (settle, samples) = self.record_length(f, base_rate_hz);
-                    self.records(f, base_rate_hz) as u64 * (settle + samples * d)
+                    self.records(f, base_rate_hz) as u64 * (settle + samples * d * (1 + extensions as u64))
                 })
                 .sum(),
         }
@@ -252,6 +278,10 @@ impl SweepParams {
             return Err(SweepError::Setting { field: "prbs_divider", value: 0.0 });
         }
         finite_positive("prbs_seconds", self.prbs_seconds)?;
+        finite_non_negative("precision_db", self.precision_db)?;
+        if self.max_extensions > MAX_EXTENSIONS {
+            return Err(SweepError::Setting { field: "max_extensions (at most 64)", value: self.max_extensions as f32 });
+        }
         // The sine is updated at the velocity-loop rate for velocity-loop points.
         let loop_rate = if self.point == InjectionPoint::TorqueCommand { base_rate_hz } else { base_rate_hz / velocity_divider as f32 };
         let top = self.stop_hz.max(self.extra_hz);
@@ -335,8 +365,13 @@ pub struct SweepStatus {
 /// fs − f when a record is not a whole number of cycles; and it tells how well the sample
 /// phases determine the sine: the determinant of the (cos, sin) covariance, 0 when all
 /// samples sit at one phase and its opposite (a single record at exactly fs/2).
+///
+/// y is summed about its first sample (`y0`): the constant speed the sweep rides on would
+/// otherwise swamp the f32 sums, in particular Σy², which gives the residual.
 #[derive(Clone, Copy, Debug, Default)]
 struct SineFitSums {
+    y0: f32,
+    yy: f32,
     n: f32,
     c: f32,
     s: f32,
@@ -354,6 +389,11 @@ struct SineFitSums {
 impl SineFitSums {
     /// One sample with the sine and cosine of its phase.
     fn add(&mut self, u: f32, y: f32, (s, c): (f32, f32)) {
+        if self.n == 0.0 {
+            self.y0 = y;
+        }
+        let y = y - self.y0;
+        self.yy += y * y;
         self.n += 1.0;
         self.c += c;
         self.s += s;
@@ -384,6 +424,35 @@ impl SineFitSums {
         let conditioning = (det / (0.25 * n * n)).clamp(0.0, 1.0);
         (amplitude(self.u, self.uc, self.us), amplitude(self.y, self.yc, self.ys), conditioning)
     }
+
+    /// Standard error of Y's gain in dB, from the residual of its fit: `σ² = SSR/(n − 3)`,
+    /// `Var b = σ²·Scc'/det`... for the centred normal equations, the radial part of the
+    /// amplitude's error over `|Y|`. None when the samples cannot tell (too few, phases
+    /// degenerate, no response).
+    fn y_gain_error_db(&self) -> Option<f32> {
+        let n = self.n;
+        if n < 8.0 {
+            return None;
+        }
+        let scc = self.cc - self.c * self.c / n;
+        let sss = self.ss - self.s * self.s / n;
+        let scs = self.cs - self.c * self.s / n;
+        let det = scc * sss - scs * scs;
+        if !(det > 1e-6 * n * n) {
+            return None;
+        }
+        let (pc, ps) = (self.yc - self.y * self.c / n, self.ys - self.y * self.s / n);
+        let b = (sss * pc - scs * ps) / det;
+        let c = (scc * ps - scs * pc) / det;
+        let amplitude2 = b * b + c * c;
+        if !(amplitude2 > 0.0) {
+            return None;
+        }
+        let residual = (self.yy - self.y * self.y / n - (b * pc + c * ps)).max(0.0);
+        let sigma2 = residual / (n - 3.0);
+        let relative = crate::square_root::sqrt(sigma2 * (scc + sss) / (2.0 * det) / amplitude2);
+        Some(20.0 / core::f32::consts::LN_10 * relative)
+    }
 }
 
 #[derive(Clone, Copy, Debug)]
@@ -394,6 +463,10 @@ pub struct PhaseShiftedSweep {
     generator: SineGenerator,
     /// Ticks left in the present state.
     left: u64,
+    /// Measurement blocks added to each record of the present frequency (see
+    /// `SweepParams::precision_db`), decided once the first record's base block is in.
+    extensions: u32,
+    lengthened: bool,
     acc: SineFitSums,
     sequence: MSequence,
     chip: f32,
@@ -412,6 +485,8 @@ impl PhaseShiftedSweep {
             status: SweepStatus::default(),
             generator: SineGenerator::default(),
             left: 0,
+            extensions: 0,
+            lengthened: false,
             acc: SineFitSums::default(),
             // Validated with the parameters; the fallback only keeps this constructor total.
             sequence: MSequence::new(params.prbs_degree).unwrap_or(MSequence::DEGREE_15),
@@ -469,6 +544,8 @@ impl PhaseShiftedSweep {
         self.left = p.record_length(f, self.base_rate_hz).0;
         if record == 0 {
             self.acc = SineFitSums::default();
+            self.extensions = 0;
+            self.lengthened = false;
         }
     }
 
@@ -477,9 +554,8 @@ impl PhaseShiftedSweep {
     /// multiple of `prbs_divider` (the caller counts ticks; a 64-bit modulo is software on a
     /// Cortex-M4). The phase's sine and cosine are kept for the correlator on the same tick
     /// (one evaluation instead of two). Rotating them on between acquisition ticks instead
-    /// of evaluating every tick saved the Cortex-M4 about 20 instructions per tick, but moved
-    /// the encoder quantisation pattern enough to take the error above 2 kHz from 0.07 to
-    /// 0.12 dB: not done.
+    /// of evaluating every tick saved the Cortex-M4 about 20 instructions per tick, but changes
+    /// what the loop computes (the golden vectors and the drive's own results): not done.
     pub fn excitation(&mut self, chip_due: bool) -> Option<(InjectionPoint, f32)> {
         if !self.running() {
             return None;
@@ -535,13 +611,29 @@ impl PhaseShiftedSweep {
                 self.status.state = SweepState::Measuring;
                 self.left = match signal {
                     SweepSignal::Prbs => libm::roundf(p.prbs_seconds * self.base_rate_hz / divider as f32) as u64,
-                    SweepSignal::SteppedSine => p.record_length(self.status.frequency, self.base_rate_hz).1,
+                    // Later records take the blocks the first one was given.
+                    SweepSignal::SteppedSine => {
+                        let blocks = if self.status.record == 0 { 1 } else { 1 + self.extensions as u64 };
+                        p.record_length(self.status.frequency, self.base_rate_hz).1 * blocks
+                    }
                 } * divider as u64;
             }
             SweepState::Measuring if signal == SweepSignal::Prbs => self.status.state = SweepState::Done,
             SweepState::Measuring => {
                 let f = self.status.frequency;
-                if self.status.record + 1 < self.params.records(f, self.base_rate_hz) {
+                let records = self.params.records(f, self.base_rate_hz);
+                // After the first record's base block: how many more blocks every record of
+                // this frequency takes (the same for all, so that the phase-shifted records
+                // stay balanced); the first one measures on at once, without settling.
+                if self.status.record == 0 && !self.lengthened {
+                    self.lengthened = true;
+                    self.extensions = self.blocks_needed(records);
+                    if self.extensions > 0 {
+                        self.left = self.extensions as u64 * self.params.record_length(f, self.base_rate_hz).1 * divider as u64;
+                        return;
+                    }
+                }
+                if self.status.record + 1 < records {
                     self.begin_record(self.status.point, self.status.record + 1);
                     return;
                 }
@@ -554,6 +646,26 @@ impl PhaseShiftedSweep {
                 }
             }
             _ => {}
+        }
+    }
+
+    /// Extra blocks per record for the gain's standard error to reach `precision_db` over
+    /// all `records`, predicted from the first base block (error ∝ 1/√samples).
+    fn blocks_needed(&self, records: u32) -> u32 {
+        let p = &self.params;
+        if !(p.precision_db > 0.0) || p.max_extensions == 0 {
+            return 0;
+        }
+        let Some(error) = self.acc.y_gain_error_db() else { return 0 };
+        let ratio = error / p.precision_db;
+        let blocks = libm::ceilf(ratio * ratio / records as f32);
+        // Compared as floats: a huge ratio must not wrap in the conversion.
+        if blocks <= 1.0 {
+            0
+        } else if blocks > (p.max_extensions + 1) as f32 {
+            p.max_extensions
+        } else {
+            blocks as u32 - 1
         }
     }
 
@@ -647,5 +759,59 @@ mod tests {
         assert_eq!(v(SweepParams { acquisition_divider: 3, ..Default::default() }), Err(SweepError::AcquisitionDivider { acquisition: 3, velocity: 2 }));
         assert_eq!(v(SweepParams { points: 200, ..Default::default() }), Err(SweepError::TooManyPoints(200)));
         assert_eq!(v(SweepParams::default()), Ok(()));
+    }
+
+    /// A response of `gain` plus uniform noise of ±`noise` (a stand-in for encoder
+    /// quantisation), two frequencies; returns (G of the first, ticks run).
+    fn noisy(params: SweepParams, gain: f32, noise: f32, seed: u32) -> (SweepResult, u64) {
+        let mut s = PhaseShiftedSweep::new(params, FS);
+        s.start().unwrap();
+        let (mut tick, mut state) = (0u64, seed | 1);
+        while s.running() {
+            let (_, u) = s.excitation(true).unwrap();
+            state ^= state << 13;
+            state ^= state >> 17;
+            state ^= state << 5;
+            let r = (state >> 8) as f32 / (1u32 << 24) as f32 * 2.0 - 1.0;
+            let y = 50.0 + gain * params.amplitude * libm::sinf(s.phase + 0.3) + noise * r;
+            s.end_tick(tick, tick.is_multiple_of(params.acquisition_divider as u64), u, y);
+            tick += 1;
+        }
+        (s.results()[0], tick)
+    }
+
+    #[test]
+    fn a_noisy_low_gain_point_is_measured_on_until_precise_and_a_clean_one_is_not() {
+        let p = SweepParams { start_hz: 300.0, stop_hz: 400.0, points: 2, extra_hz: 0.0, ..Default::default() };
+        let off = SweepParams { precision_db: 0.0, ..p };
+        // A clean response: no extension, the schedule the host computes.
+        assert_eq!(noisy(p, 1.0, 0.0, 1).1, p.total_ticks(FS));
+        // Gain 0.06 (−24 dB) under noise ±0.04: 0.1 dB-class error in a base record.
+        let (mut before, mut after) = (0.0f32, 0.0f32);
+        for seed in 1..=12 {
+            let db = |r: SweepResult| (20.0 * libm::log10f(libm::hypotf(r.re, r.im) / 0.06)).abs();
+            let (r_off, t_off) = noisy(off, 0.06, 0.04, seed);
+            let (r_on, t_on) = noisy(p, 0.06, 0.04, seed);
+            assert_eq!(t_off, off.total_ticks(FS));
+            assert!(t_on > t_off && t_on <= p.max_total_ticks(FS), "{t_on} ticks vs {t_off}..{}", p.max_total_ticks(FS));
+            before = before.max(db(r_off));
+            after = after.max(db(r_on));
+        }
+        assert!(after < 0.5 * before, "worst error {after} dB with extensions vs {before} dB without");
+        // The standard error the sweep computes is the spread it predicts: σ·√(2/n)/A in dB.
+        let mut fit = SineFitSums::default();
+        let mut state = 7u32;
+        let n = 4000;
+        for k in 0..n {
+            let theta = k as f32 * 0.731;
+            state ^= state << 13;
+            state ^= state >> 17;
+            state ^= state << 5;
+            let r = (state >> 8) as f32 / (1u32 << 24) as f32 * 2.0 - 1.0;
+            fit.add(0.0, 50.0 + 0.12 * libm::sinf(theta) + 0.04 * r, libm::sincosf(theta));
+        }
+        let predicted = 20.0 / core::f32::consts::LN_10 * (0.04 / libm::sqrtf(3.0)) * libm::sqrtf(2.0 / n as f32) / 0.12;
+        let got = fit.y_gain_error_db().unwrap();
+        assert!((got / predicted - 1.0).abs() < 0.1, "estimated {got} dB, expected {predicted} dB");
     }
 }

@@ -307,6 +307,10 @@ parameter_group! {
         prbs_divider: i32 = 1,
         /// PRBS: measured duration
         prbs_seconds: f64 = 5.0,
+        /// Stepped sine: measure a frequency on, block by block, until the standard error of its gain is at most this (dB; 0 = fixed records)
+        precision_db: f64 = 0.03,
+        /// At most so many extra measurement blocks per frequency (0 to 64)
+        max_extensions: i32 = 8,
     }
 }
 
@@ -340,6 +344,8 @@ impl SweepParameters {
             prbs_degree: count("sweep.prbs_degree", self.prbs_degree)?,
             prbs_divider: count("sweep.prbs_divider", self.prbs_divider)?,
             prbs_seconds: self.prbs_seconds as f32,
+            precision_db: self.precision_db as f32,
+            max_extensions: count("sweep.max_extensions", self.max_extensions)?,
         })
     }
 }
@@ -652,6 +658,10 @@ pub struct ServoAxis {
     seen_sweep_start: i32,
     /// Refused sequence events of the last step, for the log.
     refusals: Vec<String>,
+    /// The sweep result (bits of its re, im) that sweep_last_gain_db / _phase_deg show.
+    reported_sweep_result: Option<(u32, u32)>,
+    /// The last communication step size accepted (its bits) and its number of base ticks.
+    accepted_step: Option<(u64, u64)>,
 }
 
 impl ControllerParameters {
@@ -851,8 +861,13 @@ impl ServoAxis {
         self.sweep_frequency = w.frequency as f64;
         self.sweep_done_points = w.done_points as i32;
         self.sweep_last_frequency = w.last.frequency as f64;
-        self.sweep_last_gain_db = w.last.gain_db() as f64;
-        self.sweep_last_phase_deg = w.last.phase_deg() as f64;
+        // A logarithm and an arctangent: only when the result they come from changes.
+        let key = (w.last.re.to_bits(), w.last.im.to_bits());
+        if self.reported_sweep_result != Some(key) {
+            self.sweep_last_gain_db = w.last.gain_db() as f64;
+            self.sweep_last_phase_deg = w.last.phase_deg() as f64;
+            self.reported_sweep_result = Some(key);
+        }
         self.sweep_last_quality = w.last.quality as f64;
         self.acq_time = w.sample.tick as f64 * sim.tick_period();
         self.acq_u = w.sample.u as f64;
@@ -935,18 +950,26 @@ impl ServoAxis {
         }
         let inputs = self.user_inputs()?;
         let sim = self.sim.as_mut().ok_or("model not initialized")?;
-        let period = sim.tick_period() * self.ctrl.position_divider as f64;
-        if !(h.is_finite() && h > 0.0) {
-            return Err(format!("communication step {h} s must be a positive number"));
-        }
-        let n = (h / sim.tick_period()).round();
-        let whole_periods = (h / period).round();
-        if whole_periods < 1.0 || (h - whole_periods * period).abs() > 1e-9 * period.max(h) {
-            return Err(format!(
-                "communication step {h} s is not a whole multiple of the position-loop period {period} s \
-                 (ctrl.position_divider / ctrl.current_loop_hz)"
-            ));
-        }
+        // The step size is checked once per new size; most importers keep it.
+        let n = match self.accepted_step {
+            Some((bits, ticks)) if bits == h.to_bits() => ticks,
+            _ => {
+                let period = sim.tick_period() * self.ctrl.position_divider as f64;
+                if !(h.is_finite() && h > 0.0) {
+                    return Err(format!("communication step {h} s must be a positive number"));
+                }
+                let whole_periods = (h / period).round();
+                if whole_periods < 1.0 || (h - whole_periods * period).abs() > 1e-9 * period.max(h) {
+                    return Err(format!(
+                        "communication step {h} s is not a whole multiple of the position-loop period {period} s \
+                         (ctrl.position_divider / ctrl.current_loop_hz)"
+                    ));
+                }
+                let ticks = (h / sim.tick_period()).round() as u64;
+                self.accepted_step = Some((h.to_bits(), ticks));
+                ticks
+            }
+        };
         let expected_time = sim.ticks() as f64 * sim.tick_period();
         if (current - expected_time).abs() > 0.5 * sim.tick_period() {
             return Err(format!(
@@ -968,9 +991,7 @@ impl ServoAxis {
             }
             self.seen_sweep_start = self.sweep_start;
         }
-        for _ in 0..n as u64 {
-            sim.tick(&inputs);
-        }
+        sim.run_ticks(n, &inputs);
         self.update_outputs();
         Ok(())
     }
@@ -1022,6 +1043,8 @@ impl UserModel for ServoAxis {
             // 1 starts a run, a gain index selects its entry.
             self.seen = SequenceInputsSeen::default();
             self.seen_sweep_start = 0;
+            self.reported_sweep_result = None;
+            self.accepted_step = None;
             self.update_outputs();
             Ok(())
         }));

@@ -144,25 +144,37 @@ impl AxisSimulation {
         self.tick_traced(u);
     }
 
+    /// `n` base ticks with the inputs held: the commands are converted once, not per tick.
+    pub fn run_ticks(&mut self, n: u64, u: &UserInputs) {
+        let commands = self.commands(u);
+        for _ in 0..n {
+            self.tick_with(&commands, u.disturbance_torque);
+        }
+    }
+
     /// One base tick; returns what the control core was given (for golden vectors).
     pub fn tick_traced(&mut self, u: &UserInputs) -> (AxisInputs, Commands) {
+        let commands = self.commands(u);
+        (self.tick_with(&commands, u.disturbance_torque), commands)
+    }
+
+    fn tick_with(&mut self, commands: &Commands, disturbance_torque: f64) -> AxisInputs {
         let m = self.plant.measure();
         let inputs = AxisInputs {
             phase_currents: [m.phase_currents[0] as f32, m.phase_currents[1] as f32],
             encoder_count: m.encoder_count,
             bus_voltage: m.bus_voltage as f32,
         };
-        let commands = self.commands(u);
-        let pwm = self.axis.step(&inputs, &commands);
+        let pwm = self.axis.step(&inputs, commands);
         let applied = PlantInputs {
             duties: self.pending.duties.map(|d| d as f64),
             // A fault switches the bridge off at once, not one tick later.
             bridge_enabled: self.pending.enabled && pwm.enabled,
-            disturbance_torque: u.disturbance_torque,
+            disturbance_torque,
         };
         self.plant.advance(&applied);
         self.pending = pwm;
         self.ticks += 1;
-        (inputs, commands)
+        inputs
     }
 }

@@ -446,6 +446,7 @@ pub fn residual_vibration(
         }],
         checks: vec![],
         plot: vec![],
+        record: vec![],
     };
     let mut trace = fmu.run(&scenario, |_| {})?;
     let col = |n: &str| trace.column(n).ok_or_else(|| anyhow!("the FMU has no output {n}"));

@@ -98,8 +98,36 @@ impl Fmu {
         r.map(|_| ()).map_err(|e| anyhow!("the FMU refused {} = {value:?}: {e:?}", var.name))
     }
 
+    /// The outputs `names` (the scenario's `record` list), or every output when it is empty.
+    pub fn recorded(&self, names: &[String]) -> Result<Vec<&VariableInfo>> {
+        if names.is_empty() {
+            return Ok(self.outputs());
+        }
+        names
+            .iter()
+            .map(|n| {
+                let var = self.variable(n)?;
+                if var.causality != Causality::Output {
+                    bail!("record lists `{n}`, which is not an output of the FMU (it is {:?})", var.causality);
+                }
+                Ok(var)
+            })
+            .collect()
+    }
+
     /// Run `scenario`; `progress` is called with the fraction done.
-    pub fn run(&self, scenario: &Scenario, mut progress: impl FnMut(f64)) -> Result<Trace> {
+    pub fn run(&self, scenario: &Scenario, progress: impl FnMut(f64)) -> Result<Trace> {
+        self.run_until(scenario, progress, |_| false)
+    }
+
+    /// Run `scenario` until its stop time or until `done` says so of a recorded row (time,
+    /// then the recorded outputs in trace order); the trace ends with that row.
+    pub fn run_until(
+        &self,
+        scenario: &Scenario,
+        mut progress: impl FnMut(f64),
+        mut done: impl FnMut(&[f64]) -> bool,
+    ) -> Result<Trace> {
         let params: Vec<(&VariableInfo, Value)> = scenario
             .parameters
             .iter()
@@ -129,7 +157,7 @@ impl Fmu {
                 Ok((k, group))
             })
             .collect::<Result<_>>()?;
-        let outputs = self.outputs();
+        let outputs = self.recorded(&scenario.record)?;
 
         let mut inst = self
             .import
@@ -159,6 +187,7 @@ impl Fmu {
         let mut columns = vec!["time".to_string()];
         columns.extend(outputs.iter().map(|v| v.name.clone()));
         let mut trace = Trace::new(columns);
+        trace.rows.reserve_exact(n + 1);
         // Outputs are read in one call per type, then put back in column order.
         let of_kind = |kind: Kind| -> (Vec<usize>, Vec<u32>) {
             outputs.iter().enumerate().filter(|(_, v)| v.kind == kind).map(|(i, v)| (i, v.vr)).unzip()
@@ -202,6 +231,9 @@ impl Fmu {
             record(&mut inst, (k + 1) as f64 * h, &mut trace)?;
             if k % 256 == 0 {
                 progress(k as f64 / n as f64);
+            }
+            if trace.rows.last().is_some_and(|row| done(row)) {
+                break;
             }
         }
         progress(1.0);

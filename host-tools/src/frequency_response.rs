@@ -78,14 +78,23 @@ fn sweep_parameters(s: &SweepParams) -> Vec<(String, Value)> {
         ("sweep.prbs_degree".into(), i(s.prbs_degree)),
         ("sweep.prbs_divider".into(), i(s.prbs_divider)),
         ("sweep.prbs_seconds".into(), f(s.prbs_seconds)),
+        ("sweep.precision_db".into(), f(s.precision_db)),
+        ("sweep.max_extensions".into(), i(s.max_extensions)),
     ]
 }
 
 impl SweepRun {
-    /// Simulated time the sweep itself takes (s).
+    /// Simulated time the sweep's fixed schedule takes (s): its length when no frequency is
+    /// measured on for precision (see [`measured_time`] for what a run took).
     pub fn measurement_time(&self) -> f64 {
         let fs = control_core::Params::default().rates.current_loop_hz;
         self.settings.total_ticks(fs) as f64 / fs as f64
+    }
+
+    /// The longest the sweep can take: every frequency measured on to `max_extensions`.
+    pub fn max_measurement_time(&self) -> f64 {
+        let fs = control_core::Params::default().rates.current_loop_hz;
+        self.settings.max_total_ticks(fs) as f64 / fs as f64
     }
 
     pub fn scenario(&self) -> Result<Scenario> {
@@ -93,7 +102,8 @@ impl SweepRun {
         self.settings.validate(fs, control_core::Params::default().rates.velocity_divider).map_err(|e| anyhow!("{e}"))?;
         let mut parameters = self.parameters.clone();
         parameters.extend(sweep_parameters(&self.settings));
-        let stop = ((START_AT + self.measurement_time()) / DEFAULT_STEP).ceil() * DEFAULT_STEP + 4.0 * DEFAULT_STEP;
+        // Long enough for the longest sweep; `run` stops when it is done.
+        let stop = ((START_AT + self.max_measurement_time()) / DEFAULT_STEP).ceil() * DEFAULT_STEP + 4.0 * DEFAULT_STEP;
         let mode = if self.settings.point == InjectionPoint::TorqueCommand && self.velocity == 0.0 { 0 } else { 1 };
         let start: BTreeMap<String, Value> =
             [("mode".to_string(), Value::Int(mode)), ("velocity_command".to_string(), Value::Float(self.velocity))].into_iter().collect();
@@ -109,17 +119,33 @@ impl SweepRun {
             ],
             checks: vec![],
             plot: vec![],
+            record: vec![],
         })
     }
 
+    /// Run the sweep until it is done (the trace ends at the first step after it finishes).
     pub fn run(&self, fmu: &Fmu, progress: impl FnMut(f64)) -> Result<Trace> {
-        let t = fmu.run(&self.scenario()?, progress)?;
-        let state = t.column("sweep_state").ok_or_else(|| anyhow!("the FMU has no sweep outputs"))?;
-        if state.last() != Some(&3.0) {
+        let scenario = self.scenario()?;
+        let state = 1 + fmu.recorded(&scenario.record)?.iter().position(|v| v.name == "sweep_state").ok_or_else(|| anyhow!("the FMU has no sweep outputs"))?;
+        let t = fmu.run_until(&scenario, progress, |row| row[0] > START_AT && row[state] == 3.0)?;
+        if t.rows.last().map(|r| r[state]) != Some(3.0) {
             bail!("the sweep did not finish within the simulated time");
         }
         Ok(t)
     }
+
+    /// The scenario as far as `trace` ran it (for another importer to run the same steps).
+    pub fn scenario_as_run(&self, trace: &Trace) -> Result<Scenario> {
+        let end = trace.rows.last().map(|r| r[0]).ok_or_else(|| anyhow!("empty trace"))?;
+        Ok(Scenario { stop_time: end, ..self.scenario()? })
+    }
+}
+
+/// Simulated time a sweep took in `trace`: from its start to the first step it reports done.
+pub fn measured_time(trace: &Trace) -> Result<f64> {
+    let [time, state] = columns(trace, ["time", "sweep_state"])?;
+    let done = time.iter().zip(&state).find(|(t, s)| **t > START_AT && **s == 3.0).ok_or_else(|| anyhow!("the sweep never finished"))?;
+    Ok(done.0 - START_AT)
 }
 
 fn columns<const N: usize>(t: &Trace, names: [&str; N]) -> Result<[Vec<f64>; N]> {

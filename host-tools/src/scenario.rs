@@ -16,6 +16,8 @@
 //! time = 0.01
 //! position_command = 1.0
 //!
+//! record = ["motor_position", "iq"]   # optional: outputs to record (default: all)
+//!
 //! [[checks]]               # evaluated on the result; a failed check makes `servo` exit 1
 //! signal = "motor_position"
 //! at = 0.3                 # or `from`/`to` for a window
@@ -87,6 +89,11 @@ pub struct Scenario {
     /// Signals to plot (default: a standard set).
     #[serde(default)]
     pub plot: Vec<String>,
+    /// Outputs to record, in this order (default: every output of the FMU). Each recorded
+    /// value is one more lookup in the FMU per step: a long run that needs a few signals
+    /// runs faster when it records only those.
+    #[serde(default)]
+    pub record: Vec<String>,
 }
 
 /// Default communication step: the position-loop period of the default parameters.
@@ -148,7 +155,15 @@ impl Scenario {
                 }
             }
         }
+        for (i, name) in self.record.iter().enumerate() {
+            if self.record[..i].contains(name) {
+                bail!("record lists `{name}` twice");
+            }
+        }
         for c in &self.checks {
+            if !self.record.is_empty() && !self.record.contains(&c.signal) {
+                bail!("check on {} needs it recorded: add it to `record`", c.signal);
+            }
             if c.at.is_none() && (c.from.is_none() || c.to.is_none()) {
                 bail!("check on {} needs `at` or both `from` and `to`", c.signal);
             }
@@ -210,6 +225,7 @@ impl Scenario {
             events,
             checks: vec![],
             plot: vec![],
+            record: vec![],
         }
     }
 
@@ -225,6 +241,9 @@ impl Scenario {
         let mut t = format!("name = {:?}\nstop_time = {:?}\n", self.name, self.stop_time);
         if let Some(h) = self.step {
             t += &format!("step = {h:?}\n");
+        }
+        if !self.record.is_empty() {
+            t += &format!("record = {:?}\n", self.record);
         }
         t += "\n[parameters]\n";
         for (k, v) in &self.parameters {
@@ -266,13 +285,24 @@ mod tests {
     #[test]
     fn toml_round_trip_keeps_every_bit() {
         let s = parse(
-            "name='x'\nstop_time=0.01\n[parameters]\n\"ctrl.velocity_kp\"=0.1\n[[events]]\ntime=0.0\nmode=3\nseq_target=0.30000000000000004\n",
+            "name='x'\nstop_time=0.01\nrecord=['iq','motor_position']\n[parameters]\n\"ctrl.velocity_kp\"=0.1\n[[events]]\ntime=0.0\nmode=3\nseq_target=0.30000000000000004\n",
         )
         .unwrap();
         let back = parse(&s.to_toml()).unwrap();
         assert_eq!(back.parameters, s.parameters);
         assert_eq!(back.changes(), s.changes());
+        assert_eq!(back.record, s.record);
         assert_eq!(back.stop_time.to_bits(), s.stop_time.to_bits());
+    }
+
+    #[test]
+    fn refuses_a_record_list_with_twins_or_without_a_checked_signal() {
+        let e = parse("name='x'\nstop_time=0.01\nrecord=['iq','iq']\n").unwrap_err();
+        assert!(e.to_string().contains("twice"), "{e}");
+        let e = parse("name='x'\nstop_time=0.01\nrecord=['iq']\n[[checks]]\nsignal='id'\nat=0.01\nmax=1.0\n")
+            .unwrap_err();
+        assert!(e.to_string().contains("add it to `record`"), "{e}");
+        assert!(parse("name='x'\nstop_time=0.01\nrecord=['iq']\n[[checks]]\nsignal='iq'\nat=0.01\nmax=1.0\n").is_ok());
     }
 
     #[test]

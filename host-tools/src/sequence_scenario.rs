@@ -249,6 +249,7 @@ impl SequenceScenario {
             events,
             checks: vec![],
             plot: vec![],
+            record: vec![],
         }
     }
 

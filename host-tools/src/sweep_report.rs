@@ -9,7 +9,7 @@ use control_core::phase_shifted_sweep::SweepParams;
 use serde::Serialize;
 
 use crate::bode_plot::plot_bode;
-use crate::frequency_response::{difference, errors, online_results, stream_results, ErrorSummary, ResponsePoint, SweepRun};
+use crate::frequency_response::{difference, errors, measured_time, online_results, stream_results, ErrorSummary, ResponsePoint, SweepRun};
 use crate::fmu_runner::Fmu;
 use crate::trace::Trace;
 
@@ -25,6 +25,8 @@ pub fn oracle_settings(s: &SweepParams) -> SweepParams {
         min_measure_s: (s.min_measure_s * 10.0).max(1.0),
         settle_cycles: s.settle_cycles * 2.0,
         min_settle_s: s.min_settle_s.max(0.05),
+        // Fixed long records: the reference does not adapt its length.
+        precision_db: 0.0,
         ..*s
     }
 }
@@ -69,6 +71,7 @@ pub fn run(
         );
     }
     let trace = sweep.run(fmu, |f| progress("sweep", f))?;
+    let measurement_time = measured_time(&trace)?;
     let stream = stream_results(&trace, &sweep.settings)?;
     let online = online_results(&trace)?;
     if stream.len() != online.len() {
@@ -123,13 +126,13 @@ pub fn run(
     let svg = out.join("bode.svg");
     plot_bode(
         &svg,
-        &format!("Frequency response, {:.2} s of measurement, acquisition {acquisition_hz} Hz", sweep.measurement_time()),
+        &format!("Frequency response, {measurement_time:.2} s of measurement, acquisition {acquisition_hz} Hz"),
         &curves,
         Some((acquisition_hz / 2.0, "acquisition Nyquist")),
     )?;
     files.push(svg);
     let report = SweepReport {
-        measurement_time_s: sweep.measurement_time(),
+        measurement_time_s: measurement_time,
         acquisition_hz,
         threshold_hz: sweep.settings.threshold(fs) as f64,
         stream,

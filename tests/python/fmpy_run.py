@@ -6,7 +6,8 @@ drives the FMU through fmpy, so a difference with `servo run` points at the FMU 
 the two importers. Semantics, as in the Rust host:
   * parameters are start values;
   * an event at time t sets inputs for the step that starts at t and holds them;
-  * outputs are sampled after initialisation and after every step.
+  * outputs are sampled after initialisation and after every step (the scenario's `record`
+    list, or every output).
 
 fmpy applies continuous inputs by linear interpolation: the input table has one row per
 communication point (t_k = k*h), so at t_k the interpolation weight of the previous row is
@@ -106,6 +107,12 @@ def main():
 
     outputs = sorted((v for v in md.modelVariables if v.causality == "output"), key=lambda v: v.valueReference)
     out_names = [v.name for v in outputs]
+    if sc.get("record"):
+        # The scenario's `record` list, in its order, as the Rust host records it.
+        unknown = [nm for nm in sc["record"] if nm not in out_names]
+        if unknown:
+            sys.exit(f"record lists {unknown}, which are not outputs of the FMU")
+        out_names = list(sc["record"])
     start_values = dict(sc.get("parameters", {}))
     t0 = time.perf_counter()
     result = fmpy.simulate_fmu(

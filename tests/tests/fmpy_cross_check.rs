@@ -3,7 +3,7 @@
 
 use std::process::Command;
 
-use cross_checks::{fmu_path, load_fmu};
+use cross_checks::{fmu_path, load_fmu, scenario_from_text};
 use host_tools::bench::{python, run_fmpy};
 use host_tools::paths::workspace_root;
 use host_tools::scenario::Scenario;
@@ -54,4 +54,39 @@ fn every_parameter_and_input_reads_back_its_start_value_in_fmpy() {
     let text = String::from_utf8_lossy(&out.stdout);
     assert!(out.status.success(), "{text}{}", String::from_utf8_lossy(&out.stderr));
     assert!(text.contains(", 0 mismatches"), "{text}");
+}
+
+#[test]
+fn a_record_list_gives_those_columns_in_its_order_with_the_full_runs_bits_in_both_hosts() {
+    let fmu = load_fmu();
+    let body = "stop_time = 0.05\n\n[[events]]\ntime = 0.0\nmode = 1\nvelocity_command = 20.0\n";
+    let full = fmu.run(&scenario_from_text("record_full", &format!("name = \"record_full\"\n{body}")), |_| {}).unwrap();
+    let text = format!("name = \"record_some\"\nrecord = [\"iq\", \"faults\", \"motor_velocity\"]\n{body}");
+    let some = scenario_from_text("record_some", &text);
+    let rust = fmu.run(&some, |_| {}).unwrap();
+    assert_eq!(rust.columns, ["time", "iq", "faults", "motor_velocity"]);
+    assert_eq!(rust.rows.len(), full.rows.len());
+    for name in &rust.columns {
+        let (a, b) = (rust.column(name).unwrap(), full.column(name).unwrap());
+        assert!(a.iter().zip(&b).all(|(x, y)| x.to_bits() == y.to_bits()), "{name} differs from the full run");
+    }
+    assert!(rust.column("motor_velocity").unwrap().iter().any(|v| *v > 10.0), "the axis never moved");
+    // fmpy reads the same list from the file.
+    let tmp = std::env::temp_dir().join(format!("servo-record-{}", std::process::id()));
+    std::fs::create_dir_all(&tmp).unwrap();
+    let (toml, csv) = (tmp.join("record_some.toml"), tmp.join("record_some.fmpy.csv"));
+    std::fs::write(&toml, &text).unwrap();
+    run_fmpy(&fmu_path(), &toml, &csv).unwrap();
+    let py = Trace::read_csv(&csv).unwrap();
+    assert_eq!(py.columns, rust.columns);
+    assert_eq!(compare_exact(&rust, &py).unwrap().map_err(|m| format!("{m:?}")), Ok(4));
+    // Names that are not outputs are refused with the reason, by both hosts.
+    for (bad, why) in [("nonsense", "no variable `nonsense`"), ("mode", "not an output")] {
+        let s = scenario_from_text("record_bad", &format!("name = \"record_bad\"\nrecord = [\"{bad}\"]\n{body}"));
+        let e = fmu.run(&s, |_| {}).unwrap_err().to_string();
+        assert!(e.contains(why), "{bad}: {e}");
+    }
+    let bad = tmp.join("record_bad.toml");
+    std::fs::write(&bad, format!("name = \"record_bad\"\nrecord = [\"mode\"]\n{body}")).unwrap();
+    assert!(run_fmpy(&fmu_path(), &bad, &tmp.join("bad.csv")).is_err(), "fmpy runner accepted a non-output");
 }

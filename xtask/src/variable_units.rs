@@ -126,6 +126,8 @@ const VARIABLES: &[Row] = &[
     ("sweep.prbs_degree", "", Some(2.0), Some(20.0)),
     ("sweep.prbs_divider", "", Some(1.0), None),
     ("sweep.prbs_seconds", "s", POS, None),
+    ("sweep.precision_db", "", POS, None),
+    ("sweep.max_extensions", "", Some(0.0), Some(64.0)),
     ("sweep_start", "", None, None),
     ("corr.count", "", Some(0.0), Some(8.0)),
     ("corr.zero_hz_1", "Hz", POS, None),

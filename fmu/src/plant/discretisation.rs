@@ -90,18 +90,20 @@ impl<const N: usize, const M: usize> PolynomialHold<N, M> {
         hold
     }
 
-    /// `Φ·x + Γ0·u0 + Γσ·σ + Γκ·κ`.
-    pub fn step(&self, x: &[f64; N], u0: &[f64; M], slope: &[f64; M], curve: &[f64; M]) -> [f64; N] {
+    /// `Φ·x + Γ0·u0 + Γσ·σ + Γκ·κ` when only the first input has a slope and a curve (`σ`,
+    /// `κ`) and the others are held.
+    pub fn step_shaping_first(&self, x: &[f64; N], u0: &[f64; M], slope: f64, curve: f64) -> [f64; N] {
         let mut y = [0.0; N];
-        for i in 0..N {
+        for (i, yi) in y.iter_mut().enumerate() {
             let mut acc = 0.0;
             for j in 0..N {
                 acc += self.phi[i][j] * x[j];
             }
-            for j in 0..M {
-                acc += self.gamma0[i][j] * u0[j] + self.gamma_slope[i][j] * slope[j] + self.gamma_curve[i][j] * curve[j];
+            acc += self.gamma0[i][0] * u0[0] + self.gamma_slope[i][0] * slope + self.gamma_curve[i][0] * curve;
+            for j in 1..M {
+                acc += self.gamma0[i][j] * u0[j];
             }
-            y[i] = acc;
+            *yi = acc;
         }
         y
     }
@@ -155,8 +157,17 @@ pub fn sin_cos(x: f64) -> (f64, f64) {
         -1.0 / 87_178_291_200.0,
         1.0 / 20_922_789_888_000.0,
     ];
-    let s = r * S.iter().rev().fold(0.0, |acc, c| acc * r2 + c);
-    let c = C.iter().rev().fold(0.0, |acc, c| acc * r2 + c);
+    // Estrin's scheme: the same polynomials in a shallow tree instead of Horner's chain of
+    // eight dependent multiply-adds (the sine and cosine are on the plant's critical path).
+    let r4 = r2 * r2;
+    let r8 = r4 * r4;
+    let pair = |k: [f64; 2]| k[0] + k[1] * r2;
+    let s_low = pair([S[0], S[1]]) + pair([S[2], S[3]]) * r4;
+    let s_high = pair([S[4], S[5]]) + pair([S[6], S[7]]) * r4;
+    let s = r * (s_low + s_high * r8);
+    let c_low = pair([C[0], C[1]]) + pair([C[2], C[3]]) * r4;
+    let c_high = pair([C[4], C[5]]) + pair([C[6], C[7]]) * r4;
+    let c = c_low + (c_high + C[8] * r8) * r8;
     match quadrant.rem_euclid(4) {
         0 => (s, c),
         1 => (c, -s),
@@ -173,9 +184,11 @@ pub fn cosh_sinhc(z: f64) -> (f64, f64) {
         // Coefficients 1/(2k)! and 1/(2k+1)!.
         const C: [f64; 6] = [1.0, 1.0 / 2.0, 1.0 / 24.0, 1.0 / 720.0, 1.0 / 40_320.0, 1.0 / 3_628_800.0];
         const S: [f64; 6] = [1.0, 1.0 / 6.0, 1.0 / 120.0, 1.0 / 5040.0, 1.0 / 362_880.0, 1.0 / 39_916_800.0];
-        let c = C.iter().rev().fold(0.0, |acc, k| acc * z + k);
-        let s = S.iter().rev().fold(0.0, |acc, k| acc * z + k);
-        (c, s)
+        // Estrin's scheme (a shallow tree, not a chain: this is on the plant's critical path).
+        let z2 = z * z;
+        let z4 = z2 * z2;
+        let poly = |k: [f64; 6]| (k[0] + k[1] * z) + (k[2] + k[3] * z) * z2 + (k[4] + k[5] * z) * z4;
+        (poly(C), poly(S))
     } else if z > 0.0 {
         let r = z.sqrt();
         (r.cosh(), r.sinh() / r)
@@ -208,13 +221,13 @@ mod tests {
         // U(s) = u(s)/a − u'(s)/a² + u''/a³: x(h) = e^{−ah}·x0 + U(h) − e^{−ah}·U(0).
         let (a, h, x0, u0, d1, d2) = (3.0f64, 0.2f64, 0.7, 1.5, -4.0, 9.0);
         let hold = PolynomialHold::<1, 1>::new::<4>(&[[-a]], &[[1.0]], h);
-        let got = hold.step(&[x0], &[u0], &[d1 * h], &[d2 * h * h])[0];
+        let got = hold.step_shaping_first(&[x0], &[u0], d1 * h, d2 * h * h)[0];
         let e = (-a * h).exp();
         let big_u =
             |s: f64| (u0 + d1 * s + d2 * s * s) / a - (d1 + 2.0 * d2 * s) / (a * a) + 2.0 * d2 / (a * a * a);
         let want = e * x0 + big_u(h) - e * big_u(0.0);
         assert!((got - want).abs() < 1e-14, "{got} vs {want}");
-        let split = hold.step(&[x0], &[u0], &[0.0], &[d2 * h * h])[0] + hold.slope_response(&[d1 * h])[0];
+        let split = hold.step_shaping_first(&[x0], &[u0], 0.0, d2 * h * h)[0] + hold.slope_response(&[d1 * h])[0];
         assert!((split - want).abs() < 1e-14, "{split} vs {want}");
     }
 

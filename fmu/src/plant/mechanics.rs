@@ -44,6 +44,10 @@ pub struct TwoInertia {
     pub coulomb_velocity: f64,
     pub absorber: Option<Absorber>,
     substep: f64,
+    /// Reciprocals the per-step code multiplies by (a division costs several multiplications).
+    inverse_motor_inertia: f64,
+    inverse_load_inertia: f64,
+    inverse_coulomb_velocity: f64,
     /// Exact discretisation over one sub-step, inputs `[motor-side, load-side]` torque.
     discrete: Discrete,
 }
@@ -94,6 +98,9 @@ impl TwoInertia {
             coulomb_velocity: p.coulomb_velocity,
             absorber,
             substep,
+            inverse_motor_inertia: 1.0 / jm,
+            inverse_load_inertia: 1.0 / jl,
+            inverse_coulomb_velocity: 1.0 / p.coulomb_velocity,
             discrete,
         }
     }
@@ -106,8 +113,8 @@ impl TwoInertia {
     /// Smoothed Coulomb friction torques `Fc·tanh(ω/ω_s)` on the motor and the load.
     pub fn coulomb(&self, motor_velocity: f64, load_velocity: f64) -> [f64; 2] {
         [
-            self.motor_coulomb * (motor_velocity / self.coulomb_velocity).tanh(),
-            self.load_coulomb * (load_velocity / self.coulomb_velocity).tanh(),
+            self.motor_coulomb * (motor_velocity * self.inverse_coulomb_velocity).tanh(),
+            self.load_coulomb * (load_velocity * self.inverse_coulomb_velocity).tanh(),
         ]
     }
 
@@ -120,7 +127,7 @@ impl TwoInertia {
         let absorber = self.absorber.map_or(0.0, |a| {
             a.stiffness * x.absorber_twist + a.damping * (x.load_velocity - x.absorber_velocity)
         });
-        ((tm - shaft - fm) / self.motor_inertia, (shaft - fl + td - absorber) / self.load_inertia)
+        ((tm - shaft - fm) * self.inverse_motor_inertia, (shaft - fl + td - absorber) * self.inverse_load_inertia)
     }
 
     /// Advance the mechanical part of `x` by one sub-step: the motor torque goes from
@@ -158,7 +165,7 @@ impl TwoInertia {
         let u0 = [torque0 - coulomb0[0], td - coulomb0[1]];
         let rise = self.substep * torque_rate;
         // Predictor: Coulomb friction held at its start value.
-        let y1 = hold.step(&y, &u0, &[rise, 0.0], &[torque1 - torque0 - rise, 0.0]);
+        let y1 = hold.step_shaping_first(&y, &u0, rise, torque1 - torque0 - rise);
         // Corrector: friction ramps to its value at the predicted end velocities (more passes
         // were tried: they do not reduce the error, which comes from the friction's bend
         // within the step near zero speed, not from the predicted end value).

@@ -72,6 +72,10 @@ pub struct Plant {
     acceleration_noise: GaussianNoise,
     /// Coulomb friction at the end of the last tick and the velocities it is for.
     coulomb_cache: ([f64; 2], [f64; 2]),
+    /// Encoder counts per radian of motor angle.
+    counts_per_radian: f64,
+    /// The motor angle of the last measurement and `(sin, cos)` of its electrical angle.
+    measured_rotor: Option<(f64, f64, f64)>,
 }
 
 impl Plant {
@@ -89,6 +93,8 @@ impl Plant {
             accelerometer: 0.0,
             electromagnetic_torque: 0.0,
             coulomb_cache: ([0.0; 2], [0.0; 2]),
+            counts_per_radian: params.encoder_counts_per_rev as f64 / TAU,
+            measured_rotor: None,
         })
     }
 
@@ -97,6 +103,9 @@ impl Plant {
     }
 
     /// Advance one base tick (`params.tick`) with the inputs held.
+    // Inlined into the tick so that the inputs arrive in registers: read back from memory just
+    // after being stored, they stalled the load (store forwarding fails on the paired loads).
+    #[inline]
     pub fn advance(&mut self, u: &PlantInputs) {
         let mut x = self.state;
         let voltage = if u.bridge_enabled {
@@ -112,9 +121,15 @@ impl Plant {
         if velocities != [x.motor_velocity, x.load_velocity] {
             coulomb = self.mechanics.coulomb(x.motor_velocity, x.load_velocity);
         }
-        for _ in 0..self.params.substeps {
+        for substep in 0..self.params.substeps {
+            let first = substep == 0;
             let torque_rate = if u.bridge_enabled {
-                self.motor.advance_currents(&mut x, voltage, self.motor_acceleration)
+                // The sensors' angle is the start of the step when measure() saw this state.
+                let start_rotor = match self.measured_rotor {
+                    Some((angle, s, c)) if first && angle.to_bits() == x.motor_angle.to_bits() => Some((s, c)),
+                    _ => None,
+                };
+                self.motor.advance_currents(&mut x, voltage, self.motor_acceleration, start_rotor)
             } else {
                 0.0
             };
@@ -136,11 +151,12 @@ impl Plant {
         let p = &self.params;
         let theta_e = p.pole_pairs as f64 * self.state.motor_angle;
         let (s, c) = discretisation::sin_cos(theta_e);
+        self.measured_rotor = Some((self.state.motor_angle, s, c));
         let alpha = self.state.id * c - self.state.iq * s;
         let beta = self.state.id * s + self.state.iq * c;
         let ia = alpha;
         let ib = -0.5 * alpha + 0.5 * 3f64.sqrt() * beta;
-        let counts = self.state.motor_angle * (p.encoder_counts_per_rev as f64 / TAU);
+        let counts = self.state.motor_angle * self.counts_per_radian;
         // floor() by truncation: the library call costs more than the rest of this function.
         let truncated = counts as i64;
         let floor = if (truncated as f64) > counts { truncated - 1 } else { truncated };

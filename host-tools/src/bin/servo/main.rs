@@ -260,6 +260,14 @@ enum Command {
         /// Base ticks (62.5 µs) per acquisition sample
         #[arg(long, default_value_t = 4)]
         acquisition_divider: u32,
+        /// Measure a frequency on, block by block, until the standard error of its gain (from
+        /// the fit's residual: encoder quantisation, noise) is at most this (dB); 0 = fixed
+        /// records. Low-gain points (an anti-resonance, the top of the sweep) need it
+        #[arg(long, default_value_t = 0.03)]
+        precision_db: f64,
+        /// At most so many extra blocks (each one record's measurement) per frequency
+        #[arg(long, default_value_t = 8)]
+        max_extensions: u32,
         /// Constant speed the sweep rides on (rad/s; keeps friction on one side)
         #[arg(long, default_value_t = 50.0)]
         velocity: f64,
@@ -511,6 +519,8 @@ fn main() -> ExitCode {
             repeats,
             threshold,
             acquisition_divider,
+            precision_db,
+            max_extensions,
             velocity,
             set,
             oracle,
@@ -521,6 +531,11 @@ fn main() -> ExitCode {
                 point, *amplitude, *start, *stop, *points, *linear, *extra, *settle_cycles, *measure_cycles, *min_settle,
                 *min_measure, *shifts, *repeats, *threshold, *acquisition_divider,
             )?;
+            let settings = control_core::phase_shifted_sweep::SweepParams {
+                precision_db: *precision_db as f32,
+                max_extensions: *max_extensions,
+                ..settings
+            };
             let parameters = host_tools::circle_report::axis_parameters(set, &[])?;
             let run = host_tools::frequency_response::SweepRun { settings, parameters, velocity: *velocity };
             let reference = match reference {
