@@ -43,8 +43,13 @@ pub fn space_vector_duties(v: AlphaBeta, bus_voltage: f32) -> [f32; 3] {
     let va = v.alpha;
     let vb = -0.5 * v.alpha + SQRT3_HALF * v.beta;
     let vc = -0.5 * v.alpha - SQRT3_HALF * v.beta;
-    let max = va.max(vb).max(vc);
-    let min = va.min(vb).min(vc);
+    // Plain comparisons, not f32::max/min: those also pick the number out of a NaN pair,
+    // which costs a chain of extra instructions; a non-finite voltage latches a fault and the
+    // bridge is off in the same tick, so the duties of that case are never applied.
+    let larger = |a: f32, b: f32| if a > b { a } else { b };
+    let smaller = |a: f32, b: f32| if a < b { a } else { b };
+    let max = larger(larger(va, vb), vc);
+    let min = smaller(smaller(va, vb), vc);
     let common = 0.5 * (max + min);
     let inv = 1.0 / bus_voltage;
     [
@@ -54,8 +59,15 @@ pub fn space_vector_duties(v: AlphaBeta, bus_voltage: f32) -> [f32; 3] {
     ]
 }
 
+/// `x.clamp(0.0, 1.0)`, NaN included, without the library's NaN-preserving min/max chain.
 fn clamp01(x: f32) -> f32 {
-    x.clamp(0.0, 1.0)
+    if x < 0.0 {
+        0.0
+    } else if x > 1.0 {
+        1.0
+    } else {
+        x
+    }
 }
 
 /// Radius of the largest voltage circle SVPWM can produce linearly: `v_bus / √3`.

@@ -51,7 +51,7 @@ pub const BENCH_RECORD: [&str; 10] = [
 ];
 
 /// Rust-host runs per figure; the median is reported (a shared machine's wall clock jumps).
-pub const RUST_RUNS: usize = 5;
+pub const RUST_RUNS: usize = 9;
 
 /// The benchmark scenario: default axis in velocity mode, a slow ramp up and down with a
 /// load disturbance, over `seconds` of simulated time, recording `record` (empty: every
