@@ -124,10 +124,13 @@ impl SweepRun {
     }
 
     /// Run the sweep until it is done (the trace ends at the first step after it finishes).
-    pub fn run(&self, fmu: &Fmu, progress: impl FnMut(f64)) -> Result<Trace> {
+    pub fn run(&self, fmu: &Fmu, mut progress: impl FnMut(f64)) -> Result<Trace> {
         let scenario = self.scenario()?;
         let state = 1 + fmu.recorded(&scenario.record)?.iter().position(|v| v.name == "sweep_state").ok_or_else(|| anyhow!("the FMU has no sweep outputs"))?;
-        let t = fmu.run_until(&scenario, progress, |row| row[0] > START_AT && row[state] == 3.0)?;
+        // Progress against the fixed schedule (the usual length), not the longest possible.
+        let scale = scenario.stop_time / (START_AT + self.measurement_time());
+        let t = fmu.run_until(&scenario, |f| progress((f * scale).min(0.99)), |row| row[0] > START_AT && row[state] == 3.0)?;
+        progress(1.0);
         if t.rows.last().map(|r| r[state]) != Some(3.0) {
             bail!("the sweep did not finish within the simulated time");
         }
