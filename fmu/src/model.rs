@@ -315,9 +315,9 @@ parameter_group! {
         prbs_divider: i32 = 1,
         /// PRBS: measured duration
         prbs_seconds: f64 = 5.0,
-        /// Stepped sine: measure a frequency on, block by block, until the standard error of its gain is at most this (dB; 0 = fixed records)
+        /// Stepped sine: lengthen a frequency's records by whole blocks so that the standard error of its gain, predicted after the first block, is at most this (dB; 0 = fixed records)
         precision_db: f64 = 0.03,
-        /// At most so many extra measurement blocks per frequency (0 to 64)
+        /// At most so many extra measurement blocks per record (0 to 64)
         max_extensions: i32 = 8,
     }
 }

@@ -85,13 +85,13 @@ fn sweep_parameters(s: &SweepParams) -> Vec<(String, Value)> {
 
 impl SweepRun {
     /// Simulated time the sweep's fixed schedule takes (s): its length when no frequency is
-    /// measured on for precision (see [`measured_time`] for what a run took).
+    /// lengthened for precision (see [`measured_time`] for what a run took).
     pub fn measurement_time(&self) -> f64 {
         let fs = control_core::Params::default().rates.current_loop_hz;
         self.settings.total_ticks(fs) as f64 / fs as f64
     }
 
-    /// The longest the sweep can take: every frequency measured on to `max_extensions`.
+    /// The longest the sweep can take: every record lengthened by `max_extensions` blocks.
     pub fn max_measurement_time(&self) -> f64 {
         let fs = control_core::Params::default().rates.current_loop_hz;
         self.settings.max_total_ticks(fs) as f64 / fs as f64

@@ -42,6 +42,8 @@ pub struct SweepReport {
     pub stream_vs_online: (f64, f64),
     pub oracle: Option<Vec<ResponsePoint>>,
     pub errors_vs_oracle: Option<ErrorSummary>,
+    /// The plant's current sensors had no noise (see the hint `print` gives).
+    pub noise_free_sensors: bool,
     pub files: Vec<PathBuf>,
 }
 
@@ -140,6 +142,7 @@ pub fn run(
         stream_vs_online: agreement,
         oracle,
         errors_vs_oracle,
+        noise_free_sensors: !sweep.parameters.get("plant.current_noise_std").is_some_and(|v| v.as_f64() > 0.0),
         files: files.clone(),
     };
     let json = out.join("sweep.json");
@@ -169,6 +172,13 @@ impl SweepReport {
                 "  against the oracle: below {} Hz max {:.3} dB / {:.2} deg; from {} Hz up max {:.3} dB / {:.2} deg",
                 self.threshold_hz, e.below_gain_db, e.below_phase_deg, self.threshold_hz, e.above_gain_db, e.above_phase_deg
             );
+            if self.noise_free_sensors && e.below_gain_db.max(e.above_gain_db) > 0.05 {
+                println!(
+                    "  note: with noise-free sensors at constant speed the encoder's count pattern can lock to the excitation, \
+                     and both this sweep and the oracle then carry a quantisation error that longer records do not remove; \
+                     a drive's own sensor noise breaks the lock: try --set plant.current_noise_std=0.01 (see the README)"
+                );
+            }
         }
         for f in &self.files {
             println!("  → {}", f.display());

@@ -260,12 +260,13 @@ enum Command {
         /// Base ticks (62.5 µs) per acquisition sample
         #[arg(long, default_value_t = 4)]
         acquisition_divider: u32,
-        /// Measure a frequency on, block by block, until the standard error of its gain (from
-        /// the fit's residual: encoder quantisation, noise) is at most this (dB); 0 = fixed
-        /// records. Low-gain points (an anti-resonance, the top of the sweep) need it
+        /// Lengthen a frequency's records by whole blocks so that the standard error of its
+        /// gain, predicted from the fit's residual after the first block (encoder
+        /// quantisation, noise), is at most this (dB); 0 = fixed records. Low-gain points (an
+        /// anti-resonance, the top of the sweep) need it; the others keep their base length
         #[arg(long, default_value_t = 0.03)]
         precision_db: f64,
-        /// At most so many extra blocks (each one record's measurement) per frequency
+        /// At most so many extra blocks (each one record's base measurement) per record
         #[arg(long, default_value_t = 8)]
         max_extensions: u32,
         /// Constant speed the sweep rides on (rad/s; keeps friction on one side)
