@@ -160,6 +160,9 @@ impl Scenario {
                 bail!("record lists `{name}` twice");
             }
         }
+        if let Some(p) = self.plot.iter().find(|p| !self.record.is_empty() && !self.record.contains(p)) {
+            bail!("plot lists {p}, which is not recorded: add it to `record`");
+        }
         for c in &self.checks {
             if !self.record.is_empty() && !self.record.contains(&c.signal) {
                 bail!("check on {} needs it recorded: add it to `record`", c.signal);
@@ -303,6 +306,8 @@ mod tests {
             .unwrap_err();
         assert!(e.to_string().contains("add it to `record`"), "{e}");
         assert!(parse("name='x'\nstop_time=0.01\nrecord=['iq']\n[[checks]]\nsignal='iq'\nat=0.01\nmax=1.0\n").is_ok());
+        let e = parse("name='x'\nstop_time=0.01\nrecord=['iq']\nplot=['iq','id']\n").unwrap_err();
+        assert!(e.to_string().contains("plot lists id"), "{e}");
     }
 
     #[test]
