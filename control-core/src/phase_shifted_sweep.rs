@@ -78,10 +78,10 @@ pub struct SweepParams {
     pub prbs_seconds: f32,
     /// Stepped sine: lengthen a frequency's records by whole blocks so that the standard
     /// error of its gain (predicted from the fit's residual after the first block: mostly
-    /// encoder quantisation) is at most this (dB; 0: fixed records). At low-gain points (a deep anti-resonance, the top of the sweep) the
-    /// response is a few encoder counts and the base record leaves about 0.1 dB of error
-    /// whose size depends on the fine detail of the motion; the well-measured points are not
-    /// lengthened.
+    /// encoder quantisation) is at most this (dB; 0: fixed records). At low-gain points (a
+    /// deep anti-resonance, the top of the sweep) the response is a few encoder counts and
+    /// the base record leaves about 0.1 dB of error whose size depends on the fine detail of
+    /// the motion; the well-measured points are not lengthened.
     pub precision_db: f32,
     /// At most so many extra blocks (each as long as one record's base measurement) per
     /// record of a frequency.
@@ -781,7 +781,7 @@ mod tests {
     }
 
     #[test]
-    fn a_noisy_low_gain_point_is_measured_on_until_precise_and_a_clean_one_is_not() {
+    fn a_noisy_low_gain_point_is_lengthened_until_precise_and_a_clean_one_is_not() {
         let p = SweepParams { start_hz: 300.0, stop_hz: 400.0, points: 2, extra_hz: 0.0, ..Default::default() };
         let off = SweepParams { precision_db: 0.0, ..p };
         // A clean response: no extension, the schedule the host computes.
