@@ -408,51 +408,65 @@ impl SineFitSums {
         self.ys += y * s;
     }
 
-    /// (U, Y) complex amplitudes and the conditioning of the phases (0..1).
-    fn solve(&self) -> ((f32, f32), (f32, f32), f32) {
+    /// The centred (cos, sin) normal equations: `n` (at least 1), `Scc'`, `Sss'`, `Scs'` and
+    /// their determinant.
+    fn normal_equations(&self) -> NormalEquations {
         let n = self.n.max(1.0);
         let scc = self.cc - self.c * self.c / n;
         let sss = self.ss - self.s * self.s / n;
         let scs = self.cs - self.c * self.s / n;
-        let det = scc * sss - scs * scs;
+        NormalEquations { n, scc, sss, scs, det: scc * sss - scs * scs }
+    }
+
+    /// `(b, c)` of `x ≈ x̄ + b·cos θ + c·sin θ` from x's sums, and the centred sums
+    /// `(Sxc', Sxs')` they solve.
+    fn coefficients(&self, e: &NormalEquations, x: f32, xc: f32, xs: f32) -> ((f32, f32), (f32, f32)) {
+        let (pc, ps) = (xc - x * self.c / e.n, xs - x * self.s / e.n);
+        (((e.sss * pc - e.scs * ps) / e.det, (e.scc * ps - e.scs * pc) / e.det), (pc, ps))
+    }
+
+    /// (U, Y) complex amplitudes and the conditioning of the phases (0..1).
+    fn solve(&self) -> ((f32, f32), (f32, f32), f32) {
+        let e = self.normal_equations();
         let amplitude = |x: f32, xc: f32, xs: f32| {
-            let (pc, ps) = (xc - x * self.c / n, xs - x * self.s / n);
-            let b = (sss * pc - scs * ps) / det;
-            let c = (scc * ps - scs * pc) / det;
+            let ((b, c), _) = self.coefficients(&e, x, xc, xs);
             (b, -c)
         };
-        let conditioning = (det / (0.25 * n * n)).clamp(0.0, 1.0);
+        let conditioning = (e.det / (0.25 * e.n * e.n)).clamp(0.0, 1.0);
         (amplitude(self.u, self.uc, self.us), amplitude(self.y, self.yc, self.ys), conditioning)
     }
 
     /// Standard error of Y's gain in dB, from the residual of its fit: `σ² = SSR/(n − 3)`,
-    /// `Var b = σ²·Scc'/det`... for the centred normal equations, the radial part of the
-    /// amplitude's error over `|Y|`. None when the samples cannot tell (too few, phases
-    /// degenerate, no response).
+    /// `Var b = σ²·Sss'/det`, `Var c = σ²·Scc'/det`, the radial part of the amplitude's error
+    /// over `|Y|`. None when the samples cannot tell (too few, phases degenerate, no
+    /// response).
     fn y_gain_error_db(&self) -> Option<f32> {
-        let n = self.n;
-        if n < 8.0 {
+        if self.n < 8.0 {
             return None;
         }
-        let scc = self.cc - self.c * self.c / n;
-        let sss = self.ss - self.s * self.s / n;
-        let scs = self.cs - self.c * self.s / n;
-        let det = scc * sss - scs * scs;
-        if !(det > 1e-6 * n * n) {
+        let e = self.normal_equations();
+        if !(e.det > 1e-6 * e.n * e.n) {
             return None;
         }
-        let (pc, ps) = (self.yc - self.y * self.c / n, self.ys - self.y * self.s / n);
-        let b = (sss * pc - scs * ps) / det;
-        let c = (scc * ps - scs * pc) / det;
+        let ((b, c), (pc, ps)) = self.coefficients(&e, self.y, self.yc, self.ys);
         let amplitude2 = b * b + c * c;
         if !(amplitude2 > 0.0) {
             return None;
         }
-        let residual = (self.yy - self.y * self.y / n - (b * pc + c * ps)).max(0.0);
-        let sigma2 = residual / (n - 3.0);
-        let relative = crate::square_root::sqrt(sigma2 * (scc + sss) / (2.0 * det) / amplitude2);
+        let residual = (self.yy - self.y * self.y / e.n - (b * pc + c * ps)).max(0.0);
+        let sigma2 = residual / (e.n - 3.0);
+        let relative = crate::square_root::sqrt(sigma2 * (e.scc + e.sss) / (2.0 * e.det) / amplitude2);
         Some(20.0 / core::f32::consts::LN_10 * relative)
     }
+}
+
+/// See [`SineFitSums::normal_equations`].
+struct NormalEquations {
+    n: f32,
+    scc: f32,
+    sss: f32,
+    scs: f32,
+    det: f32,
 }
 
 #[derive(Clone, Copy, Debug)]
@@ -464,9 +478,9 @@ pub struct PhaseShiftedSweep {
     /// Ticks left in the present state.
     left: u64,
     /// Measurement blocks added to each record of the present frequency (see
-    /// `SweepParams::precision_db`), decided once the first record's base block is in.
+    /// `SweepParams::precision_db`), decided once the first record's base block is in (0
+    /// until then, and when none are needed).
     extensions: u32,
-    lengthened: bool,
     acc: SineFitSums,
     sequence: MSequence,
     chip: f32,
@@ -486,7 +500,6 @@ impl PhaseShiftedSweep {
             generator: SineGenerator::default(),
             left: 0,
             extensions: 0,
-            lengthened: false,
             acc: SineFitSums::default(),
             // Validated with the parameters; the fallback only keeps this constructor total.
             sequence: MSequence::new(params.prbs_degree).unwrap_or(MSequence::DEGREE_15),
@@ -545,7 +558,6 @@ impl PhaseShiftedSweep {
         if record == 0 {
             self.acc = SineFitSums::default();
             self.extensions = 0;
-            self.lengthened = false;
         }
     }
 
@@ -624,9 +636,9 @@ impl PhaseShiftedSweep {
                 let records = self.params.records(f, self.base_rate_hz);
                 // After the first record's base block: how many more blocks every record of
                 // this frequency takes (the same for all, so that the phase-shifted records
-                // stay balanced); the first one measures on at once, without settling.
-                if self.status.record == 0 && !self.lengthened {
-                    self.lengthened = true;
+                // stay balanced); the first one measures on at once, without settling. Its
+                // end comes back here only when blocks were added, with `extensions` > 0.
+                if self.status.record == 0 && self.extensions == 0 {
                     self.extensions = self.blocks_needed(records);
                     if self.extensions > 0 {
                         self.left = self.extensions as u64 * self.params.record_length(f, self.base_rate_hz).1 * divider as u64;
@@ -761,6 +773,14 @@ mod tests {
         assert_eq!(v(SweepParams::default()), Ok(()));
     }
 
+    /// Uniform in [−1, 1) from a xorshift32 state.
+    fn uniform(state: &mut u32) -> f32 {
+        *state ^= *state << 13;
+        *state ^= *state >> 17;
+        *state ^= *state << 5;
+        (*state >> 8) as f32 / (1u32 << 24) as f32 * 2.0 - 1.0
+    }
+
     /// A response of `gain` plus uniform noise of ±`noise` (a stand-in for encoder
     /// quantisation), two frequencies; returns (G of the first, ticks run).
     fn noisy(params: SweepParams, gain: f32, noise: f32, seed: u32) -> (SweepResult, u64) {
@@ -769,10 +789,7 @@ mod tests {
         let (mut tick, mut state) = (0u64, seed | 1);
         while s.running() {
             let (_, u) = s.excitation(true).unwrap();
-            state ^= state << 13;
-            state ^= state >> 17;
-            state ^= state << 5;
-            let r = (state >> 8) as f32 / (1u32 << 24) as f32 * 2.0 - 1.0;
+            let r = uniform(&mut state);
             let y = 50.0 + gain * params.amplitude * libm::sinf(s.phase + 0.3) + noise * r;
             s.end_tick(tick, tick.is_multiple_of(params.acquisition_divider as u64), u, y);
             tick += 1;
@@ -804,10 +821,7 @@ mod tests {
         let n = 4000;
         for k in 0..n {
             let theta = k as f32 * 0.731;
-            state ^= state << 13;
-            state ^= state >> 17;
-            state ^= state << 5;
-            let r = (state >> 8) as f32 / (1u32 << 24) as f32 * 2.0 - 1.0;
+            let r = uniform(&mut state);
             fit.add(0.0, 50.0 + 0.12 * libm::sinf(theta) + 0.04 * r, libm::sincosf(theta));
         }
         let predicted = 20.0 / core::f32::consts::LN_10 * (0.04 / libm::sqrtf(3.0)) * libm::sqrtf(2.0 / n as f32) / 0.12;

@@ -184,24 +184,24 @@ pub fn bench(fmu: &Fmu, noise_std: f64, mut progress: impl FnMut(f64)) -> Result
         });
         progress(0.6 + 0.1 * (i + 1) as f64);
     }
-    // The same measurement without the dither, and without it on a finer encoder.
-    let comparison = |parameters: BTreeMap<String, Value>| -> Result<ErrorSummary> {
-        let oracle = online_results(&base(parameters.clone(), oracle_settings(&ours_settings)).run(fmu, |_| {})?)?;
-        let ours = stream_results(&base(parameters, ours_settings).run(fmu, |_| {})?, &ours_settings)?;
-        Ok(errors(&ours, &oracle, split))
+    // Ours (each of `settings`) against the oracle, riding on `velocity` with `parameters`.
+    let against_oracle = |parameters: &BTreeMap<String, Value>, velocity: f64, settings: &[SweepParams]| -> Result<Vec<ErrorSummary>> {
+        let at = |settings: SweepParams| SweepRun { settings, parameters: parameters.clone(), velocity };
+        let oracle = online_results(&at(oracle_settings(&ours_settings)).run(fmu, |_| {})?)?;
+        settings.iter().map(|s| Ok(errors(&stream_results(&at(*s).run(fmu, |_| {})?, s)?, &oracle, split))).collect()
     };
-    let noise_free = comparison(BTreeMap::new())?;
+    // The same measurement without the dither, and without it on a finer encoder.
+    let noise_free = against_oracle(&BTreeMap::new(), VELOCITY, &[ours_settings])?[0];
     progress(0.8);
-    let fine_encoder = comparison([("plant.encoder_counts_per_rev".to_string(), Value::Int(FINE_ENCODER))].into_iter().collect())?;
+    let fine: BTreeMap<String, Value> = [("plant.encoder_counts_per_rev".to_string(), Value::Int(FINE_ENCODER))].into_iter().collect();
+    let fine_encoder = against_oracle(&fine, VELOCITY, &[ours_settings])?[0];
     progress(0.85);
     // Worst error over riding speeds, with fixed and with lengthened records.
     let fixed_settings = SweepParams { precision_db: 0.0, ..ours_settings };
     let (mut spread_fixed, mut spread_lengthened) = ((0.0f64, 0.0f64), (0.0f64, 0.0f64));
     for (i, &v) in SPREAD_SPEEDS.iter().enumerate() {
-        let at = |settings: SweepParams| SweepRun { settings, parameters: clean.clone(), velocity: v };
-        let oracle = online_results(&at(oracle_settings(&ours_settings)).run(fmu, |_| {})?)?;
-        for (settings, worst) in [(fixed_settings, &mut spread_fixed), (ours_settings, &mut spread_lengthened)] {
-            let e = errors(&stream_results(&at(settings).run(fmu, |_| {})?, &settings)?, &oracle, split);
+        let e = against_oracle(&clean, v, &[fixed_settings, ours_settings])?;
+        for (e, worst) in e.iter().zip([&mut spread_fixed, &mut spread_lengthened]) {
             worst.0 = worst.0.max(e.below_gain_db).max(e.above_gain_db);
             worst.1 = worst.1.max(e.below_phase_deg).max(e.above_phase_deg);
         }

@@ -22,22 +22,16 @@ pub fn ring_step(max_error: f64) -> f64 {
 /// `about_own_mean`: each figure's radial error is drawn about its own mean radius (its shape,
 /// for comparing roundness when the runs' radii differ), not about the nominal radius.
 pub fn plot_circle(path: &Path, title: &str, notes: &[String], radius: f64, figures: &[(&str, &Figure)], about_own_mean: bool) -> Result<()> {
-    // The radius each figure's error is measured from.
-    let reference = |f: &Figure| {
-        if about_own_mean {
-            let p = f.polar();
-            p.iter().map(|(_, r)| r).sum::<f64>() / p.len().max(1) as f64
-        } else {
-            radius
-        }
-    };
-    let max_error = figures
+    // Each figure in polar form, once, with the radius its error is measured from.
+    let polars: Vec<(Vec<(f64, f64)>, f64)> = figures
         .iter()
-        .flat_map(|(_, f)| {
-            let r0 = reference(f);
-            f.polar().into_iter().map(move |(_, r)| (r - r0).abs())
+        .map(|(_, f)| {
+            let p = f.polar();
+            let r0 = if about_own_mean { p.iter().map(|(_, r)| r).sum::<f64>() / p.len().max(1) as f64 } else { radius };
+            (p, r0)
         })
-        .fold(0.0, f64::max);
+        .collect();
+    let max_error = polars.iter().flat_map(|(p, r0)| p.iter().map(move |(_, r)| (r - r0).abs())).fold(0.0, f64::max);
     let ring = ring_step(max_error);
     let rings = 3.0;
     // Plot radius of the nominal circle, and pixels per rad of radial error.
@@ -60,10 +54,8 @@ pub fn plot_circle(path: &Path, title: &str, notes: &[String], radius: f64, figu
         writeln!(svg, r##"<line x1="{:.1}" y1="{:.1}" x2="{:.1}" y2="{:.1}" stroke="#bbb" stroke-dasharray="3,3"/>"##, cx + r0 * c, cy - r0 * s, cx + r1 * c, cy - r1 * s)?;
         writeln!(svg, r#"<text x="{:.1}" y="{:.1}" text-anchor="middle">{a}°</text>"#, cx + (r1 + 14.0) * c, cy - (r1 + 14.0) * s + 4.0)?;
     }
-    for (i, (label, f)) in figures.iter().enumerate() {
+    for (i, ((label, _), (polar, r0))) in figures.iter().zip(&polars).enumerate() {
         let mut pts = String::new();
-        let polar = f.polar();
-        let r0 = reference(f);
         let stride = (polar.len() / 2000).max(1);
         for (angle, r) in polar.iter().step_by(stride).chain(polar.first()) {
             let rp = nominal + (r - r0) * per_error;

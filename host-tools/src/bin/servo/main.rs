@@ -530,13 +530,8 @@ fn main() -> ExitCode {
         } => (|| {
             let settings = sweep::sweep_settings(
                 point, *amplitude, *start, *stop, *points, *linear, *extra, *settle_cycles, *measure_cycles, *min_settle,
-                *min_measure, *shifts, *repeats, *threshold, *acquisition_divider,
+                *min_measure, *shifts, *repeats, *threshold, *acquisition_divider, *precision_db, *max_extensions,
             )?;
-            let settings = control_core::phase_shifted_sweep::SweepParams {
-                precision_db: *precision_db as f32,
-                max_extensions: *max_extensions,
-                ..settings
-            };
             let parameters = host_tools::circle_report::axis_parameters(set, &[])?;
             let run = host_tools::frequency_response::SweepRun { settings, parameters, velocity: *velocity };
             let reference = match reference {

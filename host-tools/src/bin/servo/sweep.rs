@@ -20,6 +20,8 @@ pub fn sweep_settings(
     repeats: u32,
     threshold: f64,
     acquisition_divider: u32,
+    precision_db: f64,
+    max_extensions: u32,
 ) -> Result<control_core::phase_shifted_sweep::SweepParams> {
     use control_core::excitation::InjectionPoint;
     let (point, default_amplitude) = match point {
@@ -45,6 +47,8 @@ pub fn sweep_settings(
         repeats,
         threshold_hz: threshold as f32,
         acquisition_divider,
+        precision_db: precision_db as f32,
+        max_extensions,
         ..Default::default()
     })
 }
