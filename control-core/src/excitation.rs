@@ -29,6 +29,16 @@ impl InjectionPoint {
             _ => None,
         }
     }
+
+    /// The inverse of [`Self::from_code`].
+    pub fn code(self) -> i32 {
+        match self {
+            Self::Off => 0,
+            Self::TorqueCommand => 1,
+            Self::VelocityCommand => 2,
+            Self::VelocityFeedback => 3,
+        }
+    }
 }
 
 /// `amplitude · sin(phase)` from a 32-bit phase accumulator (numerically controlled

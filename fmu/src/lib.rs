@@ -1,11 +1,19 @@
 //! Servo axis FMU: the drive's control core in closed loop with a motor/load plant,
-//! exported as an FMI 3.0 Co-Simulation FMU.
+//! exported as a Co-Simulation FMU for FMI 3.0 and FMI 2.0 from one binary.
+//!
+//! - [`variables`]: every variable declared once; everything below is generated from it.
+//! - [`co_simulation`]: the axis as the FMI functions see it (no C types).
+//! - [`fmi`]: the C APIs (state machine, logger, panic barrier), [`fmu_state`]: saved states.
+//! - [`model_description`]: modelDescription.xml (both versions) and the documentation page.
 //!
 //! The crate is also an rlib so host tools and tests can run [`simulation::AxisSimulation`]
-//! directly (for example for the plant step-size check).
+//! directly (for example for the plant step-size check) and read the declarations.
 
-pub mod model;
+pub mod co_simulation;
+pub mod fmi;
+pub mod fmu_state;
+pub mod model_description;
+pub mod parameters;
 pub mod plant;
 pub mod simulation;
-
-fmi_export::export_fmu!(model::ServoAxis);
+pub mod variables;

@@ -59,6 +59,7 @@ pub struct UserInputs {
     pub disturbance_torque: f64,
 }
 
+#[derive(Clone, Copy, Debug)]
 pub struct AxisSimulation {
     pub axis: Axis,
     pub plant: Plant,

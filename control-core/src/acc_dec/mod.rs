@@ -33,6 +33,15 @@ impl AccDecKind {
             _ => None,
         }
     }
+
+    /// The inverse of [`Self::from_code`].
+    pub fn code(self) -> i32 {
+        match self {
+            Self::None => 0,
+            Self::MovingAverage => 1,
+            Self::Butterworth => 2,
+        }
+    }
 }
 
 /// Acc/dec settings (part of [`crate::Params`]).

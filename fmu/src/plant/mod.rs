@@ -53,7 +53,7 @@ pub struct Measurements {
     pub bus_voltage: f64,
 }
 
-#[derive(Clone, Debug)]
+#[derive(Clone, Copy, Debug)]
 pub struct Plant {
     params: PlantParams,
     /// Discretised once from `params`.

@@ -1,6 +1,6 @@
 //! Reproducible Gaussian sensor noise: xorshift64* and the Box–Muller transform.
 
-#[derive(Clone, Debug)]
+#[derive(Clone, Copy, Debug)]
 pub struct GaussianNoise {
     state: u64,
     std: f64,

@@ -1,0 +1,213 @@
+//! The FMU's parameter values turned into the control core's `Params`, the plant's
+//! parameters and the excitation: what `exitInitializationMode` builds the axis from.
+
+use control_core::acc_dec::{AccDecKind, AccDecParams};
+use control_core::excitation::InjectionPoint;
+use control_core::friction_compensation::FrictionCompensationParams;
+use control_core::params::{
+    CurrentLoopGains, Limits, MotorModel, PositionLoopGains, Rates, TorqueFilters, VelocityLoopGains,
+};
+use control_core::phase_shifted_sweep::{SweepParams, SweepSignal};
+use control_core::response_correction::{CorrectionParams, CorrectionSection, SecondOrder};
+use control_core::stop_sequence::SequenceParams;
+use control_core::Params;
+
+use crate::plant::PlantParams;
+use crate::simulation::{ExcitationConfig, SimulationConfig};
+use crate::variables::Values;
+
+/// A count parameter (its declared range keeps it non-negative; checked again here).
+fn count(name: &str, v: i32) -> Result<u32, String> {
+    u32::try_from(v).map_err(|_| format!("{name} must not be negative (got {v})"))
+}
+
+/// The whole configuration of the simulated axis.
+pub fn simulation_config(v: &Values) -> Result<SimulationConfig, String> {
+    let pole_pairs = count("plant.pole_pairs", v.plant_pole_pairs)?;
+    let counts = count("plant.encoder_counts_per_rev", v.plant_encoder_counts_per_rev)?;
+    let motor = MotorModel {
+        pole_pairs,
+        resistance: v.plant_resistance as f32,
+        ld: v.plant_ld as f32,
+        lq: v.plant_lq as f32,
+        flux_linkage: v.plant_flux_linkage as f32,
+    };
+    let plant = PlantParams {
+        pole_pairs,
+        resistance: v.plant_resistance,
+        ld: v.plant_ld,
+        lq: v.plant_lq,
+        flux_linkage: v.plant_flux_linkage,
+        bus_voltage: v.plant_bus_voltage,
+        motor_inertia: v.plant_motor_inertia,
+        load_inertia: v.plant_load_inertia,
+        shaft_stiffness: v.plant_shaft_stiffness,
+        shaft_damping: v.plant_shaft_damping,
+        motor_coulomb: v.plant_motor_coulomb,
+        motor_viscous: v.plant_motor_viscous,
+        load_coulomb: v.plant_load_coulomb,
+        load_viscous: v.plant_load_viscous,
+        absorber_inertia: v.plant_absorber_inertia,
+        absorber_stiffness: v.plant_absorber_stiffness,
+        absorber_damping: v.plant_absorber_damping,
+        coulomb_velocity: v.plant_coulomb_velocity,
+        encoder_counts_per_rev: counts,
+        current_noise_std: v.plant_current_noise_std,
+        acceleration_noise_std: v.plant_acceleration_noise_std,
+        noise_seed: v.plant_noise_seed as u32 as u64,
+        tick: 1.0 / v.ctrl_current_loop_hz,
+        substeps: count("plant.substeps", v.plant_substeps)?,
+    };
+    let point = InjectionPoint::from_code(v.excitation_point)
+        .filter(|p| *p != InjectionPoint::VelocityFeedback)
+        .ok_or_else(|| format!("excitation.point must be 0, 1 or 2 (got {})", v.excitation_point))?;
+    let control = Params {
+        motor,
+        encoder_counts_per_rev: counts,
+        rates: Rates {
+            current_loop_hz: v.ctrl_current_loop_hz as f32,
+            velocity_divider: count("ctrl.velocity_divider", v.ctrl_velocity_divider)?,
+            position_divider: count("ctrl.position_divider", v.ctrl_position_divider)?,
+        },
+        current: CurrentLoopGains {
+            kp: v.ctrl_current_kp as f32,
+            ki: v.ctrl_current_ki as f32,
+            decoupling: v.ctrl_decoupling,
+            angle_advance_ticks: v.ctrl_angle_advance_ticks as f32,
+            max_current: v.ctrl_max_current as f32,
+        },
+        velocity: VelocityLoopGains {
+            kp: v.ctrl_velocity_kp as f32,
+            ki: v.ctrl_velocity_ki as f32,
+            torque_limit: v.ctrl_torque_limit as f32,
+        },
+        position: PositionLoopGains {
+            kp: v.ctrl_position_kp as f32,
+            velocity_feedforward: v.ctrl_velocity_feedforward as f32,
+            velocity_limit: v.ctrl_velocity_limit as f32,
+        },
+        filters: TorqueFilters {
+            low_pass_hz: v.ctrl_low_pass_hz as f32,
+            notch_hz: v.ctrl_notch_hz as f32,
+            notch_q: v.ctrl_notch_q as f32,
+            notch_depth: v.ctrl_notch_depth as f32,
+        },
+        limits: Limits {
+            overcurrent: v.ctrl_overcurrent as f32,
+            bus_undervoltage: v.ctrl_bus_undervoltage as f32,
+            bus_overvoltage: v.ctrl_bus_overvoltage as f32,
+            following_error: v.ctrl_following_error_limit as f32,
+        },
+        friction: FrictionCompensationParams {
+            amplitude: v.ctrl_friction_comp_amplitude as f32,
+            decay: v.ctrl_friction_comp_decay as f32,
+        },
+        acc_dec: acc_dec(v)?,
+        sequence: sequence(v, counts)?,
+        sweep: sweep(v)?,
+        correction: correction(v)?,
+    };
+    Ok(SimulationConfig {
+        control,
+        plant,
+        excitation: ExcitationConfig {
+            point,
+            amplitude: v.excitation_amplitude as f32,
+            frequency_hz: v.excitation_frequency as f32,
+        },
+    })
+}
+
+fn acc_dec(v: &Values) -> Result<AccDecParams, String> {
+    let kind = AccDecKind::from_code(v.accdec_filter).ok_or_else(|| {
+        format!("accdec.filter must be 0 (none), 1 (moving averages) or 2 (Butterworth), got {}", v.accdec_filter)
+    })?;
+    Ok(AccDecParams {
+        kind,
+        order: count("accdec.order", v.accdec_order)?,
+        cutoff_hz: v.accdec_cutoff_hz as f32,
+        ma_stages: count("accdec.ma_stages", v.accdec_ma_stages)?,
+        ma_lengths: [
+            count("accdec.ma_length_1", v.accdec_ma_length_1)?,
+            count("accdec.ma_length_2", v.accdec_ma_length_2)?,
+            count("accdec.ma_length_3", v.accdec_ma_length_3)?,
+        ],
+    })
+}
+
+fn sequence(v: &Values, counts_per_rev: u32) -> Result<SequenceParams, String> {
+    let gains = [v.seq_gain_1, v.seq_gain_2, v.seq_gain_3, v.seq_gain_4, v.seq_gain_5, v.seq_gain_6, v.seq_gain_7, v.seq_gain_8]
+        .map(|g| g as f32);
+    let counts = |name: &str, rad: f64| -> Result<i64, String> {
+        if !(rad.is_finite() && rad.abs() <= 1.0e9) {
+            return Err(format!("{name} {rad} rad must be a finite angle within ±1e9 rad"));
+        }
+        Ok((rad / std::f64::consts::TAU * counts_per_rev as f64).round() as i64)
+    };
+    Ok(SequenceParams {
+        target_speed: v.seq_target_speed as f32,
+        acceleration: v.seq_acceleration as f32,
+        zero_speed: v.seq_zero_speed as f32,
+        position_gain: v.seq_position_gain as f32,
+        completion_counts: count("seq.completion_counts", v.seq_completion_counts)?,
+        gains,
+        gain_count: count("seq.gain_count", v.seq_gain_count)? as usize,
+        soft_limit_min: counts("seq.soft_limit_min", v.seq_soft_limit_min)?,
+        soft_limit_max: counts("seq.soft_limit_max", v.seq_soft_limit_max)?,
+    })
+}
+
+fn sweep(v: &Values) -> Result<SweepParams, String> {
+    let point = InjectionPoint::from_code(v.sweep_point)
+        .filter(|p| *p != InjectionPoint::Off)
+        .ok_or_else(|| format!("sweep.point must be 1 (torque), 2 (velocity command) or 3 (velocity feedback), got {}", v.sweep_point))?;
+    let signal = match v.sweep_signal {
+        0 => SweepSignal::SteppedSine,
+        1 => SweepSignal::Prbs,
+        other => return Err(format!("sweep.signal must be 0 (stepped sine) or 1 (PRBS), got {other}")),
+    };
+    Ok(SweepParams {
+        point,
+        signal,
+        amplitude: v.sweep_amplitude as f32,
+        start_hz: v.sweep_start_hz as f32,
+        stop_hz: v.sweep_stop_hz as f32,
+        points: count("sweep.points", v.sweep_points)?,
+        logarithmic: v.sweep_logarithmic != 0,
+        extra_hz: v.sweep_extra_hz as f32,
+        settle_cycles: v.sweep_settle_cycles as f32,
+        min_settle_s: v.sweep_min_settle_s as f32,
+        measure_cycles: v.sweep_measure_cycles as f32,
+        min_measure_s: v.sweep_min_measure_s as f32,
+        shifts: count("sweep.shifts", v.sweep_shifts)?,
+        repeats: count("sweep.repeats", v.sweep_repeats)?,
+        threshold_hz: v.sweep_threshold_hz as f32,
+        acquisition_divider: count("sweep.acquisition_divider", v.sweep_acquisition_divider)?,
+        prbs_degree: count("sweep.prbs_degree", v.sweep_prbs_degree)?,
+        prbs_divider: count("sweep.prbs_divider", v.sweep_prbs_divider)?,
+        prbs_seconds: v.sweep_prbs_seconds as f32,
+        precision_db: v.sweep_precision_db as f32,
+        max_extensions: count("sweep.max_extensions", v.sweep_max_extensions)?,
+    })
+}
+
+fn correction(v: &Values) -> Result<CorrectionParams, String> {
+    let raw = [
+        (v.corr_zero_hz_1, v.corr_zero_damping_1, v.corr_pole_hz_1, v.corr_pole_damping_1),
+        (v.corr_zero_hz_2, v.corr_zero_damping_2, v.corr_pole_hz_2, v.corr_pole_damping_2),
+        (v.corr_zero_hz_3, v.corr_zero_damping_3, v.corr_pole_hz_3, v.corr_pole_damping_3),
+        (v.corr_zero_hz_4, v.corr_zero_damping_4, v.corr_pole_hz_4, v.corr_pole_damping_4),
+        (v.corr_zero_hz_5, v.corr_zero_damping_5, v.corr_pole_hz_5, v.corr_pole_damping_5),
+        (v.corr_zero_hz_6, v.corr_zero_damping_6, v.corr_pole_hz_6, v.corr_pole_damping_6),
+        (v.corr_zero_hz_7, v.corr_zero_damping_7, v.corr_pole_hz_7, v.corr_pole_damping_7),
+        (v.corr_zero_hz_8, v.corr_zero_damping_8, v.corr_pole_hz_8, v.corr_pole_damping_8),
+    ];
+    let mut p = CorrectionParams { count: count("corr.count", v.corr_count)? as usize, ..Default::default() };
+    for (s, (zh, zd, ph, pd)) in p.sections.iter_mut().zip(raw) {
+        *s = CorrectionSection {
+            zeros: (zh != 0.0).then_some(SecondOrder { hz: zh as f32, damping: zd as f32 }),
+            poles: SecondOrder { hz: ph as f32, damping: pd as f32 },
+        };
+    }
+    Ok(p)
+}
