@@ -357,3 +357,6 @@ impl AxisModel {
         o.faults = t.faults.0 as i32;
     }
 }
+
+#[cfg(test)]
+mod tests;

@@ -29,6 +29,36 @@ pub enum Kind {
     Boolean,
 }
 
+/// Unpack an FMI 3.0 archive and read its model description with the `fmi` crate.
+///
+/// fmi-schema 0.8 reads `BaseUnit`'s ampere and kelvin exponents under the names `a` and `k`
+/// and refuses the standard's `A` and `K` (strict attributes): the model description in the
+/// unpacked copy gets its `BaseUnit` exponents renamed for it, nothing else changes. The
+/// archive itself keeps the standard's spelling (fmpy validate, fmutool and the FMI 2.0 side
+/// of the crate read it as the standard says).
+pub fn import_fmi3(path: &Path) -> Result<Fmi3Import> {
+    let file = std::fs::File::open(path)?;
+    let mut archive = zip::ZipArchive::new(file)?;
+    let dir = tempfile::Builder::new().prefix("servo-fmu").tempdir()?;
+    archive.extract(dir.path())?;
+    let xml = std::fs::read_to_string(dir.path().join("modelDescription.xml")).context("reading modelDescription.xml")?;
+    let patched = base_units_for_fmi_schema(&xml);
+    Ok(<Fmi3Import as FmiImport>::new(dir, &patched)?)
+}
+
+fn base_units_for_fmi_schema(xml: &str) -> String {
+    let mut out = String::with_capacity(xml.len());
+    let mut rest = xml;
+    while let Some(i) = rest.find("<BaseUnit") {
+        let end = i + rest[i..].find('>').unwrap_or(rest.len() - i);
+        out.push_str(&rest[..i]);
+        out.push_str(&rest[i..end].replace(" A=\"", " a=\"").replace(" K=\"", " k=\""));
+        rest = &rest[end..];
+    }
+    out.push_str(rest);
+    out
+}
+
 /// A loaded FMU (unpacked once, instantiated per run).
 pub struct Fmu {
     import: Fmi3Import,
@@ -43,8 +73,7 @@ impl Fmu {
                 path.display()
             );
         }
-        let import: Fmi3Import =
-            fmi::import::from_path(path).map_err(|e| anyhow!("cannot import {}: {e}", path.display()))?;
+        let import = import_fmi3(path).map_err(|e| anyhow!("cannot import {}: {e}", path.display()))?;
         let mut variables = BTreeMap::new();
         for v in import.model_description().model_variables.iter_abstract() {
             let kind = match v.data_type() {

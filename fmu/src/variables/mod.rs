@@ -7,6 +7,8 @@
 //! `Set`, and the typed [`Values`] the model converts into the control core's and the
 //! plant's parameters. Adding a parameter is one core field and one row.
 
+#[cfg(test)]
+mod range_tests;
 mod table;
 mod units;
 

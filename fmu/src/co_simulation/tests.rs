@@ -1,0 +1,175 @@
+use super::*;
+use crate::variables::{by_name, Value};
+
+fn vr(name: &str) -> u32 {
+    by_name(name).unwrap_or_else(|| panic!("no variable {name}")).vr
+}
+
+fn set(m: &mut AxisModel, name: &str, v: Value) -> Result<(), String> {
+    m.set(vr(name), v)
+}
+
+fn initialized() -> AxisModel {
+    let mut m = AxisModel::new();
+    m.initialize().unwrap();
+    m
+}
+
+#[test]
+fn start_values_build_the_core_and_plant_defaults() {
+    let config = simulation_config(&Values::start()).unwrap();
+    assert_eq!(config.control, control_core::Params::default());
+    let mut plant = crate::plant::PlantParams::default();
+    plant.tick = config.plant.tick;
+    assert_eq!(config.plant, plant);
+}
+
+#[test]
+fn step_size_must_be_a_whole_number_of_position_periods_and_bounded() {
+    let mut m = initialized();
+    assert!(m.do_step(0.0, 0.0003).unwrap_err().contains("whole multiple"));
+    assert!(m.do_step(0.0, 1e300).unwrap_err().contains("longest step"));
+    assert!(m.do_step(0.0, f64::NAN).unwrap_err().contains("positive"));
+    m.do_step(0.0, 0.00025).unwrap();
+    m.do_step(0.00025, 0.0005).unwrap();
+    assert_eq!(m.time(), 0.00075);
+}
+
+#[test]
+fn the_start_time_is_the_time_of_the_first_communication_point() {
+    let mut m = AxisModel::new();
+    m.set_start_time(0.1).unwrap();
+    m.initialize().unwrap();
+    assert!(m.do_step(0.0, 0.00025).unwrap_err().contains("does not match"));
+    m.do_step(0.1, 0.00025).unwrap();
+    assert_eq!(m.get(0).unwrap(), Value::Float64(0.1 + 4.0 / 16000.0));
+}
+
+#[test]
+fn fixed_parameters_are_refused_after_initialisation_and_nothing_changes() {
+    let mut m = initialized();
+    let before = m.values().ctrl_velocity_kp;
+    let err = set(&mut m, "ctrl.velocity_kp", Value::Float64(5.0)).unwrap_err();
+    assert!(err.contains("ctrl.velocity_kp") && err.contains("fixed"), "{err}");
+    assert_eq!(m.values().ctrl_velocity_kp, before);
+    m.reset();
+    set(&mut m, "ctrl.velocity_kp", Value::Float64(5.0)).unwrap();
+    m.reset();
+    assert_eq!(m.values(), &Values::start(), "reset restores every start value");
+}
+
+#[test]
+fn outputs_the_time_wrong_types_nan_and_out_of_range_values_are_refused() {
+    let mut m = AxisModel::new();
+    assert!(set(&mut m, "iq", Value::Float64(1.0)).unwrap_err().contains("output"));
+    assert!(m.set(0, Value::Float64(1.0)).unwrap_err().contains("independent"));
+    assert!(set(&mut m, "mode", Value::Float64(1.0)).unwrap_err().contains("Int32"));
+    assert!(set(&mut m, "mode", Value::Int32(7)).unwrap_err().contains("outside its range [0, 3]"));
+    assert!(set(&mut m, "velocity_command", Value::Float64(f64::NAN)).unwrap_err().contains("not a finite"));
+    assert!(set(&mut m, "move_speed", Value::Float64(-1.0)).unwrap_err().contains("move_speed"));
+    assert!(set(&mut m, "jog_velocity", Value::Float64(-4e30)).unwrap_err().contains("jog_velocity"));
+    assert!(set(&mut m, "plant.substeps", Value::Int32(i32::MAX)).unwrap_err().contains("plant.substeps"));
+    assert!(m.set(100_000, Value::Int32(1)).unwrap_err().contains("no variable"));
+    assert_eq!(m.values(), &Values::start());
+    // All or none.
+    let items = [(vr("velocity_command"), Value::Float64(3.0)), (vr("mode"), Value::Int32(9))];
+    assert!(m.set_all(items.iter().copied()).is_err());
+    assert_eq!(m.values().velocity_command, 0.0);
+}
+
+#[test]
+fn bad_acc_dec_settings_are_refused_with_the_reason() {
+    let build = |changes: &[(&str, Value)]| -> Result<(), String> {
+        let mut m = AxisModel::new();
+        for (n, v) in changes {
+            set(&mut m, n, *v)?;
+        }
+        m.initialize()
+    };
+    let bw = ("accdec.filter", Value::Int32(2));
+    assert!(build(&[bw, ("accdec.cutoff_hz", Value::Float64(5000.0))]).unwrap_err().contains("Nyquist"));
+    assert!(build(&[bw, ("accdec.order", Value::Int32(7))]).unwrap_err().contains("accdec.order"));
+    assert!(build(&[bw]).is_ok());
+}
+
+#[test]
+fn bad_sequence_settings_are_refused_with_the_reason() {
+    let build = |changes: &[(&str, Value)]| -> Result<(), String> {
+        let mut m = AxisModel::new();
+        for (n, v) in changes {
+            set(&mut m, n, *v)?;
+        }
+        m.initialize()
+    };
+    assert!(build(&[("seq.completion_counts", Value::Int32(-1))]).unwrap_err().contains("seq.completion_counts"));
+    assert!(build(&[("seq.gain_count", Value::Int32(9))]).unwrap_err().contains("seq.gain_count"));
+    assert!(build(&[("seq.gain_2", Value::Float64(-1.0))]).unwrap_err().contains("seq.gain_2"));
+    let limits = [("seq.soft_limit_min", Value::Float64(10.0)), ("seq.soft_limit_max", Value::Float64(-10.0))];
+    assert!(build(&limits).unwrap_err().contains("soft limits"));
+    assert!(build(&[]).is_ok());
+}
+
+#[test]
+fn sequence_keys_are_presses_and_refusals_are_counted_not_errors() {
+    let mut m = initialized();
+    set(&mut m, "mode", Value::Int32(3)).unwrap();
+    set(&mut m, "seq_release", Value::Int32(1)).unwrap(); // no accepted stop yet: refused, counted
+    m.do_step(0.0, 0.00025).unwrap();
+    let v = m.values();
+    assert_eq!((v.seq_refused, v.seq_last_refusal, v.seq_state), (1, 5, 0));
+    m.do_step(0.00025, 0.00025).unwrap(); // unchanged counter: no second press
+    assert_eq!(m.values().seq_refused, 1);
+    set(&mut m, "seq_stop", Value::Int32(1)).unwrap(); // at rest: accepted at the next position tick
+    m.do_step(0.0005, 0.00025).unwrap();
+    assert_eq!(m.values().seq_state, 3);
+    set(&mut m, "seq_gain_index", Value::Int32(-1)).unwrap();
+    m.do_step(0.00075, 0.00025).unwrap();
+    let v = m.values();
+    assert_eq!((v.seq_refused, v.seq_last_refusal, v.seq_gain), (2, 8, 1.0));
+    assert_eq!(m.refusals.len(), 2, "both refusals wait for the C API to log them");
+}
+
+#[test]
+fn a_sweep_start_the_mode_cannot_take_is_a_logged_refusal() {
+    let mut m = initialized();
+    set(&mut m, "mode", Value::Int32(0)).unwrap(); // torque mode: no velocity loop to inject into
+    set(&mut m, "sweep_start", Value::Int32(1)).unwrap();
+    m.do_step(0.0, 0.00025).unwrap();
+    assert_eq!(m.values().sweep_state, 0);
+    assert!(m.refusals.iter().any(|r| r.contains("sweep_start refused")), "{:?}", m.refusals);
+    set(&mut m, "mode", Value::Int32(1)).unwrap();
+    set(&mut m, "sweep_start", Value::Int32(2)).unwrap();
+    m.do_step(0.00025, 0.00025).unwrap();
+    assert_eq!(m.values().sweep_state, 1, "settling after a start in velocity mode");
+}
+
+#[test]
+fn no_output_is_infinite_or_nan_after_initialisation() {
+    let m = initialized();
+    for d in crate::variables::DECLARATIONS {
+        assert!(m.get(d.vr).unwrap().as_f64().is_finite(), "{}", d.name);
+    }
+}
+
+#[test]
+fn a_restored_state_continues_bit_for_bit_like_the_uninterrupted_run() {
+    let run = |m: &mut AxisModel, from: usize, n: usize| -> Vec<Values> {
+        (from..from + n)
+            .map(|k| {
+                if k == 40 {
+                    set(m, "position_command", Value::Float64(1.0)).unwrap();
+                }
+                m.do_step(k as f64 * 0.00025, 0.00025).unwrap();
+                *m.values()
+            })
+            .collect()
+    };
+    let mut m = initialized();
+    run(&mut m, 0, 30);
+    let saved = m.state;
+    let first = run(&mut m, 30, 200);
+    m.state = saved;
+    let second = run(&mut m, 30, 200);
+    assert_eq!(first, second);
+    assert!(first.last().unwrap().motor_position > 0.5, "the axis moved");
+}
