@@ -264,7 +264,7 @@ fn range_text(d: &Declaration) -> String {
     if d.causality == Causality::Output || d.kind == Kind::Boolean || (d.range.min.is_none() && d.range.max.is_none()) {
         return String::new();
     }
-    let side = |b: Option<f64>| b.map_or("…".to_string(), |x| number(d, x));
+    let side = |b: Option<f64>| b.map_or("…".to_string(), crate::variables::readable);
     format!("{} … {}", side(d.range.min), side(d.range.max))
 }
 

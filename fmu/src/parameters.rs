@@ -14,7 +14,7 @@ use control_core::Params;
 
 use crate::plant::PlantParams;
 use crate::simulation::{ExcitationConfig, SimulationConfig};
-use crate::variables::Values;
+use crate::variables::{name, Value, Values};
 
 /// A count parameter (its declared range keeps it non-negative; checked again here).
 fn count(name: &str, v: i32) -> Result<u32, String> {
@@ -210,4 +210,58 @@ fn correction(v: &Values) -> Result<CorrectionParams, String> {
         };
     }
     Ok(p)
+}
+
+/// The FMU parameter values of a sweep's settings: the inverse of the conversion above, kept
+/// beside it (a test turns one into the other and back).
+pub fn sweep_values(s: &SweepParams) -> Vec<(&'static str, Value)> {
+    let f = |x: f32| Value::Float64(crate::variables::from_f32(x));
+    let i = |x: u32| Value::Int32(x.min(i32::MAX as u32) as i32);
+    vec![
+        (name::sweep_point, Value::Int32(s.point.code())),
+        (name::sweep_signal, Value::Int32((s.signal == SweepSignal::Prbs) as i32)),
+        (name::sweep_amplitude, f(s.amplitude)),
+        (name::sweep_start_hz, f(s.start_hz)),
+        (name::sweep_stop_hz, f(s.stop_hz)),
+        (name::sweep_points, i(s.points)),
+        (name::sweep_logarithmic, Value::Int32(s.logarithmic as i32)),
+        (name::sweep_extra_hz, f(s.extra_hz)),
+        (name::sweep_settle_cycles, f(s.settle_cycles)),
+        (name::sweep_min_settle_s, f(s.min_settle_s)),
+        (name::sweep_measure_cycles, f(s.measure_cycles)),
+        (name::sweep_min_measure_s, f(s.min_measure_s)),
+        (name::sweep_shifts, i(s.shifts)),
+        (name::sweep_repeats, i(s.repeats)),
+        (name::sweep_threshold_hz, f(s.threshold_hz)),
+        (name::sweep_acquisition_divider, i(s.acquisition_divider)),
+        (name::sweep_prbs_degree, i(s.prbs_degree)),
+        (name::sweep_prbs_divider, i(s.prbs_divider)),
+        (name::sweep_prbs_seconds, f(s.prbs_seconds)),
+        (name::sweep_precision_db, f(s.precision_db)),
+        (name::sweep_max_extensions, i(s.max_extensions)),
+    ]
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::variables::by_name;
+
+    #[test]
+    fn sweep_settings_go_to_parameter_values_and_back_unchanged() {
+        let mut s = Params::default().sweep;
+        s.point = InjectionPoint::TorqueCommand;
+        s.signal = SweepSignal::Prbs;
+        s.precision_db = 0.07;
+        s.points = 25;
+        s.stop_hz = 2500.0;
+        s.logarithmic = false;
+        let mut v = Values::start();
+        let items = sweep_values(&s);
+        assert_eq!(items.len(), crate::variables::DECLARATIONS.iter().filter(|d| d.name.starts_with("sweep.")).count());
+        for (n, x) in items {
+            v.set(by_name(n).unwrap().vr, x).unwrap();
+        }
+        assert_eq!(simulation_config(&v).unwrap().control.sweep, s);
+    }
 }

@@ -7,6 +7,7 @@
 //! same transfer function in f64 without rounding (the ideal shape, free of the ±1-pulse
 //! quantisation that dominates a numerically differentiated jerk).
 
+use servo_axis::variables::name;
 use anyhow::{anyhow, bail, Result};
 use control_core::acc_dec::{
     AccDecFilter, ButterworthDesign, ButterworthPulseFilter, MovingAverageCascade, ZeroPlacement,
@@ -76,14 +77,14 @@ impl FilterSpec {
                 bail!("the FMU's Butterworth keeps the seed's zeros (N-1 at z = -1); zeros-as-delays runs on the host only")
             }
             Self::Butterworth { order, cutoff_hz, .. } => vec![
-                ("accdec.filter".into(), Value::Int(2)),
-                ("accdec.order".into(), Value::Int(*order as i64)),
-                ("accdec.cutoff_hz".into(), Value::Float(*cutoff_hz as f64)),
+                (name::accdec_filter.into(), Value::Int(2)),
+                (name::accdec_order.into(), Value::Int(*order as i64)),
+                (name::accdec_cutoff_hz.into(), Value::Float(*cutoff_hz as f64)),
             ],
             Self::MovingAverage { lengths } => {
                 let mut v = vec![
-                    ("accdec.filter".into(), Value::Int(1)),
-                    ("accdec.ma_stages".into(), Value::Int(lengths.len() as i64)),
+                    (name::accdec_filter.into(), Value::Int(1)),
+                    (name::accdec_ma_stages.into(), Value::Int(lengths.len() as i64)),
                 ];
                 for (i, l) in lengths.iter().enumerate() {
                     v.push((format!("accdec.ma_length_{}", i + 1), Value::Int(*l as i64)));
@@ -367,10 +368,10 @@ impl Resonance {
         let load_inertia = servo_axis::plant::PlantParams::default().load_inertia;
         let w = std::f64::consts::TAU * self.hz;
         Ok(vec![
-            ("plant.shaft_stiffness".into(), Value::Float(load_inertia * w * w)),
-            ("plant.shaft_damping".into(), Value::Float(2.0 * self.damping_ratio * load_inertia * w)),
-            ("plant.motor_coulomb".into(), Value::Float(0.0)),
-            ("plant.load_coulomb".into(), Value::Float(0.0)),
+            (name::plant_shaft_stiffness.into(), Value::Float(load_inertia * w * w)),
+            (name::plant_shaft_damping.into(), Value::Float(2.0 * self.damping_ratio * load_inertia * w)),
+            (name::plant_motor_coulomb.into(), Value::Float(0.0)),
+            (name::plant_load_coulomb.into(), Value::Float(0.0)),
         ])
     }
 }
@@ -400,7 +401,7 @@ pub fn position_period_parameters(period: f64) -> Result<Vec<(String, Value)>> {
     if !(divider >= 1.0 && divider <= 1000.0 && (divider * tick - period).abs() <= 1e-6 * period) {
         bail!("the FMU's position loop runs at whole multiples of its {} µs tick; {period} s is not one", tick * 1e6);
     }
-    Ok(vec![("ctrl.position_divider".into(), Value::Int(divider as i64))])
+    Ok(vec![(name::ctrl_position_divider.into(), Value::Int(divider as i64))])
 }
 
 /// `period` snapped to the FMU's tick grid (an f32 period converted to f64 is off by ~1e-8).

@@ -26,6 +26,11 @@ pub struct FmuBench {
     pub all_outputs: usize,
     pub all_outputs_wall_seconds: f64,
     pub all_outputs_real_time_factor: f64,
+    /// Core + plant stepped directly (no FMI, no outputs), same schedule (median of [`RUST_RUNS`]).
+    pub bare_wall_seconds: f64,
+    pub bare_real_time_factor: f64,
+    /// (all outputs through the FMI host − bare) / bare: what the boundary and the recording cost.
+    pub boundary_overhead: f64,
     pub fmpy_wall_seconds: Option<f64>,
     pub fmpy_real_time_factor: Option<f64>,
     /// Rust host real-time factor over fmpy's (both recording [`BENCH_RECORD`]).
@@ -34,9 +39,8 @@ pub struct FmuBench {
 
 /// What the benchmark records at every step: the outputs the FMU's specification names (motor
 /// and load position and velocity, load acceleration, iq, id, torque command, following error,
-/// fault flags). Each recorded value costs a lookup in the FMU per step (fmi-export routes a
-/// value reference through a search over the model's fields), so the figure with every
-/// output is printed beside it.
+/// fault flags). The figure with every output is printed beside it, and the bare simulation
+/// (no FMI) under both.
 pub const BENCH_RECORD: [&str; 10] = [
     "motor_position",
     "motor_velocity",
@@ -84,6 +88,45 @@ velocity_command = -50.0
         t2 = grid(0.4 * seconds),
         t3 = grid(0.6 * seconds),
     )
+}
+
+/// The benchmark's schedule on the core and the plant stepped directly (no FMI, nothing
+/// recorded): the median wall time of [`RUST_RUNS`] runs.
+pub fn bare_simulation_wall(seconds: f64) -> Result<f64> {
+    use control_core::Mode;
+    use servo_axis::parameters::simulation_config;
+    use servo_axis::simulation::{AxisSimulation, UserInputs};
+    use servo_axis::variables::Values;
+    let config = simulation_config(&Values::start()).map_err(anyhow::Error::msg)?;
+    let h = crate::scenario::DEFAULT_STEP;
+    let steps = (seconds / h).round() as usize;
+    let (t1, t2, t3) = (grid(0.1 * seconds), grid(0.4 * seconds), grid(0.6 * seconds));
+    let ticks = (h * config.control.rates.current_loop_hz as f64).round() as u64;
+    let mut walls = Vec::new();
+    let mut checksum = 0.0;
+    for _ in 0..RUST_RUNS {
+        let mut sim = AxisSimulation::new(&config).map_err(|e| anyhow::anyhow!("{e}"))?;
+        let start = Instant::now();
+        for k in 0..steps {
+            let t = k as f64 * h + 1e-9 * h;
+            let inputs = UserInputs {
+                mode: Mode::Velocity,
+                velocity_command: if t >= t3 { -50.0 } else if t >= t1 { 50.0 } else { 0.0 },
+                disturbance_torque: if t >= t2 { 0.1 } else { 0.0 },
+                ..Default::default()
+            };
+            sim.apply_mode(&inputs);
+            sim.run_ticks(ticks, &inputs);
+        }
+        walls.push(start.elapsed().as_secs_f64());
+        checksum += sim.plant.state.motor_velocity;
+    }
+    // The run did something (and the optimiser cannot drop it).
+    if !(checksum.is_finite() && checksum.abs() > 1.0) {
+        bail!("the bare simulation did not move the axis (final velocity sum {checksum})");
+    }
+    walls.sort_by(f64::total_cmp);
+    Ok(walls[RUST_RUNS / 2])
 }
 
 fn grid(t: f64) -> f64 {
@@ -178,6 +221,7 @@ pub fn bench_fmu(fmu_path: &Path, out: &Path, seconds: f64, with_fmpy: bool, mut
     };
     let (rust_wall, scenario) = timed(&BENCH_RECORD, "bench", 0.0)?;
     let (all_wall, _) = timed(&[], "bench_all_outputs", 0.5)?;
+    let bare_wall = bare_simulation_wall(seconds)?;
     let fmpy_wall = if with_fmpy {
         Some(run_fmpy(fmu_path, &out.join("bench.toml"), &out.join("bench_fmpy.csv"))?)
     } else {
@@ -194,6 +238,9 @@ pub fn bench_fmu(fmu_path: &Path, out: &Path, seconds: f64, with_fmpy: bool, mut
         all_outputs: fmu.outputs().len(),
         all_outputs_wall_seconds: all_wall,
         all_outputs_real_time_factor: seconds / all_wall,
+        bare_wall_seconds: bare_wall,
+        bare_real_time_factor: seconds / bare_wall,
+        boundary_overhead: (all_wall - bare_wall) / bare_wall,
         fmpy_wall_seconds: fmpy_wall,
         fmpy_real_time_factor: fmpy_rt,
         rust_over_fmpy: fmpy_rt.map(|f| rust_rt / f),

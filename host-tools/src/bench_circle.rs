@@ -8,6 +8,7 @@
 //!    R·sin(ω(t − T/4)) with its answer to R·sin ωt shifted by T/4); the largest radial
 //!    difference, relative to the radius.
 
+use servo_axis::variables::name;
 use std::collections::BTreeMap;
 
 use anyhow::Result;
@@ -19,7 +20,7 @@ use crate::scenario::Value;
 
 /// The compensation the demo uses: twice the axis' total Coulomb friction (the swing from
 /// holding it one way to the other), decaying over 0.2 s.
-pub const COMPENSATION: [(&str, f64); 2] = [("ctrl.friction_comp_amplitude", 0.06), ("ctrl.friction_comp_decay", 0.2)];
+pub const COMPENSATION: [(&str, f64); 2] = [(name::ctrl_friction_comp_amplitude, 0.06), (name::ctrl_friction_comp_decay, 0.2)];
 
 #[derive(Clone, Debug, Serialize)]
 pub struct CircleBench {
@@ -52,7 +53,7 @@ pub fn bench(fmu: &Fmu) -> Result<CircleBench> {
     let on_params: BTreeMap<String, Value> = COMPENSATION.iter().map(|(k, v)| (k.to_string(), Value::Float(*v))).collect();
     let on = two_axis(fmu, &demo_request(on_params))?.feedback.roundness(1.0);
     let frictionless: BTreeMap<String, Value> =
-        ["plant.motor_coulomb", "plant.load_coulomb"].iter().map(|k| (k.to_string(), Value::Float(0.0))).collect();
+        [name::plant_motor_coulomb, name::plant_load_coulomb].iter().map(|k| (k.to_string(), Value::Float(0.0))).collect();
     let r = demo_request(frictionless);
     let pseudo = single_axis(fmu, &r)?;
     let circle = two_axis(fmu, &r)?;

@@ -16,6 +16,7 @@
 //! A real drive's current noise breaks the lock, as a 16 times finer encoder removes the
 //! error; both are printed beside the headline.
 
+use servo_axis::variables::name;
 use std::collections::BTreeMap;
 
 use anyhow::{anyhow, Result};
@@ -127,7 +128,7 @@ pub fn bench(fmu: &Fmu, noise_std: f64, mut progress: impl FnMut(f64)) -> Result
     let fs = control_core::Params::default().rates.current_loop_hz;
     let ours_settings = SweepParams::default();
     let split = ours_settings.threshold(fs) as f64;
-    let clean: BTreeMap<String, Value> = [("plant.current_noise_std".to_string(), Value::Float(DITHER_A))].into_iter().collect();
+    let clean: BTreeMap<String, Value> = [(name::plant_current_noise_std.to_string(), Value::Float(DITHER_A))].into_iter().collect();
     progress(0.0);
     let oracle_run = base(clean.clone(), oracle_settings(&ours_settings));
     let oracle = online_results(&oracle_run.run(fmu, |_| {})?)?;
@@ -166,7 +167,7 @@ pub fn bench(fmu: &Fmu, noise_std: f64, mut progress: impl FnMut(f64)) -> Result
     let analytic_low_frequency = worst_up_to(&analytic, &oracle, 30.0);
 
     // Noise: our sweep with longer records against PRBS over the same time.
-    let noisy: BTreeMap<String, Value> = [("plant.current_noise_std".to_string(), Value::Float(noise_std))].into_iter().collect();
+    let noisy: BTreeMap<String, Value> = [(name::plant_current_noise_std.to_string(), Value::Float(noise_std))].into_iter().collect();
     let mut noise = Vec::new();
     for (i, scale) in [1.0f32, 2.0, 4.0].iter().enumerate() {
         let settings = SweepParams { measure_cycles: ours_settings.measure_cycles * scale, min_measure_s: ours_settings.min_measure_s * scale, ..ours_settings };
@@ -193,7 +194,7 @@ pub fn bench(fmu: &Fmu, noise_std: f64, mut progress: impl FnMut(f64)) -> Result
     // The same measurement without the dither, and without it on a finer encoder.
     let noise_free = against_oracle(&BTreeMap::new(), VELOCITY, &[ours_settings])?[0];
     progress(0.8);
-    let fine: BTreeMap<String, Value> = [("plant.encoder_counts_per_rev".to_string(), Value::Int(FINE_ENCODER))].into_iter().collect();
+    let fine: BTreeMap<String, Value> = [(name::plant_encoder_counts_per_rev.to_string(), Value::Int(FINE_ENCODER))].into_iter().collect();
     let fine_encoder = against_oracle(&fine, VELOCITY, &[ours_settings])?[0];
     progress(0.85);
     // Worst error over riding speeds, with fixed and with lengthened records.

@@ -124,7 +124,7 @@ impl Fmu {
             (Kind::Boolean, Value::Bool(b)) => inst.set_boolean(&[var.vr], &[b]),
             (kind, v) => bail!("{} is {kind:?}; {v:?} is not a value of that type", var.name),
         };
-        r.map(|_| ()).map_err(|e| anyhow!("the FMU refused {} = {value:?}: {e:?}", var.name))
+        r.map(|_| ()).map_err(|_| anyhow!("the FMU refused {} = {value:?}: {}", var.name, crate::fmu_log::reasons()))
     }
 
     /// The outputs `names` (the scenario's `record` list), or every output when it is empty.
@@ -188,6 +188,8 @@ impl Fmu {
             .collect::<Result<_>>()?;
         let outputs = self.recorded(&scenario.record)?;
 
+        crate::fmu_log::install();
+        crate::fmu_log::clear();
         let mut inst = self
             .import
             .instantiate_cs(&scenario.name, false, false, false, false, &[])
@@ -198,7 +200,7 @@ impl Fmu {
         let h = scenario.step();
         let n = scenario.steps();
         inst.enter_initialization_mode(None, 0.0, Some(scenario.stop_time))
-            .map_err(|e| anyhow!("enter initialization mode failed: {e:?}"))?;
+            .map_err(|_| anyhow!("enter initialization mode failed: {}", crate::fmu_log::reasons()))?;
         let mut pending = changes.iter().peekable();
         let mut apply = |inst: &mut InstanceCS, k: usize| -> Result<()> {
             while let Some((_, group)) = pending.next_if(|(j, _)| *j <= k) {
@@ -209,9 +211,8 @@ impl Fmu {
             Ok(())
         };
         apply(&mut inst, 0)?;
-        inst.exit_initialization_mode().map_err(|_| {
-            anyhow!("the FMU refused its parameters at initialization (its log above says why)")
-        })?;
+        inst.exit_initialization_mode()
+            .map_err(|_| anyhow!("the FMU refused its parameters at initialization: {}", crate::fmu_log::reasons()))?;
 
         let mut columns = vec!["time".to_string()];
         columns.extend(outputs.iter().map(|v| v.name.clone()));
@@ -256,7 +257,7 @@ impl Fmu {
             let t = k as f64 * h;
             apply(&mut inst, k)?;
             inst.do_step(t, h, true, &mut ev, &mut term, &mut early, &mut last)
-                .map_err(|e| anyhow!("do_step at t = {t} s failed: {e:?} (the FMU log above says why)"))?;
+                .map_err(|_| anyhow!("do_step at t = {t} s failed: {}", crate::fmu_log::reasons()))?;
             record(&mut inst, (k + 1) as f64 * h, &mut trace)?;
             if k % 256 == 0 {
                 progress(k as f64 / n as f64);

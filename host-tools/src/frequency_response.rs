@@ -6,7 +6,7 @@ use std::collections::BTreeMap;
 
 use anyhow::{anyhow, bail, Result};
 use control_core::excitation::InjectionPoint;
-use control_core::phase_shifted_sweep::{SweepParams, SweepSignal};
+use control_core::phase_shifted_sweep::SweepParams;
 use serde::Serialize;
 
 use crate::fmu_runner::Fmu;
@@ -50,37 +50,7 @@ pub struct SweepRun {
 pub const START_AT: f64 = 0.1;
 
 fn sweep_parameters(s: &SweepParams) -> Vec<(String, Value)> {
-    let point = match s.point {
-        InjectionPoint::TorqueCommand => 1,
-        InjectionPoint::VelocityCommand => 2,
-        InjectionPoint::VelocityFeedback => 3,
-        InjectionPoint::Off => 0,
-    };
-    let f = |x: f32| Value::Float(x as f64);
-    let i = |x: u32| Value::Int(x as i64);
-    vec![
-        ("sweep.point".into(), Value::Int(point)),
-        ("sweep.signal".into(), Value::Int(if s.signal == SweepSignal::Prbs { 1 } else { 0 })),
-        ("sweep.amplitude".into(), f(s.amplitude)),
-        ("sweep.start_hz".into(), f(s.start_hz)),
-        ("sweep.stop_hz".into(), f(s.stop_hz)),
-        ("sweep.points".into(), i(s.points)),
-        ("sweep.logarithmic".into(), Value::Int(s.logarithmic as i64)),
-        ("sweep.extra_hz".into(), f(s.extra_hz)),
-        ("sweep.settle_cycles".into(), f(s.settle_cycles)),
-        ("sweep.min_settle_s".into(), f(s.min_settle_s)),
-        ("sweep.measure_cycles".into(), f(s.measure_cycles)),
-        ("sweep.min_measure_s".into(), f(s.min_measure_s)),
-        ("sweep.shifts".into(), i(s.shifts)),
-        ("sweep.repeats".into(), i(s.repeats)),
-        ("sweep.threshold_hz".into(), f(s.threshold_hz)),
-        ("sweep.acquisition_divider".into(), i(s.acquisition_divider)),
-        ("sweep.prbs_degree".into(), i(s.prbs_degree)),
-        ("sweep.prbs_divider".into(), i(s.prbs_divider)),
-        ("sweep.prbs_seconds".into(), f(s.prbs_seconds)),
-        ("sweep.precision_db".into(), f(s.precision_db)),
-        ("sweep.max_extensions".into(), i(s.max_extensions)),
-    ]
+    servo_axis::parameters::sweep_values(s).into_iter().map(|(n, v)| (n.to_string(), Value::from(v))).collect()
 }
 
 impl SweepRun {

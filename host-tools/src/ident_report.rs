@@ -1,6 +1,7 @@
 //! `servo ident`: identify every axis's anti-resonance on the FMU, write the editable model
 //! files, the measured responses and a Bode plot of measurement and model (embodiment 5).
 
+use servo_axis::variables::name;
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 
@@ -52,7 +53,7 @@ pub fn identify_axis(fmu: &Fmu, axis: &str, parameters: &BTreeMap<String, Value>
         }
         let rms = acceleration_rms(fmu, parameters, amplitude)?;
         noise_std = rms / 10f64.powf(snr / 20.0);
-        p.insert("plant.acceleration_noise_std".into(), Value::Float(noise_std));
+        p.insert(name::plant_acceleration_noise_std.into(), Value::Float(noise_std));
     }
     let m = measure(fmu, &p, amplitude, BAND.0, BAND.1).with_context(|| format!("axis {axis}"))?;
     let mut model = identify(axis, &m).with_context(|| format!("axis {axis}"))?;

@@ -13,6 +13,7 @@
 //! by linear least squares in the frequency domain (Levy's method with Sanathanan–Koerner
 //! reweighting); else N = 1.
 
+use servo_axis::variables::name;
 use std::collections::BTreeMap;
 
 use anyhow::{anyhow, bail, Result};
@@ -397,9 +398,9 @@ pub fn true_anti_resonance(inertia: f64, stiffness: f64, damping: f64) -> Factor
 pub fn absorber_parameters(hz: f64, damping: f64, inertia: f64) -> BTreeMap<String, Value> {
     let w = std::f64::consts::TAU * hz;
     [
-        ("plant.absorber_inertia", inertia),
-        ("plant.absorber_stiffness", inertia * w * w),
-        ("plant.absorber_damping", 2.0 * damping * inertia * w),
+        (name::plant_absorber_inertia, inertia),
+        (name::plant_absorber_stiffness, inertia * w * w),
+        (name::plant_absorber_damping, 2.0 * damping * inertia * w),
     ]
     .into_iter()
     .map(|(k, v)| (k.to_string(), Value::Float(v)))

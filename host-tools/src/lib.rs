@@ -15,6 +15,7 @@ pub mod circle_report;
 pub mod circle_test;
 pub mod device_link;
 pub mod firmware;
+pub mod fmu_log;
 pub mod fmu_runner;
 pub mod frequency_response;
 pub mod ident_report;

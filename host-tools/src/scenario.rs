@@ -40,6 +40,16 @@ pub enum Value {
     Float(f64),
 }
 
+impl From<servo_axis::variables::Value> for Value {
+    fn from(v: servo_axis::variables::Value) -> Self {
+        match v {
+            servo_axis::variables::Value::Float64(x) => Value::Float(x),
+            servo_axis::variables::Value::Int32(x) => Value::Int(x as i64),
+            servo_axis::variables::Value::Boolean(x) => Value::Bool(x),
+        }
+    }
+}
+
 impl Value {
     pub fn as_f64(self) -> f64 {
         match self {

@@ -2,6 +2,7 @@
 //! acquisition stream (equivalent time) and read the drive's on-line results, check that the
 //! two agree, optionally measure the oracle, and write CSV, Bode plot and JSON.
 
+use servo_axis::variables::name;
 use std::path::{Path, PathBuf};
 
 use anyhow::{bail, Result};
@@ -142,7 +143,7 @@ pub fn run(
         stream_vs_online: agreement,
         oracle,
         errors_vs_oracle,
-        noise_free_sensors: !sweep.parameters.get("plant.current_noise_std").is_some_and(|v| v.as_f64() > 0.0),
+        noise_free_sensors: !sweep.parameters.get(name::plant_current_noise_std).is_some_and(|v| v.as_f64() > 0.0),
         files: files.clone(),
     };
     let json = out.join("sweep.json");

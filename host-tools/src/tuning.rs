@@ -15,6 +15,7 @@
 //! averaged), friction off; the check repeats it with the filters and reports the largest
 //! difference between axes up to the position loop's bandwidth.
 
+use servo_axis::variables::name;
 use std::collections::BTreeMap;
 
 use anyhow::{bail, Result};
@@ -46,7 +47,7 @@ impl AxisCorrection {
     /// `corr.*` FMU parameters.
     pub fn parameters(&self) -> BTreeMap<String, Value> {
         let mut p = BTreeMap::new();
-        p.insert("corr.count".into(), Value::Int(self.sections.len() as i64));
+        p.insert(name::corr_count.into(), Value::Int(self.sections.len() as i64));
         for (i, s) in self.sections.iter().enumerate() {
             let n = i + 1;
             let (zh, zd) = s.zeros.unwrap_or((0.0, 0.0));
@@ -130,7 +131,7 @@ pub fn command_to_load(fmu: &Fmu, parameters: &BTreeMap<String, Value>, frequenc
     if largest("faults") != 0.0 {
         bail!("the axis tripped during the multisine (faults {}): its response cannot be measured this way", largest("faults"));
     }
-    let max_current = parameters.get("ctrl.max_current").map_or(control_core::Params::default().current.max_current as f64, |v| v.as_f64());
+    let max_current = parameters.get(name::ctrl_max_current).map_or(control_core::Params::default().current.max_current as f64, |v| v.as_f64());
     if largest("iq") >= 0.9 * max_current {
         bail!(
             "the multisine drove the current to {:.1} A, near the {max_current} A limit: the measured response would not be linear (the correction filter lifts the command too much near a lightly damped mode?)",
@@ -211,8 +212,8 @@ pub struct Tuning {
 /// off (the correction is linear; friction's quadrant effects are seed 002's business).
 pub fn measurement_parameters(model: &AxisModel) -> BTreeMap<String, Value> {
     let mut p: BTreeMap<String, Value> = model.fmu_parameters.iter().map(|(k, v)| (k.clone(), Value::Float(*v))).collect();
-    p.insert("plant.motor_coulomb".into(), Value::Float(0.0));
-    p.insert("plant.load_coulomb".into(), Value::Float(0.0));
+    p.insert(name::plant_motor_coulomb.into(), Value::Float(0.0));
+    p.insert(name::plant_load_coulomb.into(), Value::Float(0.0));
     p
 }
 

@@ -50,7 +50,7 @@ fn bad_input_gets_a_clear_error() {
     let o = servo().arg("run").arg(&s).arg("--fmu").arg(fmu_path()).arg("--out").arg(&out).output().unwrap();
     assert_eq!(o.status.code(), Some(2));
     let err = String::from_utf8_lossy(&o.stderr);
-    assert!(err.contains("velocity.kp"), "stderr: {err}");
+    assert!(err.contains("ctrl.velocity_kp") && err.contains("outside its range"), "stderr: {err}");
 
     std::fs::write(&s, "name='bad'\nstop_time=0.01\n[[events]]\ntime=0.0\nnot_an_input=1.0\n").unwrap();
     let o = servo().arg("run").arg(&s).arg("--fmu").arg(fmu_path()).arg("--out").arg(&out).output().unwrap();

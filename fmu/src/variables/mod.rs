@@ -12,7 +12,7 @@ mod range_tests;
 mod table;
 mod units;
 
-pub use table::{Values, DECLARATIONS};
+pub use table::{name, Values, DECLARATIONS};
 pub use units::Unit;
 
 /// FMI base type of a variable.
@@ -58,8 +58,17 @@ impl Range {
 
     /// "[min, max]" for messages.
     pub fn describe(&self) -> String {
-        let side = |b: Option<f64>, inf: &str| b.map_or(inf.to_string(), |x| format!("{x}"));
+        let side = |b: Option<f64>, inf: &str| b.map_or(inf.to_string(), readable);
         format!("[{}, {}]", side(self.min, "-inf"), side(self.max, "+inf"))
+    }
+}
+
+/// A number as people write it: 1e-9 rather than 0.000000001, 16777216 as it is.
+pub fn readable(x: f64) -> String {
+    if x != 0.0 && (x.abs() < 1e-3 || (x.abs() >= 1e7 && x.fract() == 0.0 && x.abs() % 1e6 == 0.0)) {
+        format!("{x:e}")
+    } else {
+        format!("{x}")
     }
 }
 
@@ -132,7 +141,7 @@ pub fn check(d: &Declaration, v: Value) -> Result<(), String> {
     }
     if !d.range.contains(x) {
         let unit = d.unit.map_or(String::new(), |u| format!(" {}", u.name()));
-        return Err(format!("{} = {x}{unit} is outside its range {}{unit}", d.name, d.range.describe()));
+        return Err(format!("{} = {}{unit} is outside its range {}{unit}", d.name, readable(x), d.range.describe()));
     }
     Ok(())
 }

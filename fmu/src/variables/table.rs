@@ -28,6 +28,13 @@ macro_rules! declare_variables {
             $( pub $field: rust_type!($kind), )*
         }
 
+        /// Every variable's name, as a constant named like its field: host code writes
+        /// `name::sweep_precision_db`, and a misspelt variable does not compile.
+        #[allow(non_upper_case_globals)]
+        pub mod name {
+            $( pub const $field: &str = $name; )*
+        }
+
         /// Every variable, in value-reference order.
         pub static DECLARATIONS: &[Declaration] = &[
             $( Declaration {
