@@ -1,4 +1,4 @@
-//! The sources' hash, part of the fingerprint a serialized FMU state must carry (a state is
+//! The sources', compiler's, target's and flags' hash, part of the fingerprint a serialized FMU state must carry (a state is
 //! a byte image of the model: only the build that wrote it can read it back).
 
 use std::path::Path;
@@ -25,6 +25,19 @@ fn main() {
     for dir in [root.join("src"), root.join("../control-core/src")] {
         println!("cargo:rerun-if-changed={}", dir.display());
         hash_dir(&dir, &mut h);
+    }
+    // The layout of the state also depends on the compiler, the target and the flags.
+    let rustc = std::env::var("RUSTC").unwrap_or_else(|_| "rustc".into());
+    let version = std::process::Command::new(rustc).arg("-vV").output().map(|o| o.stdout).unwrap_or_default();
+    let mut extra = version;
+    for var in ["TARGET", "PROFILE", "OPT_LEVEL", "CARGO_ENCODED_RUSTFLAGS"] {
+        println!("cargo:rerun-if-env-changed={var}");
+        extra.extend(std::env::var(var).unwrap_or_default().bytes());
+        extra.push(0);
+    }
+    for b in extra {
+        h ^= b as u64;
+        h = h.wrapping_mul(0x100_0000_01b3);
     }
     println!("cargo:rustc-env=SERVO_FMU_SOURCE_HASH={h:016x}");
 }

@@ -91,7 +91,12 @@ impl AxisModel {
         match d.causality {
             Causality::Output => return Err(format!("{} is an output: it cannot be set", d.name)),
             Causality::Independent => return Err(format!("{} is the independent variable: it cannot be set", d.name)),
-            Causality::Parameter if self.initialized() => {
+            // Some masters send every parameter again after initialisation: the value it
+            // already has is accepted, a change is refused.
+            Causality::Parameter
+                if self.initialized()
+                    && self.state.values.get(vr).map(|v| v.as_f64().to_bits()) != Some(value.as_f64().to_bits()) =>
+            {
                 return Err(format!(
                     "{} is a fixed parameter: set it before ExitInitializationMode (or after Reset)",
                     d.name

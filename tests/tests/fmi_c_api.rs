@@ -23,9 +23,11 @@ fn library() -> Library {
 }
 
 macro_rules! sym {
-    ($lib:expr, $name:literal, $t:ty) => {
-        *unsafe { $lib.get::<$t>(concat!($name, "\0").as_bytes()) }.unwrap_or_else(|e| panic!("{} not exported: {e}", $name))
-    };
+    ($lib:expr, $name:literal, $t:ty) => {{
+        #[allow(unused_unsafe)]
+        let f = *unsafe { $lib.get::<$t>(concat!($name, "\0").as_bytes()) }.unwrap_or_else(|e| panic!("{} not exported: {e}", $name));
+        f
+    }};
 }
 
 /// Messages the logger received: (instanceEnvironment, status, category, message).

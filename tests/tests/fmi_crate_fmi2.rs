@@ -27,7 +27,7 @@ fn the_fmi_crates_fmi2_import_gives_the_rust_hosts_bits() {
             (d.vr, d.kind)
         })
         .collect();
-    let read = |inst: &mut fmi::fmi2::instance::Instance<fmi::fmi2::instance::CS>| -> Vec<f64> {
+    let read = |inst: &mut fmi::fmi2::instance::Instance<fmi::CS>| -> Vec<f64> {
         columns
             .iter()
             .map(|&(vr, kind)| match kind {

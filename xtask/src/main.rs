@@ -49,9 +49,13 @@ fn bundle() -> Result<()> {
     if !status.success() {
         bail!("cargo build -p servo-fmu failed");
     }
-    let library = root.join(format!("target/release/lib{MODEL_IDENTIFIER}.so"));
+    if !cfg!(all(target_arch = "x86_64", target_os = "linux")) {
+        bail!("the bundle packs the host's library as binaries/x86_64-linux: run it on x86_64 Linux");
+    }
+    let target_dir = std::env::var_os("CARGO_TARGET_DIR").map(PathBuf::from).unwrap_or_else(|| root.join("target"));
+    let library = target_dir.join(format!("release/lib{MODEL_IDENTIFIER}.so"));
     let binary = std::fs::read(&library).with_context(|| format!("reading {}", library.display()))?;
-    let out = root.join("target/fmu");
+    let out = target_dir.join("fmu");
     std::fs::create_dir_all(&out)?;
     let documentation = model_description::documentation_html();
     let so = format!("{MODEL_IDENTIFIER}.so");

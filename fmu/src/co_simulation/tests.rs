@@ -52,6 +52,7 @@ fn fixed_parameters_are_refused_after_initialisation_and_nothing_changes() {
     let err = set(&mut m, "ctrl.velocity_kp", Value::Float64(5.0)).unwrap_err();
     assert!(err.contains("ctrl.velocity_kp") && err.contains("fixed"), "{err}");
     assert_eq!(m.values().ctrl_velocity_kp, before);
+    set(&mut m, "ctrl.velocity_kp", Value::Float64(before)).expect("the value it already has is accepted");
     m.reset();
     set(&mut m, "ctrl.velocity_kp", Value::Float64(5.0)).unwrap();
     m.reset();

@@ -108,15 +108,18 @@ pub unsafe extern "C" fn fmi2SetupExperiment(
 ) -> Fmi2Status {
     unsafe {
         call(c, "fmi2SetupExperiment", &[I], WhenPoisoned::Refuse, |i| {
-            if let Some(stop) = (stop_time_defined != 0).then_some(stop_time) {
+            // Both checked before either is stored: a refusal changes nothing.
+            let stop = (stop_time_defined != 0).then_some(stop_time);
+            if !start_time.is_finite() {
+                return Err(format!("start time {start_time} is not a finite number"));
+            }
+            if let Some(stop) = stop {
                 if !(stop.is_finite() && stop >= start_time) {
                     return Err(format!("stop time {stop} s must be finite and not before the start time {start_time} s"));
                 }
-                i.stop_time = Some(stop);
-            } else {
-                i.stop_time = None;
             }
             i.model.set_start_time(start_time)?;
+            i.stop_time = stop;
             Ok(Status::Ok)
         })
     }

@@ -30,13 +30,13 @@ pub extern "C" fn fmi3GetVersion() -> *const c_char {
 #[no_mangle]
 pub unsafe extern "C" fn fmi3SetDebugLogging(
     instance: Fmi3Instance,
-    logging_on: bool,
+    logging_on: u8,
     n_categories: usize,
     categories: *const *const c_char,
 ) -> Fmi3Status {
     unsafe {
         call(instance, "fmi3SetDebugLogging", ANY_PHASE, WhenPoisoned::Allow, |i| {
-            i.set_debug_logging(logging_on, n_categories, categories)
+            i.set_debug_logging(logging_on != 0, n_categories, categories)
         })
     }
 }
@@ -47,7 +47,7 @@ unsafe fn refuse_instantiation(environment: *mut c_void, log: Option<instance::F
     let text = CString::new(format!("servo_axis: {message}").replace('\0', " ")).unwrap_or_default();
     match log {
         Some(cb) => unsafe { cb(environment, Status::Error as c_int, c"logStatusError".as_ptr(), text.as_ptr()) },
-        None => eprintln!("{}", text.to_string_lossy()),
+        None => instance::stderr_line(&text.to_string_lossy()),
     }
     std::ptr::null_mut()
 }
@@ -57,10 +57,10 @@ pub unsafe extern "C" fn fmi3InstantiateCoSimulation(
     instance_name: *const c_char,
     instantiation_token: *const c_char,
     _resource_path: *const c_char,
-    _visible: bool,
-    logging_on: bool,
-    event_mode_used: bool,
-    _early_return_allowed: bool,
+    _visible: u8,
+    logging_on: u8,
+    event_mode_used: u8,
+    _early_return_allowed: u8,
     _required_intermediate_variables: *const Vr,
     _n_required_intermediate_variables: usize,
     instance_environment: *mut c_void,
@@ -77,11 +77,11 @@ pub unsafe extern "C" fn fmi3InstantiateCoSimulation(
         if token != ours {
             return Err(format!("instantiationToken {token} is not this FMU's ({ours}): the binary and modelDescription.xml differ"));
         }
-        if event_mode_used {
+        if event_mode_used != 0 {
             return Err("eventModeUsed = true, but the FMU has no event mode (hasEventMode = false)".into());
         }
         let logger = Logger::Fmi3 { environment: instance_environment, callback: log_message };
-        let inst = Box::new(Instance::new(CString::new(name).unwrap_or_default(), logger, logging_on));
+        let inst = Box::new(Instance::new(CString::new(name).unwrap_or_default(), logger, logging_on != 0));
         Ok(Box::into_raw(inst) as Fmi3Instance)
     }));
     match made {
@@ -96,8 +96,8 @@ pub unsafe extern "C" fn fmi3InstantiateModelExchange(
     _instance_name: *const c_char,
     _instantiation_token: *const c_char,
     _resource_path: *const c_char,
-    _visible: bool,
-    _logging_on: bool,
+    _visible: u8,
+    _logging_on: u8,
     instance_environment: *mut c_void,
     log_message: Option<instance::Fmi3LogMessage>,
 ) -> Fmi3Instance {
@@ -109,8 +109,8 @@ pub unsafe extern "C" fn fmi3InstantiateScheduledExecution(
     _instance_name: *const c_char,
     _instantiation_token: *const c_char,
     _resource_path: *const c_char,
-    _visible: bool,
-    _logging_on: bool,
+    _visible: u8,
+    _logging_on: u8,
     instance_environment: *mut c_void,
     log_message: Option<instance::Fmi3LogMessage>,
     _clock_update: *const c_void,
@@ -122,23 +122,23 @@ pub unsafe extern "C" fn fmi3InstantiateScheduledExecution(
 
 #[no_mangle]
 pub unsafe extern "C" fn fmi3FreeInstance(instance: Fmi3Instance) {
-    let _ = catch_unwind(AssertUnwindSafe(|| {
-        if unsafe { instance::instance(instance) }.is_some() {
-            drop(unsafe { Box::from_raw(instance as *mut Instance) });
-        }
-    }));
+    let _ = catch_unwind(AssertUnwindSafe(|| unsafe { instance::free(instance) }));
 }
 
 #[no_mangle]
 pub unsafe extern "C" fn fmi3EnterInitializationMode(
     instance: Fmi3Instance,
-    _tolerance_defined: bool,
+    _tolerance_defined: u8,
     _tolerance: f64,
     start_time: f64,
-    stop_time_defined: bool,
+    stop_time_defined: u8,
     stop_time: f64,
 ) -> Fmi3Status {
-    unsafe { call(instance, "fmi3EnterInitializationMode", &[I], WhenPoisoned::Refuse, |i| enter_initialization(i, start_time, stop_time_defined.then_some(stop_time))) }
+    unsafe {
+        call(instance, "fmi3EnterInitializationMode", &[I], WhenPoisoned::Refuse, |i| {
+            enter_initialization(i, start_time, (stop_time_defined != 0).then_some(stop_time))
+        })
+    }
 }
 
 /// Enter initialisation at `start` (both versions).
@@ -216,7 +216,7 @@ pub unsafe extern "C" fn fmi3DoStep(
     instance: Fmi3Instance,
     current_communication_point: f64,
     communication_step_size: f64,
-    _no_set_fmu_state_prior_to_current_point: bool,
+    _no_set_fmu_state_prior_to_current_point: u8,
     event_handling_needed: *mut bool,
     terminate_simulation: *mut bool,
     early_return: *mut bool,
@@ -240,8 +240,10 @@ pub unsafe extern "C" fn fmi3DoStep(
 
 // ---- Get / Set ----------------------------------------------------------------------------
 
+/// Get writes `$t`; Set reads `$in` (a byte for Boolean: any non-zero byte from C is true,
+/// never an invalid Rust `bool`).
 macro_rules! get_set_typed {
-    ($get:ident, $set:ident, $t:ty, $kind:ident, $conv:path) => {
+    ($get:ident, $set:ident, $t:ty, $in:ty, $kind:ident, $conv:path, $wrap:expr) => {
         #[no_mangle]
         pub unsafe extern "C" fn $get(instance: Fmi3Instance, vrs: *const Vr, nvr: usize, out: *mut $t, n: usize) -> Fmi3Status {
             unsafe {
@@ -255,12 +257,12 @@ macro_rules! get_set_typed {
         }
 
         #[no_mangle]
-        pub unsafe extern "C" fn $set(instance: Fmi3Instance, vrs: *const Vr, nvr: usize, vals: *const $t, n: usize) -> Fmi3Status {
+        pub unsafe extern "C" fn $set(instance: Fmi3Instance, vrs: *const Vr, nvr: usize, vals: *const $in, n: usize) -> Fmi3Status {
             unsafe {
                 call(instance, stringify!($set), SET, WhenPoisoned::Refuse, |i| {
                     let vrs = slice(vrs, nvr, "valueReferences")?;
                     let vals = slice(vals, n, "values")?;
-                    values::set(&mut i.model, vrs, vals, Value::$kind)?;
+                    values::set(&mut i.model, vrs, vals, $wrap)?;
                     Ok(Status::Ok)
                 })
             }
@@ -268,9 +270,9 @@ macro_rules! get_set_typed {
     };
 }
 
-get_set_typed!(fmi3GetFloat64, fmi3SetFloat64, f64, Float64, values::float64);
-get_set_typed!(fmi3GetInt32, fmi3SetInt32, i32, Int32, values::int32);
-get_set_typed!(fmi3GetBoolean, fmi3SetBoolean, bool, Boolean, values::boolean);
+get_set_typed!(fmi3GetFloat64, fmi3SetFloat64, f64, f64, Float64, values::float64, Value::Float64);
+get_set_typed!(fmi3GetInt32, fmi3SetInt32, i32, i32, Int32, values::int32, Value::Int32);
+get_set_typed!(fmi3GetBoolean, fmi3SetBoolean, bool, u8, Boolean, values::boolean, |b: u8| Value::Boolean(b != 0));
 
 /// Types the FMU has no variable of: zero references is fine, any reference is an error.
 macro_rules! get_set_absent {
@@ -313,7 +315,7 @@ pub unsafe extern "C" fn fmi3GetClock(instance: Fmi3Instance, _vrs: *const Vr, n
 }
 
 #[no_mangle]
-pub unsafe extern "C" fn fmi3SetClock(instance: Fmi3Instance, _vrs: *const Vr, nvr: usize, _vals: *const bool) -> Fmi3Status {
+pub unsafe extern "C" fn fmi3SetClock(instance: Fmi3Instance, _vrs: *const Vr, nvr: usize, _vals: *const u8) -> Fmi3Status {
     unsafe { call(instance, "fmi3SetClock", SET, WhenPoisoned::Refuse, |_| values::no_variables_of("Clock", nvr).map(|()| Status::Ok)) }
 }
 
@@ -344,7 +346,7 @@ pub unsafe fn get_fmu_state(i: &mut Instance, state: *mut *mut c_void) -> Result
     if state.is_null() {
         return Err("FMUState is NULL".into());
     }
-    let snapshot = Snapshot::new(i.model.state, i.phase);
+    let snapshot = Snapshot::new(i.model.state, i.phase, i.stop_time);
     unsafe {
         if (*state).is_null() {
             *state = Box::into_raw(Box::new(snapshot)) as *mut c_void;
@@ -360,6 +362,7 @@ pub unsafe fn set_fmu_state(i: &mut Instance, state: *mut c_void) -> Result<Stat
     i.model.state = s.model;
     i.model.refusals.clear();
     i.phase = s.phase;
+    i.stop_time = s.stop_time;
     i.poisoned = false;
     Ok(Status::Ok)
 }
@@ -369,8 +372,7 @@ pub unsafe fn free_fmu_state(state: *mut *mut c_void) -> Result<Status, String> 
         return Ok(Status::Ok);
     }
     unsafe {
-        Snapshot::from_ptr(*state)?;
-        drop(Box::from_raw(*state as *mut Snapshot));
+        Snapshot::free(*state)?;
         *state = std::ptr::null_mut();
     }
     Ok(Status::Ok)
@@ -472,7 +474,7 @@ unsupported_fn!(fmi3EnterStepMode(), "the FMU has no event mode: ExitInitializat
 unsupported_fn!(fmi3GetOutputDerivatives(vrs: *const Vr, nvr: usize, orders: *const i32, values: *mut f64, n: usize), "maxOutputDerivativeOrder = 0");
 unsupported_fn!(fmi3ActivateModelPartition(clock_reference: Vr, activation_time: f64), "Co-Simulation only (no Scheduled Execution)");
 unsupported_fn!(fmi3EnterContinuousTimeMode(), "Co-Simulation only (no Model Exchange)");
-unsupported_fn!(fmi3CompletedIntegratorStep(no_set_prior: bool, enter_event_mode: *mut bool, terminate_simulation: *mut bool), "Co-Simulation only (no Model Exchange)");
+unsupported_fn!(fmi3CompletedIntegratorStep(no_set_prior: u8, enter_event_mode: *mut bool, terminate_simulation: *mut bool), "Co-Simulation only (no Model Exchange)");
 unsupported_fn!(fmi3SetTime(time: f64), "Co-Simulation only (no Model Exchange)");
 unsupported_fn!(fmi3SetContinuousStates(x: *const f64, n: usize), "Co-Simulation only (no Model Exchange)");
 unsupported_fn!(fmi3GetContinuousStateDerivatives(dx: *mut f64, n: usize), "Co-Simulation only (no Model Exchange)");

@@ -51,6 +51,9 @@ pub enum Logger {
 
 const MAGIC: u64 = 0x5345_5256_4f41_5849; // "SERVOAXI"
 
+/// `repr(C)` with the magic first: a pointer is checked by reading one word before any
+/// reference to the instance is made.
+#[repr(C)]
 pub struct Instance {
     magic: u64,
     pub name: CString,
@@ -107,7 +110,7 @@ impl Instance {
             },
             _ => {
                 if status >= Status::Warning {
-                    eprintln!("servo_axis ({}): {message}", self.name.to_string_lossy());
+                    stderr_line(&format!("servo_axis ({}): {message}", self.name.to_string_lossy()));
                 }
             }
         }
@@ -174,6 +177,12 @@ pub unsafe fn c_str<'a>(p: *const c_char, what: &str) -> Result<&'a str, String>
     unsafe { CStr::from_ptr(p) }.to_str().map_err(|_| format!("{what} is not UTF-8"))
 }
 
+/// A line on stderr that never panics (eprintln! does when stderr is a closed pipe).
+pub fn stderr_line(text: &str) {
+    use std::io::Write;
+    let _ = writeln!(std::io::stderr(), "{text}");
+}
+
 pub fn panic_message(p: Box<dyn std::any::Any + Send>) -> String {
     p.downcast_ref::<&str>()
         .map(|s| s.to_string())
@@ -186,11 +195,24 @@ pub fn panic_message(p: Box<dyn std::any::Any + Send>) -> String {
 /// # Safety
 /// A non-NULL pointer must come from this library's Instantiate (and not be freed).
 pub unsafe fn instance<'a>(p: *mut c_void) -> Option<&'a mut Instance> {
-    if p.is_null() {
+    if p.is_null() || unsafe { std::ptr::read(p as *const u64) } != MAGIC {
         return None;
     }
-    let i = unsafe { &mut *(p as *mut Instance) };
-    (i.magic == MAGIC).then_some(i)
+    Some(unsafe { &mut *(p as *mut Instance) })
+}
+
+/// Free an instance made by Instantiate; its magic is cleared first, so a second free of the
+/// same pointer is recognised and ignored instead of freeing twice.
+///
+/// # Safety
+/// `p` is NULL or a pointer from this library's Instantiate.
+pub unsafe fn free(p: *mut c_void) {
+    if unsafe { instance(p) }.is_some() {
+        unsafe {
+            std::ptr::write_volatile(p as *mut u64, 0);
+            drop(Box::from_raw(p as *mut Instance));
+        }
+    }
 }
 
 /// Whether a call may run on a poisoned instance (one that panicked).
@@ -217,7 +239,7 @@ pub unsafe fn call(
     let result = catch_unwind(AssertUnwindSafe(|| {
         let Some(inst) = (unsafe { instance(p) }) else {
             if !p.is_null() {
-                eprintln!("servo_axis: {function} called with a pointer that is not an instance of this FMU");
+                stderr_line(&format!("servo_axis: {function} called with a pointer that is not an instance of this FMU"));
             }
             return Status::Error;
         };
