@@ -105,6 +105,14 @@ impl<const N: usize> CurrentSensing<N> {
         matches!(self.state, State::Ready { .. })
     }
 
+    /// The calibrated offsets (counts), for the log; None until calibrated.
+    pub fn offsets(&self) -> Option<[f32; N]> {
+        match self.state {
+            State::Ready { offsets } => Some(offsets),
+            _ => None,
+        }
+    }
+
     /// Start calibrating again (for instance after the power stage was switched on late).
     pub fn recalibrate(&mut self) {
         self.state = State::Calibrating { sums: [0; N], n: 0 };
@@ -139,6 +147,8 @@ mod tests {
             assert_eq!(done, k + 1 == CALIBRATION_SAMPLES);
         }
         assert!(s.ready());
+        let o = s.offsets().unwrap();
+        assert!((o[0] - 2040.0).abs() < 0.01 && (o[1] - 2060.0).abs() < 0.01, "{o:?}");
         let ([a, b], v) = s.convert([2140, 1960], 3000).unwrap();
         // 100 counts above and below the (noise-averaged) offsets; the noise left
         // 1/1024 of a count at most.

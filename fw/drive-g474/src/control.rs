@@ -42,6 +42,8 @@ pub struct Shared {
     /// compare registers are preloaded and take new values at the next update event, before
     /// the top of the count where the ADCs sample).
     pub duties_in_force: [f32; 3],
+    /// The bus voltage of the last tick (V), for the log.
+    pub bus_voltage: f32,
 }
 
 /// The shared state, filled once by [`install`]. Uninitialised until then, so that its
@@ -79,6 +81,7 @@ pub fn install(params: Params) -> Result<(), &'static str> {
                 sensing,
                 stream: AcquisitionStream::default(),
                 duties_in_force: [0.0; 3],
+                bus_voltage: 0.0,
             });
             s.installed = true;
         }
@@ -118,6 +121,7 @@ pub fn on_sample() {
             }
             return None;
         };
+        s.bus_voltage = bus_voltage;
         let phase_currents = shunt_selection::phase_currents(shunt_amps, s.duties_in_force);
         let inputs = AxisInputs { phase_currents, encoder_count: count, bus_voltage };
         let commands = s.commands;
@@ -140,14 +144,29 @@ pub fn on_sample() {
     }
 }
 
-/// Position-tick housekeeping in the high-priority executor: fault changes are logged when
-/// they happen, and a heartbeat once a second.
+/// Position-tick housekeeping in the high-priority executor: the current offsets and the bus
+/// voltage once calibrated (to compare with a meter at the first power-up), fault changes
+/// when they happen, and a heartbeat with the bus voltage once a second.
 #[embassy_executor::task]
 pub async fn position_tick_task() {
     let mut last = Faults::default();
     let mut n: u32 = 0;
+    let mut offsets_logged = false;
     loop {
         let faults = POSITION_TICK.wait().await;
+        if !offsets_logged {
+            let seen = SHARED.lock(|s| s.borrow_mut().get().and_then(|s| s.sensing.offsets().map(|o| (o, s.bus_voltage))));
+            if let Some((o, bus)) = seen {
+                defmt::info!(
+                    "current offsets U {} V {} W {} counts (mid-scale 2047.5), bus {} V",
+                    o[0],
+                    o[1],
+                    o[2],
+                    bus
+                );
+                offsets_logged = true;
+            }
+        }
         if faults != last {
             for name in faults.names() {
                 defmt::warn!("fault latched: {} (PWM off until ClearFaults)", name);
@@ -159,7 +178,8 @@ pub async fn position_tick_task() {
         }
         n = n.wrapping_add(1);
         if n % 4_000 == 0 {
-            defmt::info!("control loop alive: {} ticks, faults {:#x}", TICKS.load(Ordering::Relaxed), faults.0);
+            let bus = SHARED.lock(|s| s.borrow_mut().get().map_or(0.0, |s| s.bus_voltage));
+            defmt::info!("control loop alive: {} ticks, faults {:#x}, bus {} V", TICKS.load(Ordering::Relaxed), faults.0, bus);
         }
     }
 }
