@@ -215,6 +215,16 @@ pub fn take_sample() -> ([u16; 3], u16) {
     ([a1.jdr(0).read().jdata(), a2.jdr(0).read().jdata(), a2.jdr(1).read().jdata()], a1.jdr(1).read().jdata())
 }
 
+/// Shunt channels sampled per tick (U, V, W).
+pub const CURRENT_CHANNELS: usize = 3;
+
+/// The phase currents U and V for the core from the three shunt currents (A), believing the
+/// two shunts whose low sides conducted longest under `duties_in_force`.
+#[inline]
+pub fn phase_currents(shunts: [f32; CURRENT_CHANNELS], duties_in_force: [f32; 3]) -> [f32; 2] {
+    power_stage::shunt_selection::phase_currents(shunts, duties_in_force)
+}
+
 /// The encoder's 32-bit quadrature count.
 pub fn encoder_count() -> i32 {
     pac::TIM2.cnt().read() as i32

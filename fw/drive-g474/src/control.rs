@@ -8,7 +8,7 @@
 //! 2. until the current offsets are calibrated (bridge off), feed the calibration instead;
 //!    implausible offsets latch a sensing fault and the bridge never comes on;
 //! 3. of the three shunts, believe the two whose low sides conducted longest under the duties
-//!    that were in force when they were sampled (`power_stage::shunt_selection`);
+//!    that were in force when they were sampled (`board::phase_currents`);
 //! 4. a break (the power stage's own overcurrent comparator) latches a core fault;
 //! 5. `Axis::step`; the duties go to TIM1 and the gate drive follows the core's `enabled`
 //!    at once, so any fault the core sees (overcurrent, bus over/under-voltage, following
@@ -28,7 +28,6 @@ use embassy_stm32::interrupt;
 use embassy_sync::blocking_mutex::raw::CriticalSectionRawMutex;
 use embassy_sync::blocking_mutex::Mutex;
 use embassy_sync::signal::Signal;
-use power_stage::shunt_selection;
 
 use crate::board;
 
@@ -36,7 +35,7 @@ use crate::board;
 pub struct Shared {
     pub axis: Axis,
     pub commands: Commands,
-    pub sensing: CurrentSensing<3>,
+    pub sensing: CurrentSensing<{ board::CURRENT_CHANNELS }>,
     pub stream: AcquisitionStream,
     /// The duties written last tick: in force when this tick's currents were sampled (the
     /// compare registers are preloaded and take new values at the next update event, before
@@ -122,7 +121,7 @@ pub fn on_sample() {
             return None;
         };
         s.bus_voltage = bus_voltage;
-        let phase_currents = shunt_selection::phase_currents(shunt_amps, s.duties_in_force);
+        let phase_currents = board::phase_currents(shunt_amps, s.duties_in_force);
         let inputs = AxisInputs { phase_currents, encoder_count: count, bus_voltage };
         let commands = s.commands;
         let pwm = s.axis.step(&inputs, &commands);
