@@ -15,6 +15,7 @@
 //! | BKE, BKP | 1, 0 | break input enabled, active low like the IHM08M1's comparator output |
 //! | AOE | 0 | MOE stays 0 after a break until the firmware sets it again |
 //! | MOE | 0 | the bridge starts off; `bdtr_with_moe` gives the word with the bridge on |
+//! | LOCK | 2 | polarities, idle levels, OSSI/OSSR, dead time and break settings frozen until reset (RM0440: LOCK level 2); the LOCK field itself is frozen by the first write to BDTR after reset, so this word must be that first write |
 //!
 //! The timer counts centre-aligned (CMS = 3) with preloaded compare and auto-reload
 //! registers; channel 4 in PWM mode 2 with CCR4 = ARR − 1 (no pin) rises just before the top of
@@ -82,6 +83,7 @@ pub const fn ccer_np(ch: usize) -> u32 {
 }
 // BDTR
 pub const BDTR_DTG_MASK: u32 = 0xFF;
+pub const BDTR_LOCK_LEVEL_2: u32 = 2 << 8;
 pub const BDTR_OSSI: u32 = 1 << 10;
 pub const BDTR_OSSR: u32 = 1 << 11;
 pub const BDTR_BKE: u32 = 1 << 12;
@@ -126,6 +128,7 @@ pub const fn tim1_words(c: &PowerStageConfig) -> Tim1Words {
         ch += 1;
     }
     let mut bdtr = dead_time::encode(c.ticks(c.timer_dead_time_ns)) as u32
+        | BDTR_LOCK_LEVEL_2
         | BDTR_OSSI
         | BDTR_OSSR
         | BDTR_BKE
@@ -185,9 +188,9 @@ mod tests {
         assert_eq!(w.cr2, 0x0070_2A00);
         assert_eq!(w.ccmr1, 0x6868);
         assert_eq!(w.ccmr2, 0x7868);
-        // 17 clocks (100 ns), OSSI, OSSR, BKE, active low, BKF = 4, MOE = 0.
-        assert_eq!(w.bdtr, 0x0004_1C11);
-        assert_eq!(bdtr_with_moe(w.bdtr, true), 0x0004_9C11);
+        // 17 clocks (100 ns), LOCK 2, OSSI, OSSR, BKE, active low, BKF = 4, MOE = 0.
+        assert_eq!(w.bdtr, 0x0004_1E11);
+        assert_eq!(bdtr_with_moe(w.bdtr, true), 0x0004_9E11);
         assert_eq!(w.cr1, 0xE0);
         assert_eq!(ocm_of(&w, 0), OCM_PWM1);
         assert_eq!(ocm_of(&w, 3), OCM_PWM2);

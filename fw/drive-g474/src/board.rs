@@ -34,16 +34,12 @@
 
 use control_core::current_sensing::SensingScales;
 use control_core::Params;
-use embassy_stm32::gpio::OutputType;
 use embassy_stm32::pac;
 use embassy_stm32::peripherals;
 use embassy_stm32::time::Hertz;
-use embassy_stm32::timer::complementary_pwm::{ComplementaryPwm, ComplementaryPwmPin};
-use embassy_stm32::timer::low_level::CountingMode;
 use embassy_stm32::timer::qei::Qei;
-use embassy_stm32::timer::simple_pwm::PwmPin;
 use embassy_stm32::usart::{self, BufferedUart};
-use embassy_stm32::{bind_interrupts, Peripherals};
+use embassy_stm32::{bind_interrupts, Peri, Peripherals};
 use power_stage::adc_words;
 use power_stage::config::IHM08M1;
 use power_stage::fail_safe::{self, FAIL_SAFE};
@@ -86,10 +82,17 @@ pub fn clocks() -> embassy_stm32::Config {
     config
 }
 
+/// TIM1 and the six gate pins, owned for the program's life; set up by [`init`] from the
+/// words, driven through [`write_duties`] and [`set_outputs`].
+pub struct Bridge {
+    _timer: Peri<'static, peripherals::TIM1>,
+    _high_sides: (Peri<'static, peripherals::PA8>, Peri<'static, peripherals::PA9>, Peri<'static, peripherals::PA10>),
+    _low_sides: (Peri<'static, peripherals::PA7>, Peri<'static, peripherals::PB0>, Peri<'static, peripherals::PB1>),
+    _break_input: Peri<'static, peripherals::PA6>,
+}
+
 pub struct Board {
-    /// Kept so that the timer, its pins and its clock stay owned; the loop drives it
-    /// through [`write_duties`] and [`set_outputs`].
-    pub bridge: ComplementaryPwm<'static, peripherals::TIM1>,
+    pub bridge: Bridge,
     /// Kept for the same reason; read through [`encoder_count`].
     pub encoder: Qei<'static, peripherals::TIM2>,
     pub link: BufferedUart<'static>,
@@ -97,23 +100,15 @@ pub struct Board {
 
 pub fn init(p: Peripherals, tx: &'static mut [u8], rx: &'static mut [u8]) -> Board {
     loss_of_control_to_break();
-    // Clock, reset and the pins' alternate functions. It leaves MOE = 1 with every output
-    // disabled: the pins are not driven, and the L6398's own input pulls (HIN down, LIN up)
-    // keep both FETs off until `gate_drive` below drives them.
-    let bridge = ComplementaryPwm::new(
-        p.TIM1,
-        Some(PwmPin::new(p.PA8, OutputType::PushPull)),
-        Some(ComplementaryPwmPin::new(p.PA7, OutputType::PushPull)),
-        Some(PwmPin::new(p.PA9, OutputType::PushPull)),
-        Some(ComplementaryPwmPin::new(p.PB0, OutputType::PushPull)),
-        Some(PwmPin::new(p.PA10, OutputType::PushPull)),
-        Some(ComplementaryPwmPin::new(p.PB1, OutputType::PushPull)),
-        None,
-        None,
-        Hertz(PWM_HZ),
-        CountingMode::CenterAlignedBothInterrupts,
-    );
+    // Until `gate_drive` hands the pins to the timer they are not driven (analog after
+    // reset), and the L6398's own input pulls (HIN down, LIN up) keep both FETs off.
     gate_drive();
+    let bridge = Bridge {
+        _timer: p.TIM1,
+        _high_sides: (p.PA8, p.PA9, p.PA10),
+        _low_sides: (p.PA7, p.PB0, p.PB1),
+        _break_input: p.PA6,
+    };
     let encoder = Qei::new(p.TIM2, p.PA15, p.PB3, Default::default());
     adc_injected();
     let mut config = usart::Config::default();
@@ -131,16 +126,20 @@ fn loss_of_control_to_break() {
     pac::SYSCFG.cfgr2().modify(|w| w.0 |= FAIL_SAFE.syscfg_cfgr2);
 }
 
-/// TIM1 from its words: counter stopped, everything written with MOE = 0, the outputs enabled
-/// (now driven to their off levels), preloads loaded, counter started. The break input on
-/// PA6 (AF6, pulled up: the comparator pulls it low) and pulls on the gate pins that agree
-/// with the off levels.
+/// TIM1 from its words, then its pins: clock on and timer reset; BDTR first (MOE = 0; the first
+/// write after reset, so that its LOCK level takes), everything else, the outputs enabled
+/// (off levels: HIN low, LIN high), preloads loaded, counter started. Only then the six gate
+/// pins (pulls that agree with the off levels) and the break input on PA6 (pulled up: the
+/// comparator pulls it low) go to alternate function 6, TIM1.
 fn gate_drive() {
-    use pac::gpio::vals::{Moder, Pupdr};
+    use pac::gpio::vals::{Moder, Ospeedr, Pupdr};
+    pac::RCC.apb2enr().modify(|w| w.set_tim1en(true));
+    pac::RCC.apb2rstr().modify(|w| w.set_tim1rst(true));
+    pac::RCC.apb2rstr().modify(|w| w.set_tim1rst(false));
     let t = pac::TIM1;
     let w = TIM1_WORDS;
+    t.bdtr().write(|r| r.0 = w.bdtr); // MOE = 0, LOCK, whole word at once
     t.cr1().write(|r| r.0 = w.cr1); // CEN = 0
-    t.bdtr().write(|r| r.0 = w.bdtr); // MOE = 0, whole word at once
     t.cr2().write(|r| r.0 = w.cr2);
     t.ccmr_output(0).write(|r| r.0 = w.ccmr1);
     t.ccmr_output(1).write(|r| r.0 = w.ccmr2);
@@ -156,6 +155,7 @@ fn gate_drive() {
     t.egr().write(|r| r.0 = EGR_UG);
     t.sr().write(|r| r.0 = 0);
     t.cr1().write(|r| r.0 = w.cr1 | CR1_CEN);
+    const TIM1_AF: u8 = 6;
     for (port, pin, pull) in [
         (pac::GPIOA, 8, Pupdr::PULL_DOWN),
         (pac::GPIOA, 9, Pupdr::PULL_DOWN),
@@ -163,12 +163,13 @@ fn gate_drive() {
         (pac::GPIOA, 7, Pupdr::PULL_UP),
         (pac::GPIOB, 0, Pupdr::PULL_UP),
         (pac::GPIOB, 1, Pupdr::PULL_UP),
+        (pac::GPIOA, 6, Pupdr::PULL_UP),
     ] {
         port.pupdr().modify(|r| r.set_pupdr(pin, pull));
+        port.ospeedr().modify(|r| r.set_ospeedr(pin, Ospeedr::HIGH_SPEED));
+        port.afr(pin / 8).modify(|r| r.set_afr(pin % 8, TIM1_AF));
+        port.moder().modify(|r| r.set_moder(pin, Moder::ALTERNATE));
     }
-    pac::GPIOA.pupdr().modify(|r| r.set_pupdr(6, Pupdr::PULL_UP));
-    pac::GPIOA.afr(0).modify(|r| r.set_afr(6, 6));
-    pac::GPIOA.moder().modify(|r| r.set_moder(6, Moder::ALTERNATE));
     t.sr().write(|r| r.0 = 0); // a break flag from the pin's switch-over
 }
 
