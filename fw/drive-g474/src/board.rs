@@ -93,7 +93,7 @@ pub struct Bridge {
 
 pub struct Board {
     pub bridge: Bridge,
-    /// Kept for the same reason; read through [`encoder_count`].
+    /// Kept so that TIM2, its pins and its clock stay owned; read through [`encoder_count`].
     pub encoder: Qei<'static, peripherals::TIM2>,
     pub link: BufferedUart<'static>,
 }
