@@ -1,6 +1,11 @@
 //! On-target tests of the board code (NUCLEO-G474RE; the power stage may be absent: the
 //! bridge's gate drive stays off throughout).
 //!
+//! - Registers: after `board::init`, TIM1's, the ADCs' and the fail-safe registers read back
+//!   as the words of the `power-stage` crate (the words its host tests feed through the
+//!   models of TIM1's output stage and the L6398).
+//! - Gate pins with the bridge off: PA8/PA9/PA10 (HIN) low, PA7/PB0/PB1 (LIN) high, driven
+//!   by the timer (alternate function) — every FET off.
 //! - PWM: TIM1 runs centre-aligned at the 16 kHz base tick with the duties written by
 //!   `board::write_duties`, and the gate drive is off after start-up.
 //! - ADC timing: injected conversions arrive once per PWM period, finish within 2 µs of the
@@ -20,6 +25,9 @@ use panic_probe as _;
 mod tests {
     use drive_g474::board;
     use embassy_stm32::pac;
+    use power_stage::fail_safe::FAIL_SAFE;
+    use power_stage::tim1_words::{bdtr_with_moe, CR1_CEN, CR1_DIR};
+    use power_stage::{adc_words, config::IHM08M1, tim1_words::tim1_words};
     use static_cell::StaticCell;
 
     static TX: StaticCell<[u8; 256]> = StaticCell::new();
@@ -41,6 +49,62 @@ mod tests {
         cp.DCB.enable_trace();
         cp.DWT.enable_cycle_counter();
         Board { _board: b }
+    }
+
+    #[test]
+    fn tim1_reads_back_as_the_model_s_words_with_the_bridge_off(_b: &mut Board) {
+        let t = pac::TIM1;
+        let w = tim1_words(&IHM08M1);
+        defmt::assert!(w == board::TIM1_WORDS, "the board writes the model's words");
+        // CEN is set and DIR is the counter's direction (read-only in centre-aligned mode).
+        defmt::assert_eq!(t.cr1().read().0 & !(CR1_CEN | CR1_DIR), w.cr1, "CR1");
+        defmt::assert!(t.cr1().read().0 & CR1_CEN != 0, "counter running");
+        defmt::assert_eq!(t.cr2().read().0, w.cr2, "CR2");
+        defmt::assert_eq!(t.ccmr_output(0).read().0, w.ccmr1, "CCMR1");
+        defmt::assert_eq!(t.ccmr_output(1).read().0, w.ccmr2, "CCMR2");
+        defmt::assert_eq!(t.ccer().read().0, w.ccer, "CCER");
+        defmt::assert_eq!(t.bdtr().read().0, bdtr_with_moe(w.bdtr, false), "BDTR (MOE = 0)");
+        defmt::assert_eq!(t.af1().read().0, w.af1, "AF1");
+        defmt::assert_eq!(t.psc().read() as u32, w.psc, "PSC");
+        defmt::assert_eq!(t.arr().read().0, w.arr, "ARR");
+        defmt::assert_eq!(t.rcr().read().0, w.rcr, "RCR");
+        defmt::assert_eq!(t.ccr(3).read().0, w.ccr4, "CCR4");
+    }
+
+    #[test]
+    fn the_adcs_and_the_fail_safe_read_back_as_the_model_s_words(_b: &mut Board) {
+        for (adc, seq, name) in [(pac::ADC1, adc_words::ADC1_SEQUENCE, "ADC1"), (pac::ADC2, adc_words::ADC2_SEQUENCE, "ADC2")] {
+            defmt::assert_eq!(adc.jsqr().read().0, adc_words::jsqr(&seq), "{} JSQR", name);
+            defmt::assert_eq!(adc.smpr().read().0, adc_words::smpr1(&seq), "{} SMPR1", name);
+            defmt::assert!(adc.cr().read().jadstart(), "{} injected conversions armed", name);
+        }
+        defmt::assert_eq!(pac::ADC12_COMMON.ccr().read().0 & (3 << 16), adc_words::COMMON_CCR, "ADC12 CKMODE");
+        defmt::assert!(pac::ADC1.ier().read().jeosie(), "ADC1 end of injected sequence interrupt");
+        let f = FAIL_SAFE;
+        defmt::assert_eq!(pac::DBGMCU.apb2fzr().read().0 & f.dbgmcu_apb2fzr, f.dbgmcu_apb2fzr, "DBG_TIM1_STOP");
+        defmt::assert_eq!(pac::DBGMCU.apb1lfzr().read().0 & f.dbgmcu_apb1fzr1, f.dbgmcu_apb1fzr1, "DBG_IWDG_STOP");
+        defmt::assert_eq!(pac::SYSCFG.cfgr2().read().0 & f.syscfg_cfgr2, f.syscfg_cfgr2, "SYSCFG CFGR2.CLL");
+    }
+
+    #[test]
+    fn with_the_bridge_off_the_gate_pins_hold_every_fet_off(_b: &mut Board) {
+        use pac::gpio::vals::Moder;
+        defmt::assert!(!pac::TIM1.bdtr().read().moe(), "MOE = 0");
+        // HIN pins low, LIN pins high, and the timer drives them (alternate function).
+        for (port, pin, high, name) in [
+            (pac::GPIOA, 8usize, false, "PA8 U HIN"),
+            (pac::GPIOA, 9, false, "PA9 V HIN"),
+            (pac::GPIOA, 10, false, "PA10 W HIN"),
+            (pac::GPIOA, 7, true, "PA7 U LIN"),
+            (pac::GPIOB, 0, true, "PB0 V LIN"),
+            (pac::GPIOB, 1, true, "PB1 W LIN"),
+        ] {
+            defmt::assert!(port.moder().read().moder(pin) == Moder::ALTERNATE, "{} in alternate function", name);
+            for _ in 0..100 {
+                defmt::assert_eq!(port.idr().read().idr(pin) == pac::gpio::vals::Idr::HIGH, high, "{} level", name);
+                cortex_m::asm::delay(1_700); // 10 µs: sixteen samples a PWM period
+            }
+        }
     }
 
     #[test]
@@ -70,8 +134,8 @@ mod tests {
             }
             let at = cortex_m::peripheral::DWT::cycle_count();
             let counter = pac::TIM1.cnt().read().cnt() as u32;
-            let ([a, b], bus) = board::take_sample();
-            (at, counter, [a, b, bus])
+            let ([u, v, w], bus) = board::take_sample();
+            (at, counter, [u, v, w, bus])
         };
         wait();
         let (t0, _, _) = wait();
@@ -85,7 +149,7 @@ mod tests {
         for c in counts {
             defmt::assert!(c <= 4095, "12-bit count {}", c);
         }
-        defmt::info!("ADC: {} cycles per period, phase/phase/bus counts {}", period, counts);
+        defmt::info!("ADC: {} cycles per period, U/V/W/bus counts {}", period, counts);
     }
 
     #[test]

@@ -1,66 +1,68 @@
-//! NUCLEO-G474RE with the X-NUCLEO-IHM08M1 power stage: clocks, pins, peripherals and the
-//! register-level set-up of the current sampling. Everything board-specific lives here, so a
-//! second board is a second module with the same functions.
+//! NUCLEO-G474RE with the X-NUCLEO-IHM08M1 power stage: clocks, pins and peripherals. The
+//! register words come from the `power-stage` crate (pure functions of its `IHM08M1`
+//! configuration, tested on the host against models of TIM1's output stage, the L6398 and the
+//! shunt amplifiers); this module writes them. Everything board-specific lives here and
+//! there, so a second board is a second module with the same functions.
 //!
 //! | signal | pin | peripheral |
 //! |---|---|---|
-//! | phase U high / low | PA8 / PA7 | TIM1 CH1 / CH1N |
+//! | phase U high / low (L6398 HIN / LIN) | PA8 / PA7 | TIM1 CH1 / CH1N |
 //! | phase V high / low | PA9 / PB0 | TIM1 CH2 / CH2N |
 //! | phase W high / low | PA10 / PB1 | TIM1 CH3 / CH3N |
 //! | overcurrent comparator (break) | PA6 | TIM1 BKIN (AF6), active low |
-//! | phase U current | PA0 | ADC1 IN1 (injected rank 1) |
-//! | bus voltage | PA1 | ADC1 IN2 (injected rank 2) |
-//! | phase V current | PC1 | ADC2 IN7 (injected rank 1) |
+//! | phase U current / bus voltage | PA0 / PA1 | ADC1 IN1 / IN2 (injected ranks 1 / 2) |
+//! | phase V current / phase W current | PC1 / PC0 | ADC2 IN7 / IN6 (injected ranks 1 / 2) |
 //! | encoder A / B | PA15 / PB3 | TIM2 quadrature (32-bit counter) |
 //! | host link | PA2 (TX) / PA3 (RX) | USART2, the ST-LINK virtual COM port |
 //!
-//! Sampling: TIM1 counts up and down (centre-aligned) at the 16 kHz base tick. Channel 4 in
-//! PWM mode 2 with CCR4 = ARR − 1 rises near the top of the count, where every high-side
-//! switch is off and the low-side shunts carry the phase currents; OC4REF is TIM1's TRGO2,
-//! which starts the injected conversions of ADC1 and ADC2 together (RM0440: injected external
-//! trigger 8 of ADC1/2 is TIM1_TRGO2). ADC1's end of injected sequence raises ADC1_2, where
-//! the control loop runs (`control`).
+//! Gate drive (`power_stage::tim1_words` says why each bit is what it is): HIN active high,
+//! LIN active low (CCxNP = 1), every output enabled once at set-up, the bridge gated only by
+//! MOE; with MOE = 0 (start, break, software break, debug halt) the pins are driven HIN low,
+//! LIN high (OSSI = 1, OISx = 0, OISxN = 1): every FET off.
 //!
-//! The scales are the IHM08M1's (UM1996): 10 mΩ shunts into an amplifier of gain 5.18 biased
-//! at half the 3.3 V reference, and a 169 kΩ / 9.31 kΩ bus divider. They have not been checked
-//! on a board yet: compare the first logged offsets and bus voltage with a meter before
-//! enabling a motor.
+//! Sampling: TIM1 counts up and down (centre-aligned) at the 16 kHz base tick. Channel 4 in
+//! PWM mode 2 with CCR4 = ARR − 1 rises near the top of the count, where the low sides
+//! conduct and the shunts carry the phase currents; OC4REF is TRGO2, which starts the injected
+//! sequences of ADC1 and ADC2 together. All three shunts are converted; the control loop
+//! believes the two whose low sides conducted longest (`power_stage::shunt_selection`).
+//! ADC1's end of injected sequence raises ADC1_2, where the control loop runs (`control`).
+//!
+//! Fail-safe (`power_stage::fail_safe`): TIM1 stops and its outputs go to their off state
+//! while a debugger halts the core; a core lockup breaks TIM1; the control loop feeds an
+//! independent watchdog (started by [`start_watchdog`]); the panic and HardFault handlers of
+//! the binary call [`bridge_off_now`] first.
 
 use control_core::current_sensing::SensingScales;
-use embassy_stm32::gpio::OutputType;
+use control_core::Params;
 use embassy_stm32::pac;
 use embassy_stm32::peripherals;
 use embassy_stm32::time::Hertz;
-use embassy_stm32::timer::complementary_pwm::{ComplementaryPwm, ComplementaryPwmPin};
-use embassy_stm32::timer::low_level::CountingMode;
 use embassy_stm32::timer::qei::Qei;
-use embassy_stm32::timer::simple_pwm::PwmPin;
 use embassy_stm32::usart::{self, BufferedUart};
-use embassy_stm32::{bind_interrupts, Peripherals};
+use embassy_stm32::{bind_interrupts, Peri, Peripherals};
+use power_stage::adc_words;
+use power_stage::config::IHM08M1;
+use power_stage::fail_safe::{self, FAIL_SAFE};
+use power_stage::ratings;
+use power_stage::tim1_words::{self, bdtr_with_moe, compare_value, Tim1Words, CR1_CEN, EGR_UG};
 
 bind_interrupts!(pub struct Irqs {
     USART2 => usart::BufferedInterruptHandler<peripherals::USART2>;
 });
 
-/// PWM frequency: the control core's base tick (centre-aligned: the counter period is two
-/// ticks of the carrier, so the carrier is set to the tick rate).
-pub const PWM_HZ: u32 = 16_000;
-/// Dead time in timer clocks (170 MHz: about 500 ns).
-pub const DEAD_TIME: u16 = 85;
+/// PWM frequency: the control core's base tick.
+pub const PWM_HZ: u32 = IHM08M1.pwm_hz;
+/// TIM1's set-up, word by word.
+pub const TIM1_WORDS: Tim1Words = tim1_words::tim1_words(&IHM08M1);
 
-const SHUNT_OHM: f32 = 0.010;
-const AMPLIFIER_GAIN: f32 = 5.18;
-const VREF: f32 = 3.3;
-const BUS_DIVIDER: f32 = (169.0 + 9.31) / 9.31;
+/// ADC counts to amperes and volts for `control_core::current_sensing` (the IHM08M1's
+/// amplifier inverts: a current into the motor lowers the count).
+pub const SCALES: SensingScales = ratings::SCALES;
 
-/// ADC counts to amperes and volts for `control_core::current_sensing`. Sign: positive
-/// current into the motor is taken to raise the count; if the first run on a board shows the
-/// opposite (the current loop runs away at once), the sign here is what changes.
-pub const SCALES: SensingScales = SensingScales {
-    full_scale: 4095,
-    amps_per_count: VREF / 4095.0 / (SHUNT_OHM * AMPLIFIER_GAIN),
-    volts_per_count: VREF / 4095.0 * BUS_DIVIDER,
-};
+/// The parameters with this board's protective limits (bus 10–50 V, 24 A).
+pub fn with_board_limits(p: Params) -> Params {
+    Params { limits: ratings::board_limits(p.limits), ..p }
+}
 
 /// 170 MHz from the NUCLEO's 24 MHz crystal: 24 / 6 × 85 / 2, range-1 boost.
 pub fn clocks() -> embassy_stm32::Config {
@@ -80,34 +82,34 @@ pub fn clocks() -> embassy_stm32::Config {
     config
 }
 
+/// TIM1 and the six gate pins, owned for the program's life; set up by [`init`] from the
+/// words, driven through [`write_duties`] and [`set_outputs`].
+pub struct Bridge {
+    _timer: Peri<'static, peripherals::TIM1>,
+    _high_sides: (Peri<'static, peripherals::PA8>, Peri<'static, peripherals::PA9>, Peri<'static, peripherals::PA10>),
+    _low_sides: (Peri<'static, peripherals::PA7>, Peri<'static, peripherals::PB0>, Peri<'static, peripherals::PB1>),
+    _break_input: Peri<'static, peripherals::PA6>,
+}
+
 pub struct Board {
-    /// Kept so that the timer, its pins and its clock stay owned; the loop drives it
-    /// through [`write_duties`] and [`set_outputs`].
-    pub bridge: ComplementaryPwm<'static, peripherals::TIM1>,
-    /// Kept for the same reason; read through [`encoder_count`].
+    pub bridge: Bridge,
+    /// Kept so that TIM2, its pins and its clock stay owned; read through [`encoder_count`].
     pub encoder: Qei<'static, peripherals::TIM2>,
     pub link: BufferedUart<'static>,
 }
 
 pub fn init(p: Peripherals, tx: &'static mut [u8], rx: &'static mut [u8]) -> Board {
-    let mut bridge = ComplementaryPwm::new(
-        p.TIM1,
-        Some(PwmPin::new(p.PA8, OutputType::PushPull)),
-        Some(ComplementaryPwmPin::new(p.PA7, OutputType::PushPull)),
-        Some(PwmPin::new(p.PA9, OutputType::PushPull)),
-        Some(ComplementaryPwmPin::new(p.PB0, OutputType::PushPull)),
-        Some(PwmPin::new(p.PA10, OutputType::PushPull)),
-        Some(ComplementaryPwmPin::new(p.PB1, OutputType::PushPull)),
-        None,
-        None,
-        Hertz(PWM_HZ),
-        CountingMode::CenterAlignedBothInterrupts,
-    );
-    bridge.set_dead_time(DEAD_TIME);
-    // Off until the control loop has calibrated the current offsets and the core allows it.
-    bridge.set_master_output_enable(false);
+    loss_of_control_to_break();
+    // Until `gate_drive` hands the pins to the timer they are not driven (analog after
+    // reset), and the L6398's own input pulls (HIN down, LIN up) keep both FETs off.
+    gate_drive();
+    let bridge = Bridge {
+        _timer: p.TIM1,
+        _high_sides: (p.PA8, p.PA9, p.PA10),
+        _low_sides: (p.PA7, p.PB0, p.PB1),
+        _break_input: p.PA6,
+    };
     let encoder = Qei::new(p.TIM2, p.PA15, p.PB3, Default::default());
-    sampling_trigger_and_break();
     adc_injected();
     let mut config = usart::Config::default();
     config.baudrate = 921_600;
@@ -115,38 +117,69 @@ pub fn init(p: Peripherals, tx: &'static mut [u8], rx: &'static mut [u8]) -> Boa
     Board { bridge, encoder, link }
 }
 
-/// TIM1 channel 4 as the sampling trigger (TRGO2) and the break input on PA6.
-fn sampling_trigger_and_break() {
-    use pac::gpio::vals::{Moder, Pupdr};
-    use pac::timer::vals::{Bkp, FilterValue, Mms2, Ocm};
-    let t = pac::TIM1;
-    let top = t.arr().read().arr();
-    t.ccr(3).write(|w| w.set_ccr(top.saturating_sub(1)));
-    t.ccmr_output(1).modify(|w| w.set_ocm(1, Ocm::PWM_MODE2));
-    t.ccer().modify(|w| w.set_cce(3, false)); // internal only: no pin
-    t.cr2().modify(|w| w.set_mms2(Mms2::COMPARE_OC4));
-    // PA6 = TIM1_BKIN (AF6), pulled up: the IHM08M1's comparator pulls it low.
-    pac::GPIOA.pupdr().modify(|w| w.set_pupdr(6, Pupdr::PULL_UP));
-    pac::GPIOA.afr(0).modify(|w| w.set_afr(6, 6));
-    pac::GPIOA.moder().modify(|w| w.set_moder(6, Moder::ALTERNATE));
-    t.bdtr().modify(|w| {
-        w.set_bkp(0, Bkp::ACTIVE_LOW);
-        w.set_bkf(0, FilterValue::FDTS_DIV2_N6);
-        w.set_bke(0, true);
-        w.set_aoe(false); // stays off after a break until the core clears its fault
-    });
-    t.sr().modify(|w| w.set_bif(0, false));
+/// DBG_TIM1_STOP (and DBG_IWDG_STOP: a breakpoint does not reset the chip), and the core's
+/// lockup wired to TIM1's break (SYSCFG CFGR2.CLL, set until reset).
+fn loss_of_control_to_break() {
+    pac::DBGMCU.apb2fzr().modify(|w| w.0 |= FAIL_SAFE.dbgmcu_apb2fzr);
+    pac::DBGMCU.apb1lfzr().modify(|w| w.0 |= FAIL_SAFE.dbgmcu_apb1fzr1);
+    pac::RCC.apb2enr().modify(|w| w.set_syscfgen(true));
+    pac::SYSCFG.cfgr2().modify(|w| w.0 |= FAIL_SAFE.syscfg_cfgr2);
 }
 
-/// ADC1 (phase U, bus) and ADC2 (phase V): injected sequences on TIM1_TRGO2, 12 bits,
-/// synchronous clock HCLK/4 = 42.5 MHz, 12.5-cycle sampling (conversion of both ranks
-/// about 0.6 µs).
+/// TIM1 from its words, then its pins: clock on and timer reset; BDTR first (MOE = 0; the first
+/// write after reset, so that its LOCK level takes), everything else, the outputs enabled
+/// (off levels: HIN low, LIN high), preloads loaded, counter started. Only then the six gate
+/// pins (pulls that agree with the off levels) and the break input on PA6 (pulled up: the
+/// comparator pulls it low) go to alternate function 6, TIM1.
+fn gate_drive() {
+    use pac::gpio::vals::{Moder, Ospeedr, Pupdr};
+    pac::RCC.apb2enr().modify(|w| w.set_tim1en(true));
+    pac::RCC.apb2rstr().modify(|w| w.set_tim1rst(true));
+    pac::RCC.apb2rstr().modify(|w| w.set_tim1rst(false));
+    let t = pac::TIM1;
+    let w = TIM1_WORDS;
+    t.bdtr().write(|r| r.0 = w.bdtr); // MOE = 0, LOCK, whole word at once
+    t.cr1().write(|r| r.0 = w.cr1); // CEN = 0
+    t.cr2().write(|r| r.0 = w.cr2);
+    t.ccmr_output(0).write(|r| r.0 = w.ccmr1);
+    t.ccmr_output(1).write(|r| r.0 = w.ccmr2);
+    t.psc().write_value(w.psc as u16);
+    t.arr().write(|r| r.0 = w.arr);
+    t.rcr().write(|r| r.0 = w.rcr);
+    for n in 0..3 {
+        t.ccr(n).write(|r| r.0 = 0);
+    }
+    t.ccr(3).write(|r| r.0 = w.ccr4);
+    t.af1().write(|r| r.0 = w.af1);
+    t.ccer().write(|r| r.0 = w.ccer);
+    t.egr().write(|r| r.0 = EGR_UG);
+    t.sr().write(|r| r.0 = 0);
+    t.cr1().write(|r| r.0 = w.cr1 | CR1_CEN);
+    const TIM1_AF: u8 = 6;
+    for (port, pin, pull) in [
+        (pac::GPIOA, 8, Pupdr::PULL_DOWN),
+        (pac::GPIOA, 9, Pupdr::PULL_DOWN),
+        (pac::GPIOA, 10, Pupdr::PULL_DOWN),
+        (pac::GPIOA, 7, Pupdr::PULL_UP),
+        (pac::GPIOB, 0, Pupdr::PULL_UP),
+        (pac::GPIOB, 1, Pupdr::PULL_UP),
+        (pac::GPIOA, 6, Pupdr::PULL_UP),
+    ] {
+        port.pupdr().modify(|r| r.set_pupdr(pin, pull));
+        port.ospeedr().modify(|r| r.set_ospeedr(pin, Ospeedr::HIGH_SPEED));
+        port.afr(pin / 8).modify(|r| r.set_afr(pin % 8, TIM1_AF));
+        port.moder().modify(|r| r.set_moder(pin, Moder::ALTERNATE));
+    }
+    t.sr().write(|r| r.0 = 0); // a break flag from the pin's switch-over
+}
+
+/// ADC1 (phase U, bus) and ADC2 (phase V, phase W): injected sequences on TIM1_TRGO2, 12
+/// bits, synchronous clock HCLK/4 = 42.5 MHz, 12.5-cycle sampling (`power_stage::adc_words`).
 fn adc_injected() {
-    use pac::adc::vals::{Adcaldif, Exten, SampleTime};
-    use pac::adccommon::vals::Ckmode;
     pac::RCC.ahb2enr().modify(|w| w.set_adc12en(true));
-    pac::ADC12_COMMON.ccr().modify(|w| w.set_ckmode(Ckmode::SYNC_DIV4));
-    for (adc, channels) in [(pac::ADC1, &[1u8, 2][..]), (pac::ADC2, &[7u8][..])] {
+    pac::ADC12_COMMON.ccr().modify(|w| w.0 = (w.0 & !(3 << 16)) | adc_words::COMMON_CCR);
+    for (adc, sequence) in [(pac::ADC1, adc_words::ADC1_SEQUENCE), (pac::ADC2, adc_words::ADC2_SEQUENCE)] {
+        use pac::adc::vals::Adcaldif;
         adc.cr().modify(|w| {
             w.set_deeppwd(false);
             w.set_advregen(true);
@@ -161,30 +194,36 @@ fn adc_injected() {
         adc.isr().write(|w| w.set_adrdy(true));
         adc.cr().modify(|w| w.set_aden(true));
         while !adc.isr().read().adrdy() {}
-        for &ch in channels {
-            adc.smpr().modify(|w| w.set_smp(ch as usize, SampleTime::CYCLES12_5));
-        }
-        adc.jsqr().write(|w| {
-            w.set_jl(channels.len() as u8 - 1);
-            w.set_jextsel(8); // TIM1_TRGO2
-            w.set_jexten(Exten::RISING_EDGE);
-            for (rank, &ch) in channels.iter().enumerate() {
-                w.set_jsq(rank, ch);
-            }
-        });
+        adc.smpr().write(|w| w.0 = adc_words::smpr1(&sequence));
+        adc.jsqr().write(|w| w.0 = adc_words::jsqr(&sequence));
         adc.cr().modify(|w| w.set_jadstart(true));
     }
     pac::ADC1.isr().write(|w| w.set_jeos(true));
     pac::ADC1.ier().modify(|w| w.set_jeosie(true));
 }
 
-/// One sample: phase U and V current counts, bus voltage count. Acknowledges ADC1's end of
-/// sequence; ADC2 was triggered together and has finished (one rank against two).
-pub fn take_sample() -> ([u16; 2], u16) {
+/// One sample: the three shunt counts (U, V, W) and the bus voltage count. Acknowledges both
+/// ADCs' end of sequence; ADC2 was triggered with ADC1 and converts as many ranks, so it has
+/// finished too (waited for, a few clocks at most).
+pub fn take_sample() -> ([u16; 3], u16) {
     let (a1, a2) = (pac::ADC1, pac::ADC2);
+    let mut spins = 0;
+    while !a2.isr().read().jeos() && spins < 64 {
+        spins += 1;
+    }
     a1.isr().write(|w| w.set_jeos(true));
     a2.isr().write(|w| w.set_jeos(true));
-    ([a1.jdr(0).read().jdata(), a2.jdr(0).read().jdata()], a1.jdr(1).read().jdata())
+    ([a1.jdr(0).read().jdata(), a2.jdr(0).read().jdata(), a2.jdr(1).read().jdata()], a1.jdr(1).read().jdata())
+}
+
+/// Shunt channels sampled per tick (U, V, W).
+pub const CURRENT_CHANNELS: usize = 3;
+
+/// The phase currents U and V for the core from the three shunt currents (A), believing the
+/// two shunts whose low sides conducted longest under `duties_in_force`.
+#[inline]
+pub fn phase_currents(shunts: [f32; CURRENT_CHANNELS], duties_in_force: [f32; 3]) -> [f32; 2] {
+    power_stage::shunt_selection::phase_currents(shunts, duties_in_force)
 }
 
 /// The encoder's 32-bit quadrature count.
@@ -194,15 +233,41 @@ pub fn encoder_count() -> i32 {
 
 /// Duty cycles 0..1 of the three half-bridges (clamped: the core gives 0..1 already).
 pub fn write_duties(d: [f32; 3]) {
-    let top = pac::TIM1.arr().read().arr() as f32;
     for (n, duty) in d.into_iter().enumerate() {
-        pac::TIM1.ccr(n).write(|w| w.set_ccr((duty.clamp(0.0, 1.0) * top) as u16));
+        pac::TIM1.ccr(n).write(|w| w.0 = compare_value(duty, TIM1_WORDS.arr));
     }
 }
 
-/// Gate drive on or off (main output enable). Off takes effect at once.
+/// Gate drive on or off (main output enable; the whole BDTR word). Off takes effect at once.
 pub fn set_outputs(on: bool) {
-    pac::TIM1.bdtr().modify(|w| w.set_moe(on));
+    pac::TIM1.bdtr().write(|w| w.0 = bdtr_with_moe(TIM1_WORDS.bdtr, on));
+}
+
+/// Every FET off now, from any context: a software break (MOE cleared by the hardware, as by
+/// the break input), then MOE cleared by a write in case the break is not taken.
+#[inline(always)]
+pub fn bridge_off_now() {
+    pac::TIM1.egr().write(|w| w.0 = fail_safe::BRIDGE_OFF_EGR);
+    pac::TIM1.bdtr().write(|w| w.0 = TIM1_WORDS.bdtr);
+}
+
+/// Start the independent watchdog (about 4 ms; it cannot be stopped until reset). Call right
+/// before the control loop starts: from then on the loop feeds it every tick.
+pub fn start_watchdog() {
+    let Some(w) = FAIL_SAFE.watchdog else { return };
+    let iwdg = pac::IWDG;
+    iwdg.kr().write(|k| k.0 = fail_safe::IWDG_KEY_START as u32);
+    iwdg.kr().write(|k| k.0 = fail_safe::IWDG_KEY_UNLOCK as u32);
+    iwdg.pr().write(|r| r.0 = w.pr as u32);
+    iwdg.rlr().write(|r| r.0 = w.rlr as u32);
+    while iwdg.sr().read().0 != 0 {}
+    feed_watchdog();
+}
+
+/// One feed of the independent watchdog.
+#[inline(always)]
+pub fn feed_watchdog() {
+    pac::IWDG.kr().write(|k| k.0 = fail_safe::IWDG_KEY_FEED as u32);
 }
 
 /// The break input switched the bridge off since the last call (clears the flag; the flag

@@ -5,6 +5,10 @@
 //! Interrupt priorities (lower number = more urgent): the sampling interrupt that runs the
 //! loop P0; the high-priority executor (position-tick housekeeping) P1; Embassy's own time
 //! driver (TIM4) and the link's USART2 P3, so nothing of theirs delays a control tick.
+//!
+//! Loss of control: the panic and HardFault handlers switch the bridge off before anything
+//! else (`board::bridge_off_now`: a software break); the watchdog, fed by the control loop,
+//! resets the chip if the loop stops.
 
 #![no_std]
 #![no_main]
@@ -15,8 +19,29 @@ use defmt_rtt as _;
 use embassy_executor::{InterruptExecutor, Spawner};
 use embassy_stm32::interrupt;
 use embassy_stm32::interrupt::{InterruptExt, Priority};
-use panic_probe as _;
 use static_cell::StaticCell;
+
+/// Bridge off first; then interrupts masked (the control interrupt sets MOE every tick, so it
+/// must not run again) and the bridge switched off once more in case it ran in between; then
+/// the message, and a HardFault as panic-probe does (a probe halts there; without one the
+/// HardFault handler waits for the watchdog).
+#[panic_handler]
+fn panic(info: &core::panic::PanicInfo) -> ! {
+    board::bridge_off_now();
+    cortex_m::interrupt::disable();
+    board::bridge_off_now();
+    defmt::error!("panic: {}", defmt::Display2Format(info));
+    cortex_m::asm::udf()
+}
+
+/// Bridge off first (nothing preempts a HardFault but NMI); then wait for the watchdog.
+#[cortex_m_rt::exception]
+unsafe fn HardFault(_frame: &cortex_m_rt::ExceptionFrame) -> ! {
+    board::bridge_off_now();
+    loop {
+        cortex_m::asm::nop();
+    }
+}
 
 static CONTROL_EXECUTOR: InterruptExecutor = InterruptExecutor::new();
 
@@ -40,7 +65,7 @@ async fn main(spawner: Spawner) {
     interrupt::TIM4.set_priority(Priority::P3);
     interrupt::USART2.set_priority(Priority::P3);
     let board = board::init(p, TX.init([0; 1024]), RX.init([0; 1024]));
-    if let Err(e) = control::install(control_core::Params::default()) {
+    if let Err(e) = control::install(board::with_board_limits(control_core::Params::default())) {
         defmt::error!("control core not installed: {}", e);
         return;
     }
@@ -48,6 +73,7 @@ async fn main(spawner: Spawner) {
     let housekeeping = CONTROL_EXECUTOR.start(interrupt::UART4);
     housekeeping.spawn(control::position_tick_task().expect("position-tick task"));
     spawner.spawn(link::link_task(board.link).expect("link task"));
+    board::start_watchdog();
     control::start(Priority::P0);
     defmt::info!(
         "drive-g474 running: loop at 16 kHz in ADC1_2 (bridge off until the current offsets are calibrated), host link on USART2 at 921600 Bd"
