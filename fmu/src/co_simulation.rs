@@ -130,10 +130,8 @@ impl AxisModel {
         Ok(())
     }
 
+    /// (`time`, value reference 0, is kept equal to [`Self::time`] by every step.)
     pub fn get(&self, vr: u32) -> Result<Value, String> {
-        if vr == 0 {
-            return Ok(Value::Float64(self.time()));
-        }
         self.state.values.get(vr).ok_or_else(|| format!("no variable has value reference {vr}"))
     }
 

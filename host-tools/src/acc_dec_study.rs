@@ -466,8 +466,10 @@ pub fn residual_vibration(
     let residual = (from..load.len()).map(|k| (load[k] - motor[k]).abs()).fold(0.0, f64::max);
     let peak_error = (0..load.len()).map(err).fold(0.0, f64::max);
     trace.columns.extend(["load_error".into(), "shaft_twist".into()]);
-    for ((row, l), m) in trace.rows.iter_mut().zip(&load).zip(&motor) {
-        row.extend([l - target, l - m]);
+    let narrow = std::mem::take(&mut trace.rows);
+    trace.rows = crate::trace::Rows::new(trace.columns.len());
+    for ((row, l), m) in narrow.iter().zip(&load).zip(&motor) {
+        trace.rows.push_from(row.iter().copied().chain([l - target, l - m]));
     }
     Ok((
         Vibration {

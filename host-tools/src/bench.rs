@@ -26,6 +26,10 @@ pub struct FmuBench {
     pub all_outputs: usize,
     pub all_outputs_wall_seconds: f64,
     pub all_outputs_real_time_factor: f64,
+    /// The all-outputs run reading every output at every step without keeping the rows.
+    pub read_only_wall_seconds: f64,
+    /// (read-only run − bare) / bare: the FMI boundary alone (median of per-repeat ratios).
+    pub read_only_overhead: f64,
     /// Core + plant stepped directly (no FMI, no outputs), same schedule (median of [`RUST_RUNS`]).
     pub bare_wall_seconds: f64,
     pub bare_real_time_factor: f64,
@@ -55,7 +59,7 @@ pub const BENCH_RECORD: [&str; 10] = [
 ];
 
 /// Rust-host runs per figure; the median is reported (a shared machine's wall clock jumps).
-pub const RUST_RUNS: usize = 9;
+pub const RUST_RUNS: usize = 15;
 
 /// The benchmark scenario: default axis in velocity mode, a slow ramp up and down with a
 /// load disturbance, over `seconds` of simulated time, recording `record` (empty: every
@@ -91,7 +95,7 @@ velocity_command = -50.0
 }
 
 /// The benchmark's schedule on the core and the plant stepped directly (no FMI, nothing
-/// recorded): the median wall time of [`RUST_RUNS`] runs.
+/// recorded): the wall time of one run.
 pub fn bare_simulation_wall(seconds: f64) -> Result<f64> {
     use control_core::Mode;
     use servo_axis::parameters::simulation_config;
@@ -102,31 +106,26 @@ pub fn bare_simulation_wall(seconds: f64) -> Result<f64> {
     let steps = (seconds / h).round() as usize;
     let (t1, t2, t3) = (grid(0.1 * seconds), grid(0.4 * seconds), grid(0.6 * seconds));
     let ticks = (h * config.control.rates.current_loop_hz as f64).round() as u64;
-    let mut walls = Vec::new();
-    let mut checksum = 0.0;
-    for _ in 0..RUST_RUNS {
-        let mut sim = AxisSimulation::new(&config).map_err(|e| anyhow::anyhow!("{e}"))?;
-        let start = Instant::now();
-        for k in 0..steps {
-            let t = k as f64 * h + 1e-9 * h;
-            let inputs = UserInputs {
-                mode: Mode::Velocity,
-                velocity_command: if t >= t3 { -50.0 } else if t >= t1 { 50.0 } else { 0.0 },
-                disturbance_torque: if t >= t2 { 0.1 } else { 0.0 },
-                ..Default::default()
-            };
-            sim.apply_mode(&inputs);
-            sim.run_ticks(ticks, &inputs);
-        }
-        walls.push(start.elapsed().as_secs_f64());
-        checksum += sim.plant.state.motor_velocity;
+    let mut sim = AxisSimulation::new(&config).map_err(|e| anyhow::anyhow!("{e}"))?;
+    let start = Instant::now();
+    for k in 0..steps {
+        let t = k as f64 * h + 1e-9 * h;
+        let inputs = UserInputs {
+            mode: Mode::Velocity,
+            velocity_command: if t >= t3 { -50.0 } else if t >= t1 { 50.0 } else { 0.0 },
+            disturbance_torque: if t >= t2 { 0.1 } else { 0.0 },
+            ..Default::default()
+        };
+        sim.apply_mode(&inputs);
+        sim.run_ticks(ticks, &inputs);
     }
+    let wall = start.elapsed().as_secs_f64();
     // The run did something (and the optimiser cannot drop it).
-    if !(checksum.is_finite() && checksum.abs() > 1.0) {
-        bail!("the bare simulation did not move the axis (final velocity sum {checksum})");
+    let v = sim.plant.state.motor_velocity;
+    if !(v.is_finite() && v.abs() > 1.0) {
+        bail!("the bare simulation did not move the axis (final velocity {v})");
     }
-    walls.sort_by(f64::total_cmp);
-    Ok(walls[RUST_RUNS / 2])
+    Ok(wall)
 }
 
 fn grid(t: f64) -> f64 {
@@ -201,27 +200,47 @@ pub fn print_verdict(what: &str, v: &FmpyVerdict) {
 pub fn bench_fmu(fmu_path: &Path, out: &Path, seconds: f64, with_fmpy: bool, mut progress: impl FnMut(f64)) -> Result<FmuBench> {
     std::fs::create_dir_all(out)?;
     let fmu = Fmu::load(fmu_path)?;
-    // Median wall time of RUST_RUNS runs of `record`; the last run's trace goes to `csv`.
-    let mut timed = |record: &[&str], name: &str, done: f64| -> Result<(f64, Scenario)> {
+    let load = |record: &[&str], name: &str| -> Result<Scenario> {
         let path = out.join(format!("{name}.toml"));
         std::fs::write(&path, bench_scenario(seconds, record))?;
-        let scenario = Scenario::load(&path)?;
-        let mut walls = Vec::new();
-        let mut trace = None;
-        for run in 0..RUST_RUNS {
-            let start = Instant::now();
-            let t = fmu.run(&scenario, |_| {})?;
-            walls.push(start.elapsed().as_secs_f64());
-            trace = Some(t);
-            progress(done + 0.5 * (run + 1) as f64 / RUST_RUNS as f64);
-        }
-        trace.expect("RUST_RUNS > 0").write_csv(&out.join(format!("{name}_rust.csv")))?;
-        walls.sort_by(f64::total_cmp);
-        Ok((walls[RUST_RUNS / 2], scenario))
+        Scenario::load(&path)
     };
-    let (rust_wall, scenario) = timed(&BENCH_RECORD, "bench", 0.0)?;
-    let (all_wall, _) = timed(&[], "bench_all_outputs", 0.5)?;
-    let bare_wall = bare_simulation_wall(seconds)?;
+    let scenario = load(&BENCH_RECORD, "bench")?;
+    let all = load(&[], "bench_all_outputs")?;
+    // The three runs interleaved in every repeat (a shared machine's speed drifts): each
+    // figure is the median of its runs, the boundary's cost the median of the per-repeat
+    // ratios of the all-outputs run to the bare run.
+    let (mut walls, mut all_walls, mut bare_walls, mut ratios) = (Vec::new(), Vec::new(), Vec::new(), Vec::new());
+    let (mut read_walls, mut read_ratios) = (Vec::new(), Vec::new());
+    let (mut trace, mut all_trace) = (None, None);
+    for run in 0..RUST_RUNS {
+        // The previous runs' traces are dropped before the clock starts.
+        drop((trace.take(), all_trace.take()));
+        let start = Instant::now();
+        trace = Some(fmu.run(&scenario, |_| {})?);
+        walls.push(start.elapsed().as_secs_f64());
+        let start = Instant::now();
+        all_trace = Some(fmu.run(&all, |_| {})?);
+        let all_wall = start.elapsed().as_secs_f64();
+        let start = Instant::now();
+        fmu.run_reading_only(&all)?;
+        let read_wall = start.elapsed().as_secs_f64();
+        let bare = bare_simulation_wall(seconds)?;
+        read_walls.push(read_wall);
+        read_ratios.push(read_wall / bare - 1.0);
+        all_walls.push(all_wall);
+        bare_walls.push(bare);
+        ratios.push(all_wall / bare - 1.0);
+        progress((run + 1) as f64 / RUST_RUNS as f64);
+    }
+    trace.expect("RUST_RUNS > 0").write_csv(&out.join("bench_rust.csv"))?;
+    all_trace.expect("RUST_RUNS > 0").write_csv(&out.join("bench_all_outputs_rust.csv"))?;
+    let median = |mut v: Vec<f64>| {
+        v.sort_by(f64::total_cmp);
+        v[v.len() / 2]
+    };
+    let (rust_wall, all_wall, bare_wall, overhead) = (median(walls), median(all_walls), median(bare_walls), median(ratios));
+    let (read_wall, read_overhead) = (median(read_walls), median(read_ratios));
     let fmpy_wall = if with_fmpy {
         Some(run_fmpy(fmu_path, &out.join("bench.toml"), &out.join("bench_fmpy.csv"))?)
     } else {
@@ -240,7 +259,9 @@ pub fn bench_fmu(fmu_path: &Path, out: &Path, seconds: f64, with_fmpy: bool, mut
         all_outputs_real_time_factor: seconds / all_wall,
         bare_wall_seconds: bare_wall,
         bare_real_time_factor: seconds / bare_wall,
-        boundary_overhead: (all_wall - bare_wall) / bare_wall,
+        boundary_overhead: overhead,
+        read_only_wall_seconds: read_wall,
+        read_only_overhead: read_overhead,
         fmpy_wall_seconds: fmpy_wall,
         fmpy_real_time_factor: fmpy_rt,
         rust_over_fmpy: fmpy_rt.map(|f| rust_rt / f),

@@ -151,11 +151,22 @@ impl Fmu {
 
     /// Run `scenario` until its stop time or until `done` says so of a recorded row (time,
     /// then the recorded outputs in trace order); the trace ends with that row.
-    pub fn run_until(
+    pub fn run_until(&self, scenario: &Scenario, progress: impl FnMut(f64), done: impl FnMut(&[f64]) -> bool) -> Result<Trace> {
+        self.run_inner(scenario, progress, done, true)
+    }
+
+    /// Run `scenario` reading every recorded output at every step but keeping only the last
+    /// row (what the FMI boundary costs without the memory a trace takes; `servo bench fmu`).
+    pub fn run_reading_only(&self, scenario: &Scenario) -> Result<Trace> {
+        self.run_inner(scenario, |_| {}, |_| false, false)
+    }
+
+    fn run_inner(
         &self,
         scenario: &Scenario,
         mut progress: impl FnMut(f64),
         mut done: impl FnMut(&[f64]) -> bool,
+        keep_rows: bool,
     ) -> Result<Trace> {
         let params: Vec<(&VariableInfo, Value)> = scenario
             .parameters
@@ -217,7 +228,7 @@ impl Fmu {
         let mut columns = vec!["time".to_string()];
         columns.extend(outputs.iter().map(|v| v.name.clone()));
         let mut trace = Trace::new(columns);
-        trace.rows.reserve_exact(n + 1);
+        trace.rows.reserve_exact(if keep_rows { n + 1 } else { 1 });
         // Outputs are read in one call per type, then put back in column order.
         let of_kind = |kind: Kind| -> (Vec<usize>, Vec<u32>) {
             outputs.iter().enumerate().filter(|(_, v)| v.kind == kind).map(|(i, v)| (i, v.vr)).unzip()
@@ -228,8 +239,6 @@ impl Fmu {
         let (mut f64_buf, mut i32_buf, mut bool_buf) =
             (vec![0.0; f64_vrs.len()], vec![0; i32_vrs.len()], vec![false; bool_vrs.len()]);
         let mut record = |inst: &mut InstanceCS, t: f64, trace: &mut Trace| -> Result<()> {
-            let mut row = vec![0.0; outputs.len() + 1];
-            row[0] = t;
             if !f64_vrs.is_empty() {
                 inst.get_float64(&f64_vrs, &mut f64_buf).map_err(|e| anyhow!("get outputs: {e:?}"))?;
             }
@@ -239,16 +248,21 @@ impl Fmu {
             if !bool_vrs.is_empty() {
                 inst.get_boolean(&bool_vrs, &mut bool_buf).map_err(|e| anyhow!("get outputs: {e:?}"))?;
             }
-            for (c, v) in f64_cols.iter().zip(&f64_buf) {
-                row[c + 1] = *v;
+            if !keep_rows {
+                trace.rows.clear();
             }
-            for (c, v) in i32_cols.iter().zip(&i32_buf) {
-                row[c + 1] = *v as f64;
-            }
-            for (c, v) in bool_cols.iter().zip(&bool_buf) {
-                row[c + 1] = *v as i32 as f64;
-            }
-            trace.rows.push(row);
+            trace.rows.push_with(|row| {
+                row[0] = t;
+                for (&c, &v) in f64_cols.iter().zip(&f64_buf) {
+                    row[c + 1] = v;
+                }
+                for (&c, &v) in i32_cols.iter().zip(&i32_buf) {
+                    row[c + 1] = v as f64;
+                }
+                for (&c, &v) in bool_cols.iter().zip(&bool_buf) {
+                    row[c + 1] = v as i32 as f64;
+                }
+            });
             Ok(())
         };
         record(&mut inst, 0.0, &mut trace)?;

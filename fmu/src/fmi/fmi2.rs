@@ -10,7 +10,7 @@ use super::fmi3;
 use super::instance::{self, c_str, call, slice, slice_mut, unsupported, Instance, Logger, Phase, Status, WhenPoisoned, ANY_PHASE};
 use super::values;
 use crate::model_description;
-use crate::variables::{Kind, Value};
+use crate::variables::{Kind, Value, Values};
 
 type Component = *mut c_void;
 type Vr = u32;
@@ -171,7 +171,7 @@ pub unsafe extern "C" fn fmi2CancelStep(c: Component) -> Fmi2Status {
 pub unsafe extern "C" fn fmi2GetReal(c: Component, vrs: *const Vr, n: usize, out: *mut f64) -> Fmi2Status {
     unsafe {
         call(c, "fmi2GetReal", GET, WhenPoisoned::Allow, |i| {
-            values::get(&i.model, slice(vrs, n, "vr")?, slice_mut(out, n, "value")?, Kind::Float64, values::float64)?;
+            values::get(&i.model, slice(vrs, n, "vr")?, slice_mut(out, n, "value")?, Kind::Float64, Values::float64)?;
             Ok(Status::Ok)
         })
     }
@@ -181,7 +181,7 @@ pub unsafe extern "C" fn fmi2GetReal(c: Component, vrs: *const Vr, n: usize, out
 pub unsafe extern "C" fn fmi2GetInteger(c: Component, vrs: *const Vr, n: usize, out: *mut c_int) -> Fmi2Status {
     unsafe {
         call(c, "fmi2GetInteger", GET, WhenPoisoned::Allow, |i| {
-            values::get(&i.model, slice(vrs, n, "vr")?, slice_mut(out, n, "value")?, Kind::Int32, values::int32)?;
+            values::get(&i.model, slice(vrs, n, "vr")?, slice_mut(out, n, "value")?, Kind::Int32, Values::int32)?;
             Ok(Status::Ok)
         })
     }
@@ -191,7 +191,7 @@ pub unsafe extern "C" fn fmi2GetInteger(c: Component, vrs: *const Vr, n: usize, 
 pub unsafe extern "C" fn fmi2GetBoolean(c: Component, vrs: *const Vr, n: usize, out: *mut Fmi2Boolean) -> Fmi2Status {
     unsafe {
         call(c, "fmi2GetBoolean", GET, WhenPoisoned::Allow, |i| {
-            values::get(&i.model, slice(vrs, n, "vr")?, slice_mut(out, n, "value")?, Kind::Boolean, |v| values::boolean(v).map(c_int::from))?;
+            values::get(&i.model, slice(vrs, n, "vr")?, slice_mut(out, n, "value")?, Kind::Boolean, |v, vr| v.boolean(vr).map(c_int::from))?;
             Ok(Status::Ok)
         })
     }

@@ -11,7 +11,7 @@ use super::instance::{self, c_str, call, slice, slice_mut, unsupported, Instance
 use super::values;
 use crate::fmu_state::{self, Snapshot};
 use crate::model_description;
-use crate::variables::{Kind, Value};
+use crate::variables::{Kind, Value, Values};
 
 type Fmi3Instance = *mut c_void;
 type Vr = u32;
@@ -270,9 +270,9 @@ macro_rules! get_set_typed {
     };
 }
 
-get_set_typed!(fmi3GetFloat64, fmi3SetFloat64, f64, f64, Float64, values::float64, Value::Float64);
-get_set_typed!(fmi3GetInt32, fmi3SetInt32, i32, i32, Int32, values::int32, Value::Int32);
-get_set_typed!(fmi3GetBoolean, fmi3SetBoolean, bool, u8, Boolean, values::boolean, |b: u8| Value::Boolean(b != 0));
+get_set_typed!(fmi3GetFloat64, fmi3SetFloat64, f64, f64, Float64, Values::float64, Value::Float64);
+get_set_typed!(fmi3GetInt32, fmi3SetInt32, i32, i32, Int32, Values::int32, Value::Int32);
+get_set_typed!(fmi3GetBoolean, fmi3SetBoolean, bool, u8, Boolean, Values::boolean, |b: u8| Value::Boolean(b != 0));
 
 /// Types the FMU has no variable of: zero references is fine, any reference is an error.
 macro_rules! get_set_absent {

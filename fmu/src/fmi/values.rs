@@ -2,7 +2,7 @@
 //! value reference, the type checked, and a Set that stores all of its values or none.
 
 use crate::co_simulation::AxisModel;
-use crate::variables::{self, Kind, Value};
+use crate::variables::{self, Kind, Value, Values};
 
 fn kind_error(vr: u32, wanted: Kind) -> String {
     match variables::declaration(vr) {
@@ -11,13 +11,14 @@ fn kind_error(vr: u32, wanted: Kind) -> String {
     }
 }
 
-/// Read `vrs` into `out` (as many values as references).
-pub fn get<T>(model: &AxisModel, vrs: &[u32], out: &mut [T], wanted: Kind, convert: impl Fn(Value) -> Option<T>) -> Result<(), String> {
+/// Read `vrs` into `out` (as many values as references) with a typed getter of `Values`.
+pub fn get<T>(model: &AxisModel, vrs: &[u32], out: &mut [T], wanted: Kind, read: impl Fn(&Values, u32) -> Option<T>) -> Result<(), String> {
     if vrs.len() != out.len() {
         return Err(format!("{} value references but room for {} values (every variable is a scalar)", vrs.len(), out.len()));
     }
+    let values = model.values();
     for (o, &vr) in out.iter_mut().zip(vrs) {
-        *o = convert(model.get(vr)?).ok_or_else(|| kind_error(vr, wanted))?;
+        *o = read(values, vr).ok_or_else(|| kind_error(vr, wanted))?;
     }
     Ok(())
 }
@@ -28,27 +29,6 @@ pub fn set<T: Copy>(model: &mut AxisModel, vrs: &[u32], values: &[T], wrap: impl
         return Err(format!("{} value references but {} values (every variable is a scalar)", vrs.len(), values.len()));
     }
     model.set_all(vrs.iter().copied().zip(values.iter().map(move |v| wrap(*v))))
-}
-
-pub fn float64(v: Value) -> Option<f64> {
-    match v {
-        Value::Float64(x) => Some(x),
-        _ => None,
-    }
-}
-
-pub fn int32(v: Value) -> Option<i32> {
-    match v {
-        Value::Int32(x) => Some(x),
-        _ => None,
-    }
-}
-
-pub fn boolean(v: Value) -> Option<bool> {
-    match v {
-        Value::Boolean(x) => Some(x),
-        _ => None,
-    }
 }
 
 /// A Get or Set of a type the FMU has no variable of: fine for zero references.

@@ -200,6 +200,30 @@ mod tests {
     }
 
     #[test]
+    fn the_typed_getters_read_the_same_field_as_get() {
+        let mut v = Values::start();
+        for d in DECLARATIONS {
+            // A distinct value in every variable, so a wrong offset shows.
+            let x = match d.kind {
+                Kind::Float64 => Value::Float64(d.vr as f64 + 0.5),
+                Kind::Int32 => Value::Int32(d.vr as i32 + 7),
+                Kind::Boolean => Value::Boolean(d.vr % 2 == 1),
+            };
+            v.set(d.vr, x).unwrap();
+        }
+        for d in DECLARATIONS {
+            let typed = match d.kind {
+                Kind::Float64 => v.float64(d.vr).map(Value::Float64),
+                Kind::Int32 => v.int32(d.vr).map(Value::Int32),
+                Kind::Boolean => v.boolean(d.vr).map(Value::Boolean),
+            };
+            assert_eq!(typed, v.get(d.vr), "{}", d.name);
+            assert!(d.kind == Kind::Float64 || v.float64(d.vr).is_none(), "{} read as Float64", d.name);
+        }
+        assert_eq!(v.float64(DECLARATIONS.len() as u32), None);
+    }
+
+    #[test]
     fn the_shortest_decimal_rounds_back_to_the_f32() {
         for x in [4.7124_f32, 0.0942, 11.84, 1.0 / 3.0, 1.0e-5, 2827.4] {
             assert_eq!(from_f32(x) as f32, x);

@@ -49,7 +49,41 @@ macro_rules! declare_variables {
             }, )*
         ];
 
+        /// Each variable's type and byte offset in [`Values`], by value reference: the typed
+        /// getters read a field with one table lookup (the FMI Get path, every step).
+        static LAYOUT: &[(Kind, usize)] = &[ $( (Kind::$kind, std::mem::offset_of!(Values, $field)), )* ];
+
         impl Values {
+            /// A Float64 variable's value (None: no such value reference, or another type).
+            #[inline]
+            pub fn float64(&self, vr: u32) -> Option<f64> {
+                match LAYOUT.get(vr as usize) {
+                    // SAFETY: the offset is that of an f64 field of Values (generated above).
+                    Some(&(Kind::Float64, at)) => Some(unsafe { *((self as *const Self as *const u8).add(at) as *const f64) }),
+                    _ => None,
+                }
+            }
+
+            /// An Int32 variable's value.
+            #[inline]
+            pub fn int32(&self, vr: u32) -> Option<i32> {
+                match LAYOUT.get(vr as usize) {
+                    // SAFETY: the offset is that of an i32 field of Values.
+                    Some(&(Kind::Int32, at)) => Some(unsafe { *((self as *const Self as *const u8).add(at) as *const i32) }),
+                    _ => None,
+                }
+            }
+
+            /// A Boolean variable's value.
+            #[inline]
+            pub fn boolean(&self, vr: u32) -> Option<bool> {
+                match LAYOUT.get(vr as usize) {
+                    // SAFETY: the offset is that of a bool field of Values.
+                    Some(&(Kind::Boolean, at)) => Some(unsafe { *((self as *const Self as *const u8).add(at) as *const bool) }),
+                    _ => None,
+                }
+            }
+
             fn compute_start() -> Self {
                 Self { $( $field: $start, )* }
             }

@@ -130,7 +130,8 @@ pub fn bench_fmu(seconds: f64, no_fmpy: bool, goal: f64, common: &Common) -> Res
     let pb = progress_bar("Rust host", common.json);
     let r = bench::bench_fmu(&fmu_path, &out, seconds, !no_fmpy, |f| pb.set_position((f * 1000.0) as u64))?;
     pb.finish_and_clear();
-    let ok = r.rust_real_time_factor >= goal && r.boundary_overhead <= 0.10;
+    let speed_ok = r.rust_real_time_factor >= goal;
+    let ok = speed_ok && r.boundary_overhead <= 0.10;
     if common.json {
         println!("{}", serde_json::to_string_pretty(&serde_json::json!({"bench": "fmu", "result": r, "goal": goal, "passed": ok}))?);
     } else {
@@ -164,6 +165,12 @@ pub fn bench_fmu(seconds: f64, no_fmpy: bool, goal: f64, common: &Common) -> Res
             bench::RUST_RUNS
         );
         println!(
+            "  reading all {} outputs at every step without keeping them: {:>8.3} s wall, {:+.1} % of the bare simulation (the boundary alone)",
+            r.all_outputs,
+            r.read_only_wall_seconds,
+            100.0 * r.read_only_overhead
+        );
+        println!(
             "  the FMI boundary and recording all {} outputs cost {:+.1} % of the bare simulation (goal ≤ 10 %): {}",
             r.all_outputs,
             100.0 * r.boundary_overhead,
@@ -171,7 +178,7 @@ pub fn bench_fmu(seconds: f64, no_fmpy: bool, goal: f64, common: &Common) -> Res
         );
         println!(
             "  goal ≥ {goal} x real time through the Rust host (the specification's outputs): {}",
-            if ok { "met" } else { "NOT met" }
+            if speed_ok { "met" } else { "NOT met" }
         );
     }
     Ok(ok)
