@@ -253,7 +253,39 @@ impl AxisModel {
         }
         sim.run_ticks(n, &inputs);
         self.update_outputs();
-        Ok(())
+        self.check_outputs_finite()
+    }
+
+    /// No step ends with an OK status and a non-finite output: if the plant or the core
+    /// produced one, the axis latches its non-finite fault (the bridge goes off) and the step
+    /// is an error naming the output.
+    fn check_outputs_finite(&mut self) -> Result<(), String> {
+        static FLOAT_OUTPUTS: std::sync::OnceLock<Vec<u32>> = std::sync::OnceLock::new();
+        let outputs = FLOAT_OUTPUTS.get_or_init(|| {
+            crate::variables::DECLARATIONS
+                .iter()
+                .filter(|d| d.causality == Causality::Output && d.kind == Kind::Float64)
+                .map(|d| d.vr)
+                .collect()
+        });
+        let values = &self.state.values;
+        let finite = |vr: &u32| values.float64(*vr).is_some_and(f64::is_finite);
+        if outputs.iter().fold(true, |ok, vr| ok & finite(vr)) {
+            return Ok(());
+        }
+        let Some(d) = outputs.iter().find(|vr| !finite(vr)).and_then(|vr| crate::variables::declaration(*vr)) else {
+            return Ok(());
+        };
+        let t = self.time();
+        if let Some(sim) = self.state.sim.as_mut() {
+            sim.axis.latch_fault(control_core::faults::Faults::NOT_FINITE);
+            self.state.values.faults = sim.axis.faults().0 as i32;
+        }
+        Err(format!(
+            "output {} is {} at t = {t} s: the non-finite fault is latched (bridge off); clear it with fault_reset",
+            d.name,
+            self.state.values.float64(d.vr).unwrap_or(f64::NAN)
+        ))
     }
 
     /// Turn changes of the sequence inputs into events, in a fixed order: gain, run, stop,

@@ -159,13 +159,28 @@ impl AxisSimulation {
         (self.tick_with(&commands, u.disturbance_torque), commands)
     }
 
+    /// One base tick with the sensor readings altered by `fault` before the core sees them
+    /// (fault campaigns: a NaN or saturated current sample, an encoder jump, a bus fault);
+    /// returns the PWM the core commanded for the next tick.
+    pub fn tick_with_sensor_fault(&mut self, u: &UserInputs, fault: impl FnOnce(&mut AxisInputs)) -> PwmOutput {
+        let commands = self.commands(u);
+        self.tick_inner(&commands, u.disturbance_torque, fault);
+        self.pending
+    }
+
     fn tick_with(&mut self, commands: &Commands, disturbance_torque: f64) -> AxisInputs {
+        self.tick_inner(commands, disturbance_torque, |_| {})
+    }
+
+    #[inline(always)]
+    fn tick_inner(&mut self, commands: &Commands, disturbance_torque: f64, fault: impl FnOnce(&mut AxisInputs)) -> AxisInputs {
         let m = self.plant.measure();
-        let inputs = AxisInputs {
+        let mut inputs = AxisInputs {
             phase_currents: [m.phase_currents[0] as f32, m.phase_currents[1] as f32],
             encoder_count: m.encoder_count,
             bus_voltage: m.bus_voltage as f32,
         };
+        fault(&mut inputs);
         let pwm = self.axis.step(&inputs, commands);
         let applied = PlantInputs {
             duties: self.pending.duties.map(|d| d as f64),

@@ -174,3 +174,69 @@ fn a_restored_state_continues_bit_for_bit_like_the_uninterrupted_run() {
     assert_eq!(first, second);
     assert!(first.last().unwrap().motor_position > 0.5, "the axis moved");
 }
+
+#[test]
+fn a_non_finite_output_is_an_error_and_latches_the_fault() {
+    let mut m = initialized();
+    m.do_step(0.0, 0.00025).unwrap();
+    // A plant that has blown up (no accepted parameter set does this: the state is forced).
+    m.state.sim.as_mut().unwrap().plant.state.load_velocity = f64::NAN;
+    let err = m.do_step(0.00025, 0.00025).unwrap_err();
+    assert!(err.contains("is NaN") && err.contains("latched"), "{err}");
+    assert_ne!(m.values().faults & control_core::faults::Faults::NOT_FINITE as i32, 0);
+    assert!(m.state.sim.as_ref().unwrap().axis.faults().contains(control_core::faults::Faults::NOT_FINITE));
+}
+
+/// Every parameter at each end of its declared range (the others at their defaults), and
+/// every input at each end of its range during a run: initialisation refuses the setting with
+/// a reason, or every step ends with finite outputs (a non-finite one would be an error with
+/// the fault latched, never an OK step).
+#[test]
+fn range_extremes_never_give_a_non_finite_output_with_an_ok_step() {
+    use crate::variables::{Causality, Kind, DECLARATIONS};
+    let value = |kind: Kind, x: f64| match kind {
+        Kind::Float64 => Value::Float64(x),
+        Kind::Int32 => Value::Int32(x as i32),
+        Kind::Boolean => Value::Boolean(x != 0.0),
+    };
+    let (mut runs, mut refused, mut stopped_by_error) = (0, 0, 0);
+    for d in DECLARATIONS.iter().filter(|d| d.settable() && d.kind != Kind::Boolean) {
+        for bound in [d.range.min, d.range.max].into_iter().flatten() {
+            let mut m = AxisModel::new();
+            set(&mut m, "mode", Value::Int32(2)).unwrap();
+            m.set(d.vr, value(d.kind, bound)).unwrap();
+            if d.causality == Causality::Parameter && m.initialize().is_err() {
+                refused += 1;
+                continue;
+            }
+            if d.causality == Causality::Input {
+                m.initialize().unwrap();
+            }
+            runs += 1;
+            let v = m.values();
+            let period = v.ctrl_position_divider as f64 / v.ctrl_current_loop_hz;
+            let h = period * (0.00025 / period).round().max(1.0);
+            for k in 0..200 {
+                if k == 20 {
+                    let _ = set(&mut m, "position_command", Value::Float64(1.0));
+                }
+                match m.do_step(m.time(), h) {
+                    Ok(()) => {
+                        for o in DECLARATIONS.iter().filter(|o| o.causality == Causality::Output) {
+                            let x = m.get(o.vr).unwrap().as_f64();
+                            assert!(x.is_finite(), "{} = {bound}: {} = {x} after an OK step {k}", d.name, o.name);
+                        }
+                    }
+                    Err(e) => {
+                        assert!(e.contains("latched") || e.contains("mode"), "{} = {bound}: {e}", d.name);
+                        stopped_by_error += 1;
+                        println!("stopped: {} = {bound}: {e}", d.name);
+                        break;
+                    }
+                }
+            }
+        }
+    }
+    assert!(runs > 150, "{runs} runs, {refused} refused");
+    println!("{runs} runs at range ends, {refused} refused at initialisation, {stopped_by_error} stopped by a latched non-finite fault");
+}

@@ -209,8 +209,8 @@ declare_variables! {
     // Motor, mechanics, encoder and sensors of the simulated machine.
     25 plant_pole_pairs: Int32 "plant.pole_pairs" Parameter Fixed = plant_count(|p| p.pole_pairs); NONE; r(1.0, 64.0); "Motor pole pairs";
     26 plant_resistance: Float64 "plant.resistance" Parameter Fixed = plant(|p| p.resistance); OHM; r(1.0e-6, 1.0e3); "Stator resistance";
-    27 plant_ld: Float64 "plant.ld" Parameter Fixed = plant(|p| p.ld); H; r(1.0e-9, 10.0); "d-axis inductance";
-    28 plant_lq: Float64 "plant.lq" Parameter Fixed = plant(|p| p.lq); H; r(1.0e-9, 10.0); "q-axis inductance";
+    27 plant_ld: Float64 "plant.ld" Parameter Fixed = plant(|p| p.ld); H; r(1.0e-6, 10.0); "d-axis inductance (1 µH and up: the winding is solved exactly, a smaller L underflows its exponential)";
+    28 plant_lq: Float64 "plant.lq" Parameter Fixed = plant(|p| p.lq); H; r(1.0e-6, 10.0); "q-axis inductance";
     29 plant_flux_linkage: Float64 "plant.flux_linkage" Parameter Fixed = plant(|p| p.flux_linkage); WB; r(1.0e-6, 10.0); "Permanent-magnet flux linkage";
     30 plant_bus_voltage: Float64 "plant.bus_voltage" Parameter Fixed = plant(|p| p.bus_voltage); V; r(1.0e-3, 1.0e4); "DC-bus voltage";
     31 plant_motor_inertia: Float64 "plant.motor_inertia" Parameter Fixed = plant(|p| p.motor_inertia); KGM2; r(1.0e-9, 1.0e3); "Motor (rotor) inertia";

@@ -6,6 +6,7 @@ mod circle;
 mod device;
 mod firmware;
 mod ident;
+mod robustness;
 mod sequence;
 mod sweep;
 
@@ -469,6 +470,34 @@ enum BenchCommand {
         #[command(flatten)]
         common: Common,
     },
+    /// Random FMI call sequences through fmpy on both archives (FMI 3.0 and 2.0): every
+    /// function in any state, valid and hostile arguments (unknown value references, NaN,
+    /// huge values, steps of 0, 1e300 or off the grid, corrupt serialized states). Goals: no
+    /// crash, no hang, no OK step with a non-finite output.
+    FmiCampaign {
+        /// Seconds of calls per archive
+        #[arg(long, default_value_t = 20.0)]
+        seconds: f64,
+        /// Seed of the call sequences (the same seed gives the same calls)
+        #[arg(long, default_value_t = 1)]
+        seed: u64,
+        #[command(flatten)]
+        common: Common,
+    },
+    /// Faults injected at random times into the simulated axis: a NaN or saturated current
+    /// sample, an encoder disconnect, bus under- and over-voltage, the power stage's break, a
+    /// following-error runaway. Prints per fault the worst reaction (ticks from detection to
+    /// the bridge off; goal ≤ 1), restarts before ClearFaults (goal 0) and recovery after it.
+    FaultCampaign {
+        /// Runs per fault kind
+        #[arg(long, default_value_t = 100)]
+        runs: usize,
+        /// Seed of the injection times and settings
+        #[arg(long, default_value_t = 1)]
+        seed: u64,
+        #[command(flatten)]
+        common: Common,
+    },
     /// Run a filter for the instruction count of `servo bench accdec` (valgrind runs this).
     #[command(hide = true)]
     AccdecProbe {
@@ -611,6 +640,8 @@ fn main() -> ExitCode {
         ),
         Command::Bench(BenchCommand::Fmu { seconds, no_fmpy, goal, common }) => backbone::bench_fmu(*seconds, *no_fmpy, *goal, common),
         Command::Bench(BenchCommand::Plant { common }) => backbone::bench_plant(common),
+        Command::Bench(BenchCommand::FmiCampaign { seconds, seed, common }) => robustness::bench_fmi_campaign(*seconds, *seed, common),
+        Command::Bench(BenchCommand::FaultCampaign { runs, seed, common }) => robustness::bench_fault_campaign(*runs, *seed, common),
         Command::Bench(BenchCommand::Firmware { common }) => firmware::bench_firmware(common),
         Command::Bench(BenchCommand::Accdec { sequences, resonance, no_cost, common }) => {
             acc_dec::bench_accdec(*sequences, resonance, *no_cost, common)
