@@ -375,13 +375,18 @@ impl AxisModel {
         // A logarithm and an arctangent: only when the result they come from changes.
         let key = (w.last.re.to_bits(), w.last.im.to_bits());
         if s.reported_sweep_result != Some(key) {
-            // No result yet (0 + 0j): 0 dB and 0 deg rather than -inf.
-            let measured = w.last.re != 0.0 || w.last.im != 0.0;
-            o.sweep_last_gain_db = if measured { w.last.gain_db() as f64 } else { 0.0 };
-            o.sweep_last_phase_deg = if measured { w.last.phase_deg() as f64 } else { 0.0 };
+            // No result yet (0 + 0j), or none the excitation defines (U without power at the
+            // frequency: a ratio that is not finite): 0 dB, 0 deg and quality 0, rather than
+            // -inf or NaN. Quality 0 says the gain and phase mean nothing.
+            let measured = w.last.re.is_finite() && w.last.im.is_finite() && (w.last.re != 0.0 || w.last.im != 0.0);
+            let gain = w.last.gain_db() as f64;
+            let phase = w.last.phase_deg() as f64;
+            let defined = measured && gain.is_finite() && phase.is_finite();
+            o.sweep_last_gain_db = if defined { gain } else { 0.0 };
+            o.sweep_last_phase_deg = if defined { phase } else { 0.0 };
+            o.sweep_last_quality = if defined && w.last.quality.is_finite() { w.last.quality as f64 } else { 0.0 };
             s.reported_sweep_result = Some(key);
         }
-        o.sweep_last_quality = w.last.quality as f64;
         o.acq_time = s.start_time + w.sample.tick as f64 * sim.tick_period();
         o.acq_u = w.sample.u as f64;
         o.acq_y = w.sample.y as f64;

@@ -212,6 +212,22 @@ fn correction(v: &Values) -> Result<CorrectionParams, String> {
     Ok(p)
 }
 
+/// The names of the parameters of correction section i (0-based): zero frequency, zero
+/// damping, pole frequency, pole damping — in the order `correction` reads them.
+pub const CORRECTION_SECTIONS: [[&str; 4]; 8] = [
+    [name::corr_zero_hz_1, name::corr_zero_damping_1, name::corr_pole_hz_1, name::corr_pole_damping_1],
+    [name::corr_zero_hz_2, name::corr_zero_damping_2, name::corr_pole_hz_2, name::corr_pole_damping_2],
+    [name::corr_zero_hz_3, name::corr_zero_damping_3, name::corr_pole_hz_3, name::corr_pole_damping_3],
+    [name::corr_zero_hz_4, name::corr_zero_damping_4, name::corr_pole_hz_4, name::corr_pole_damping_4],
+    [name::corr_zero_hz_5, name::corr_zero_damping_5, name::corr_pole_hz_5, name::corr_pole_damping_5],
+    [name::corr_zero_hz_6, name::corr_zero_damping_6, name::corr_pole_hz_6, name::corr_pole_damping_6],
+    [name::corr_zero_hz_7, name::corr_zero_damping_7, name::corr_pole_hz_7, name::corr_pole_damping_7],
+    [name::corr_zero_hz_8, name::corr_zero_damping_8, name::corr_pole_hz_8, name::corr_pole_damping_8],
+];
+
+/// The names of the moving-average stage lengths, stage 1 to 3.
+pub const MOVING_AVERAGE_LENGTHS: [&str; 3] = [name::accdec_ma_length_1, name::accdec_ma_length_2, name::accdec_ma_length_3];
+
 /// The FMU parameter values of a sweep's settings: the inverse of the conversion above, kept
 /// beside it (a test turns one into the other and back).
 pub fn sweep_values(s: &SweepParams) -> Vec<(&'static str, Value)> {
@@ -246,6 +262,29 @@ pub fn sweep_values(s: &SweepParams) -> Vec<(&'static str, Value)> {
 mod tests {
     use super::*;
     use crate::variables::by_name;
+
+    #[test]
+    fn the_section_and_stage_name_tables_reach_the_fields_the_conversion_reads() {
+        let mut v = Values::start();
+        let set = |v: &mut Values, n: &str, x: Value| v.set(by_name(n).unwrap().vr, x).unwrap();
+        set(&mut v, name::corr_count, Value::Int32(8));
+        for (i, names) in CORRECTION_SECTIONS.iter().enumerate() {
+            for (j, n) in names.iter().enumerate() {
+                set(&mut v, n, Value::Float64(10.0 * (i + 1) as f64 + j as f64));
+            }
+        }
+        set(&mut v, name::accdec_filter, Value::Int32(1));
+        for (i, n) in MOVING_AVERAGE_LENGTHS.iter().enumerate() {
+            set(&mut v, n, Value::Int32(5 + i as i32));
+        }
+        let c = simulation_config(&v).unwrap().control;
+        for (i, s) in c.correction.sections.iter().enumerate() {
+            let base = 10.0 * (i + 1) as f32;
+            let z = s.zeros.unwrap();
+            assert_eq!([z.hz, z.damping, s.poles.hz, s.poles.damping], [base, base + 1.0, base + 2.0, base + 3.0]);
+        }
+        assert_eq!(c.acc_dec.ma_lengths, [5, 6, 7]);
+    }
 
     #[test]
     fn sweep_settings_go_to_parameter_values_and_back_unchanged() {

@@ -86,8 +86,9 @@ impl FilterSpec {
                     (name::accdec_filter.into(), Value::Int(1)),
                     (name::accdec_ma_stages.into(), Value::Int(lengths.len() as i64)),
                 ];
-                for (i, l) in lengths.iter().enumerate() {
-                    v.push((format!("accdec.ma_length_{}", i + 1), Value::Int(*l as i64)));
+                // More than three stages: accdec.ma_stages says so and the FMU refuses it.
+                for (l, n) in lengths.iter().zip(servo_axis::parameters::MOVING_AVERAGE_LENGTHS) {
+                    v.push((n.to_string(), Value::Int(*l as i64)));
                 }
                 v
             }

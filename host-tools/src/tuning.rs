@@ -48,13 +48,11 @@ impl AxisCorrection {
     pub fn parameters(&self) -> BTreeMap<String, Value> {
         let mut p = BTreeMap::new();
         p.insert(name::corr_count.into(), Value::Int(self.sections.len() as i64));
-        for (i, s) in self.sections.iter().enumerate() {
-            let n = i + 1;
+        for (s, names) in self.sections.iter().zip(servo_axis::parameters::CORRECTION_SECTIONS) {
             let (zh, zd) = s.zeros.unwrap_or((0.0, 0.0));
-            p.insert(format!("corr.zero_hz_{n}"), Value::Float(zh));
-            p.insert(format!("corr.zero_damping_{n}"), Value::Float(zd));
-            p.insert(format!("corr.pole_hz_{n}"), Value::Float(s.pole_hz));
-            p.insert(format!("corr.pole_damping_{n}"), Value::Float(s.pole_damping));
+            for (n, x) in names.into_iter().zip([zh, zd, s.pole_hz, s.pole_damping]) {
+                p.insert(n.into(), Value::Float(x));
+            }
         }
         p
     }

@@ -369,7 +369,7 @@ declare_variables! {
     170 sweep_last_frequency: Float64 "sweep_last_frequency" Output Discrete = 0.0; HZ; ANY; "Last measured frequency";
     171 sweep_last_gain_db: Float64 "sweep_last_gain_db" Output Discrete = 0.0; DB; ANY; "Its gain (on-line correlator, on the drive)";
     172 sweep_last_phase_deg: Float64 "sweep_last_phase_deg" Output Discrete = 0.0; DEG; ANY; "Its phase";
-    173 sweep_last_quality: Float64 "sweep_last_quality" Output Discrete = 0.0; NONE; ANY; "Its quality: fraction of U's AC power at the excitation frequency";
+    173 sweep_last_quality: Float64 "sweep_last_quality" Output Discrete = 0.0; NONE; ANY; "Its quality: fraction of U's AC power at the excitation frequency (0: no result, or none the excitation defines; gain and phase then read 0)";
     174 acq_time: Float64 "acq_time" Output Discrete = 0.0; S; ANY; "Time of the last acquisition sample (the base tick it was taken at)";
     175 acq_u: Float64 "acq_u" Output Discrete = 0.0; NONE; ANY; "Acquired U (see the README for what it is per injection point)";
     176 acq_y: Float64 "acq_y" Output Discrete = 0.0; RAD_S; ANY; "Acquired Y (the velocity estimate)";
