@@ -14,6 +14,7 @@ pub mod circle_plot;
 pub mod circle_report;
 pub mod circle_test;
 pub mod device_link;
+pub mod frame_stream;
 pub mod firmware;
 pub mod fmu_log;
 pub mod fmu_runner;
