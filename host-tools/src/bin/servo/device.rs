@@ -42,7 +42,9 @@ pub fn device(port: &str, baud: u32, timeout_ms: u64, seconds: f64, action: &[St
             let dropped = batches.last().map_or(0, |b| b.dropped);
             let mut t = Trace::new(["tick", "u", "y", "phase", "measuring", "point", "record"].map(String::from).to_vec());
             let rows = host_tools::frame_stream::sample_rows(&batches).map_err(|e| anyhow::anyhow!("corrupt sample batch from the drive: {e}"))?;
-            t.rows.extend(rows.iter().map(|r| r.to_vec()));
+            for r in &rows {
+                t.rows.push(r.to_vec());
+            }
             let out = common.out.clone().unwrap_or_else(|| default_out("device"));
             std::fs::create_dir_all(&out)?;
             let csv = out.join("stream.csv");
