@@ -10,6 +10,7 @@ use crate::friction_compensation::FrictionCompensation;
 use crate::phase_shifted_sweep::{PhaseShiftedSweep, SweepError, SweepStatus};
 use crate::params::{ParamError, Params};
 use crate::position_loop::PositionLoop;
+use crate::ranges::{check_f32, check_position, Quantity, RangeError, MAX_SPEED};
 use crate::reference_frames::Dq;
 use crate::response_correction::{CorrectionError, CorrectionParams, ResponseCorrection};
 use crate::stop_sequence::{Refusal, SequenceEvent, SequenceStatus, StopSequence};
@@ -76,6 +77,17 @@ pub struct Commands {
     pub velocity: f32,
     /// Torque command (Nm).
     pub torque: f32,
+}
+
+impl Commands {
+    /// Every set-point within its range (`crate::ranges`); the first one outside is named.
+    pub fn validate(&self) -> Result<(), RangeError> {
+        check_position(Quantity::Position, self.position)?;
+        check_f32(Quantity::MoveSpeed, self.move_speed)?;
+        check_f32(Quantity::JogVelocity, self.jog_velocity)?;
+        check_f32(Quantity::Velocity, self.velocity)?;
+        check_f32(Quantity::Torque, self.torque)
+    }
 }
 
 /// Inverter command for the next PWM period.
@@ -274,14 +286,18 @@ impl Axis {
         let mut faults = self.telemetry.faults;
         let p = &self.params;
 
-        if !inputs.phase_currents.iter().all(|x| x.is_finite())
-            || !inputs.bus_voltage.is_finite()
-            || !commands.velocity.is_finite()
-            || !commands.torque.is_finite()
-            || !commands.move_speed.is_finite()
-            || !commands.jog_velocity.is_finite()
-        {
+        if !inputs.phase_currents.iter().all(|x| x.is_finite()) || !inputs.bus_voltage.is_finite() {
             faults.latch(Faults::NOT_FINITE);
+        }
+        // Set-points: a NaN or infinity is a non-finite fault as before; a finite value
+        // outside its range (`crate::ranges`) a range fault. The detailed check only when the
+        // quick one fails.
+        let speeds_in_range = commands.move_speed.abs() <= MAX_SPEED && commands.jog_velocity.abs() <= MAX_SPEED;
+        if !(speeds_in_range && commands.velocity.abs() <= MAX_SPEED && commands.torque.abs() <= crate::ranges::MAX_TORQUE)
+            || commands.position.unsigned_abs() > crate::ranges::MAX_POSITION_COUNTS as u64
+        {
+            let finite = [commands.move_speed, commands.jog_velocity, commands.velocity, commands.torque].iter().all(|x| x.is_finite());
+            faults.latch(if finite { Faults::COMMAND_RANGE } else { Faults::NOT_FINITE });
         }
         if self.encoder.update(inputs.encoder_count, p.encoder_counts_per_rev) == EncoderUpdate::Jump {
             faults.latch(Faults::ENCODER);
@@ -314,7 +330,7 @@ impl Axis {
 
         let position = self.encoder.position();
         if velocity_due {
-            let counts = position - self.position_at_velocity_tick;
+            let counts = position.saturating_sub(self.position_at_velocity_tick);
             self.position_at_velocity_tick = position;
             if self.tick > 0 {
                 self.velocity_estimate =
@@ -330,8 +346,9 @@ impl Axis {
             } else {
                 Move::Stream
             };
-            // A non-finite speed has latched a fault above; it must not reach the carry.
-            let command = if commands.move_speed.is_finite() && commands.jog_velocity.is_finite() {
+            // A non-finite or out-of-range speed has latched a fault above; it must not reach
+            // the carry.
+            let command = if speeds_in_range && commands.position.unsigned_abs() <= crate::ranges::MAX_POSITION_COUNTS as u64 {
                 self.command_path.step(motion, commands.position)
             } else {
                 self.command_path.position()

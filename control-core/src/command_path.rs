@@ -10,6 +10,9 @@
 //!
 //! Fractional pulses of a speed are carried from tick to tick; the filter conserves whole
 //! pulses; so the filtered command ends exactly on the target.
+//!
+//! Positions and speeds are bounded where they enter (`crate::ranges`); the sums here
+//! saturate, so no input, accepted or not, can make them wrap.
 
 use crate::acc_dec::AccDecFilter;
 use crate::response_correction::{CorrectionError, CorrectionParams, ResponseCorrection};
@@ -107,7 +110,7 @@ impl CommandPath {
     /// [`Move::Stream`], but it is watched in every tick so that returning to streaming after
     /// a jog or a positioning move never jumps.
     pub fn step(&mut self, m: Move, position_input: i64) -> i64 {
-        let increment = position_input.wrapping_sub(self.last_stream_input);
+        let increment = position_input.saturating_sub(self.last_stream_input);
         self.last_stream_input = position_input;
         let pulses = match m {
             Move::Stream => {
@@ -115,9 +118,9 @@ impl CommandPath {
                 increment
             }
             Move::Absolute { target, speed } => {
-                let remaining = target - self.interpolated;
+                let remaining = target.saturating_sub(self.interpolated);
                 let step = self.speed_pulses(speed.abs());
-                if step >= remaining.abs() {
+                if step >= remaining.saturating_abs() {
                     self.carry = 0.0;
                     remaining
                 } else {
@@ -126,12 +129,12 @@ impl CommandPath {
             }
             Move::Jog(speed) => {
                 let step = self.speed_pulses(speed.abs());
-                if speed < 0.0 { -step } else { step }
+                if speed < 0.0 { step.saturating_neg() } else { step }
             }
         };
-        self.interpolated = self.interpolated.wrapping_add(pulses);
+        self.interpolated = self.interpolated.saturating_add(pulses);
         self.pulses = self.correction.step(self.filter.step(pulses));
-        self.position = self.position.wrapping_add(self.pulses);
+        self.position = self.position.saturating_add(self.pulses);
         self.position
     }
 }

@@ -39,7 +39,7 @@ impl EncoderTracker {
         }
         let delta = raw.wrapping_sub(self.last_raw) as i64;
         self.last_raw = raw;
-        self.position += delta;
+        self.position = self.position.saturating_add(delta);
         let w = self.within_rev as i64 + delta;
         self.within_rev = if (0..cpr).contains(&w) {
             w as u32

@@ -15,6 +15,8 @@ impl Faults {
     pub const HARDWARE_BREAK: u32 = 1 << 6;
     /// Current sensing is not calibrated or its offsets are implausible.
     pub const SENSING: u32 = 1 << 7;
+    /// A set-point outside its range (`crate::ranges`) reached the loop.
+    pub const COMMAND_RANGE: u32 = 1 << 8;
 
     pub fn any(self) -> bool {
         self.0 != 0
@@ -27,7 +29,7 @@ impl Faults {
     }
     /// Names of the set bits, for logs and reports.
     pub fn names(self) -> impl Iterator<Item = &'static str> {
-        const NAMES: [(u32, &str); 8] = [
+        const NAMES: [(u32, &str); 9] = [
             (Faults::OVERCURRENT, "overcurrent"),
             (Faults::BUS_UNDERVOLTAGE, "bus undervoltage"),
             (Faults::BUS_OVERVOLTAGE, "bus overvoltage"),
@@ -36,6 +38,7 @@ impl Faults {
             (Faults::ENCODER, "encoder jump"),
             (Faults::HARDWARE_BREAK, "hardware break input"),
             (Faults::SENSING, "current sensing not calibrated"),
+            (Faults::COMMAND_RANGE, "command out of range"),
         ];
         NAMES.into_iter().filter(move |(b, _)| self.0 & b != 0).map(|(_, n)| n)
     }

@@ -28,6 +28,7 @@ pub mod phase_shifted_sweep;
 pub mod pi_controller;
 pub mod position_loop;
 pub mod protocol;
+pub mod ranges;
 pub mod reference_frames;
 pub mod response_correction;
 pub mod square_root;
@@ -61,7 +62,8 @@ pub fn counts_to_f32(x: i64) -> f32 {
 #[inline]
 pub(crate) fn release_whole_pulses(stock: &mut i64, pulses: i64, pending: f32) -> i64 {
     let keep = round_to_counts(pending);
-    let out = *stock + pulses - keep;
+    // Saturating: bounded for every accepted command (see `ranges`), never wrapping otherwise.
+    let out = stock.saturating_add(pulses).saturating_sub(keep);
     *stock = keep;
     out
 }

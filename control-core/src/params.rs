@@ -192,6 +192,40 @@ impl fmt::Display for ParamError {
     }
 }
 
+impl ParamError {
+    /// The offending parameter's name (the group for the filters' and sequences' own checks).
+    pub fn field(&self) -> &'static str {
+        use crate::acc_dec::AccDecError as A;
+        use crate::friction_compensation::FrictionCompensationError as F;
+        use crate::response_correction::CorrectionError as C;
+        use crate::stop_sequence::SequenceParamError as S;
+        match *self {
+            Self::NotFinite { field } | Self::NotPositive { field, .. } | Self::OutOfRange { field, .. } | Self::Zero { field } => field,
+            Self::AboveNyquist { field, .. } => field,
+            Self::RatesNotDivisible { .. } => "rates.position_divider",
+            Self::BusLimitsInverted { .. } => "limits.bus_undervoltage",
+            Self::AccDec(A::Order(_)) => "acc_dec.order",
+            Self::AccDec(A::Cutoff(_) | A::CutoffAboveNyquist { .. }) => "acc_dec.cutoff_hz",
+            Self::AccDec(A::Stages(_)) => "acc_dec.stages",
+            Self::AccDec(A::Length { .. }) => "acc_dec.lengths",
+            Self::AccDec(_) => "acc_dec",
+            Self::Sequence(S::NotPositive { field, .. }) => field,
+            Self::Sequence(S::GainCount(_)) => "sequence.gain_count",
+            Self::Sequence(S::Gain { .. }) => "sequence.gains",
+            Self::Sequence(S::SoftLimits { .. } | S::SoftLimitRange { .. }) => "sequence.soft_limit",
+            Self::Friction(F::Amplitude(_)) => "friction.amplitude",
+            Self::Friction(F::Decay(_)) => "friction.decay",
+            Self::Sweep(crate::phase_shifted_sweep::SweepError::Setting { field, .. }) => field,
+            Self::Sweep(crate::phase_shifted_sweep::SweepError::Range { field, .. }) => field,
+            Self::Sweep(_) => "sweep",
+            Self::Correction(C::Count(_)) => "correction.count",
+            Self::Correction(C::Frequency { .. }) => "correction frequency",
+            Self::Correction(C::Damping { .. }) => "correction damping",
+            Self::Correction(_) => "correction",
+        }
+    }
+}
+
 fn finite(field: &'static str, v: f32) -> Result<f32, ParamError> {
     if v.is_finite() { Ok(v) } else { Err(ParamError::NotFinite { field }) }
 }
@@ -293,6 +327,9 @@ impl Params {
         in_range("rates.current_loop_hz", r.current_loop_hz, 1000.0, 200_000.0)?;
         nonzero("rates.velocity_divider", r.velocity_divider)?;
         nonzero("rates.position_divider", r.position_divider)?;
+        let max_divider = crate::ranges::MAX_LOOP_DIVIDER as f32;
+        in_range("rates.velocity_divider", r.velocity_divider as f32, 1.0, max_divider)?;
+        in_range("rates.position_divider", r.position_divider as f32, 1.0, max_divider)?;
         if !r.position_divider.is_multiple_of(r.velocity_divider) {
             return Err(ParamError::RatesNotDivisible {
                 velocity_divider: r.velocity_divider,

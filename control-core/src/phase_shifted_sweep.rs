@@ -126,6 +126,8 @@ impl Default for SweepParams {
 pub enum SweepError {
     /// A value outside its range: the field and the value.
     Setting { field: &'static str, value: f32 },
+    /// A value outside `[min, max]`.
+    Range { field: &'static str, value: f32, min: f32, max: f32 },
     /// A frequency at or above the loop's Nyquist frequency, where the injected sine aliases.
     AboveLoopNyquist { frequency: f32, nyquist: f32 },
     /// More frequencies than the result table holds.
@@ -142,6 +144,7 @@ impl fmt::Display for SweepError {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         match *self {
             Self::Setting { field, value } => write!(f, "sweep {field} = {value} is out of range"),
+            Self::Range { field, value, min, max } => write!(f, "sweep {field} = {value} is outside [{min}, {max}]"),
             Self::AboveLoopNyquist { frequency, nyquist } => {
                 write!(f, "sweep frequency {frequency} Hz is at or above the loop's Nyquist frequency {nyquist} Hz")
             }
@@ -204,7 +207,7 @@ impl SweepParams {
         let d = self.acquisition_divider as f32;
         let settle = libm::ceilf(self.min_settle_s.max(self.settle_cycles / f) * base_rate_hz / d) as u64;
         let samples = (libm::roundf(self.min_measure_s.max(self.measure_cycles / f) * base_rate_hz / d) as u64).max(1);
-        (settle * self.acquisition_divider as u64, samples)
+        (settle.saturating_mul(self.acquisition_divider as u64), samples)
     }
 
     /// Base ticks from the start to the end of the sweep when no frequency is extended (the
@@ -224,16 +227,17 @@ impl SweepParams {
         let d = self.acquisition_divider as u64;
         match self.signal {
             SweepSignal::Prbs => {
-                let settle = libm::ceilf(self.min_settle_s * base_rate_hz / d as f32) as u64 * d;
-                settle + libm::roundf(self.prbs_seconds * base_rate_hz / d as f32) as u64 * d
+                let settle = (libm::ceilf(self.min_settle_s * base_rate_hz / d as f32) as u64).saturating_mul(d);
+                settle.saturating_add((libm::roundf(self.prbs_seconds * base_rate_hz / d as f32) as u64).saturating_mul(d))
             }
             SweepSignal::SteppedSine => (0..self.count())
                 .map(|i| {
                     let f = self.frequency(i);
                     let (settle, samples) = self.record_length(f, base_rate_hz);
-                    self.records(f, base_rate_hz) as u64 * (settle + samples * d * (1 + extensions as u64))
+                    let measure = samples.saturating_mul(d).saturating_mul(1 + extensions as u64);
+                    (self.records(f, base_rate_hz) as u64).saturating_mul(settle.saturating_add(measure))
                 })
-                .sum(),
+                .fold(0u64, u64::saturating_add),
         }
     }
 
@@ -282,6 +286,23 @@ impl SweepParams {
         if self.max_extensions > MAX_EXTENSIONS {
             return Err(SweepError::Setting { field: "max_extensions (at most 64)", value: self.max_extensions as f32 });
         }
+        // Bounds that keep every tick count far from overflow (`crate::ranges`): at most
+        // 10⁴ s or 10⁴ cycles from 1 mHz per record, 2·10¹² ticks at 200 kHz.
+        let range = |field, value: f32, min: f32, max: f32| {
+            if value >= min && value <= max { Ok(()) } else { Err(SweepError::Range { field, value, min, max }) }
+        };
+        use crate::ranges::{MAX_SWEEP_CYCLES, MAX_SWEEP_DIVIDER, MAX_SWEEP_SECONDS, MIN_SWEEP_HZ};
+        range("start_hz", self.start_hz, MIN_SWEEP_HZ, f32::MAX)?;
+        if self.extra_hz != 0.0 {
+            range("extra_hz (0 or above)", self.extra_hz, MIN_SWEEP_HZ, f32::MAX)?;
+        }
+        range("settle_cycles", self.settle_cycles, 0.0, MAX_SWEEP_CYCLES)?;
+        range("measure_cycles", self.measure_cycles, 0.0, MAX_SWEEP_CYCLES)?;
+        range("min_settle_s", self.min_settle_s, 0.0, MAX_SWEEP_SECONDS)?;
+        range("min_measure_s", self.min_measure_s, 0.0, MAX_SWEEP_SECONDS)?;
+        range("prbs_seconds", self.prbs_seconds, 0.0, MAX_SWEEP_SECONDS)?;
+        range("acquisition_divider", self.acquisition_divider as f32, 1.0, MAX_SWEEP_DIVIDER as f32)?;
+        range("prbs_divider", self.prbs_divider as f32, 1.0, MAX_SWEEP_DIVIDER as f32)?;
         // The sine is updated at the velocity-loop rate for velocity-loop points.
         let loop_rate = if self.point == InjectionPoint::TorqueCommand { base_rate_hz } else { base_rate_hz / velocity_divider as f32 };
         let top = self.stop_hz.max(self.extra_hz);
@@ -546,7 +567,7 @@ impl PhaseShiftedSweep {
         self.status.state = SweepState::Settling;
         if p.signal == SweepSignal::Prbs {
             let d = p.acquisition_divider as u64;
-            self.left = libm::ceilf(p.min_settle_s * self.base_rate_hz / d as f32) as u64 * d;
+            self.left = (libm::ceilf(p.min_settle_s * self.base_rate_hz / d as f32) as u64).saturating_mul(d);
             self.status.frequency = 0.0;
             return;
         }
@@ -626,9 +647,10 @@ impl PhaseShiftedSweep {
                     // Later records take the blocks the first one was given.
                     SweepSignal::SteppedSine => {
                         let blocks = if self.status.record == 0 { 1 } else { 1 + self.extensions as u64 };
-                        p.record_length(self.status.frequency, self.base_rate_hz).1 * blocks
+                        p.record_length(self.status.frequency, self.base_rate_hz).1.saturating_mul(blocks)
                     }
-                } * divider as u64;
+                }
+                .saturating_mul(divider as u64);
             }
             SweepState::Measuring if signal == SweepSignal::Prbs => self.status.state = SweepState::Done,
             SweepState::Measuring => {
@@ -641,7 +663,9 @@ impl PhaseShiftedSweep {
                 if self.status.record == 0 && self.extensions == 0 {
                     self.extensions = self.blocks_needed(records);
                     if self.extensions > 0 {
-                        self.left = self.extensions as u64 * self.params.record_length(f, self.base_rate_hz).1 * divider as u64;
+                        self.left = (self.extensions as u64)
+                            .saturating_mul(self.params.record_length(f, self.base_rate_hz).1)
+                            .saturating_mul(divider as u64);
                         return;
                     }
                 }

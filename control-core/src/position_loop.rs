@@ -24,10 +24,10 @@ impl PositionLoop {
 
     pub fn step(&mut self, p: &Params, command: i64, feedback: i64) -> PositionLoopOutput {
         let rad_per_count = TAU / p.encoder_counts_per_rev as f32;
-        let error = crate::counts_to_f32(command - feedback) * rad_per_count;
+        let error = crate::counts_to_f32(command.saturating_sub(feedback)) * rad_per_count;
         let previous = self.previous_command.replace(command).unwrap_or(command);
         let feedforward =
-            crate::counts_to_f32(command - previous) * rad_per_count / p.rates.position_period();
+            crate::counts_to_f32(command.saturating_sub(previous)) * rad_per_count / p.rates.position_period();
         let v = p.position.kp * error + p.position.velocity_feedforward * feedforward;
         let limit = p.position.velocity_limit;
         PositionLoopOutput { velocity_reference: v.clamp(-limit, limit), following_error: error }

@@ -81,6 +81,8 @@ pub enum SequenceParamError {
     Gain { index: usize, value: f32 },
     /// Soft limits not in order.
     SoftLimits { min: i64, max: i64 },
+    /// A soft limit beyond ±2⁵³ counts (`crate::ranges::MAX_POSITION_COUNTS`).
+    SoftLimitRange { value: i64 },
 }
 
 impl fmt::Display for SequenceParamError {
@@ -90,6 +92,11 @@ impl fmt::Display for SequenceParamError {
             Self::GainCount(n) => write!(f, "gain table of {n} entries: use 1..={MAX_GAINS}"),
             Self::Gain { index, value } => write!(f, "gain-table entry {index} must be > 0 (got {value})"),
             Self::SoftLimits { min, max } => write!(f, "soft limits {min}..{max} counts: min must be below max"),
+            Self::SoftLimitRange { value } => write!(
+                f,
+                "soft limit {value} counts is outside [-{m}, {m}] counts",
+                m = crate::ranges::MAX_POSITION_COUNTS
+            ),
         }
     }
 }
@@ -110,6 +117,11 @@ impl SequenceParams {
         for (index, &value) in self.gains[..self.gain_count].iter().enumerate() {
             if !(value.is_finite() && value > 0.0) {
                 return Err(SequenceParamError::Gain { index, value });
+            }
+        }
+        for value in [self.soft_limit_min, self.soft_limit_max] {
+            if value.unsigned_abs() > crate::ranges::MAX_POSITION_COUNTS as u64 {
+                return Err(SequenceParamError::SoftLimitRange { value });
             }
         }
         if self.soft_limit_min >= self.soft_limit_max {
@@ -351,7 +363,7 @@ impl StopSequence {
                 // The P branch decelerates at gain²·|e| ≤ a, so no gain in the table can
                 // make the slewed reference lag behind and overshoot.
                 let gain = p.position_gain * p.gains[s.gain_index];
-                let deviation = crate::counts_to_f32(s.target - position) * (TAU / counts_per_rev as f32);
+                let deviation = crate::counts_to_f32(s.target.saturating_sub(position)) * (TAU / counts_per_rev as f32);
                 let magnitude = deviation.abs();
                 let speed = (gain * magnitude).min(crate::square_root::sqrt(p.acceleration * magnitude)).min(p.target_speed);
                 libm::copysignf(speed, deviation)
@@ -360,7 +372,7 @@ impl StopSequence {
         let max_change = p.acceleration * dt;
         s.speed_reference += (wanted - s.speed_reference).clamp(-max_change, max_change);
         if s.state.position_control() {
-            s.deviation = s.target - position;
+            s.deviation = s.target.saturating_sub(position);
             s.complete = s.deviation.unsigned_abs() <= p.completion_counts as u64;
         } else {
             s.deviation = 0;

@@ -1,5 +1,6 @@
 //! The host's side of the drive link: the core's protocol (`control_core::protocol`: postcard
-//! messages, CRC-16, COBS, zero-delimited frames) over any byte stream — the drive's USART
+//! messages, CRC-32C, COBS, zero-delimited frames, version 3; every count field checked
+//! before use, `frame_stream`) over any byte stream — the drive's USART
 //! through the ST-LINK virtual COM port, or a socket to a simulated drive in tests.
 //!
 //! Every request gets one answer. While streaming is on, the drive also sends `Samples`
@@ -11,19 +12,21 @@ use std::time::{Duration, Instant};
 
 use anyhow::{bail, Context, Result};
 use control_core::acquisition_stream::SampleBatch;
-use control_core::protocol::{decode, encode, Request, Response, MAX_FRAME, VERSION};
+use control_core::protocol::{encode, Request, Response, MAX_FRAME, VERSION};
+
+use crate::frame_stream::FrameStream;
 
 pub struct DeviceLink<T: Read + Write> {
     port: T,
     /// Bytes read but not yet part of a complete frame.
-    pending: Vec<u8>,
+    pending: FrameStream,
     samples: Vec<SampleBatch>,
     timeout: Duration,
 }
 
 impl<T: Read + Write> DeviceLink<T> {
     pub fn new(port: T, timeout: Duration) -> Self {
-        Self { port, pending: Vec::new(), samples: Vec::new(), timeout }
+        Self { port, pending: FrameStream::default(), samples: Vec::new(), timeout }
     }
 
     /// Send one request and wait for its answer.
@@ -73,27 +76,36 @@ impl<T: Read + Write> DeviceLink<T> {
     fn next_frame(&mut self, deadline: Instant) -> Result<Response> {
         let mut chunk = [0u8; 256];
         loop {
-            if let Some(end) = self.pending.iter().position(|&b| b == 0) {
-                let mut frame: Vec<u8> = self.pending.drain(..=end).collect();
-                if frame.len() == 1 {
-                    continue; // an empty frame between delimiters
-                }
-                return decode::<Response>(&mut frame).map_err(|e| anyhow::anyhow!("corrupt frame from the drive: {e}"));
-            }
-            if self.pending.len() > MAX_FRAME + 8 {
-                self.pending.clear();
-                bail!("the drive sent more than {MAX_FRAME} bytes without a frame delimiter");
+            match self.pending.next_frame() {
+                Some(Ok(r)) => return Ok(r),
+                Some(Err(e)) => bail!("corrupt frame from the drive: {e}"),
+                None => {}
             }
             if Instant::now() >= deadline {
                 bail!("no answer from the drive within {:?}", self.timeout);
             }
             match self.port.read(&mut chunk) {
                 Ok(0) => bail!("the drive closed the link"),
-                Ok(n) => self.pending.extend_from_slice(&chunk[..n]),
+                Ok(n) => self.pending.push(&chunk[..n]),
                 Err(e) if matches!(e.kind(), std::io::ErrorKind::TimedOut | std::io::ErrorKind::WouldBlock | std::io::ErrorKind::Interrupted) => {}
                 Err(e) => return Err(e).context("cannot read from the drive"),
             }
         }
+    }
+}
+
+/// A `LoadCorrection` frame (`servo tune`'s `<axis>.corr.frame`), checked as the drive would
+/// check it (`CorrectionParams::validate` through `Axis::load_correction`) at the
+/// position-loop period of the parameters the firmware installs (`Params::default` rates).
+pub fn correction_request(frame: &mut [u8]) -> Result<Request> {
+    match control_core::protocol::decode::<Request>(frame) {
+        Ok(r @ Request::LoadCorrection(c)) => {
+            let period = control_core::Params::default().rates.position_period();
+            c.validate(period).map_err(|e| anyhow::anyhow!("the drive would refuse this correction: {e}"))?;
+            Ok(r)
+        }
+        Ok(other) => bail!("a {other:?} request, not a correction"),
+        Err(e) => bail!("not a frame of protocol version {VERSION}: {e}"),
     }
 }
 
@@ -110,7 +122,7 @@ mod tests {
     use super::*;
     use control_core::acquisition_stream::AcquisitionStream;
     use control_core::phase_shifted_sweep::AcquisitionSample;
-    use control_core::protocol::handle;
+    use control_core::protocol::{decode, handle};
     use control_core::{Axis, Commands, Params};
     use std::os::unix::net::UnixStream;
 
@@ -159,7 +171,7 @@ mod tests {
         assert!(matches!(link.request(&Request::GetTelemetry).unwrap(), Response::Telemetry(_)));
         assert_eq!(link.request(&Request::ClearFaults).unwrap(), Response::Done);
         let ticks: Vec<u64> =
-            link.take_samples().iter().flat_map(|b| b.samples[..b.count as usize].iter().map(|s| s.tick).collect::<Vec<_>>()).collect();
+            link.take_samples().iter().flat_map(|b| crate::frame_stream::batch_samples(b).unwrap().iter().map(|s| s.tick).collect::<Vec<_>>()).collect();
         assert!(ticks.len() >= 40, "{} samples", ticks.len());
         assert!(ticks.windows(2).all(|w| w[1] == w[0] + 4), "in order, none lost: {ticks:?}");
         // A version the drive does not speak is an error with the reason.
@@ -170,6 +182,45 @@ mod tests {
         assert!(e.contains("version"), "{e}");
         drop(link);
         t.join().unwrap();
+    }
+
+    /// Issue 18: a correction with a NaN pole or 99 sections is refused before it is sent.
+    #[test]
+    fn corrections_are_checked_as_the_drive_checks_them() {
+        let good = control_core::Params::default().correction;
+        let frame = |c| {
+            let mut buf = vec![0u8; MAX_FRAME + 8];
+            let n = encode(&Request::LoadCorrection(c), &mut buf).unwrap();
+            buf.truncate(n);
+            buf
+        };
+        assert!(correction_request(&mut frame(good)).is_ok());
+        let mut nan = good;
+        nan.count = 1;
+        nan.sections[0].poles.hz = f32::NAN;
+        let e = correction_request(&mut frame(nan)).unwrap_err().to_string();
+        assert!(e.contains("would refuse"), "{e}");
+        let many = control_core::response_correction::CorrectionParams { count: 99, ..good };
+        let e = correction_request(&mut frame(many)).unwrap_err().to_string();
+        assert!(e.contains("would refuse"), "{e}");
+        // And the drive does refuse both (the host's check is the drive's).
+        let mut axis = Axis::new(control_core::Params::default()).unwrap();
+        for c in [nan, many] {
+            assert!(axis.load_correction(&c).is_err());
+        }
+    }
+
+    /// Issue 18: a CRC-valid Samples frame whose count says 200 is an error, not a panic.
+    #[test]
+    fn a_sample_count_beyond_its_slots_is_an_error() {
+        let mut b = SampleBatch::default();
+        b.count = 200;
+        let mut buf = vec![0u8; MAX_FRAME + 8];
+        let n = encode(&Response::Samples(b), &mut buf).unwrap();
+        let mut s = FrameStream::default();
+        s.push(&buf[..n]);
+        assert!(matches!(s.next_frame(), Some(Err(control_core::protocol::FrameError::Count { got: 200, max: 16 }))));
+        assert!(crate::frame_stream::sample_rows(&[b]).is_err());
     }
 
     #[test]

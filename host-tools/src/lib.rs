@@ -15,6 +15,7 @@ pub mod circle_report;
 pub mod circle_test;
 pub mod device_link;
 pub mod fault_campaign;
+pub mod frame_stream;
 pub mod firmware;
 pub mod fmi_campaign;
 pub mod fmu_log;

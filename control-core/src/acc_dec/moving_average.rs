@@ -22,8 +22,10 @@ impl Stage {
         let n = self.length as i64;
         let oldest = core::mem::replace(&mut self.window[self.next], x);
         self.next = (self.next + 1) % self.length as usize;
-        self.sum += x - oldest;
-        let total = self.sum + self.remainder;
+        // Saturating: far from the bounds for accepted commands (`crate::ranges`), and
+        // never wrapping for any other.
+        self.sum = self.sum.saturating_add(x.saturating_sub(oldest));
+        let total = self.sum.saturating_add(self.remainder);
         self.remainder = total.rem_euclid(n);
         total.div_euclid(n)
     }

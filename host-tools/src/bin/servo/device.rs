@@ -3,7 +3,7 @@
 use super::*;
 
 pub fn device(port: &str, baud: u32, timeout_ms: u64, seconds: f64, action: &[String], common: &Common) -> Result<bool> {
-    use control_core::protocol::{decode, Request, Response};
+    use control_core::protocol::{Request, Response};
     use host_tools::device_link::{open_serial, DeviceLink};
     let (what, arg) = (action[0].as_str(), action.get(1));
     // Everything that can be checked before the port is opened.
@@ -20,11 +20,7 @@ pub fn device(port: &str, baud: u32, timeout_ms: u64, seconds: f64, action: &[St
         }
         ("load-correction", Some(file)) => {
             let mut frame = std::fs::read(file).with_context(|| format!("cannot read {file}"))?;
-            match decode::<Request>(&mut frame) {
-                Ok(r @ Request::LoadCorrection(_)) => Some(r),
-                Ok(other) => bail!("{file} holds a {other:?} request, not a correction"),
-                Err(e) => bail!("{file} is not a frame of this protocol version: {e}"),
-            }
+            Some(host_tools::device_link::correction_request(&mut frame).with_context(|| format!("{file}"))?)
         }
         ("load-correction", None) => bail!("load-correction needs the <axis>.corr.frame file `servo tune` wrote"),
         _ => bail!("unknown action `{}`: use hello, telemetry, clear-faults, start-sweep, load-correction FILE or stream", action.join(" ")),
@@ -45,10 +41,9 @@ pub fn device(port: &str, baud: u32, timeout_ms: u64, seconds: f64, action: &[St
             let batches = link.take_samples();
             let dropped = batches.last().map_or(0, |b| b.dropped);
             let mut t = Trace::new(["tick", "u", "y", "phase", "measuring", "point", "record"].map(String::from).to_vec());
-            for b in &batches {
-                for s in &b.samples[..b.count as usize] {
-                    t.rows.push(vec![s.tick as f64, s.u as f64, s.y as f64, s.phase as f64, s.measuring as u8 as f64, s.point as f64, s.record as f64]);
-                }
+            let rows = host_tools::frame_stream::sample_rows(&batches).map_err(|e| anyhow::anyhow!("corrupt sample batch from the drive: {e}"))?;
+            for r in &rows {
+                t.rows.push(r.to_vec());
             }
             let out = common.out.clone().unwrap_or_else(|| default_out("device"));
             std::fs::create_dir_all(&out)?;
@@ -60,7 +55,7 @@ pub fn device(port: &str, baud: u32, timeout_ms: u64, seconds: f64, action: &[St
         (_, Some(r)) => match link.request(&r)? {
             Response::Telemetry(t) => serde_json::json!({"telemetry": format!("{t:?}")}),
             Response::Done => serde_json::json!({"done": true}),
-            Response::Refused(why) => bail!("the drive refused the request: {why:?}"),
+            Response::Refused(why) => bail!("the drive refused the request: {why}"),
             Response::FrameError(e) => bail!("the drive could not read the request: {e}"),
             other => bail!("unexpected answer: {other:?}"),
         },

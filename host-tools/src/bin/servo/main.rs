@@ -392,6 +392,25 @@ enum Command {
 
 #[derive(Subcommand)]
 enum BenchCommand {
+    /// Robustness campaigns of the drive link, seeded and time-bounded, run with integer
+    /// overflow checks on (cargo profile `robustness`, built on first use): `frames` (the
+    /// frame decoder under byte mutations), `requests` (decode → handle → ticks of the
+    /// drive), `stream` (the host's parsing of the drive's bytes). Prints inputs tried,
+    /// crashes, accepted-corrupt frames, overflow panics (goal 0 each) and wall time; exits 1
+    /// when a goal is missed.
+    Robustness {
+        /// frames, requests, stream or all
+        #[arg(long, default_value = "all")]
+        campaign: String,
+        /// Wall time per campaign (s)
+        #[arg(long, default_value_t = 20.0)]
+        seconds: f64,
+        /// Seed of the mutations
+        #[arg(long, default_value_t = 0x5EED_0018)]
+        seed: u64,
+        #[command(flatten)]
+        common: Common,
+    },
     /// The firmware's figures: flash and RAM of the drive image; golden vectors
     /// replayed bit for bit on a Cortex-M4F in QEMU against the host; instructions per 16 kHz
     /// tick on the Cortex-M4 (QEMU -icount: instructions, not cycles), on average over the
@@ -642,6 +661,7 @@ fn main() -> ExitCode {
         Command::Bench(BenchCommand::Plant { common }) => backbone::bench_plant(common),
         Command::Bench(BenchCommand::FmiCampaign { seconds, seed, common }) => robustness::bench_fmi_campaign(*seconds, *seed, common),
         Command::Bench(BenchCommand::FaultCampaign { runs, seed, common }) => robustness::bench_fault_campaign(*runs, *seed, common),
+        Command::Bench(BenchCommand::Robustness { campaign, seconds, seed, common }) => bench_robustness(campaign, *seconds, *seed, common),
         Command::Bench(BenchCommand::Firmware { common }) => firmware::bench_firmware(common),
         Command::Bench(BenchCommand::Accdec { sequences, resonance, no_cost, common }) => {
             acc_dec::bench_accdec(*sequences, resonance, *no_cost, common)
@@ -664,5 +684,30 @@ fn main() -> ExitCode {
             eprintln!("error: {e:#}");
             ExitCode::from(2)
         }
+    }
+}
+
+/// `servo bench robustness`: the campaigns live in `robustness/` and run from a build with
+/// overflow checks (`cargo run --profile robustness -p robustness`), which this release
+/// binary is not; their figures are printed as they come.
+fn bench_robustness(campaign: &str, seconds: f64, seed: u64, common: &Common) -> Result<bool> {
+    if !["frames", "requests", "stream", "all"].contains(&campaign) {
+        bail!("unknown campaign `{campaign}`: frames, requests, stream or all");
+    }
+    if !(seconds.is_finite() && seconds > 0.0 && seconds <= 86_400.0) {
+        bail!("--seconds must be in (0, 86400] (got {seconds})");
+    }
+    let mut cmd = std::process::Command::new(std::env::var("CARGO").unwrap_or_else(|_| "cargo".into()));
+    cmd.current_dir(workspace_root())
+        .args(["run", "--profile", "robustness", "-q", "-p", "robustness", "--"])
+        .args(["--campaign", campaign, "--seconds", &seconds.to_string(), "--seed", &seed.to_string()]);
+    if common.json {
+        cmd.arg("--json");
+    }
+    let status = cmd.status().context("cannot run cargo for the robustness campaigns")?;
+    match status.code() {
+        Some(0) => Ok(true),
+        Some(1) => Ok(false),
+        _ => bail!("the robustness campaigns did not run to the end ({status})"),
     }
 }
