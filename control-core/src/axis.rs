@@ -344,13 +344,20 @@ impl Axis {
             }
         }
         if commands.mode == Mode::Sequence && position_due {
+            // The velocity loop's integral as the travel its integral action still owes
+            // (the hand-over at a stop accounts for it; see `stop_sequence`).
+            let integral_position = if p.velocity.ki > 0.0 { self.velocity_loop.integral() / p.velocity.ki } else { 0.0 };
             self.velocity_reference = self.sequence.step(
                 &p.sequence,
                 p.encoder_counts_per_rev,
                 position,
                 self.velocity_estimate,
                 p.rates.position_period(),
+                integral_position,
             );
+            if let Some(held) = self.sequence.take_integrator_release() {
+                self.velocity_loop.set_integral(held * p.velocity.ki);
+            }
         }
         if commands.mode != Mode::Torque && velocity_due {
             if commands.mode == Mode::Velocity {

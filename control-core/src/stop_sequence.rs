@@ -29,6 +29,8 @@ use crate::TAU;
 
 /// Largest gain table.
 pub const MAX_GAINS: usize = 8;
+/// Longest completion hold time (s).
+pub const MAX_COMPLETION_HOLD: f32 = 10.0;
 
 #[derive(Clone, Copy, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct SequenceParams {
@@ -40,8 +42,13 @@ pub struct SequenceParams {
     pub zero_speed: f32,
     /// Base position gain (1/s, > 0): speed reference per radian of deviation.
     pub position_gain: f32,
-    /// Completion while |deviation| ≤ this many counts.
+    /// In position: |deviation| ≤ this many counts (and |speed| ≤ the zero-speed level).
     pub completion_counts: u32,
+    /// Completion is raised once the axis has stayed in position this long (s, ≥ 0).
+    pub completion_hold: f32,
+    /// Once raised, completion drops only when |deviation| exceeds the width by more than
+    /// this many counts (or on a new target).
+    pub completion_hysteresis: u32,
     /// Gain-table multipliers (the first `gain_count` are used; each > 0).
     pub gains: [f32; MAX_GAINS],
     pub gain_count: usize,
@@ -61,6 +68,8 @@ impl Default for SequenceParams {
             zero_speed: 2.0,
             position_gain: 20.0,
             completion_counts: 8,
+            completion_hold: 0.02,
+            completion_hysteresis: 24,
             // Entries 5–8 (½, ¼, 16, 32) are there to be switched on with `gain_count`.
             gains: [1.0, 2.0, 4.0, 8.0, 0.5, 0.25, 16.0, 32.0],
             gain_count: 4,
@@ -81,6 +90,8 @@ pub enum SequenceParamError {
     Gain { index: usize, value: f32 },
     /// Soft limits not in order.
     SoftLimits { min: i64, max: i64 },
+    /// Completion hold time outside 0 … [`MAX_COMPLETION_HOLD`] s.
+    CompletionHold(f32),
 }
 
 impl fmt::Display for SequenceParamError {
@@ -90,6 +101,7 @@ impl fmt::Display for SequenceParamError {
             Self::GainCount(n) => write!(f, "gain table of {n} entries: use 1..={MAX_GAINS}"),
             Self::Gain { index, value } => write!(f, "gain-table entry {index} must be > 0 (got {value})"),
             Self::SoftLimits { min, max } => write!(f, "soft limits {min}..{max} counts: min must be below max"),
+            Self::CompletionHold(t) => write!(f, "completion hold {t} s: use 0 to {MAX_COMPLETION_HOLD} s"),
         }
     }
 }
@@ -104,6 +116,9 @@ impl SequenceParams {
         positive("acceleration", self.acceleration, false)?;
         positive("zero_speed", self.zero_speed, true)?;
         positive("position_gain", self.position_gain, false)?;
+        if !(0.0..=MAX_COMPLETION_HOLD).contains(&self.completion_hold) {
+            return Err(SequenceParamError::CompletionHold(self.completion_hold));
+        }
         if !(1..=MAX_GAINS).contains(&self.gain_count) {
             return Err(SequenceParamError::GainCount(self.gain_count));
         }
@@ -244,6 +259,16 @@ pub struct StopSequence {
     start: i64,
     /// Position and speed at the last step (for events between steps).
     position: i64,
+    /// Position ticks the axis has been in position without completion raised.
+    in_position_ticks: u32,
+    /// What the velocity loop's integrator held (as a position, rad) during the last run at
+    /// a steady speed: the load and friction part of it, not the acceleration's.
+    run_integral: f32,
+    /// Non-zero from acceptance until the speed reference stops ramping: the deceleration
+    /// part of the velocity loop's integrator (rad) still to be released.
+    lead: f32,
+    /// For the axis: preset the velocity loop's integrator to this (as a position, rad).
+    release: Option<f32>,
 }
 
 impl StopSequence {
@@ -254,6 +279,16 @@ impl StopSequence {
         self.status = SequenceStatus { speed_reference: speed, gain_index, refused, target: position, ..Default::default() };
         self.start = position;
         self.position = position;
+        self.in_position_ticks = 0;
+        self.run_integral = 0.0;
+        self.lead = 0.0;
+        self.release = None;
+    }
+
+    /// Take the integrator preset the hand-over asks for (rad: multiply by the velocity
+    /// loop's integral gain), once.
+    pub fn take_integrator_release(&mut self) -> Option<f32> {
+        self.release.take()
     }
 
     pub fn status(&self) -> &SequenceStatus {
@@ -326,12 +361,35 @@ impl StopSequence {
                 s.gain_index = i;
             }
         }
+        if matches!(e, SequenceEvent::MoveTo(_) | SequenceEvent::ReturnToStart) {
+            // A new positioning: completion drops and must be earned again.
+            s.complete = false;
+            self.in_position_ticks = 0;
+        }
         Ok(())
     }
 
     /// One position-loop tick: `position` (counts), measured `speed` (rad/s), period `dt`
-    /// (s). Returns the speed reference for the velocity loop (rad/s).
-    pub fn step(&mut self, p: &SequenceParams, counts_per_rev: u32, position: i64, speed: f32, dt: f32) -> f32 {
+    /// (s), and `integral_position` (rad): the velocity loop's integrator divided by its
+    /// integral gain, the distance its integral action still wants to travel against the
+    /// reference. Returns the speed reference for the velocity loop (rad/s).
+    ///
+    /// **Hand-over.** At the end of a deceleration the velocity loop's integrator holds
+    /// the deceleration torque (≈ J·a). Discharging it takes ∫(reference − speed) dt =
+    /// J·a/kᵢ; with the reference already at zero that area can only come from the axis
+    /// running *backwards* (≈ 15 mrad, 2 500 counts, at the defaults). So at acceptance the
+    /// sequence computes that area from the integrator (less what it held during the steady
+    /// run: load and friction stay) and adds it to the position law's speed reference as a
+    /// *lead* in the direction of motion, drained at the acceleration gradient: the torque
+    /// lets go while the axis comes to rest, which then takes about the stopping distance
+    /// v²/(2a) of the speed v at acceptance.
+    ///
+    /// **Completion.** In position = |deviation| ≤ `completion_counts` and |speed| ≤
+    /// `zero_speed`. Completion is raised after the axis has been in position for
+    /// `completion_hold` without a break; once raised it drops only when |deviation| >
+    /// `completion_counts + completion_hysteresis`, on a new target, or on leaving position
+    /// control.
+    pub fn step(&mut self, p: &SequenceParams, counts_per_rev: u32, position: i64, speed: f32, dt: f32, integral_position: f32) -> f32 {
         use SequenceState::*;
         self.position = position;
         let s = &mut self.status;
@@ -340,6 +398,11 @@ impl StopSequence {
             s.stop_pending = false;
             s.state = ServoLock;
             s.target = position;
+            s.complete = false;
+            self.in_position_ticks = 0;
+            // The integrator's deceleration part, as reference travel still owed (a
+            // decelerating integrator holds torque against the motion: the lead is along it).
+            self.lead = self.run_integral - integral_position;
         }
         let wanted = match s.state {
             Running => p.target_speed,
@@ -358,13 +421,36 @@ impl StopSequence {
             }
         };
         let max_change = p.acceleration * dt;
+        let before = s.speed_reference;
         s.speed_reference += (wanted - s.speed_reference).clamp(-max_change, max_change);
+        if self.lead != 0.0 && (wanted - before).abs() <= max_change {
+            // The reference has caught up with the position law: the deceleration is over,
+            // so is the torque the integrator holds for it.
+            self.release = Some(0.0);
+            self.lead = 0.0;
+        }
+        if s.state == Running && before == p.target_speed && s.speed_reference == p.target_speed {
+            self.run_integral = integral_position;
+        }
         if s.state.position_control() {
             s.deviation = s.target - position;
-            s.complete = s.deviation.unsigned_abs() <= p.completion_counts as u64;
+            let magnitude = s.deviation.unsigned_abs();
+            if s.complete {
+                if magnitude > p.completion_counts as u64 + p.completion_hysteresis as u64 {
+                    s.complete = false;
+                    self.in_position_ticks = 0;
+                }
+            } else if magnitude <= p.completion_counts as u64 && speed.abs() <= p.zero_speed {
+                self.in_position_ticks = self.in_position_ticks.saturating_add(1);
+                s.complete = self.in_position_ticks as f32 * dt >= p.completion_hold * (1.0 - 1e-6);
+            } else {
+                self.in_position_ticks = 0;
+            }
         } else {
             s.deviation = 0;
             s.complete = false;
+            self.in_position_ticks = 0;
+            self.lead = 0.0;
         }
         s.speed_reference
     }
@@ -381,7 +467,7 @@ mod tests {
     fn run(seq: &mut StopSequence, p: &SequenceParams, position: &mut f64, ticks: usize) -> f32 {
         let mut speed = 0.0;
         for _ in 0..ticks {
-            speed = seq.step(p, CPR, position.round() as i64, speed, DT);
+            speed = seq.step(p, CPR, position.round() as i64, speed, DT, 0.0);
             *position += speed as f64 * DT as f64 * CPR as f64 / core::f64::consts::TAU;
         }
         speed
@@ -449,7 +535,7 @@ mod tests {
         let mut seq = StopSequence::default();
         seq.enter(0, 0.0, 0);
         seq.event(&p, SequenceEvent::Stop).unwrap();
-        seq.step(&p, CPR, 0, 0.0, DT);
+        seq.step(&p, CPR, 0, 0.0, DT, 0.0);
         seq.event(&p, SequenceEvent::ReleaseBlocking).unwrap();
         assert_eq!(seq.event(&p, SequenceEvent::MoveTo(1001)), Err(Refusal::BeyondSoftLimits));
         assert_eq!(seq.status().target, 0);
