@@ -562,6 +562,35 @@ mod tests {
     }
 
     #[test]
+    fn completion_waits_for_the_hold_and_drops_only_beyond_the_hysteresis() {
+        let p = SequenceParams { completion_hold: 0.01, completion_hysteresis: 5, ..Default::default() };
+        let hold_ticks = (p.completion_hold / DT).round() as usize;
+        let mut seq = StopSequence::default();
+        seq.enter(0, 0.0, 0);
+        seq.event(&p, SequenceEvent::Stop).unwrap();
+        seq.step(&p, CPR, 0, 0.0, DT, 0.0);
+        assert_eq!((seq.status().state, seq.status().target), (SequenceState::ServoLock, 0));
+        // In position but moving faster than the zero-speed level: never complete.
+        for _ in 0..2 * hold_ticks {
+            seq.step(&p, CPR, 0, p.zero_speed * 1.5, DT, 0.0);
+            assert!(!seq.status().complete);
+        }
+        // Still: raised on exactly the hold's last tick, not before.
+        for k in 1..=hold_ticks {
+            seq.step(&p, CPR, 3, 0.0, DT, 0.0);
+            assert_eq!(seq.status().complete, k == hold_ticks, "tick {k}");
+        }
+        // Beyond the width but inside the hysteresis: stays; beyond it: drops.
+        seq.step(&p, CPR, p.completion_counts as i64 + 5, 0.0, DT, 0.0);
+        assert!(seq.status().complete);
+        seq.step(&p, CPR, p.completion_counts as i64 + 6, 0.0, DT, 0.0);
+        assert!(!seq.status().complete);
+        // Back in position: the hold starts again.
+        seq.step(&p, CPR, 0, 0.0, DT, 0.0);
+        assert!(!seq.status().complete);
+    }
+
+    #[test]
     fn bad_parameters_are_named() {
         let mut p = SequenceParams { zero_speed: -1.0, ..Default::default() };
         assert!(matches!(p.validate(), Err(SequenceParamError::NotPositive { field: "zero_speed", .. })));
@@ -570,6 +599,8 @@ mod tests {
         p = SequenceParams::default();
         p.gains[1] = f32::NAN;
         assert!(matches!(p.validate(), Err(SequenceParamError::Gain { index: 1, .. })));
+        p = SequenceParams { completion_hold: 10.5, ..Default::default() };
+        assert_eq!(p.validate(), Err(SequenceParamError::CompletionHold(10.5)));
         p = SequenceParams { soft_limit_min: 5, soft_limit_max: 5, ..Default::default() };
         assert!(matches!(p.validate(), Err(SequenceParamError::SoftLimits { .. })));
         assert_eq!(SequenceParams::default().validate(), Ok(()));
