@@ -368,6 +368,10 @@ impl Axis {
                 self.velocity_estimate,
                 p.rates.position_period(),
             );
+            // The stop's hand-over: the deceleration torque lets go (see `stop_sequence`).
+            if self.sequence.take_integrator_release() {
+                self.velocity_loop.set_integral(0.0);
+            }
         }
         if commands.mode != Mode::Torque && velocity_due {
             if commands.mode == Mode::Velocity {

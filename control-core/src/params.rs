@@ -213,6 +213,7 @@ impl ParamError {
             Self::Sequence(S::GainCount(_)) => "sequence.gain_count",
             Self::Sequence(S::Gain { .. }) => "sequence.gains",
             Self::Sequence(S::SoftLimits { .. } | S::SoftLimitRange { .. }) => "sequence.soft_limit",
+            Self::Sequence(S::CompletionHold(_)) => "sequence.completion_hold",
             Self::Friction(F::Amplitude(_)) => "friction.amplitude",
             Self::Friction(F::Decay(_)) => "friction.decay",
             Self::Sweep(crate::phase_shifted_sweep::SweepError::Setting { field, .. }) => field,

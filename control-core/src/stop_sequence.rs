@@ -29,6 +29,8 @@ use crate::TAU;
 
 /// Largest gain table.
 pub const MAX_GAINS: usize = 8;
+/// Longest completion hold time (s).
+pub const MAX_COMPLETION_HOLD: f32 = 10.0;
 
 #[derive(Clone, Copy, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct SequenceParams {
@@ -40,8 +42,13 @@ pub struct SequenceParams {
     pub zero_speed: f32,
     /// Base position gain (1/s, > 0): speed reference per radian of deviation.
     pub position_gain: f32,
-    /// Completion while |deviation| ≤ this many counts.
+    /// In position: |deviation| ≤ this many counts (and |speed| ≤ the zero-speed level).
     pub completion_counts: u32,
+    /// Completion is raised once the axis has stayed in position this long (s, ≥ 0).
+    pub completion_hold: f32,
+    /// Once raised, completion drops only when |deviation| exceeds the width by more than
+    /// this many counts (or on a new target).
+    pub completion_hysteresis: u32,
     /// Gain-table multipliers (the first `gain_count` are used; each > 0).
     pub gains: [f32; MAX_GAINS],
     pub gain_count: usize,
@@ -61,6 +68,8 @@ impl Default for SequenceParams {
             zero_speed: 2.0,
             position_gain: 20.0,
             completion_counts: 8,
+            completion_hold: 0.02,
+            completion_hysteresis: 24,
             // Entries 5–8 (½, ¼, 16, 32) are there to be switched on with `gain_count`.
             gains: [1.0, 2.0, 4.0, 8.0, 0.5, 0.25, 16.0, 32.0],
             gain_count: 4,
@@ -83,6 +92,8 @@ pub enum SequenceParamError {
     SoftLimits { min: i64, max: i64 },
     /// A soft limit beyond ±2⁵³ counts (`crate::ranges::MAX_POSITION_COUNTS`).
     SoftLimitRange { value: i64 },
+    /// Completion hold time outside 0 … [`MAX_COMPLETION_HOLD`] s.
+    CompletionHold(f32),
 }
 
 impl fmt::Display for SequenceParamError {
@@ -97,6 +108,7 @@ impl fmt::Display for SequenceParamError {
                 "soft limit {value} counts is outside [-{m}, {m}] counts",
                 m = crate::ranges::MAX_POSITION_COUNTS
             ),
+            Self::CompletionHold(t) => write!(f, "completion hold {t} s: use 0 to {MAX_COMPLETION_HOLD} s"),
         }
     }
 }
@@ -111,6 +123,9 @@ impl SequenceParams {
         positive("acceleration", self.acceleration, false)?;
         positive("zero_speed", self.zero_speed, true)?;
         positive("position_gain", self.position_gain, false)?;
+        if !(0.0..=MAX_COMPLETION_HOLD).contains(&self.completion_hold) {
+            return Err(SequenceParamError::CompletionHold(self.completion_hold));
+        }
         if !(1..=MAX_GAINS).contains(&self.gain_count) {
             return Err(SequenceParamError::GainCount(self.gain_count));
         }
@@ -256,6 +271,13 @@ pub struct StopSequence {
     start: i64,
     /// Position and speed at the last step (for events between steps).
     position: i64,
+    /// Position ticks the axis has been in position without completion raised.
+    in_position_ticks: u32,
+    /// From acceptance until the speed reference stops ramping: the integrator's
+    /// deceleration torque is still to be released.
+    releasing: bool,
+    /// For the axis: clear the velocity loop's integrator now (once).
+    release: bool,
 }
 
 impl StopSequence {
@@ -266,6 +288,15 @@ impl StopSequence {
         self.status = SequenceStatus { speed_reference: speed, gain_index, refused, target: position, ..Default::default() };
         self.start = position;
         self.position = position;
+        self.in_position_ticks = 0;
+        self.releasing = false;
+        self.release = false;
+    }
+
+    /// Whether the hand-over asks the axis to clear the velocity loop's integrator now
+    /// (true once per stop).
+    pub fn take_integrator_release(&mut self) -> bool {
+        core::mem::take(&mut self.release)
     }
 
     pub fn status(&self) -> &SequenceStatus {
@@ -338,11 +369,34 @@ impl StopSequence {
                 s.gain_index = i;
             }
         }
+        if matches!(e, SequenceEvent::MoveTo(_) | SequenceEvent::ReturnToStart) {
+            // A new positioning: completion drops and must be earned again.
+            s.complete = false;
+            self.in_position_ticks = 0;
+        }
         Ok(())
     }
 
     /// One position-loop tick: `position` (counts), measured `speed` (rad/s), period `dt`
     /// (s). Returns the speed reference for the velocity loop (rad/s).
+    ///
+    /// **Hand-over.** At the end of a deceleration the velocity loop's integrator holds
+    /// the deceleration torque (≈ J·a). Discharging it takes ∫(reference − speed) dt =
+    /// J·a/kᵢ; with the reference already at zero that area can only come from the axis
+    /// running *backwards* (≈ 15 mrad, 2 500 counts, at the defaults). So once the stop is
+    /// accepted and the speed reference has caught up with the position law (the
+    /// deceleration is over), the sequence asks the axis to clear the integrator
+    /// ([`Self::take_integrator_release`]): the deceleration torque lets go at once. Clearing
+    /// it to what it held in the steady run (load and friction) was tried and left the
+    /// friction torque pushing the stopped axis on (282 counts against 198 at the defaults),
+    /// so it is cleared to zero; on an axis with a standing load (gravity) the integrator
+    /// then builds that torque up again, which costs about load / kᵢ of motion.
+    ///
+    /// **Completion.** In position = |deviation| ≤ `completion_counts` and |speed| ≤
+    /// `zero_speed`. Completion is raised after the axis has been in position for
+    /// `completion_hold` without a break; once raised it drops only when |deviation| >
+    /// `completion_counts + completion_hysteresis`, on a new target, or on leaving position
+    /// control.
     pub fn step(&mut self, p: &SequenceParams, counts_per_rev: u32, position: i64, speed: f32, dt: f32) -> f32 {
         use SequenceState::*;
         self.position = position;
@@ -352,6 +406,9 @@ impl StopSequence {
             s.stop_pending = false;
             s.state = ServoLock;
             s.target = position;
+            s.complete = false;
+            self.in_position_ticks = 0;
+            self.releasing = true;
         }
         let wanted = match s.state {
             Running => p.target_speed,
@@ -370,13 +427,33 @@ impl StopSequence {
             }
         };
         let max_change = p.acceleration * dt;
+        let before = s.speed_reference;
         s.speed_reference += (wanted - s.speed_reference).clamp(-max_change, max_change);
+        if self.releasing && (wanted - before).abs() <= max_change {
+            // The reference has caught up with the position law: the deceleration is over,
+            // so is the torque the integrator holds for it.
+            self.release = true;
+            self.releasing = false;
+        }
         if s.state.position_control() {
             s.deviation = s.target.saturating_sub(position);
-            s.complete = s.deviation.unsigned_abs() <= p.completion_counts as u64;
+            let magnitude = s.deviation.unsigned_abs();
+            if s.complete {
+                if magnitude > p.completion_counts as u64 + p.completion_hysteresis as u64 {
+                    s.complete = false;
+                    self.in_position_ticks = 0;
+                }
+            } else if magnitude <= p.completion_counts as u64 && speed.abs() <= p.zero_speed {
+                self.in_position_ticks = self.in_position_ticks.saturating_add(1);
+                s.complete = self.in_position_ticks as f32 * dt >= p.completion_hold * (1.0 - 1e-6);
+            } else {
+                self.in_position_ticks = 0;
+            }
         } else {
             s.deviation = 0;
             s.complete = false;
+            self.in_position_ticks = 0;
+            self.releasing = false;
         }
         s.speed_reference
     }
@@ -488,6 +565,35 @@ mod tests {
     }
 
     #[test]
+    fn completion_waits_for_the_hold_and_drops_only_beyond_the_hysteresis() {
+        let p = SequenceParams { completion_hold: 0.01, completion_hysteresis: 5, ..Default::default() };
+        let hold_ticks = (p.completion_hold / DT).round() as usize;
+        let mut seq = StopSequence::default();
+        seq.enter(0, 0.0, 0);
+        seq.event(&p, SequenceEvent::Stop).unwrap();
+        seq.step(&p, CPR, 0, 0.0, DT);
+        assert_eq!((seq.status().state, seq.status().target), (SequenceState::ServoLock, 0));
+        // In position but moving faster than the zero-speed level: never complete.
+        for _ in 0..2 * hold_ticks {
+            seq.step(&p, CPR, 0, p.zero_speed * 1.5, DT);
+            assert!(!seq.status().complete);
+        }
+        // Still: raised on exactly the hold's last tick, not before.
+        for k in 1..=hold_ticks {
+            seq.step(&p, CPR, 3, 0.0, DT);
+            assert_eq!(seq.status().complete, k == hold_ticks, "tick {k}");
+        }
+        // Beyond the width but inside the hysteresis: stays; beyond it: drops.
+        seq.step(&p, CPR, p.completion_counts as i64 + 5, 0.0, DT);
+        assert!(seq.status().complete);
+        seq.step(&p, CPR, p.completion_counts as i64 + 6, 0.0, DT);
+        assert!(!seq.status().complete);
+        // Back in position: the hold starts again.
+        seq.step(&p, CPR, 0, 0.0, DT);
+        assert!(!seq.status().complete);
+    }
+
+    #[test]
     fn bad_parameters_are_named() {
         let mut p = SequenceParams { zero_speed: -1.0, ..Default::default() };
         assert!(matches!(p.validate(), Err(SequenceParamError::NotPositive { field: "zero_speed", .. })));
@@ -496,6 +602,8 @@ mod tests {
         p = SequenceParams::default();
         p.gains[1] = f32::NAN;
         assert!(matches!(p.validate(), Err(SequenceParamError::Gain { index: 1, .. })));
+        p = SequenceParams { completion_hold: 10.5, ..Default::default() };
+        assert_eq!(p.validate(), Err(SequenceParamError::CompletionHold(10.5)));
         p = SequenceParams { soft_limit_min: 5, soft_limit_max: 5, ..Default::default() };
         assert!(matches!(p.validate(), Err(SequenceParamError::SoftLimits { .. })));
         assert_eq!(SequenceParams::default().validate(), Ok(()));

@@ -34,6 +34,16 @@ impl VelocityLoop {
         }
     }
 
+    /// The PI's integrator (Nm, before the torque filters).
+    pub fn integral(&self) -> f32 {
+        self.pi.integral()
+    }
+
+    /// Set the PI's integrator alone (the filters keep their state).
+    pub fn set_integral(&mut self, torque: f32) {
+        self.pi.preset(torque);
+    }
+
     pub fn reset(&mut self) {
         self.preset(0.0);
     }

@@ -150,6 +150,8 @@ fn sequence(v: &Values, counts_per_rev: u32) -> Result<SequenceParams, String> {
         zero_speed: v.seq_zero_speed as f32,
         position_gain: v.seq_position_gain as f32,
         completion_counts: count("seq.completion_counts", v.seq_completion_counts)?,
+        completion_hold: v.seq_completion_hold as f32,
+        completion_hysteresis: count("seq.completion_hysteresis", v.seq_completion_hysteresis)?,
         gains,
         gain_count: count("seq.gain_count", v.seq_gain_count)? as usize,
         soft_limit_min: counts("seq.soft_limit_min", v.seq_soft_limit_min)?,

@@ -50,6 +50,11 @@ fn acceptance_follows_the_deceleration_ramp_and_settling_speeds_up_with_gain() {
         assert!(a.measured >= a.ramp - 1e-9 && a.measured <= a.ramp + 2.0 * tick + 1e-9, "{a:?}");
     }
     assert!(r.settle_falls_with_gain, "{:?}", r.gains);
+    // The grid (speeds 10-200 rad/s, levels 0.5-20 rad/s, widths 1-100 counts, every gain):
+    // completion raised in every run and never toggling, the swing within its bound.
+    let g = &r.grid_figures;
+    assert!(g.holds, "{g:?}");
+    assert_eq!((g.max_toggles, g.never_complete), (0, 0));
     for g in &r.gains {
         assert!(g.stop_error_at_rest <= 2, "stop error at rest {g:?}");
     }

@@ -250,7 +250,7 @@ declare_variables! {
     59 seq_acceleration: Float64 "seq.acceleration" Parameter Fixed = core(|p| p.sequence.acceleration); RAD_S2; r(1.0e-3, 1.0e8); "Acceleration/deceleration gradient of the speed reference";
     60 seq_zero_speed: Float64 "seq.zero_speed" Parameter Fixed = core(|p| p.sequence.zero_speed); RAD_S; r(0.0, 1.0e5); "A stop is accepted at or below this speed";
     61 seq_position_gain: Float64 "seq.position_gain" Parameter Fixed = core(|p| p.sequence.position_gain); PER_S; r(1.0e-3, 1.0e5); "Base position gain (speed reference per radian of deviation)";
-    62 seq_completion_counts: Int32 "seq.completion_counts" Parameter Fixed = core_count(|p| p.sequence.completion_counts); NONE; r(0.0, 1.0e9); "Completion while |deviation| <= this many encoder counts";
+    62 seq_completion_counts: Int32 "seq.completion_counts" Parameter Fixed = core_count(|p| p.sequence.completion_counts); NONE; r(0.0, 1.0e9); "In position while |deviation| <= this many encoder counts (see seq.completion_hold)";
     63 seq_gain_count: Int32 "seq.gain_count" Parameter Fixed = Params::default().sequence.gain_count as i32; NONE; r(1.0, 8.0); "Entries of the gain table in use (1 to 8)";
     64 seq_gain_1: Float64 "seq.gain_1" Parameter Fixed = core(|p| p.sequence.gains[0]); NONE; r(1.0e-6, 1.0e6); "Gain-table multiplier 1";
     65 seq_gain_2: Float64 "seq.gain_2" Parameter Fixed = core(|p| p.sequence.gains[1]); NONE; r(1.0e-6, 1.0e6); "Gain-table multiplier 2";
@@ -354,7 +354,7 @@ declare_variables! {
     155 position_command_out: Float64 "position_command_out" Output Continuous = 0.0; RAD; ANY; "Position command after interpolation and acc/dec filter (position mode)";
     156 command_velocity: Float64 "command_velocity" Output Continuous = 0.0; RAD_S; ANY; "Speed of that command (its pulses per position tick)";
     157 seq_state: Int32 "seq_state" Output Discrete = 0; NONE; ANY; "Sequence state: 0 idle, 1 running, 2 decelerating, 3 servo lock, 4 fine adjust";
-    158 seq_complete: Int32 "seq_complete" Output Discrete = 0; NONE; ANY; "Zero-servo / fine-adjust completion (|deviation| <= seq.completion_counts)";
+    158 seq_complete: Int32 "seq_complete" Output Discrete = 0; NONE; ANY; "Zero-servo / fine-adjust completion: in position (|deviation| <= seq.completion_counts, |speed| <= seq.zero_speed) for seq.completion_hold, dropped beyond seq.completion_hysteresis or on a new target";
     159 seq_deviation: Int32 "seq_deviation" Output Discrete = 0; NONE; ANY; "Deviation counter: target minus position, in encoder counts (saturates at the Int32 range)";
     160 seq_hold_position: Float64 "seq_hold_position" Output Discrete = 0.0; RAD; ANY; "Position the sequence holds or moves to (the accepted stop position in servo lock)";
     161 seq_speed_reference: Float64 "seq_speed_reference" Output Continuous = 0.0; RAD_S; ANY; "Speed reference the sequence hands to the velocity loop";
@@ -378,4 +378,9 @@ declare_variables! {
     179 acq_point: Int32 "acq_point" Output Discrete = 0; NONE; ANY; "Frequency index the sample belongs to";
     180 acq_record: Int32 "acq_record" Output Discrete = 0; NONE; ANY; "Record (phase-shifted repeat) the sample belongs to";
     181 faults: Int32 "faults" Output Discrete = 0; NONE; ANY; "Latched fault bits: 1 overcurrent, 2 undervoltage, 4 overvoltage, 8 following error, 16 non-finite, 32 encoder";
+
+    // Stop sequence completion signal (seed 004), added after the first release: appended so
+    // that every earlier value reference stays.
+    182 seq_completion_hold: Float64 "seq.completion_hold" Parameter Fixed = core(|p| p.sequence.completion_hold); S; r(0.0, 10.0); "Completion is raised after |deviation| <= seq.completion_counts and |speed| <= seq.zero_speed held this long";
+    183 seq_completion_hysteresis: Int32 "seq.completion_hysteresis" Parameter Fixed = core_count(|p| p.sequence.completion_hysteresis); NONE; r(0.0, 1.0e9); "Once raised, completion drops only when |deviation| > seq.completion_counts + this many counts (or on a new target)";
 }

@@ -68,8 +68,34 @@ pub fn bench_sequence(zero_speed: &[f64], common: &Common) -> Result<bool> {
     pb.finish_and_clear();
     if common.json {
         println!("{}", serde_json::to_string_pretty(&serde_json::json!({"bench": "sequence", "result": r}))?);
-        return Ok(r.settle_falls_with_gain);
+        return Ok(r.settle_falls_with_gain && r.grid_figures.holds);
     }
+    let g = &r.grid_figures;
+    println!(
+        "servo bench sequence — stop grid: run speeds {:?} rad/s, zero-speed levels {:?} rad/s, widths {:?} counts, every gain of the table; gradient 2000 rad/s², completion hold {} ms, hysteresis {} counts ({} runs)",
+        host_tools::bench_sequence::GRID_SPEEDS,
+        host_tools::bench_sequence::GRID_ZERO_SPEEDS,
+        host_tools::bench_sequence::GRID_WIDTHS,
+        control_core::Params::default().sequence.completion_hold * 1e3,
+        control_core::Params::default().sequence.completion_hysteresis,
+        g.runs
+    );
+    println!("  {:>8} {:>8} {:>6} {:>6} {:>10} {:>12} {:>10} {:>12} {:>10} {:>8}", "speed", "level", "width", "gain", "v@acc", "stop dist", "swing", "overshoot", "settle ms", "toggles");
+    for x in &r.grid {
+        println!(
+            "  {:>8} {:>8} {:>6} {:>5}x {:>10.3} {:>12.0} {:>10} {:>12} {:>10.1} {:>8}",
+            x.speed, x.zero_speed, x.width, x.multiplier, x.speed_at_acceptance, x.stopping_counts, x.swing_counts, x.overshoot_counts, x.settle * 1e3, x.toggles
+        );
+    }
+    println!("  worst case over the grid: completion toggles after the first raise {} (goal 0); runs never complete {}; overshoot beyond the width after completion {} counts; settle time (acceptance to completion) {:.1} ms",
+        g.max_toggles, g.never_complete, g.max_overshoot_counts, g.max_settle * 1e3);
+    if let Some(w) = &g.worst_swing {
+        println!(
+            "  swing after acceptance / bound ({}·v²/(2a) + {} counts + width + hysteresis): worst {:.2} (goal <= 1) at {} rad/s, level {} rad/s, width {}, gain {}x: swing {} counts, v@acc {:.3} rad/s, stopping distance {:.0} counts",
+            host_tools::bench_sequence::SWING_BOUND_FACTOR, host_tools::bench_sequence::SWING_FLOOR_COUNTS, g.worst_swing_ratio, w.speed, w.zero_speed, w.width, w.multiplier, w.swing_counts, w.speed_at_acceptance, w.stopping_counts
+        );
+    }
+    println!("  figure holds over the grid: {}", if g.holds { "yes" } else { "NO" });
     println!("servo bench sequence — seed 004, default axis and friction, run at 100 rad/s, gradient 2000 rad/s², base gain 20/s, completion width 8 counts");
     println!("  stop at speed (run off + stop key at 0.3 s, zero-speed level 2 rad/s) and a 1 rad fine adjustment, per gain multiplier:");
     println!(
@@ -95,5 +121,5 @@ pub fn bench_sequence(zero_speed: &[f64], common: &Common) -> Result<bool> {
     for a in &r.acceptance {
         println!("  {:>12} {:>14.2} {:>22.2}", a.zero_speed, a.measured * 1e3, a.ramp * 1e3);
     }
-    Ok(r.settle_falls_with_gain)
+    Ok(r.settle_falls_with_gain && r.grid_figures.holds)
 }
