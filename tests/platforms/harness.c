@@ -5,7 +5,7 @@
  * aarch64-linux-gnu-gcc (run under qemu-user). Usage: harness LIBRARY < schedule > trace
  *
  * Schedule, one command per line (floats as the 16 hex digits of their IEEE-754 bits):
- *   T token            instantiate (Co-Simulation)
+ *   T token            instantiate (Co-Simulation); forgets the outputs an O declared
  *   F vr bits          fmi3SetFloat64 of one value
  *   I vr value         fmi3SetInt32 of one value
  *   B vr 0|1           fmi3SetBoolean of one value
@@ -128,6 +128,7 @@ int main(int argc, char **argv) {
         char *b = strtok_r(NULL, " \r\n", &save);
         switch (cmd[0]) {
         case 'T':
+            n_out = 0;
             inst = instantiate("harness", a, NULL, false, false, false, false, NULL, 0, NULL, logger, NULL);
             if (!inst) {
                 fprintf(stderr, "harness: instantiation failed\n");
