@@ -80,13 +80,14 @@ struct Binary {
 
 /// The three platforms' libraries as `scripts/platforms` leaves them: x86_64 Linux from
 /// `cargo zigbuild --target x86_64-unknown-linux-gnu.2.17`, Windows and aarch64 Linux from
-/// the build-std cross builds in `target/cross/`.
+/// the build-std cross builds in `target/cross/` (the DLL stripped of its symbol table).
 fn bundle_all_platforms() -> Result<()> {
     let root = workspace_root();
     let target_dir = target_dir(&root);
     let sources = [
         ("x86_64-linux", "linux64", "so", format!("x86_64-unknown-linux-gnu/release/lib{MODEL_IDENTIFIER}.so")),
-        ("x86_64-windows", "win64", "dll", format!("cross/x86_64-pc-windows-gnu/release/{MODEL_IDENTIFIER}.dll")),
+        // Stripped of its symbol table by scripts/platforms.
+        ("x86_64-windows", "win64", "dll", format!("cross/{MODEL_IDENTIFIER}.dll")),
         ("aarch64-linux", "aarch64-linux", "so", format!("cross/aarch64-unknown-linux-gnu/release/lib{MODEL_IDENTIFIER}.so")),
     ];
     let mut binaries = Vec::new();
