@@ -1,9 +1,15 @@
-//! `cargo run -p xtask -- bundle`: build the FMU library (release) and write the two
-//! archives from the project's own model descriptions:
+//! `cargo run -p xtask -- bundle`: build the FMU library (release) for the host and write the
+//! two archives from the project's own model descriptions:
 //! - `target/fmu/servo_axis.fmu`: FMI 3.0 Co-Simulation (`binaries/x86_64-linux`),
 //! - `target/fmu/servo_axis_fmi2.fmu`: FMI 2.0 Co-Simulation (`binaries/linux64`),
 //!
 //! each with `documentation/index.html`. One binary exports both APIs.
+//!
+//! `bundle --all-platforms` packs the three binaries `scripts/platforms` builds (it runs this
+//! after them) instead: x86_64 Linux for glibc 2.17, x86_64 Windows and aarch64 Linux (glibc
+//! 2.17), as `binaries/x86_64-linux`, `x86_64-windows`, `aarch64-linux` (FMI 3.0) and
+//! `linux64`, `win64`, `aarch64-linux` (FMI 2.0: the standard names no aarch64 folder; FMI
+//! 2.0.4 suggests the FMI 3.0 tuple, which is what FMI 2.0 importers that support ARM look for).
 //! `cargo run -p xtask -- parameter-table` prints the README's parameter table.
 
 use std::io::Write;
@@ -12,7 +18,6 @@ use std::process::Command;
 
 use anyhow::{bail, Context, Result};
 use servo_axis::model_description::{self, MODEL_IDENTIFIER};
-
 fn workspace_root() -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR")).parent().expect("xtask lives in the workspace").to_path_buf()
 }
@@ -20,7 +25,8 @@ fn workspace_root() -> PathBuf {
 fn main() -> Result<()> {
     let args: Vec<String> = std::env::args().skip(1).collect();
     match args.first().map(String::as_str) {
-        Some("bundle") => bundle(),
+        Some("bundle") if args.len() == 1 => bundle(),
+        Some("bundle") if args.len() == 2 && args[1] == "--all-platforms" => bundle_all_platforms(),
         Some("parameter-table") if args.get(1).map(String::as_str) == Some("--update-readme") => update_readme(),
         Some("parameter-table") => {
             print!("{}", model_description::markdown_table());
@@ -29,7 +35,9 @@ fn main() -> Result<()> {
         _ => {
             eprintln!(
                 "usage: cargo run -p xtask -- bundle | parameter-table\n\n  \
-                 bundle           build target/fmu/servo_axis.fmu (FMI 3.0) and target/fmu/servo_axis_fmi2.fmu (FMI 2.0)\n  \
+                 bundle           build target/fmu/servo_axis.fmu (FMI 3.0) and target/fmu/servo_axis_fmi2.fmu (FMI 2.0)\n                   \
+                 (--all-platforms: pack the x86_64 Linux, Windows and aarch64 Linux binaries that\n                   \
+                 scripts/platforms builds; run that script, it calls this)\n  \
                  parameter-table  print the parameters and inputs as the README's Markdown table\n                   \
                  (--update-readme: write it into README.md between its markers)"
             );
@@ -52,32 +60,72 @@ fn bundle() -> Result<()> {
     if !cfg!(all(target_arch = "x86_64", target_os = "linux")) {
         bail!("the bundle packs the host's library as binaries/x86_64-linux: run it on x86_64 Linux");
     }
-    let target_dir = std::env::var_os("CARGO_TARGET_DIR").map(PathBuf::from).unwrap_or_else(|| root.join("target"));
+    let target_dir = target_dir(&root);
     let library = target_dir.join(format!("release/lib{MODEL_IDENTIFIER}.so"));
     let binary = std::fs::read(&library).with_context(|| format!("reading {}", library.display()))?;
+    write_archives(&target_dir, &[Binary { fmi3: "x86_64-linux", fmi2: "linux64", extension: "so", bytes: binary }])
+}
+
+fn target_dir(root: &Path) -> PathBuf {
+    std::env::var_os("CARGO_TARGET_DIR").map(PathBuf::from).unwrap_or_else(|| root.join("target"))
+}
+
+/// One platform's library and its folder names under `binaries/`.
+struct Binary {
+    fmi3: &'static str,
+    fmi2: &'static str,
+    extension: &'static str,
+    bytes: Vec<u8>,
+}
+
+/// The three platforms' libraries as `scripts/platforms` leaves them: x86_64 Linux from
+/// `cargo zigbuild --target x86_64-unknown-linux-gnu.2.17`, Windows and aarch64 Linux from
+/// the build-std cross builds in `target/cross/` (the DLL stripped of its symbol table).
+fn bundle_all_platforms() -> Result<()> {
+    let root = workspace_root();
+    let target_dir = target_dir(&root);
+    let sources = [
+        ("x86_64-linux", "linux64", "so", format!("x86_64-unknown-linux-gnu/release/lib{MODEL_IDENTIFIER}.so")),
+        // Stripped of its symbol table by scripts/platforms.
+        ("x86_64-windows", "win64", "dll", format!("cross/{MODEL_IDENTIFIER}.dll")),
+        ("aarch64-linux", "aarch64-linux", "so", format!("cross/aarch64-unknown-linux-gnu/release/lib{MODEL_IDENTIFIER}.so")),
+    ];
+    let mut binaries = Vec::new();
+    for (fmi3, fmi2, extension, relative) in sources {
+        let path = target_dir.join(relative);
+        let bytes = std::fs::read(&path)
+            .with_context(|| format!("reading {} (scripts/platforms builds it, then calls this)", path.display()))?;
+        binaries.push(Binary { fmi3, fmi2, extension, bytes });
+    }
+    write_archives(&target_dir, &binaries)
+}
+
+fn write_archives(target_dir: &Path, binaries: &[Binary]) -> Result<()> {
     let out = target_dir.join("fmu");
     std::fs::create_dir_all(&out)?;
     let documentation = model_description::documentation_html();
-    let so = format!("{MODEL_IDENTIFIER}.so");
+    let mut fmi3_entries = vec![("modelDescription.xml".to_string(), model_description::fmi3().into_bytes())];
+    let mut fmi2_entries = vec![("modelDescription.xml".to_string(), model_description::fmi2().into_bytes())];
+    for b in binaries {
+        let file = format!("{MODEL_IDENTIFIER}.{}", b.extension);
+        fmi3_entries.push((format!("binaries/{}/{file}", b.fmi3), b.bytes.clone()));
+        fmi2_entries.push((format!("binaries/{}/{file}", b.fmi2), b.bytes.clone()));
+    }
+    fmi3_entries.push(("documentation/index.html".to_string(), documentation.clone().into_bytes()));
+    fmi2_entries.push(("documentation/index.html".to_string(), documentation.into_bytes()));
     let fmi3 = out.join(format!("{MODEL_IDENTIFIER}.fmu"));
-    write_archive(
-        &fmi3,
-        &[
-            ("modelDescription.xml", model_description::fmi3().into_bytes()),
-            (&format!("binaries/x86_64-linux/{so}"), binary.clone()),
-            ("documentation/index.html", documentation.clone().into_bytes()),
-        ],
-    )?;
+    write_archive(&fmi3, &fmi3_entries)?;
     let fmi2 = out.join(format!("{MODEL_IDENTIFIER}_fmi2.fmu"));
-    write_archive(
-        &fmi2,
-        &[
-            ("modelDescription.xml", model_description::fmi2().into_bytes()),
-            (&format!("binaries/linux64/{so}"), binary),
-            ("documentation/index.html", documentation.into_bytes()),
-        ],
-    )?;
-    println!("FMU ready: {} (FMI 3.0), {} (FMI 2.0)", fmi3.display(), fmi2.display());
+    write_archive(&fmi2, &fmi2_entries)?;
+    let platforms: Vec<&str> = binaries.iter().map(|b| b.fmi3).collect();
+    println!(
+        "FMU ready: {} (FMI 3.0, {} bytes), {} (FMI 2.0, {} bytes); binaries: {}",
+        fmi3.display(),
+        std::fs::metadata(&fmi3)?.len(),
+        fmi2.display(),
+        std::fs::metadata(&fmi2)?.len(),
+        platforms.join(", ")
+    );
     Ok(())
 }
 
@@ -97,11 +145,11 @@ fn update_readme() -> Result<()> {
     Ok(())
 }
 
-fn write_archive(path: &Path, entries: &[(&str, Vec<u8>)]) -> Result<()> {
+fn write_archive(path: &Path, entries: &[(String, Vec<u8>)]) -> Result<()> {
     let mut zip = zip::ZipWriter::new(std::io::Cursor::new(Vec::new()));
     let options = zip::write::SimpleFileOptions::default().compression_method(zip::CompressionMethod::Deflated);
     for (name, data) in entries {
-        zip.start_file(*name, options)?;
+        zip.start_file(name.as_str(), options)?;
         zip.write_all(data)?;
     }
     let bytes = zip.finish()?.into_inner();

@@ -118,11 +118,11 @@ impl<const N: usize, const M: usize> PolynomialHold<N, M> {
     }
 }
 
-/// `(sin x, cos x)` within a few ulp for |x| < 1e6 rad (beyond: the standard library):
+/// `(sin x, cos x)` within a few ulp for |x| < 1e6 rad (beyond: the `libm` crate):
 /// Cody–Waite reduction by π/2, then Taylor polynomials on [−π/4, π/4].
 pub fn sin_cos(x: f64) -> (f64, f64) {
     if !(x.abs() < 1.0e6) {
-        return x.sin_cos();
+        return libm::sincos(x);
     }
     // π/2 in three parts, the first two with 33 significant bits, so that k·part is exact
     // for |k| < 2²⁰ (Cody–Waite reduction).
@@ -191,10 +191,11 @@ pub fn cosh_sinhc(z: f64) -> (f64, f64) {
         (poly(C), poly(S))
     } else if z > 0.0 {
         let r = z.sqrt();
-        (r.cosh(), r.sinh() / r)
+        (libm::cosh(r), libm::sinh(r) / r)
     } else {
         let r = (-z).sqrt();
-        (r.cos(), r.sin() / r)
+        let (s, c) = libm::sincos(r);
+        (c, s / r)
     }
 }
 

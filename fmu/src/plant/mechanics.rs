@@ -113,8 +113,8 @@ impl TwoInertia {
     /// Smoothed Coulomb friction torques `Fc·tanh(ω/ω_s)` on the motor and the load.
     pub fn coulomb(&self, motor_velocity: f64, load_velocity: f64) -> [f64; 2] {
         [
-            self.motor_coulomb * (motor_velocity * self.inverse_coulomb_velocity).tanh(),
-            self.load_coulomb * (load_velocity * self.inverse_coulomb_velocity).tanh(),
+            self.motor_coulomb * libm::tanh(motor_velocity * self.inverse_coulomb_velocity),
+            self.load_coulomb * libm::tanh(load_velocity * self.inverse_coulomb_velocity),
         ]
     }
 

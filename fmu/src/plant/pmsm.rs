@@ -45,7 +45,7 @@ impl Pmsm {
             substep,
             inverse_substep: 1.0 / substep,
             half_difference: 0.5 * (r / lq - r / ld),
-            mean_decay: (mean_rate * substep).exp(),
+            mean_decay: libm::exp(mean_rate * substep),
             inverse_motor_inertia: 1.0 / p.motor_inertia,
             inv_ld: 1.0 / ld,
             inv_lq: 1.0 / lq,
