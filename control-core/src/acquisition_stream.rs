@@ -31,7 +31,14 @@ pub struct AcquisitionStream {
 
 impl Default for AcquisitionStream {
     fn default() -> Self {
-        Self { ring: [AcquisitionSample::default(); CAPACITY], head: 0, len: 0, dropped: 0, last_tick: None, enabled: false }
+        Self {
+            ring: [AcquisitionSample::default(); CAPACITY],
+            head: 0,
+            len: 0,
+            dropped: 0,
+            last_tick: None,
+            enabled: false,
+        }
     }
 }
 

@@ -7,8 +7,8 @@ use crate::encoder::{EncoderTracker, EncoderUpdate};
 use crate::excitation::{InjectionPoint, SineGenerator};
 use crate::faults::Faults;
 use crate::friction_compensation::FrictionCompensation;
-use crate::phase_shifted_sweep::{PhaseShiftedSweep, SweepError, SweepStatus};
 use crate::params::{ParamError, Params};
+use crate::phase_shifted_sweep::{PhaseShiftedSweep, SweepError, SweepStatus};
 use crate::position_loop::PositionLoop;
 use crate::ranges::{check_f32, check_position, Quantity, RangeError, MAX_SPEED};
 use crate::reference_frames::Dq;
@@ -153,8 +153,7 @@ impl Axis {
     /// Build an axis; refuses parameters that do not validate.
     pub fn new(params: Params) -> Result<Self, ParamError> {
         params.validate()?;
-        let acc_dec = AccDecFilter::new(&params.acc_dec, params.rates.position_period())
-            .map_err(ParamError::AccDec)?;
+        let acc_dec = AccDecFilter::new(&params.acc_dec, params.rates.position_period()).map_err(ParamError::AccDec)?;
         Ok(Self {
             params,
             current_loop: CurrentLoop::new(&params),
@@ -293,10 +292,14 @@ impl Axis {
         // outside its range (`crate::ranges`) a range fault. The detailed check only when the
         // quick one fails.
         let speeds_in_range = commands.move_speed.abs() <= MAX_SPEED && commands.jog_velocity.abs() <= MAX_SPEED;
-        if !(speeds_in_range && commands.velocity.abs() <= MAX_SPEED && commands.torque.abs() <= crate::ranges::MAX_TORQUE)
+        if !(speeds_in_range
+            && commands.velocity.abs() <= MAX_SPEED
+            && commands.torque.abs() <= crate::ranges::MAX_TORQUE)
             || commands.position.unsigned_abs() > crate::ranges::MAX_POSITION_COUNTS as u64
         {
-            let finite = [commands.move_speed, commands.jog_velocity, commands.velocity, commands.torque].iter().all(|x| x.is_finite());
+            let finite = [commands.move_speed, commands.jog_velocity, commands.velocity, commands.torque]
+                .iter()
+                .all(|x| x.is_finite());
             faults.latch(if finite { Faults::COMMAND_RANGE } else { Faults::NOT_FINITE });
         }
         if self.encoder.update(inputs.encoder_count, p.encoder_counts_per_rev) == EncoderUpdate::Jump {
@@ -348,11 +351,12 @@ impl Axis {
             };
             // A non-finite or out-of-range speed has latched a fault above; it must not reach
             // the carry.
-            let command = if speeds_in_range && commands.position.unsigned_abs() <= crate::ranges::MAX_POSITION_COUNTS as u64 {
-                self.command_path.step(motion, commands.position)
-            } else {
-                self.command_path.position()
-            };
+            let command =
+                if speeds_in_range && commands.position.unsigned_abs() <= crate::ranges::MAX_POSITION_COUNTS as u64 {
+                    self.command_path.step(motion, commands.position)
+                } else {
+                    self.command_path.position()
+                };
             let out = self.position_loop.step(p, command, position);
             self.velocity_reference = out.velocity_reference;
             self.telemetry.following_error = out.following_error;
@@ -397,8 +401,7 @@ impl Axis {
             self.torque_command = torque.clamp(-p.velocity.torque_limit, p.velocity.torque_limit);
         }
         if commands.mode == Mode::Torque {
-            self.torque_command =
-                commands.torque.clamp(-p.velocity.torque_limit, p.velocity.torque_limit);
+            self.torque_command = commands.torque.clamp(-p.velocity.torque_limit, p.velocity.torque_limit);
         }
         let mut torque = self.torque_command;
         if excitation.0 == InjectionPoint::TorqueCommand {
@@ -462,12 +465,8 @@ impl Axis {
             t.sweep.sample = s.sample;
         }
         self.tick += 1;
-        let dividers = [
-            p.rates.velocity_divider,
-            p.rates.position_divider,
-            p.sweep.acquisition_divider,
-            p.sweep.prbs_divider,
-        ];
+        let dividers =
+            [p.rates.velocity_divider, p.rates.position_divider, p.sweep.acquisition_divider, p.sweep.prbs_divider];
         for (phase, divider) in self.phases.iter_mut().zip(dividers) {
             *phase = if *phase + 1 >= divider { 0 } else { *phase + 1 };
         }

@@ -52,15 +52,7 @@ impl Biquad {
         let da0 = den[2] * kk + den[1] * w0 * k + den[0] * w2;
         let da1 = 2.0 * (den[0] * w2 - den[2] * kk);
         let da2 = den[2] * kk - den[1] * w0 * k + den[0] * w2;
-        Self {
-            b0: nb0 / da0,
-            b1: nb1 / da0,
-            b2: nb2 / da0,
-            a1: da1 / da0,
-            a2: da2 / da0,
-            s1: 0.0,
-            s2: 0.0,
-        }
+        Self { b0: nb0 / da0, b1: nb1 / da0, b2: nb2 / da0, a1: da1 / da0, a2: da2 / da0, s1: 0.0, s2: 0.0 }
     }
 
     /// Second-order Butterworth low-pass (Q = 1/√2) at `cutoff_hz`.

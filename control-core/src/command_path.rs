@@ -50,15 +50,7 @@ impl CommandPath {
     }
 
     pub fn with_correction(filter: AccDecFilter, correction: ResponseCorrection) -> Self {
-        Self {
-            interpolated: 0,
-            last_stream_input: 0,
-            carry: 0.0,
-            filter,
-            correction,
-            position: 0,
-            pulses: 0,
-        }
+        Self { interpolated: 0, last_stream_input: 0, carry: 0.0, filter, correction, position: 0, pulses: 0 }
     }
 
     /// Start from rest at `position` (counts): empty filter, no carry.
@@ -129,7 +121,11 @@ impl CommandPath {
             }
             Move::Jog(speed) => {
                 let step = self.speed_pulses(speed.abs());
-                if speed < 0.0 { step.saturating_neg() } else { step }
+                if speed < 0.0 {
+                    step.saturating_neg()
+                } else {
+                    step
+                }
             }
         };
         self.interpolated = self.interpolated.saturating_add(pulses);

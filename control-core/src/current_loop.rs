@@ -3,9 +3,7 @@
 
 use crate::params::Params;
 use crate::pi_controller::PiController;
-use crate::reference_frames::{
-    clarke, inverse_park, park, space_vector_duties, voltage_circle_radius, Dq,
-};
+use crate::reference_frames::{clarke, inverse_park, park, space_vector_duties, voltage_circle_radius, Dq};
 
 #[derive(Clone, Copy, Debug, Default)]
 pub struct CurrentLoop {
@@ -27,10 +25,7 @@ pub struct CurrentLoopOutput {
 
 impl CurrentLoop {
     pub fn new(p: &Params) -> Self {
-        Self {
-            d: PiController::new(p.current.kp, p.current.ki),
-            q: PiController::new(p.current.kp, p.current.ki),
-        }
+        Self { d: PiController::new(p.current.kp, p.current.ki), q: PiController::new(p.current.kp, p.current.ki) }
     }
 
     pub fn reset(&mut self) {
@@ -90,4 +85,3 @@ impl CurrentLoop {
         CurrentLoopOutput { current: i, voltage: v, duties, saturated: sat_d || sat_q }
     }
 }
-

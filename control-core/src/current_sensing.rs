@@ -38,7 +38,9 @@ pub enum SensingError {
 impl fmt::Display for SensingError {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         match *self {
-            Self::Scale => write!(f, "sensing scales must be finite and non-zero (full scale > 0, volts per count > 0)"),
+            Self::Scale => {
+                write!(f, "sensing scales must be finite and non-zero (full scale > 0, volts per count > 0)")
+            }
             Self::Offset { channel, counts } => {
                 write!(f, "current channel {channel}: offset {counts} counts is too far from mid-scale (amplifier, power stage, or bridge not off?)")
             }

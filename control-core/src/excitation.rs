@@ -58,11 +58,7 @@ impl SineGenerator {
     pub fn new(amplitude: f32, frequency_hz: f32, sample_rate_hz: f32, initial_phase: f32) -> Self {
         let turns = frequency_hz as f64 / sample_rate_hz as f64;
         let start = initial_phase as f64 / core::f64::consts::TAU;
-        Self {
-            amplitude,
-            increment: to_accumulator(turns),
-            phase: to_accumulator(start),
-        }
+        Self { amplitude, increment: to_accumulator(turns), phase: to_accumulator(start) }
     }
 
     /// Current phase in `[0, 2π)`.

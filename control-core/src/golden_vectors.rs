@@ -38,7 +38,8 @@ pub fn preset(id: u32) -> Option<Params> {
                 zeros: Some(SecondOrder { hz: 70.0, damping: 0.05 }),
                 poles: SecondOrder { hz: 100.0, damping: 1.0 },
             };
-            p.correction.sections[1] = CorrectionSection { zeros: None, poles: SecondOrder { hz: 100.0, damping: 1.0 } };
+            p.correction.sections[1] =
+                CorrectionSection { zeros: None, poles: SecondOrder { hz: 100.0, damping: 1.0 } };
         }
         4 => p.acc_dec.kind = AccDecKind::MovingAverage,
         // Every feature at once, at its most expensive: 6th-order Butterworth acc/dec, eight
@@ -235,7 +236,11 @@ fn replay_with(bytes: &[u8], work: Work) -> Result<(u64, u64), VectorError> {
         r.at += events as usize * EVENT_BYTES;
         let mut next_event = 0u32;
         for tick in 0..ticks {
-            let inputs = AxisInputs { phase_currents: [r.f32()?, r.f32()?], encoder_count: i32::from_le_bytes(r.take()?), bus_voltage: r.f32()? };
+            let inputs = AxisInputs {
+                phase_currents: [r.f32()?, r.f32()?],
+                encoder_count: i32::from_le_bytes(r.take()?),
+                bus_voltage: r.f32()?,
+            };
             let code = r.take::<1>()?[0];
             let mode = Mode::from_code(code as i32).ok_or(VectorError::Mode(code))?;
             let commands = Commands {
@@ -280,13 +285,23 @@ fn replay_with(bytes: &[u8], work: Work) -> Result<(u64, u64), VectorError> {
             digest.bytes(&[pwm.enabled as u8]);
             digest.bytes(&t.position.to_le_bytes());
             digest.bytes(&t.position_command.to_le_bytes());
-            for x in [t.velocity_estimate, t.velocity_reference, t.following_error, t.torque_command, t.current.d, t.current.q, t.voltage.d, t.voltage.q] {
+            for x in [
+                t.velocity_estimate,
+                t.velocity_reference,
+                t.following_error,
+                t.torque_command,
+                t.current.d,
+                t.current.q,
+                t.voltage.d,
+                t.voltage.q,
+            ] {
                 digest.f32(x);
             }
             digest.bytes(&t.faults.0.to_le_bytes());
             digest.bytes(&t.sequence.deviation.to_le_bytes());
             digest.bytes(&[t.sequence.state.code() as u8, t.sweep.state.code() as u8]);
-            for x in [t.sequence.speed_reference, t.sweep.last.re, t.sweep.last.im, t.sweep.sample.u, t.sweep.sample.y] {
+            for x in [t.sequence.speed_reference, t.sweep.last.re, t.sweep.last.im, t.sweep.sample.u, t.sweep.sample.y]
+            {
                 digest.f32(x);
             }
         }
@@ -302,7 +317,14 @@ mod tests {
     #[test]
     fn a_tick_round_trips_and_bad_files_are_refused() {
         let i = AxisInputs { phase_currents: [1.5, -0.25], encoder_count: -12345, bus_voltage: 48.0 };
-        let c = Commands { mode: Mode::Position, position: -1 << 40, move_speed: 3.0, jog_velocity: 0.0, velocity: 1.0, torque: -0.5 };
+        let c = Commands {
+            mode: Mode::Position,
+            position: -1 << 40,
+            move_speed: 3.0,
+            jog_velocity: 0.0,
+            velocity: 1.0,
+            torque: -0.5,
+        };
         let mut tick = [0u8; TICK_BYTES];
         encode_tick(&i, &c, &mut tick);
         let mut file = [0u8; 4 + 4 + 12 + TICK_BYTES];

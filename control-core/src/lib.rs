@@ -20,9 +20,9 @@ pub mod current_sensing;
 pub mod encoder;
 pub mod excitation;
 pub mod faults;
-pub mod m_sequence;
 pub mod friction_compensation;
 pub mod golden_vectors;
+pub mod m_sequence;
 pub mod params;
 pub mod phase_shifted_sweep;
 pub mod pi_controller;
@@ -116,8 +116,33 @@ mod conversion_tests {
     /// integers, both sides of 2²³ and 2³¹, huge, infinite and NaN.
     #[test]
     fn fast_conversions_equal_libm() {
-        let mut values: Vec<f32> = [0.0f32, -0.0, 0.5, -0.5, 1.5, -1.5, 2.5, -2.5, 0.49999997, -0.49999997, 8_388_607.5, -8_388_607.5, 8_388_608.0, 16_777_217.0,
-            2_147_483_520.0, -2_147_483_520.0, 2_147_483_648.0, -2_147_483_648.0, 1.0e12, -1.0e12, f32::MAX, f32::MIN, f32::INFINITY, f32::NEG_INFINITY, f32::NAN]
+        let mut values: Vec<f32> = [
+            0.0f32,
+            -0.0,
+            0.5,
+            -0.5,
+            1.5,
+            -1.5,
+            2.5,
+            -2.5,
+            0.49999997,
+            -0.49999997,
+            8_388_607.5,
+            -8_388_607.5,
+            8_388_608.0,
+            16_777_217.0,
+            2_147_483_520.0,
+            -2_147_483_520.0,
+            2_147_483_648.0,
+            -2_147_483_648.0,
+            1.0e12,
+            -1.0e12,
+            f32::MAX,
+            f32::MIN,
+            f32::INFINITY,
+            f32::NEG_INFINITY,
+            f32::NAN,
+        ]
         .to_vec();
         let mut x = 1.0e-3f32;
         while x < 1.0e11 {

@@ -73,7 +73,11 @@ impl MSequence {
     pub fn next_chip(&mut self) -> i8 {
         let bit = (self.state & self.mask).count_ones() & 1;
         self.state = ((self.state << 1) | bit) & ((1u32 << self.degree) - 1);
-        if bit == 1 { 1 } else { -1 }
+        if bit == 1 {
+            1
+        } else {
+            -1
+        }
     }
 }
 

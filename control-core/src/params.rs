@@ -6,9 +6,9 @@
 use core::fmt;
 
 use crate::acc_dec::{AccDecError, AccDecFilter, AccDecParams};
+use crate::friction_compensation::{FrictionCompensationError, FrictionCompensationParams};
 use crate::phase_shifted_sweep::{SweepError, SweepParams};
 use crate::response_correction::{CorrectionError, CorrectionParams};
-use crate::friction_compensation::{FrictionCompensationError, FrictionCompensationParams};
 use crate::stop_sequence::{SequenceParamError, SequenceParams};
 
 /// Motor data the controller needs (decoupling, torque constant, electrical angle).
@@ -200,7 +200,10 @@ impl ParamError {
         use crate::response_correction::CorrectionError as C;
         use crate::stop_sequence::SequenceParamError as S;
         match *self {
-            Self::NotFinite { field } | Self::NotPositive { field, .. } | Self::OutOfRange { field, .. } | Self::Zero { field } => field,
+            Self::NotFinite { field }
+            | Self::NotPositive { field, .. }
+            | Self::OutOfRange { field, .. }
+            | Self::Zero { field } => field,
             Self::AboveNyquist { field, .. } => field,
             Self::RatesNotDivisible { .. } => "rates.position_divider",
             Self::BusLimitsInverted { .. } => "limits.bus_undervoltage",
@@ -228,11 +231,19 @@ impl ParamError {
 }
 
 fn finite(field: &'static str, v: f32) -> Result<f32, ParamError> {
-    if v.is_finite() { Ok(v) } else { Err(ParamError::NotFinite { field }) }
+    if v.is_finite() {
+        Ok(v)
+    } else {
+        Err(ParamError::NotFinite { field })
+    }
 }
 
 fn positive(field: &'static str, v: f32) -> Result<(), ParamError> {
-    if finite(field, v)? > 0.0 { Ok(()) } else { Err(ParamError::NotPositive { field, value: v }) }
+    if finite(field, v)? > 0.0 {
+        Ok(())
+    } else {
+        Err(ParamError::NotPositive { field, value: v })
+    }
 }
 
 fn in_range(field: &'static str, v: f32, min: f32, max: f32) -> Result<(), ParamError> {
@@ -245,26 +256,28 @@ fn in_range(field: &'static str, v: f32, min: f32, max: f32) -> Result<(), Param
 }
 
 fn nonzero(field: &'static str, v: u32) -> Result<(), ParamError> {
-    if v == 0 { Err(ParamError::Zero { field }) } else { Ok(()) }
+    if v == 0 {
+        Err(ParamError::Zero { field })
+    } else {
+        Ok(())
+    }
 }
 
 fn filter_frequency(field: &'static str, v: f32, rate: f32) -> Result<(), ParamError> {
     in_range(field, v, 0.0, f32::MAX)?;
     let nyquist = 0.5 * rate;
-    if v >= nyquist { Err(ParamError::AboveNyquist { field, value: v, nyquist }) } else { Ok(()) }
+    if v >= nyquist {
+        Err(ParamError::AboveNyquist { field, value: v, nyquist })
+    } else {
+        Ok(())
+    }
 }
 
 impl Default for Params {
     /// A 48 V, 4-pole-pair servo motor of 0.1 Nm/A with a 20-bit encoder, tuned for about
     /// 1.5 kHz current, 100 Hz velocity and 20 Hz position bandwidth on the default plant.
     fn default() -> Self {
-        let motor = MotorModel {
-            pole_pairs: 4,
-            resistance: 0.3,
-            ld: 0.5e-3,
-            lq: 0.5e-3,
-            flux_linkage: 0.1 / 6.0,
-        };
+        let motor = MotorModel { pole_pairs: 4, resistance: 0.3, ld: 0.5e-3, lq: 0.5e-3, flux_linkage: 0.1 / 6.0 };
         // Gains (rounded): current kp = Lq·ωc, ki = R·ωc with ωc = 2π·1500 rad/s; velocity
         // kp = J·ωv, ki = J·ωv²/5 with J = 1.5e-4 kg·m², ωv = 2π·100 rad/s; position 2π·20 1/s.
         Params {
@@ -278,23 +291,10 @@ impl Default for Params {
                 angle_advance_ticks: 1.5,
                 max_current: 20.0,
             },
-            velocity: VelocityLoopGains {
-                kp: 0.0942,
-                ki: 11.84,
-                torque_limit: 2.0,
-            },
-            position: PositionLoopGains {
-                kp: 125.7,
-                velocity_feedforward: 1.0,
-                velocity_limit: 300.0,
-            },
+            velocity: VelocityLoopGains { kp: 0.0942, ki: 11.84, torque_limit: 2.0 },
+            position: PositionLoopGains { kp: 125.7, velocity_feedforward: 1.0, velocity_limit: 300.0 },
             filters: TorqueFilters { low_pass_hz: 0.0, notch_hz: 0.0, notch_q: 1.0, notch_depth: 0.0 },
-            limits: Limits {
-                overcurrent: 30.0,
-                bus_undervoltage: 20.0,
-                bus_overvoltage: 60.0,
-                following_error: 1.0,
-            },
+            limits: Limits { overcurrent: 30.0, bus_undervoltage: 20.0, bus_overvoltage: 60.0, following_error: 1.0 },
             acc_dec: AccDecParams::default(),
             sequence: SequenceParams::default(),
             friction: FrictionCompensationParams::default(),

@@ -193,12 +193,20 @@ impl SweepParams {
 
     /// Phase shifting from this frequency up.
     pub fn threshold(&self, base_rate_hz: f32) -> f32 {
-        if self.threshold_hz > 0.0 { self.threshold_hz } else { 0.5 * base_rate_hz / self.acquisition_divider as f32 }
+        if self.threshold_hz > 0.0 {
+            self.threshold_hz
+        } else {
+            0.5 * base_rate_hz / self.acquisition_divider as f32
+        }
     }
 
     /// Records at frequency f.
     pub fn records(&self, f: f32, base_rate_hz: f32) -> u32 {
-        if f >= self.threshold(base_rate_hz) { self.repeats } else { 1 }
+        if f >= self.threshold(base_rate_hz) {
+            self.repeats
+        } else {
+            1
+        }
     }
 
     /// Settling ticks (a whole number of acquisition periods) and measured samples of one
@@ -228,7 +236,9 @@ impl SweepParams {
         match self.signal {
             SweepSignal::Prbs => {
                 let settle = (libm::ceilf(self.min_settle_s * base_rate_hz / d as f32) as u64).saturating_mul(d);
-                settle.saturating_add((libm::roundf(self.prbs_seconds * base_rate_hz / d as f32) as u64).saturating_mul(d))
+                settle.saturating_add(
+                    (libm::roundf(self.prbs_seconds * base_rate_hz / d as f32) as u64).saturating_mul(d),
+                )
             }
             SweepSignal::SteppedSine => (0..self.count())
                 .map(|i| {
@@ -243,10 +253,18 @@ impl SweepParams {
 
     pub fn validate(&self, base_rate_hz: f32, velocity_divider: u32) -> Result<(), SweepError> {
         let finite_positive = |field, value: f32| {
-            if value.is_finite() && value > 0.0 { Ok(()) } else { Err(SweepError::Setting { field, value }) }
+            if value.is_finite() && value > 0.0 {
+                Ok(())
+            } else {
+                Err(SweepError::Setting { field, value })
+            }
         };
         let finite_non_negative = |field, value: f32| {
-            if value.is_finite() && value >= 0.0 { Ok(()) } else { Err(SweepError::Setting { field, value }) }
+            if value.is_finite() && value >= 0.0 {
+                Ok(())
+            } else {
+                Err(SweepError::Setting { field, value })
+            }
         };
         finite_positive("amplitude", self.amplitude)?;
         finite_positive("start_hz", self.start_hz)?;
@@ -273,7 +291,10 @@ impl SweepParams {
         }
         finite_non_negative("threshold_hz", self.threshold_hz)?;
         if self.acquisition_divider == 0 || !self.acquisition_divider.is_multiple_of(velocity_divider) {
-            return Err(SweepError::AcquisitionDivider { acquisition: self.acquisition_divider, velocity: velocity_divider });
+            return Err(SweepError::AcquisitionDivider {
+                acquisition: self.acquisition_divider,
+                velocity: velocity_divider,
+            });
         }
         if MSequence::new(self.prbs_degree).is_err() {
             return Err(SweepError::Setting { field: "prbs_degree (2 to 20)", value: self.prbs_degree as f32 });
@@ -284,12 +305,19 @@ impl SweepParams {
         finite_positive("prbs_seconds", self.prbs_seconds)?;
         finite_non_negative("precision_db", self.precision_db)?;
         if self.max_extensions > MAX_EXTENSIONS {
-            return Err(SweepError::Setting { field: "max_extensions (at most 64)", value: self.max_extensions as f32 });
+            return Err(SweepError::Setting {
+                field: "max_extensions (at most 64)",
+                value: self.max_extensions as f32,
+            });
         }
         // Bounds that keep every tick count far from overflow (`crate::ranges`): at most
         // 10⁴ s or 10⁴ cycles from 1 mHz per record, 2·10¹² ticks at 200 kHz.
         let range = |field, value: f32, min: f32, max: f32| {
-            if value >= min && value <= max { Ok(()) } else { Err(SweepError::Range { field, value, min, max }) }
+            if value >= min && value <= max {
+                Ok(())
+            } else {
+                Err(SweepError::Range { field, value, min, max })
+            }
         };
         use crate::ranges::{MAX_SWEEP_CYCLES, MAX_SWEEP_DIVIDER, MAX_SWEEP_SECONDS, MIN_SWEEP_HZ};
         range("start_hz", self.start_hz, MIN_SWEEP_HZ, f32::MAX)?;
@@ -304,7 +332,11 @@ impl SweepParams {
         range("acquisition_divider", self.acquisition_divider as f32, 1.0, MAX_SWEEP_DIVIDER as f32)?;
         range("prbs_divider", self.prbs_divider as f32, 1.0, MAX_SWEEP_DIVIDER as f32)?;
         // The sine is updated at the velocity-loop rate for velocity-loop points.
-        let loop_rate = if self.point == InjectionPoint::TorqueCommand { base_rate_hz } else { base_rate_hz / velocity_divider as f32 };
+        let loop_rate = if self.point == InjectionPoint::TorqueCommand {
+            base_rate_hz
+        } else {
+            base_rate_hz / velocity_divider as f32
+        };
         let top = self.stop_hz.max(self.extra_hz);
         if top >= 0.5 * loop_rate {
             return Err(SweepError::AboveLoopNyquist { frequency: top, nyquist: 0.5 * loop_rate });
@@ -769,13 +801,19 @@ mod tests {
         let [single, _] = measure(at(2000.0, 1, 1), 0.5, -1.0);
         let gain_error = (single.gain_db() - 20.0 * libm::log10f(0.5)).abs();
         let phase_error = (single.phase_deg() + 1.0f32.to_degrees()).abs();
-        assert!(gain_error > 3.0 || phase_error > 10.0 || !gain_error.is_finite(), "single phase must fail: {single:?}");
+        assert!(
+            gain_error > 3.0 || phase_error > 10.0 || !gain_error.is_finite(),
+            "single phase must fail: {single:?}"
+        );
     }
 
     #[test]
     fn below_the_threshold_one_record_measures_exactly() {
         let [r, _] = measure(at(123.0, 3, 3), 2.0, 0.7);
-        assert!((r.gain_db() - 20.0 * libm::log10f(2.0)).abs() < 1e-3 && (r.phase_deg() - 0.7f32.to_degrees()).abs() < 0.05, "{r:?}");
+        assert!(
+            (r.gain_db() - 20.0 * libm::log10f(2.0)).abs() < 1e-3 && (r.phase_deg() - 0.7f32.to_degrees()).abs() < 0.05,
+            "{r:?}"
+        );
     }
 
     #[test]
@@ -790,9 +828,18 @@ mod tests {
     #[test]
     fn bad_settings_are_named() {
         let v = |p: SweepParams| p.validate(FS, 2);
-        assert_eq!(v(SweepParams { stop_hz: 4000.0, ..Default::default() }), Err(SweepError::AboveLoopNyquist { frequency: 4000.0, nyquist: 4000.0 }));
-        assert!(matches!(v(SweepParams { amplitude: f32::NAN, ..Default::default() }), Err(SweepError::Setting { field: "amplitude", .. })));
-        assert_eq!(v(SweepParams { acquisition_divider: 3, ..Default::default() }), Err(SweepError::AcquisitionDivider { acquisition: 3, velocity: 2 }));
+        assert_eq!(
+            v(SweepParams { stop_hz: 4000.0, ..Default::default() }),
+            Err(SweepError::AboveLoopNyquist { frequency: 4000.0, nyquist: 4000.0 })
+        );
+        assert!(matches!(
+            v(SweepParams { amplitude: f32::NAN, ..Default::default() }),
+            Err(SweepError::Setting { field: "amplitude", .. })
+        ));
+        assert_eq!(
+            v(SweepParams { acquisition_divider: 3, ..Default::default() }),
+            Err(SweepError::AcquisitionDivider { acquisition: 3, velocity: 2 })
+        );
         assert_eq!(v(SweepParams { points: 200, ..Default::default() }), Err(SweepError::TooManyPoints(200)));
         assert_eq!(v(SweepParams::default()), Ok(()));
     }
@@ -834,7 +881,11 @@ mod tests {
             let (r_off, t_off) = noisy(off, 0.06, 0.04, seed);
             let (r_on, t_on) = noisy(p, 0.06, 0.04, seed);
             assert_eq!(t_off, off.total_ticks(FS));
-            assert!(t_on > t_off && t_on <= p.max_total_ticks(FS), "{t_on} ticks vs {t_off}..{}", p.max_total_ticks(FS));
+            assert!(
+                t_on > t_off && t_on <= p.max_total_ticks(FS),
+                "{t_on} ticks vs {t_off}..{}",
+                p.max_total_ticks(FS)
+            );
             before = before.max(db(r_off));
             after = after.max(db(r_on));
         }
@@ -848,7 +899,8 @@ mod tests {
             let r = uniform(&mut state);
             fit.add(0.0, 50.0 + 0.12 * libm::sinf(theta) + 0.04 * r, libm::sincosf(theta));
         }
-        let predicted = 20.0 / core::f32::consts::LN_10 * (0.04 / libm::sqrtf(3.0)) * libm::sqrtf(2.0 / n as f32) / 0.12;
+        let predicted =
+            20.0 / core::f32::consts::LN_10 * (0.04 / libm::sqrtf(3.0)) * libm::sqrtf(2.0 / n as f32) / 0.12;
         let got = fit.y_gain_error_db().unwrap();
         assert!((got / predicted - 1.0).abs() < 0.1, "estimated {got} dB, expected {predicted} dB");
     }

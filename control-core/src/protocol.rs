@@ -19,9 +19,9 @@ use core::fmt;
 
 use serde::{de::DeserializeOwned, Deserialize, Serialize};
 
+use crate::acquisition_stream::{AcquisitionStream, SampleBatch, BATCH};
 use crate::axis::{Axis, Commands, Mode, Telemetry};
 use crate::params::Params;
-use crate::acquisition_stream::{AcquisitionStream, SampleBatch, BATCH};
 use crate::ranges::{check_position, Quantity, RangeError};
 use crate::response_correction::CorrectionParams;
 use crate::stop_sequence::{Refusal, SequenceEvent};
@@ -49,7 +49,9 @@ pub fn crc32(data: &[u8]) -> u32 {
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
 pub enum Request {
     /// Protocol handshake: the drive answers with its version.
-    Hello { version: u16 },
+    Hello {
+        version: u16,
+    },
     /// Replace every parameter (only while the axis stands still in torque mode at zero torque).
     SetParams(Params),
     /// Mode and set-points, used from the next tick.
@@ -61,7 +63,9 @@ pub enum Request {
     ClearFaults,
     GetTelemetry,
     /// Stream acquisition samples (`Response::Samples` frames, unasked) or stop.
-    Stream { enabled: bool },
+    Stream {
+        enabled: bool,
+    },
 }
 
 /// A parameter's name as it crosses the link (at most 32 bytes of ASCII, zero-padded).
@@ -157,7 +161,9 @@ impl fmt::Display for FrameError {
 
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
 pub enum Response {
-    Hello { version: u16 },
+    Hello {
+        version: u16,
+    },
     Done,
     Refused(RefusalReason),
     Telemetry(Telemetry),
@@ -171,7 +177,9 @@ impl Response {
     /// uses one; [`decode_response`] does it).
     pub fn check(&self) -> Result<(), FrameError> {
         match self {
-            Self::Samples(b) if b.count as usize > BATCH => Err(FrameError::Count { got: b.count as u32, max: BATCH as u32 }),
+            Self::Samples(b) if b.count as usize > BATCH => {
+                Err(FrameError::Count { got: b.count as u32, max: BATCH as u32 })
+            }
             _ => Ok(()),
         }
     }
@@ -238,7 +246,8 @@ pub fn handle(axis: &mut Axis, commands: &mut Commands, stream: &mut Acquisition
         Request::Hello { version } if version != VERSION => Response::FrameError(FrameError::Version { got: version }),
         Request::Hello { .. } => Response::Hello { version: VERSION },
         Request::SetParams(p) => {
-            let at_rest = commands.mode == Mode::Torque && commands.torque == 0.0 && axis.telemetry().torque_command == 0.0;
+            let at_rest =
+                commands.mode == Mode::Torque && commands.torque == 0.0 && axis.telemetry().torque_command == 0.0;
             if !at_rest {
                 return refused(RefusalReason::Busy);
             }
@@ -460,7 +469,10 @@ mod tests {
         );
         extern crate std;
         let e = p.validate().unwrap_err();
-        assert_eq!(std::format!("{e}"), "sweep min_settle_s = 340000000000000000000000000000000000000 is outside [0, 10000]");
+        assert_eq!(
+            std::format!("{e}"),
+            "sweep min_settle_s = 340000000000000000000000000000000000000 is outside [0, 10000]"
+        );
         assert_eq!(*axis.params(), Params::default());
         // The longest settling accepted: the sweep's tick counts stay exact.
         p.sweep.min_settle_s = 10_000.0;
@@ -477,18 +489,29 @@ mod tests {
         let mut stream = AcquisitionStream::default();
         let far = SequenceEvent::MoveTo(i64::MIN);
         let answer = handle(&mut axis, &mut commands, &mut stream, Request::Sequence(far));
-        assert!(matches!(answer, Response::Refused(RefusalReason::OutOfRange(RangeError { quantity: Quantity::MoveTarget, .. }))), "{answer:?}");
+        assert!(
+            matches!(
+                answer,
+                Response::Refused(RefusalReason::OutOfRange(RangeError { quantity: Quantity::MoveTarget, .. }))
+            ),
+            "{answer:?}"
+        );
         let c = Commands { position: (1 << 53) + 1, ..Default::default() };
         let answer = handle(&mut axis, &mut commands, &mut stream, Request::SetCommands(c));
-        assert!(matches!(answer, Response::Refused(RefusalReason::OutOfRange(RangeError { quantity: Quantity::Position, .. }))), "{answer:?}");
+        assert!(
+            matches!(
+                answer,
+                Response::Refused(RefusalReason::OutOfRange(RangeError { quantity: Quantity::Position, .. }))
+            ),
+            "{answer:?}"
+        );
         let c = Commands { position: 1 << 53, ..Default::default() };
         assert_eq!(handle(&mut axis, &mut commands, &mut stream, Request::SetCommands(c)), Response::Done);
     }
 
     #[test]
     fn a_sample_count_beyond_the_batch_is_refused_by_the_host() {
-        let mut b = SampleBatch::default();
-        b.count = 200;
+        let mut b = SampleBatch { count: 200, ..Default::default() };
         let mut buf = [0u8; MAX_FRAME + 8];
         let n = encode(&Response::Samples(b), &mut buf).unwrap();
         assert_eq!(decode_response(&mut buf[..n]), Err(FrameError::Count { got: 200, max: 16 }));
@@ -505,7 +528,10 @@ mod tests {
         let before = *axis.params();
         let mut bad = Params::default();
         bad.velocity.kp = f32::NAN;
-        assert_eq!(handle(&mut axis, &mut commands, &mut stream, Request::SetParams(Params::default())), Response::Refused(RefusalReason::Busy));
+        assert_eq!(
+            handle(&mut axis, &mut commands, &mut stream, Request::SetParams(Params::default())),
+            Response::Refused(RefusalReason::Busy)
+        );
         commands = Commands::default();
         assert_eq!(
             handle(&mut axis, &mut commands, &mut stream, Request::SetParams(bad)),
@@ -513,14 +539,23 @@ mod tests {
         );
         assert_eq!(*axis.params(), before);
         let nan = Commands { torque: f32::NAN, ..Default::default() };
-        assert_eq!(handle(&mut axis, &mut commands, &mut stream, Request::SetCommands(nan)), Response::Refused(RefusalReason::NotFinite(Quantity::Torque)));
+        assert_eq!(
+            handle(&mut axis, &mut commands, &mut stream, Request::SetCommands(nan)),
+            Response::Refused(RefusalReason::NotFinite(Quantity::Torque))
+        );
         assert_eq!(commands, Commands::default());
         assert_eq!(
             handle(&mut axis, &mut commands, &mut stream, Request::Sequence(SequenceEvent::Stop)),
             Response::Refused(RefusalReason::Sequence(Refusal::NotInSequenceMode))
         );
-        assert_eq!(handle(&mut axis, &mut commands, &mut stream, Request::Hello { version: 7 }), Response::FrameError(FrameError::Version { got: 7 }));
-        assert_eq!(handle(&mut axis, &mut commands, &mut stream, Request::Hello { version: VERSION }), Response::Hello { version: VERSION });
+        assert_eq!(
+            handle(&mut axis, &mut commands, &mut stream, Request::Hello { version: 7 }),
+            Response::FrameError(FrameError::Version { got: 7 })
+        );
+        assert_eq!(
+            handle(&mut axis, &mut commands, &mut stream, Request::Hello { version: VERSION }),
+            Response::Hello { version: VERSION }
+        );
     }
 
     #[test]
@@ -531,7 +566,15 @@ mod tests {
         assert_eq!(handle(&mut axis, &mut commands, &mut stream, Request::Stream { enabled: true }), Response::Done);
         assert!(stream.enabled());
         for t in 0..64u64 {
-            stream.offer(&crate::phase_shifted_sweep::AcquisitionSample { tick: t, u: 1.5, y: -2.5, phase: 3.0, measuring: true, point: 7, record: 2 });
+            stream.offer(&crate::phase_shifted_sweep::AcquisitionSample {
+                tick: t,
+                u: 1.5,
+                y: -2.5,
+                phase: 3.0,
+                measuring: true,
+                point: 7,
+                record: 2,
+            });
         }
         let batch = stream.take_batch().unwrap();
         let mut buf = [0u8; MAX_FRAME + 8];

@@ -105,11 +105,19 @@ impl fmt::Display for RangeError {
 #[inline]
 pub fn check_f32(quantity: Quantity, value: f32) -> Result<(), RangeError> {
     let (_, max) = quantity.range();
-    if value.abs() <= max as f32 { Ok(()) } else { Err(RangeError { quantity, value: value as f64 }) }
+    if value.abs() <= max as f32 {
+        Ok(())
+    } else {
+        Err(RangeError { quantity, value: value as f64 })
+    }
 }
 
 /// A position in range.
 #[inline]
 pub fn check_position(quantity: Quantity, value: i64) -> Result<(), RangeError> {
-    if value.unsigned_abs() <= MAX_POSITION_COUNTS as u64 { Ok(()) } else { Err(RangeError { quantity, value: value as f64 }) }
+    if value.unsigned_abs() <= MAX_POSITION_COUNTS as u64 {
+        Ok(())
+    } else {
+        Err(RangeError { quantity, value: value as f64 })
+    }
 }

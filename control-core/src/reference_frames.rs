@@ -52,11 +52,7 @@ pub fn space_vector_duties(v: AlphaBeta, bus_voltage: f32) -> [f32; 3] {
     let min = smaller(smaller(va, vb), vc);
     let common = 0.5 * (max + min);
     let inv = 1.0 / bus_voltage;
-    [
-        clamp01(0.5 + (va - common) * inv),
-        clamp01(0.5 + (vb - common) * inv),
-        clamp01(0.5 + (vc - common) * inv),
-    ]
+    [clamp01(0.5 + (va - common) * inv), clamp01(0.5 + (vb - common) * inv), clamp01(0.5 + (vc - common) * inv)]
 }
 
 /// `x.clamp(0.0, 1.0)`, NaN included, without the library's NaN-preserving min/max chain.

@@ -55,9 +55,15 @@ pub struct CorrectionParams {
 pub enum CorrectionError {
     Count(usize),
     /// A frequency not positive and finite, or at/above the Nyquist frequency.
-    Frequency { section: usize, hz: f32 },
+    Frequency {
+        section: usize,
+        hz: f32,
+    },
     /// A damping not finite or ≤ 0 for poles (< 0 for zeros).
-    Damping { section: usize, damping: f32 },
+    Damping {
+        section: usize,
+        damping: f32,
+    },
     /// New coefficients while command pulses are still inside the filter.
     InMotion,
 }
@@ -70,7 +76,10 @@ impl fmt::Display for CorrectionError {
                 write!(f, "correction section {section}: {hz} Hz must be positive and below the position loop's Nyquist frequency")
             }
             Self::Damping { section, damping } => {
-                write!(f, "correction section {section}: damping {damping} must be finite (> 0 for poles, >= 0 for zeros)")
+                write!(
+                    f,
+                    "correction section {section}: damping {damping} must be finite (> 0 for poles, >= 0 for zeros)"
+                )
             }
             Self::InMotion => write!(f, "correction coefficients can only be loaded while no command is in motion"),
         }
@@ -100,7 +109,11 @@ impl CorrectionParams {
         }
         let nyquist = 0.5 / period;
         let frequency = |section, f: SecondOrder| {
-            if f.hz.is_finite() && f.hz > 0.0 && f.hz < nyquist { Ok(()) } else { Err(CorrectionError::Frequency { section, hz: f.hz }) }
+            if f.hz.is_finite() && f.hz > 0.0 && f.hz < nyquist {
+                Ok(())
+            } else {
+                Err(CorrectionError::Frequency { section, hz: f.hz })
+            }
         };
         for (i, s) in self.sections[..self.count].iter().enumerate() {
             frequency(i + 1, s.poles)?;
@@ -155,10 +168,11 @@ impl ResponseCorrection {
 
     /// No pulse inside and the state at rest (within a thousandth of a pulse).
     pub fn at_rest(&self) -> bool {
-        self.stock == 0 && self.sections[..self.count].iter().all(|b| {
-            let (s1, s2) = b.state();
-            s1.abs() < 1e-3 && s2.abs() < 1e-3
-        })
+        self.stock == 0
+            && self.sections[..self.count].iter().all(|b| {
+                let (s1, s2) = b.state();
+                s1.abs() < 1e-3 && s2.abs() < 1e-3
+            })
     }
 
     /// New coefficients (from a tuning run): only at rest; refused otherwise, nothing changed.
@@ -258,7 +272,10 @@ mod tests {
     #[test]
     fn whole_pulses_in_and_out_and_loading_only_at_rest() {
         let p = params(&[
-            CorrectionSection { zeros: Some(SecondOrder { hz: 55.0, damping: 0.05 }), poles: SecondOrder { hz: 80.0, damping: 1.0 } },
+            CorrectionSection {
+                zeros: Some(SecondOrder { hz: 55.0, damping: 0.05 }),
+                poles: SecondOrder { hz: 80.0, damping: 1.0 },
+            },
             CorrectionSection { zeros: None, poles: SecondOrder { hz: 80.0, damping: 1.0 } },
         ]);
         let mut f = ResponseCorrection::new(&p, T).unwrap();
@@ -285,9 +302,18 @@ mod tests {
         let bad = |s: CorrectionSection| params(&[s]).validate(T);
         let ok = CorrectionSection { zeros: None, poles: SecondOrder { hz: 50.0, damping: 1.0 } };
         assert_eq!(bad(ok), Ok(()));
-        assert!(matches!(bad(CorrectionSection { poles: SecondOrder { hz: 2500.0, damping: 1.0 }, ..ok }), Err(CorrectionError::Frequency { .. })));
-        assert!(matches!(bad(CorrectionSection { poles: SecondOrder { hz: 50.0, damping: 0.0 }, ..ok }), Err(CorrectionError::Damping { .. })));
-        assert!(matches!(bad(CorrectionSection { zeros: Some(SecondOrder { hz: f32::NAN, damping: 0.1 }), ..ok }), Err(CorrectionError::Frequency { .. })));
+        assert!(matches!(
+            bad(CorrectionSection { poles: SecondOrder { hz: 2500.0, damping: 1.0 }, ..ok }),
+            Err(CorrectionError::Frequency { .. })
+        ));
+        assert!(matches!(
+            bad(CorrectionSection { poles: SecondOrder { hz: 50.0, damping: 0.0 }, ..ok }),
+            Err(CorrectionError::Damping { .. })
+        ));
+        assert!(matches!(
+            bad(CorrectionSection { zeros: Some(SecondOrder { hz: f32::NAN, damping: 0.1 }), ..ok }),
+            Err(CorrectionError::Frequency { .. })
+        ));
         assert_eq!(CorrectionParams { count: 9, ..Default::default() }.validate(T), Err(CorrectionError::Count(9)));
     }
 }

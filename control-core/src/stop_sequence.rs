@@ -117,7 +117,11 @@ impl SequenceParams {
     pub fn validate(&self) -> Result<(), SequenceParamError> {
         let positive = |field, value: f32, allow_zero: bool| {
             let ok = value.is_finite() && (value > 0.0 || (allow_zero && value == 0.0));
-            if ok { Ok(()) } else { Err(SequenceParamError::NotPositive { field, value }) }
+            if ok {
+                Ok(())
+            } else {
+                Err(SequenceParamError::NotPositive { field, value })
+            }
         };
         positive("target_speed", self.target_speed, false)?;
         positive("acceleration", self.acceleration, false)?;
@@ -285,7 +289,8 @@ impl StopSequence {
     /// = the present speed (it then ramps to zero), nothing pending.
     pub fn enter(&mut self, position: i64, speed: f32, gain_index: usize) {
         let refused = self.status.refused;
-        self.status = SequenceStatus { speed_reference: speed, gain_index, refused, target: position, ..Default::default() };
+        self.status =
+            SequenceStatus { speed_reference: speed, gain_index, refused, target: position, ..Default::default() };
         self.start = position;
         self.position = position;
         self.in_position_ticks = 0;
@@ -422,7 +427,8 @@ impl StopSequence {
                 let gain = p.position_gain * p.gains[s.gain_index];
                 let deviation = crate::counts_to_f32(s.target.saturating_sub(position)) * (TAU / counts_per_rev as f32);
                 let magnitude = deviation.abs();
-                let speed = (gain * magnitude).min(crate::square_root::sqrt(p.acceleration * magnitude)).min(p.target_speed);
+                let speed =
+                    (gain * magnitude).min(crate::square_root::sqrt(p.acceleration * magnitude)).min(p.target_speed);
                 libm::copysignf(speed, deviation)
             }
         };

@@ -178,8 +178,9 @@ impl AxisModel {
 
     fn user_inputs(&self) -> Result<UserInputs, String> {
         let v = &self.state.values;
-        let mode = Mode::from_code(v.mode)
-            .ok_or_else(|| format!("mode must be 0 (torque), 1 (velocity), 2 (position) or 3 (stop sequence), got {}", v.mode))?;
+        let mode = Mode::from_code(v.mode).ok_or_else(|| {
+            format!("mode must be 0 (torque), 1 (velocity), 2 (position) or 3 (stop sequence), got {}", v.mode)
+        })?;
         // Every input was range-checked when it was set; a NaN cannot be stored.
         Ok(UserInputs {
             mode,
@@ -207,7 +208,9 @@ impl AxisModel {
         }
         let max = MAX_STEP_TICKS as f64 * sim.tick_period();
         if h > max {
-            return Err(format!("communication step {h} s is longer than the longest step accepted ({max} s): split it"));
+            return Err(format!(
+                "communication step {h} s is longer than the longest step accepted ({max} s): split it"
+            ));
         }
         let whole_periods = (h / period).round();
         if whole_periods < 1.0 || (h - whole_periods * period).abs() > 1e-9 * period.max(h) {

@@ -111,7 +111,10 @@ fn phase_from(c: u8) -> Option<Phase> {
 pub fn serialize(s: &Snapshot, out: &mut [u8]) -> Result<(), String> {
     let n = serialized_size();
     if out.len() < n {
-        return Err(format!("the buffer holds {} bytes; a serialized state takes {n} (SerializedFMUStateSize)", out.len()));
+        return Err(format!(
+            "the buffer holds {} bytes; a serialized state takes {n} (SerializedFMUStateSize)",
+            out.len()
+        ));
     }
     let out = &mut out[..n];
     let body_len = n - HEADER;
@@ -124,7 +127,8 @@ pub fn serialize(s: &Snapshot, out: &mut [u8]) -> Result<(), String> {
     body[2..10].copy_from_slice(&s.stop_time.unwrap_or(0.0).to_le_bytes());
     // SAFETY: ModelState is Copy (no pointers, no Drop); its bytes are read as a plain
     // image, padding included (its value is never interpreted, only copied back).
-    let image = unsafe { std::slice::from_raw_parts(&s.model as *const ModelState as *const u8, size_of::<ModelState>()) };
+    let image =
+        unsafe { std::slice::from_raw_parts(&s.model as *const ModelState as *const u8, size_of::<ModelState>()) };
     body[BODY_PREFIX..].copy_from_slice(image);
     let crc = CRC.checksum(&out[HEADER..]);
     out[24..28].copy_from_slice(&crc.to_le_bytes());
@@ -163,7 +167,11 @@ pub fn deserialize(bytes: &[u8]) -> Result<Snapshot, String> {
     // SAFETY: the image was written by `serialize` of this very build (fingerprint and CRC
     // checked), from a valid ModelState of the same layout.
     let model = unsafe {
-        std::ptr::copy_nonoverlapping(body[BODY_PREFIX..].as_ptr(), model.as_mut_ptr() as *mut u8, size_of::<ModelState>());
+        std::ptr::copy_nonoverlapping(
+            body[BODY_PREFIX..].as_ptr(),
+            model.as_mut_ptr() as *mut u8,
+            size_of::<ModelState>(),
+        );
         model.assume_init()
     };
     // Belt and braces: every settable value within its declared range.

@@ -8,7 +8,8 @@ use crate::variables::{Causality, Declaration, Kind, Unit, Value, Values, Variab
 
 pub const MODEL_IDENTIFIER: &str = "servo_axis";
 const MODEL_NAME: &str = "servo_axis";
-const DESCRIPTION: &str = "Servo axis: the drive's control core (current, velocity and position loops, acc/dec filter, \
+const DESCRIPTION: &str =
+    "Servo axis: the drive's control core (current, velocity and position loops, acc/dec filter, \
 stop sequences, frequency-response sweep, response correction) in closed loop with a PMSM, a two-inertia load, \
 friction and an encoder";
 const COPYRIGHT: &str = "Copyright (c) the servo-drive toolkit developers";
@@ -161,7 +162,13 @@ pub fn fmi3() -> String {
     unit_definitions(&mut out);
     out.push_str("  <TypeDefinitions>\n");
     for u in units_used() {
-        let _ = writeln!(out, "    <Float64Type name=\"{}\" quantity=\"{}\" unit=\"{}\"/>", u.type_name(), u.quantity(), xml_escape(u.name()));
+        let _ = writeln!(
+            out,
+            "    <Float64Type name=\"{}\" quantity=\"{}\" unit=\"{}\"/>",
+            u.type_name(),
+            u.quantity(),
+            xml_escape(u.name())
+        );
     }
     out.push_str("  </TypeDefinitions>\n");
     log_categories(&mut out);
@@ -271,7 +278,9 @@ fn range_text(d: &Declaration) -> String {
 /// The parameter and input table (Markdown) the README carries.
 pub fn markdown_table() -> String {
     let start = Values::start();
-    let mut out = String::from("| variable | causality | unit | start | range | description |\n| --- | --- | --- | --- | --- | --- |\n");
+    let mut out = String::from(
+        "| variable | causality | unit | start | range | description |\n| --- | --- | --- | --- | --- | --- |\n",
+    );
     for d in DECLARATIONS.iter().filter(|d| d.settable()) {
         let _ = writeln!(
             out,

@@ -136,8 +136,17 @@ fn acc_dec(v: &Values) -> Result<AccDecParams, String> {
 }
 
 fn sequence(v: &Values, counts_per_rev: u32) -> Result<SequenceParams, String> {
-    let gains = [v.seq_gain_1, v.seq_gain_2, v.seq_gain_3, v.seq_gain_4, v.seq_gain_5, v.seq_gain_6, v.seq_gain_7, v.seq_gain_8]
-        .map(|g| g as f32);
+    let gains = [
+        v.seq_gain_1,
+        v.seq_gain_2,
+        v.seq_gain_3,
+        v.seq_gain_4,
+        v.seq_gain_5,
+        v.seq_gain_6,
+        v.seq_gain_7,
+        v.seq_gain_8,
+    ]
+    .map(|g| g as f32);
     let counts = |name: &str, rad: f64| -> Result<i64, String> {
         if !(rad.is_finite() && rad.abs() <= 1.0e9) {
             return Err(format!("{name} {rad} rad must be a finite angle within ±1e9 rad"));
@@ -160,9 +169,9 @@ fn sequence(v: &Values, counts_per_rev: u32) -> Result<SequenceParams, String> {
 }
 
 fn sweep(v: &Values) -> Result<SweepParams, String> {
-    let point = InjectionPoint::from_code(v.sweep_point)
-        .filter(|p| *p != InjectionPoint::Off)
-        .ok_or_else(|| format!("sweep.point must be 1 (torque), 2 (velocity command) or 3 (velocity feedback), got {}", v.sweep_point))?;
+    let point = InjectionPoint::from_code(v.sweep_point).filter(|p| *p != InjectionPoint::Off).ok_or_else(|| {
+        format!("sweep.point must be 1 (torque), 2 (velocity command) or 3 (velocity feedback), got {}", v.sweep_point)
+    })?;
     let signal = match v.sweep_signal {
         0 => SweepSignal::SteppedSine,
         1 => SweepSignal::Prbs,
@@ -228,7 +237,8 @@ pub const CORRECTION_SECTIONS: [[&str; 4]; 8] = [
 ];
 
 /// The names of the moving-average stage lengths, stage 1 to 3.
-pub const MOVING_AVERAGE_LENGTHS: [&str; 3] = [name::accdec_ma_length_1, name::accdec_ma_length_2, name::accdec_ma_length_3];
+pub const MOVING_AVERAGE_LENGTHS: [&str; 3] =
+    [name::accdec_ma_length_1, name::accdec_ma_length_2, name::accdec_ma_length_3];
 
 /// The FMU parameter values of a sweep's settings: the inverse of the conversion above, kept
 /// beside it (a test turns one into the other and back).

@@ -173,7 +173,12 @@ impl AxisSimulation {
     }
 
     #[inline(always)]
-    fn tick_inner(&mut self, commands: &Commands, disturbance_torque: f64, fault: impl FnOnce(&mut AxisInputs)) -> AxisInputs {
+    fn tick_inner(
+        &mut self,
+        commands: &Commands,
+        disturbance_torque: f64,
+        fault: impl FnOnce(&mut AxisInputs),
+    ) -> AxisInputs {
         let m = self.plant.measure();
         let mut inputs = AxisInputs {
             phase_currents: [m.phase_currents[0] as f32, m.phase_currents[1] as f32],

@@ -73,7 +73,9 @@ mod tests {
 
     #[test]
     fn the_adcs_and_the_fail_safe_read_back_as_the_model_s_words(_b: &mut Board) {
-        for (adc, seq, name) in [(pac::ADC1, adc_words::ADC1_SEQUENCE, "ADC1"), (pac::ADC2, adc_words::ADC2_SEQUENCE, "ADC2")] {
+        for (adc, seq, name) in
+            [(pac::ADC1, adc_words::ADC1_SEQUENCE, "ADC1"), (pac::ADC2, adc_words::ADC2_SEQUENCE, "ADC2")]
+        {
             defmt::assert_eq!(adc.jsqr().read().0, adc_words::jsqr(&seq), "{} JSQR", name);
             defmt::assert_eq!(adc.smpr().read().0, adc_words::smpr1(&seq), "{} SMPR1", name);
             defmt::assert!(adc.cr().read().jadstart(), "{} injected conversions armed", name);
@@ -130,7 +132,10 @@ mod tests {
         let wait = || {
             let start = cortex_m::peripheral::DWT::cycle_count();
             while !adc.isr().read().jeos() {
-                defmt::assert!(cortex_m::peripheral::DWT::cycle_count().wrapping_sub(start) < 4 * PERIOD_CYCLES, "no conversion within four periods");
+                defmt::assert!(
+                    cortex_m::peripheral::DWT::cycle_count().wrapping_sub(start) < 4 * PERIOD_CYCLES,
+                    "no conversion within four periods"
+                );
             }
             let at = cortex_m::peripheral::DWT::cycle_count();
             let counter = pac::TIM1.cnt().read().cnt() as u32;
@@ -141,7 +146,12 @@ mod tests {
         let (t0, _, _) = wait();
         let (t1, counter, counts) = wait();
         let period = t1.wrapping_sub(t0);
-        defmt::assert!(period.abs_diff(PERIOD_CYCLES) < PERIOD_CYCLES / 100, "{} cycles between conversions, {} expected", period, PERIOD_CYCLES);
+        defmt::assert!(
+            period.abs_diff(PERIOD_CYCLES) < PERIOD_CYCLES / 100,
+            "{} cycles between conversions, {} expected",
+            period,
+            PERIOD_CYCLES
+        );
         // Triggered at ARR − 1 going up; done (polling latency included) within 2 µs, i.e.
         // within 170 timer counts of the top on the way down.
         let top = pac::TIM1.arr().read().arr() as u32;

@@ -129,7 +129,10 @@ fn pulse_move(r: &AccDecRequest) -> Result<PulseMove> {
     // The drive's own scale: f32, as `Params::counts_per_position_tick`.
     let speed = r.speed_rad_s as f32 * (r.counts_per_rev as f32 / control_core::TAU * r.sample_period);
     if speed < 1.0 {
-        bail!("--speed {} rad/s is less than one count per position tick; use a faster move or a finer encoder", r.speed_rad_s);
+        bail!(
+            "--speed {} rad/s is less than one count per position tick; use a faster move or a finer encoder",
+            r.speed_rad_s
+        );
     }
     Ok(PulseMove { distance, speed })
 }
@@ -243,10 +246,26 @@ pub fn run(r: &AccDecRequest, mut progress: impl FnMut(&str, f64)) -> Result<Acc
             let duration = fmu_duration(&[&bres, &ares], &r.resonances);
             for res in &r.resonances {
                 let period = r.sample_period as f64;
-                let (vb, _) =
-                    residual_vibration(fmu, &b, *res, period, r.distance_rad, r.speed_rad_s, window_start(&bres), duration)?;
-                let (va, _) =
-                    residual_vibration(fmu, &a, *res, period, r.distance_rad, r.speed_rad_s, window_start(&ares), duration)?;
+                let (vb, _) = residual_vibration(
+                    fmu,
+                    &b,
+                    *res,
+                    period,
+                    r.distance_rad,
+                    r.speed_rad_s,
+                    window_start(&bres),
+                    duration,
+                )?;
+                let (va, _) = residual_vibration(
+                    fmu,
+                    &a,
+                    *res,
+                    period,
+                    r.distance_rad,
+                    r.speed_rad_s,
+                    window_start(&ares),
+                    duration,
+                )?;
                 residuals.push((res.hz, vb.residual, va.residual));
             }
         }
@@ -280,10 +299,16 @@ pub fn run(r: &AccDecRequest, mut progress: impl FnMut(&str, f64)) -> Result<Acc
 }
 
 fn write_sweep(out: &Path, sweep: &[SweepPoint]) -> Result<Vec<PathBuf>> {
-    let mut columns = vec!["cutoff_hz", "butterworth_t99_ms", "moving_average_t99_ms", "butterworth_peak_jerk", "moving_average_peak_jerk"]
-        .into_iter()
-        .map(String::from)
-        .collect::<Vec<_>>();
+    let mut columns = vec![
+        "cutoff_hz",
+        "butterworth_t99_ms",
+        "moving_average_t99_ms",
+        "butterworth_peak_jerk",
+        "moving_average_peak_jerk",
+    ]
+    .into_iter()
+    .map(String::from)
+    .collect::<Vec<_>>();
     let mut bw = Trace::new(vec!["cutoff_hz".into(), "t99_ms".into(), "peak_jerk".into()]);
     let mut ma = bw.clone();
     if let Some(p) = sweep.first() {
@@ -296,7 +321,13 @@ fn write_sweep(out: &Path, sweep: &[SweepPoint]) -> Result<Vec<PathBuf>> {
     }
     let mut all = Trace::new(columns);
     for p in sweep {
-        let mut row = vec![p.cutoff_hz as f64, p.butterworth_t99 * 1e3, p.moving_average_t99 * 1e3, p.butterworth_peak_jerk, p.moving_average_peak_jerk];
+        let mut row = vec![
+            p.cutoff_hz as f64,
+            p.butterworth_t99 * 1e3,
+            p.moving_average_t99 * 1e3,
+            p.butterworth_peak_jerk,
+            p.moving_average_peak_jerk,
+        ];
         let mut rb = vec![p.cutoff_hz as f64, p.butterworth_t99 * 1e3, p.butterworth_peak_jerk];
         let mut rm = vec![p.cutoff_hz as f64, p.moving_average_t99 * 1e3, p.moving_average_peak_jerk];
         for (_, b, m) in &p.residuals {
@@ -337,7 +368,15 @@ impl AccDecReport {
             d.poles.iter().map(|(re, im)| format!("{re:.6}{im:+.6}j")).collect::<Vec<_>>().join(", ")
         );
         for (i, s) in d.sections.iter().enumerate() {
-            println!("  section {} b0 b1 b2 | a1 a2 : {:.8} {:.8} {:.8} | {:.8} {:.8}", i + 1, s[0], s[1], s[2], s[3], s[4]);
+            println!(
+                "  section {} b0 b1 b2 | a1 a2 : {:.8} {:.8} {:.8} | {:.8} {:.8}",
+                i + 1,
+                s[0],
+                s[1],
+                s[2],
+                s[3],
+                s[4]
+            );
         }
         if let Some(f) = d.first_order {
             println!("  first-order section b1 | a1 : {:.8} | {:.8}", f[0], f[1]);

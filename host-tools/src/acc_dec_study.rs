@@ -7,7 +7,6 @@
 //! same transfer function in f64 without rounding (the ideal shape, free of the ±1-pulse
 //! quantisation that dominates a numerically differentiated jerk).
 
-use servo_axis::variables::name;
 use anyhow::{anyhow, bail, Result};
 use control_core::acc_dec::{
     AccDecFilter, ButterworthDesign, ButterworthPulseFilter, MovingAverageCascade, ZeroPlacement,
@@ -15,6 +14,7 @@ use control_core::acc_dec::{
 };
 use control_core::command_path::{CommandPath, Move};
 use serde::Serialize;
+use servo_axis::variables::name;
 
 use crate::fmu_runner::Fmu;
 use crate::scenario::{Event, Scenario, Value};
@@ -50,9 +50,7 @@ impl FilterSpec {
         match self {
             Self::Butterworth { order, cutoff_hz, all_delays } => {
                 let zeros = if *all_delays { ZeroPlacement::AllDelays } else { ZeroPlacement::Seed };
-                ButterworthDesign::with_zeros(*order, *cutoff_hz, period, zeros)
-                    .map(Some)
-                    .map_err(|e| anyhow!("{e}"))
+                ButterworthDesign::with_zeros(*order, *cutoff_hz, period, zeros).map(Some).map_err(|e| anyhow!("{e}"))
             }
             Self::MovingAverage { .. } => Ok(None),
         }
@@ -364,7 +362,11 @@ pub struct Resonance {
 impl Resonance {
     pub fn plant_parameters(&self) -> Result<Vec<(String, Value)>> {
         if !(self.hz.is_finite() && self.hz > 0.0 && self.damping_ratio.is_finite() && self.damping_ratio >= 0.0) {
-            bail!("a load resonance needs a positive frequency and a damping ratio >= 0 (got {} Hz, {})", self.hz, self.damping_ratio);
+            bail!(
+                "a load resonance needs a positive frequency and a damping ratio >= 0 (got {} Hz, {})",
+                self.hz,
+                self.damping_ratio
+            );
         }
         let load_inertia = servo_axis::plant::PlantParams::default().load_inertia;
         let w = std::f64::consts::TAU * self.hz;
@@ -399,7 +401,7 @@ pub fn position_period_parameters(period: f64) -> Result<Vec<(String, Value)>> {
     let defaults = control_core::Params::default();
     let tick = 1.0 / defaults.rates.current_loop_hz as f64;
     let divider = (period / tick).round();
-    if !(divider >= 1.0 && divider <= 1000.0 && (divider * tick - period).abs() <= 1e-6 * period) {
+    if !((1.0..=1000.0).contains(&divider) && (divider * tick - period).abs() <= 1e-6 * period) {
         bail!("the FMU's position loop runs at whole multiples of its {} µs tick; {period} s is not one", tick * 1e6);
     }
     Ok(vec![(name::ctrl_position_divider.into(), Value::Int(divider as i64))])

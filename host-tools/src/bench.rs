@@ -112,7 +112,13 @@ pub fn bare_simulation_wall(seconds: f64) -> Result<f64> {
         let t = k as f64 * h + 1e-9 * h;
         let inputs = UserInputs {
             mode: Mode::Velocity,
-            velocity_command: if t >= t3 { -50.0 } else if t >= t1 { 50.0 } else { 0.0 },
+            velocity_command: if t >= t3 {
+                -50.0
+            } else if t >= t1 {
+                50.0
+            } else {
+                0.0
+            },
             disturbance_torque: if t >= t2 { 0.1 } else { 0.0 },
             ..Default::default()
         };
@@ -197,7 +203,13 @@ pub fn print_verdict(what: &str, v: &FmpyVerdict) {
     }
 }
 
-pub fn bench_fmu(fmu_path: &Path, out: &Path, seconds: f64, with_fmpy: bool, mut progress: impl FnMut(f64)) -> Result<FmuBench> {
+pub fn bench_fmu(
+    fmu_path: &Path,
+    out: &Path,
+    seconds: f64,
+    with_fmpy: bool,
+    mut progress: impl FnMut(f64),
+) -> Result<FmuBench> {
     std::fs::create_dir_all(out)?;
     let fmu = Fmu::load(fmu_path)?;
     let load = |record: &[&str], name: &str| -> Result<Scenario> {
@@ -239,13 +251,11 @@ pub fn bench_fmu(fmu_path: &Path, out: &Path, seconds: f64, with_fmpy: bool, mut
         v.sort_by(f64::total_cmp);
         v[v.len() / 2]
     };
-    let (rust_wall, all_wall, bare_wall, overhead) = (median(walls), median(all_walls), median(bare_walls), median(ratios));
+    let (rust_wall, all_wall, bare_wall, overhead) =
+        (median(walls), median(all_walls), median(bare_walls), median(ratios));
     let (read_wall, read_overhead) = (median(read_walls), median(read_ratios));
-    let fmpy_wall = if with_fmpy {
-        Some(run_fmpy(fmu_path, &out.join("bench.toml"), &out.join("bench_fmpy.csv"))?)
-    } else {
-        None
-    };
+    let fmpy_wall =
+        if with_fmpy { Some(run_fmpy(fmu_path, &out.join("bench.toml"), &out.join("bench_fmpy.csv"))?) } else { None };
     let rust_rt = seconds / rust_wall;
     let fmpy_rt = fmpy_wall.map(|w| seconds / w);
     Ok(FmuBench {

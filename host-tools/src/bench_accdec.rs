@@ -36,7 +36,12 @@ pub struct SeedDigit {
 pub fn seed_digits() -> Result<Vec<SeedDigit>> {
     let d = ButterworthDesign::new(3, 1000.0, 0.0005).map_err(|e| anyhow::anyhow!("{e}"))?;
     let a = d.denominator();
-    let rows = [("K (numerator gain)", "0.3403", d.gain), ("a1", "0.33626", a[1]), ("a2", "0.026815", a[2]), ("a3", "-0.0018674", a[3])];
+    let rows = [
+        ("K (numerator gain)", "0.3403", d.gain),
+        ("a1", "0.33626", a[1]),
+        ("a2", "0.026815", a[2]),
+        ("a3", "-0.0018674", a[3]),
+    ];
     Ok(rows
         .into_iter()
         .map(|(name, printed, ours)| {
@@ -95,7 +100,9 @@ fn pole_distance(a: &[(f64, f64)], b: &[(f64, f64)]) -> f64 {
 pub fn matched_comparison() -> Result<Vec<MatchedComparison>> {
     let cases: Vec<serde_json::Value> = MATCHED_CASES
         .iter()
-        .flat_map(|&(c, t)| (1..=MAX_ORDER).map(move |n| serde_json::json!({"order": n, "cutoff_hz": c, "sample_period": t})))
+        .flat_map(|&(c, t)| {
+            (1..=MAX_ORDER).map(move |n| serde_json::json!({"order": n, "cutoff_hz": c, "sample_period": t}))
+        })
         .collect();
     let script = workspace_root().join("tests/python/matched_reference.py");
     let mut child = Command::new(python()?)
@@ -230,7 +237,12 @@ pub fn properties(sequences: usize) -> Properties {
         let mut f = random_filter(&mut rng);
         nonzero += (0..ticks / 100).filter(|_| f.step(0) != 0).count();
     }
-    Properties { sequences, conservation_failures: failures, zero_input_ticks: ticks, zero_input_nonzero_outputs: nonzero }
+    Properties {
+        sequences,
+        conservation_failures: failures,
+        zero_input_ticks: ticks,
+        zero_input_nonzero_outputs: nonzero,
+    }
 }
 
 #[derive(Clone, Debug, Serialize)]
@@ -292,7 +304,8 @@ pub fn equal_delay_vibration(fmu_path: &Path, resonances_hz: &[f64], on_t50: boo
 }
 
 /// The filters whose cost is measured, by name.
-pub const COST_FILTERS: [&str; 5] = ["none", "butterworth3", "butterworth6", "moving_average3x16", "moving_average1x16"];
+pub const COST_FILTERS: [&str; 5] =
+    ["none", "butterworth3", "butterworth6", "moving_average3x16", "moving_average1x16"];
 
 /// Run `ticks` ticks of a filter on reproducible pulses (the probe valgrind counts).
 pub fn cost_probe(filter: &str, ticks: usize) -> Result<i64> {
@@ -304,8 +317,12 @@ pub fn cost_probe(filter: &str, ticks: usize) -> Result<i64> {
             let d = ButterworthDesign::new(order, 40.0, period).map_err(|e| anyhow::anyhow!("{e}"))?;
             AccDecFilter::Butterworth(control_core::acc_dec::ButterworthPulseFilter::new(d))
         }
-        "moving_average3x16" => AccDecFilter::MovingAverage(MovingAverageCascade::new(&[16, 16, 16]).map_err(|e| anyhow::anyhow!("{e}"))?),
-        "moving_average1x16" => AccDecFilter::MovingAverage(MovingAverageCascade::new(&[16]).map_err(|e| anyhow::anyhow!("{e}"))?),
+        "moving_average3x16" => {
+            AccDecFilter::MovingAverage(MovingAverageCascade::new(&[16, 16, 16]).map_err(|e| anyhow::anyhow!("{e}"))?)
+        }
+        "moving_average1x16" => {
+            AccDecFilter::MovingAverage(MovingAverageCascade::new(&[16]).map_err(|e| anyhow::anyhow!("{e}"))?)
+        }
         other => bail!("unknown filter `{other}` (one of {COST_FILTERS:?})"),
     };
     let mut rng = Random(7);

@@ -20,7 +20,8 @@ use crate::scenario::Value;
 
 /// The compensation the demo uses: twice the axis' total Coulomb friction (the swing from
 /// holding it one way to the other), decaying over 0.2 s.
-pub const COMPENSATION: [(&str, f64); 2] = [(name::ctrl_friction_comp_amplitude, 0.06), (name::ctrl_friction_comp_decay, 0.2)];
+pub const COMPENSATION: [(&str, f64); 2] =
+    [(name::ctrl_friction_comp_amplitude, 0.06), (name::ctrl_friction_comp_decay, 0.2)];
 
 #[derive(Clone, Debug, Serialize)]
 pub struct CircleBench {
@@ -50,14 +51,18 @@ pub fn demo_request(parameters: BTreeMap<String, Value>) -> CircleRequest {
 
 pub fn bench(fmu: &Fmu) -> Result<CircleBench> {
     let off = two_axis(fmu, &demo_request(BTreeMap::new()))?.feedback.roundness(1.0);
-    let on_params: BTreeMap<String, Value> = COMPENSATION.iter().map(|(k, v)| (k.to_string(), Value::Float(*v))).collect();
+    let on_params: BTreeMap<String, Value> =
+        COMPENSATION.iter().map(|(k, v)| (k.to_string(), Value::Float(*v))).collect();
     let on = two_axis(fmu, &demo_request(on_params))?.feedback.roundness(1.0);
-    let frictionless: BTreeMap<String, Value> =
-        [name::plant_motor_coulomb, name::plant_load_coulomb].iter().map(|k| (k.to_string(), Value::Float(0.0))).collect();
+    let frictionless: BTreeMap<String, Value> = [name::plant_motor_coulomb, name::plant_load_coulomb]
+        .iter()
+        .map(|k| (k.to_string(), Value::Float(0.0)))
+        .collect();
     let r = demo_request(frictionless);
     let pseudo = single_axis(fmu, &r)?;
     let circle = two_axis(fmu, &r)?;
-    let d = radial_difference(&pseudo.feedback, &circle.feedback).max(radial_difference(&circle.feedback, &pseudo.feedback));
+    let d = radial_difference(&pseudo.feedback, &circle.feedback)
+        .max(radial_difference(&circle.feedback, &pseudo.feedback));
     Ok(CircleBench {
         radius: r.radius,
         feed: r.feed,

@@ -132,10 +132,12 @@ fn stop_and_move(fmu: &Fmu, index: usize, multiplier: f64) -> Result<GainFigures
          [[events]]\ntime={STOP_AT}\nevent='run_off'\n[[events]]\ntime={STOP_AT}\nevent='stop'\n"
     );
     let t = run(fmu, &stop_text)?;
-    let (time, state, complete, dev) = (col(&t, "time")?, col(&t, "seq_state")?, col(&t, "seq_complete")?, col(&t, "seq_deviation")?);
+    let (time, state, complete, dev) =
+        (col(&t, "time")?, col(&t, "seq_state")?, col(&t, "seq_complete")?, col(&t, "seq_deviation")?);
     let accepted = state.iter().position(|&s| s == 3.0).ok_or_else(|| anyhow!("the stop was never accepted"))?;
     let end = time.len() - 1;
-    let settled = settled_from(&complete, accepted, end).ok_or_else(|| anyhow!("no completion after the stop at gain {multiplier}"))?;
+    let settled = settled_from(&complete, accepted, end)
+        .ok_or_else(|| anyhow!("no completion after the stop at gain {multiplier}"))?;
     let hold = col(&t, "seq_hold_position")?[end];
     let overshoot = dev[accepted..].iter().fold(0.0f64, |m, d| m.max(d.abs())) as i64;
 
@@ -150,8 +152,10 @@ fn stop_and_move(fmu: &Fmu, index: usize, multiplier: f64) -> Result<GainFigures
     let (mtime, mcomplete, mpos) = (col(&m, "time")?, col(&m, "seq_complete")?, col(&m, "motor_position")?);
     let k = at(&mtime, move_at);
     let mend = mtime.len() - 1;
-    let msettled = settled_from(&mcomplete, k + 1, mend).ok_or_else(|| anyhow!("no completion after the move at gain {multiplier}"))?;
-    let counts_per_rad = servo_axis::plant::PlantParams::default().encoder_counts_per_rev as f64 / std::f64::consts::TAU;
+    let msettled = settled_from(&mcomplete, k + 1, mend)
+        .ok_or_else(|| anyhow!("no completion after the move at gain {multiplier}"))?;
+    let counts_per_rad =
+        servo_axis::plant::PlantParams::default().encoder_counts_per_rev as f64 / std::f64::consts::TAU;
     let past = mpos[k..].iter().fold(0.0f64, |m, p| m.max(p - target));
     Ok(GainFigures {
         multiplier,
@@ -172,9 +176,17 @@ fn grid_stop(fmu: &Fmu, speed: f64, vh: f64, width: u32, index: usize, multiplie
          [[events]]\ntime={STOP_AT}\nevent='run_off'\n[[events]]\ntime={STOP_AT}\nevent='stop'\n"
     );
     let t = run(fmu, &text)?;
-    let (state, complete, dev, time, v) = (col(&t, "seq_state")?, col(&t, "seq_complete")?, col(&t, "seq_deviation")?, col(&t, "time")?, col(&t, "velocity_estimate")?);
-    let accepted = state.iter().position(|&s| s == 3.0).ok_or_else(|| anyhow!("no acceptance at {speed} rad/s, level {vh}"))?;
-    let counts_per_rad = servo_axis::plant::PlantParams::default().encoder_counts_per_rev as f64 / std::f64::consts::TAU;
+    let (state, complete, dev, time, v) = (
+        col(&t, "seq_state")?,
+        col(&t, "seq_complete")?,
+        col(&t, "seq_deviation")?,
+        col(&t, "time")?,
+        col(&t, "velocity_estimate")?,
+    );
+    let accepted =
+        state.iter().position(|&s| s == 3.0).ok_or_else(|| anyhow!("no acceptance at {speed} rad/s, level {vh}"))?;
+    let counts_per_rad =
+        servo_axis::plant::PlantParams::default().encoder_counts_per_rev as f64 / std::f64::consts::TAU;
     let va = v[accepted].abs();
     let first = (accepted..complete.len()).find(|&i| complete[i] != 0.0);
     let toggles = first.map_or(0, |f| complete[f..].windows(2).filter(|w| w[0] != w[1]).count() as u32);
@@ -186,7 +198,8 @@ fn grid_stop(fmu: &Fmu, speed: f64, vh: f64, width: u32, index: usize, multiplie
         speed_at_acceptance: va,
         stopping_counts: va * va / (2.0 * ACCELERATION) * counts_per_rad,
         swing_counts: dev[accepted..].iter().fold(0.0f64, |m, d| m.max(d.abs())) as i64,
-        overshoot_counts: first.map_or(0, |f| dev[f..].iter().fold(0.0f64, |m, d| m.max(d.abs() - width as f64)) as i64),
+        overshoot_counts: first
+            .map_or(0, |f| dev[f..].iter().fold(0.0f64, |m, d| m.max(d.abs() - width as f64)) as i64),
         settle: first.map_or(f64::NAN, |f| time[f] - time[accepted]),
         toggles,
     })
@@ -194,7 +207,10 @@ fn grid_stop(fmu: &Fmu, speed: f64, vh: f64, width: u32, index: usize, multiplie
 
 pub fn grid_figures(grid: &[GridStop]) -> GridFigures {
     let hysteresis = control_core::Params::default().sequence.completion_hysteresis as f64;
-    let ratio = |g: &GridStop| g.swing_counts as f64 / (SWING_BOUND_FACTOR * g.stopping_counts + SWING_FLOOR_COUNTS + g.width as f64 + hysteresis);
+    let ratio = |g: &GridStop| {
+        g.swing_counts as f64
+            / (SWING_BOUND_FACTOR * g.stopping_counts + SWING_FLOOR_COUNTS + g.width as f64 + hysteresis)
+    };
     let worst = grid.iter().max_by(|a, b| ratio(a).total_cmp(&ratio(b))).cloned();
     let never_complete = grid.iter().filter(|g| g.settle.is_nan()).count();
     let max_toggles = grid.iter().map(|g| g.toggles).max().unwrap_or(0);
@@ -256,7 +272,11 @@ pub fn bench(fmu: &Fmu, zero_speeds: &[f64], mut progress: impl FnMut(f64)) -> R
         let t = run(fmu, &text)?;
         let (time, state) = (col(&t, "time")?, col(&t, "seq_state")?);
         let accepted = state.iter().position(|&s| s == 3.0).ok_or_else(|| anyhow!("no acceptance at {vh} rad/s"))?;
-        acceptance.push(AcceptanceFigure { zero_speed: vh, measured: time[accepted] - STOP_AT, ramp: (RUN_SPEED - vh) / ACCELERATION });
+        acceptance.push(AcceptanceFigure {
+            zero_speed: vh,
+            measured: time[accepted] - STOP_AT,
+            ramp: (RUN_SPEED - vh) / ACCELERATION,
+        });
     }
     progress(1.0);
     let falls = gains.windows(2).all(|w| w[1].move_settle < w[0].move_settle && w[1].stop_settle < w[0].stop_settle);

@@ -23,8 +23,10 @@ use anyhow::{anyhow, Result};
 use control_core::phase_shifted_sweep::{SweepParams, SweepSignal};
 use serde::Serialize;
 
-use crate::frequency_response::{errors, measured_time, online_results, prbs_results, stream_results, ErrorSummary, ResponsePoint, SweepRun};
 use crate::fmu_runner::Fmu;
+use crate::frequency_response::{
+    errors, measured_time, online_results, prbs_results, stream_results, ErrorSummary, ResponsePoint, SweepRun,
+};
 use crate::scenario::Value;
 use crate::spectral::Complex;
 use crate::sweep_report::oracle_settings;
@@ -128,7 +130,8 @@ pub fn bench(fmu: &Fmu, noise_std: f64, mut progress: impl FnMut(f64)) -> Result
     let fs = control_core::Params::default().rates.current_loop_hz;
     let ours_settings = SweepParams::default();
     let split = ours_settings.threshold(fs) as f64;
-    let clean: BTreeMap<String, Value> = [(name::plant_current_noise_std.to_string(), Value::Float(DITHER_A))].into_iter().collect();
+    let clean: BTreeMap<String, Value> =
+        [(name::plant_current_noise_std.to_string(), Value::Float(DITHER_A))].into_iter().collect();
     progress(0.0);
     let oracle_run = base(clean.clone(), oracle_settings(&ours_settings));
     let oracle = online_results(&oracle_run.run(fmu, |_| {})?)?;
@@ -137,10 +140,11 @@ pub fn bench(fmu: &Fmu, noise_std: f64, mut progress: impl FnMut(f64)) -> Result
     let ours_trace = ours_run.run(fmu, |_| {})?;
     let ours = stream_results(&ours_trace, &ours_settings)?;
     let online = online_results(&ours_trace)?;
-    let stream_vs_online = ours.iter().zip(&online).filter(|(a, _)| a.quality > 0.01).fold((0.0f64, 0.0f64), |(g, p), (a, b)| {
-        let (dg, dp) = crate::frequency_response::difference(a, b);
-        (g.max(dg.abs()), p.max(dp.abs()))
-    });
+    let stream_vs_online =
+        ours.iter().zip(&online).filter(|(a, _)| a.quality > 0.01).fold((0.0f64, 0.0f64), |(g, p), (a, b)| {
+            let (dg, dp) = crate::frequency_response::difference(a, b);
+            (g.max(dg.abs()), p.max(dp.abs()))
+        });
     progress(0.35);
     let single_settings = SweepParams { shifts: 1, ..ours_settings };
     let single_run = base(clean.clone(), single_settings);
@@ -161,16 +165,24 @@ pub fn bench(fmu: &Fmu, noise_std: f64, mut progress: impl FnMut(f64)) -> Result
     let frequencies: Vec<f64> = oracle.iter().map(|p| p.frequency).collect();
     let prbs = prbs_results(&prbs_run.run(fmu, |_| {})?, &prbs_settings, &frequencies, SEGMENT)?;
     progress(0.6);
-    let find = |v: &[ResponsePoint], f: f64| v.iter().copied().find(|p| (p.frequency - f).abs() < 1e-3).ok_or_else(|| anyhow!("no {f} Hz point"));
+    let find = |v: &[ResponsePoint], f: f64| {
+        v.iter().copied().find(|p| (p.frequency - f).abs() < 1e-3).ok_or_else(|| anyhow!("no {f} Hz point"))
+    };
     let at_nyquist = [find(&oracle, 2000.0)?, find(&ours, 2000.0)?, find(&single, 2000.0)?];
-    let analytic: Vec<ResponsePoint> = oracle.iter().filter(|p| p.frequency <= 30.0).map(|p| analytic_closed_loop(p.frequency)).collect();
+    let analytic: Vec<ResponsePoint> =
+        oracle.iter().filter(|p| p.frequency <= 30.0).map(|p| analytic_closed_loop(p.frequency)).collect();
     let analytic_low_frequency = worst_up_to(&analytic, &oracle, 30.0);
 
     // Noise: our sweep with longer records against PRBS over the same time.
-    let noisy: BTreeMap<String, Value> = [(name::plant_current_noise_std.to_string(), Value::Float(noise_std))].into_iter().collect();
+    let noisy: BTreeMap<String, Value> =
+        [(name::plant_current_noise_std.to_string(), Value::Float(noise_std))].into_iter().collect();
     let mut noise = Vec::new();
     for (i, scale) in [1.0f32, 2.0, 4.0].iter().enumerate() {
-        let settings = SweepParams { measure_cycles: ours_settings.measure_cycles * scale, min_measure_s: ours_settings.min_measure_s * scale, ..ours_settings };
+        let settings = SweepParams {
+            measure_cycles: ours_settings.measure_cycles * scale,
+            min_measure_s: ours_settings.min_measure_s * scale,
+            ..ours_settings
+        };
         let run = base(noisy.clone(), settings);
         let noisy_trace = run.run(fmu, |_| {})?;
         let ours_noisy = stream_results(&noisy_trace, &settings)?;
@@ -186,7 +198,10 @@ pub fn bench(fmu: &Fmu, noise_std: f64, mut progress: impl FnMut(f64)) -> Result
         progress(0.6 + 0.1 * (i + 1) as f64);
     }
     // Ours (each of `settings`) against the oracle, riding on `velocity` with `parameters`.
-    let against_oracle = |parameters: &BTreeMap<String, Value>, velocity: f64, settings: &[SweepParams]| -> Result<Vec<ErrorSummary>> {
+    let against_oracle = |parameters: &BTreeMap<String, Value>,
+                          velocity: f64,
+                          settings: &[SweepParams]|
+     -> Result<Vec<ErrorSummary>> {
         let at = |settings: SweepParams| SweepRun { settings, parameters: parameters.clone(), velocity };
         let oracle = online_results(&at(oracle_settings(&ours_settings)).run(fmu, |_| {})?)?;
         settings.iter().map(|s| Ok(errors(&stream_results(&at(*s).run(fmu, |_| {})?, s)?, &oracle, split))).collect()
@@ -194,7 +209,8 @@ pub fn bench(fmu: &Fmu, noise_std: f64, mut progress: impl FnMut(f64)) -> Result
     // The same measurement without the dither, and without it on a finer encoder.
     let noise_free = against_oracle(&BTreeMap::new(), VELOCITY, &[ours_settings])?[0];
     progress(0.8);
-    let fine: BTreeMap<String, Value> = [(name::plant_encoder_counts_per_rev.to_string(), Value::Int(FINE_ENCODER))].into_iter().collect();
+    let fine: BTreeMap<String, Value> =
+        [(name::plant_encoder_counts_per_rev.to_string(), Value::Int(FINE_ENCODER))].into_iter().collect();
     let fine_encoder = against_oracle(&fine, VELOCITY, &[ours_settings])?[0];
     progress(0.85);
     // Worst error over riding speeds, with fixed and with lengthened records.
@@ -209,7 +225,12 @@ pub fn bench(fmu: &Fmu, noise_std: f64, mut progress: impl FnMut(f64)) -> Result
         progress(0.85 + 0.15 * (i + 1) as f64 / SPREAD_SPEEDS.len() as f64);
     }
     Ok(SweepBench {
-        ours: MethodErrors { method: "phase-shifted stepped sine".into(), measurement_time_s: time, errors: errors(&ours, &oracle, split), unmeasured: unmeasured(&ours) },
+        ours: MethodErrors {
+            method: "phase-shifted stepped sine".into(),
+            measurement_time_s: time,
+            errors: errors(&ours, &oracle, split),
+            unmeasured: unmeasured(&ours),
+        },
         single_phase: MethodErrors {
             method: "single-phase stepped sine (same records, all at phase 0)".into(),
             measurement_time_s: measured_time(&single_trace)?,

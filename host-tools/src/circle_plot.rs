@@ -21,13 +21,21 @@ pub fn ring_step(max_error: f64) -> f64 {
 /// radius; radial errors are drawn `rings × ring` wide in a band of 30 % of the radius.
 /// `about_own_mean`: each figure's radial error is drawn about its own mean radius (its shape,
 /// for comparing roundness when the runs' radii differ), not about the nominal radius.
-pub fn plot_circle(path: &Path, title: &str, notes: &[String], radius: f64, figures: &[(&str, &Figure)], about_own_mean: bool) -> Result<()> {
+pub fn plot_circle(
+    path: &Path,
+    title: &str,
+    notes: &[String],
+    radius: f64,
+    figures: &[(&str, &Figure)],
+    about_own_mean: bool,
+) -> Result<()> {
     // Each figure in polar form, once, with the radius its error is measured from.
     let polars: Vec<(Vec<(f64, f64)>, f64)> = figures
         .iter()
         .map(|(_, f)| {
             let p = f.polar();
-            let r0 = if about_own_mean { p.iter().map(|(_, r)| r).sum::<f64>() / p.len().max(1) as f64 } else { radius };
+            let r0 =
+                if about_own_mean { p.iter().map(|(_, r)| r).sum::<f64>() / p.len().max(1) as f64 } else { radius };
             (p, r0)
         })
         .collect();
@@ -40,7 +48,10 @@ pub fn plot_circle(path: &Path, title: &str, notes: &[String], radius: f64, figu
     let (cx, cy) = (SIZE / 2.0, SIZE / 2.0 + 20.0);
     let mut svg = String::new();
     let height = SIZE + 40.0 + 16.0 * notes.len() as f64;
-    writeln!(svg, r#"<svg xmlns="http://www.w3.org/2000/svg" width="{SIZE}" height="{height}" viewBox="0 0 {SIZE} {height}" font-family="sans-serif" font-size="11">"#)?;
+    writeln!(
+        svg,
+        r#"<svg xmlns="http://www.w3.org/2000/svg" width="{SIZE}" height="{height}" viewBox="0 0 {SIZE} {height}" font-family="sans-serif" font-size="11">"#
+    )?;
     writeln!(svg, r#"<rect width="100%" height="100%" fill="white"/>"#)?;
     writeln!(svg, r#"<text x="{}" y="18" font-size="14" text-anchor="middle">{}</text>"#, SIZE / 2.0, escape(title))?;
     for i in -3..=3 {
@@ -51,8 +62,20 @@ pub fn plot_circle(path: &Path, title: &str, notes: &[String], radius: f64, figu
     for a in [0.0f64, 90.0, 180.0, 270.0] {
         let (s, c) = a.to_radians().sin_cos();
         let (r0, r1) = (nominal - 3.5 * ring * per_error, nominal + 3.5 * ring * per_error);
-        writeln!(svg, r##"<line x1="{:.1}" y1="{:.1}" x2="{:.1}" y2="{:.1}" stroke="#bbb" stroke-dasharray="3,3"/>"##, cx + r0 * c, cy - r0 * s, cx + r1 * c, cy - r1 * s)?;
-        writeln!(svg, r#"<text x="{:.1}" y="{:.1}" text-anchor="middle">{a}°</text>"#, cx + (r1 + 14.0) * c, cy - (r1 + 14.0) * s + 4.0)?;
+        writeln!(
+            svg,
+            r##"<line x1="{:.1}" y1="{:.1}" x2="{:.1}" y2="{:.1}" stroke="#bbb" stroke-dasharray="3,3"/>"##,
+            cx + r0 * c,
+            cy - r0 * s,
+            cx + r1 * c,
+            cy - r1 * s
+        )?;
+        writeln!(
+            svg,
+            r#"<text x="{:.1}" y="{:.1}" text-anchor="middle">{a}°</text>"#,
+            cx + (r1 + 14.0) * c,
+            cy - (r1 + 14.0) * s + 4.0
+        )?;
     }
     for (i, ((label, _), (polar, r0))) in figures.iter().zip(&polars).enumerate() {
         let mut pts = String::new();
@@ -66,13 +89,22 @@ pub fn plot_circle(path: &Path, title: &str, notes: &[String], radius: f64, figu
         let width = if i == 0 { 1.0 } else { 1.4 };
         writeln!(svg, r#"<polyline fill="none" stroke="{colour}" stroke-width="{width}" points="{pts}"/>"#)?;
         let y = 40.0 + 14.0 * i as f64;
-        writeln!(svg, r#"<line x1="12" y1="{y}" x2="32" y2="{y}" stroke="{colour}" stroke-width="2"/><text x="36" y="{}">{}</text>"#, y + 4.0, escape(label))?;
+        writeln!(
+            svg,
+            r#"<line x1="12" y1="{y}" x2="32" y2="{y}" stroke="{colour}" stroke-width="2"/><text x="36" y="{}">{}</text>"#,
+            y + 4.0,
+            escape(label)
+        )?;
     }
     let mut y = SIZE + 20.0;
     let about = if about_own_mean { "about each figure's own mean radius" } else { "about the nominal radius" };
-    for n in [format!("rings every {} rad of radial error {about} (magnified {:.3e}×); nominal radius {radius} rad", fmt(ring), per_error * radius / nominal)]
-        .iter()
-        .chain(notes)
+    for n in [format!(
+        "rings every {} rad of radial error {about} (magnified {:.3e}×); nominal radius {radius} rad",
+        fmt(ring),
+        per_error * radius / nominal
+    )]
+    .iter()
+    .chain(notes)
     {
         writeln!(svg, r#"<text x="12" y="{y}">{}</text>"#, escape(n))?;
         y += 16.0;

@@ -58,7 +58,9 @@ pub struct CircleReport {
 
 fn write_points(path: &Path, command: &Figure, feedback: &Figure) -> Result<()> {
     let mut t = Trace::new(
-        ["index", "command_x", "command_y", "feedback_x", "feedback_y", "angle_deg", "radius"].map(String::from).to_vec(),
+        ["index", "command_x", "command_y", "feedback_x", "feedback_y", "angle_deg", "radius"]
+            .map(String::from)
+            .to_vec(),
     );
     let polar = feedback.polar();
     for i in 0..feedback.x.len() {
@@ -142,7 +144,11 @@ pub fn run(
                 t.write_csv(&p)?;
                 files.push(p);
             }
-            runs.push(CircleFigures { label: label.clone(), feedback: c.feedback.roundness(r.radius), against_command: None });
+            runs.push(CircleFigures {
+                label: label.clone(),
+                feedback: c.feedback.roundness(r.radius),
+                against_command: None,
+            });
             reference.get_or_insert(c.command.clone());
             figures.push((label.clone(), c.feedback));
         }
@@ -211,7 +217,11 @@ impl CircleReport {
             println!("  largest quadrant protrusion, second run / first: {ratio:.3}");
         }
         if let Some(ratio) = self.roundness_ratio {
-            println!("  roundness, second run / first: {ratio:.4} ({:.1}× {})", 1.0 / ratio, if ratio < 1.0 { "smaller" } else { "LARGER" });
+            println!(
+                "  roundness, second run / first: {ratio:.4} ({:.1}× {})",
+                1.0 / ratio,
+                if ratio < 1.0 { "smaller" } else { "LARGER" }
+            );
         }
         for f in &self.files {
             println!("  → {}", f.display());
@@ -220,10 +230,7 @@ impl CircleReport {
 }
 
 /// Parameters per axis from `--set` (both), `--x-set`, `--y-set`.
-pub fn axis_parameters(
-    both: &[String],
-    own: &[String],
-) -> Result<BTreeMap<String, Value>> {
+pub fn axis_parameters(both: &[String], own: &[String]) -> Result<BTreeMap<String, Value>> {
     let mut m = BTreeMap::new();
     for s in both.iter().chain(own) {
         let (k, v) = parse_assignment(s)?;
@@ -238,16 +245,19 @@ pub type TunedAxisParameters = (BTreeMap<String, Value>, BTreeMap<String, Value>
 /// The x and y axes of a `servo tune` output directory.
 pub fn tuned_axes(dir: &Path) -> Result<[TunedAxisParameters; 2]> {
     let path = dir.join("tune.json");
-    let text = std::fs::read_to_string(&path).with_context(|| format!("cannot read {} (run `servo tune --out {}` first)", path.display(), dir.display()))?;
-    let json: serde_json::Value = serde_json::from_str(&text).with_context(|| format!("{} is not a tuning file", path.display()))?;
+    let text = std::fs::read_to_string(&path)
+        .with_context(|| format!("cannot read {} (run `servo tune --out {}` first)", path.display(), dir.display()))?;
+    let json: serde_json::Value =
+        serde_json::from_str(&text).with_context(|| format!("{} is not a tuning file", path.display()))?;
     let axes = json["axes"].as_array().ok_or_else(|| anyhow::anyhow!("{}: no axes", path.display()))?;
     let axis = |name: &str| -> Result<TunedAxisParameters> {
-        let a = axes
-            .iter()
-            .find(|a| a["axis"] == name)
-            .ok_or_else(|| anyhow::anyhow!("{}: no axis `{name}` (the XY circle needs axes x and y)", path.display()))?;
+        let a = axes.iter().find(|a| a["axis"] == name).ok_or_else(|| {
+            anyhow::anyhow!("{}: no axis `{name}` (the XY circle needs axes x and y)", path.display())
+        })?;
         let floats = |v: &serde_json::Value| -> BTreeMap<String, Value> {
-            v.as_object().map(|o| o.iter().filter_map(|(k, v)| v.as_f64().map(|x| (k.clone(), Value::Float(x)))).collect()).unwrap_or_default()
+            v.as_object()
+                .map(|o| o.iter().filter_map(|(k, v)| v.as_f64().map(|x| (k.clone(), Value::Float(x)))).collect())
+                .unwrap_or_default()
         };
         let base = floats(&a["fmu_parameters"]);
         let correction: crate::tuning::AxisCorrection = serde_json::from_value(a["correction"].clone())

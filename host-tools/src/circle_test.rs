@@ -183,7 +183,8 @@ pub fn two_axis(fmu: &Fmu, r: &CircleRequest) -> Result<CircleRun> {
     let steps = n * (r.lead_in as usize + 1);
     let sign = if r.direction == Direction::CounterClockwise { 1.0 } else { -1.0 };
     let xc: Vec<f64> = (0..steps).map(|k| r.radius * (omega * k as f64 * DEFAULT_STEP).sin()).collect();
-    let yc: Vec<f64> = (0..steps).map(|k| sign * (r.radius - r.radius * (omega * k as f64 * DEFAULT_STEP).cos())).collect();
+    let yc: Vec<f64> =
+        (0..steps).map(|k| sign * (r.radius - r.radius * (omega * k as f64 * DEFAULT_STEP).cos())).collect();
     let tx = fmu.run(&Scenario::streamed_position("circle_x", &r.x_parameters, &xc), |_| {})?;
     let ty = fmu.run(&Scenario::streamed_position("circle_y", &r.y_parameters, &yc), |_| {})?;
     let fx = tx.column(r.measure.column()).ok_or_else(|| anyhow!("no {}", r.measure.column()))?;
@@ -222,9 +223,21 @@ pub fn single_axis(fmu: &Fmu, r: &CircleRequest) -> Result<PseudoCircleRun> {
     let w = measured_window(steps, n);
     let fb = |k: usize| x[k + 1];
     Ok(PseudoCircleRun {
-        command: Figure { x: w.clone().map(|k| c[k]).collect(), y: w.clone().map(|k| c[k - q]).collect(), centre: (0.0, 0.0) },
-        feedback: Figure { x: w.clone().map(fb).collect(), y: w.clone().map(|k| fb(k - q)).collect(), centre: (0.0, 0.0) },
-        against_command: Figure { x: w.clone().map(fb).collect(), y: w.map(|k| c[k - q]).collect(), centre: (0.0, 0.0) },
+        command: Figure {
+            x: w.clone().map(|k| c[k]).collect(),
+            y: w.clone().map(|k| c[k - q]).collect(),
+            centre: (0.0, 0.0),
+        },
+        feedback: Figure {
+            x: w.clone().map(fb).collect(),
+            y: w.clone().map(|k| fb(k - q)).collect(),
+            centre: (0.0, 0.0),
+        },
+        against_command: Figure {
+            x: w.clone().map(fb).collect(),
+            y: w.map(|k| c[k - q]).collect(),
+            centre: (0.0, 0.0),
+        },
         trace,
         scenario,
     })

@@ -87,7 +87,11 @@ impl<T: Read + Write> DeviceLink<T> {
             match self.port.read(&mut chunk) {
                 Ok(0) => bail!("the drive closed the link"),
                 Ok(n) => self.pending.push(&chunk[..n]),
-                Err(e) if matches!(e.kind(), std::io::ErrorKind::TimedOut | std::io::ErrorKind::WouldBlock | std::io::ErrorKind::Interrupted) => {}
+                Err(e)
+                    if matches!(
+                        e.kind(),
+                        std::io::ErrorKind::TimedOut | std::io::ErrorKind::WouldBlock | std::io::ErrorKind::Interrupted
+                    ) => {}
                 Err(e) => return Err(e).context("cannot read from the drive"),
             }
         }
@@ -111,10 +115,9 @@ pub fn correction_request(frame: &mut [u8]) -> Result<Request> {
 
 /// Open the drive's serial port (8N1, no flow control).
 pub fn open_serial(path: &str, baud: u32) -> Result<Box<dyn serialport::SerialPort>> {
-    serialport::new(path, baud)
-        .timeout(Duration::from_millis(50))
-        .open()
-        .with_context(|| format!("cannot open the serial port {path} (is the board attached, and may you use the port?)"))
+    serialport::new(path, baud).timeout(Duration::from_millis(50)).open().with_context(|| {
+        format!("cannot open the serial port {path} (is the board attached, and may you use the port?)")
+    })
 }
 
 #[cfg(test)]
@@ -170,8 +173,11 @@ mod tests {
         assert_eq!(link.request(&Request::Stream { enabled: true }).unwrap(), Response::Done);
         assert!(matches!(link.request(&Request::GetTelemetry).unwrap(), Response::Telemetry(_)));
         assert_eq!(link.request(&Request::ClearFaults).unwrap(), Response::Done);
-        let ticks: Vec<u64> =
-            link.take_samples().iter().flat_map(|b| crate::frame_stream::batch_samples(b).unwrap().iter().map(|s| s.tick).collect::<Vec<_>>()).collect();
+        let ticks: Vec<u64> = link
+            .take_samples()
+            .iter()
+            .flat_map(|b| crate::frame_stream::batch_samples(b).unwrap().iter().map(|s| s.tick).collect::<Vec<_>>())
+            .collect();
         assert!(ticks.len() >= 40, "{} samples", ticks.len());
         assert!(ticks.windows(2).all(|w| w[1] == w[0] + 4), "in order, none lost: {ticks:?}");
         // A version the drive does not speak is an error with the reason.
@@ -213,8 +219,7 @@ mod tests {
     /// Issue 18: a CRC-valid Samples frame whose count says 200 is an error, not a panic.
     #[test]
     fn a_sample_count_beyond_its_slots_is_an_error() {
-        let mut b = SampleBatch::default();
-        b.count = 200;
+        let b = SampleBatch { count: 200, ..Default::default() };
         let mut buf = vec![0u8; MAX_FRAME + 8];
         let n = encode(&Response::Samples(b), &mut buf).unwrap();
         let mut s = FrameStream::default();

@@ -137,7 +137,9 @@ fn run_one(kind: FaultKind, rng: &mut Rng) -> Result<(bool, u64, u64, bool)> {
         FaultKind::NanCurrentSample => i.phase_currents[phase] = f32::NAN,
         FaultKind::SaturatedCurrentSample => i.phase_currents[phase] = full_scale,
         // A jump of a quarter of the counter's range or more: far over half a revolution.
-        FaultKind::EncoderDisconnect => i.encoder_count = i.encoder_count.wrapping_add(0x4000_0000 ^ (garbage & 0x0FFF_FFFF)),
+        FaultKind::EncoderDisconnect => {
+            i.encoder_count = i.encoder_count.wrapping_add(0x4000_0000 ^ (garbage & 0x0FFF_FFFF))
+        }
         FaultKind::BusUndervoltage => i.bus_voltage = 0.5 * limits.bus_undervoltage,
         FaultKind::BusOvervoltage => i.bus_voltage = 1.2 * limits.bus_overvoltage,
         FaultKind::PowerStageBreak | FaultKind::FollowingErrorRunaway => {}

@@ -10,7 +10,9 @@ use std::path::{Path, PathBuf};
 use std::process::Command;
 
 use anyhow::{bail, Context, Result};
-use control_core::golden_vectors::{encode_tick, preset, replay, VectorEvent, ALL_FEATURES, EVENT_BYTES, MAGIC, TICK_BYTES};
+use control_core::golden_vectors::{
+    encode_tick, preset, replay, VectorEvent, ALL_FEATURES, EVENT_BYTES, MAGIC, TICK_BYTES,
+};
 use control_core::stop_sequence::SequenceEvent;
 use control_core::Mode;
 use serde::Serialize;
@@ -25,7 +27,12 @@ pub struct Recording {
 }
 
 /// Run a closed loop with `inputs(t)` and events at times, recording the core's inputs.
-pub fn record(preset_id: u32, seconds: f64, inputs: impl Fn(f64) -> UserInputs, events: &[(f64, VectorEvent)]) -> Recording {
+pub fn record(
+    preset_id: u32,
+    seconds: f64,
+    inputs: impl Fn(f64) -> UserInputs,
+    events: &[(f64, VectorEvent)],
+) -> Recording {
     let config = SimulationConfig { control: preset(preset_id).unwrap(), ..Default::default() };
     let mut sim = AxisSimulation::new(&config).unwrap();
     let n = (seconds / sim.tick_period()).round() as u32;
@@ -60,8 +67,18 @@ fn inputs(mode: Mode) -> UserInputs {
 pub fn recordings() -> Vec<Recording> {
     let seq = |e| VectorEvent::Sequence(e);
     vec![
-        record(0, 0.15, |t| UserInputs { position_command: if t >= 0.01 { 1.0 } else { 0.0 }, ..inputs(Mode::Position) }, &[]),
-        record(0, 0.1, |t| UserInputs { velocity_command: if t < 0.05 { 100.0 } else { -50.0 }, ..inputs(Mode::Velocity) }, &[]),
+        record(
+            0,
+            0.15,
+            |t| UserInputs { position_command: if t >= 0.01 { 1.0 } else { 0.0 }, ..inputs(Mode::Position) },
+            &[],
+        ),
+        record(
+            0,
+            0.1,
+            |t| UserInputs { velocity_command: if t < 0.05 { 100.0 } else { -50.0 }, ..inputs(Mode::Velocity) },
+            &[],
+        ),
         record(1, 0.2, |_| UserInputs { position_command: 2.0, move_speed: 50.0, ..inputs(Mode::Position) }, &[]),
         record(
             0,
@@ -78,8 +95,18 @@ pub fn recordings() -> Vec<Recording> {
                 (0.4, seq(SequenceEvent::SelectGain(9))),
             ],
         ),
-        record(0, 0.1, |_| UserInputs { velocity_command: 50.0, ..inputs(Mode::Velocity) }, &[(0.01, VectorEvent::StartSweep)]),
-        record(2, 0.15, |t| UserInputs { position_command: (std::f64::consts::TAU * 5.0 * t).sin(), ..inputs(Mode::Position) }, &[]),
+        record(
+            0,
+            0.1,
+            |_| UserInputs { velocity_command: 50.0, ..inputs(Mode::Velocity) },
+            &[(0.01, VectorEvent::StartSweep)],
+        ),
+        record(
+            2,
+            0.15,
+            |t| UserInputs { position_command: (std::f64::consts::TAU * 5.0 * t).sin(), ..inputs(Mode::Position) },
+            &[],
+        ),
         record(3, 0.1, |t| UserInputs { position_command: 3.0 * t, ..inputs(Mode::Position) }, &[]),
     ]
 }
@@ -127,13 +154,17 @@ pub fn sections(elf: &[u8]) -> Vec<(String, u32, u32)> {
         .collect()
 }
 
-
 /// Every feature on at once: a position move and a streamed sine through the 6th-order
 /// acc/dec and eight correction sections, friction compensation, torque filters, and a
 /// sweep injecting on the torque.
 pub fn all_features_recordings() -> Vec<Recording> {
     vec![
-        record(ALL_FEATURES, 0.1, |_| UserInputs { position_command: 2.0, move_speed: 50.0, ..inputs(Mode::Position) }, &[(0.0, VectorEvent::StartSweep)]),
+        record(
+            ALL_FEATURES,
+            0.1,
+            |_| UserInputs { position_command: 2.0, move_speed: 50.0, ..inputs(Mode::Position) },
+            &[(0.0, VectorEvent::StartSweep)],
+        ),
         record(
             ALL_FEATURES,
             0.1,
@@ -188,7 +219,17 @@ pub fn replay_on_cortex_m4(bytes: &[u8], name: &str) -> Result<CoreReplay> {
     build(&["--release", "-q", "-p", "core-vectors"], &[("CORE_VECTORS_FILE", &file)])?;
     let elf = dir.join("thumbv7em-none-eabihf/release/core-vectors");
     let run = Command::new("timeout")
-        .args(["300", "qemu-system-arm", "-machine", "netduinoplus2", "-nographic", "-monitor", "none", "-serial", "none"])
+        .args([
+            "300",
+            "qemu-system-arm",
+            "-machine",
+            "netduinoplus2",
+            "-nographic",
+            "-monitor",
+            "none",
+            "-serial",
+            "none",
+        ])
         .args(["-icount", "shift=0"])
         .args(["-semihosting-config", "enable=on,target=native", "-kernel"])
         .arg(&elf)

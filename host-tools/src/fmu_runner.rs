@@ -41,7 +41,8 @@ pub fn import_fmi3(path: &Path) -> Result<Fmi3Import> {
     let mut archive = zip::ZipArchive::new(file)?;
     let dir = tempfile::Builder::new().prefix("servo-fmu").tempdir()?;
     archive.extract(dir.path())?;
-    let xml = std::fs::read_to_string(dir.path().join("modelDescription.xml")).context("reading modelDescription.xml")?;
+    let xml =
+        std::fs::read_to_string(dir.path().join("modelDescription.xml")).context("reading modelDescription.xml")?;
     let patched = base_units_for_fmi_schema(&xml);
     Ok(<Fmi3Import as FmiImport>::new(dir, &patched)?)
 }
@@ -99,7 +100,10 @@ impl Fmu {
                 .map(String::as_str)
                 .take(5)
                 .collect();
-            anyhow!("the FMU has no variable `{name}`{}", if close.is_empty() { String::new() } else { format!(" (did you mean {close:?}?)") })
+            anyhow!(
+                "the FMU has no variable `{name}`{}",
+                if close.is_empty() { String::new() } else { format!(" (did you mean {close:?}?)") }
+            )
         })
     }
 
@@ -151,7 +155,12 @@ impl Fmu {
 
     /// Run `scenario` until its stop time or until `done` says so of a recorded row (time,
     /// then the recorded outputs in trace order); the trace ends with that row.
-    pub fn run_until(&self, scenario: &Scenario, progress: impl FnMut(f64), done: impl FnMut(&[f64]) -> bool) -> Result<Trace> {
+    pub fn run_until(
+        &self,
+        scenario: &Scenario,
+        progress: impl FnMut(f64),
+        done: impl FnMut(&[f64]) -> bool,
+    ) -> Result<Trace> {
         self.run_inner(scenario, progress, done, true)
     }
 
@@ -276,7 +285,7 @@ impl Fmu {
             if k % 256 == 0 {
                 progress(k as f64 / n as f64);
             }
-            if trace.rows.last().is_some_and(|row| done(row)) {
+            if trace.rows.last().is_some_and(&mut done) {
                 break;
             }
         }
@@ -303,19 +312,22 @@ pub fn evaluate_checks(scenario: &Scenario, trace: &Trace) -> Result<Vec<CheckRe
     let time = trace.column("time").context("trace has no time column")?;
     let mut results = Vec::new();
     for c in &scenario.checks {
-        let values = trace.column(&c.signal).with_context(|| format!("check: no signal `{}` in the result", c.signal))?;
+        let values =
+            trace.column(&c.signal).with_context(|| format!("check: no signal `{}` in the result", c.signal))?;
         let (from, to) = match c.at {
             Some(at) => (at, at),
             None => (c.from.unwrap_or(0.0), c.to.unwrap_or(scenario.stop_time)),
         };
         let h = scenario.step();
-        let idx: Vec<usize> = (0..time.len()).filter(|&i| time[i] >= from - 0.5 * h && time[i] <= to + 0.5 * h).collect();
+        let idx: Vec<usize> =
+            (0..time.len()).filter(|&i| time[i] >= from - 0.5 * h && time[i] <= to + 0.5 * h).collect();
         if idx.is_empty() {
             bail!("check on {}: no sample in [{from}, {to}] s", c.signal);
         }
         let lo = c.min.unwrap_or(f64::NEG_INFINITY);
         let hi = c.max.unwrap_or(f64::INFINITY);
-        let observed = idx.iter().fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), &i| (a.min(values[i]), b.max(values[i])));
+        let observed =
+            idx.iter().fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), &i| (a.min(values[i]), b.max(values[i])));
         let passed = idx.iter().all(|&i| values[i] >= lo && values[i] <= hi);
         results.push(CheckResult {
             signal: c.signal.clone(),

@@ -54,7 +54,15 @@ pub fn sample_rows(batches: &[SampleBatch]) -> Result<Vec<[f64; 7]>, FrameError>
     let mut rows = Vec::new();
     for b in batches {
         for s in batch_samples(b)? {
-            rows.push([s.tick as f64, s.u as f64, s.y as f64, s.phase as f64, s.measuring as u8 as f64, s.point as f64, s.record as f64]);
+            rows.push([
+                s.tick as f64,
+                s.u as f64,
+                s.y as f64,
+                s.phase as f64,
+                s.measuring as u8 as f64,
+                s.point as f64,
+                s.record as f64,
+            ]);
         }
     }
     Ok(rows)

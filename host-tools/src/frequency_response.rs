@@ -69,14 +69,18 @@ impl SweepRun {
 
     pub fn scenario(&self) -> Result<Scenario> {
         let fs = control_core::Params::default().rates.current_loop_hz;
-        self.settings.validate(fs, control_core::Params::default().rates.velocity_divider).map_err(|e| anyhow!("{e}"))?;
+        self.settings
+            .validate(fs, control_core::Params::default().rates.velocity_divider)
+            .map_err(|e| anyhow!("{e}"))?;
         let mut parameters = self.parameters.clone();
         parameters.extend(sweep_parameters(&self.settings));
         // Long enough for the longest sweep; `run` stops when it is done.
         let stop = ((START_AT + self.max_measurement_time()) / DEFAULT_STEP).ceil() * DEFAULT_STEP + 4.0 * DEFAULT_STEP;
         let mode = if self.settings.point == InjectionPoint::TorqueCommand && self.velocity == 0.0 { 0 } else { 1 };
         let start: BTreeMap<String, Value> =
-            [("mode".to_string(), Value::Int(mode)), ("velocity_command".to_string(), Value::Float(self.velocity))].into_iter().collect();
+            [("mode".to_string(), Value::Int(mode)), ("velocity_command".to_string(), Value::Float(self.velocity))]
+                .into_iter()
+                .collect();
         Ok(Scenario {
             name: "sweep".into(),
             description: String::new(),
@@ -96,10 +100,18 @@ impl SweepRun {
     /// Run the sweep until it is done (the trace ends at the first step after it finishes).
     pub fn run(&self, fmu: &Fmu, mut progress: impl FnMut(f64)) -> Result<Trace> {
         let scenario = self.scenario()?;
-        let state = 1 + fmu.recorded(&scenario.record)?.iter().position(|v| v.name == "sweep_state").ok_or_else(|| anyhow!("the FMU has no sweep outputs"))?;
+        let state = 1 + fmu
+            .recorded(&scenario.record)?
+            .iter()
+            .position(|v| v.name == "sweep_state")
+            .ok_or_else(|| anyhow!("the FMU has no sweep outputs"))?;
         // Progress against the fixed schedule (the usual length), not the longest possible.
         let scale = scenario.stop_time / (START_AT + self.measurement_time());
-        let t = fmu.run_until(&scenario, |f| progress((f * scale).min(0.99)), |row| row[0] > START_AT && row[state] == 3.0)?;
+        let t = fmu.run_until(
+            &scenario,
+            |f| progress((f * scale).min(0.99)),
+            |row| row[0] > START_AT && row[state] == 3.0,
+        )?;
         progress(1.0);
         if t.rows.last().map(|r| r[state]) != Some(3.0) {
             bail!("the sweep did not finish within the simulated time");
@@ -117,7 +129,11 @@ impl SweepRun {
 /// Simulated time a sweep took in `trace`: from its start to the first step it reports done.
 pub fn measured_time(trace: &Trace) -> Result<f64> {
     let [time, state] = columns(trace, ["time", "sweep_state"])?;
-    let done = time.iter().zip(&state).find(|(t, s)| **t > START_AT && **s == 3.0).ok_or_else(|| anyhow!("the sweep never finished"))?;
+    let done = time
+        .iter()
+        .zip(&state)
+        .find(|(t, s)| **t > START_AT && **s == 3.0)
+        .ok_or_else(|| anyhow!("the sweep never finished"))?;
     Ok(done.0 - START_AT)
 }
 
@@ -131,7 +147,16 @@ fn columns<const N: usize>(t: &Trace, names: [&str; N]) -> Result<[Vec<f64>; N]>
 
 /// The drive's on-line correlator results, read at each completion.
 pub fn online_results(t: &Trace) -> Result<Vec<ResponsePoint>> {
-    let [done, f, g, p, q] = columns(t, ["sweep_done_points", "sweep_last_frequency", "sweep_last_gain_db", "sweep_last_phase_deg", "sweep_last_quality"])?;
+    let [done, f, g, p, q] = columns(
+        t,
+        [
+            "sweep_done_points",
+            "sweep_last_frequency",
+            "sweep_last_gain_db",
+            "sweep_last_phase_deg",
+            "sweep_last_quality",
+        ],
+    )?;
     let mut out = Vec::new();
     for i in 1..done.len() {
         if done[i] > done[i - 1] {
@@ -186,7 +211,11 @@ impl SineFit {
             let (pc, ps) = (xc - x * self.c / n, xs - x * self.s / n);
             Complex::new((sss * pc - scs * ps) / det, -(scc * ps - scs * pc) / det)
         };
-        (amplitude(self.u, self.uc, self.us), amplitude(self.y, self.yc, self.ys), (det / (0.25 * n * n)).clamp(0.0, 1.0))
+        (
+            amplitude(self.u, self.uc, self.us),
+            amplitude(self.y, self.yc, self.ys),
+            (det / (0.25 * n * n)).clamp(0.0, 1.0),
+        )
     }
 }
 
@@ -194,7 +223,8 @@ impl SineFit {
 /// the excitation phase of every measured sample of every record (f64). Needs one acquisition
 /// sample per communication step (acquisition divider = the position divider).
 pub fn stream_results(t: &Trace, settings: &SweepParams) -> Result<Vec<ResponsePoint>> {
-    let [point, measuring, u, y, phase, time] = columns(t, ["acq_point", "acq_measuring", "acq_u", "acq_y", "acq_phase", "acq_time"])?;
+    let [point, measuring, u, y, phase, time] =
+        columns(t, ["acq_point", "acq_measuring", "acq_u", "acq_y", "acq_phase", "acq_time"])?;
     let mut fits: BTreeMap<i64, SineFit> = BTreeMap::new();
     let mut last_time = f64::NEG_INFINITY;
     for i in 0..u.len() {
@@ -222,7 +252,12 @@ pub fn stream_results(t: &Trace, settings: &SweepParams) -> Result<Vec<ResponseP
 /// response times that hold, `(1/m)·Σ e^{−jωiT}`; the known factor is divided out (chips
 /// must change only at acquisition ticks: a `prbs_divider` multiple of the acquisition
 /// divider).
-pub fn prbs_results(t: &Trace, settings: &SweepParams, frequencies: &[f64], segment: usize) -> Result<Vec<ResponsePoint>> {
+pub fn prbs_results(
+    t: &Trace,
+    settings: &SweepParams,
+    frequencies: &[f64],
+    segment: usize,
+) -> Result<Vec<ResponsePoint>> {
     let [measuring, u, y, time] = columns(t, ["acq_measuring", "acq_u", "acq_y", "acq_time"])?;
     let (mut us, mut ys) = (Vec::new(), Vec::new());
     let mut last_time = f64::NEG_INFINITY;
@@ -277,7 +312,9 @@ pub struct ErrorSummary {
 pub fn errors(a: &[ResponsePoint], reference: &[ResponsePoint], split_hz: f64) -> ErrorSummary {
     let mut s = ErrorSummary::default();
     for p in a {
-        let Some(r) = reference.iter().find(|r| (r.frequency - p.frequency).abs() <= 1e-6 * p.frequency) else { continue };
+        let Some(r) = reference.iter().find(|r| (r.frequency - p.frequency).abs() <= 1e-6 * p.frequency) else {
+            continue;
+        };
         let (dg, dp) = difference(p, r);
         s.points_compared += 1;
         if p.frequency < split_hz {

@@ -9,9 +9,9 @@ use anyhow::{anyhow, bail, Context, Result};
 use serde::Serialize;
 
 use crate::bode_plot::plot_bode;
+use crate::fmu_runner::Fmu;
 use crate::frequency_response::ResponsePoint;
 use crate::identification::{acceleration_rms, identify, measure, AxisModel, Measured};
-use crate::fmu_runner::Fmu;
 use crate::scenario::Value;
 use crate::trace::Trace;
 
@@ -41,7 +41,14 @@ pub fn model_points(model: &AxisModel, frequencies: &[f64]) -> Vec<ResponsePoint
 
 /// Identify one axis with `parameters`; with `snr_db`, accelerometer noise is set from a
 /// noise-free pilot run to that signal-to-noise ratio.
-pub fn identify_axis(fmu: &Fmu, axis: &str, parameters: &BTreeMap<String, Value>, amplitude: f64, snr_db: Option<f64>, out: &Path) -> Result<IdentifiedAxis> {
+pub fn identify_axis(
+    fmu: &Fmu,
+    axis: &str,
+    parameters: &BTreeMap<String, Value>,
+    amplitude: f64,
+    snr_db: Option<f64>,
+    out: &Path,
+) -> Result<IdentifiedAxis> {
     if !(amplitude.is_finite() && amplitude > 0.0) {
         bail!("--amplitude must be a positive torque (N·m)");
     }
@@ -94,13 +101,16 @@ pub fn replot(models: &[PathBuf], out: &Path) -> Result<PathBuf> {
             }
         }
         let measured_path = path.with_file_name(format!("{}.measured.csv", model.axis));
-        let t = Trace::read_csv(&measured_path).with_context(|| format!("the measurement of axis {} ({})", model.axis, measured_path.display()))?;
+        let t = Trace::read_csv(&measured_path)
+            .with_context(|| format!("the measurement of axis {} ({})", model.axis, measured_path.display()))?;
         let (f, g, ph) = (
             t.column("frequency").ok_or_else(|| anyhow!("no frequency column"))?,
             t.column("gain_db").ok_or_else(|| anyhow!("no gain_db column"))?,
             t.column("phase_deg").ok_or_else(|| anyhow!("no phase_deg column"))?,
         );
-        let measured = (0..f.len()).map(|i| ResponsePoint { frequency: f[i], gain_db: g[i], phase_deg: ph[i], quality: 1.0 }).collect();
+        let measured = (0..f.len())
+            .map(|i| ResponsePoint { frequency: f[i], gain_db: g[i], phase_deg: ph[i], quality: 1.0 })
+            .collect();
         axes.push((model, measured));
     }
     std::fs::create_dir_all(out)?;

@@ -23,8 +23,8 @@ use serde::{Deserialize, Serialize};
 
 use crate::fmu_runner::Fmu;
 use crate::frequency_response::{ResponsePoint, SweepRun};
-use crate::scenario::Value;
 use crate::polynomial::roots;
+use crate::scenario::Value;
 use crate::spectral::{dft_bin, Complex};
 
 pub const DEGREE: u32 = 11;
@@ -124,15 +124,25 @@ fn excitation(parameters: &BTreeMap<String, Value>, amplitude: f64, seconds: f64
 
 /// Run the excitation on an axis with `parameters` and return the measured response between
 /// `f_min` and `f_max`.
-pub fn measure(fmu: &Fmu, parameters: &BTreeMap<String, Value>, amplitude: f64, f_min: f64, f_max: f64) -> Result<Measured> {
+pub fn measure(
+    fmu: &Fmu,
+    parameters: &BTreeMap<String, Value>,
+    amplitude: f64,
+    f_min: f64,
+    f_max: f64,
+) -> Result<Measured> {
     let chips = (1u64 << DEGREE) - 1;
     let fs = control_core::Params::default().rates.current_loop_hz as f64;
     let period = chips as f64 * CHIP_DIVIDER as f64 / fs;
     let trace = excitation(parameters, amplitude, TRANSIENT_S + period).run(fmu, |_| {})?;
     let col = |n: &str| trace.column(n).ok_or_else(|| anyhow!("the FMU has no output {n}"));
-    let (measuring, u_all, y_all, faults) = (col("acq_measuring")?, col(INPUT_SIGNAL)?, col("load_acceleration")?, col("faults")?);
+    let (measuring, u_all, y_all, faults) =
+        (col("acq_measuring")?, col(INPUT_SIGNAL)?, col("load_acceleration")?, col("faults")?);
     if faults.iter().any(|&f| f != 0.0) {
-        bail!("the axis tripped during the excitation (faults {}): lower the amplitude", faults.iter().cloned().fold(0.0, f64::max));
+        bail!(
+            "the axis tripped during the excitation (faults {}): lower the amplitude",
+            faults.iter().cloned().fold(0.0, f64::max)
+        );
     }
     let torque_limit = control_core::Params::default().velocity.torque_limit as f64;
     if u_all.iter().any(|u| u.abs() >= 0.999 * torque_limit) {
@@ -169,7 +179,8 @@ pub fn measure(fmu: &Fmu, parameters: &BTreeMap<String, Value>, amplitude: f64, 
 /// Noise-free run, to set the accelerometer noise for a signal-to-noise ratio.
 pub fn acceleration_rms(fmu: &Fmu, parameters: &BTreeMap<String, Value>, amplitude: f64) -> Result<f64> {
     let trace = excitation(parameters, amplitude, 0.5).run(fmu, |_| {})?;
-    let (m, a) = (trace.column("acq_measuring").unwrap_or_default(), trace.column("load_acceleration").unwrap_or_default());
+    let (m, a) =
+        (trace.column("acq_measuring").unwrap_or_default(), trace.column("load_acceleration").unwrap_or_default());
     let v: Vec<f64> = (0..a.len()).filter(|&i| m[i] != 0.0).map(|i| a[i]).collect();
     let mean = v.iter().sum::<f64>() / v.len().max(1) as f64;
     Ok((v.iter().map(|x| (x - mean).powi(2)).sum::<f64>() / v.len().max(1) as f64).sqrt())
@@ -219,7 +230,12 @@ pub fn find_anti_resonance(m: &Measured, depth_db: f64) -> Option<f64> {
     let (i, &min) = s.iter().enumerate().min_by(|a, b| a.1.total_cmp(b.1))?;
     let f = m.frequencies[i];
     let around = |lo: f64, hi: f64| {
-        m.frequencies.iter().zip(&s).filter(|(x, _)| **x >= lo && **x <= hi).map(|(_, v)| *v).fold(f64::NEG_INFINITY, f64::max)
+        m.frequencies
+            .iter()
+            .zip(&s)
+            .filter(|(x, _)| **x >= lo && **x <= hi)
+            .map(|(_, v)| *v)
+            .fold(f64::NEG_INFINITY, f64::max)
     };
     let (left, right) = (around(0.6 * f, 0.8 * f), around(1.25 * f, 1.4 * f));
     (left.is_finite() && right.is_finite() && left - min >= depth_db && right - min >= depth_db).then_some(f)
@@ -276,7 +292,8 @@ impl RationalFit {
 /// Fit `B(s)/A(s)` of orders (nb, na) over the band by Levy's linearised least squares with
 /// Sanathanan–Koerner reweighting (s normalised by the band's centre).
 pub fn fit_rational(m: &Measured, band: (f64, f64), nb: usize, na: usize) -> Result<RationalFit> {
-    let selected: Vec<usize> = (0..m.frequencies.len()).filter(|&i| m.frequencies[i] >= band.0 && m.frequencies[i] <= band.1).collect();
+    let selected: Vec<usize> =
+        (0..m.frequencies.len()).filter(|&i| m.frequencies[i] >= band.0 && m.frequencies[i] <= band.1).collect();
     let pts: Vec<(f64, Complex)> = selected.iter().map(|&i| (m.frequencies[i], m.response[i])).collect();
     // Inverse-variance weights of H under accelerometer noise, normalised.
     let mean_power = selected.iter().map(|&i| m.input_power[i]).sum::<f64>() / selected.len().max(1) as f64;
@@ -334,7 +351,8 @@ pub fn fit_rational(m: &Measured, band: (f64, f64), nb: usize, na: usize) -> Res
     let mut denominator = vec![1.0];
     denominator.extend_from_slice(&theta[nb + 1..]);
     let mut fit = RationalFit { w0, numerator, denominator, fit_error: 0.0 };
-    fit.fit_error = (pts.iter().map(|(f, h)| (fit.at(*f).sub(*h).abs() / h.abs()).powi(2)).sum::<f64>() / pts.len() as f64).sqrt();
+    fit.fit_error =
+        (pts.iter().map(|(f, h)| (fit.at(*f).sub(*h).abs() / h.abs()).powi(2)).sum::<f64>() / pts.len() as f64).sqrt();
     Ok(fit)
 }
 

@@ -20,7 +20,15 @@ const COLOURS: [&str; 4] = ["#1f77b4", "#d62728", "#2ca02c", "#9467bd"];
 pub(crate) fn nice_step(raw: f64) -> f64 {
     let mag = 10f64.powf(raw.log10().floor());
     let norm = raw / mag;
-    let nice = if norm < 1.5 { 1.0 } else if norm < 3.5 { 2.0 } else if norm < 7.5 { 5.0 } else { 10.0 };
+    let nice = if norm < 1.5 {
+        1.0
+    } else if norm < 3.5 {
+        2.0
+    } else if norm < 7.5 {
+        5.0
+    } else {
+        10.0
+    };
     nice * mag
 }
 
@@ -70,17 +78,21 @@ pub fn plot_against(
     writeln!(svg, r#"<text x="{}" y="20" font-size="15" text-anchor="middle">{}</text>"#, WIDTH / 2.0, escape(title))?;
     for (li, (name, _)) in traces.iter().enumerate().filter(|_| traces.len() > 1) {
         let x = LEFT + 10.0 + li as f64 * 160.0;
-        writeln!(svg, r#"<line x1="{x}" y1="30" x2="{}" y2="30" stroke="{}" stroke-width="2"/>"#, x + 20.0, COLOURS[li % 4])?;
+        writeln!(
+            svg,
+            r#"<line x1="{x}" y1="30" x2="{}" y2="30" stroke="{}" stroke-width="2"/>"#,
+            x + 20.0,
+            COLOURS[li % 4]
+        )?;
         writeln!(svg, r#"<text x="{}" y="34">{}</text>"#, x + 25.0, escape(name))?;
     }
     let plot_w = WIDTH - LEFT - RIGHT;
     for (si, signal) in signals.iter().enumerate() {
         let y0 = TOP + si as f64 * (PANEL_H + GAP);
-        let series: Vec<(Vec<f64>, Vec<f64>)> = traces
-            .iter()
-            .filter_map(|(_, t)| Some((t.column(x)?, t.column(signal)?)))
-            .collect();
-        let (mut tmin, mut tmax, mut vmin, mut vmax) = (f64::INFINITY, f64::NEG_INFINITY, f64::INFINITY, f64::NEG_INFINITY);
+        let series: Vec<(Vec<f64>, Vec<f64>)> =
+            traces.iter().filter_map(|(_, t)| Some((t.column(x)?, t.column(signal)?))).collect();
+        let (mut tmin, mut tmax, mut vmin, mut vmax) =
+            (f64::INFINITY, f64::NEG_INFINITY, f64::INFINITY, f64::NEG_INFINITY);
         for (t, v) in &series {
             for (&a, &b) in t.iter().zip(v) {
                 if a.is_finite() && b.is_finite() {
@@ -102,7 +114,10 @@ pub fn plot_against(
         let (vmin, vmax) = (vmin - pad, vmax + pad);
         let tx = |t: f64| LEFT + (t - tmin) / (tmax - tmin).max(1e-300) * plot_w;
         let vy = |v: f64| y0 + PANEL_H - (v - vmin) / (vmax - vmin) * PANEL_H;
-        writeln!(svg, r##"<rect x="{LEFT}" y="{y0}" width="{plot_w}" height="{PANEL_H}" fill="none" stroke="#888"/>"##)?;
+        writeln!(
+            svg,
+            r##"<rect x="{LEFT}" y="{y0}" width="{plot_w}" height="{PANEL_H}" fill="none" stroke="#888"/>"##
+        )?;
         let ts = tick_step(tmax - tmin);
         let mut t = (tmin / ts).ceil() * ts;
         while t <= tmax + 1e-12 {
@@ -126,9 +141,10 @@ pub fn plot_against(
             let stride = (t.len() as f64 / (2.0 * plot_w)).ceil().max(1.0) as usize;
             for chunk in t.chunks(stride).zip(v.chunks(stride)) {
                 let (ct, cv) = chunk;
-                let (imin, imax) = cv.iter().enumerate().fold((0, 0), |(a, b), (i, x)| {
-                    (if *x < cv[a] { i } else { a }, if *x > cv[b] { i } else { b })
-                });
+                let (imin, imax) = cv
+                    .iter()
+                    .enumerate()
+                    .fold((0, 0), |(a, b), (i, x)| (if *x < cv[a] { i } else { a }, if *x > cv[b] { i } else { b }));
                 for i in if imin <= imax { [imin, imax] } else { [imax, imin] } {
                     if cv[i].is_finite() {
                         write!(pts, "{:.1},{:.1} ", tx(ct[i]), vy(cv[i]))?;
@@ -136,10 +152,20 @@ pub fn plot_against(
                 }
             }
             let dash = if ci > 0 { r#" stroke-dasharray="6,4""# } else { "" };
-            writeln!(svg, r#"<polyline fill="none" stroke="{}" stroke-width="1.3"{dash} points="{pts}"/>"#, COLOURS[ci % 4])?;
+            writeln!(
+                svg,
+                r#"<polyline fill="none" stroke="{}" stroke-width="1.3"{dash} points="{pts}"/>"#,
+                COLOURS[ci % 4]
+            )?;
         }
     }
-    writeln!(svg, r#"<text x="{}" y="{}" text-anchor="middle">{}</text>"#, LEFT + plot_w / 2.0, height - 8.0, escape(x_label))?;
+    writeln!(
+        svg,
+        r#"<text x="{}" y="{}" text-anchor="middle">{}</text>"#,
+        LEFT + plot_w / 2.0,
+        height - 8.0,
+        escape(x_label)
+    )?;
     svg.push_str("</svg>\n");
     std::fs::write(path, svg).with_context(|| format!("cannot write {}", path.display()))
 }

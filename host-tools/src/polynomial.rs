@@ -12,7 +12,8 @@ pub fn roots(c: &[f64]) -> Vec<Complex> {
             Complex::new(0.9 * a.cos(), 0.9 * a.sin())
         })
         .collect();
-    let eval = |x: Complex| c.iter().rev().fold(Complex::default(), |acc, &ci| acc.mul(x).add(Complex::new(ci / lead, 0.0)));
+    let eval =
+        |x: Complex| c.iter().rev().fold(Complex::default(), |acc, &ci| acc.mul(x).add(Complex::new(ci / lead, 0.0)));
     for _ in 0..2000 {
         for i in 0..n {
             let mut den = Complex::new(1.0, 0.0);

@@ -55,7 +55,11 @@ impl ResponseModel {
         self.poles
             .iter()
             .enumerate()
-            .map(|(i, p)| Section { zeros: self.zeros.get(i).map(|z| (z.hz, z.damping)), pole_hz: p.hz, pole_damping: p.damping })
+            .map(|(i, p)| Section {
+                zeros: self.zeros.get(i).map(|z| (z.hz, z.damping)),
+                pole_hz: p.hz,
+                pole_damping: p.damping,
+            })
             .collect()
     }
 }
@@ -91,13 +95,21 @@ fn as_factors(pairs: Vec<Factor>, mut real: Vec<f64>, what: &str, nyquist_hz: f6
 
 /// Fit the model of `axis` from measured `(frequency, response)` points over `band`, with at
 /// most `max_sections` second-order sections.
-pub fn fit(axis: &str, points: &[(f64, Complex)], band: (f64, f64), max_sections: usize, nyquist_hz: f64) -> Result<ResponseModel> {
+pub fn fit(
+    axis: &str,
+    points: &[(f64, Complex)],
+    band: (f64, f64),
+    max_sections: usize,
+    nyquist_hz: f64,
+) -> Result<ResponseModel> {
     let measured = Measured {
         frequencies: points.iter().map(|p| p.0).collect(),
         response: points.iter().map(|p| p.1).collect(),
         input_power: vec![1.0; points.len()],
     };
-    if let Some((f, _)) = points.iter().find(|(f, h)| !(f.is_finite() && h.re.is_finite() && h.im.is_finite() && h.abs() > 0.0)) {
+    if let Some((f, _)) =
+        points.iter().find(|(f, h)| !(f.is_finite() && h.re.is_finite() && h.im.is_finite() && h.abs() > 0.0))
+    {
         bail!("axis {axis}: the measured response at {f} Hz is not a finite, non-zero number: the axis did not follow its command");
     }
     let in_band: Vec<&(f64, Complex)> = points.iter().filter(|(f, _)| *f >= band.0 && *f <= band.1).collect();
@@ -110,7 +122,8 @@ pub fn fit(axis: &str, points: &[(f64, Complex)], band: (f64, f64), max_sections
         let Ok(fit) = fit_rational(&measured, band, nb, na) else { continue };
         let (zp, zr) = fit.zeros();
         let (pp, pr) = fit.poles();
-        let factors = as_factors(zp, zr, "zero", nyquist_hz).and_then(|z| as_factors(pp, pr, "pole", nyquist_hz).map(|p| (z, p)));
+        let factors =
+            as_factors(zp, zr, "zero", nyquist_hz).and_then(|z| as_factors(pp, pr, "pole", nyquist_hz).map(|p| (z, p)));
         let (zeros, poles) = match factors {
             Ok(f) => f,
             Err(why) => {

@@ -221,7 +221,8 @@ impl Scenario {
             .iter()
             .enumerate()
             .map(|(k, &c)| {
-                let mut inputs: BTreeMap<String, Value> = [("position_command".to_string(), Value::Float(c))].into_iter().collect();
+                let mut inputs: BTreeMap<String, Value> =
+                    [("position_command".to_string(), Value::Float(c))].into_iter().collect();
                 if k == 0 {
                     inputs.insert("mode".into(), Value::Int(2));
                     inputs.insert("move_speed".into(), Value::Float(0.0));
@@ -312,8 +313,8 @@ mod tests {
     fn refuses_a_record_list_with_twins_or_without_a_checked_signal() {
         let e = parse("name='x'\nstop_time=0.01\nrecord=['iq','iq']\n").unwrap_err();
         assert!(e.to_string().contains("twice"), "{e}");
-        let e = parse("name='x'\nstop_time=0.01\nrecord=['iq']\n[[checks]]\nsignal='id'\nat=0.01\nmax=1.0\n")
-            .unwrap_err();
+        let e =
+            parse("name='x'\nstop_time=0.01\nrecord=['iq']\n[[checks]]\nsignal='id'\nat=0.01\nmax=1.0\n").unwrap_err();
         assert!(e.to_string().contains("add it to `record`"), "{e}");
         assert!(parse("name='x'\nstop_time=0.01\nrecord=['iq']\n[[checks]]\nsignal='iq'\nat=0.01\nmax=1.0\n").is_ok());
         let e = parse("name='x'\nstop_time=0.01\nrecord=['iq']\nplot=['iq','id']\n").unwrap_err();

@@ -128,7 +128,8 @@ fn on_grid(t: f64, what: &str, stop: f64) -> Result<()> {
 impl SequenceScenario {
     pub fn load(path: &Path) -> Result<Self> {
         let text = std::fs::read_to_string(path).with_context(|| format!("cannot read {}", path.display()))?;
-        let s: Self = toml::from_str(&text).with_context(|| format!("sequence scenario {} is malformed", path.display()))?;
+        let s: Self =
+            toml::from_str(&text).with_context(|| format!("sequence scenario {} is malformed", path.display()))?;
         s.validate().with_context(|| format!("sequence scenario {} is invalid", path.display()))?;
         Ok(s)
     }
@@ -154,23 +155,36 @@ impl SequenceScenario {
                 "run" | "run_off" | "stop" | "release" | "return" => (false, false),
                 "move" => (true, false),
                 "gain" => (false, true),
-                other => bail!("unknown event `{other}` at {} s: use run, run_off, stop, release, move, return or gain", e.time),
+                other => bail!(
+                    "unknown event `{other}` at {} s: use run, run_off, stop, release, move, return or gain",
+                    e.time
+                ),
             };
             match (needs_target, e.target) {
                 (true, None) => bail!("`move` at {} s needs `target` (rad)", e.time),
-                (true, Some(t)) if !(t.is_finite() && t.abs() <= 1e9) => bail!("`move` at {} s: target {t} is not a finite angle", e.time),
+                (true, Some(t)) if !(t.is_finite() && t.abs() <= 1e9) => {
+                    bail!("`move` at {} s: target {t} is not a finite angle", e.time)
+                }
                 (false, Some(_)) => bail!("`{}` at {} s takes no `target`", e.event, e.time),
                 _ => {}
             }
             match (needs_index, e.index) {
                 (true, None) => bail!("`gain` at {} s needs `index`", e.time),
-                (true, Some(i)) if i32::try_from(i).is_err() => bail!("`gain` at {} s: index {i} is out of range", e.time),
+                (true, Some(i)) if i32::try_from(i).is_err() => {
+                    bail!("`gain` at {} s: index {i} is out of range", e.time)
+                }
                 (false, Some(_)) => bail!("`{}` at {} s takes no `index`", e.event, e.time),
                 _ => {}
             }
         }
         for x in &self.expect {
-            let kinds = [x.completion_within.is_some(), x.state.is_some(), x.deviation_counts.is_some(), x.refused.is_some(), x.signal.is_some()];
+            let kinds = [
+                x.completion_within.is_some(),
+                x.state.is_some(),
+                x.deviation_counts.is_some(),
+                x.refused.is_some(),
+                x.signal.is_some(),
+            ];
             if kinds.iter().filter(|&&k| k).count() != 1 {
                 bail!("each [[expect]] needs exactly one of completion_within, state, deviation_counts, refused, signal: {x:?}");
             }
@@ -198,7 +212,9 @@ impl SequenceScenario {
             if x.last_refusal.is_some() && x.refused.is_none() {
                 bail!("last_refusal goes with a `refused` expectation");
             }
-            if x.signal.is_some() && (x.min.is_none() && x.max.is_none() || x.at.is_none() && (x.from.is_none() || x.to.is_none())) {
+            if x.signal.is_some()
+                && (x.min.is_none() && x.max.is_none() || x.at.is_none() && (x.from.is_none() || x.to.is_none()))
+            {
                 bail!("signal expectation needs min and/or max, and `at` or `from` and `to`");
             }
         }
@@ -209,7 +225,8 @@ impl SequenceScenario {
     /// switch and the gain index levels.
     pub fn to_scenario(&self) -> Scenario {
         let mut counters: BTreeMap<&str, i64> = BTreeMap::new();
-        let mut events: Vec<Event> = vec![Event { time: 0.0, inputs: [("mode".to_string(), Value::Int(3))].into_iter().collect() }];
+        let mut events: Vec<Event> =
+            vec![Event { time: 0.0, inputs: [("mode".to_string(), Value::Int(3))].into_iter().collect() }];
         for e in &self.events {
             if events.last().is_none_or(|last| last.time != e.time) {
                 events.push(Event { time: e.time, inputs: BTreeMap::new() });
@@ -270,11 +287,18 @@ impl SequenceScenario {
                 // Completion for good: the first sample after which the flag stays set to `until`.
                 let settled = (i0..=i1).rev().take_while(|&i| complete[i] != 0.0).last();
                 let observed = match settled {
-                    Some(i) => format!("complete from {:.4} s ({:.1} ms after {after} s)", time[i], (time[i] - after) * 1e3),
+                    Some(i) => {
+                        format!("complete from {:.4} s ({:.1} ms after {after} s)", time[i], (time[i] - after) * 1e3)
+                    }
                     None => format!("not complete at {until} s"),
                 };
                 let passed = settled.is_some_and(|i| time[i] - after <= w + 1e-9);
-                (passed, observed, format!("within {:.1} ms, held to {until} s", w * 1e3), format!("completion within {:.0} ms", w * 1e3))
+                (
+                    passed,
+                    observed,
+                    format!("within {:.1} ms, held to {until} s", w * 1e3),
+                    format!("completion within {:.0} ms", w * 1e3),
+                )
             } else if let Some(s) = &x.state {
                 let at = x.at.expect("validated");
                 let code = col("seq_state")?[index(at)] as usize;
@@ -283,7 +307,12 @@ impl SequenceScenario {
             } else if let Some(d) = x.deviation_counts {
                 let at = x.at.expect("validated");
                 let dev = col("seq_deviation")?[index(at)];
-                (dev.abs() <= d as f64, format!("{dev} counts at {at} s"), format!("|deviation| <= {d} counts"), format!("position error <= {d} counts at {at} s"))
+                (
+                    dev.abs() <= d as f64,
+                    format!("{dev} counts at {at} s"),
+                    format!("|deviation| <= {d} counts"),
+                    format!("position error <= {d} counts at {at} s"),
+                )
             } else if let Some(n) = x.refused {
                 let at = x.at.expect("validated");
                 let i = index(at);
@@ -294,7 +323,12 @@ impl SequenceScenario {
                     Some(r) => format!("{n} refused, last reason {r}"),
                     None => format!("{n} refused"),
                 };
-                (passed, format!("{seen} refused, last reason {reason} at {at} s"), bound, format!("{n} event(s) refused by {at} s"))
+                (
+                    passed,
+                    format!("{seen} refused, last reason {reason} at {at} s"),
+                    bound,
+                    format!("{n} event(s) refused by {at} s"),
+                )
             } else {
                 let signal = x.signal.clone().expect("validated");
                 let check = Check {
@@ -308,7 +342,11 @@ impl SequenceScenario {
                 };
                 let scenario = Scenario { checks: vec![check], ..self.to_scenario() };
                 let r = crate::fmu_runner::evaluate_checks(&scenario, trace)?.remove(0);
-                let bound = format!("{} … {}", x.min.map_or("-inf".into(), |v| v.to_string()), x.max.map_or("+inf".into(), |v| v.to_string()));
+                let bound = format!(
+                    "{} … {}",
+                    x.min.map_or("-inf".into(), |v| v.to_string()),
+                    x.max.map_or("+inf".into(), |v| v.to_string())
+                );
                 (r.passed, format!("{} … {}", r.observed.0, r.observed.1), bound, format!("{signal} in bounds"))
             };
             out.push(Outcome { description: x.description.clone().unwrap_or(default_text), passed, observed, bound });
@@ -318,7 +356,8 @@ impl SequenceScenario {
 }
 
 /// Signals of the sequence plot, on one timeline.
-pub const PLOT: [&str; 6] = ["motor_velocity", "motor_position", "seq_deviation", "seq_state", "seq_complete", "seq_refused"];
+pub const PLOT: [&str; 6] =
+    ["motor_velocity", "motor_position", "seq_deviation", "seq_state", "seq_complete", "seq_refused"];
 
 #[cfg(test)]
 mod tests {

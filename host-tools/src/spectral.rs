@@ -91,7 +91,8 @@ pub fn welch_h1(u: &[f64], y: &[f64], segment: usize) -> Result<(Vec<Complex>, V
     if u.len() != y.len() || u.len() < segment {
         bail!("{} samples are too few for segments of {segment}", u.len());
     }
-    let window: Vec<f64> = (0..segment).map(|i| 0.5 - 0.5 * (std::f64::consts::TAU * i as f64 / segment as f64).cos()).collect();
+    let window: Vec<f64> =
+        (0..segment).map(|i| 0.5 - 0.5 * (std::f64::consts::TAU * i as f64 / segment as f64).cos()).collect();
     let bins = segment / 2 + 1;
     let (mut suu, mut syy, mut suy) = (vec![0.0; bins], vec![0.0; bins], vec![Complex::default(); bins]);
     let mut start = 0;
@@ -121,7 +122,8 @@ mod tests {
     #[test]
     fn fft_of_a_cosine_has_two_bins() {
         let n = 64;
-        let mut x: Vec<Complex> = (0..n).map(|i| Complex::new((std::f64::consts::TAU * 5.0 * i as f64 / n as f64).cos(), 0.0)).collect();
+        let mut x: Vec<Complex> =
+            (0..n).map(|i| Complex::new((std::f64::consts::TAU * 5.0 * i as f64 / n as f64).cos(), 0.0)).collect();
         fft(&mut x);
         for (k, v) in x.iter().enumerate() {
             let expect = if k == 5 || k == n - 5 { n as f64 / 2.0 } else { 0.0 };
@@ -148,7 +150,11 @@ mod tests {
                 state ^= state << 13;
                 state ^= state >> 7;
                 state ^= state << 17;
-                if state & 1 == 1 { 1.0 } else { -1.0 }
+                if state & 1 == 1 {
+                    1.0
+                } else {
+                    -1.0
+                }
             })
             .collect();
         let y: Vec<f64> = (0..u.len()).map(|k| 0.5 * u[k] + if k > 0 { 0.3 * u[k - 1] } else { 0.0 }).collect();

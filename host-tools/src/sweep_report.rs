@@ -10,8 +10,10 @@ use control_core::phase_shifted_sweep::SweepParams;
 use serde::Serialize;
 
 use crate::bode_plot::plot_bode;
-use crate::frequency_response::{difference, errors, measured_time, online_results, stream_results, ErrorSummary, ResponsePoint, SweepRun};
 use crate::fmu_runner::Fmu;
+use crate::frequency_response::{
+    difference, errors, measured_time, online_results, stream_results, ErrorSummary, ResponsePoint, SweepRun,
+};
 use crate::trace::Trace;
 
 /// The oracle: the same loop with acquisition at the velocity-loop rate (every 2 ticks: no
@@ -91,7 +93,9 @@ pub fn run(
     let mut files = Vec::new();
     let csv = out.join("sweep.csv");
     let mut t = Trace::new(
-        ["frequency", "gain_db", "phase_deg", "quality", "online_gain_db", "online_phase_deg", "online_quality"].map(String::from).to_vec(),
+        ["frequency", "gain_db", "phase_deg", "quality", "online_gain_db", "online_phase_deg", "online_quality"]
+            .map(String::from)
+            .to_vec(),
     );
     for (a, b) in stream.iter().zip(&online) {
         t.rows.push(vec![a.frequency, a.gain_db, a.phase_deg, a.quality, b.gain_db, b.phase_deg, b.quality]);
@@ -160,9 +164,15 @@ impl SweepReport {
             self.acquisition_hz,
             self.threshold_hz
         );
-        println!("  {:>10} {:>10} {:>10} {:>8} {:>12} {:>12}", "Hz", "gain dB", "phase deg", "quality", "online dB", "online deg");
+        println!(
+            "  {:>10} {:>10} {:>10} {:>8} {:>12} {:>12}",
+            "Hz", "gain dB", "phase deg", "quality", "online dB", "online deg"
+        );
         for (a, b) in self.stream.iter().zip(&self.online) {
-            println!("  {:>10.2} {:>10.3} {:>10.2} {:>8.4} {:>12.3} {:>12.2}", a.frequency, a.gain_db, a.phase_deg, a.quality, b.gain_db, b.phase_deg);
+            println!(
+                "  {:>10.2} {:>10.3} {:>10.2} {:>8.4} {:>12.3} {:>12.2}",
+                a.frequency, a.gain_db, a.phase_deg, a.quality, b.gain_db, b.phase_deg
+            );
         }
         println!(
             "  stream vs on-line correlator: largest difference {:.2e} dB, {:.2e} deg",
@@ -171,7 +181,12 @@ impl SweepReport {
         if let Some(e) = &self.errors_vs_oracle {
             println!(
                 "  against the oracle: below {} Hz max {:.3} dB / {:.2} deg; from {} Hz up max {:.3} dB / {:.2} deg",
-                self.threshold_hz, e.below_gain_db, e.below_phase_deg, self.threshold_hz, e.above_gain_db, e.above_phase_deg
+                self.threshold_hz,
+                e.below_gain_db,
+                e.below_phase_deg,
+                self.threshold_hz,
+                e.above_gain_db,
+                e.above_phase_deg
             );
             if self.noise_free_sensors && e.below_gain_db.max(e.above_gain_db) > 0.05 {
                 println!(

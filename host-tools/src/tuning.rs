@@ -62,7 +62,11 @@ impl AxisCorrection {
 pub fn corrections(models: &[AxisModel], position_bandwidth_hz: f64) -> Result<(f64, Vec<AxisCorrection>)> {
     let resonant: Vec<&AxisModel> = models.iter().filter(|m| m.anti_resonance.is_some()).collect();
     if resonant.len() > control_core::response_correction::MAX_SECTIONS {
-        bail!("{} axes with an anti-resonance: the filter holds {} sections", resonant.len(), control_core::response_correction::MAX_SECTIONS);
+        bail!(
+            "{} axes with an anti-resonance: the filter holds {} sections",
+            resonant.len(),
+            control_core::response_correction::MAX_SECTIONS
+        );
     }
     for m in &resonant {
         let z = m.anti_resonance.expect("filtered");
@@ -119,7 +123,11 @@ pub const MULTISINE_AMPLITUDE: f64 = 1.0e-3;
 pub const MEASURED_PERIODS: usize = 4;
 
 /// Command → machine-end response of one axis at `frequencies` (Hz, whole numbers), complex.
-pub fn command_to_load(fmu: &Fmu, parameters: &BTreeMap<String, Value>, frequencies: &[u32]) -> Result<Vec<(f64, Complex)>> {
+pub fn command_to_load(
+    fmu: &Fmu,
+    parameters: &BTreeMap<String, Value>,
+    frequencies: &[u32],
+) -> Result<Vec<(f64, Complex)>> {
     let period = (1.0 / DEFAULT_STEP).round() as usize; // one second
     let command = multisine(frequencies, MULTISINE_AMPLITUDE, (1 + MEASURED_PERIODS) * period);
     let scenario = Scenario::streamed_position("command_to_load", parameters, &command);
@@ -127,9 +135,14 @@ pub fn command_to_load(fmu: &Fmu, parameters: &BTreeMap<String, Value>, frequenc
     // A response measured through a current limit or a trip is not the axis's response.
     let largest = |c: &str| trace.column(c).unwrap_or_default().iter().fold(0.0f64, |a, x| a.max(x.abs()));
     if largest("faults") != 0.0 {
-        bail!("the axis tripped during the multisine (faults {}): its response cannot be measured this way", largest("faults"));
+        bail!(
+            "the axis tripped during the multisine (faults {}): its response cannot be measured this way",
+            largest("faults")
+        );
     }
-    let max_current = parameters.get(name::ctrl_max_current).map_or(control_core::Params::default().current.max_current as f64, |v| v.as_f64());
+    let max_current = parameters
+        .get(name::ctrl_max_current)
+        .map_or(control_core::Params::default().current.max_current as f64, |v| v.as_f64());
     if largest("iq") >= 0.9 * max_current {
         bail!(
             "the multisine drove the current to {:.1} A, near the {max_current} A limit: the measured response would not be linear (the correction filter lifts the command too much near a lightly damped mode?)",
@@ -138,10 +151,14 @@ pub fn command_to_load(fmu: &Fmu, parameters: &BTreeMap<String, Value>, frequenc
     }
     let load = trace.column("load_position").unwrap_or_default();
     // Row k+1 follows command k: all periods after the first.
-    let (u, y): (Vec<f64>, Vec<f64>) = (period..(1 + MEASURED_PERIODS) * period).map(|k| (command[k], load[k + 1])).unzip();
+    let (u, y): (Vec<f64>, Vec<f64>) =
+        (period..(1 + MEASURED_PERIODS) * period).map(|k| (command[k], load[k + 1])).unzip();
     // The record is whole seconds: frequency f Hz is bin f·seconds.
     let seconds = MEASURED_PERIODS as f64;
-    Ok(frequencies.iter().map(|&f| (f as f64, dft_bin(&y, f as f64 * seconds).div(dft_bin(&u, f as f64 * seconds)))).collect())
+    Ok(frequencies
+        .iter()
+        .map(|&f| (f as f64, dft_bin(&y, f as f64 * seconds).div(dft_bin(&u, f as f64 * seconds))))
+        .collect())
 }
 
 /// Largest gain (dB) and phase (deg) difference between any two axes' responses.
@@ -209,7 +226,8 @@ pub struct Tuning {
 /// The FMU parameters a tuning measurement runs an axis with: the identified ones, friction
 /// off (the correction is linear; friction's quadrant effects are seed 002's business).
 pub fn measurement_parameters(model: &AxisModel) -> BTreeMap<String, Value> {
-    let mut p: BTreeMap<String, Value> = model.fmu_parameters.iter().map(|(k, v)| (k.clone(), Value::Float(*v))).collect();
+    let mut p: BTreeMap<String, Value> =
+        model.fmu_parameters.iter().map(|(k, v)| (k.clone(), Value::Float(*v))).collect();
     p.insert(name::plant_motor_coulomb.into(), Value::Float(0.0));
     p.insert(name::plant_load_coulomb.into(), Value::Float(0.0));
     p
@@ -221,9 +239,14 @@ pub fn response_corrections(models: &[ResponseModel]) -> Result<Vec<AxisCorrecti
     models
         .iter()
         .map(|m| {
-            let sections: Vec<Section> = models.iter().filter(|o| o.axis != m.axis).flat_map(|o| o.sections()).collect();
+            let sections: Vec<Section> =
+                models.iter().filter(|o| o.axis != m.axis).flat_map(|o| o.sections()).collect();
             if sections.len() > max {
-                bail!("axis {}: the other axes' models need {} sections; the filter holds {max}", m.axis, sections.len());
+                bail!(
+                    "axis {}: the other axes' models need {} sections; the filter holds {max}",
+                    m.axis,
+                    sections.len()
+                );
             }
             Ok(AxisCorrection { axis: m.axis.clone(), sections })
         })
@@ -260,13 +283,20 @@ pub fn validate(c: &AxisCorrection) -> Result<()> {
 pub fn drive_frame(c: &AxisCorrection) -> Result<Vec<u8>> {
     use control_core::protocol::{encode, Request, MAX_FRAME};
     let mut buf = vec![0u8; MAX_FRAME + 8];
-    let n = encode(&Request::LoadCorrection(core_parameters(c)?), &mut buf).map_err(|e| anyhow::anyhow!("axis {}: {e}", c.axis))?;
+    let n = encode(&Request::LoadCorrection(core_parameters(c)?), &mut buf)
+        .map_err(|e| anyhow::anyhow!("axis {}: {e}", c.axis))?;
     buf.truncate(n);
     Ok(buf)
 }
 
 /// Measure, fit, correct and (with `check`) measure again. `progress` gets 0..1.
-pub fn tune(fmu: &Fmu, models: &[AxisModel], method: Method, check: bool, mut progress: impl FnMut(f64)) -> Result<Tuning> {
+pub fn tune(
+    fmu: &Fmu,
+    models: &[AxisModel],
+    method: Method,
+    check: bool,
+    mut progress: impl FnMut(f64),
+) -> Result<Tuning> {
     if models.len() < 2 {
         bail!("tuning makes axes alike: give at least two axes");
     }
@@ -321,7 +351,14 @@ pub fn tune(fmu: &Fmu, models: &[AxisModel], method: Method, check: bool, mut pr
         }
     }
     let upto = |r: &[Vec<(f64, Complex)>]| -> Vec<Vec<ResponsePoint>> {
-        r.iter().map(|v| v.iter().filter(|p| p.0 <= bandwidth + 1e-9).map(|&(f, h)| ResponsePoint::from_complex(f, h, 1.0)).collect()).collect()
+        r.iter()
+            .map(|v| {
+                v.iter()
+                    .filter(|p| p.0 <= bandwidth + 1e-9)
+                    .map(|&(f, h)| ResponsePoint::from_complex(f, h, 1.0))
+                    .collect()
+            })
+            .collect()
     };
     let axes = models
         .iter()
@@ -364,7 +401,10 @@ pub fn write(t: &Tuning, out: &std::path::Path) -> Result<Vec<std::path::PathBuf
             })
             .collect();
         let path = out.join(format!("{}.corr.toml", a.axis));
-        std::fs::write(&path, format!("# servo tune ({:?} method): response correction of axis {}\n{text}", t.method, a.axis))?;
+        std::fs::write(
+            &path,
+            format!("# servo tune ({:?} method): response correction of axis {}\n{text}", t.method, a.axis),
+        )?;
         files.push(path);
         let frame = out.join(format!("{}.corr.frame", a.axis));
         std::fs::write(&frame, drive_frame(&a.correction)?)?;
@@ -375,14 +415,20 @@ pub fn write(t: &Tuning, out: &std::path::Path) -> Result<Vec<std::path::PathBuf
     files.push(json);
     if !t.after.is_empty() {
         let mut curves: Vec<(String, Vec<ResponsePoint>)> = Vec::new();
-        let points = |v: &[(f64, Complex)]| v.iter().map(|&(f, h)| ResponsePoint::from_complex(f, h, 1.0)).collect::<Vec<_>>();
+        let points =
+            |v: &[(f64, Complex)]| v.iter().map(|&(f, h)| ResponsePoint::from_complex(f, h, 1.0)).collect::<Vec<_>>();
         for (a, (b, c)) in t.axes.iter().zip(t.before.iter().zip(&t.after)) {
             curves.push((format!("{} before", a.axis), points(b)));
             curves.push((format!("{} after", a.axis), points(c)));
         }
         let refs: Vec<(&str, &[ResponsePoint])> = curves.iter().map(|(l, c)| (l.as_str(), c.as_slice())).collect();
         let svg = out.join("tune.svg");
-        crate::bode_plot::plot_bode(&svg, "Command → machine-end position, before and after the correction", &refs, Some((t.position_bandwidth_hz, "position-loop bandwidth")))?;
+        crate::bode_plot::plot_bode(
+            &svg,
+            "Command → machine-end position, before and after the correction",
+            &refs,
+            Some((t.position_bandwidth_hz, "position-loop bandwidth")),
+        )?;
         files.push(svg);
     }
     Ok(files)
@@ -403,7 +449,9 @@ impl Tuning {
         }
         for a in &self.axes {
             if let Some(m) = &a.response_model {
-                let f = |v: &[Factor]| v.iter().map(|x| format!("({:.2} Hz, ζ {:.3})", x.hz, x.damping)).collect::<Vec<_>>().join("·");
+                let f = |v: &[Factor]| {
+                    v.iter().map(|x| format!("({:.2} Hz, ζ {:.3})", x.hz, x.damping)).collect::<Vec<_>>().join("·")
+                };
                 println!(
                     "  model of {}: zeros {} / poles {}, fitted {:.0}–{:.0} Hz, worst error {:.3} %",
                     a.axis,
@@ -451,10 +499,15 @@ pub struct CircleCheck {
 pub fn circle_check(fmu: &Fmu, t: &Tuning, radius: f64, frequency_hz: f64, lead_in: u32) -> Result<CircleCheck> {
     use crate::circle_test::{two_axis, CircleRequest, Direction, Measure};
     let axis = |name: &str| {
-        t.axes.iter().find(|a| a.axis == name).ok_or_else(|| anyhow::anyhow!("the circle check needs axes x and y; the tuning has no `{name}`"))
+        t.axes
+            .iter()
+            .find(|a| a.axis == name)
+            .ok_or_else(|| anyhow::anyhow!("the circle check needs axes x and y; the tuning has no `{name}`"))
     };
     let (x, y) = (axis("x")?, axis("y")?);
-    let base = |a: &TunedAxis| -> BTreeMap<String, Value> { a.fmu_parameters.iter().map(|(k, v)| (k.clone(), Value::Float(*v))).collect() };
+    let base = |a: &TunedAxis| -> BTreeMap<String, Value> {
+        a.fmu_parameters.iter().map(|(k, v)| (k.clone(), Value::Float(*v))).collect()
+    };
     let mut request = CircleRequest {
         radius,
         feed: radius * std::f64::consts::TAU * frequency_hz,

@@ -20,7 +20,16 @@ fn tmp(name: &str) -> std::path::PathBuf {
 fn run_writes_csv_plot_json_and_report() {
     let out = tmp("run");
     let scenario = workspace_root().join("scenarios/position_step.toml");
-    let o = servo().arg("run").arg(&scenario).arg("--fmu").arg(fmu_path()).arg("--out").arg(&out).arg("--json").output().unwrap();
+    let o = servo()
+        .arg("run")
+        .arg(&scenario)
+        .arg("--fmu")
+        .arg(fmu_path())
+        .arg("--out")
+        .arg(&out)
+        .arg("--json")
+        .output()
+        .unwrap();
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
     let summary: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
     assert_eq!(summary[0]["passed"], true);
@@ -78,7 +87,9 @@ fn accdec_prints_the_seed_design_and_writes_its_files() {
     assert_eq!(r["butterworth"]["shape"]["pulse_balance"], 0);
     assert_eq!(r["moving_average"]["shape"]["pulse_balance"], 0);
     assert_eq!(r["vibration"].as_array().unwrap().len(), 4, "two filters on two resonances");
-    for f in ["profiles.svg", "profile_butterworth.csv", "profile_moving_average.csv", "vibration_20hz.svg", "accdec.json"] {
+    for f in
+        ["profiles.svg", "profile_butterworth.csv", "profile_moving_average.csv", "vibration_20hz.svg", "accdec.json"]
+    {
         assert!(out.join(f).exists(), "{f} missing");
     }
 }
@@ -93,7 +104,14 @@ fn accdec_refuses_bad_designs_with_the_reason() {
         (vec!["--ma-lengths", "16,0,16"], "length 0"),
         (vec!["--speed=-1"], "--speed"),
     ] {
-        let o = servo().arg("accdec").args(&args).args(["--no-fmu", "--no-sweep"]).arg("--out").arg(tmp("accdec-bad")).output().unwrap();
+        let o = servo()
+            .arg("accdec")
+            .args(&args)
+            .args(["--no-fmu", "--no-sweep"])
+            .arg("--out")
+            .arg(tmp("accdec-bad"))
+            .output()
+            .unwrap();
         let err = String::from_utf8_lossy(&o.stderr);
         assert_eq!(o.status.code(), Some(2), "{args:?}: {err}");
         assert!(err.contains(reason), "{args:?}: {err}");
@@ -104,7 +122,11 @@ fn accdec_refuses_bad_designs_with_the_reason() {
 fn sequence_reports_failed_expectations_and_refuses_malformed_timelines() {
     let out = tmp("sequence");
     let strict = out.join("strict.toml");
-    std::fs::write(&strict, "name='strict'\nstop_time=0.2\n[[events]]\ntime=0.0\nevent='run'\n[[expect]]\nstate='servo_lock'\nat=0.1\n").unwrap();
+    std::fs::write(
+        &strict,
+        "name='strict'\nstop_time=0.2\n[[events]]\ntime=0.0\nevent='run'\n[[expect]]\nstate='servo_lock'\nat=0.1\n",
+    )
+    .unwrap();
     let o = servo().arg("sequence").arg(&strict).arg("--fmu").arg(fmu_path()).arg("--out").arg(&out).output().unwrap();
     assert_eq!(o.status.code(), Some(1), "{}", String::from_utf8_lossy(&o.stdout));
     assert!(String::from_utf8_lossy(&o.stdout).contains("[FAIL] state servo_lock"));
@@ -125,7 +147,15 @@ fn circle_refuses_what_cannot_make_a_circle_test() {
         (vec!["--single", "x", "--feed", "2513.2741228718346"], "multiple of 4"),
         (vec!["--set", "plant.load_coulomb"], "NAME=VALUE"),
     ] {
-        let o = servo().arg("circle").args(&args).arg("--fmu").arg(fmu_path()).arg("--out").arg(tmp("circle-bad")).output().unwrap();
+        let o = servo()
+            .arg("circle")
+            .args(&args)
+            .arg("--fmu")
+            .arg(fmu_path())
+            .arg("--out")
+            .arg(tmp("circle-bad"))
+            .output()
+            .unwrap();
         let err = String::from_utf8_lossy(&o.stderr);
         assert_eq!(o.status.code(), Some(2), "{args:?}: {err}");
         assert!(err.contains(reason), "{args:?}: {err}");
@@ -135,7 +165,14 @@ fn circle_refuses_what_cannot_make_a_circle_test() {
 #[test]
 fn circle_writes_plot_points_and_figures() {
     let out = tmp("circle");
-    let o = servo().args(["circle", "--json", "--compare", "ctrl.friction_comp_amplitude=0.06"]).arg("--fmu").arg(fmu_path()).arg("--out").arg(&out).output().unwrap();
+    let o = servo()
+        .args(["circle", "--json", "--compare", "ctrl.friction_comp_amplitude=0.06"])
+        .arg("--fmu")
+        .arg(fmu_path())
+        .arg("--out")
+        .arg(&out)
+        .output()
+        .unwrap();
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
     let r: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
     assert_eq!(r["circle"]["runs"].as_array().unwrap().len(), 2);
@@ -155,7 +192,15 @@ fn sweep_refuses_bad_settings_with_the_reason() {
         (vec!["--amplitude=-1"], "amplitude"),
         (vec!["--acquisition-divider", "8"], "once per communication step"),
     ] {
-        let o = servo().arg("sweep").args(&args).arg("--fmu").arg(fmu_path()).arg("--out").arg(tmp("sweep-bad")).output().unwrap();
+        let o = servo()
+            .arg("sweep")
+            .args(&args)
+            .arg("--fmu")
+            .arg(fmu_path())
+            .arg("--out")
+            .arg(tmp("sweep-bad"))
+            .output()
+            .unwrap();
         let err = String::from_utf8_lossy(&o.stderr);
         assert_eq!(o.status.code(), Some(2), "{args:?}: {err}");
         assert!(err.contains(reason), "{args:?}: {err}");
@@ -165,7 +210,14 @@ fn sweep_refuses_bad_settings_with_the_reason() {
 #[test]
 fn sweep_writes_csv_bode_and_json() {
     let out = tmp("sweep");
-    let o = servo().args(["sweep", "--json", "--start", "100", "--stop", "3000", "--points", "6"]).arg("--fmu").arg(fmu_path()).arg("--out").arg(&out).output().unwrap();
+    let o = servo()
+        .args(["sweep", "--json", "--start", "100", "--stop", "3000", "--points", "6"])
+        .arg("--fmu")
+        .arg(fmu_path())
+        .arg("--out")
+        .arg(&out)
+        .output()
+        .unwrap();
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
     let r: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
     assert_eq!(r["stream"].as_array().unwrap().len(), 7, "6 points and 2 kHz");
@@ -177,7 +229,14 @@ fn sweep_writes_csv_bode_and_json() {
 #[test]
 fn ident_writes_models_and_refuses_unusable_models() {
     let out = tmp("ident");
-    let o = servo().args(["ident", "--anti-resonance", "x=40,y=70", "--json"]).arg("--fmu").arg(fmu_path()).arg("--out").arg(&out).output().unwrap();
+    let o = servo()
+        .args(["ident", "--anti-resonance", "x=40,y=70", "--json"])
+        .arg("--fmu")
+        .arg(fmu_path())
+        .arg("--out")
+        .arg(&out)
+        .output()
+        .unwrap();
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
     for f in ["x.model.json", "y.model.json", "x.measured.csv", "ident.svg"] {
         assert!(out.join(f).exists(), "{f} missing");
@@ -192,7 +251,14 @@ fn ident_writes_models_and_refuses_unusable_models() {
     let o = servo().arg("ident").arg("--model").arg(out.join("y.model.json")).arg("--out").arg(&out).output().unwrap();
     assert_eq!(o.status.code(), Some(2));
     assert!(String::from_utf8_lossy(&o.stderr).contains("right half plane"));
-    let o = servo().args(["ident", "--anti-resonance", "q=40"]).arg("--fmu").arg(fmu_path()).arg("--out").arg(&out).output().unwrap();
+    let o = servo()
+        .args(["ident", "--anti-resonance", "q=40"])
+        .arg("--fmu")
+        .arg(fmu_path())
+        .arg("--out")
+        .arg(&out)
+        .output()
+        .unwrap();
     assert_eq!(o.status.code(), Some(2));
     assert!(String::from_utf8_lossy(&o.stderr).contains("no axis `q`"));
 }
@@ -200,12 +266,28 @@ fn ident_writes_models_and_refuses_unusable_models() {
 #[test]
 fn tune_writes_each_axis_correction_and_refuses_unusable_models() {
     let out = tmp("tune");
-    let o = servo().args(["ident", "--anti-resonance", "x=40,y=70"]).arg("--fmu").arg(fmu_path()).arg("--out").arg(&out).output().unwrap();
+    let o = servo()
+        .args(["ident", "--anti-resonance", "x=40,y=70"])
+        .arg("--fmu")
+        .arg(fmu_path())
+        .arg("--out")
+        .arg(&out)
+        .output()
+        .unwrap();
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
     let (x, y) = (out.join("x.model.json"), out.join("y.model.json"));
     // The seed as written: x carries y's numerator (70 Hz) and y carries x's (40 Hz), each
     // over the same F.
-    let o = servo().args(["tune", "--method", "zeros", "--json", "--model"]).arg(&x).arg(&y).arg("--fmu").arg(fmu_path()).arg("--out").arg(&out).output().unwrap();
+    let o = servo()
+        .args(["tune", "--method", "zeros", "--json", "--model"])
+        .arg(&x)
+        .arg(&y)
+        .arg("--fmu")
+        .arg(fmu_path())
+        .arg("--out")
+        .arg(&out)
+        .output()
+        .unwrap();
     let r: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
     let zero = |axis: usize| r["tuning"]["axes"][axis]["correction"]["sections"][0]["zeros"][0].as_f64().unwrap();
     assert!((zero(0) - 70.0).abs() < 1.0 && (zero(1) - 40.0).abs() < 1.0, "{r}");
@@ -216,10 +298,20 @@ fn tune_writes_each_axis_correction_and_refuses_unusable_models() {
     assert!(!o.status.success());
 
     // The default (measured models) does, and the circle of the tuned axes gets rounder.
-    let o = servo().args(["tune", "--json", "--model"]).arg(&x).arg(&y).arg("--fmu").arg(fmu_path()).arg("--out").arg(&out).output().unwrap();
+    let o = servo()
+        .args(["tune", "--json", "--model"])
+        .arg(&x)
+        .arg(&y)
+        .arg("--fmu")
+        .arg(fmu_path())
+        .arg("--out")
+        .arg(&out)
+        .output()
+        .unwrap();
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
     let r: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
-    let (before, after) = (r["tuning"]["spread_before"][0].as_f64().unwrap(), r["tuning"]["spread_after"][0].as_f64().unwrap());
+    let (before, after) =
+        (r["tuning"]["spread_before"][0].as_f64().unwrap(), r["tuning"]["spread_after"][0].as_f64().unwrap());
     assert!(after < before / 10.0, "{r}");
     let circle = tmp("tune-circle");
     let o = servo()
@@ -235,7 +327,8 @@ fn tune_writes_each_axis_correction_and_refuses_unusable_models() {
     let c: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
     assert!(c["circle"]["roundness_ratio"].as_f64().unwrap() < 0.05, "{c}");
 
-    let o = servo().args(["tune", "--method", "poles", "--model"]).arg(&x).arg(&y).arg("--out").arg(&out).output().unwrap();
+    let o =
+        servo().args(["tune", "--method", "poles", "--model"]).arg(&x).arg(&y).arg("--out").arg(&out).output().unwrap();
     assert_eq!(o.status.code(), Some(2));
     assert!(String::from_utf8_lossy(&o.stderr).contains("response or zeros"));
     let o = servo().args(["tune", "--no-check", "--model"]).arg(&x).arg("--out").arg(&out).output().unwrap();

@@ -17,7 +17,8 @@ pub struct ShuntAmplifier {
     pub full_scale: u16,
 }
 
-pub const IHM08M1: ShuntAmplifier = ShuntAmplifier { shunt_ohm: 0.010, gain: -5.18, bias_volts: 1.65, vref: 3.3, full_scale: 4095 };
+pub const IHM08M1: ShuntAmplifier =
+    ShuntAmplifier { shunt_ohm: 0.010, gain: -5.18, bias_volts: 1.65, vref: 3.3, full_scale: 4095 };
 
 impl ShuntAmplifier {
     /// The ADC count for a current through the shunt (A, positive in the phase current's
@@ -36,7 +37,8 @@ impl ShuntAmplifier {
 
     /// The largest current either way the converter can show from the bias (A).
     pub fn range_amps(&self) -> f32 {
-        let headroom = if self.bias_volts < self.vref - self.bias_volts { self.bias_volts } else { self.vref - self.bias_volts };
+        let headroom =
+            if self.bias_volts < self.vref - self.bias_volts { self.bias_volts } else { self.vref - self.bias_volts };
         headroom / (self.shunt_ohm * self.gain.abs())
     }
 }

@@ -14,11 +14,11 @@ pub const fn encode(ticks: u32) -> u8 {
     if ticks <= 127 {
         ticks as u8
     } else if ticks <= 2 * (64 + 63) {
-        0x80 | ((ticks + 1) / 2 - 64) as u8
+        0x80 | (ticks.div_ceil(2) - 64) as u8
     } else if ticks <= 8 * (32 + 31) {
-        0xC0 | ((ticks + 7) / 8 - 32) as u8
+        0xC0 | (ticks.div_ceil(8) - 32) as u8
     } else if ticks <= 16 * (32 + 31) {
-        0xE0 | ((ticks + 15) / 16 - 32) as u8
+        0xE0 | (ticks.div_ceil(16) - 32) as u8
     } else {
         0xFF
     }

@@ -114,7 +114,16 @@ mod tests {
     use super::*;
 
     fn both(polarity: bool, n_polarity: bool) -> ChannelBits {
-        ChannelBits { enable: true, polarity, n_enable: true, n_polarity, idle: false, n_idle: true, ossi: true, ossr: true }
+        ChannelBits {
+            enable: true,
+            polarity,
+            n_enable: true,
+            n_polarity,
+            idle: false,
+            n_idle: true,
+            ossi: true,
+            ossr: true,
+        }
     }
 
     #[test]

@@ -42,7 +42,12 @@ pub const SCALES: SensingScales = SensingScales {
 
 /// The limits of this board, the following error kept as given.
 pub fn board_limits(given: Limits) -> Limits {
-    Limits { overcurrent: OVERCURRENT_A, bus_undervoltage: BUS_UNDERVOLTAGE_V, bus_overvoltage: BUS_OVERVOLTAGE_V, ..given }
+    Limits {
+        overcurrent: OVERCURRENT_A,
+        bus_undervoltage: BUS_UNDERVOLTAGE_V,
+        bus_overvoltage: BUS_OVERVOLTAGE_V,
+        ..given
+    }
 }
 
 /// Ways a set of limits does not fit this board (bits of the result).

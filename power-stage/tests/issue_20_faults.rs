@@ -15,7 +15,9 @@ use power_stage::config::IHM08M1;
 use power_stage::current_amplifier::IHM08M1 as AMPLIFIER;
 use power_stage::fail_safe::{bridge_after, BridgeAfter, FailSafeWords, LossOfControl};
 use power_stage::gate_driver::DEAD_TIME_NS;
-use power_stage::ratings::{limit_violations, OVERCURRENT_BEYOND_CONVERTER, OVERVOLTAGE_ABOVE_RATING, SCALES, UNDERVOLTAGE_REFUSES_RATED_RANGE};
+use power_stage::ratings::{
+    limit_violations, OVERCURRENT_BEYOND_CONVERTER, OVERVOLTAGE_ABOVE_RATING, SCALES, UNDERVOLTAGE_REFUSES_RATED_RANGE,
+};
 use power_stage::sampling::{SampleValidity, AMPLIFIER_SETTLING_NS};
 use power_stage::shunt_selection::phase_currents;
 use power_stage::tim1_words::{cr2_oisn, tim1_words, Tim1Words};
@@ -138,7 +140,9 @@ fn fixed_u_and_v_sampling_misread_at_high_modulation() {
 fn nothing_took_the_gates_off_when_control_was_lost() {
     // panic-probe only faulted; no DBG_TIM1_STOP, no CLL, no watchdog.
     let old = FailSafeWords { dbgmcu_apb2fzr: 0, dbgmcu_apb1fzr1: 0, syscfg_cfgr2: 0, watchdog: None, handler_egr: 0 };
-    for event in [LossOfControl::PanicOrFault, LossOfControl::DebuggerHalt, LossOfControl::Lockup, LossOfControl::StalledLoop] {
+    for event in
+        [LossOfControl::PanicOrFault, LossOfControl::DebuggerHalt, LossOfControl::Lockup, LossOfControl::StalledLoop]
+    {
         assert_eq!(bridge_after(&old, event), BridgeAfter::KeepsSwitching, "{event:?}");
     }
     // And the last duties stay on the motor.

@@ -92,7 +92,7 @@ fn a_positive_q_voltage_gives_a_positive_measured_q_current() {
     let (bus, ohms) = (24.0, 0.5);
     let sensing = calibrated(SCALES);
     for step in 0..12 {
-        let theta = step as f32 * 0.5236 + 0.1;
+        let theta = step as f32 * core::f32::consts::FRAC_PI_6 + 0.1;
         let duties = duties_for(Dq { d: 0.0, q: 2.0 }, theta, bus);
         let mut m = bridge_on(words(), duties);
         let true_currents = steady_currents(&mut m, bus, ohms);
@@ -104,7 +104,10 @@ fn a_positive_q_voltage_gives_a_positive_measured_q_current() {
         // 2 V over 0.5 Ω is 4 A; the dead time takes a little of the voltage.
         assert!(truth.q > 3.0 && truth.q < 4.1, "θ {theta}: true q current {}", truth.q);
         assert!(measured.q > 0.0, "θ {theta}: measured q current {} for a positive q voltage", measured.q);
-        assert!((measured.q - truth.q).abs() < 0.05 && (measured.d - truth.d).abs() < 0.05, "θ {theta}: {measured:?} vs {truth:?}");
+        assert!(
+            (measured.q - truth.q).abs() < 0.05 && (measured.d - truth.d).abs() < 0.05,
+            "θ {theta}: {measured:?} vs {truth:?}"
+        );
     }
 }
 
@@ -135,7 +138,9 @@ fn at_full_modulation_the_two_phases_read_are_always_sampled_inside_their_low_si
 
 #[test]
 fn every_loss_of_control_takes_the_gates_off() {
-    for event in [LossOfControl::PanicOrFault, LossOfControl::DebuggerHalt, LossOfControl::Lockup, LossOfControl::StalledLoop] {
+    for event in
+        [LossOfControl::PanicOrFault, LossOfControl::DebuggerHalt, LossOfControl::Lockup, LossOfControl::StalledLoop]
+    {
         let mut m = bridge_on(words(), [0.2, 0.5, 0.8]);
         run(&mut m, 1000, |_| {});
         match bridge_after(&FAIL_SAFE, event) {

@@ -112,9 +112,17 @@ impl fmt::Display for Figures {
         writeln!(f, "  decoded                 {}", self.decoded)?;
         writeln!(f, "  crashes/panics          {}   (goal 0)", self.crashes)?;
         writeln!(f, "  overflow panics         {}   (goal 0)", self.overflow_panics)?;
-        writeln!(f, "  accepted-corrupt frames {}   (goal 0; {} decoded to another message)", self.accepted_corrupt, self.accepted_corrupt_different)?;
+        writeln!(
+            f,
+            "  accepted-corrupt frames {}   (goal 0; {} decoded to another message)",
+            self.accepted_corrupt, self.accepted_corrupt_different
+        )?;
         if self.campaign == "requests" {
-            writeln!(f, "  refusals                {} ({} changed state, goal 0)", self.refusals, self.refusals_that_changed_state)?;
+            writeln!(
+                f,
+                "  refusals                {} ({} changed state, goal 0)",
+                self.refusals, self.refusals_that_changed_state
+            )?;
             writeln!(f, "  drive ticks             {}", self.ticks)?;
         }
         if self.campaign == "stream" {
@@ -214,8 +222,28 @@ pub fn run(c: Campaign, seconds: f64, seed: u64) -> Figures {
 /// f32 values that break things: the issue's −4e30 and 3.4e38, the largest finite ones,
 /// NaN and infinities, tiny and subnormal values, just beyond the ranges.
 const INTERESTING_F32: [f32; 22] = [
-    -4e30, 3.4e38, -3.4e38, f32::MAX, f32::MIN, f32::NAN, f32::INFINITY, f32::NEG_INFINITY, 1e-45, -1e-45, 1e-38, 0.0, -0.0, 1.0, -1.0,
-    100_000.0, 100_000.01, -100_001.0, 1e10, 9.3e18, 2.1e9, 1e-3,
+    -4e30,
+    3.4e38,
+    -3.4e38,
+    f32::MAX,
+    f32::MIN,
+    f32::NAN,
+    f32::INFINITY,
+    f32::NEG_INFINITY,
+    1e-45,
+    -1e-45,
+    1e-38,
+    0.0,
+    -0.0,
+    1.0,
+    -1.0,
+    100_000.0,
+    100_000.01,
+    -100_001.0,
+    1e10,
+    9.3e18,
+    2.1e9,
+    1e-3,
 ];
 
 fn random_f32(rng: &mut Rng) -> f32 {
@@ -390,14 +418,16 @@ fn encode_vec<T: serde::Serialize>(msg: &T) -> Vec<u8> {
 
 fn frames(fig: &mut Figures, rng: &mut Rng, started: Instant, seconds: f64) {
     // A pool of valid frames, renewed as it goes.
-    let mut pool: Vec<(Request, Vec<u8>)> = (0..64).map(|_| {
-        let r = random_request(rng);
-        (r, encode_vec(&r))
-    }).collect();
+    let mut pool: Vec<(Request, Vec<u8>)> = (0..64)
+        .map(|_| {
+            let r = random_request(rng);
+            (r, encode_vec(&r))
+        })
+        .collect();
     let mut k = 0u64;
-    while k % 4096 != 0 || started.elapsed().as_secs_f64() < seconds {
+    while !k.is_multiple_of(4096) || started.elapsed().as_secs_f64() < seconds {
         k += 1;
-        if k % 1024 == 0 {
+        if k.is_multiple_of(1024) {
             let r = random_request(rng);
             let i = rng.usize(..pool.len());
             pool[i] = (r, encode_vec(&r));
@@ -415,16 +445,14 @@ fn frames(fig: &mut Figures, rng: &mut Rng, started: Instant, seconds: f64) {
         }
         fig.inputs += 1;
         let input = f.clone();
-        if let Some(r) = guarded(fig, &input, || decode::<Request>(&mut f)) {
-            if let Ok(got) = r {
-                fig.decoded += 1;
-                fig.accepted_corrupt += 1;
-                if got != *original {
-                    fig.accepted_corrupt_different += 1;
-                }
-                if fig.crash_inputs.len() < 8 {
-                    fig.crash_inputs.push(format!("{} (accepted corrupt frame)", hex(&input)));
-                }
+        if let Some(Ok(got)) = guarded(fig, &input, || decode::<Request>(&mut f)) {
+            fig.decoded += 1;
+            fig.accepted_corrupt += 1;
+            if got != *original {
+                fig.accepted_corrupt_different += 1;
+            }
+            if fig.crash_inputs.len() < 8 {
+                fig.crash_inputs.push(format!("{} (accepted corrupt frame)", hex(&input)));
             }
         }
     }
@@ -440,7 +468,12 @@ struct Drive {
 
 impl Drive {
     fn new() -> Self {
-        Self { axis: Axis::new(Params::default()).unwrap(), commands: Commands::default(), stream: AcquisitionStream::default(), encoder: 0 }
+        Self {
+            axis: Axis::new(Params::default()).unwrap(),
+            commands: Commands::default(),
+            stream: AcquisitionStream::default(),
+            encoder: 0,
+        }
     }
 }
 
@@ -453,9 +486,9 @@ fn state_bits(d: &Drive) -> Vec<u8> {
 fn requests(fig: &mut Figures, rng: &mut Rng, started: Instant, seconds: f64) {
     let mut drive = Drive::new();
     let mut k = 0u64;
-    while k % 64 != 0 || started.elapsed().as_secs_f64() < seconds {
+    while !k.is_multiple_of(64) || started.elapsed().as_secs_f64() < seconds {
         k += 1;
-        if k % 512 == 0 {
+        if k.is_multiple_of(512) {
             drive = Drive::new();
         }
         let request = random_request(rng);
@@ -526,7 +559,15 @@ fn random_response(rng: &mut Rng, tick: &mut u64) -> Response {
         0..=4 => {
             let mut b = SampleBatch { count: rng.u8(0..=BATCH as u8), dropped: rng.u32(0..10), ..Default::default() };
             for s in &mut b.samples[..b.count as usize] {
-                *s = AcquisitionSample { tick: *tick, u: rng.f32(), y: rng.f32(), phase: rng.f32() * 6.28, measuring: rng.bool(), point: rng.u32(0..128), record: rng.u32(0..16) };
+                *s = AcquisitionSample {
+                    tick: *tick,
+                    u: rng.f32(),
+                    y: rng.f32(),
+                    phase: rng.f32() * std::f32::consts::TAU,
+                    measuring: rng.bool(),
+                    point: rng.u32(0..128),
+                    record: rng.u32(0..16),
+                };
                 *tick += 4;
             }
             Response::Samples(b)
@@ -540,7 +581,7 @@ fn random_response(rng: &mut Rng, tick: &mut u64) -> Response {
 fn stream(fig: &mut Figures, rng: &mut Rng, started: Instant, seconds: f64) {
     let mut tick = 0u64;
     let mut k = 0u64;
-    while k % 64 != 0 || started.elapsed().as_secs_f64() < seconds {
+    while !k.is_multiple_of(64) || started.elapsed().as_secs_f64() < seconds {
         k += 1;
         // One stretch of traffic: a few frames, some with mutated payloads under a valid
         // CRC (absurd counts), some byte-corrupted, random garbage between them.
@@ -635,7 +676,11 @@ mod tests {
         for c in [Campaign::Frames, Campaign::Requests, Campaign::Stream] {
             let f = run(c, 0.5, 18);
             assert!(f.inputs > 100, "{f}");
-            assert_eq!((f.crashes, f.overflow_panics, f.accepted_corrupt, f.refusals_that_changed_state, f.bad_counts_used), (0, 0, 0, 0, 0), "{f}");
+            assert_eq!(
+                (f.crashes, f.overflow_panics, f.accepted_corrupt, f.refusals_that_changed_state, f.bad_counts_used),
+                (0, 0, 0, 0, 0),
+                "{f}"
+            );
         }
     }
 

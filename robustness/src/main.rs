@@ -29,7 +29,8 @@ fn main() {
     }
     let campaigns: Vec<Campaign> = match which.as_str() {
         "all" => vec![Campaign::Frames, Campaign::Requests, Campaign::Stream],
-        other => vec![Campaign::parse(other).unwrap_or_else(|| fail(&format!("unknown campaign {other}: frames, requests, stream or all")))],
+        other => vec![Campaign::parse(other)
+            .unwrap_or_else(|| fail(&format!("unknown campaign {other}: frames, requests, stream or all")))],
     };
     let mut ok = true;
     let mut all = Vec::new();

@@ -93,7 +93,12 @@ velocity_command = {STEP:?}
         }
     }
     let peak = w.iter().cloned().fold(0.0, f64::max);
-    eprintln!("largest difference {:.4} rad/s = {:.2} % of the step; FMU peak {:.3}", worst, 100.0 * worst / STEP, peak);
+    eprintln!(
+        "largest difference {:.4} rad/s = {:.2} % of the step; FMU peak {:.3}",
+        worst,
+        100.0 * worst / STEP,
+        peak
+    );
     assert!(peak > 1.05 * STEP, "the step response should overshoot (PI on a two-inertia plant)");
     assert!(worst <= 0.03 * STEP, "FMU and linearised loop differ by {:.2} % of the step", 100.0 * worst / STEP);
 }

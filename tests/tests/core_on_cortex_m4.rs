@@ -5,7 +5,9 @@
 //!
 //! Needs the firmware toolchain and QEMU; `scripts/fw` installs them (apt) on first use.
 
-use host_tools::firmware::{all_features_recordings, build, drive_image_size, encode, recordings, replay_on_cortex_m4, sections};
+use host_tools::firmware::{
+    all_features_recordings, build, drive_image_size, encode, recordings, replay_on_cortex_m4, sections,
+};
 use host_tools::paths::workspace_root;
 
 #[test]
@@ -62,11 +64,15 @@ fn the_on_target_tests_build_with_the_defmt_test_harness() {
         .expect("an on_target test binary");
     let elf = std::fs::read(newest.path()).unwrap();
     let s = sections(&elf);
-    assert!(s.iter().any(|(n, a, _)| n == ".vector_table" && *a == 0x0800_0000), "a Cortex-M image at the G474's flash: {s:?}");
+    assert!(
+        s.iter().any(|(n, a, _)| n == ".vector_table" && *a == 0x0800_0000),
+        "a Cortex-M image at the G474's flash: {s:?}"
+    );
     // defmt keeps its strings in symbol names of a non-allocated .defmt section: the three
     // tests' names are there.
     assert!(elf.windows(7).any(|w| w == b".defmt\0"), "a .defmt section");
-    for name in ["pwm_is_centre_aligned", "injected_conversions_come_once_per_period", "the_quadrature_counter_follows"] {
+    for name in ["pwm_is_centre_aligned", "injected_conversions_come_once_per_period", "the_quadrature_counter_follows"]
+    {
         assert!(elf.windows(name.len()).any(|w| w == name.as_bytes()), "test {name} in the binary");
     }
 }

@@ -25,7 +25,8 @@ fn library() -> Library {
 macro_rules! sym {
     ($lib:expr, $name:literal, $t:ty) => {{
         #[allow(unused_unsafe)]
-        let f = *unsafe { $lib.get::<$t>(concat!($name, "\0").as_bytes()) }.unwrap_or_else(|e| panic!("{} not exported: {e}", $name));
+        let f = *unsafe { $lib.get::<$t>(concat!($name, "\0").as_bytes()) }
+            .unwrap_or_else(|e| panic!("{} not exported: {e}", $name));
         f
     }};
 }
@@ -34,7 +35,13 @@ macro_rules! sym {
 static LOG: Mutex<Vec<(usize, c_int, String, String)>> = Mutex::new(Vec::new());
 
 unsafe extern "C" fn logger(env: *mut c_void, status: c_int, category: *const c_char, message: *const c_char) {
-    let s = |p: *const c_char| if p.is_null() { String::new() } else { unsafe { CStr::from_ptr(p) }.to_string_lossy().into_owned() };
+    let s = |p: *const c_char| {
+        if p.is_null() {
+            String::new()
+        } else {
+            unsafe { CStr::from_ptr(p) }.to_string_lossy().into_owned()
+        }
+    };
     LOG.lock().unwrap().push((env as usize, status, s(category), s(message)));
 }
 
@@ -48,8 +55,18 @@ fn take_log(env: usize) -> Vec<(usize, c_int, String, String)> {
 }
 
 type Instantiate3 = unsafe extern "C" fn(
-    *const c_char, *const c_char, *const c_char, bool, bool, bool, bool, *const u32, usize, *mut c_void,
-    Option<unsafe extern "C" fn(*mut c_void, c_int, *const c_char, *const c_char)>, P,
+    *const c_char,
+    *const c_char,
+    *const c_char,
+    bool,
+    bool,
+    bool,
+    bool,
+    *const u32,
+    usize,
+    *mut c_void,
+    Option<unsafe extern "C" fn(*mut c_void, c_int, *const c_char, *const c_char)>,
+    P,
 ) -> Inst;
 type F0 = unsafe extern "C" fn(Inst) -> c_int;
 type EnterInit = unsafe extern "C" fn(Inst, bool, f64, f64, bool, f64) -> c_int;
@@ -68,7 +85,20 @@ impl Fmi3<'_> {
         let f: Instantiate3 = sym!(self.lib, "fmi3InstantiateCoSimulation", Instantiate3);
         let token = CString::new(instantiation_token()).unwrap();
         let inst = unsafe {
-            f(c"axis".as_ptr(), token.as_ptr(), std::ptr::null(), false, logging, false, false, std::ptr::null(), 0, self.env as *mut c_void, Some(logger), null_mut())
+            f(
+                c"axis".as_ptr(),
+                token.as_ptr(),
+                std::ptr::null(),
+                false,
+                logging,
+                false,
+                false,
+                std::ptr::null(),
+                0,
+                self.env as *mut c_void,
+                Some(logger),
+                null_mut(),
+            )
         };
         assert!(!inst.is_null());
         inst
@@ -139,7 +169,11 @@ fn call_fmi3(lib: &Library, name: &str, inst: Inst) -> c_int {
     unsafe {
         match name {
             "fmi3GetFloat64" | "fmi3SetFloat64" => sym!(lib, "fmi3GetFloat64", GetSet)(inst, f64_vr.as_ptr(), 1, b, 1)
-                .max(if name == "fmi3SetFloat64" { sym!(lib, "fmi3SetFloat64", GetSet)(inst, f64_vr.as_ptr(), 1, b, 1) } else { 0 }),
+                .max(if name == "fmi3SetFloat64" {
+                    sym!(lib, "fmi3SetFloat64", GetSet)(inst, f64_vr.as_ptr(), 1, b, 1)
+                } else {
+                    0
+                }),
             "fmi3GetInt32" => sym!(lib, "fmi3GetInt32", GetSet)(inst, i32_vr.as_ptr(), 1, b, 1),
             "fmi3SetInt32" => sym!(lib, "fmi3SetInt32", GetSet)(inst, i32_vr.as_ptr(), 1, mode.as_ptr() as P, 1),
             "fmi3GetBoolean" | "fmi3SetBoolean" => {
@@ -147,24 +181,39 @@ fn call_fmi3(lib: &Library, name: &str, inst: Inst) -> c_int {
                 f(inst, bool_vr.as_ptr(), 1, b, 1)
             }
             n if (n.starts_with("fmi3Get") || n.starts_with("fmi3Set"))
-                && ["Float32", "Int8", "UInt8", "Int16", "UInt16", "UInt32", "Int64", "UInt64", "String"].iter().any(|t| n.ends_with(t)) =>
+                && ["Float32", "Int8", "UInt8", "Int16", "UInt16", "UInt32", "Int64", "UInt64", "String"]
+                    .iter()
+                    .any(|t| n.ends_with(t)) =>
             {
                 let f = *lib.get::<GetSet>(format!("{name}\0").as_bytes()).unwrap();
                 f(inst, f64_vr.as_ptr(), 1, b, 1)
             }
             "fmi3GetBinary" | "fmi3SetBinary" => {
-                let f = *lib.get::<unsafe extern "C" fn(Inst, *const u32, usize, P, P, usize) -> c_int>(format!("{name}\0").as_bytes()).unwrap();
+                let f = *lib
+                    .get::<unsafe extern "C" fn(Inst, *const u32, usize, P, P, usize) -> c_int>(
+                        format!("{name}\0").as_bytes(),
+                    )
+                    .unwrap();
                 f(inst, f64_vr.as_ptr(), 1, b, b, 1)
             }
             "fmi3GetClock" | "fmi3SetClock" => {
-                let f = *lib.get::<unsafe extern "C" fn(Inst, *const u32, usize, P) -> c_int>(format!("{name}\0").as_bytes()).unwrap();
+                let f = *lib
+                    .get::<unsafe extern "C" fn(Inst, *const u32, usize, P) -> c_int>(format!("{name}\0").as_bytes())
+                    .unwrap();
                 f(inst, f64_vr.as_ptr(), 1, b)
             }
             "fmi3SetDebugLogging" => {
                 let cats = [c"logEvents".as_ptr()];
-                sym!(lib, "fmi3SetDebugLogging", unsafe extern "C" fn(Inst, bool, usize, *const *const c_char) -> c_int)(inst, true, 1, cats.as_ptr())
+                sym!(lib, "fmi3SetDebugLogging", unsafe extern "C" fn(Inst, bool, usize, *const *const c_char) -> c_int)(
+                    inst,
+                    true,
+                    1,
+                    cats.as_ptr(),
+                )
             }
-            "fmi3EnterInitializationMode" => sym!(lib, "fmi3EnterInitializationMode", EnterInit)(inst, false, 0.0, 0.0, false, 0.0),
+            "fmi3EnterInitializationMode" => {
+                sym!(lib, "fmi3EnterInitializationMode", EnterInit)(inst, false, 0.0, 0.0, false, 0.0)
+            }
             "fmi3DoStep" => {
                 let (mut a, mut c, mut d, mut t) = (false, false, false, 0.0);
                 sym!(lib, "fmi3DoStep", DoStep)(inst, 0.00025, 0.00025, false, &mut a, &mut c, &mut d, &mut t)
@@ -177,54 +226,94 @@ fn call_fmi3(lib: &Library, name: &str, inst: Inst) -> c_int {
                 s
             }
             "fmi3SetFMUState" => sym!(lib, "fmi3SetFMUState", unsafe extern "C" fn(Inst, P) -> c_int)(inst, null_mut()),
-            "fmi3FreeFMUState" => sym!(lib, "fmi3FreeFMUState", unsafe extern "C" fn(Inst, *mut P) -> c_int)(inst, &mut state),
-            "fmi3SerializedFMUStateSize" => {
-                sym!(lib, "fmi3SerializedFMUStateSize", unsafe extern "C" fn(Inst, P, *mut usize) -> c_int)(inst, null_mut(), &mut size)
+            "fmi3FreeFMUState" => {
+                sym!(lib, "fmi3FreeFMUState", unsafe extern "C" fn(Inst, *mut P) -> c_int)(inst, &mut state)
             }
-            "fmi3SerializeFMUState" => sym!(lib, "fmi3SerializeFMUState", unsafe extern "C" fn(Inst, P, P, usize) -> c_int)(inst, null_mut(), b, 8),
+            "fmi3SerializedFMUStateSize" => sym!(
+                lib,
+                "fmi3SerializedFMUStateSize",
+                unsafe extern "C" fn(Inst, P, *mut usize) -> c_int
+            )(inst, null_mut(), &mut size),
+            "fmi3SerializeFMUState" => sym!(
+                lib,
+                "fmi3SerializeFMUState",
+                unsafe extern "C" fn(Inst, P, P, usize) -> c_int
+            )(inst, null_mut(), b, 8),
             "fmi3DeserializeFMUState" => {
-                sym!(lib, "fmi3DeserializeFMUState", unsafe extern "C" fn(Inst, P, usize, *mut P) -> c_int)(inst, b, 64, &mut state)
+                sym!(lib, "fmi3DeserializeFMUState", unsafe extern "C" fn(Inst, P, usize, *mut P) -> c_int)(
+                    inst, b, 64, &mut state,
+                )
             }
-            "fmi3GetNumberOfVariableDependencies" => {
-                sym!(lib, "fmi3GetNumberOfVariableDependencies", unsafe extern "C" fn(Inst, u32, *mut usize) -> c_int)(inst, vr("iq"), &mut size)
-            }
-            "fmi3GetVariableDependencies" => sym!(lib, "fmi3GetVariableDependencies", unsafe extern "C" fn(Inst, u32, P, P, P, P, usize) -> c_int)(
-                inst, vr("iq"), b, b, b, b, 0,
-            ),
+            "fmi3GetNumberOfVariableDependencies" => sym!(
+                lib,
+                "fmi3GetNumberOfVariableDependencies",
+                unsafe extern "C" fn(Inst, u32, *mut usize) -> c_int
+            )(inst, vr("iq"), &mut size),
+            "fmi3GetVariableDependencies" => sym!(
+                lib,
+                "fmi3GetVariableDependencies",
+                unsafe extern "C" fn(Inst, u32, P, P, P, P, usize) -> c_int
+            )(inst, vr("iq"), b, b, b, b, 0),
             "fmi3GetDirectionalDerivative" | "fmi3GetAdjointDerivative" => {
                 let f = *lib.get::<unsafe extern "C" fn(Inst, *const u32, usize, *const u32, usize, P, usize, P, usize) -> c_int>(format!("{name}\0").as_bytes()).unwrap();
                 f(inst, f64_vr.as_ptr(), 1, f64_vr.as_ptr(), 1, b, 1, b, 1)
             }
-            "fmi3GetIntervalDecimal" | "fmi3GetIntervalFraction" | "fmi3GetShiftFraction" | "fmi3SetIntervalFraction" | "fmi3SetShiftFraction" => {
-                let f = *lib.get::<unsafe extern "C" fn(Inst, *const u32, usize, P, P, P) -> c_int>(format!("{name}\0").as_bytes()).unwrap();
+            "fmi3GetIntervalDecimal"
+            | "fmi3GetIntervalFraction"
+            | "fmi3GetShiftFraction"
+            | "fmi3SetIntervalFraction"
+            | "fmi3SetShiftFraction" => {
+                let f = *lib
+                    .get::<unsafe extern "C" fn(Inst, *const u32, usize, P, P, P) -> c_int>(
+                        format!("{name}\0").as_bytes(),
+                    )
+                    .unwrap();
                 f(inst, f64_vr.as_ptr(), 1, b, b, b)
             }
             "fmi3GetShiftDecimal" | "fmi3SetIntervalDecimal" | "fmi3SetShiftDecimal" => {
-                let f = *lib.get::<unsafe extern "C" fn(Inst, *const u32, usize, P) -> c_int>(format!("{name}\0").as_bytes()).unwrap();
+                let f = *lib
+                    .get::<unsafe extern "C" fn(Inst, *const u32, usize, P) -> c_int>(format!("{name}\0").as_bytes())
+                    .unwrap();
                 f(inst, f64_vr.as_ptr(), 1, b)
             }
             "fmi3UpdateDiscreteStates" => {
-                sym!(lib, "fmi3UpdateDiscreteStates", unsafe extern "C" fn(Inst, P, P, P, P, P, P) -> c_int)(inst, b, b, b, b, b, b)
+                sym!(lib, "fmi3UpdateDiscreteStates", unsafe extern "C" fn(Inst, P, P, P, P, P, P) -> c_int)(
+                    inst, b, b, b, b, b, b,
+                )
             }
-            "fmi3GetOutputDerivatives" => {
-                sym!(lib, "fmi3GetOutputDerivatives", unsafe extern "C" fn(Inst, *const u32, usize, P, P, usize) -> c_int)(inst, f64_vr.as_ptr(), 1, b, b, 1)
+            "fmi3GetOutputDerivatives" => sym!(
+                lib,
+                "fmi3GetOutputDerivatives",
+                unsafe extern "C" fn(Inst, *const u32, usize, P, P, usize) -> c_int
+            )(inst, f64_vr.as_ptr(), 1, b, b, 1),
+            "fmi3ActivateModelPartition" => {
+                sym!(lib, "fmi3ActivateModelPartition", unsafe extern "C" fn(Inst, u32, f64) -> c_int)(inst, 0, 0.0)
             }
-            "fmi3ActivateModelPartition" => sym!(lib, "fmi3ActivateModelPartition", unsafe extern "C" fn(Inst, u32, f64) -> c_int)(inst, 0, 0.0),
             "fmi3CompletedIntegratorStep" => {
-                sym!(lib, "fmi3CompletedIntegratorStep", unsafe extern "C" fn(Inst, bool, P, P) -> c_int)(inst, true, b, b)
+                sym!(lib, "fmi3CompletedIntegratorStep", unsafe extern "C" fn(Inst, bool, P, P) -> c_int)(
+                    inst, true, b, b,
+                )
             }
             "fmi3SetTime" => sym!(lib, "fmi3SetTime", unsafe extern "C" fn(Inst, f64) -> c_int)(inst, 0.0),
-            "fmi3SetContinuousStates" | "fmi3GetContinuousStateDerivatives" | "fmi3GetEventIndicators" | "fmi3GetContinuousStates"
+            "fmi3SetContinuousStates"
+            | "fmi3GetContinuousStateDerivatives"
+            | "fmi3GetEventIndicators"
+            | "fmi3GetContinuousStates"
             | "fmi3GetNominalsOfContinuousStates" => {
-                let f = *lib.get::<unsafe extern "C" fn(Inst, P, usize) -> c_int>(format!("{name}\0").as_bytes()).unwrap();
+                let f =
+                    *lib.get::<unsafe extern "C" fn(Inst, P, usize) -> c_int>(format!("{name}\0").as_bytes()).unwrap();
                 f(inst, b, 0)
             }
             "fmi3GetNumberOfEventIndicators" | "fmi3GetNumberOfContinuousStates" => {
-                let f = *lib.get::<unsafe extern "C" fn(Inst, *mut usize) -> c_int>(format!("{name}\0").as_bytes()).unwrap();
+                let f = *lib
+                    .get::<unsafe extern "C" fn(Inst, *mut usize) -> c_int>(format!("{name}\0").as_bytes())
+                    .unwrap();
                 f(inst, &mut size)
             }
             _ => {
-                let f = *lib.get::<F0>(format!("{name}\0").as_bytes()).unwrap_or_else(|e| panic!("{name} not exported: {e}"));
+                let f = *lib
+                    .get::<F0>(format!("{name}\0").as_bytes())
+                    .unwrap_or_else(|e| panic!("{name} not exported: {e}"));
                 f(inst)
             }
         }
@@ -233,27 +322,89 @@ fn call_fmi3(lib: &Library, name: &str, inst: Inst) -> c_int {
 
 /// The functions of fmi3Functions.h that take an instance and return a status.
 const FMI3_WITH_INSTANCE: &[&str] = &[
-    "fmi3SetDebugLogging", "fmi3EnterInitializationMode", "fmi3ExitInitializationMode", "fmi3EnterEventMode", "fmi3Terminate",
-    "fmi3Reset", "fmi3GetFloat32", "fmi3GetFloat64", "fmi3GetInt8", "fmi3GetUInt8", "fmi3GetInt16", "fmi3GetUInt16",
-    "fmi3GetInt32", "fmi3GetUInt32", "fmi3GetInt64", "fmi3GetUInt64", "fmi3GetBoolean", "fmi3GetString", "fmi3GetBinary",
-    "fmi3GetClock", "fmi3SetFloat32", "fmi3SetFloat64", "fmi3SetInt8", "fmi3SetUInt8", "fmi3SetInt16", "fmi3SetUInt16",
-    "fmi3SetInt32", "fmi3SetUInt32", "fmi3SetInt64", "fmi3SetUInt64", "fmi3SetBoolean", "fmi3SetString", "fmi3SetBinary",
-    "fmi3SetClock", "fmi3GetNumberOfVariableDependencies", "fmi3GetVariableDependencies", "fmi3GetFMUState", "fmi3SetFMUState",
-    "fmi3FreeFMUState", "fmi3SerializedFMUStateSize", "fmi3SerializeFMUState", "fmi3DeserializeFMUState",
-    "fmi3GetDirectionalDerivative", "fmi3GetAdjointDerivative", "fmi3EnterConfigurationMode", "fmi3ExitConfigurationMode",
-    "fmi3GetIntervalDecimal", "fmi3GetIntervalFraction", "fmi3GetShiftDecimal", "fmi3GetShiftFraction", "fmi3SetIntervalDecimal",
-    "fmi3SetIntervalFraction", "fmi3SetShiftDecimal", "fmi3SetShiftFraction", "fmi3EvaluateDiscreteStates",
-    "fmi3UpdateDiscreteStates", "fmi3EnterContinuousTimeMode", "fmi3CompletedIntegratorStep", "fmi3SetTime",
-    "fmi3SetContinuousStates", "fmi3GetContinuousStateDerivatives", "fmi3GetEventIndicators", "fmi3GetContinuousStates",
-    "fmi3GetNominalsOfContinuousStates", "fmi3GetNumberOfEventIndicators", "fmi3GetNumberOfContinuousStates",
-    "fmi3EnterStepMode", "fmi3GetOutputDerivatives", "fmi3DoStep", "fmi3ActivateModelPartition",
+    "fmi3SetDebugLogging",
+    "fmi3EnterInitializationMode",
+    "fmi3ExitInitializationMode",
+    "fmi3EnterEventMode",
+    "fmi3Terminate",
+    "fmi3Reset",
+    "fmi3GetFloat32",
+    "fmi3GetFloat64",
+    "fmi3GetInt8",
+    "fmi3GetUInt8",
+    "fmi3GetInt16",
+    "fmi3GetUInt16",
+    "fmi3GetInt32",
+    "fmi3GetUInt32",
+    "fmi3GetInt64",
+    "fmi3GetUInt64",
+    "fmi3GetBoolean",
+    "fmi3GetString",
+    "fmi3GetBinary",
+    "fmi3GetClock",
+    "fmi3SetFloat32",
+    "fmi3SetFloat64",
+    "fmi3SetInt8",
+    "fmi3SetUInt8",
+    "fmi3SetInt16",
+    "fmi3SetUInt16",
+    "fmi3SetInt32",
+    "fmi3SetUInt32",
+    "fmi3SetInt64",
+    "fmi3SetUInt64",
+    "fmi3SetBoolean",
+    "fmi3SetString",
+    "fmi3SetBinary",
+    "fmi3SetClock",
+    "fmi3GetNumberOfVariableDependencies",
+    "fmi3GetVariableDependencies",
+    "fmi3GetFMUState",
+    "fmi3SetFMUState",
+    "fmi3FreeFMUState",
+    "fmi3SerializedFMUStateSize",
+    "fmi3SerializeFMUState",
+    "fmi3DeserializeFMUState",
+    "fmi3GetDirectionalDerivative",
+    "fmi3GetAdjointDerivative",
+    "fmi3EnterConfigurationMode",
+    "fmi3ExitConfigurationMode",
+    "fmi3GetIntervalDecimal",
+    "fmi3GetIntervalFraction",
+    "fmi3GetShiftDecimal",
+    "fmi3GetShiftFraction",
+    "fmi3SetIntervalDecimal",
+    "fmi3SetIntervalFraction",
+    "fmi3SetShiftDecimal",
+    "fmi3SetShiftFraction",
+    "fmi3EvaluateDiscreteStates",
+    "fmi3UpdateDiscreteStates",
+    "fmi3EnterContinuousTimeMode",
+    "fmi3CompletedIntegratorStep",
+    "fmi3SetTime",
+    "fmi3SetContinuousStates",
+    "fmi3GetContinuousStateDerivatives",
+    "fmi3GetEventIndicators",
+    "fmi3GetContinuousStates",
+    "fmi3GetNominalsOfContinuousStates",
+    "fmi3GetNumberOfEventIndicators",
+    "fmi3GetNumberOfContinuousStates",
+    "fmi3EnterStepMode",
+    "fmi3GetOutputDerivatives",
+    "fmi3DoStep",
+    "fmi3ActivateModelPartition",
 ];
 
 #[test]
 fn every_fmi3_function_returns_a_status_in_every_state_and_with_a_null_instance() {
     let lib = library();
     let fmi = Fmi3 { lib: &lib, env: 0x5eed_0001 };
-    for name in ["fmi3GetVersion", "fmi3InstantiateModelExchange", "fmi3InstantiateCoSimulation", "fmi3InstantiateScheduledExecution", "fmi3FreeInstance"] {
+    for name in [
+        "fmi3GetVersion",
+        "fmi3InstantiateModelExchange",
+        "fmi3InstantiateCoSimulation",
+        "fmi3InstantiateScheduledExecution",
+        "fmi3FreeInstance",
+    ] {
         assert!(unsafe { lib.get::<F0>(format!("{name}\0").as_bytes()) }.is_ok(), "{name} not exported");
     }
     assert_eq!(FMI3_WITH_INSTANCE.len() + 5, 75, "fmi3Functions.h declares 75 functions");
@@ -273,10 +424,13 @@ fn every_fmi3_function_returns_a_status_in_every_state_and_with_a_null_instance(
         }
     }
     fmi.free(null_mut()); // a no-op
-    // Unsupported and wrong-state calls explain themselves through the logger.
+                          // Unsupported and wrong-state calls explain themselves through the logger.
     let log = take_log(fmi.env);
     assert!(!log.is_empty());
-    assert!(LOG.lock().unwrap().iter().all(|l| l.0 & !0xf == 0x5eed_0000), "every callback gets its instance's instanceEnvironment");
+    assert!(
+        LOG.lock().unwrap().iter().all(|l| l.0 & !0xf == 0x5eed_0000),
+        "every callback gets its instance's instanceEnvironment"
+    );
     assert!(log.iter().any(|(_, s, _, m)| *s == 3 && m.contains("not supported")), "no 'not supported' reason logged");
     assert!(log.iter().any(|(_, s, _, m)| *s == 3 && m.contains("not allowed in")), "no wrong-state reason logged");
     println!("statuses over {} calls: {statuses:?}", FMI3_WITH_INSTANCE.len() * 5);
@@ -300,7 +454,10 @@ fn the_standards_call_order_is_enforced_and_refusals_leave_the_instance_intact()
     assert_eq!(fmi.get_f64(i, &[kp]).1[0], start);
     // Errors reach the logger even with logging off, with the importer's environment.
     let log = take_log(fmi.env);
-    assert!(log.iter().any(|(_, s, c, m)| *s == 3 && c == "logStatusError" && m.contains("fmi3ExitInitializationMode")), "{log:?}");
+    assert!(
+        log.iter().any(|(_, s, c, m)| *s == 3 && c == "logStatusError" && m.contains("fmi3ExitInitializationMode")),
+        "{log:?}"
+    );
     // startTime is honoured.
     assert_eq!(fmi.enter_init(i, 0.1), 0);
     assert_eq!(fmi.call0("fmi3ExitInitializationMode", i), 0);
@@ -332,10 +489,13 @@ fn a_restored_or_deserialized_state_continues_bit_for_bit_and_foreign_states_are
     let free_state = sym!(lib, "fmi3FreeFMUState", unsafe extern "C" fn(Inst, *mut P) -> c_int);
     let size_of = sym!(lib, "fmi3SerializedFMUStateSize", unsafe extern "C" fn(Inst, P, *mut usize) -> c_int);
     let serialize = sym!(lib, "fmi3SerializeFMUState", unsafe extern "C" fn(Inst, P, *mut u8, usize) -> c_int);
-    let deserialize = sym!(lib, "fmi3DeserializeFMUState", unsafe extern "C" fn(Inst, *const u8, usize, *mut P) -> c_int);
+    let deserialize =
+        sym!(lib, "fmi3DeserializeFMUState", unsafe extern "C" fn(Inst, *const u8, usize, *mut P) -> c_int);
     let outputs: Vec<u32> = servo_axis::variables::DECLARATIONS
         .iter()
-        .filter(|d| d.causality == servo_axis::variables::Causality::Output && d.kind == servo_axis::variables::Kind::Float64)
+        .filter(|d| {
+            d.causality == servo_axis::variables::Causality::Output && d.kind == servo_axis::variables::Kind::Float64
+        })
         .map(|d| d.vr)
         .collect();
 
@@ -395,12 +555,40 @@ fn a_restored_or_deserialized_state_continues_bit_for_bit_and_foreign_states_are
 fn fmi2_gives_the_fmi3_bits_and_every_function_is_exported() {
     let lib = library();
     for name in [
-        "fmi2GetTypesPlatform", "fmi2GetVersion", "fmi2SetDebugLogging", "fmi2Instantiate", "fmi2FreeInstance", "fmi2SetupExperiment",
-        "fmi2EnterInitializationMode", "fmi2ExitInitializationMode", "fmi2Terminate", "fmi2Reset", "fmi2GetReal", "fmi2GetInteger",
-        "fmi2GetBoolean", "fmi2GetString", "fmi2SetReal", "fmi2SetInteger", "fmi2SetBoolean", "fmi2SetString", "fmi2GetFMUstate",
-        "fmi2SetFMUstate", "fmi2FreeFMUstate", "fmi2SerializedFMUstateSize", "fmi2SerializeFMUstate", "fmi2DeSerializeFMUstate",
-        "fmi2GetDirectionalDerivative", "fmi2SetRealInputDerivatives", "fmi2GetRealOutputDerivatives", "fmi2DoStep", "fmi2CancelStep",
-        "fmi2GetStatus", "fmi2GetRealStatus", "fmi2GetIntegerStatus", "fmi2GetBooleanStatus", "fmi2GetStringStatus",
+        "fmi2GetTypesPlatform",
+        "fmi2GetVersion",
+        "fmi2SetDebugLogging",
+        "fmi2Instantiate",
+        "fmi2FreeInstance",
+        "fmi2SetupExperiment",
+        "fmi2EnterInitializationMode",
+        "fmi2ExitInitializationMode",
+        "fmi2Terminate",
+        "fmi2Reset",
+        "fmi2GetReal",
+        "fmi2GetInteger",
+        "fmi2GetBoolean",
+        "fmi2GetString",
+        "fmi2SetReal",
+        "fmi2SetInteger",
+        "fmi2SetBoolean",
+        "fmi2SetString",
+        "fmi2GetFMUstate",
+        "fmi2SetFMUstate",
+        "fmi2FreeFMUstate",
+        "fmi2SerializedFMUstateSize",
+        "fmi2SerializeFMUstate",
+        "fmi2DeSerializeFMUstate",
+        "fmi2GetDirectionalDerivative",
+        "fmi2SetRealInputDerivatives",
+        "fmi2GetRealOutputDerivatives",
+        "fmi2DoStep",
+        "fmi2CancelStep",
+        "fmi2GetStatus",
+        "fmi2GetRealStatus",
+        "fmi2GetIntegerStatus",
+        "fmi2GetBooleanStatus",
+        "fmi2GetStringStatus",
     ] {
         assert!(unsafe { lib.get::<F0>(format!("{name}\0").as_bytes()) }.is_ok(), "{name} not exported");
     }
@@ -412,8 +600,26 @@ fn fmi2_gives_the_fmi3_bits_and_every_function_is_exported() {
         step_finished: P,
         env: P,
     }
-    let callbacks = Callbacks { logger: null_mut(), allocate: null_mut(), free: null_mut(), step_finished: null_mut(), env: null_mut() };
-    let instantiate = sym!(lib, "fmi2Instantiate", unsafe extern "C" fn(*const c_char, c_int, *const c_char, *const c_char, *const Callbacks, c_int, c_int) -> Inst);
+    let callbacks = Callbacks {
+        logger: null_mut(),
+        allocate: null_mut(),
+        free: null_mut(),
+        step_finished: null_mut(),
+        env: null_mut(),
+    };
+    let instantiate = sym!(
+        lib,
+        "fmi2Instantiate",
+        unsafe extern "C" fn(
+            *const c_char,
+            c_int,
+            *const c_char,
+            *const c_char,
+            *const Callbacks,
+            c_int,
+            c_int,
+        ) -> Inst
+    );
     let setup = sym!(lib, "fmi2SetupExperiment", unsafe extern "C" fn(Inst, c_int, f64, f64, c_int, f64) -> c_int);
     let do_step = sym!(lib, "fmi2DoStep", unsafe extern "C" fn(Inst, f64, f64, c_int) -> c_int);
     let get_real = sym!(lib, "fmi2GetReal", unsafe extern "C" fn(Inst, *const u32, usize, *mut f64) -> c_int);

@@ -63,7 +63,12 @@ fn the_fmi_crates_fmi2_import_gives_the_rust_hosts_bits() {
     let mut compared = 0;
     for (k, (row, reference)) in rows.iter().zip(&reference.rows).enumerate() {
         for (c, (a, b)) in row.iter().zip(&reference[1..]).enumerate() {
-            assert_eq!(a.to_bits(), b.to_bits(), "row {k}, {}: fmi crate FMI 2.0 {a} vs Rust host FMI 3.0 {b}", reference_name(c));
+            assert_eq!(
+                a.to_bits(),
+                b.to_bits(),
+                "row {k}, {}: fmi crate FMI 2.0 {a} vs Rust host FMI 3.0 {b}",
+                reference_name(c)
+            );
             compared += 1;
         }
     }

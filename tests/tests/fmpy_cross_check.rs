@@ -15,7 +15,11 @@ fn fmpy_validate_finds_no_problem_in_either_archive() {
     for archive in [fmu_path(), fmi2] {
         let out = Command::new(python().unwrap()).args(["-m", "fmpy", "validate"]).arg(&archive).output().unwrap();
         let text = String::from_utf8_lossy(&out.stdout);
-        assert!(out.status.success() && text.contains("No problems found"), "fmpy validate {}:\n{text}", archive.display());
+        assert!(
+            out.status.success() && text.contains("No problems found"),
+            "fmpy validate {}:\n{text}",
+            archive.display()
+        );
     }
 }
 

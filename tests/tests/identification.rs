@@ -5,8 +5,8 @@
 use std::collections::BTreeMap;
 
 use cross_checks::load_fmu;
-use host_tools::identification::{absorber_parameters, identify, measure, true_anti_resonance};
 use host_tools::ident_report::identify_axis;
+use host_tools::identification::{absorber_parameters, identify, measure, true_anti_resonance};
 use host_tools::scenario::Value;
 
 const LOAD: f64 = 1.0e-4;

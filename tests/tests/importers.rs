@@ -53,7 +53,8 @@ position_command = 1.0
 time = 0.2
 seq_stop = 1
 ";
-const REFUSAL_LOGGED: &str = "sequence event Stop at t = 0.2 s: sequence event refused: the axis is not in sequence mode";
+const REFUSAL_LOGGED: &str =
+    "sequence event Stop at t = 0.2 s: sequence event refused: the axis is not in sequence mode";
 
 fn refused_key_file() -> PathBuf {
     static FILE: OnceLock<PathBuf> = OnceLock::new();
@@ -112,7 +113,8 @@ fn importer<S: AsRef<OsStr>>(label: &str, args: &[S]) -> (String, String) {
     let t0 = Instant::now();
     let out = Command::new(python().unwrap()).arg(&script).args(args).output().unwrap();
     let secs = t0.elapsed().as_secs_f64();
-    let (so, se) = (String::from_utf8_lossy(&out.stdout).into_owned(), String::from_utf8_lossy(&out.stderr).into_owned());
+    let (so, se) =
+        (String::from_utf8_lossy(&out.stdout).into_owned(), String::from_utf8_lossy(&out.stderr).into_owned());
     eprintln!("{label}: {secs:.2} s (process)\n{se}");
     assert!(out.status.success(), "{label} failed ({}):\n--- stdout\n{so}\n--- stderr\n{se}", describe(out.status));
     (so, se)
@@ -136,7 +138,10 @@ fn ecospy_runs_the_fmi3_archive_with_the_rust_hosts_bits() {
     assert_bit_identical(label, &csv, false);
     // The FMU's warning reaches ecos's logger (which finds its instance through instanceEnvironment).
     let csv = tmp("position_step_refused_key.ecospy.csv");
-    let (_, se) = importer(label, &[OsStr::new("ecospy"), fmu_path().as_os_str(), refused_key_file().as_os_str(), csv.as_os_str()]);
+    let (_, se) = importer(
+        label,
+        &[OsStr::new("ecospy"), fmu_path().as_os_str(), refused_key_file().as_os_str(), csv.as_os_str()],
+    );
     assert!(se.contains(&format!("[servo] Warning {REFUSAL_LOGGED}")), "{label}: the refusal was not logged:\n{se}");
     assert_bit_identical(label, &csv, true);
 }
@@ -162,15 +167,24 @@ fn container(fmu: &Path, version: &str) {
     let label = format!("fmutool container (FMI {version}, logging on)");
     let v = &version[..1];
     let csv = tmp(&format!("position_step.container{v}.csv"));
-    let (_, se) = importer(&label, &[OsStr::new("fmutool-container"), fmu.as_os_str(), csv.as_os_str(), scenario_file().as_os_str()]);
+    let (_, se) = importer(
+        &label,
+        &[OsStr::new("fmutool-container"), fmu.as_os_str(), csv.as_os_str(), scenario_file().as_os_str()],
+    );
     assert!(se.contains(&format!("FMI {version} container built")), "{label}:\n{se}");
     assert_bit_identical(&label, &csv, false);
     // The FMU's warning comes back through the container's logger, which finds the embedded
     // FMU through instanceEnvironment and prefixes its messages with the FMU's file name.
     let csv = tmp(&format!("position_step_refused_key.container{v}.csv"));
-    let (_, se) = importer(&label, &[OsStr::new("fmutool-container"), fmu.as_os_str(), csv.as_os_str(), refused_key_file().as_os_str()]);
+    let (_, se) = importer(
+        &label,
+        &[OsStr::new("fmutool-container"), fmu.as_os_str(), csv.as_os_str(), refused_key_file().as_os_str()],
+    );
     let name = fmu.file_name().unwrap().to_string_lossy();
-    assert!(se.contains(&format!("container log (FMU): [Warning] {name}: {REFUSAL_LOGGED}")), "{label}: the refusal was not logged:\n{se}");
+    assert!(
+        se.contains(&format!("container log (FMU): [Warning] {name}: {REFUSAL_LOGGED}")),
+        "{label}: the refusal was not logged:\n{se}"
+    );
     assert_bit_identical(&label, &csv, true);
 }
 

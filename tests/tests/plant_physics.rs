@@ -61,7 +61,8 @@ fn samples_per_block(f: f64) -> usize {
 fn open_loop_torque_responses_match_the_two_inertia_model() {
     let fmu = load_fmu();
     let (jm, jl, k, c) = (5.0e-5, 1.0e-4, 88.83, 0.009425);
-    let freqs = [1.0, 2.0, 5.0, 10.0, 20.0, 50.0, 100.0, 150.0, 200.0, 250.0, 260.0, 300.0, 400.0, 500.0, 800.0, 1000.0];
+    let freqs =
+        [1.0, 2.0, 5.0, 10.0, 20.0, 50.0, 100.0, 150.0, 200.0, 250.0, 260.0, 300.0, 400.0, 500.0, 800.0, 1000.0];
     let mut worst = (0.0f64, 0.0f64);
     for &f in &freqs {
         let block = samples_per_block(f);
@@ -85,14 +86,8 @@ fn open_loop_torque_responses_match_the_two_inertia_model() {
         let ga = s_.scale(c).add(C(k, 0.0)).div(d);
 
         let db = |a: f64, b: f64| 20.0 * (a / b).log10();
-        let e = [
-            (db(g_w, gw.abs()), wrap_deg(p_w - gw.arg_deg())),
-            (db(g_a, ga.abs()), wrap_deg(p_a - ga.arg_deg())),
-        ];
-        eprintln!(
-            "{f:>7.1} Hz  ω_m/T: {:+.4} dB {:+.3}°   a_L/T: {:+.4} dB {:+.3}°",
-            e[0].0, e[0].1, e[1].0, e[1].1
-        );
+        let e = [(db(g_w, gw.abs()), wrap_deg(p_w - gw.arg_deg())), (db(g_a, ga.abs()), wrap_deg(p_a - ga.arg_deg()))];
+        eprintln!("{f:>7.1} Hz  ω_m/T: {:+.4} dB {:+.3}°   a_L/T: {:+.4} dB {:+.3}°", e[0].0, e[0].1, e[1].0, e[1].1);
         for (gdb, ph) in e {
             worst.0 = worst.0.max(gdb.abs());
             worst.1 = worst.1.max(ph.abs());

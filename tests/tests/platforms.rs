@@ -52,7 +52,9 @@ fn work_dir(name: &str) -> PathBuf {
 
 fn entry(archive: &Path, name: &str) -> Vec<u8> {
     let mut zip = zip::ZipArchive::new(std::fs::File::open(archive).unwrap()).unwrap();
-    let mut file = zip.by_name(name).unwrap_or_else(|_| panic!("{} has no {name}: build it with scripts/platforms", archive.display()));
+    let mut file = zip
+        .by_name(name)
+        .unwrap_or_else(|_| panic!("{} has no {name}: build it with scripts/platforms", archive.display()));
     let mut bytes = Vec::new();
     file.read_to_end(&mut bytes).unwrap();
     bytes
@@ -108,7 +110,8 @@ fn linux_binaries_need_glibc_2_17_at_most_and_the_windows_one_only_system_dlls()
         assert!(version <= vec![2, 17], "{} needs {name}, newer than glibc 2.17", lib.display());
     }
     let text = run(Command::new("x86_64-w64-mingw32-objdump").arg("-p").arg(&libs[1]));
-    let dlls: Vec<String> = text.lines().filter_map(|l| l.trim().strip_prefix("DLL Name: ")).map(str::to_lowercase).collect();
+    let dlls: Vec<String> =
+        text.lines().filter_map(|l| l.trim().strip_prefix("DLL Name: ")).map(str::to_lowercase).collect();
     eprintln!("x86_64-windows/servo_axis.dll imports {}", dlls.join(", "));
     assert!(dlls.iter().any(|d| d == "kernel32.dll"), "no import table read: {text}");
     for d in &dlls {
@@ -128,7 +131,8 @@ fn shipped_scenarios() -> Vec<(String, Scenario)> {
             .collect();
         paths.sort();
         for p in paths {
-            let s = if sequence { SequenceScenario::load(&p).unwrap().to_scenario() } else { Scenario::load(&p).unwrap() };
+            let s =
+                if sequence { SequenceScenario::load(&p).unwrap().to_scenario() } else { Scenario::load(&p).unwrap() };
             out.push((p.strip_prefix(&root).unwrap().display().to_string(), s));
         }
     }
@@ -170,7 +174,8 @@ fn schedule(fmu: &Fmu, s: &Scenario, out: &mut String) {
     apply(out, 0);
     writeln!(out, "X").unwrap();
     for (kind, letter) in [(Kind::Float64, 'f'), (Kind::Int32, 'i'), (Kind::Boolean, 'b')] {
-        let vrs: Vec<String> = fmu.recorded(&s.record).unwrap().iter().filter(|v| v.kind == kind).map(|v| v.vr.to_string()).collect();
+        let vrs: Vec<String> =
+            fmu.recorded(&s.record).unwrap().iter().filter(|v| v.kind == kind).map(|v| v.vr.to_string()).collect();
         if !vrs.is_empty() {
             writeln!(out, "O {letter} {} {}", vrs.len(), vrs.join(" ")).unwrap();
         }
@@ -226,7 +231,13 @@ fn difference(a: &str, b: &str) -> (f64, usize, usize) {
                 continue;
             }
             differ += 1;
-            let v = |t: &str| if t.len() == 16 { f64::from_bits(u64::from_str_radix(t, 16).unwrap()) } else { t.parse::<f64>().unwrap() };
+            let v = |t: &str| {
+                if t.len() == 16 {
+                    f64::from_bits(u64::from_str_radix(t, 16).unwrap())
+                } else {
+                    t.parse::<f64>().unwrap()
+                }
+            };
             worst = worst.max((v(x) - v(y)).abs());
         }
     }
@@ -255,9 +266,15 @@ fn shipped_scenarios_give_the_same_bits_natively_under_wine_and_under_qemu() {
     compile("gcc", &["harness.c"], &dir.join("harness"), &["-ldl"]);
     compile("aarch64-linux-gnu-gcc", &["harness.c"], &dir.join("harness-aarch64"), &["-ldl"]);
     compile("x86_64-w64-mingw32-gcc", &["harness.c"], &windows.join("harness.exe"), &["-static"]);
-    compile("x86_64-w64-mingw32-gcc", &["bcryptprimitives_shim.c"], &windows.join("bcryptprimitives.dll"), &["-shared", "-ladvapi32"]);
+    compile(
+        "x86_64-w64-mingw32-gcc",
+        &["bcryptprimitives_shim.c"],
+        &windows.join("bcryptprimitives.dll"),
+        &["-shared", "-ladvapi32"],
+    );
 
-    let wine = ["/usr/lib/wine/wine64", "/usr/bin/wine64"].into_iter().find(|p| Path::new(p).exists()).unwrap_or("wine64");
+    let wine =
+        ["/usr/lib/wine/wine64", "/usr/bin/wine64"].into_iter().find(|p| Path::new(p).exists()).unwrap_or("wine64");
     let prefix = work_dir("wine-prefix");
     let mut runs: Vec<(&str, Command)> = Vec::new();
     let mut native = Command::new(dir.join("harness"));
@@ -294,13 +311,17 @@ fn shipped_scenarios_give_the_same_bits_natively_under_wine_and_under_qemu() {
     }
 
     let (worst, differ, cells) = difference(&host, &outputs[0].1);
-    assert!(differ == 0, "the native harness differs from the Rust host in {differ} of {cells} values (largest {worst:e})");
+    assert!(
+        differ == 0,
+        "the native harness differs from the Rust host in {differ} of {cells} values (largest {worst:e})"
+    );
     let mut failures = Vec::new();
     for (name, text) in &outputs[1..] {
         let (worst, differ, cells) = difference(&outputs[0].1, text);
         eprintln!("{name} against x86_64-linux: max difference {worst:e}, {differ} of {cells} values differ");
         if differ != 0 {
-            failures.push(format!("{name} differs from x86_64-linux in {differ} of {cells} values (largest {worst:e})"));
+            failures
+                .push(format!("{name} differs from x86_64-linux in {differ} of {cells} values (largest {worst:e})"));
         }
     }
     assert!(failures.is_empty(), "{}", failures.join("; "));

@@ -3,7 +3,6 @@
 //! times the other axes' fitted models (the core's filter realises the models), and the XY
 //! circle gets rounder by the factor.
 
-
 use cross_checks::load_fmu;
 use host_tools::identification::{absorber_parameters, AxisModel, Factor};
 use host_tools::tuning::{circle_check, tune, Method};
@@ -36,7 +35,12 @@ fn corrected_axes_coincide_and_the_circle_gets_rounder() {
         let other = t.axes.iter().find(|o| o.axis != a.axis).unwrap().response_model.as_ref().unwrap();
         for (&(f, b), &(_, c)) in t.before[i].iter().zip(&t.after[i]).filter(|(p, _)| p.0 <= 20.0) {
             let r = c.div(b.mul(other.at(f)));
-            assert!((20.0 * r.abs().log10()).abs() < 0.01 && r.arg().to_degrees().abs() < 0.05, "axis {} at {f} Hz: {:?}", a.axis, r);
+            assert!(
+                (20.0 * r.abs().log10()).abs() < 0.01 && r.arg().to_degrees().abs() < 0.05,
+                "axis {} at {f} Hz: {:?}",
+                a.axis,
+                r
+            );
         }
     }
 

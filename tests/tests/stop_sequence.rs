@@ -11,7 +11,11 @@ use host_tools::trace::{compare_exact, Trace};
 
 fn shipped() -> Vec<SequenceScenario> {
     let dir = workspace_root().join("scenarios/sequences");
-    let mut v: Vec<_> = std::fs::read_dir(&dir).unwrap().map(|e| e.unwrap().path()).filter(|p| p.extension().is_some_and(|e| e == "toml")).collect();
+    let mut v: Vec<_> = std::fs::read_dir(&dir)
+        .unwrap()
+        .map(|e| e.unwrap().path())
+        .filter(|p| p.extension().is_some_and(|e| e == "toml"))
+        .collect();
     v.sort();
     assert!(v.len() >= 4, "one timeline per embodiment and one of refused events");
     v.iter().map(|p| SequenceScenario::load(p).unwrap()).collect()
@@ -71,5 +75,8 @@ fn hand_over_to_position_control_does_not_jump_the_torque() {
     let decel_start = state.iter().position(|&x| x == 2.0).unwrap();
     let typical = (decel_start + 4..k).map(|i| (torque[i] - torque[i - 1]).abs()).fold(0.0, f64::max);
     let at_hand_over = (k..k + 4).map(|i| (torque[i] - torque[i - 1]).abs()).fold(0.0, f64::max);
-    assert!(at_hand_over <= typical.max(0.01) * 1.5, "torque step {at_hand_over} N·m at the hand-over vs {typical} N·m while decelerating");
+    assert!(
+        at_hand_over <= typical.max(0.01) * 1.5,
+        "torque step {at_hand_over} N·m at the hand-over vs {typical} N·m while decelerating"
+    );
 }

@@ -136,18 +136,16 @@ impl fmt::Display for AccDecError {
         match *self {
             Self::Order(n) => write!(f, "Butterworth order {n} is outside 1..={MAX_ORDER}"),
             Self::Cutoff(c) => write!(f, "cut-off {c} Hz must be a positive finite frequency"),
-            Self::CutoffAboveNyquist { cutoff_hz, nyquist_hz } => write!(
-                f,
-                "cut-off {cutoff_hz} Hz is above the Nyquist frequency {nyquist_hz} Hz of the sample period"
-            ),
+            Self::CutoffAboveNyquist { cutoff_hz, nyquist_hz } => {
+                write!(f, "cut-off {cutoff_hz} Hz is above the Nyquist frequency {nyquist_hz} Hz of the sample period")
+            }
             Self::SamplePeriod(t) => write!(f, "sample period {t} s must be a positive finite time"),
             Self::Stages(n) => {
                 write!(f, "{n} moving-average stages: use 1..={MAX_MOVING_AVERAGE_STAGES}")
             }
-            Self::Length { stage, length } => write!(
-                f,
-                "moving-average stage {stage} has length {length}: use 1..={MAX_MOVING_AVERAGE_LENGTH}"
-            ),
+            Self::Length { stage, length } => {
+                write!(f, "moving-average stage {stage} has length {length}: use 1..={MAX_MOVING_AVERAGE_LENGTH}")
+            }
         }
     }
 }

@@ -48,8 +48,7 @@ impl MovingAverageCascade {
                 return Err(AccDecError::Length { stage: stage + 1, length });
             }
         }
-        let empty =
-            Stage { length: 1, window: [0; MAX_MOVING_AVERAGE_LENGTH as usize], next: 0, sum: 0, remainder: 0 };
+        let empty = Stage { length: 1, window: [0; MAX_MOVING_AVERAGE_LENGTH as usize], next: 0, sum: 0, remainder: 0 };
         let mut stages = [empty; MAX_MOVING_AVERAGE_STAGES];
         for (s, &length) in stages.iter_mut().zip(lengths) {
             s.length = length;

@@ -157,7 +157,10 @@ fn whole_pulse_output_follows_the_direct_form_transfer_function() {
             ys[0] = y;
             cum_ref += y;
             cum_out += f.step(x);
-            assert!((cum_out as f64 - cum_ref).abs() <= 0.5 + 0.01, "order {order} {zeros:?}, k {k}: {cum_out} vs {cum_ref}");
+            assert!(
+                (cum_out as f64 - cum_ref).abs() <= 0.5 + 0.01,
+                "order {order} {zeros:?}, k {k}: {cum_out} vs {cum_ref}"
+            );
         }
         assert_eq!(cum_out, 3000);
     }

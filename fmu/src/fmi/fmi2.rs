@@ -7,7 +7,9 @@ use std::ffi::{c_char, c_int, c_void, CString};
 use std::panic::{catch_unwind, AssertUnwindSafe};
 
 use super::fmi3;
-use super::instance::{self, c_str, call, slice, slice_mut, unsupported, Instance, Logger, Phase, Status, WhenPoisoned, ANY_PHASE};
+use super::instance::{
+    self, c_str, call, slice, slice_mut, unsupported, Instance, Logger, Phase, Status, WhenPoisoned, ANY_PHASE,
+};
 use super::values;
 use crate::model_description;
 use crate::variables::{Kind, Value, Values};
@@ -43,8 +45,17 @@ pub extern "C" fn fmi2GetVersion() -> *const c_char {
 }
 
 #[no_mangle]
-pub unsafe extern "C" fn fmi2SetDebugLogging(c: Component, logging_on: Fmi2Boolean, n: usize, categories: *const *const c_char) -> Fmi2Status {
-    unsafe { call(c, "fmi2SetDebugLogging", ANY_PHASE, WhenPoisoned::Allow, |i| i.set_debug_logging(logging_on != 0, n, categories)) }
+pub unsafe extern "C" fn fmi2SetDebugLogging(
+    c: Component,
+    logging_on: Fmi2Boolean,
+    n: usize,
+    categories: *const *const c_char,
+) -> Fmi2Status {
+    unsafe {
+        call(c, "fmi2SetDebugLogging", ANY_PHASE, WhenPoisoned::Allow, |i| {
+            i.set_debug_logging(logging_on != 0, n, categories)
+        })
+    }
 }
 
 #[no_mangle]
@@ -77,7 +88,9 @@ pub unsafe extern "C" fn fmi2Instantiate(
             let token = unsafe { c_str(guid, "fmuGUID")? };
             let ours = model_description::instantiation_token();
             if token != ours {
-                return Err(format!("fmuGUID {token} is not this FMU's ({ours}): the binary and modelDescription.xml differ"));
+                return Err(format!(
+                    "fmuGUID {token} is not this FMU's ({ours}): the binary and modelDescription.xml differ"
+                ));
             }
             Ok(())
         };
@@ -115,7 +128,9 @@ pub unsafe extern "C" fn fmi2SetupExperiment(
             }
             if let Some(stop) = stop {
                 if !(stop.is_finite() && stop >= start_time) {
-                    return Err(format!("stop time {stop} s must be finite and not before the start time {start_time} s"));
+                    return Err(format!(
+                        "stop time {stop} s must be finite and not before the start time {start_time} s"
+                    ));
                 }
             }
             i.model.set_start_time(start_time)?;
@@ -162,7 +177,13 @@ pub unsafe extern "C" fn fmi2DoStep(c: Component, current: f64, h: f64, _no_set_
 
 #[no_mangle]
 pub unsafe extern "C" fn fmi2CancelStep(c: Component) -> Fmi2Status {
-    unsafe { unsupported(c, "fmi2CancelStep", "DoStep is synchronous (canRunAsynchronuously = false): there is nothing to cancel") }
+    unsafe {
+        unsupported(
+            c,
+            "fmi2CancelStep",
+            "DoStep is synchronous (canRunAsynchronuously = false): there is nothing to cancel",
+        )
+    }
 }
 
 // ---- Get / Set ----------------------------------------------------------------------------
@@ -191,15 +212,26 @@ pub unsafe extern "C" fn fmi2GetInteger(c: Component, vrs: *const Vr, n: usize, 
 pub unsafe extern "C" fn fmi2GetBoolean(c: Component, vrs: *const Vr, n: usize, out: *mut Fmi2Boolean) -> Fmi2Status {
     unsafe {
         call(c, "fmi2GetBoolean", GET, WhenPoisoned::Allow, |i| {
-            values::get(&i.model, slice(vrs, n, "vr")?, slice_mut(out, n, "value")?, Kind::Boolean, |v, vr| v.boolean(vr).map(c_int::from))?;
+            values::get(&i.model, slice(vrs, n, "vr")?, slice_mut(out, n, "value")?, Kind::Boolean, |v, vr| {
+                v.boolean(vr).map(c_int::from)
+            })?;
             Ok(Status::Ok)
         })
     }
 }
 
 #[no_mangle]
-pub unsafe extern "C" fn fmi2GetString(c: Component, _vrs: *const Vr, n: usize, _out: *mut *const c_char) -> Fmi2Status {
-    unsafe { call(c, "fmi2GetString", GET, WhenPoisoned::Allow, |_| values::no_variables_of("String", n).map(|()| Status::Ok)) }
+pub unsafe extern "C" fn fmi2GetString(
+    c: Component,
+    _vrs: *const Vr,
+    n: usize,
+    _out: *mut *const c_char,
+) -> Fmi2Status {
+    unsafe {
+        call(c, "fmi2GetString", GET, WhenPoisoned::Allow, |_| {
+            values::no_variables_of("String", n).map(|()| Status::Ok)
+        })
+    }
 }
 
 #[no_mangle]
@@ -223,18 +255,34 @@ pub unsafe extern "C" fn fmi2SetInteger(c: Component, vrs: *const Vr, n: usize, 
 }
 
 #[no_mangle]
-pub unsafe extern "C" fn fmi2SetBoolean(c: Component, vrs: *const Vr, n: usize, vals: *const Fmi2Boolean) -> Fmi2Status {
+pub unsafe extern "C" fn fmi2SetBoolean(
+    c: Component,
+    vrs: *const Vr,
+    n: usize,
+    vals: *const Fmi2Boolean,
+) -> Fmi2Status {
     unsafe {
         call(c, "fmi2SetBoolean", SET, WhenPoisoned::Refuse, |i| {
-            values::set(&mut i.model, slice(vrs, n, "vr")?, slice(vals, n, "value")?, |b: c_int| Value::Boolean(b != 0))?;
+            values::set(&mut i.model, slice(vrs, n, "vr")?, slice(vals, n, "value")?, |b: c_int| {
+                Value::Boolean(b != 0)
+            })?;
             Ok(Status::Ok)
         })
     }
 }
 
 #[no_mangle]
-pub unsafe extern "C" fn fmi2SetString(c: Component, _vrs: *const Vr, n: usize, _vals: *const *const c_char) -> Fmi2Status {
-    unsafe { call(c, "fmi2SetString", SET, WhenPoisoned::Refuse, |_| values::no_variables_of("String", n).map(|()| Status::Ok)) }
+pub unsafe extern "C" fn fmi2SetString(
+    c: Component,
+    _vrs: *const Vr,
+    n: usize,
+    _vals: *const *const c_char,
+) -> Fmi2Status {
+    unsafe {
+        call(c, "fmi2SetString", SET, WhenPoisoned::Refuse, |_| {
+            values::no_variables_of("String", n).map(|()| Status::Ok)
+        })
+    }
 }
 
 // ---- FMU state ----------------------------------------------------------------------------
@@ -256,17 +304,31 @@ pub unsafe extern "C" fn fmi2FreeFMUstate(c: Component, state: *mut *mut c_void)
 
 #[no_mangle]
 pub unsafe extern "C" fn fmi2SerializedFMUstateSize(c: Component, state: *mut c_void, size: *mut usize) -> Fmi2Status {
-    unsafe { call(c, "fmi2SerializedFMUstateSize", ANY_PHASE, WhenPoisoned::Allow, |_| fmi3::serialized_size(state, size)) }
+    unsafe {
+        call(c, "fmi2SerializedFMUstateSize", ANY_PHASE, WhenPoisoned::Allow, |_| fmi3::serialized_size(state, size))
+    }
 }
 
 #[no_mangle]
-pub unsafe extern "C" fn fmi2SerializeFMUstate(c: Component, state: *mut c_void, out: *mut u8, size: usize) -> Fmi2Status {
+pub unsafe extern "C" fn fmi2SerializeFMUstate(
+    c: Component,
+    state: *mut c_void,
+    out: *mut u8,
+    size: usize,
+) -> Fmi2Status {
     unsafe { call(c, "fmi2SerializeFMUstate", ANY_PHASE, WhenPoisoned::Allow, |_| fmi3::serialize(state, out, size)) }
 }
 
 #[no_mangle]
-pub unsafe extern "C" fn fmi2DeSerializeFMUstate(c: Component, bytes: *const u8, size: usize, state: *mut *mut c_void) -> Fmi2Status {
-    unsafe { call(c, "fmi2DeSerializeFMUstate", ANY_PHASE, WhenPoisoned::Allow, |_| fmi3::deserialize(bytes, size, state)) }
+pub unsafe extern "C" fn fmi2DeSerializeFMUstate(
+    c: Component,
+    bytes: *const u8,
+    size: usize,
+    state: *mut *mut c_void,
+) -> Fmi2Status {
+    unsafe {
+        call(c, "fmi2DeSerializeFMUstate", ANY_PHASE, WhenPoisoned::Allow, |_| fmi3::deserialize(bytes, size, state))
+    }
 }
 
 // ---- Status and derivatives ---------------------------------------------------------------
@@ -330,11 +392,23 @@ pub unsafe extern "C" fn fmi2GetDirectionalDerivative(
 }
 
 #[no_mangle]
-pub unsafe extern "C" fn fmi2SetRealInputDerivatives(c: Component, _vrs: *const Vr, _n: usize, _order: *const c_int, _vals: *const f64) -> Fmi2Status {
+pub unsafe extern "C" fn fmi2SetRealInputDerivatives(
+    c: Component,
+    _vrs: *const Vr,
+    _n: usize,
+    _order: *const c_int,
+    _vals: *const f64,
+) -> Fmi2Status {
     unsafe { unsupported(c, "fmi2SetRealInputDerivatives", "canInterpolateInputs = false") }
 }
 
 #[no_mangle]
-pub unsafe extern "C" fn fmi2GetRealOutputDerivatives(c: Component, _vrs: *const Vr, _n: usize, _order: *const c_int, _vals: *mut f64) -> Fmi2Status {
+pub unsafe extern "C" fn fmi2GetRealOutputDerivatives(
+    c: Component,
+    _vrs: *const Vr,
+    _n: usize,
+    _order: *const c_int,
+    _vals: *mut f64,
+) -> Fmi2Status {
     unsafe { unsupported(c, "fmi2GetRealOutputDerivatives", "maxOutputDerivativeOrder = 0") }
 }

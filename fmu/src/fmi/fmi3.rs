@@ -7,7 +7,9 @@
 use std::ffi::{c_char, c_int, c_void, CString};
 use std::panic::{catch_unwind, AssertUnwindSafe};
 
-use super::instance::{self, c_str, call, slice, slice_mut, unsupported, Instance, Logger, Phase, Status, WhenPoisoned, ANY_PHASE};
+use super::instance::{
+    self, c_str, call, slice, slice_mut, unsupported, Instance, Logger, Phase, Status, WhenPoisoned, ANY_PHASE,
+};
 use super::values;
 use crate::fmu_state::{self, Snapshot};
 use crate::model_description;
@@ -43,7 +45,11 @@ pub unsafe extern "C" fn fmi3SetDebugLogging(
 
 /// Report a failed instantiation through the callback the importer gave (there is no
 /// instance to carry it).
-unsafe fn refuse_instantiation(environment: *mut c_void, log: Option<instance::Fmi3LogMessage>, message: &str) -> Fmi3Instance {
+unsafe fn refuse_instantiation(
+    environment: *mut c_void,
+    log: Option<instance::Fmi3LogMessage>,
+    message: &str,
+) -> Fmi3Instance {
     let text = CString::new(format!("servo_axis: {message}").replace('\0', " ")).unwrap_or_default();
     match log {
         Some(cb) => unsafe { cb(environment, Status::Error as c_int, c"logStatusError".as_ptr(), text.as_ptr()) },
@@ -75,7 +81,9 @@ pub unsafe extern "C" fn fmi3InstantiateCoSimulation(
         let token = unsafe { c_str(instantiation_token, "instantiationToken")? };
         let ours = model_description::instantiation_token();
         if token != ours {
-            return Err(format!("instantiationToken {token} is not this FMU's ({ours}): the binary and modelDescription.xml differ"));
+            return Err(format!(
+                "instantiationToken {token} is not this FMU's ({ours}): the binary and modelDescription.xml differ"
+            ));
         }
         if event_mode_used != 0 {
             return Err("eventModeUsed = true, but the FMU has no event mode (hasEventMode = false)".into());
@@ -101,7 +109,9 @@ pub unsafe extern "C" fn fmi3InstantiateModelExchange(
     instance_environment: *mut c_void,
     log_message: Option<instance::Fmi3LogMessage>,
 ) -> Fmi3Instance {
-    unsafe { refuse_instantiation(instance_environment, log_message, "this FMU is Co-Simulation only (no Model Exchange)") }
+    unsafe {
+        refuse_instantiation(instance_environment, log_message, "this FMU is Co-Simulation only (no Model Exchange)")
+    }
 }
 
 #[no_mangle]
@@ -117,7 +127,13 @@ pub unsafe extern "C" fn fmi3InstantiateScheduledExecution(
     _lock_preemption: *const c_void,
     _unlock_preemption: *const c_void,
 ) -> Fmi3Instance {
-    unsafe { refuse_instantiation(instance_environment, log_message, "this FMU is Co-Simulation only (no Scheduled Execution)") }
+    unsafe {
+        refuse_instantiation(
+            instance_environment,
+            log_message,
+            "this FMU is Co-Simulation only (no Scheduled Execution)",
+        )
+    }
 }
 
 #[no_mangle]
@@ -245,7 +261,13 @@ pub unsafe extern "C" fn fmi3DoStep(
 macro_rules! get_set_typed {
     ($get:ident, $set:ident, $t:ty, $in:ty, $kind:ident, $conv:path, $wrap:expr) => {
         #[no_mangle]
-        pub unsafe extern "C" fn $get(instance: Fmi3Instance, vrs: *const Vr, nvr: usize, out: *mut $t, n: usize) -> Fmi3Status {
+        pub unsafe extern "C" fn $get(
+            instance: Fmi3Instance,
+            vrs: *const Vr,
+            nvr: usize,
+            out: *mut $t,
+            n: usize,
+        ) -> Fmi3Status {
             unsafe {
                 call(instance, stringify!($get), GET, WhenPoisoned::Allow, |i| {
                     let vrs = slice(vrs, nvr, "valueReferences")?;
@@ -257,7 +279,13 @@ macro_rules! get_set_typed {
         }
 
         #[no_mangle]
-        pub unsafe extern "C" fn $set(instance: Fmi3Instance, vrs: *const Vr, nvr: usize, vals: *const $in, n: usize) -> Fmi3Status {
+        pub unsafe extern "C" fn $set(
+            instance: Fmi3Instance,
+            vrs: *const Vr,
+            nvr: usize,
+            vals: *const $in,
+            n: usize,
+        ) -> Fmi3Status {
             unsafe {
                 call(instance, stringify!($set), SET, WhenPoisoned::Refuse, |i| {
                     let vrs = slice(vrs, nvr, "valueReferences")?;
@@ -278,13 +306,33 @@ get_set_typed!(fmi3GetBoolean, fmi3SetBoolean, bool, u8, Boolean, Values::boolea
 macro_rules! get_set_absent {
     ($get:ident, $set:ident, $t:ty, $name:literal) => {
         #[no_mangle]
-        pub unsafe extern "C" fn $get(instance: Fmi3Instance, _vrs: *const Vr, nvr: usize, _out: *mut $t, _n: usize) -> Fmi3Status {
-            unsafe { call(instance, stringify!($get), GET, WhenPoisoned::Allow, |_| values::no_variables_of($name, nvr).map(|()| Status::Ok)) }
+        pub unsafe extern "C" fn $get(
+            instance: Fmi3Instance,
+            _vrs: *const Vr,
+            nvr: usize,
+            _out: *mut $t,
+            _n: usize,
+        ) -> Fmi3Status {
+            unsafe {
+                call(instance, stringify!($get), GET, WhenPoisoned::Allow, |_| {
+                    values::no_variables_of($name, nvr).map(|()| Status::Ok)
+                })
+            }
         }
 
         #[no_mangle]
-        pub unsafe extern "C" fn $set(instance: Fmi3Instance, _vrs: *const Vr, nvr: usize, _vals: *const $t, _n: usize) -> Fmi3Status {
-            unsafe { call(instance, stringify!($set), SET, WhenPoisoned::Refuse, |_| values::no_variables_of($name, nvr).map(|()| Status::Ok)) }
+        pub unsafe extern "C" fn $set(
+            instance: Fmi3Instance,
+            _vrs: *const Vr,
+            nvr: usize,
+            _vals: *const $t,
+            _n: usize,
+        ) -> Fmi3Status {
+            unsafe {
+                call(instance, stringify!($set), SET, WhenPoisoned::Refuse, |_| {
+                    values::no_variables_of($name, nvr).map(|()| Status::Ok)
+                })
+            }
         }
     };
 }
@@ -300,30 +348,80 @@ get_set_absent!(fmi3GetUInt64, fmi3SetUInt64, u64, "UInt64");
 get_set_absent!(fmi3GetString, fmi3SetString, *const c_char, "String");
 
 #[no_mangle]
-pub unsafe extern "C" fn fmi3GetBinary(instance: Fmi3Instance, _vrs: *const Vr, nvr: usize, _sizes: *mut usize, _out: *mut *const u8, _n: usize) -> Fmi3Status {
-    unsafe { call(instance, "fmi3GetBinary", GET, WhenPoisoned::Allow, |_| values::no_variables_of("Binary", nvr).map(|()| Status::Ok)) }
+pub unsafe extern "C" fn fmi3GetBinary(
+    instance: Fmi3Instance,
+    _vrs: *const Vr,
+    nvr: usize,
+    _sizes: *mut usize,
+    _out: *mut *const u8,
+    _n: usize,
+) -> Fmi3Status {
+    unsafe {
+        call(instance, "fmi3GetBinary", GET, WhenPoisoned::Allow, |_| {
+            values::no_variables_of("Binary", nvr).map(|()| Status::Ok)
+        })
+    }
 }
 
 #[no_mangle]
-pub unsafe extern "C" fn fmi3SetBinary(instance: Fmi3Instance, _vrs: *const Vr, nvr: usize, _sizes: *const usize, _vals: *const *const u8, _n: usize) -> Fmi3Status {
-    unsafe { call(instance, "fmi3SetBinary", SET, WhenPoisoned::Refuse, |_| values::no_variables_of("Binary", nvr).map(|()| Status::Ok)) }
+pub unsafe extern "C" fn fmi3SetBinary(
+    instance: Fmi3Instance,
+    _vrs: *const Vr,
+    nvr: usize,
+    _sizes: *const usize,
+    _vals: *const *const u8,
+    _n: usize,
+) -> Fmi3Status {
+    unsafe {
+        call(instance, "fmi3SetBinary", SET, WhenPoisoned::Refuse, |_| {
+            values::no_variables_of("Binary", nvr).map(|()| Status::Ok)
+        })
+    }
 }
 
 #[no_mangle]
-pub unsafe extern "C" fn fmi3GetClock(instance: Fmi3Instance, _vrs: *const Vr, nvr: usize, _out: *mut bool) -> Fmi3Status {
-    unsafe { call(instance, "fmi3GetClock", GET, WhenPoisoned::Allow, |_| values::no_variables_of("Clock", nvr).map(|()| Status::Ok)) }
+pub unsafe extern "C" fn fmi3GetClock(
+    instance: Fmi3Instance,
+    _vrs: *const Vr,
+    nvr: usize,
+    _out: *mut bool,
+) -> Fmi3Status {
+    unsafe {
+        call(instance, "fmi3GetClock", GET, WhenPoisoned::Allow, |_| {
+            values::no_variables_of("Clock", nvr).map(|()| Status::Ok)
+        })
+    }
 }
 
 #[no_mangle]
-pub unsafe extern "C" fn fmi3SetClock(instance: Fmi3Instance, _vrs: *const Vr, nvr: usize, _vals: *const u8) -> Fmi3Status {
-    unsafe { call(instance, "fmi3SetClock", SET, WhenPoisoned::Refuse, |_| values::no_variables_of("Clock", nvr).map(|()| Status::Ok)) }
+pub unsafe extern "C" fn fmi3SetClock(
+    instance: Fmi3Instance,
+    _vrs: *const Vr,
+    nvr: usize,
+    _vals: *const u8,
+) -> Fmi3Status {
+    unsafe {
+        call(instance, "fmi3SetClock", SET, WhenPoisoned::Refuse, |_| {
+            values::no_variables_of("Clock", nvr).map(|()| Status::Ok)
+        })
+    }
 }
 
 // ---- Dependencies -------------------------------------------------------------------------
 
 #[no_mangle]
-pub unsafe extern "C" fn fmi3GetNumberOfVariableDependencies(instance: Fmi3Instance, _vr: Vr, _n: *mut usize) -> Fmi3Status {
-    unsafe { unsupported(instance, "fmi3GetNumberOfVariableDependencies", "providesPerElementDependencies = false: the dependencies are in the model description's ModelStructure") }
+pub unsafe extern "C" fn fmi3GetNumberOfVariableDependencies(
+    instance: Fmi3Instance,
+    _vr: Vr,
+    _n: *mut usize,
+) -> Fmi3Status {
+    unsafe {
+        unsupported(
+            instance,
+            "fmi3GetNumberOfVariableDependencies",
+            "providesPerElementDependencies = false: the dependencies are in the model description's ModelStructure",
+        )
+    }
 }
 
 #[no_mangle]
@@ -336,7 +434,13 @@ pub unsafe extern "C" fn fmi3GetVariableDependencies(
     _dependency_kinds: *mut c_int,
     _n: usize,
 ) -> Fmi3Status {
-    unsafe { unsupported(instance, "fmi3GetVariableDependencies", "providesPerElementDependencies = false: the dependencies are in the model description's ModelStructure") }
+    unsafe {
+        unsupported(
+            instance,
+            "fmi3GetVariableDependencies",
+            "providesPerElementDependencies = false: the dependencies are in the model description's ModelStructure",
+        )
+    }
 }
 
 // ---- FMU state ----------------------------------------------------------------------------
@@ -426,18 +530,36 @@ pub unsafe extern "C" fn fmi3FreeFMUState(instance: Fmi3Instance, state: *mut *m
 }
 
 #[no_mangle]
-pub unsafe extern "C" fn fmi3SerializedFMUStateSize(instance: Fmi3Instance, state: *mut c_void, size: *mut usize) -> Fmi3Status {
-    unsafe { call(instance, "fmi3SerializedFMUStateSize", ANY_PHASE, WhenPoisoned::Allow, |_| serialized_size(state, size)) }
+pub unsafe extern "C" fn fmi3SerializedFMUStateSize(
+    instance: Fmi3Instance,
+    state: *mut c_void,
+    size: *mut usize,
+) -> Fmi3Status {
+    unsafe {
+        call(instance, "fmi3SerializedFMUStateSize", ANY_PHASE, WhenPoisoned::Allow, |_| serialized_size(state, size))
+    }
 }
 
 #[no_mangle]
-pub unsafe extern "C" fn fmi3SerializeFMUState(instance: Fmi3Instance, state: *mut c_void, out: *mut u8, size: usize) -> Fmi3Status {
+pub unsafe extern "C" fn fmi3SerializeFMUState(
+    instance: Fmi3Instance,
+    state: *mut c_void,
+    out: *mut u8,
+    size: usize,
+) -> Fmi3Status {
     unsafe { call(instance, "fmi3SerializeFMUState", ANY_PHASE, WhenPoisoned::Allow, |_| serialize(state, out, size)) }
 }
 
 #[no_mangle]
-pub unsafe extern "C" fn fmi3DeserializeFMUState(instance: Fmi3Instance, bytes: *const u8, size: usize, state: *mut *mut c_void) -> Fmi3Status {
-    unsafe { call(instance, "fmi3DeserializeFMUState", ANY_PHASE, WhenPoisoned::Allow, |_| deserialize(bytes, size, state)) }
+pub unsafe extern "C" fn fmi3DeserializeFMUState(
+    instance: Fmi3Instance,
+    bytes: *const u8,
+    size: usize,
+    state: *mut *mut c_void,
+) -> Fmi3Status {
+    unsafe {
+        call(instance, "fmi3DeserializeFMUState", ANY_PHASE, WhenPoisoned::Allow, |_| deserialize(bytes, size, state))
+    }
 }
 
 // ---- Not supported: each returns fmi3Error with the reason logged --------------------------
@@ -451,7 +573,6 @@ macro_rules! unsupported_fn {
         }
     };
 }
-
 
 unsupported_fn!(fmi3GetDirectionalDerivative(unknowns: *const Vr, n_unknowns: usize, knowns: *const Vr, n_knowns: usize, seed: *const f64, n_seed: usize, sensitivity: *mut f64, n_sensitivity: usize),
     "providesDirectionalDerivatives = false (a sampled-data controller has no useful partial derivatives)");

@@ -120,7 +120,12 @@ impl Instance {
     ///
     /// # Safety
     /// `categories` points to `n` C strings (or is NULL with `n` = 0).
-    pub unsafe fn set_debug_logging(&mut self, on: bool, n: usize, categories: *const *const c_char) -> Result<Status, String> {
+    pub unsafe fn set_debug_logging(
+        &mut self,
+        on: bool,
+        n: usize,
+        categories: *const *const c_char,
+    ) -> Result<Status, String> {
         if n == 0 {
             self.logging_on = on;
             self.categories = [on; LOG_CATEGORIES.len()];
@@ -130,10 +135,9 @@ impl Instance {
         let mut new = self.categories;
         for &p in names {
             let name = unsafe { c_str(p, "category")? };
-            let i = LOG_CATEGORIES
-                .iter()
-                .position(|(c, _)| *c == name)
-                .ok_or_else(|| format!("unknown log category `{name}` (the FMU has {:?})", LOG_CATEGORIES.map(|c| c.0)))?;
+            let i = LOG_CATEGORIES.iter().position(|(c, _)| *c == name).ok_or_else(|| {
+                format!("unknown log category `{name}` (the FMU has {:?})", LOG_CATEGORIES.map(|c| c.0))
+            })?;
             new[i] = on;
         }
         self.categories = new;
@@ -239,12 +243,17 @@ pub unsafe fn call(
     let result = catch_unwind(AssertUnwindSafe(|| {
         let Some(inst) = (unsafe { instance(p) }) else {
             if !p.is_null() {
-                stderr_line(&format!("servo_axis: {function} called with a pointer that is not an instance of this FMU"));
+                stderr_line(&format!(
+                    "servo_axis: {function} called with a pointer that is not an instance of this FMU"
+                ));
             }
             return Status::Error;
         };
         if inst.poisoned && poisoned == WhenPoisoned::Refuse {
-            inst.log(Status::Error, &format!("{function}: the instance failed internally; call Reset (or SetFMUState) first"));
+            inst.log(
+                Status::Error,
+                &format!("{function}: the instance failed internally; call Reset (or SetFMUState) first"),
+            );
             return Status::Error;
         }
         if !allowed.contains(&inst.phase) {

@@ -12,9 +12,19 @@ fn kind_error(vr: u32, wanted: Kind) -> String {
 }
 
 /// Read `vrs` into `out` (as many values as references) with a typed getter of `Values`.
-pub fn get<T>(model: &AxisModel, vrs: &[u32], out: &mut [T], wanted: Kind, read: impl Fn(&Values, u32) -> Option<T>) -> Result<(), String> {
+pub fn get<T>(
+    model: &AxisModel,
+    vrs: &[u32],
+    out: &mut [T],
+    wanted: Kind,
+    read: impl Fn(&Values, u32) -> Option<T>,
+) -> Result<(), String> {
     if vrs.len() != out.len() {
-        return Err(format!("{} value references but room for {} values (every variable is a scalar)", vrs.len(), out.len()));
+        return Err(format!(
+            "{} value references but room for {} values (every variable is a scalar)",
+            vrs.len(),
+            out.len()
+        ));
     }
     let values = model.values();
     for (o, &vr) in out.iter_mut().zip(vrs) {
@@ -24,7 +34,12 @@ pub fn get<T>(model: &AxisModel, vrs: &[u32], out: &mut [T], wanted: Kind, read:
 }
 
 /// Set `vrs` from `values`: all or none.
-pub fn set<T: Copy>(model: &mut AxisModel, vrs: &[u32], values: &[T], wrap: impl Fn(T) -> Value + Clone) -> Result<(), String> {
+pub fn set<T: Copy>(
+    model: &mut AxisModel,
+    vrs: &[u32],
+    values: &[T],
+    wrap: impl Fn(T) -> Value + Clone,
+) -> Result<(), String> {
     if vrs.len() != values.len() {
         return Err(format!("{} value references but {} values (every variable is a scalar)", vrs.len(), values.len()));
     }

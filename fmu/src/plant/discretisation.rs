@@ -224,8 +224,7 @@ mod tests {
         let hold = PolynomialHold::<1, 1>::new::<4>(&[[-a]], &[[1.0]], h);
         let got = hold.step_shaping_first(&[x0], &[u0], d1 * h, d2 * h * h)[0];
         let e = (-a * h).exp();
-        let big_u =
-            |s: f64| (u0 + d1 * s + d2 * s * s) / a - (d1 + 2.0 * d2 * s) / (a * a) + 2.0 * d2 / (a * a * a);
+        let big_u = |s: f64| (u0 + d1 * s + d2 * s * s) / a - (d1 + 2.0 * d2 * s) / (a * a) + 2.0 * d2 / (a * a * a);
         let want = e * x0 + big_u(h) - e * big_u(0.0);
         assert!((got - want).abs() < 1e-14, "{got} vs {want}");
         let split = hold.step_shaping_first(&[x0], &[u0], 0.0, d2 * h * h)[0] + hold.slope_response(&[d1 * h])[0];

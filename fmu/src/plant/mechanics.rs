@@ -124,16 +124,24 @@ impl TwoInertia {
         let shaft = self.shaft_torque(x);
         let fm = coulomb[0] + self.motor_viscous * x.motor_velocity;
         let fl = coulomb[1] + self.load_viscous * x.load_velocity;
-        let absorber = self.absorber.map_or(0.0, |a| {
-            a.stiffness * x.absorber_twist + a.damping * (x.load_velocity - x.absorber_velocity)
-        });
+        let absorber = self
+            .absorber
+            .map_or(0.0, |a| a.stiffness * x.absorber_twist + a.damping * (x.load_velocity - x.absorber_velocity));
         ((tm - shaft - fm) * self.inverse_motor_inertia, (shaft - fl + td - absorber) * self.inverse_load_inertia)
     }
 
     /// Advance the mechanical part of `x` by one sub-step: the motor torque goes from
     /// `torque0` (rising at `torque_rate`, Nm/s) to `torque1`, the disturbance `td` is held,
     /// `coulomb0` is the Coulomb friction at the start.
-    pub fn advance(&self, x: &mut PlantState, torque0: f64, torque_rate: f64, torque1: f64, td: f64, coulomb0: [f64; 2]) {
+    pub fn advance(
+        &self,
+        x: &mut PlantState,
+        torque0: f64,
+        torque_rate: f64,
+        torque1: f64,
+        td: f64,
+        coulomb0: [f64; 2],
+    ) {
         let base = [x.motor_angle - x.load_angle, x.motor_velocity, x.load_velocity, x.load_angle];
         let inputs = (torque0, torque_rate, torque1, td, coulomb0);
         let y = match &self.discrete {

@@ -35,7 +35,6 @@ pub struct PlantState {
     pub absorber_velocity: f64,
 }
 
-
 /// What the inverter and the load see during one tick.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub struct PlantInputs {

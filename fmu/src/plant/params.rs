@@ -69,11 +69,23 @@ impl Default for PlantParams {
 
 #[derive(Clone, Debug, PartialEq)]
 pub enum PlantError {
-    NotPositive { field: &'static str, value: f64 },
-    Negative { field: &'static str, value: f64 },
-    NotFinite { field: &'static str },
+    NotPositive {
+        field: &'static str,
+        value: f64,
+    },
+    Negative {
+        field: &'static str,
+        value: f64,
+    },
+    NotFinite {
+        field: &'static str,
+    },
     /// A term that the integrator does not solve exactly is too fast for the sub-step.
-    TooStiff { mode: &'static str, rate: f64, substep: f64 },
+    TooStiff {
+        mode: &'static str,
+        rate: f64,
+        substep: f64,
+    },
 }
 
 impl fmt::Display for PlantError {

@@ -115,9 +115,8 @@ impl Pmsm {
         let phi = [[g * cz + hs * n, hs * a01], [hs * a10, g * cz - hs * n]];
         let inv_det = 1.0 / (a00 * a11 - a01 * a10);
         let solve = |v: [f64; 2]| [(a11 * v[0] - a01 * v[1]) * inv_det, (-a10 * v[0] + a00 * v[1]) * inv_det];
-        let phi_minus_one = |v: [f64; 2]| {
-            [(phi[0][0] - 1.0) * v[0] + phi[0][1] * v[1], phi[1][0] * v[0] + (phi[1][1] - 1.0) * v[1]]
-        };
+        let phi_minus_one =
+            |v: [f64; 2]| [(phi[0][0] - 1.0) * v[0] + phi[0][1] * v[1], phi[1][0] * v[0] + (phi[1][1] - 1.0) * v[1]];
         // x(h) = Φ·x0 + Γ0·b0 + Γ1·(b1 − b0), Γ0 = A⁻¹(Φ − I), Γ1 = A⁻¹(Γ0 − h·I)/h.
         let held = solve(phi_minus_one(b0));
         let g0_rise = solve(phi_minus_one(b_rise));

@@ -64,7 +64,9 @@ fn declared_ranges_are_what_validation_accepts_and_refuses() {
                 let mut m = AxisModel::new();
                 match m.set(d.vr, value(d.kind, outside)) {
                     Ok(()) => problems.push(format!("{} = {outside} (outside its {side}) was accepted", d.name)),
-                    Err(e) if !e.contains(d.name) => problems.push(format!("{}: refusal does not name it: {e}", d.name)),
+                    Err(e) if !e.contains(d.name) => {
+                        problems.push(format!("{}: refusal does not name it: {e}", d.name))
+                    }
                     Err(_) => {}
                 }
             }
@@ -81,7 +83,9 @@ fn declared_ranges_are_what_validation_accepts_and_refuses() {
             match (result, coupled) {
                 (Ok(()), None) => {}
                 (Ok(()), Some(_)) => problems.push(format!("{} {side}: listed as coupled but accepted", d.name)),
-                (Err(e), Some((_, _, word))) if e.contains(word) => coupled_seen.push(format!("{} {side}: {e}", d.name)),
+                (Err(e), Some((_, _, word))) if e.contains(word) => {
+                    coupled_seen.push(format!("{} {side}: {e}", d.name))
+                }
                 (Err(e), _) => problems.push(format!("{} = {bound} (its {side}) refused by validation: {e}", d.name)),
             }
         }

@@ -13,9 +13,15 @@ use super::{Causality, Declaration, Kind, Range, Unit, Value, Variability};
 use crate::plant::PlantParams;
 
 macro_rules! rust_type {
-    (Float64) => { f64 };
-    (Int32) => { i32 };
-    (Boolean) => { bool };
+    (Float64) => {
+        f64
+    };
+    (Int32) => {
+        i32
+    };
+    (Boolean) => {
+        bool
+    };
 }
 
 macro_rules! declare_variables {

@@ -154,7 +154,8 @@ pub async fn position_tick_task() {
     loop {
         let faults = POSITION_TICK.wait().await;
         if !offsets_logged {
-            let seen = SHARED.lock(|s| s.borrow_mut().get().and_then(|s| s.sensing.offsets().map(|o| (o, s.bus_voltage))));
+            let seen =
+                SHARED.lock(|s| s.borrow_mut().get().and_then(|s| s.sensing.offsets().map(|o| (o, s.bus_voltage))));
             if let Some((o, bus)) = seen {
                 defmt::info!(
                     "current offsets U {} V {} W {} counts (mid-scale 2047.5), bus {} V",
@@ -178,7 +179,12 @@ pub async fn position_tick_task() {
         n = n.wrapping_add(1);
         if n % 4_000 == 0 {
             let bus = SHARED.lock(|s| s.borrow_mut().get().map_or(0.0, |s| s.bus_voltage));
-            defmt::info!("control loop alive: {} ticks, faults {:#x}, bus {} V", TICKS.load(Ordering::Relaxed), faults.0, bus);
+            defmt::info!(
+                "control loop alive: {} ticks, faults {:#x}, bus {} V",
+                TICKS.load(Ordering::Relaxed),
+                faults.0,
+                bus
+            );
         }
     }
 }

@@ -35,16 +35,15 @@ pub fn accdec(
         distance_rad: distance,
         speed_rad_s: speed,
         counts_per_rev,
-        resonances: resonance
-            .iter()
-            .map(|&hz| host_tools::acc_dec_study::Resonance { hz, damping_ratio })
-            .collect(),
+        resonances: resonance.iter().map(|&hz| host_tools::acc_dec_study::Resonance { hz, damping_ratio }).collect(),
         sweep,
         fmu: (!no_fmu && !zeros_as_delays).then(|| common.fmu.clone().unwrap_or_else(default_fmu)),
         out: common.out.clone().unwrap_or_else(|| default_out("accdec")),
     };
     if zeros_as_delays && !no_fmu && !common.json {
-        eprintln!("note: --zeros-as-delays runs on the host only (the FMU's filter keeps the seed's zeros): no FMU runs");
+        eprintln!(
+            "note: --zeros-as-delays runs on the host only (the FMU's filter keeps the seed's zeros): no FMU runs"
+        );
     }
     let pb = progress_bar("accdec", common.json);
     let report = host_tools::acc_dec_report::run(&request, |label, f| {
@@ -81,8 +80,12 @@ pub fn bench_accdec(sequences: usize, resonance: &[f64], no_cost: bool, common: 
     let costs = if no_cost { vec![] } else { b::filter_costs()? };
     pb.finish_and_clear();
     let worst = |f: fn(&b::MatchedComparison) -> f64| matched.iter().map(f).fold(0.0, f64::max);
-    let (pole, den, gd, gs) =
-        (worst(|m| m.pole_error), worst(|m| m.denominator_error), worst(|m| m.all_delays_gain_error), worst(|m| m.seed_gain_error));
+    let (pole, den, gd, gs) = (
+        worst(|m| m.pole_error),
+        worst(|m| m.denominator_error),
+        worst(|m| m.all_delays_gain_error),
+        worst(|m| m.seed_gain_error),
+    );
     let ok = digits.iter().all(|d| d.equal)
         && pole < 1e-5
         && gd < 1e-4
@@ -102,7 +105,13 @@ pub fn bench_accdec(sequences: usize, resonance: &[f64], no_cost: bool, common: 
     println!("servo bench accdec — seed 003");
     println!("  1. seed example, 3rd order, 1 kHz, 0.5 ms (printed digits):");
     for d in &digits {
-        println!("     {:<20} seed {:>11}  ours {:>13.8}  {}", d.name, d.printed, d.ours, if d.equal { "equal" } else { "DIFFERENT" });
+        println!(
+            "     {:<20} seed {:>11}  ours {:>13.8}  {}",
+            d.name,
+            d.printed,
+            d.ours,
+            if d.equal { "equal" } else { "DIFFERENT" }
+        );
     }
     for (cutoff, out) in &seed_test {
         println!(
@@ -112,15 +121,23 @@ pub fn bench_accdec(sequences: usize, resonance: &[f64], no_cost: bool, common: 
             out.iter().map(i64::to_string).collect::<Vec<_>>().join(" ")
         );
     }
-    println!("  2. against python-control sample_system(method='matched'), orders 1-6 at {} (Hz, s):", b::MATCHED_CASES.map(|(c, t)| format!("{c}/{t}")).join(", "));
+    println!(
+        "  2. against python-control sample_system(method='matched'), orders 1-6 at {} (Hz, s):",
+        b::MATCHED_CASES.map(|(c, t)| format!("{c}/{t}")).join(", ")
+    );
     println!("     largest pole error |z - z_py|            {pole:.2e}");
     println!("     largest denominator coefficient error    {den:.2e}");
-    println!("     gain, every zero at infinity a delay: K = A(1), relative error {gd:.2e}  (python-control's convention)");
+    println!(
+        "     gain, every zero at infinity a delay: K = A(1), relative error {gd:.2e}  (python-control's convention)"
+    );
     println!("     gain, seed: N-1 zeros at z = -1 + one delay: K·2^(N-1) = A(1), relative error {gs:.2e}");
     println!("     (same poles; the seed's form answers one tick after the input and nulls Nyquist, python-control's waits N ticks)");
     println!("  3. properties of the whole-pulse filters (random Butterworth 1-6 / moving-average cascades):");
     println!("     {} random sequences: {} with output sum != input sum", props.sequences, props.conservation_failures);
-    println!("     {} ticks of zero input: {} non-zero outputs", props.zero_input_ticks, props.zero_input_nonzero_outputs);
+    println!(
+        "     {} ticks of zero input: {} non-zero outputs",
+        props.zero_input_ticks, props.zero_input_nonzero_outputs
+    );
     println!("  4. residual load vibration (peak shaft twist after end of interpolation + 99 % delay; 2 rad at 50 rad/s, 2 % damping, friction off):");
     for v in [&vibration, &vibration_t50] {
         println!(
@@ -143,6 +160,9 @@ pub fn bench_accdec(sequences: usize, resonance: &[f64], no_cost: bool, common: 
             println!("     {:<22} {:>7.1}", c.filter, c.instructions_per_tick);
         }
     }
-    println!("  checks (seed digits, poles < 1e-5, gains < 1e-4, conservation, zero in -> zero out): {}", if ok { "pass" } else { "FAIL" });
+    println!(
+        "  checks (seed digits, poles < 1e-5, gains < 1e-4, conservation, zero in -> zero out): {}",
+        if ok { "pass" } else { "FAIL" }
+    );
     Ok(ok)
 }

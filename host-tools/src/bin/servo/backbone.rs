@@ -107,12 +107,7 @@ pub fn run(files: &[PathBuf], with_fmpy: bool, common: &Common) -> Result<bool> 
         });
     }
     let index = out.join("index.html");
-    write_html(
-        &index,
-        "Servo axis scenarios",
-        &format!("<p>FMU: <code>{}</code></p>", fmu_path.display()),
-        &reports,
-    )?;
+    write_html(&index, "Servo axis scenarios", &format!("<p>FMU: <code>{}</code></p>", fmu_path.display()), &reports)?;
     if common.json {
         println!("{}", serde_json::to_string_pretty(&summary)?);
     } else {
@@ -133,9 +128,17 @@ pub fn bench_fmu(seconds: f64, no_fmpy: bool, goal: f64, common: &Common) -> Res
     let speed_ok = r.rust_real_time_factor >= goal;
     let ok = speed_ok && r.boundary_overhead <= 0.10;
     if common.json {
-        println!("{}", serde_json::to_string_pretty(&serde_json::json!({"bench": "fmu", "result": r, "goal": goal, "passed": ok}))?);
+        println!(
+            "{}",
+            serde_json::to_string_pretty(
+                &serde_json::json!({"bench": "fmu", "result": r, "goal": goal, "passed": ok})
+            )?
+        );
     } else {
-        println!("servo bench fmu — default axis, {} s simulated, {} communication steps", r.simulated_seconds, r.communication_steps);
+        println!(
+            "servo bench fmu — default axis, {} s simulated, {} communication steps",
+            r.simulated_seconds, r.communication_steps
+        );
         println!(
             "  recording the {} outputs the FMU's specification names ({}) at every step:",
             r.recorded_outputs.len(),
@@ -193,7 +196,12 @@ pub fn bench_plant(common: &Common) -> Result<bool> {
         for (name, err, scale) in &r.errors {
             println!("  {name:<16} max |error| {err:>10.3e}  (signal peak {scale:.3e}, relative {:.2e})", err / scale);
         }
-        println!("  largest relative error: {:.2e} (goal ≤ {:.0e}): {}", r.worst_relative, host_tools::bench_plant::GOAL, if r.passed { "met" } else { "NOT met" });
+        println!(
+            "  largest relative error: {:.2e} (goal ≤ {:.0e}): {}",
+            r.worst_relative,
+            host_tools::bench_plant::GOAL,
+            if r.passed { "met" } else { "NOT met" }
+        );
     }
     Ok(r.passed)
 }

@@ -88,7 +88,12 @@ pub fn circle(
         fmpy_note = Some(verdict);
     }
     if common.json {
-        println!("{}", serde_json::to_string_pretty(&serde_json::json!({"circle": report, "fmpy": fmpy_note.as_ref().map(bench::verdict_json)}))?);
+        println!(
+            "{}",
+            serde_json::to_string_pretty(
+                &serde_json::json!({"circle": report, "fmpy": fmpy_note.as_ref().map(bench::verdict_json)})
+            )?
+        );
     } else {
         report.print();
         if let Some(v) = &fmpy_note {
@@ -103,12 +108,21 @@ pub fn bench_circle(common: &Common) -> Result<bool> {
     let r = host_tools::bench_circle::bench(&fmu)?;
     let ok = r.pseudo_vs_two_axis_relative <= 1e-3 && r.protrusion_ratio < 1.0;
     if common.json {
-        println!("{}", serde_json::to_string_pretty(&serde_json::json!({"bench": "circle", "result": r, "passed": ok}))?);
+        println!(
+            "{}",
+            serde_json::to_string_pretty(&serde_json::json!({"bench": "circle", "result": r, "passed": ok}))?
+        );
         return Ok(ok);
     }
-    println!("servo bench circle — seed 002, radius {} rad, feed {} rad/s (1 revolution per second), machine-end positions", r.radius, r.feed);
+    println!(
+        "servo bench circle — seed 002, radius {} rad, feed {} rad/s (1 revolution per second), machine-end positions",
+        r.radius, r.feed
+    );
     println!("  demo axis (default Coulomb friction 0.01 N·m motor, 0.02 N·m load), two-axis circle:");
-    println!("    compensation off: largest quadrant protrusion {:.3e} rad, roundness {:.3e} rad", r.protrusion_off, r.roundness_off);
+    println!(
+        "    compensation off: largest quadrant protrusion {:.3e} rad, roundness {:.3e} rad",
+        r.protrusion_off, r.roundness_off
+    );
     println!(
         "    compensation on ({}): largest quadrant protrusion {:.3e} rad, roundness {:.3e} rad",
         host_tools::bench_circle::COMPENSATION.map(|(k, v)| format!("{k} = {v}")).join(", "),

@@ -2,7 +2,14 @@
 
 use super::*;
 
-pub fn device(port: &str, baud: u32, timeout_ms: u64, seconds: f64, action: &[String], common: &Common) -> Result<bool> {
+pub fn device(
+    port: &str,
+    baud: u32,
+    timeout_ms: u64,
+    seconds: f64,
+    action: &[String],
+    common: &Common,
+) -> Result<bool> {
     use control_core::protocol::{Request, Response};
     use host_tools::device_link::{open_serial, DeviceLink};
     let (what, arg) = (action[0].as_str(), action.get(1));
@@ -20,10 +27,13 @@ pub fn device(port: &str, baud: u32, timeout_ms: u64, seconds: f64, action: &[St
         }
         ("load-correction", Some(file)) => {
             let mut frame = std::fs::read(file).with_context(|| format!("cannot read {file}"))?;
-            Some(host_tools::device_link::correction_request(&mut frame).with_context(|| format!("{file}"))?)
+            Some(host_tools::device_link::correction_request(&mut frame).with_context(|| file.to_string())?)
         }
         ("load-correction", None) => bail!("load-correction needs the <axis>.corr.frame file `servo tune` wrote"),
-        _ => bail!("unknown action `{}`: use hello, telemetry, clear-faults, start-sweep, load-correction FILE or stream", action.join(" ")),
+        _ => bail!(
+            "unknown action `{}`: use hello, telemetry, clear-faults, start-sweep, load-correction FILE or stream",
+            action.join(" ")
+        ),
     };
     let mut link = DeviceLink::new(open_serial(port, baud)?, std::time::Duration::from_millis(timeout_ms));
     link.hello()?;
@@ -40,10 +50,12 @@ pub fn device(port: &str, baud: u32, timeout_ms: u64, seconds: f64, action: &[St
             expect_done(link.request(&Request::Stream { enabled: false })?, "Stream off")?;
             let batches = link.take_samples();
             let dropped = batches.last().map_or(0, |b| b.dropped);
-            let mut t = Trace::new(["tick", "u", "y", "phase", "measuring", "point", "record"].map(String::from).to_vec());
-            let rows = host_tools::frame_stream::sample_rows(&batches).map_err(|e| anyhow::anyhow!("corrupt sample batch from the drive: {e}"))?;
+            let mut t =
+                Trace::new(["tick", "u", "y", "phase", "measuring", "point", "record"].map(String::from).to_vec());
+            let rows = host_tools::frame_stream::sample_rows(&batches)
+                .map_err(|e| anyhow::anyhow!("corrupt sample batch from the drive: {e}"))?;
             for r in &rows {
-                t.rows.push(r.to_vec());
+                t.rows.push(r);
             }
             let out = common.out.clone().unwrap_or_else(|| default_out("device"));
             std::fs::create_dir_all(&out)?;

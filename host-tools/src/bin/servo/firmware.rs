@@ -30,7 +30,9 @@ pub fn bench_firmware(common: &Common) -> Result<bool> {
         );
         return Ok(ok);
     }
-    println!("servo bench firmware — drive-g474 (STM32G474RE) and the control core on a Cortex-M4F (QEMU netduinoplus2)");
+    println!(
+        "servo bench firmware — drive-g474 (STM32G474RE) and the control core on a Cortex-M4F (QEMU netduinoplus2)"
+    );
     println!(
         "  drive image: flash {} bytes ({:.1} KiB, goal ≤ 128 KiB), static RAM {} bytes ({:.1} KiB, goal ≤ 48 KiB; stack not included)",
         size.flash,
@@ -38,7 +40,9 @@ pub fn bench_firmware(common: &Common) -> Result<bool> {
         size.ram,
         size.ram as f64 / 1024.0
     );
-    for (name, r) in [("golden vectors (the shipped scenarios' situations)", &vectors), ("every feature on at once", &all)] {
+    for (name, r) in
+        [("golden vectors (the shipped scenarios' situations)", &vectors), ("every feature on at once", &all)]
+    {
         println!(
             "  {name}: {} ticks compared bit for bit, host digest {}, target: {} → {}",
             r.ticks,

@@ -19,12 +19,17 @@ pub fn ident(
         println!("re-plotted {} model(s) → {}", model.len(), svg.display());
         return Ok(true);
     }
-    let mut parameters: std::collections::BTreeMap<String, std::collections::BTreeMap<String, host_tools::scenario::Value>> =
-        axes.iter().map(|a| (a.clone(), Default::default())).collect();
+    let mut parameters: std::collections::BTreeMap<
+        String,
+        std::collections::BTreeMap<String, host_tools::scenario::Value>,
+    > = axes.iter().map(|a| (a.clone(), Default::default())).collect();
     for s in set {
         let (axis, rest) = s.split_once(':').ok_or_else(|| anyhow::anyhow!("--set `{s}`: use AXIS:NAME=VALUE"))?;
         let (k, v) = host_tools::circle_report::parse_assignment(rest)?;
-        parameters.get_mut(axis).ok_or_else(|| anyhow::anyhow!("--set `{s}`: no axis `{axis}` in --axes"))?.insert(k, v);
+        parameters
+            .get_mut(axis)
+            .ok_or_else(|| anyhow::anyhow!("--set `{s}`: no axis `{axis}` in --axes"))?
+            .insert(k, v);
     }
     for s in anti_resonance {
         let (axis, hz) = s.split_once('=').ok_or_else(|| anyhow::anyhow!("--anti-resonance `{s}`: use AXIS=HZ"))?;
@@ -51,8 +56,19 @@ pub fn ident(
         .iter()
         .map(|r| {
             let t = Trace::read_csv(&r.files[1])?;
-            let (f, g, p) = (t.column("frequency").unwrap_or_default(), t.column("gain_db").unwrap_or_default(), t.column("phase_deg").unwrap_or_default());
-            let pts = (0..f.len()).map(|i| host_tools::frequency_response::ResponsePoint { frequency: f[i], gain_db: g[i], phase_deg: p[i], quality: 1.0 }).collect();
+            let (f, g, p) = (
+                t.column("frequency").unwrap_or_default(),
+                t.column("gain_db").unwrap_or_default(),
+                t.column("phase_deg").unwrap_or_default(),
+            );
+            let pts = (0..f.len())
+                .map(|i| host_tools::frequency_response::ResponsePoint {
+                    frequency: f[i],
+                    gain_db: g[i],
+                    phase_deg: p[i],
+                    quality: 1.0,
+                })
+                .collect();
             Ok((r.model.clone(), pts))
         })
         .collect::<Result<_>>()?;
@@ -94,7 +110,9 @@ pub fn bench_ident(common: &Common) -> Result<bool> {
     let fmu = Fmu::load(&common.fmu.clone().unwrap_or_else(default_fmu))?;
     let out = common.out.clone().unwrap_or_else(|| default_out("bench/ident"));
     let load = servo_axis::plant::PlantParams::default().load_inertia;
-    let cases: Vec<(&str, Vec<(&str, Option<f64>)>)> = vec![
+    // (case, [(axis, anti-resonance in Hz or none)])
+    type Axes<'a> = Vec<(&'a str, Option<f64>)>;
+    let cases: Vec<(&str, Axes)> = vec![
         ("two axes", vec![("x", Some(40.0)), ("y", Some(70.0))]),
         ("three axes", vec![("x", Some(40.0)), ("y", Some(70.0)), ("z", Some(55.0))]),
         ("rigid axis", vec![("w", None)]),
@@ -114,7 +132,14 @@ pub fn bench_ident(common: &Common) -> Result<bool> {
         for (axis, hz) in axes {
             tick(&pb);
             let params = hz.map(|h| absorber_parameters(h, 0.05, load)).unwrap_or_default();
-            let r = host_tools::ident_report::identify_axis(&fmu, axis, &params, 0.05, Some(20.0), &out.join(case.replace(' ', "_")))?;
+            let r = host_tools::ident_report::identify_axis(
+                &fmu,
+                axis,
+                &params,
+                0.05,
+                Some(20.0),
+                &out.join(case.replace(' ', "_")),
+            )?;
             let truth = hz.map(|h| {
                 let w = std::f64::consts::TAU * h;
                 true_anti_resonance(load, load * w * w, 2.0 * 0.05 * load * w)
@@ -151,15 +176,25 @@ pub fn bench_ident(common: &Common) -> Result<bool> {
     }
     pb.finish_and_clear();
     if common.json {
-        println!("{}", serde_json::to_string_pretty(&serde_json::json!({"bench": "ident", "rows": rows, "tunings": tunings, "passed": ok}))?);
+        println!(
+            "{}",
+            serde_json::to_string_pretty(
+                &serde_json::json!({"bench": "ident", "rows": rows, "tunings": tunings, "passed": ok})
+            )?
+        );
         return Ok(ok);
     }
     println!("servo bench ident — seed 001: accelerometer noise at 20 dB SNR, 2.05 s of M-sequence measured after 0.5 s of transients");
-    println!("  {:<11} {:<5} {:>12} {:>12} {:>12} {:>12} {:>10} {:>10}", "case", "axis", "true Hz", "found Hz", "true ζ", "found ζ", "Hz err %", "ζ err %");
+    println!(
+        "  {:<11} {:<5} {:>12} {:>12} {:>12} {:>12} {:>10} {:>10}",
+        "case", "axis", "true Hz", "found Hz", "true ζ", "found ζ", "Hz err %", "ζ err %"
+    );
     for r in &rows {
         let t = &r["truth"];
         let m = &r["model"]["anti_resonance"];
-        let num = |v: &serde_json::Value, k: &str| v.get(k).and_then(|x| x.as_f64()).map_or("-".to_string(), |x| format!("{x:.4}"));
+        let num = |v: &serde_json::Value, k: &str| {
+            v.get(k).and_then(|x| x.as_f64()).map_or("-".to_string(), |x| format!("{x:.4}"))
+        };
         println!(
             "  {:<11} {:<5} {:>12} {:>12} {:>12} {:>12} {:>10.3} {:>10.2}",
             r["case"].as_str().unwrap_or(""),
@@ -174,7 +209,9 @@ pub fn bench_ident(common: &Common) -> Result<bool> {
     }
     println!("  goal: at most 1 % in frequency and 20 % in damping");
     println!("  largest difference between the axes' command → machine-end responses up to the position-loop bandwidth (friction off; controllers alike):");
-    let pair = |v: &serde_json::Value| format!("{:.4} dB / {:.3}°", v[0].as_f64().unwrap_or(f64::NAN), v[1].as_f64().unwrap_or(f64::NAN));
+    let pair = |v: &serde_json::Value| {
+        format!("{:.4} dB / {:.3}°", v[0].as_f64().unwrap_or(f64::NAN), v[1].as_f64().unwrap_or(f64::NAN))
+    };
     for t in &tunings {
         let (r, z) = (&t["response"], &t["zeros"]);
         println!(
@@ -185,7 +222,8 @@ pub fn bench_ident(common: &Common) -> Result<bool> {
             pair(&z["spread_after"])
         );
         if let Some(c) = t["circle"].as_object() {
-            let (w, c2) = (c["roundness_without"].as_f64().unwrap_or(f64::NAN), c["roundness_with"].as_f64().unwrap_or(f64::NAN));
+            let (w, c2) =
+                (c["roundness_without"].as_f64().unwrap_or(f64::NAN), c["roundness_with"].as_f64().unwrap_or(f64::NAN));
             println!(
                 "    XY circle of x and y, radius {} rad at {} Hz (the position-loop bandwidth), machine-end roundness: without {:.3e} rad, with {:.3e} rad: {:.1}× smaller (goal 20×)",
                 CIRCLE_RADIUS, CIRCLE_HZ, w, c2, w / c2
@@ -219,7 +257,10 @@ pub fn tune(models: &[PathBuf], method: &str, no_check: bool, common: &Common) -
         _ => true,
     };
     if common.json {
-        println!("{}", serde_json::to_string_pretty(&serde_json::json!({"tuning": tuning, "files": files, "improved": improved}))?);
+        println!(
+            "{}",
+            serde_json::to_string_pretty(&serde_json::json!({"tuning": tuning, "files": files, "improved": improved}))?
+        );
         return Ok(improved);
     }
     tuning.print();

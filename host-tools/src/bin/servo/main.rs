@@ -26,11 +26,15 @@ use host_tools::scenario::Scenario;
 use host_tools::trace::{compare_exact, Trace};
 
 #[derive(Parser)]
-#[command(name = "servo", version, about = "Servo-drive toolkit: run experiments on the servo FMU, compare with fmpy, benchmark",
+#[command(
+    name = "servo",
+    version,
+    about = "Servo-drive toolkit: run experiments on the servo FMU, compare with fmpy, benchmark",
     long_about = "Servo-drive toolkit.\n\nEvery command runs against the FMU the project builds \
     (target/fmu/servo_axis.fmu, made by `cargo run -p xtask -- bundle`) unless --fmu says otherwise, \
     writes its files into out/<command>/ unless --out says otherwise, prints figures as JSON with --json, \
-    and exits with status 1 when a check inside it fails.")]
+    and exits with status 1 when a check inside it fails."
+)]
 struct Cli {
     #[command(subcommand)]
     command: Command,
@@ -577,8 +581,23 @@ fn main() -> ExitCode {
             common,
         } => (|| {
             let settings = sweep::sweep_settings(
-                point, *amplitude, *start, *stop, *points, *linear, *extra, *settle_cycles, *measure_cycles, *min_settle,
-                *min_measure, *shifts, *repeats, *threshold, *acquisition_divider, *precision_db, *max_extensions,
+                point,
+                *amplitude,
+                *start,
+                *stop,
+                *points,
+                *linear,
+                *extra,
+                *settle_cycles,
+                *measure_cycles,
+                *min_settle,
+                *min_measure,
+                *shifts,
+                *repeats,
+                *threshold,
+                *acquisition_divider,
+                *precision_db,
+                *max_extensions,
             )?;
             let parameters = host_tools::circle_report::axis_parameters(set, &[])?;
             let run = host_tools::frequency_response::SweepRun { settings, parameters, velocity: *velocity };
@@ -609,10 +628,27 @@ fn main() -> ExitCode {
             // The drive's correlator and the host's equivalent-time estimate must agree.
             Ok(r.stream_vs_online.0 <= 0.01 && r.stream_vs_online.1 <= 0.1)
         })(),
-        Command::Circle { axes, single, radius, feed, cw, lead_in, measure, set, x_set, y_set, compare, tuned, fmpy, common } => {
-            circle::circle(axes, single, *radius, *feed, *cw, *lead_in, measure, set, x_set, y_set, compare, tuned, *fmpy, common)
+        Command::Circle {
+            axes,
+            single,
+            radius,
+            feed,
+            cw,
+            lead_in,
+            measure,
+            set,
+            x_set,
+            y_set,
+            compare,
+            tuned,
+            fmpy,
+            common,
+        } => circle::circle(
+            axes, single, *radius, *feed, *cw, *lead_in, measure, set, x_set, y_set, compare, tuned, *fmpy, common,
+        ),
+        Command::Device { port, baud, timeout_ms, seconds, action, common } => {
+            device::device(port, *baud, *timeout_ms, *seconds, action, common)
         }
-        Command::Device { port, baud, timeout_ms, seconds, action, common } => device::device(port, *baud, *timeout_ms, *seconds, action, common),
         Command::Compare { a, b } => (|| {
             let (ta, tb) = (Trace::read_csv(a)?, Trace::read_csv(b)?);
             match compare_exact(&ta, &tb)? {
@@ -657,11 +693,19 @@ fn main() -> ExitCode {
             *no_fmu,
             common,
         ),
-        Command::Bench(BenchCommand::Fmu { seconds, no_fmpy, goal, common }) => backbone::bench_fmu(*seconds, *no_fmpy, *goal, common),
+        Command::Bench(BenchCommand::Fmu { seconds, no_fmpy, goal, common }) => {
+            backbone::bench_fmu(*seconds, *no_fmpy, *goal, common)
+        }
         Command::Bench(BenchCommand::Plant { common }) => backbone::bench_plant(common),
-        Command::Bench(BenchCommand::FmiCampaign { seconds, seed, common }) => robustness::bench_fmi_campaign(*seconds, *seed, common),
-        Command::Bench(BenchCommand::FaultCampaign { runs, seed, common }) => robustness::bench_fault_campaign(*runs, *seed, common),
-        Command::Bench(BenchCommand::Robustness { campaign, seconds, seed, common }) => bench_robustness(campaign, *seconds, *seed, common),
+        Command::Bench(BenchCommand::FmiCampaign { seconds, seed, common }) => {
+            robustness::bench_fmi_campaign(*seconds, *seed, common)
+        }
+        Command::Bench(BenchCommand::FaultCampaign { runs, seed, common }) => {
+            robustness::bench_fault_campaign(*runs, *seed, common)
+        }
+        Command::Bench(BenchCommand::Robustness { campaign, seconds, seed, common }) => {
+            bench_robustness(campaign, *seconds, *seed, common)
+        }
         Command::Bench(BenchCommand::Firmware { common }) => firmware::bench_firmware(common),
         Command::Bench(BenchCommand::Accdec { sequences, resonance, no_cost, common }) => {
             acc_dec::bench_accdec(*sequences, resonance, *no_cost, common)
@@ -698,9 +742,14 @@ fn bench_robustness(campaign: &str, seconds: f64, seed: u64, common: &Common) ->
         bail!("--seconds must be in (0, 86400] (got {seconds})");
     }
     let mut cmd = std::process::Command::new(std::env::var("CARGO").unwrap_or_else(|_| "cargo".into()));
-    cmd.current_dir(workspace_root())
-        .args(["run", "--profile", "robustness", "-q", "-p", "robustness", "--"])
-        .args(["--campaign", campaign, "--seconds", &seconds.to_string(), "--seed", &seed.to_string()]);
+    cmd.current_dir(workspace_root()).args(["run", "--profile", "robustness", "-q", "-p", "robustness", "--"]).args([
+        "--campaign",
+        campaign,
+        "--seconds",
+        &seconds.to_string(),
+        "--seed",
+        &seed.to_string(),
+    ]);
     if common.json {
         cmd.arg("--json");
     }

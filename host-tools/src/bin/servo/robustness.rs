@@ -16,7 +16,11 @@ pub fn bench_fmi_campaign(seconds: f64, seed: u64, common: &Common) -> Result<bo
     ));
     let mut results = Vec::new();
     for archive in [fmi3, fmi2] {
-        anyhow::ensure!(archive.exists(), "{} not found: build it with `cargo run -p xtask -- bundle`", archive.display());
+        anyhow::ensure!(
+            archive.exists(),
+            "{} not found: build it with `cargo run -p xtask -- bundle`",
+            archive.display()
+        );
         if !common.json {
             eprintln!("random FMI call sequences on {} for {seconds} s …", archive.display());
         }
@@ -24,21 +28,51 @@ pub fn bench_fmi_campaign(seconds: f64, seed: u64, common: &Common) -> Result<bo
     }
     let passed = results.iter().all(|r| r.passed());
     if common.json {
-        println!("{}", serde_json::to_string_pretty(&serde_json::json!({"bench": "fmi-campaign", "results": results, "passed": passed}))?);
+        println!(
+            "{}",
+            serde_json::to_string_pretty(
+                &serde_json::json!({"bench": "fmi-campaign", "results": results, "passed": passed})
+            )?
+        );
     } else {
         println!("servo bench fmi-campaign — random FMI call sequences through fmpy (seed {seed}), every call in any state, hostile arguments");
-        println!("  {:<8} {:>9} {:>9} {:>8} {:>8} {:>8} {:>8} {:>7} {:>6} {:>14} {:>7}", "FMI", "sequences", "calls", "OK", "Error", "refused", "steps", "crashes", "hangs", "OK+non-finite", "wall s");
+        println!(
+            "  {:<8} {:>9} {:>9} {:>8} {:>8} {:>8} {:>8} {:>7} {:>6} {:>14} {:>7}",
+            "FMI",
+            "sequences",
+            "calls",
+            "OK",
+            "Error",
+            "refused",
+            "steps",
+            "crashes",
+            "hangs",
+            "OK+non-finite",
+            "wall s"
+        );
         for r in &results {
             println!(
                 "  {:<8} {:>9} {:>9} {:>8} {:>8} {:>8} {:>8} {:>7} {:>6} {:>14} {:>7.1}",
-                r.fmi_version, r.sequences, r.calls, r.statuses.ok + r.statuses.warning, r.statuses.error, r.statuses.exception,
-                r.steps_ok, r.crashes, r.hangs, r.ok_with_non_finite_output, r.wall_seconds
+                r.fmi_version,
+                r.sequences,
+                r.calls,
+                r.statuses.ok + r.statuses.warning,
+                r.statuses.error,
+                r.statuses.exception,
+                r.steps_ok,
+                r.crashes,
+                r.hangs,
+                r.ok_with_non_finite_output,
+                r.wall_seconds
             );
             for f in &r.findings {
                 println!("    finding: {f}");
             }
         }
-        println!("  goals: 0 crashes, 0 hangs, 0 OK steps with a non-finite output: {}", if passed { "met" } else { "NOT met" });
+        println!(
+            "  goals: 0 crashes, 0 hangs, 0 OK steps with a non-finite output: {}",
+            if passed { "met" } else { "NOT met" }
+        );
     }
     Ok(passed)
 }
@@ -55,7 +89,10 @@ pub fn bench_fault_campaign(runs: usize, seed: u64, common: &Common) -> Result<b
             "servo bench fault-campaign — {} runs per fault, injected at random times in position mode with a jog (seed {seed}), {:.1} s",
             r.runs_per_kind, r.wall_seconds
         );
-        println!("  {:<40} {:>9} {:>22} {:>24} {:>22}", "fault", "detected", "worst reaction (ticks)", "restarts before clear", "runs again after clear");
+        println!(
+            "  {:<40} {:>9} {:>22} {:>24} {:>22}",
+            "fault", "detected", "worst reaction (ticks)", "restarts before clear", "runs again after clear"
+        );
         for k in &r.kinds {
             println!(
                 "  {:<40} {:>5}/{:<3} {:>22} {:>24} {:>22}",

@@ -7,7 +7,11 @@ pub fn sequence(files: &[PathBuf], with_fmpy: bool, common: &Common) -> Result<b
     let fmu_path = common.fmu.clone().unwrap_or_else(default_fmu);
     let out = common.out.clone().unwrap_or_else(|| default_out("sequence"));
     std::fs::create_dir_all(&out).with_context(|| format!("cannot create {}", out.display()))?;
-    let files = if files.is_empty() { super::backbone::toml_files_in(&workspace_root().join("scenarios/sequences"))? } else { files.to_vec() };
+    let files = if files.is_empty() {
+        super::backbone::toml_files_in(&workspace_root().join("scenarios/sequences"))?
+    } else {
+        files.to_vec()
+    };
     let fmu = Fmu::load(&fmu_path)?;
     let mut all_ok = true;
     let mut summary = Vec::new();
@@ -46,7 +50,13 @@ pub fn sequence(files: &[PathBuf], with_fmpy: bool, common: &Common) -> Result<b
         if !common.json {
             println!("{} — {}", s.name, s.description);
             for o in &outcomes {
-                println!("  [{}] {:<52} {:<48} asked: {}", if o.passed { "pass" } else { "FAIL" }, o.description, o.observed, o.bound);
+                println!(
+                    "  [{}] {:<52} {:<48} asked: {}",
+                    if o.passed { "pass" } else { "FAIL" },
+                    o.description,
+                    o.observed,
+                    o.bound
+                );
             }
             if let Some(v) = &fmpy_verdict {
                 bench::print_verdict("fmpy cross-check", v);
@@ -80,11 +90,23 @@ pub fn bench_sequence(zero_speed: &[f64], common: &Common) -> Result<bool> {
         control_core::Params::default().sequence.completion_hysteresis,
         g.runs
     );
-    println!("  {:>8} {:>8} {:>6} {:>6} {:>10} {:>12} {:>10} {:>12} {:>10} {:>8}", "speed", "level", "width", "gain", "v@acc", "stop dist", "swing", "overshoot", "settle ms", "toggles");
+    println!(
+        "  {:>8} {:>8} {:>6} {:>6} {:>10} {:>12} {:>10} {:>12} {:>10} {:>8}",
+        "speed", "level", "width", "gain", "v@acc", "stop dist", "swing", "overshoot", "settle ms", "toggles"
+    );
     for x in &r.grid {
         println!(
             "  {:>8} {:>8} {:>6} {:>5}x {:>10.3} {:>12.0} {:>10} {:>12} {:>10.1} {:>8}",
-            x.speed, x.zero_speed, x.width, x.multiplier, x.speed_at_acceptance, x.stopping_counts, x.swing_counts, x.overshoot_counts, x.settle * 1e3, x.toggles
+            x.speed,
+            x.zero_speed,
+            x.width,
+            x.multiplier,
+            x.speed_at_acceptance,
+            x.stopping_counts,
+            x.swing_counts,
+            x.overshoot_counts,
+            x.settle * 1e3,
+            x.toggles
         );
     }
     println!("  worst case over the grid: completion toggles after the first raise {} (goal 0); runs never complete {}; overshoot beyond the width after completion {} counts; settle time (acceptance to completion) {:.1} ms",
@@ -100,7 +122,14 @@ pub fn bench_sequence(zero_speed: &[f64], common: &Common) -> Result<bool> {
     println!("  stop at speed (run off + stop key at 0.3 s, zero-speed level 2 rad/s) and a 1 rad fine adjustment, per gain multiplier:");
     println!(
         "  {:>6} {:>12} {:>12} {:>16} {:>18} {:>14} {:>12} {:>16}",
-        "gain", "accept ms", "settle ms", "overshoot cnt", "error@complete cnt", "error@rest cnt", "move ms", "move overshoot"
+        "gain",
+        "accept ms",
+        "settle ms",
+        "overshoot cnt",
+        "error@complete cnt",
+        "error@rest cnt",
+        "move ms",
+        "move overshoot"
     );
     for g in &r.gains {
         println!(
@@ -115,7 +144,10 @@ pub fn bench_sequence(zero_speed: &[f64], common: &Common) -> Result<bool> {
             g.move_overshoot_counts
         );
     }
-    println!("  settle time falls as the gain rises (stop and move): {}", if r.settle_falls_with_gain { "yes" } else { "NO" });
+    println!(
+        "  settle time falls as the gain rises (stop and move): {}",
+        if r.settle_falls_with_gain { "yes" } else { "NO" }
+    );
     println!("  time from the stop key to acceptance against the zero-speed level (deceleration from 100 rad/s):");
     println!("  {:>12} {:>14} {:>22}", "level rad/s", "measured ms", "ramp (V-VH)/a ms");
     for a in &r.acceptance {

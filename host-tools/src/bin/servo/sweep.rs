@@ -62,9 +62,14 @@ pub fn bench_sweep(noise: f64, common: &Common) -> Result<bool> {
     let r = host_tools::bench_sweep::bench(&fmu, noise, |f| pb.set_position((f * 1000.0) as u64))?;
     pb.finish_and_clear();
     let e = &r.ours.errors;
-    let ok = e.below_gain_db.max(e.above_gain_db) <= 0.1 && e.below_phase_deg.max(e.above_phase_deg) <= 1.0 && r.ours.measurement_time_s <= 10.0;
+    let ok = e.below_gain_db.max(e.above_gain_db) <= 0.1
+        && e.below_phase_deg.max(e.above_phase_deg) <= 1.0
+        && r.ours.measurement_time_s <= 10.0;
     if common.json {
-        println!("{}", serde_json::to_string_pretty(&serde_json::json!({"bench": "sweep", "result": r, "passed": ok}))?);
+        println!(
+            "{}",
+            serde_json::to_string_pretty(&serde_json::json!({"bench": "sweep", "result": r, "passed": ok}))?
+        );
         return Ok(ok);
     }
     println!("servo bench sweep — seed 000: velocity loop 8 kHz, acquisition 4 kHz, 10 Hz to 3 kHz (41 points incl. 2 kHz), velocity-command injection 2 rad/s on 50 rad/s");
@@ -84,7 +89,15 @@ pub fn bench_sweep(noise: f64, common: &Common) -> Result<bool> {
             x.below_phase_deg,
             x.above_gain_db,
             x.above_phase_deg,
-            if m.unmeasured.is_empty() { String::new() } else { format!("   cannot measure {} point(s): {:?} Hz", m.unmeasured.len(), m.unmeasured.iter().map(|f| f.round()).collect::<Vec<_>>()) }
+            if m.unmeasured.is_empty() {
+                String::new()
+            } else {
+                format!(
+                    "   cannot measure {} point(s): {:?} Hz",
+                    m.unmeasured.len(),
+                    m.unmeasured.iter().map(|f| f.round()).collect::<Vec<_>>()
+                )
+            }
         );
     }
     let [o, ours, single] = r.at_nyquist;
@@ -92,9 +105,15 @@ pub fn bench_sweep(noise: f64, common: &Common) -> Result<bool> {
         "  at exactly 2 kHz: oracle {:.3} dB / {:.2} deg; phase shifted {:.3} dB / {:.2} deg (quality {:.3}); single phase {:.3} dB / {:.2} deg (quality {:.3})",
         o.gain_db, o.phase_deg, ours.gain_db, ours.phase_deg, ours.quality, single.gain_db, single.phase_deg, single.quality
     );
-    println!("  equivalent-time stream vs the drive's on-line correlator: {:.1e} dB, {:.1e} deg", r.stream_vs_online.0, r.stream_vs_online.1);
+    println!(
+        "  equivalent-time stream vs the drive's on-line correlator: {:.1e} dB, {:.1e} deg",
+        r.stream_vs_online.0, r.stream_vs_online.1
+    );
     let row = |x: &host_tools::frequency_response::ErrorSummary| {
-        format!("{:.3} / {:.2} below 2 kHz, {:.3} / {:.2} from 2 kHz up (dB / deg)", x.below_gain_db, x.below_phase_deg, x.above_gain_db, x.above_phase_deg)
+        format!(
+            "{:.3} / {:.2} below 2 kHz, {:.3} / {:.2} from 2 kHz up (dB / deg)",
+            x.below_gain_db, x.below_phase_deg, x.above_gain_db, x.above_phase_deg
+        )
     };
     println!("  ours vs oracle without the sensor noise: {}", row(&r.noise_free));
     println!("    (the noise-free encoder's count pattern locks to the excitation: both carry a phase-dependent quantisation error)");
@@ -103,7 +122,10 @@ pub fn bench_sweep(noise: f64, common: &Common) -> Result<bool> {
         "  worst error over riding speeds {:?} rad/s: fixed records {:.3} dB / {:.2} deg, lengthened for precision {:.3} dB / {:.2} deg",
         r.spread_speeds, r.spread_fixed.0, r.spread_fixed.1, r.spread_lengthened.0, r.spread_lengthened.1
     );
-    println!("  analytic linear model vs oracle up to 30 Hz: {:.3} dB, {:.2} deg", r.analytic_low_frequency.0, r.analytic_low_frequency.1);
+    println!(
+        "  analytic linear model vs oracle up to 30 Hz: {:.3} dB, {:.2} deg",
+        r.analytic_low_frequency.0, r.analytic_low_frequency.1
+    );
     println!(
         "  goal: full Bode in <= 10 s with <= 0.1 dB / 1 deg everywhere: {:.2} s, {:.3} dB, {:.2} deg: {}",
         r.ours.measurement_time_s,
@@ -114,7 +136,10 @@ pub fn bench_sweep(noise: f64, common: &Common) -> Result<bool> {
     println!("  with current-sensor noise {} A: max error up to 1.9 kHz against measurement time", r.noise_std_a);
     println!("  {:>10} {:>24} {:>24}", "time s", "ours dB / deg", "PRBS H1 dB / deg");
     for n in &r.noise {
-        println!("  {:>10.2} {:>12.3} / {:>9.2} {:>12.3} / {:>9.2}", n.measurement_time_s, n.ours.0, n.ours.1, n.prbs.0, n.prbs.1);
+        println!(
+            "  {:>10.2} {:>12.3} / {:>9.2} {:>12.3} / {:>9.2}",
+            n.measurement_time_s, n.ours.0, n.ours.1, n.prbs.0, n.prbs.1
+        );
     }
     Ok(ok)
 }
