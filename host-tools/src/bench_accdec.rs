@@ -161,26 +161,16 @@ pub fn matched_comparison() -> Result<Vec<MatchedComparison>> {
     Ok(rows)
 }
 
-/// xorshift64*: reproducible pulse sequences.
-struct Random(u64);
+/// Reproducible pulse sequences.
+type Random = crate::random::XorShift64Star;
 
-impl Random {
-    fn next(&mut self) -> u64 {
-        self.0 ^= self.0 >> 12;
-        self.0 ^= self.0 << 25;
-        self.0 ^= self.0 >> 27;
-        self.0.wrapping_mul(0x2545_F491_4F6C_DD1D)
-    }
-    fn below(&mut self, n: u64) -> u64 {
-        self.next() % n
-    }
-    fn pulses(&mut self) -> i64 {
-        match self.below(4) {
-            0 => 0,
-            1 => self.below(201) as i64 - 100,
-            2 => self.below(40_001) as i64 - 20_000,
-            _ => self.below(2_000_001) as i64 - 1_000_000,
-        }
+/// Pulses of one tick: none, small, medium or large, either sign.
+fn pulses(rng: &mut Random) -> i64 {
+    match rng.below(4) {
+        0 => 0,
+        1 => rng.below(201) as i64 - 100,
+        2 => rng.below(40_001) as i64 - 20_000,
+        _ => rng.below(2_000_001) as i64 - 1_000_000,
     }
 }
 
@@ -213,7 +203,7 @@ fn random_filter(rng: &mut Random) -> AccDecFilter {
 }
 
 pub fn properties(sequences: usize) -> Properties {
-    let mut rng = Random(0x5EED_0003);
+    let mut rng = crate::random::XorShift64Star(0x5EED_0003);
     let mut failures = 0;
     for _ in 0..sequences {
         let mut f = random_filter(&mut rng);
@@ -221,7 +211,7 @@ pub fn properties(sequences: usize) -> Properties {
         let mut sum_in = 0i64;
         let mut sum_out = 0i64;
         for _ in 0..n {
-            let x = rng.pulses();
+            let x = pulses(&mut rng);
             sum_in += x;
             sum_out += f.step(x);
         }
@@ -325,10 +315,10 @@ pub fn cost_probe(filter: &str, ticks: usize) -> Result<i64> {
         }
         other => bail!("unknown filter `{other}` (one of {COST_FILTERS:?})"),
     };
-    let mut rng = Random(7);
+    let mut rng = crate::random::XorShift64Star(7);
     let mut sum = 0i64;
     for _ in 0..ticks {
-        let x = std::hint::black_box(rng.pulses());
+        let x = std::hint::black_box(pulses(&mut rng));
         sum = sum.wrapping_add(std::hint::black_box(f.step(x)));
     }
     Ok(sum)

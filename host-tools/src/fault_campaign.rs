@@ -99,20 +99,7 @@ pub struct CampaignResult {
 /// Reaction goal in current-loop ticks.
 pub const REACTION_GOAL_TICKS: u64 = 1;
 
-/// Deterministic generator (xorshift64*) so a seed names a campaign.
-struct Rng(u64);
-
-impl Rng {
-    fn next(&mut self) -> u64 {
-        self.0 ^= self.0 >> 12;
-        self.0 ^= self.0 << 25;
-        self.0 ^= self.0 >> 27;
-        self.0.wrapping_mul(0x2545_F491_4F6C_DD1D)
-    }
-    fn below(&mut self, n: u64) -> u64 {
-        self.next() % n
-    }
-}
+type Rng = crate::random::XorShift64Star;
 
 /// One run: settle, inject at a random tick, watch the bridge, remove the fault, watch it stay
 /// off, clear, watch it come back.
@@ -199,7 +186,7 @@ fn limits_torque(config: &servo_axis::simulation::SimulationConfig) -> f64 {
 /// phases, from `seed`.
 pub fn run(runs: usize, seed: u64, mut progress: impl FnMut(f64)) -> Result<CampaignResult> {
     let start = std::time::Instant::now();
-    let mut rng = Rng(seed.wrapping_mul(0x9E37_79B9_7F4A_7C15) | 1);
+    let mut rng = crate::random::XorShift64Star(seed.wrapping_mul(0x9E37_79B9_7F4A_7C15) | 1);
     let mut kinds = Vec::new();
     for (i, kind) in FaultKind::ALL.into_iter().enumerate() {
         let mut r = KindResult {

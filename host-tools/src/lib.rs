@@ -26,6 +26,7 @@ pub mod identification;
 pub mod paths;
 pub mod plot;
 pub mod polynomial;
+pub mod random;
 pub mod report;
 pub mod response_model;
 pub mod scenario;

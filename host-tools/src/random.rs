@@ -1,0 +1,19 @@
+//! xorshift64*: a small, reproducible generator for the benches and campaigns (a seed names
+//! a run; no statistical claims beyond that).
+
+#[derive(Clone, Debug)]
+pub struct XorShift64Star(pub u64);
+
+impl XorShift64Star {
+    pub fn next(&mut self) -> u64 {
+        self.0 ^= self.0 >> 12;
+        self.0 ^= self.0 << 25;
+        self.0 ^= self.0 >> 27;
+        self.0.wrapping_mul(0x2545_F491_4F6C_DD1D)
+    }
+
+    /// A number in 0..n (n > 0).
+    pub fn below(&mut self, n: u64) -> u64 {
+        self.next() % n
+    }
+}
