@@ -6,11 +6,11 @@
 use std::ffi::{c_char, c_int, c_void, CString};
 use std::panic::{catch_unwind, AssertUnwindSafe};
 
-use super::fmi3;
 use super::instance::{
     self, c_str, call, slice, slice_mut, unsupported, Instance, Logger, Phase, Status, WhenPoisoned, ANY_PHASE,
 };
 use super::values;
+use super::{calls, fmi3};
 use crate::model_description;
 use crate::variables::{Kind, Value, Values};
 
@@ -121,21 +121,7 @@ pub unsafe extern "C" fn fmi2SetupExperiment(
 ) -> Fmi2Status {
     unsafe {
         call(c, "fmi2SetupExperiment", &[I], WhenPoisoned::Refuse, |i| {
-            // Both checked before either is stored: a refusal changes nothing.
-            let stop = (stop_time_defined != 0).then_some(stop_time);
-            if !start_time.is_finite() {
-                return Err(format!("start time {start_time} is not a finite number"));
-            }
-            if let Some(stop) = stop {
-                if !(stop.is_finite() && stop >= start_time) {
-                    return Err(format!(
-                        "stop time {stop} s must be finite and not before the start time {start_time} s"
-                    ));
-                }
-            }
-            i.model.set_start_time(start_time)?;
-            i.stop_time = stop;
-            Ok(Status::Ok)
+            calls::set_experiment(i, start_time, (stop_time_defined != 0).then_some(stop_time))
         })
     }
 }
@@ -145,14 +131,14 @@ pub unsafe extern "C" fn fmi2EnterInitializationMode(c: Component) -> Fmi2Status
     unsafe {
         call(c, "fmi2EnterInitializationMode", &[I], WhenPoisoned::Refuse, |i| {
             let (start, stop) = (i.model.time(), i.stop_time);
-            fmi3::enter_initialization(i, start, stop)
+            calls::enter_initialization(i, start, stop)
         })
     }
 }
 
 #[no_mangle]
 pub unsafe extern "C" fn fmi2ExitInitializationMode(c: Component) -> Fmi2Status {
-    unsafe { call(c, "fmi2ExitInitializationMode", &[IM], WhenPoisoned::Refuse, fmi3::exit_initialization) }
+    unsafe { call(c, "fmi2ExitInitializationMode", &[IM], WhenPoisoned::Refuse, calls::exit_initialization) }
 }
 
 #[no_mangle]
@@ -167,12 +153,12 @@ pub unsafe extern "C" fn fmi2Terminate(c: Component) -> Fmi2Status {
 
 #[no_mangle]
 pub unsafe extern "C" fn fmi2Reset(c: Component) -> Fmi2Status {
-    unsafe { call(c, "fmi2Reset", ANY_PHASE, WhenPoisoned::Allow, fmi3::reset) }
+    unsafe { call(c, "fmi2Reset", ANY_PHASE, WhenPoisoned::Allow, calls::reset) }
 }
 
 #[no_mangle]
 pub unsafe extern "C" fn fmi2DoStep(c: Component, current: f64, h: f64, _no_set_prior: Fmi2Boolean) -> Fmi2Status {
-    unsafe { call(c, "fmi2DoStep", &[SM], WhenPoisoned::Refuse, |i| fmi3::do_step(i, current, h)) }
+    unsafe { call(c, "fmi2DoStep", &[SM], WhenPoisoned::Refuse, |i| calls::do_step(i, current, h)) }
 }
 
 #[no_mangle]
@@ -289,23 +275,23 @@ pub unsafe extern "C" fn fmi2SetString(
 
 #[no_mangle]
 pub unsafe extern "C" fn fmi2GetFMUstate(c: Component, state: *mut *mut c_void) -> Fmi2Status {
-    unsafe { call(c, "fmi2GetFMUstate", ANY_PHASE, WhenPoisoned::Refuse, |i| fmi3::get_fmu_state(i, state)) }
+    unsafe { call(c, "fmi2GetFMUstate", ANY_PHASE, WhenPoisoned::Refuse, |i| calls::get_fmu_state(i, state)) }
 }
 
 #[no_mangle]
 pub unsafe extern "C" fn fmi2SetFMUstate(c: Component, state: *mut c_void) -> Fmi2Status {
-    unsafe { call(c, "fmi2SetFMUstate", ANY_PHASE, WhenPoisoned::Allow, |i| fmi3::set_fmu_state(i, state)) }
+    unsafe { call(c, "fmi2SetFMUstate", ANY_PHASE, WhenPoisoned::Allow, |i| calls::set_fmu_state(i, state)) }
 }
 
 #[no_mangle]
 pub unsafe extern "C" fn fmi2FreeFMUstate(c: Component, state: *mut *mut c_void) -> Fmi2Status {
-    unsafe { call(c, "fmi2FreeFMUstate", ANY_PHASE, WhenPoisoned::Allow, |_| fmi3::free_fmu_state(state)) }
+    unsafe { call(c, "fmi2FreeFMUstate", ANY_PHASE, WhenPoisoned::Allow, |_| calls::free_fmu_state(state)) }
 }
 
 #[no_mangle]
 pub unsafe extern "C" fn fmi2SerializedFMUstateSize(c: Component, state: *mut c_void, size: *mut usize) -> Fmi2Status {
     unsafe {
-        call(c, "fmi2SerializedFMUstateSize", ANY_PHASE, WhenPoisoned::Allow, |_| fmi3::serialized_size(state, size))
+        call(c, "fmi2SerializedFMUstateSize", ANY_PHASE, WhenPoisoned::Allow, |_| calls::serialized_size(state, size))
     }
 }
 
@@ -316,7 +302,7 @@ pub unsafe extern "C" fn fmi2SerializeFMUstate(
     out: *mut u8,
     size: usize,
 ) -> Fmi2Status {
-    unsafe { call(c, "fmi2SerializeFMUstate", ANY_PHASE, WhenPoisoned::Allow, |_| fmi3::serialize(state, out, size)) }
+    unsafe { call(c, "fmi2SerializeFMUstate", ANY_PHASE, WhenPoisoned::Allow, |_| calls::serialize(state, out, size)) }
 }
 
 #[no_mangle]
@@ -327,7 +313,7 @@ pub unsafe extern "C" fn fmi2DeSerializeFMUstate(
     state: *mut *mut c_void,
 ) -> Fmi2Status {
     unsafe {
-        call(c, "fmi2DeSerializeFMUstate", ANY_PHASE, WhenPoisoned::Allow, |_| fmi3::deserialize(bytes, size, state))
+        call(c, "fmi2DeSerializeFMUstate", ANY_PHASE, WhenPoisoned::Allow, |_| calls::deserialize(bytes, size, state))
     }
 }
 

@@ -10,8 +10,7 @@ use std::panic::{catch_unwind, AssertUnwindSafe};
 use super::instance::{
     self, c_str, call, slice, slice_mut, unsupported, Instance, Logger, Phase, Status, WhenPoisoned, ANY_PHASE,
 };
-use super::values;
-use crate::fmu_state::{self, Snapshot};
+use super::{calls, values};
 use crate::model_description;
 use crate::variables::{Kind, Value, Values};
 
@@ -152,35 +151,14 @@ pub unsafe extern "C" fn fmi3EnterInitializationMode(
 ) -> Fmi3Status {
     unsafe {
         call(instance, "fmi3EnterInitializationMode", &[I], WhenPoisoned::Refuse, |i| {
-            enter_initialization(i, start_time, (stop_time_defined != 0).then_some(stop_time))
+            calls::enter_initialization(i, start_time, (stop_time_defined != 0).then_some(stop_time))
         })
     }
 }
 
-/// Enter initialisation at `start` (both versions).
-pub fn enter_initialization(i: &mut Instance, start: f64, stop: Option<f64>) -> Result<Status, String> {
-    if let Some(stop) = stop {
-        if !(stop.is_finite() && stop >= start) {
-            return Err(format!("stop time {stop} s must be finite and not before the start time {start} s"));
-        }
-    }
-    i.model.set_start_time(start)?;
-    i.stop_time = stop;
-    i.phase = Phase::InitializationMode;
-    Ok(Status::Ok)
-}
-
-/// Leave initialisation: the axis is built from the parameters; when they are refused, the
-/// reason is logged and the instance stays in initialisation (fix and call again).
-pub fn exit_initialization(i: &mut Instance) -> Result<Status, String> {
-    i.model.initialize()?;
-    i.phase = Phase::StepMode;
-    Ok(Status::Ok)
-}
-
 #[no_mangle]
 pub unsafe extern "C" fn fmi3ExitInitializationMode(instance: Fmi3Instance) -> Fmi3Status {
-    unsafe { call(instance, "fmi3ExitInitializationMode", &[IM], WhenPoisoned::Refuse, exit_initialization) }
+    unsafe { call(instance, "fmi3ExitInitializationMode", &[IM], WhenPoisoned::Refuse, calls::exit_initialization) }
 }
 
 #[no_mangle]
@@ -198,33 +176,9 @@ pub unsafe extern "C" fn fmi3Terminate(instance: Fmi3Instance) -> Fmi3Status {
     }
 }
 
-/// Back to Instantiated with every variable at its start value (the logger settings stay).
-pub fn reset(i: &mut Instance) -> Result<Status, String> {
-    i.model.reset();
-    i.phase = Phase::Instantiated;
-    i.poisoned = false;
-    i.stop_time = None;
-    Ok(Status::Ok)
-}
-
 #[no_mangle]
 pub unsafe extern "C" fn fmi3Reset(instance: Fmi3Instance) -> Fmi3Status {
-    unsafe { call(instance, "fmi3Reset", ANY_PHASE, WhenPoisoned::Allow, reset) }
-}
-
-/// One communication step (both versions): refused before the stop time is passed, and
-/// outside the model's own checks; a refused step leaves the instance as it was.
-pub fn do_step(i: &mut Instance, current: f64, h: f64) -> Result<Status, String> {
-    if let Some(stop) = i.stop_time {
-        if current + h > stop + 1e-9 * stop.abs().max(1.0) {
-            return Err(format!("the step to {} s goes past the stop time {stop} s", current + h));
-        }
-    }
-    let result = i.model.do_step(current, h);
-    for note in std::mem::take(&mut i.model.refusals) {
-        i.log(Status::Warning, &note);
-    }
-    result.map(|()| Status::Ok)
+    unsafe { call(instance, "fmi3Reset", ANY_PHASE, WhenPoisoned::Allow, calls::reset) }
 }
 
 #[no_mangle]
@@ -240,7 +194,7 @@ pub unsafe extern "C" fn fmi3DoStep(
 ) -> Fmi3Status {
     unsafe {
         call(instance, "fmi3DoStep", &[SM], WhenPoisoned::Refuse, |i| {
-            let status = do_step(i, current_communication_point, communication_step_size);
+            let status = calls::do_step(i, current_communication_point, communication_step_size);
             for (p, v) in [(event_handling_needed, false), (terminate_simulation, false), (early_return, false)] {
                 if !p.is_null() {
                     *p = v;
@@ -445,88 +399,19 @@ pub unsafe extern "C" fn fmi3GetVariableDependencies(
 
 // ---- FMU state ----------------------------------------------------------------------------
 
-/// Save the state into `*state` (a new one when NULL, else overwrite that one).
-pub unsafe fn get_fmu_state(i: &mut Instance, state: *mut *mut c_void) -> Result<Status, String> {
-    if state.is_null() {
-        return Err("FMUState is NULL".into());
-    }
-    let snapshot = Snapshot::new(i.model.state, i.phase, i.stop_time);
-    unsafe {
-        if (*state).is_null() {
-            *state = Box::into_raw(Box::new(snapshot)) as *mut c_void;
-        } else {
-            *Snapshot::from_ptr(*state)? = snapshot;
-        }
-    }
-    Ok(Status::Ok)
-}
-
-pub unsafe fn set_fmu_state(i: &mut Instance, state: *mut c_void) -> Result<Status, String> {
-    let s = unsafe { Snapshot::from_ptr(state)? };
-    i.model.state = s.model;
-    i.model.refusals.clear();
-    i.phase = s.phase;
-    i.stop_time = s.stop_time;
-    i.poisoned = false;
-    Ok(Status::Ok)
-}
-
-pub unsafe fn free_fmu_state(state: *mut *mut c_void) -> Result<Status, String> {
-    if state.is_null() || unsafe { (*state).is_null() } {
-        return Ok(Status::Ok);
-    }
-    unsafe {
-        Snapshot::free(*state)?;
-        *state = std::ptr::null_mut();
-    }
-    Ok(Status::Ok)
-}
-
-pub unsafe fn serialized_size(state: *mut c_void, size: *mut usize) -> Result<Status, String> {
-    unsafe { Snapshot::from_ptr(state)? };
-    if size.is_null() {
-        return Err("size is NULL".into());
-    }
-    unsafe { *size = fmu_state::serialized_size() };
-    Ok(Status::Ok)
-}
-
-pub unsafe fn serialize(state: *mut c_void, out: *mut u8, size: usize) -> Result<Status, String> {
-    let s = unsafe { Snapshot::from_ptr(state)? };
-    let out = unsafe { slice_mut(out, size, "serializedState")? };
-    fmu_state::serialize(s, out)?;
-    Ok(Status::Ok)
-}
-
-pub unsafe fn deserialize(bytes: *const u8, size: usize, state: *mut *mut c_void) -> Result<Status, String> {
-    if state.is_null() {
-        return Err("FMUState is NULL".into());
-    }
-    let bytes = unsafe { slice(bytes, size, "serializedState")? };
-    let snapshot = fmu_state::deserialize(bytes)?;
-    unsafe {
-        if (*state).is_null() {
-            *state = Box::into_raw(Box::new(snapshot)) as *mut c_void;
-        } else {
-            *Snapshot::from_ptr(*state)? = snapshot;
-        }
-    }
-    Ok(Status::Ok)
-}
-
 #[no_mangle]
 pub unsafe extern "C" fn fmi3GetFMUState(instance: Fmi3Instance, state: *mut *mut c_void) -> Fmi3Status {
-    unsafe { call(instance, "fmi3GetFMUState", ANY_PHASE, WhenPoisoned::Refuse, |i| get_fmu_state(i, state)) }
+    unsafe { call(instance, "fmi3GetFMUState", ANY_PHASE, WhenPoisoned::Refuse, |i| calls::get_fmu_state(i, state)) }
 }
 
 #[no_mangle]
 pub unsafe extern "C" fn fmi3SetFMUState(instance: Fmi3Instance, state: *mut c_void) -> Fmi3Status {
-    unsafe { call(instance, "fmi3SetFMUState", ANY_PHASE, WhenPoisoned::Allow, |i| set_fmu_state(i, state)) }
+    unsafe { call(instance, "fmi3SetFMUState", ANY_PHASE, WhenPoisoned::Allow, |i| calls::set_fmu_state(i, state)) }
 }
 
 #[no_mangle]
 pub unsafe extern "C" fn fmi3FreeFMUState(instance: Fmi3Instance, state: *mut *mut c_void) -> Fmi3Status {
-    unsafe { call(instance, "fmi3FreeFMUState", ANY_PHASE, WhenPoisoned::Allow, |_| free_fmu_state(state)) }
+    unsafe { call(instance, "fmi3FreeFMUState", ANY_PHASE, WhenPoisoned::Allow, |_| calls::free_fmu_state(state)) }
 }
 
 #[no_mangle]
@@ -536,7 +421,9 @@ pub unsafe extern "C" fn fmi3SerializedFMUStateSize(
     size: *mut usize,
 ) -> Fmi3Status {
     unsafe {
-        call(instance, "fmi3SerializedFMUStateSize", ANY_PHASE, WhenPoisoned::Allow, |_| serialized_size(state, size))
+        call(instance, "fmi3SerializedFMUStateSize", ANY_PHASE, WhenPoisoned::Allow, |_| {
+            calls::serialized_size(state, size)
+        })
     }
 }
 
@@ -547,7 +434,9 @@ pub unsafe extern "C" fn fmi3SerializeFMUState(
     out: *mut u8,
     size: usize,
 ) -> Fmi3Status {
-    unsafe { call(instance, "fmi3SerializeFMUState", ANY_PHASE, WhenPoisoned::Allow, |_| serialize(state, out, size)) }
+    unsafe {
+        call(instance, "fmi3SerializeFMUState", ANY_PHASE, WhenPoisoned::Allow, |_| calls::serialize(state, out, size))
+    }
 }
 
 #[no_mangle]
@@ -558,7 +447,9 @@ pub unsafe extern "C" fn fmi3DeserializeFMUState(
     state: *mut *mut c_void,
 ) -> Fmi3Status {
     unsafe {
-        call(instance, "fmi3DeserializeFMUState", ANY_PHASE, WhenPoisoned::Allow, |_| deserialize(bytes, size, state))
+        call(instance, "fmi3DeserializeFMUState", ANY_PHASE, WhenPoisoned::Allow, |_| {
+            calls::deserialize(bytes, size, state)
+        })
     }
 }
 

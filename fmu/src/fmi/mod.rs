@@ -2,6 +2,7 @@
 //! one model. Every entry point goes through `instance::call` (pointer check, the
 //! standard's state machine, panic barrier, reasons to the importer's logger).
 
+pub mod calls;
 pub mod fmi2;
 pub mod fmi3;
 pub mod instance;
