@@ -12,6 +12,13 @@ pub fn default_fmu() -> PathBuf {
     workspace_root().join("target/fmu/servo_axis.fmu")
 }
 
+/// The x86_64 Linux FMU library the archives carry (glibc 2.17 build by `scripts/platforms`,
+/// `cargo zigbuild --target x86_64-unknown-linux-gnu.2.17`). Tests that call the C API load
+/// this one, not `target/release/`, which a plain `cargo test` never links as a cdylib.
+pub fn shipped_linux_fmu_library() -> PathBuf {
+    workspace_root().join("target/x86_64-unknown-linux-gnu/release/libservo_axis.so")
+}
+
 /// `out/<command>/` under the current directory.
 pub fn default_out(command: &str) -> PathBuf {
     PathBuf::from("out").join(command)

@@ -17,8 +17,8 @@ type Inst = *mut c_void;
 type P = *mut c_void;
 
 fn library() -> Library {
-    let p = host_tools::paths::workspace_root().join("target/release/libservo_axis.so");
-    assert!(p.exists(), "{} is missing: run scripts/test (it builds the FMU first)", p.display());
+    let p = host_tools::paths::shipped_linux_fmu_library();
+    assert!(p.exists(), "{} is missing: run scripts/platforms (scripts/test runs it first)", p.display());
     unsafe { Library::new(&p) }.expect("the FMU library loads")
 }
 
