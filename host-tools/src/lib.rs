@@ -33,5 +33,6 @@ pub mod scenario;
 pub mod sequence_scenario;
 pub mod spectral;
 pub mod sweep_report;
+pub mod timeline_reference;
 pub mod trace;
 pub mod tuning;
