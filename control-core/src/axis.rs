@@ -269,6 +269,20 @@ impl Axis {
         Ok(())
     }
 
+    /// Install a correction built ahead with `ResponseCorrection::new` from `p` at this axis's
+    /// position period (the drive builds it outside the section it shares with the control
+    /// interrupt; this only copies it in). Refused, changing nothing, while command pulses are
+    /// in flight, as [`Axis::load_correction`].
+    pub fn install_correction(
+        &mut self,
+        built: &ResponseCorrection,
+        p: &CorrectionParams,
+    ) -> Result<(), CorrectionError> {
+        self.command_path.install_correction(built)?;
+        self.params.correction = *p;
+        Ok(())
+    }
+
     pub fn sweep(&self) -> &PhaseShiftedSweep {
         &self.sweep
     }

@@ -80,6 +80,15 @@ impl CommandPath {
         self.correction.load(p, period)
     }
 
+    /// Install a correction built ahead; refused while command pulses are in flight.
+    pub fn install_correction(&mut self, built: &ResponseCorrection) -> Result<(), CorrectionError> {
+        if !self.correction.at_rest() {
+            return Err(CorrectionError::InMotion);
+        }
+        self.correction = *built;
+        Ok(())
+    }
+
     /// Filtered pulses of the last tick.
     pub fn pulses(&self) -> i64 {
         self.pulses

@@ -26,9 +26,10 @@ use crate::ranges::{check_position, Quantity, RangeError};
 use crate::response_correction::CorrectionParams;
 use crate::stop_sequence::{Refusal, SequenceEvent};
 
-/// Protocol version 3: CRC-32C instead of CRC-16 (version 2), trailing bytes refused, range
-/// refusals.
-pub const VERSION: u16 = 3;
+/// Protocol version 4: `SaveParams`, and the answer to `Hello` says where the drive's
+/// parameters came from at boot (version 3: CRC-32C instead of CRC-16, trailing bytes
+/// refused, range refusals).
+pub const VERSION: u16 = 4;
 /// Largest encoded frame, COBS body without its terminator (a full parameter set fits with
 /// room to spare).
 pub const MAX_FRAME: usize = 1024;
@@ -66,6 +67,63 @@ pub enum Request {
     Stream {
         enabled: bool,
     },
+    /// Write the parameters in force to the drive's flash, loaded at the next boot (only while
+    /// the axis stands still in torque mode at zero torque: the gate drive is off meanwhile).
+    SaveParams,
+}
+
+/// Where the parameters a drive booted with came from.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+pub enum ParamsOrigin {
+    /// The set saved last (`SaveParams`), with its record's sequence number.
+    Stored { sequence: u32 },
+    /// The defaults, and why no stored set was used.
+    Defaults(DefaultsReason),
+}
+
+/// Why a drive booted with its default parameters.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+pub enum DefaultsReason {
+    /// This side has no parameter storage (the FMU, a test).
+    NoStorage,
+    /// Both pages are erased: nothing was ever saved.
+    NothingStored,
+    /// A page holds a record whose check value does not match (a write cut short, worn flash).
+    Corrupt,
+    /// A record of another format (another firmware's layout), with its format number.
+    Foreign { format: u16 },
+    /// A record that reads but whose parameters this firmware refuses (the first offending field).
+    Invalid(FieldName),
+}
+
+impl fmt::Display for ParamsOrigin {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match self {
+            Self::Stored { sequence } => write!(f, "parameters loaded from flash (record {sequence})"),
+            Self::Defaults(DefaultsReason::NoStorage) => write!(f, "default parameters (no parameter storage)"),
+            Self::Defaults(DefaultsReason::NothingStored) => write!(f, "default parameters (nothing saved yet)"),
+            Self::Defaults(DefaultsReason::Corrupt) => {
+                write!(f, "default parameters (the stored record is corrupt: check value mismatch)")
+            }
+            Self::Defaults(DefaultsReason::Foreign { format }) => {
+                write!(f, "default parameters (the stored record has format {format}, this firmware reads another)")
+            }
+            Self::Defaults(DefaultsReason::Invalid(field)) => {
+                write!(f, "default parameters (the stored set is refused: {})", field.as_str())
+            }
+        }
+    }
+}
+
+/// Why the parameters could not be saved.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+pub enum StorageError {
+    /// This side has no parameter storage.
+    Unavailable,
+    /// The flash refused an erase or a write, or read back something else.
+    Flash,
+    /// The parameter set does not fit a page.
+    TooLarge,
 }
 
 /// A parameter's name as it crosses the link (at most 32 bytes of ASCII, zero-padded).
@@ -111,6 +169,8 @@ pub enum RefusalReason {
     NotFinite(Quantity),
     /// A set-point outside its range (`crate::ranges`): which one, and its value.
     OutOfRange(RangeError),
+    /// The parameters could not be saved.
+    Storage(StorageError),
 }
 
 impl fmt::Display for RefusalReason {
@@ -123,6 +183,9 @@ impl fmt::Display for RefusalReason {
             Self::Correction => write!(f, "invalid correction, or a command still in motion through the filter"),
             Self::NotFinite(q) => write!(f, "{} is not a finite number", q.name()),
             Self::OutOfRange(e) => write!(f, "{e}"),
+            Self::Storage(StorageError::Unavailable) => write!(f, "this drive has no parameter storage"),
+            Self::Storage(StorageError::Flash) => write!(f, "the flash refused the write or read back something else"),
+            Self::Storage(StorageError::TooLarge) => write!(f, "the parameter set does not fit a flash page"),
         }
     }
 }
@@ -163,6 +226,8 @@ impl fmt::Display for FrameError {
 pub enum Response {
     Hello {
         version: u16,
+        /// Where the parameters the drive booted with came from.
+        boot_params: ParamsOrigin,
     },
     Done,
     Refused(RefusalReason),
@@ -244,7 +309,9 @@ pub fn handle(axis: &mut Axis, commands: &mut Commands, stream: &mut Acquisition
     let refused = Response::Refused;
     match request {
         Request::Hello { version } if version != VERSION => Response::FrameError(FrameError::Version { got: version }),
-        Request::Hello { .. } => Response::Hello { version: VERSION },
+        Request::Hello { .. } => {
+            Response::Hello { version: VERSION, boot_params: ParamsOrigin::Defaults(DefaultsReason::NoStorage) }
+        }
         Request::SetParams(p) => {
             let at_rest =
                 commands.mode == Mode::Torque && commands.torque == 0.0 && axis.telemetry().torque_command == 0.0;
@@ -299,6 +366,8 @@ pub fn handle(axis: &mut Axis, commands: &mut Commands, stream: &mut Acquisition
             stream.set_enabled(enabled);
             Response::Done
         }
+        // The drive's application saves (it owns the flash); here there is nothing to save to.
+        Request::SaveParams => refused(RefusalReason::Storage(StorageError::Unavailable)),
     }
 }
 
@@ -327,6 +396,7 @@ mod tests {
             Request::LoadCorrection(p.correction),
             Request::ClearFaults,
             Request::GetTelemetry,
+            Request::SaveParams,
         ] {
             assert_eq!(round_trip(r), r);
         }
@@ -352,7 +422,7 @@ mod tests {
         let mut short = [0x02, 0x07, 0x01, 0x01, 0x01, 0x00];
         assert_eq!(decode::<Request>(&mut short), Err(FrameError::Framing));
         let mut garbage = [0u8; 16];
-        let m = encode(&[9u8, 9, 9], &mut garbage).unwrap();
+        let m = encode(&[42u8, 9, 9], &mut garbage).unwrap(); // variant 42: no request
         assert_eq!(decode::<Request>(&mut garbage[..m]), Err(FrameError::Message));
     }
 
@@ -554,7 +624,7 @@ mod tests {
         );
         assert_eq!(
             handle(&mut axis, &mut commands, &mut stream, Request::Hello { version: VERSION }),
-            Response::Hello { version: VERSION }
+            Response::Hello { version: VERSION, boot_params: ParamsOrigin::Defaults(DefaultsReason::NoStorage) }
         );
     }
 

@@ -47,7 +47,7 @@ impl<T: Read + Write> DeviceLink<T> {
     /// Check the drive speaks this protocol version.
     pub fn hello(&mut self) -> Result<()> {
         match self.request(&Request::Hello { version: VERSION })? {
-            Response::Hello { version } if version == VERSION => Ok(()),
+            Response::Hello { version, .. } if version == VERSION => Ok(()),
             Response::FrameError(e) => bail!("the drive refused the handshake: {e}"),
             other => bail!("unexpected answer to the handshake: {other:?}"),
         }

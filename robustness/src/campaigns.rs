@@ -7,7 +7,9 @@ use std::time::Instant;
 
 use control_core::acquisition_stream::{AcquisitionStream, SampleBatch, BATCH};
 use control_core::phase_shifted_sweep::AcquisitionSample;
-use control_core::protocol::{decode, encode, handle, Request, Response, MAX_FRAME, VERSION};
+use control_core::protocol::{
+    decode, encode, handle, DefaultsReason, ParamsOrigin, Request, Response, MAX_FRAME, VERSION,
+};
 use control_core::stop_sequence::SequenceEvent;
 use control_core::{Axis, AxisInputs, Commands, Mode, Params};
 use fastrand::Rng;
@@ -305,7 +307,8 @@ fn random_request(rng: &mut Rng) -> Request {
         9 => Request::StartSweep,
         10 => Request::LoadCorrection(Params::default().correction),
         11 => Request::ClearFaults,
-        12 | 13 => Request::GetTelemetry,
+        12 => Request::GetTelemetry,
+        13 => Request::SaveParams,
         _ => Request::Stream { enabled: rng.bool() },
     }
 }
@@ -574,7 +577,15 @@ fn random_response(rng: &mut Rng, tick: &mut u64) -> Response {
         }
         5 => Response::Telemetry(Default::default()),
         6 => Response::Done,
-        _ => Response::Hello { version: VERSION },
+        _ => Response::Hello {
+            version: VERSION,
+            boot_params: match rng.u8(0..4) {
+                0 => ParamsOrigin::Stored { sequence: rng.u32(..) },
+                1 => ParamsOrigin::Defaults(DefaultsReason::Corrupt),
+                2 => ParamsOrigin::Defaults(DefaultsReason::Foreign { format: rng.u16(..) }),
+                _ => ParamsOrigin::Defaults(DefaultsReason::NothingStored),
+            },
+        },
     }
 }
 
