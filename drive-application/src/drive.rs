@@ -204,7 +204,7 @@ impl Drive {
                 s.stream.offer(&t.sweep.sample);
                 let divider = axis.params().rates.position_divider;
                 // A u32 counter: a 64-bit modulo is a library call on the Cortex-M4.
-                (ticks % divider == 0).then_some(t.faults)
+                ticks.is_multiple_of(divider).then_some(t.faults)
             })
             .unwrap_or_else(|| {
                 stage.set_outputs(false);

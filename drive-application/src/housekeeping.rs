@@ -43,7 +43,7 @@ impl Housekeeping {
             self.last = faults;
         }
         self.position_ticks = self.position_ticks.wrapping_add(1);
-        if self.position_ticks % ALIVE_EVERY == 0 {
+        if self.position_ticks.is_multiple_of(ALIVE_EVERY) {
             note(Note::Alive { ticks: drive.ticks(), faults, bus_voltage: drive.bus_voltage() });
         }
     }

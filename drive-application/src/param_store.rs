@@ -171,7 +171,7 @@ pub fn save<F: ParamFlash>(flash: &mut F, state: &mut StoreState, params: &Param
     // The head's first 8 bytes (magic, format, length) are the commit, written last: the
     // programming unit must divide them.
     let unit = F::WRITE_BYTES;
-    if unit == 0 || COMMIT_BYTES % unit != 0 {
+    if unit == 0 || !COMMIT_BYTES.is_multiple_of(unit) {
         return Err(StorageError::Flash);
     }
     let n = encode_record(params, sequence, unit, &mut record)?;

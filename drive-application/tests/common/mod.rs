@@ -96,7 +96,7 @@ impl ParamFlash for RamFlash {
         Ok(())
     }
     fn program(&mut self, page: usize, offset: usize, bytes: &[u8]) -> Result<(), FlashError> {
-        if page > 1 || offset % 8 != 0 || bytes.len() % 8 != 0 || offset + bytes.len() > PAGE {
+        if page > 1 || !offset.is_multiple_of(8) || !bytes.len().is_multiple_of(8) || offset + bytes.len() > PAGE {
             return Err(FlashError::Alignment);
         }
         for (i, b) in bytes.iter().enumerate() {
