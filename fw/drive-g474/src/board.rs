@@ -1,8 +1,10 @@
-//! NUCLEO-G474RE with the X-NUCLEO-IHM08M1 power stage: clocks, pins and peripherals. The
-//! register words come from the `power-stage` crate (pure functions of its `IHM08M1`
-//! configuration, tested on the host against models of TIM1's output stage, the L6398 and the
-//! shunt amplifiers); this module writes them. Everything board-specific lives here and
-//! there, so a second board is a second module with the same functions.
+//! NUCLEO-G474RE with the X-NUCLEO-IHM08M1 power stage: clocks, pins and peripherals, and the
+//! drive application's board interface on them ([`Stage`]: `drive_application::PowerStage`,
+//! [`ParamPages`]: `drive_application::ParamFlash`). The register words come from the
+//! `power-stage` crate (pure functions of its `IHM08M1` configuration, tested on the host
+//! against models of TIM1's output stage, the L6398 and the shunt amplifiers); this module
+//! writes them. Everything board-specific lives here and there, so a second board is a second
+//! module implementing the same two traits.
 //!
 //! | signal | pin | peripheral |
 //! |---|---|---|
@@ -31,9 +33,18 @@
 //! while a debugger halts the core; a core lockup breaks TIM1; the control loop feeds an
 //! independent watchdog (started by [`start_watchdog`]); the panic and HardFault handlers of
 //! the binary call [`bridge_off_now`] first.
+//!
+//! Parameter storage: the last two 4 KiB pages of the flash (single-bank mode), at offsets
+//! 0x7E000 and 0x7F000. The G474 has one flash bank here: an erase or a write stalls every
+//! fetch from flash, the control interrupt's included, for up to 40 ms (page erase). So
+//! [`ParamPages`] switches the gate drive off and lengthens the watchdog around each
+//! operation (the application allows `SaveParams` only at rest and keeps the gate drive off
+//! until the save is over).
 
 use control_core::current_sensing::SensingScales;
 use control_core::Params;
+use drive_application::board::{FlashError, ParamFlash, PowerStage, Sample};
+use embassy_stm32::flash::{Blocking, Flash};
 use embassy_stm32::pac;
 use embassy_stm32::peripherals;
 use embassy_stm32::time::Hertz;
@@ -42,7 +53,7 @@ use embassy_stm32::usart::{self, BufferedUart};
 use embassy_stm32::{bind_interrupts, Peri, Peripherals};
 use power_stage::adc_words;
 use power_stage::config::IHM08M1;
-use power_stage::fail_safe::{self, FAIL_SAFE};
+use power_stage::fail_safe::{self, WatchdogWords, FAIL_SAFE};
 use power_stage::ratings;
 use power_stage::tim1_words::{self, bdtr_with_moe, compare_value, Tim1Words, CR1_CEN, EGR_UG};
 
@@ -93,6 +104,7 @@ pub struct Bridge {
 
 pub struct Board {
     pub bridge: Bridge,
+    pub flash: ParamPages,
     /// Kept so that TIM2, its pins and its clock stay owned; read through [`encoder_count`].
     pub encoder: Qei<'static, peripherals::TIM2>,
     pub link: BufferedUart<'static>,
@@ -114,7 +126,7 @@ pub fn init(p: Peripherals, tx: &'static mut [u8], rx: &'static mut [u8]) -> Boa
     let mut config = usart::Config::default();
     config.baudrate = 921_600;
     let link = BufferedUart::new(p.USART2, p.PA3, p.PA2, tx, rx, Irqs, config).expect("USART2 configuration");
-    Board { bridge, encoder, link }
+    Board { bridge, flash: ParamPages { flash: Flash::new_blocking(p.FLASH) }, encoder, link }
 }
 
 /// DBG_TIM1_STOP (and DBG_IWDG_STOP: a breakpoint does not reset the chip), and the core's
@@ -205,6 +217,7 @@ fn adc_injected() {
 /// One sample: the three shunt counts (U, V, W) and the bus voltage count. Acknowledges both
 /// ADCs' end of sequence; ADC2 was triggered with ADC1 and converts as many ranks, so it has
 /// finished too (waited for, a few clocks at most).
+#[inline(always)]
 pub fn take_sample() -> ([u16; 3], u16) {
     let (a1, a2) = (pac::ADC1, pac::ADC2);
     let mut spins = 0;
@@ -216,22 +229,14 @@ pub fn take_sample() -> ([u16; 3], u16) {
     ([a1.jdr(0).read().jdata(), a2.jdr(0).read().jdata(), a2.jdr(1).read().jdata()], a1.jdr(1).read().jdata())
 }
 
-/// Shunt channels sampled per tick (U, V, W).
-pub const CURRENT_CHANNELS: usize = 3;
-
-/// The phase currents U and V for the core from the three shunt currents (A), believing the
-/// two shunts whose low sides conducted longest under `duties_in_force`.
-#[inline]
-pub fn phase_currents(shunts: [f32; CURRENT_CHANNELS], duties_in_force: [f32; 3]) -> [f32; 2] {
-    power_stage::shunt_selection::phase_currents(shunts, duties_in_force)
-}
-
 /// The encoder's 32-bit quadrature count.
+#[inline(always)]
 pub fn encoder_count() -> i32 {
     pac::TIM2.cnt().read() as i32
 }
 
 /// Duty cycles 0..1 of the three half-bridges (clamped: the core gives 0..1 already).
+#[inline(always)]
 pub fn write_duties(d: [f32; 3]) {
     for (n, duty) in d.into_iter().enumerate() {
         pac::TIM1.ccr(n).write(|w| w.0 = compare_value(duty, TIM1_WORDS.arr));
@@ -239,6 +244,7 @@ pub fn write_duties(d: [f32; 3]) {
 }
 
 /// Gate drive on or off (main output enable; the whole BDTR word). Off takes effect at once.
+#[inline(always)]
 pub fn set_outputs(on: bool) {
     pac::TIM1.bdtr().write(|w| w.0 = bdtr_with_moe(TIM1_WORDS.bdtr, on));
 }
@@ -272,6 +278,7 @@ pub fn feed_watchdog() {
 
 /// The break input switched the bridge off since the last call (clears the flag; the flag
 /// comes back while the input stays active).
+#[inline(always)]
 pub fn break_tripped() -> bool {
     let t = pac::TIM1;
     let tripped = t.sr().read().bif(0);
@@ -283,3 +290,127 @@ pub fn break_tripped() -> bool {
 
 /// Interrupt of the injected end of sequence, for `control` to enable.
 pub const SAMPLE_INTERRUPT: embassy_stm32::interrupt::Interrupt = embassy_stm32::interrupt::ADC1_2;
+
+/// The power stage as the drive application's control tick uses it: the functions above.
+pub struct Stage;
+
+impl PowerStage for Stage {
+    const SCALES: SensingScales = SCALES;
+    #[inline(always)]
+    fn take_sample(&mut self) -> Sample {
+        let (shunts, bus) = take_sample();
+        Sample { shunts, bus }
+    }
+    #[inline(always)]
+    fn encoder_count(&mut self) -> i32 {
+        encoder_count()
+    }
+    #[inline(always)]
+    fn break_tripped(&mut self) -> bool {
+        break_tripped()
+    }
+    /// Believe the two shunts whose low sides conducted longest under `duties_in_force`.
+    #[inline(always)]
+    fn phase_currents(&self, shunt_amps: [f32; 3], duties_in_force: [f32; 3]) -> [f32; 2] {
+        power_stage::shunt_selection::phase_currents(shunt_amps, duties_in_force)
+    }
+    #[inline(always)]
+    fn write_duties(&mut self, duties: [f32; 3]) {
+        write_duties(duties)
+    }
+    #[inline(always)]
+    fn set_outputs(&mut self, on: bool) {
+        set_outputs(on)
+    }
+    #[inline(always)]
+    fn feed_watchdog(&mut self) {
+        feed_watchdog()
+    }
+}
+
+/// Offset (from the start of flash) of the first parameter page; the second follows.
+pub const PARAM_PAGES_OFFSET: u32 = 0x7_E000;
+/// The G474's page in single-bank mode.
+pub const PARAM_PAGE_BYTES: u32 = 4096;
+
+/// The two parameter pages, through Embassy's blocking flash driver (its calls that take no
+/// critical section: the stall itself already holds everything off).
+pub struct ParamPages {
+    flash: Flash<'static, Blocking>,
+}
+
+impl ParamPages {
+    fn offset(page: usize, offset: usize, len: usize) -> Result<u32, FlashError> {
+        if page > 1 || offset + len > PARAM_PAGE_BYTES as usize || !image_below_param_pages() {
+            return Err(FlashError::Alignment);
+        }
+        Ok(PARAM_PAGES_OFFSET + page as u32 * PARAM_PAGE_BYTES + offset as u32)
+    }
+}
+
+/// The program image (code, read-only data and the initial image of `.data`) ends below the
+/// parameter pages (the linker's memory map gives the whole flash to the program).
+fn image_below_param_pages() -> bool {
+    extern "C" {
+        static __sidata: u32;
+        static __sdata: u32;
+        static __edata: u32;
+    }
+    // Addresses of cortex-m-rt's linker symbols, not their contents.
+    let (load, start, end) = (
+        core::ptr::addr_of!(__sidata) as u32,
+        core::ptr::addr_of!(__sdata) as u32,
+        core::ptr::addr_of!(__edata) as u32,
+    );
+    load + (end - start) <= 0x0800_0000 + PARAM_PAGES_OFFSET
+}
+
+/// `f` with the gate drive off and the watchdog at about 200 ms (the flash stalls the
+/// control interrupt; a page erase takes up to 40 ms), then the watchdog as before.
+fn stalling<R>(f: impl FnOnce() -> R) -> R {
+    set_outputs(false);
+    let normal = FAIL_SAFE.watchdog;
+    if normal.is_some() {
+        set_watchdog(FLASH_WATCHDOG);
+    }
+    let r = f();
+    if let Some(w) = normal {
+        set_watchdog(w);
+    }
+    r
+}
+
+/// The watchdog while the flash stalls the processor: 200 ms.
+const FLASH_WATCHDOG: WatchdogWords = fail_safe::watchdog_words(200_000, fail_safe::LSI_HZ);
+
+/// New prescaler and reload of the running watchdog (waits for the previous update), fed.
+fn set_watchdog(w: WatchdogWords) {
+    let iwdg = pac::IWDG;
+    feed_watchdog();
+    while iwdg.sr().read().0 != 0 {}
+    iwdg.kr().write(|k| k.0 = fail_safe::IWDG_KEY_UNLOCK as u32);
+    iwdg.pr().write(|r| r.0 = w.pr as u32);
+    iwdg.rlr().write(|r| r.0 = w.rlr as u32);
+    while iwdg.sr().read().0 != 0 {}
+    feed_watchdog();
+}
+
+impl ParamFlash for ParamPages {
+    const PAGE_BYTES: usize = PARAM_PAGE_BYTES as usize;
+    const WRITE_BYTES: usize = 8;
+    fn read(&mut self, page: usize, offset: usize, bytes: &mut [u8]) -> Result<(), FlashError> {
+        let at = Self::offset(page, offset, bytes.len())?;
+        self.flash.blocking_read(at, bytes).map_err(|_| FlashError::Hardware)
+    }
+    fn erase(&mut self, page: usize) -> Result<(), FlashError> {
+        let at = Self::offset(page, 0, PARAM_PAGE_BYTES as usize)?;
+        stalling(|| self.flash.blocking_erase(at, at + PARAM_PAGE_BYTES)).map_err(|_| FlashError::Hardware)
+    }
+    fn program(&mut self, page: usize, offset: usize, bytes: &[u8]) -> Result<(), FlashError> {
+        if !offset.is_multiple_of(8) || !bytes.len().is_multiple_of(8) {
+            return Err(FlashError::Alignment);
+        }
+        let at = Self::offset(page, offset, bytes.len())?;
+        stalling(|| self.flash.blocking_write(at, bytes)).map_err(|_| FlashError::Hardware)
+    }
+}

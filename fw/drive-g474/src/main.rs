@@ -1,6 +1,8 @@
-//! Servo drive firmware: the control core (`control-core`) around an STM32G474. The library
-//! holds board code (`board`) and application code (`control`: the loop, `link`: the host
-//! protocol); this binary wires interrupts and tasks. On-target tests: `fw/tests`.
+//! Servo drive firmware: the drive application (`drive-application`, around the control core)
+//! on an STM32G474. The library holds the board code (`board`: registers, and the board
+//! interface the application uses) and binds the application's two sides to this board's
+//! contexts (`control`: the tick in the sampling interrupt and the housekeeping task, `link`:
+//! the host link task); this binary wires interrupts and tasks. On-target tests: `fw/tests`.
 //!
 //! Interrupt priorities (lower number = more urgent): the sampling interrupt that runs the
 //! loop P0; the high-priority executor (position-tick housekeeping) P1; Embassy's own time
@@ -64,15 +66,25 @@ async fn main(spawner: Spawner) {
     let p = embassy_stm32::init(board::clocks());
     interrupt::TIM4.set_priority(Priority::P3);
     interrupt::USART2.set_priority(Priority::P3);
-    let board = board::init(p, TX.init([0; 1024]), RX.init([0; 1024]));
-    if let Err(e) = control::install(board::with_board_limits(control_core::Params::default())) {
-        defmt::error!("control core not installed: {}", e);
-        return;
+    let mut board = board::init(p, TX.init([0; 1024]), RX.init([0; 1024]));
+    let defaults = board::with_board_limits(control_core::Params::default());
+    let host = match control::DRIVE.install::<board::Stage, _>(defaults, &mut board.flash) {
+        Ok(host) => host,
+        Err(e) => {
+            defmt::error!("drive not installed: {}", defmt::Debug2Format(&e));
+            return;
+        }
+    };
+    match host.boot_params() {
+        origin @ control_core::protocol::ParamsOrigin::Stored { .. } => {
+            defmt::info!("{}", defmt::Display2Format(&origin))
+        }
+        origin => defmt::warn!("{}", defmt::Display2Format(&origin)),
     }
     interrupt::UART4.set_priority(Priority::P1);
     let housekeeping = CONTROL_EXECUTOR.start(interrupt::UART4);
     housekeeping.spawn(control::position_tick_task().expect("position-tick task"));
-    spawner.spawn(link::link_task(board.link).expect("link task"));
+    spawner.spawn(link::link_task(board.link, host, board.flash).expect("link task"));
     board::start_watchdog();
     control::start(Priority::P0);
     defmt::info!(
