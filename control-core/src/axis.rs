@@ -279,7 +279,11 @@ impl Axis {
         p: &CorrectionParams,
     ) -> Result<(), CorrectionError> {
         self.command_path.install_correction(built)?;
-        self.params.correction = *p;
+        // Section by section (a whole-struct copy is a slow `memcpy` on the Cortex-M4).
+        for (d, s) in self.params.correction.sections.iter_mut().zip(&p.sections) {
+            *d = *s;
+        }
+        self.params.correction.count = p.count;
         Ok(())
     }
 

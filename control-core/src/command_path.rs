@@ -82,11 +82,7 @@ impl CommandPath {
 
     /// Install a correction built ahead; refused while command pulses are in flight.
     pub fn install_correction(&mut self, built: &ResponseCorrection) -> Result<(), CorrectionError> {
-        if !self.correction.at_rest() {
-            return Err(CorrectionError::InMotion);
-        }
-        self.correction = *built;
-        Ok(())
+        self.correction.install(built)
     }
 
     /// Filtered pulses of the last tick.

@@ -23,13 +23,15 @@
 
 use core::cell::{RefCell, UnsafeCell};
 use core::mem::MaybeUninit;
-use core::sync::atomic::{AtomicU32, Ordering};
+use core::sync::atomic::{AtomicBool, AtomicU32, Ordering};
 
 use control_core::acquisition_stream::{AcquisitionStream, SampleBatch};
 use control_core::current_sensing::CurrentSensing;
 use control_core::faults::Faults;
 use control_core::params::Params;
-use control_core::protocol::{handle, FrameError, ParamsOrigin, RefusalReason, Request, Response, VERSION};
+use control_core::protocol::{
+    handle, DefaultsReason, FieldName, FrameError, ParamsOrigin, RefusalReason, Request, Response, VERSION,
+};
 use control_core::response_correction::ResponseCorrection;
 use control_core::{Axis, AxisInputs, Commands, Mode};
 use critical_section::Mutex;
@@ -65,6 +67,8 @@ pub struct Drive {
     axes: [UnsafeCell<MaybeUninit<Axis>>; 2],
     /// Ticks since start (health, the heartbeat).
     ticks: AtomicU32,
+    /// [`Drive::install`] has begun (it hands out the one [`Host`]).
+    claimed: AtomicBool,
 }
 
 // SAFETY: the active axis slot is touched only under the critical section (through
@@ -95,6 +99,7 @@ impl Drive {
             shared: Mutex::new(RefCell::new(Slot { installed: false, value: MaybeUninit::uninit() })),
             axes: [UnsafeCell::new(MaybeUninit::uninit()), UnsafeCell::new(MaybeUninit::uninit())],
             ticks: AtomicU32::new(0),
+            claimed: AtomicBool::new(false),
         }
     }
 
@@ -105,48 +110,43 @@ impl Drive {
         defaults: Params,
         flash: &mut F,
     ) -> Result<Host<'_>, InstallError> {
+        if self.claimed.swap(true, Ordering::AcqRel) {
+            return Err(InstallError::Twice);
+        }
         let (loaded, store) = param_store::load(flash);
-        let (axis, params, boot_params) = match loaded {
+        let (stored, refused) = match loaded {
             Ok((params, sequence)) => match Axis::new(params) {
-                Ok(axis) => (axis, params, ParamsOrigin::Stored { sequence }),
-                Err(e) => {
-                    let reason = control_core::protocol::DefaultsReason::Invalid(
-                        control_core::protocol::FieldName::new(e.field()),
-                    );
-                    (
-                        Axis::new(defaults).map_err(|e| InstallError::Params(e.field()))?,
-                        defaults,
-                        ParamsOrigin::Defaults(reason),
-                    )
-                }
+                Ok(axis) => (Some((axis, params, ParamsOrigin::Stored { sequence })), None),
+                Err(e) => (None, Some(DefaultsReason::Invalid(FieldName::new(e.field())))),
             },
-            Err(reason) => (
+            Err(reason) => (None, Some(reason)),
+        };
+        let (axis, params, boot_params) = match (stored, refused) {
+            (Some(found), _) => found,
+            (None, reason) => (
                 Axis::new(defaults).map_err(|e| InstallError::Params(e.field()))?,
                 defaults,
-                ParamsOrigin::Defaults(reason),
+                ParamsOrigin::Defaults(reason.unwrap_or(DefaultsReason::NothingStored)),
             ),
         };
         let sensing = CurrentSensing::new(P::SCALES).map_err(|_| InstallError::Scales)?;
+        // SAFETY: claimed above, by this call alone, and not installed yet: nothing reads slot
+        // 0 (the tick waits for `installed`, set below under the critical section).
+        unsafe { (*self.axes[0].get()).write(axis) };
+        let shared = Shared {
+            active: 0,
+            commands: Commands::default(),
+            sensing,
+            stream: AcquisitionStream::default(),
+            duties_in_force: [0.0; 3],
+            bus_voltage: 0.0,
+            storing: false,
+        };
         critical_section::with(|cs| {
             let mut slot = self.shared.borrow_ref_mut(cs);
-            if slot.installed {
-                return Err(InstallError::Twice);
-            }
-            // SAFETY: not installed yet, so nothing reads slot 0 (the tick waits for
-            // `installed`, set below under the same critical section).
-            unsafe { (*self.axes[0].get()).write(axis) };
-            slot.value.write(Shared {
-                active: 0,
-                commands: Commands::default(),
-                sensing,
-                stream: AcquisitionStream::default(),
-                duties_in_force: [0.0; 3],
-                bus_voltage: 0.0,
-                storing: false,
-            });
+            slot.value.write(shared);
             slot.installed = true;
-            Ok(())
-        })?;
+        });
         Ok(Host { drive: self, params, boot_params, store, assembler: FrameAssembler::new() })
     }
 
@@ -296,11 +296,7 @@ impl Host<'_> {
         }
         let new = match Axis::new(p) {
             Ok(new) => new,
-            Err(e) => {
-                return Response::Refused(RefusalReason::InvalidParams(control_core::protocol::FieldName::new(
-                    e.field(),
-                )))
-            }
+            Err(e) => return Response::Refused(RefusalReason::InvalidParams(FieldName::new(e.field()))),
         };
         let spare = 1 - active;
         // SAFETY: the spare slot is not the active one, and only this `Host` (there is one)

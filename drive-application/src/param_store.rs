@@ -2,8 +2,10 @@
 //! so that a power loss during a save leaves the previous record whole.
 //!
 //! A record: an 8-byte head (magic "SVPR", format, payload length), an 8-byte tail of the
-//! head (sequence number, CRC-32C of format, length, sequence and payload), then the
-//! postcard-encoded `Params`, padded with 0xFF to the programming unit. A save erases the page
+//! head (sequence number, CRC-32C of format, length, sequence and payload), then the payload:
+//! the protocol's `Request::SetParams` carrying the set, postcard-encoded as on the link (the
+//! drive decodes it with the link's own decoder: no second copy of it in flash), padded with
+//! 0xFF to the programming unit. A save erases the page
 //! not holding the newest record, programs everything but the head, and the head last: a
 //! record without its head is no record, and a head is written only over a complete body.
 //! At boot the newest record (highest sequence number, compared with wrap-around) whose check
@@ -12,7 +14,7 @@
 //! another format.
 
 use control_core::params::Params;
-use control_core::protocol::{DefaultsReason, StorageError, MAX_FRAME};
+use control_core::protocol::{DefaultsReason, Request, StorageError, MAX_FRAME};
 
 use crate::board::ParamFlash;
 
@@ -101,8 +103,8 @@ pub fn read_page<F: ParamFlash>(flash: &mut F, page: usize) -> PageContent {
     {
         return PageContent::Corrupt;
     }
-    match postcard::take_from_bytes::<Params>(&payload[..n]) {
-        Ok((params, [])) => PageContent::Record { sequence, params },
+    match postcard::take_from_bytes::<Request>(&payload[..n]) {
+        Ok((Request::SetParams(params), [])) => PageContent::Record { sequence, params },
         _ => PageContent::Corrupt,
     }
 }
@@ -145,8 +147,9 @@ pub fn encode_record(params: &Params, sequence: u32, unit: usize, out: &mut [u8]
         return Err(StorageError::TooLarge);
     }
     let room = (out.len() - HEAD_BYTES).min(MAX_PAYLOAD);
-    let n =
-        postcard::to_slice(params, &mut out[HEAD_BYTES..HEAD_BYTES + room]).map_err(|_| StorageError::TooLarge)?.len();
+    let n = postcard::to_slice(&Request::SetParams(*params), &mut out[HEAD_BYTES..HEAD_BYTES + room])
+        .map_err(|_| StorageError::TooLarge)?
+        .len();
     let length = n as u16;
     let crc = crc_of(FORMAT, length, sequence, &out[HEAD_BYTES..HEAD_BYTES + n]);
     out[0..4].copy_from_slice(&MAGIC.to_le_bytes());
@@ -182,11 +185,15 @@ pub fn save<F: ParamFlash>(flash: &mut F, state: &mut StoreState, params: &Param
     flash.erase(page).map_err(|_| StorageError::Flash)?;
     flash.program(page, commit, &record[commit..n]).map_err(|_| StorageError::Flash)?;
     flash.program(page, 0, &record[..commit]).map_err(|_| StorageError::Flash)?;
-    match read_page(flash, page) {
-        PageContent::Record { sequence: s, params: p } if s == sequence && p == *params => {
-            state.newest = Some((page, sequence));
-            Ok(())
+    // Read back byte for byte, a unit at a time.
+    let mut unit_back = [0u8; COMMIT_BYTES];
+    for (k, chunk) in record[..n].chunks(COMMIT_BYTES).enumerate() {
+        let back = &mut unit_back[..chunk.len()];
+        flash.read(page, k * COMMIT_BYTES, back).map_err(|_| StorageError::Flash)?;
+        if back != chunk {
+            return Err(StorageError::Flash);
         }
-        _ => Err(StorageError::Flash),
     }
+    state.newest = Some((page, sequence));
+    Ok(())
 }

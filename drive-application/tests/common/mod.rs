@@ -112,20 +112,29 @@ impl ParamFlash for RamFlash {
 /// The critical section on the host: a spin lock, re-entrant within a thread. For every
 /// outermost section taken by a thread marked as the link's ([`mark_link_thread`]), the
 /// processor time it held the lock (the thread's own clock: a preemption does not count)
-/// goes into [`LINK_SECTIONS_NS`]; one of at least [`TICK_NS`] would have missed a tick.
+/// goes into that thread's [`take_longest`]; one of at least [`TICK_NS`] would have made the
+/// control interrupt miss a tick.
 struct SpinSection;
 critical_section::set_impl!(SpinSection);
 
 static LOCKED: AtomicBool = AtomicBool::new(false);
 static OWNER: AtomicUsize = AtomicUsize::new(0);
-/// Processor time (ns) of every section the link side held, in order.
-pub static LINK_SECTIONS_NS: std::sync::Mutex<Vec<u64>> = std::sync::Mutex::new(Vec::new());
+/// Sections the host's kernel entered (a page fault, a context switch: nothing the drive's
+/// code does on the target), left out of [`take_longest`].
+pub static DISTURBED_SECTIONS: std::sync::atomic::AtomicU64 = std::sync::atomic::AtomicU64::new(0);
+
+/// The longest section this (link) thread held since the last call, in processor time (ns),
+/// and how many it held.
+pub fn take_longest() -> (u64, u64) {
+    LONGEST.with(|l| l.replace((0, 0)))
+}
 /// The G474's base tick: 16 kHz.
 pub const TICK_NS: u64 = 62_500;
 
 thread_local! {
     static IS_LINK: std::cell::Cell<bool> = const { std::cell::Cell::new(false) };
-    static STARTED: std::cell::Cell<u64> = const { std::cell::Cell::new(0) };
+    static STARTED: std::cell::Cell<(u64, i64)> = const { std::cell::Cell::new((0, 0)) };
+    static LONGEST: std::cell::Cell<(u64, u64)> = const { std::cell::Cell::new((0, 0)) };
 }
 
 pub fn mark_link_thread() {
@@ -135,6 +144,14 @@ pub fn mark_link_thread() {
 fn thread_id() -> usize {
     thread_local! { static ID: u8 = const { 0 }; }
     ID.with(|x| x as *const u8 as usize)
+}
+
+/// Page faults and context switches of this thread so far.
+fn kernel_entries() -> i64 {
+    // SAFETY: a plain read into a zeroed local.
+    let mut u: libc::rusage = unsafe { std::mem::zeroed() };
+    unsafe { libc::getrusage(libc::RUSAGE_THREAD, &mut u) };
+    u.ru_minflt + u.ru_majflt + u.ru_nvcsw + u.ru_nivcsw
 }
 
 pub fn thread_cpu_ns() -> u64 {
@@ -155,7 +172,7 @@ unsafe impl critical_section::Impl for SpinSection {
         }
         OWNER.store(me, Ordering::Release);
         if IS_LINK.with(|l| l.get()) {
-            STARTED.with(|s| s.set(thread_cpu_ns()));
+            STARTED.with(|s| s.set((thread_cpu_ns(), kernel_entries())));
         }
         true
     }
@@ -164,8 +181,17 @@ unsafe impl critical_section::Impl for SpinSection {
             return;
         }
         if IS_LINK.with(|l| l.get()) {
-            let held = thread_cpu_ns().saturating_sub(STARTED.with(|s| s.get()));
-            LINK_SECTIONS_NS.lock().unwrap_or_else(|e| e.into_inner()).push(held);
+            let held = thread_cpu_ns();
+            let (started, entries) = STARTED.with(|s| s.get());
+            if kernel_entries() != entries {
+                DISTURBED_SECTIONS.fetch_add(1, Ordering::Relaxed);
+            } else {
+                let held = held.saturating_sub(started);
+                LONGEST.with(|l| {
+                    let (longest, n) = l.get();
+                    l.set((longest.max(held), n + 1));
+                });
+            }
         }
         OWNER.store(0, Ordering::Release);
         LOCKED.store(false, Ordering::Release);

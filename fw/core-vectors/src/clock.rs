@@ -31,3 +31,20 @@ pub fn ticks() -> u64 {
         }
     }
 }
+
+/// The raw 24-bit down-counter: differences of two reads (modulo 2^24) measure sections too
+/// short for a wrap and run with interrupts off, where the wrap count cannot advance.
+#[inline(always)]
+pub fn counter() -> u32 {
+    // SAFETY: a read of the SysTick current-value register.
+    unsafe { SYST_CVR.read_volatile() }
+}
+
+/// Clock ticks of a loop of `2 × passes` instructions: the calibration of clocks to
+/// instructions.
+pub fn calibrate(passes: u32) -> u64 {
+    let c0 = ticks();
+    // SAFETY: a register-only countdown loop.
+    unsafe { core::arch::asm!("1:", "subs {0}, {0}, #1", "bne 1b", inout(reg) passes => _, options(nostack)) };
+    ticks() - c0
+}

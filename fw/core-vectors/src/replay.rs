@@ -4,7 +4,7 @@ use core::fmt::Write as _;
 
 use control_core::golden_vectors::{decode_only, replay, replay_only};
 
-use crate::semihosting::write;
+use core_vectors::semihosting::write;
 
 static VECTORS: &[u8] = include_bytes!(env!("CORE_VECTORS_FILE"));
 
@@ -26,24 +26,24 @@ impl core::fmt::Write for Line {
 
 pub fn run() -> bool {
     let mut line = Line { buf: [0; 128], len: 0 };
-    crate::clock::start();
+    core_vectors::clock::start();
     // Calibration: a loop of known length (2 instructions per pass).
     let passes: u32 = 100_000;
-    let c0 = crate::clock::ticks();
+    let c0 = core_vectors::clock::ticks();
     // SAFETY: a register-only countdown loop.
     unsafe { core::arch::asm!("1:", "subs {0}, {0}, #1", "bne 1b", inout(reg) passes => _, options(nostack)) };
-    let calibration = crate::clock::ticks() - c0;
-    let before = crate::clock::ticks();
+    let calibration = core_vectors::clock::ticks() - c0;
+    let before = core_vectors::clock::ticks();
     let result = replay(VECTORS);
-    let clocks = crate::clock::ticks() - before;
+    let clocks = core_vectors::clock::ticks() - before;
     // The same replay without the output digest: what the core itself (and the decoding of
     // its inputs) costs.
-    let before = crate::clock::ticks();
+    let before = core_vectors::clock::ticks();
     let _ = replay_only(VECTORS);
-    let step_clocks = crate::clock::ticks() - before;
-    let before = crate::clock::ticks();
+    let step_clocks = core_vectors::clock::ticks() - before;
+    let before = core_vectors::clock::ticks();
     let _ = decode_only(VECTORS);
-    let decode_clocks = crate::clock::ticks() - before;
+    let decode_clocks = core_vectors::clock::ticks() - before;
     let core_clocks = step_clocks.saturating_sub(decode_clocks);
     let ok = match result {
         Ok((ticks, digest)) => {
