@@ -113,21 +113,21 @@ impl Drive {
         if self.claimed.swap(true, Ordering::AcqRel) {
             return Err(InstallError::Twice);
         }
-        let (loaded, store) = param_store::load(flash);
-        let (stored, refused) = match loaded {
-            Ok((params, sequence)) => match Axis::new(params) {
-                Ok(axis) => (Some((axis, params, ParamsOrigin::Stored { sequence })), None),
-                Err(e) => (None, Some(DefaultsReason::Invalid(FieldName::new(e.field())))),
+        let mut params = defaults;
+        let (loaded, store) = param_store::load(flash, &mut params);
+        let stored = match loaded {
+            Ok(sequence) => match Axis::new(params) {
+                Ok(axis) => Ok((axis, ParamsOrigin::Stored { sequence })),
+                Err(e) => Err(DefaultsReason::Invalid(FieldName::new(e.field()))),
             },
-            Err(reason) => (None, Some(reason)),
+            Err(reason) => Err(reason),
         };
-        let (axis, params, boot_params) = match (stored, refused) {
-            (Some(found), _) => found,
-            (None, reason) => (
-                Axis::new(defaults).map_err(|e| InstallError::Params(e.field()))?,
-                defaults,
-                ParamsOrigin::Defaults(reason.unwrap_or(DefaultsReason::NothingStored)),
-            ),
+        let (axis, boot_params) = match stored {
+            Ok(found) => found,
+            Err(reason) => {
+                params = defaults;
+                (Axis::new(defaults).map_err(|e| InstallError::Params(e.field()))?, ParamsOrigin::Defaults(reason))
+            }
         };
         let sensing = CurrentSensing::new(P::SCALES).map_err(|_| InstallError::Scales)?;
         // SAFETY: claimed above, by this call alone, and not installed yet: nothing reads slot

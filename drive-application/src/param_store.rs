@@ -32,12 +32,12 @@ const COMMIT_BYTES: usize = 8;
 const RECORD_ROOM: usize = HEAD_BYTES + MAX_PAYLOAD + 8;
 
 /// What a page holds.
-#[derive(Clone, Copy, Debug, PartialEq)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum PageContent {
     /// Every byte of the head erased: never written, or a save cut short before its head.
     Empty,
-    /// A whole record.
-    Record { sequence: u32, params: Params },
+    /// A whole record (its check value matches), of this sequence number.
+    Record { sequence: u32 },
     /// A head with another format number.
     Foreign { format: u16 },
     /// Anything else: a head that is no record's, a check value that does not match, a
@@ -61,9 +61,6 @@ impl StoreState {
     }
 }
 
-/// What boot found: the newest record's parameters and sequence, or why there is none.
-pub type Loaded = Result<(Params, u32), DefaultsReason>;
-
 fn crc_of(format: u16, length: u16, sequence: u32, payload: &[u8]) -> u32 {
     let mut digest = control_core::protocol::FRAME_CRC.digest();
     digest.update(&format.to_le_bytes());
@@ -73,8 +70,10 @@ fn crc_of(format: u16, length: u16, sequence: u32, payload: &[u8]) -> u32 {
     digest.finalize()
 }
 
-/// Read and check one page.
-pub fn read_page<F: ParamFlash>(flash: &mut F, page: usize) -> PageContent {
+/// Read and check one page; with `params`, a record's parameters are decoded into it (left
+/// as they were otherwise). The parameters are decoded in place, never returned by value:
+/// each move of the set costs the drive's flash a few hundred instructions.
+pub fn read_page<F: ParamFlash>(flash: &mut F, page: usize, params: Option<&mut Params>) -> PageContent {
     let mut head = [0u8; HEAD_BYTES];
     if flash.read(page, 0, &mut head).is_err() {
         return PageContent::Corrupt;
@@ -103,30 +102,48 @@ pub fn read_page<F: ParamFlash>(flash: &mut F, page: usize) -> PageContent {
     {
         return PageContent::Corrupt;
     }
-    match postcard::take_from_bytes::<Request>(&payload[..n]) {
-        Ok((Request::SetParams(params), [])) => PageContent::Record { sequence, params },
+    match decode_payload(&payload[..n]) {
+        Some(Request::SetParams(p)) => {
+            if let Some(out) = params {
+                *out = p;
+            }
+            PageContent::Record { sequence }
+        }
         _ => PageContent::Corrupt,
     }
 }
 
-/// Boot: the newest record of the two pages, or why there is none; and where the next save
-/// goes.
-pub fn load<F: ParamFlash>(flash: &mut F) -> (Loaded, StoreState) {
-    let pages = [read_page(flash, 0), read_page(flash, 1)];
-    let mut newest: Option<(usize, u32, Params)> = None;
+/// A payload's request, every byte used. Not generic, so that it is compiled here once, with
+/// the link's decoder (a generic caller would instantiate a second copy of it in the board's
+/// crate: 6 KiB of the G474's flash).
+#[inline(never)]
+fn decode_payload(payload: &[u8]) -> Option<Request> {
+    match postcard::take_from_bytes::<Request>(payload) {
+        Ok((request, [])) => Some(request),
+        _ => None,
+    }
+}
+
+/// Boot: the newest record of the two pages decoded into `params` (its sequence number), or
+/// why there is none (`params` untouched); and where the next save goes.
+pub fn load<F: ParamFlash>(flash: &mut F, params: &mut Params) -> (Result<u32, DefaultsReason>, StoreState) {
+    let pages = [read_page(flash, 0, None), read_page(flash, 1, None)];
+    let mut newest: Option<(usize, u32)> = None;
     for (page, content) in pages.iter().enumerate() {
-        if let PageContent::Record { sequence, params } = *content {
+        if let PageContent::Record { sequence } = *content {
             let newer = match newest {
                 None => true,
-                Some((_, s, _)) => (sequence.wrapping_sub(s) as i32) > 0,
+                Some((_, s)) => (sequence.wrapping_sub(s) as i32) > 0,
             };
             if newer {
-                newest = Some((page, sequence, params));
+                newest = Some((page, sequence));
             }
         }
     }
-    if let Some((page, sequence, params)) = newest {
-        return (Ok((params, sequence)), StoreState { newest: Some((page, sequence)) });
+    if let Some((page, sequence)) = newest {
+        if read_page(flash, page, Some(params)) == (PageContent::Record { sequence }) {
+            return (Ok(sequence), StoreState { newest: Some((page, sequence)) });
+        }
     }
     let reason = if let Some(format) =
         pages.iter().find_map(|c| if let PageContent::Foreign { format } = c { Some(*format) } else { None })

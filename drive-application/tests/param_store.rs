@@ -89,7 +89,7 @@ fn nothing_stored_corrupt_foreign_and_refused_sets_fall_back_to_the_defaults_wit
     save(&mut flash, &mut state, &set(3)).unwrap();
     let mut corrupt = flash.clone();
     corrupt.pages[0][param_store::HEAD_BYTES + 5] ^= 0x10;
-    assert_eq!(read_page(&mut corrupt, 0), PageContent::Corrupt);
+    assert_eq!(read_page(&mut corrupt, 0, None), PageContent::Corrupt);
     assert_eq!(boot(&mut corrupt), (Params::default(), ParamsOrigin::Defaults(DefaultsReason::Corrupt)));
 
     // Garbage where the head should be: corrupt.
@@ -110,7 +110,7 @@ fn nothing_stored_corrupt_foreign_and_refused_sets_fall_back_to_the_defaults_wit
     let mut record = [0xFFu8; 2048];
     let n = encode_record(&bad, 9, 8, &mut record).unwrap();
     refused.program(0, 0, &record[..n]).unwrap();
-    assert!(matches!(read_page(&mut refused, 0), PageContent::Record { sequence: 9, .. }));
+    assert_eq!(read_page(&mut refused, 0, None), PageContent::Record { sequence: 9 });
     assert_eq!(
         boot(&mut refused),
         (Params::default(), ParamsOrigin::Defaults(DefaultsReason::Invalid(FieldName::new(field))))
@@ -121,7 +121,11 @@ fn nothing_stored_corrupt_foreign_and_refused_sets_fall_back_to_the_defaults_wit
     save(&mut one_bad, &mut state, &set(4)).unwrap(); // page 1
     one_bad.pages[1][param_store::HEAD_BYTES + 1] ^= 1;
     assert_eq!(boot(&mut one_bad), (set(3), ParamsOrigin::Stored { sequence: 1 }));
-    assert_eq!(load(&mut one_bad).1.newest, Some((0, 1)), "the next save overwrites the corrupt page");
+    assert_eq!(
+        load(&mut one_bad, &mut Params::default()).1.newest,
+        Some((0, 1)),
+        "the next save overwrites the corrupt page"
+    );
 }
 
 #[test]

@@ -58,6 +58,35 @@ fn ADC1_2() {
     control::on_sample()
 }
 
+fn install_error(e: drive_application::InstallError) -> &'static str {
+    match e {
+        drive_application::InstallError::Params(field) => field,
+        drive_application::InstallError::Scales => "the board's ADC scales are refused",
+        drive_application::InstallError::Twice => "installed twice",
+    }
+}
+
+/// Where the parameters came from (the answer to Hello says the same to the host).
+fn log_boot_params(origin: control_core::protocol::ParamsOrigin) {
+    use control_core::protocol::{DefaultsReason, ParamsOrigin};
+    match origin {
+        ParamsOrigin::Stored { sequence } => defmt::info!("parameters loaded from flash (record {})", sequence),
+        ParamsOrigin::Defaults(DefaultsReason::NoStorage) => defmt::warn!("default parameters: no storage"),
+        ParamsOrigin::Defaults(DefaultsReason::NothingStored) => {
+            defmt::info!("default parameters: nothing saved yet")
+        }
+        ParamsOrigin::Defaults(DefaultsReason::Corrupt) => {
+            defmt::warn!("default parameters: the stored record is corrupt (check value mismatch)")
+        }
+        ParamsOrigin::Defaults(DefaultsReason::Foreign { format }) => {
+            defmt::warn!("default parameters: the stored record has format {}, this firmware reads another", format)
+        }
+        ParamsOrigin::Defaults(DefaultsReason::Invalid(field)) => {
+            defmt::warn!("default parameters: the stored set is refused ({=str})", field.as_str())
+        }
+    }
+}
+
 static TX: StaticCell<[u8; 1024]> = StaticCell::new();
 static RX: StaticCell<[u8; 1024]> = StaticCell::new();
 
@@ -71,16 +100,11 @@ async fn main(spawner: Spawner) {
     let host = match control::DRIVE.install::<board::Stage, _>(defaults, &mut board.flash) {
         Ok(host) => host,
         Err(e) => {
-            defmt::error!("drive not installed: {}", defmt::Debug2Format(&e));
+            defmt::error!("drive not installed: {=str}", install_error(e));
             return;
         }
     };
-    match host.boot_params() {
-        origin @ control_core::protocol::ParamsOrigin::Stored { .. } => {
-            defmt::info!("{}", defmt::Display2Format(&origin))
-        }
-        origin => defmt::warn!("{}", defmt::Display2Format(&origin)),
-    }
+    log_boot_params(host.boot_params());
     interrupt::UART4.set_priority(Priority::P1);
     let housekeeping = CONTROL_EXECUTOR.start(interrupt::UART4);
     housekeeping.spawn(control::position_tick_task().expect("position-tick task"));
