@@ -271,20 +271,21 @@ impl Axis {
 
     /// Install a correction built ahead with `ResponseCorrection::new` from `p` at this axis's
     /// position period (the drive builds it outside the section it shares with the control
-    /// interrupt; this only copies it in). Refused, changing nothing, while command pulses are
-    /// in flight, as [`Axis::load_correction`].
-    pub fn install_correction(
-        &mut self,
-        built: &ResponseCorrection,
-        p: &CorrectionParams,
-    ) -> Result<(), CorrectionError> {
-        self.command_path.install_correction(built)?;
+    /// interrupt; this only copies the sections in). Refused, changing nothing, while command
+    /// pulses are in flight, as [`Axis::load_correction`]. [`Axis::params`] still shows the
+    /// previous correction until [`Axis::record_correction`] (the drive does that in a second,
+    /// short section: the tick never reads it).
+    pub fn install_correction(&mut self, built: &ResponseCorrection) -> Result<(), CorrectionError> {
+        self.command_path.install_correction(built)
+    }
+
+    /// Record the correction installed by [`Axis::install_correction`] in the parameters.
+    pub fn record_correction(&mut self, p: &CorrectionParams) {
         // Section by section (a whole-struct copy is a slow `memcpy` on the Cortex-M4).
         for (d, s) in self.params.correction.sections.iter_mut().zip(&p.sections) {
             *d = *s;
         }
         self.params.correction.count = p.count;
-        Ok(())
     }
 
     pub fn sweep(&self) -> &PhaseShiftedSweep {

@@ -184,7 +184,7 @@ impl ResponseCorrection {
             return Err(CorrectionError::InMotion);
         }
         for (d, s) in self.sections.iter_mut().zip(&built.sections[..built.count]) {
-            *d = *s;
+            d.copy_from(s);
         }
         self.count = built.count;
         self.stock = 0;

@@ -28,7 +28,7 @@ use core::sync::atomic::{AtomicBool, AtomicU32, Ordering};
 use control_core::acquisition_stream::{AcquisitionStream, SampleBatch};
 use control_core::current_sensing::CurrentSensing;
 use control_core::faults::Faults;
-use control_core::params::Params;
+use control_core::params::{ParamError, Params};
 use control_core::protocol::{
     handle, DefaultsReason, FieldName, FrameError, ParamsOrigin, RefusalReason, Request, Response, VERSION,
 };
@@ -64,7 +64,10 @@ struct Slot {
 /// in a `static` (uninitialised until [`Drive::install`], so its kilobytes go to `.bss`).
 pub struct Drive {
     shared: Mutex<RefCell<Slot>>,
-    axes: [UnsafeCell<MaybeUninit<Axis>>; 2],
+    /// The two axis slots, each the whole result of `Axis::new` so that it is built in place
+    /// (an `Axis` slot would need the result on the stack first, 20 KiB, then a copy): an
+    /// installed slot always holds `Ok`.
+    axes: [UnsafeCell<MaybeUninit<Result<Axis, ParamError>>>; 2],
     /// Ticks since start (health, the heartbeat).
     ticks: AtomicU32,
     /// [`Drive::install`] has begun (it hands out the one [`Host`]).
@@ -104,7 +107,10 @@ impl Drive {
     }
 
     /// Load the stored parameters (or take `defaults`, saying why), build the axis and the
-    /// current sensing, and return the link side (once).
+    /// current sensing, and return the link side (once). Never inlined, nor are the parameter
+    /// changes below: an axis is kilobytes, and a caller's stack frame must not keep room for
+    /// one (the G474's stack and statics share 128 KiB).
+    #[inline(never)]
     pub fn install<P: PowerStage, F: ParamFlash>(
         &self,
         defaults: Params,
@@ -115,39 +121,49 @@ impl Drive {
         }
         let mut params = defaults;
         let (loaded, store) = param_store::load(flash, &mut params);
-        let stored = match loaded {
-            Ok(sequence) => match Axis::new(params) {
-                Ok(axis) => Ok((axis, ParamsOrigin::Stored { sequence })),
-                Err(e) => Err(DefaultsReason::Invalid(FieldName::new(e.field()))),
-            },
-            Err(reason) => Err(reason),
+        let mut boot_params = match loaded {
+            Ok(sequence) => ParamsOrigin::Stored { sequence },
+            Err(reason) => ParamsOrigin::Defaults(reason),
         };
-        let (axis, boot_params) = match stored {
-            Ok(found) => found,
-            Err(reason) => {
-                params = defaults;
-                (Axis::new(defaults).map_err(|e| InstallError::Params(e.field()))?, ParamsOrigin::Defaults(reason))
-            }
-        };
-        let sensing = CurrentSensing::new(P::SCALES).map_err(|_| InstallError::Scales)?;
+        // One call site of `Axis::new`, building straight into slot 0: the stored set, or the
+        // defaults if it is refused (a second call site would keep room for a second axis).
         // SAFETY: claimed above, by this call alone, and not installed yet: nothing reads slot
         // 0 (the tick waits for `installed`, set below under the critical section).
-        unsafe { (*self.axes[0].get()).write(axis) };
-        let shared = Shared {
-            active: 0,
-            commands: Commands::default(),
-            sensing,
-            stream: AcquisitionStream::default(),
-            duties_in_force: [0.0; 3],
-            bus_voltage: 0.0,
-            storing: false,
-        };
+        let slot = unsafe { &mut *self.axes[0].get() };
+        loop {
+            match build_axis(slot, params) {
+                Ok(()) => break,
+                Err(field) if matches!(boot_params, ParamsOrigin::Stored { .. }) => {
+                    boot_params = ParamsOrigin::Defaults(DefaultsReason::Invalid(FieldName::new(field)));
+                    params = defaults;
+                }
+                Err(field) => return Err(InstallError::Params(field)),
+            }
+        }
+        let sensing = CurrentSensing::new(P::SCALES).map_err(|_| InstallError::Scales)?;
+        self.share(sensing);
+        Ok(Host { drive: self, params, boot_params, store, assembler: FrameAssembler::new() })
+    }
+
+    /// The shared state, built in place inside the section (at boot, before the tick runs):
+    /// the sample ring is kilobytes, and a `Shared` built first on the stack would be a second
+    /// copy. Never inlined, so that `install`'s frame does not keep room for it while the axis
+    /// is built.
+    #[inline(never)]
+    fn share(&self, sensing: CurrentSensing<CURRENT_CHANNELS>) {
         critical_section::with(|cs| {
             let mut slot = self.shared.borrow_ref_mut(cs);
-            slot.value.write(shared);
+            slot.value.write(Shared {
+                active: 0,
+                commands: Commands::default(),
+                sensing,
+                stream: AcquisitionStream::default(),
+                duties_in_force: [0.0; 3],
+                bus_voltage: 0.0,
+                storing: false,
+            });
             slot.installed = true;
         });
-        Ok(Host { drive: self, params, boot_params, store, assembler: FrameAssembler::new() })
     }
 
     /// `f` on the shared state and the active axis, under the critical section (`None` before
@@ -161,8 +177,10 @@ impl Drive {
             // SAFETY: installed, so the value and the active axis slot are initialised; the
             // active slot is touched only under this critical section.
             let shared = unsafe { slot.value.assume_init_mut() };
-            let axis = unsafe { (*self.axes[shared.active].get()).assume_init_mut() };
-            Some(f(shared, axis))
+            match unsafe { (*self.axes[shared.active].get()).assume_init_mut() } {
+                Ok(axis) => Some(f(shared, axis)),
+                Err(_) => None, // never: only a slot holding an axis becomes the active one
+            }
         })
     }
 
@@ -226,6 +244,29 @@ impl Drive {
     }
 }
 
+/// The core's own request handling, for the requests the drive does not handle itself. Never
+/// inlined: the core's `SetParams` arm (never taken here) keeps room for an axis in its
+/// frame, which the link task's frame must not carry.
+#[inline(never)]
+fn core_handle(axis: &mut Axis, s: &mut Shared, request: Request) -> Response {
+    handle(axis, &mut s.commands, &mut s.stream, request)
+}
+
+/// `Axis::new(params)` built straight into `slot`; the first refused field if it refuses.
+#[inline(never)]
+fn build_axis(slot: &mut MaybeUninit<Result<Axis, ParamError>>, params: Params) -> Result<(), &'static str> {
+    let slot = slot.as_mut_ptr();
+    // SAFETY: `slot` is valid for writes; the result goes straight into it (the call's
+    // return slot), then is read there.
+    unsafe {
+        slot.write(Axis::new(params));
+        match &*slot {
+            Ok(_) => Ok(()),
+            Err(e) => Err(e.field()),
+        }
+    }
+}
+
 /// Only while the axis stands still in torque mode at zero torque.
 fn at_rest(commands: &Commands, axis: &Axis) -> bool {
     commands.mode == Mode::Torque && commands.torque == 0.0 && axis.telemetry().torque_command == 0.0
@@ -278,15 +319,21 @@ impl Host<'_> {
             Request::SetParams(p) => self.set_params(p),
             Request::LoadCorrection(c) => self.load_correction(&c),
             Request::SaveParams => self.save_params(flash),
+            // One copy of the telemetry inside the section; the answer is built outside.
+            Request::GetTelemetry => match self.drive.with(|_, axis| *axis.telemetry()) {
+                Some(t) => Response::Telemetry(t),
+                None => Response::FrameError(FrameError::Message),
+            },
             other => self
                 .drive
-                .with(|s, axis| handle(axis, &mut s.commands, &mut s.stream, other))
+                .with(|s, axis| core_handle(axis, s, other))
                 .unwrap_or(Response::FrameError(FrameError::Message)),
         }
     }
 
     /// The new axis is built in the spare slot with the critical section open; inside it, the
     /// rest check and the swap of the slot index.
+    #[inline(never)]
     fn set_params(&mut self, p: Params) -> Response {
         let Some((active, rest)) = self.drive.with(|s, axis| (s.active, at_rest(&s.commands, axis))) else {
             return Response::FrameError(FrameError::Message);
@@ -294,14 +341,13 @@ impl Host<'_> {
         if !rest {
             return Response::Refused(RefusalReason::Busy);
         }
-        let new = match Axis::new(p) {
-            Ok(new) => new,
-            Err(e) => return Response::Refused(RefusalReason::InvalidParams(FieldName::new(e.field()))),
-        };
         let spare = 1 - active;
         // SAFETY: the spare slot is not the active one, and only this `Host` (there is one)
         // changes which is active.
-        unsafe { (*self.drive.axes[spare].get()).write(new) };
+        let slot = unsafe { &mut *self.drive.axes[spare].get() };
+        if let Err(field) = build_axis(slot, p) {
+            return Response::Refused(RefusalReason::InvalidParams(FieldName::new(field)));
+        }
         let swapped = self
             .drive
             .with(|s, axis| {
@@ -320,14 +366,18 @@ impl Host<'_> {
     }
 
     /// The correction's sections are designed with the critical section open; inside it, the
-    /// rest check and the copy.
+    /// rest check and the copy of the sections in use; in a second one, the record of it in
+    /// the axis's parameters.
+    #[inline(never)]
     fn load_correction(&mut self, c: &control_core::response_correction::CorrectionParams) -> Response {
         let refused = Response::Refused(RefusalReason::Correction);
         let Ok(built) = ResponseCorrection::new(c, self.params.rates.position_period()) else {
             return refused;
         };
-        match self.drive.with(|_, axis| axis.install_correction(&built, c)) {
+        match self.drive.with(|_, axis| axis.install_correction(&built)) {
             Some(Ok(())) => {
+                // A second section: the tick never reads the parameters' correction.
+                self.drive.with(|_, axis| axis.record_correction(c));
                 self.params.correction = *c;
                 Response::Done
             }
@@ -336,6 +386,7 @@ impl Host<'_> {
     }
 
     /// Write the parameters in force to flash (at rest; the gate drive off meanwhile).
+    #[inline(never)]
     fn save_params<F: ParamFlash>(&mut self, flash: &mut F) -> Response {
         let started = self.drive.with(|s, axis| {
             let rest = at_rest(&s.commands, axis);

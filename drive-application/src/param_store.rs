@@ -126,6 +126,7 @@ fn decode_payload(payload: &[u8]) -> Option<Request> {
 
 /// Boot: the newest record of the two pages decoded into `params` (its sequence number), or
 /// why there is none (`params` untouched); and where the next save goes.
+#[inline(never)]
 pub fn load<F: ParamFlash>(flash: &mut F, params: &mut Params) -> (Result<u32, DefaultsReason>, StoreState) {
     let pages = [read_page(flash, 0, None), read_page(flash, 1, None)];
     let mut newest: Option<(usize, u32)> = None;

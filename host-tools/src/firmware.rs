@@ -278,3 +278,50 @@ pub fn drive_image_size() -> Result<ImageSize> {
     let in_ram: u32 = s.iter().filter(|(_, a, _)| (0x2000_0000..0x2010_0000).contains(a)).map(|x| x.2).sum();
     Ok(ImageSize { flash: in_flash + data, ram: in_ram })
 }
+
+/// The drive application's critical sections on the Cortex-M4 (QEMU, instructions): the
+/// longest during a parameter change (SetParams, LoadCorrection, SaveParams), the longest
+/// over every request and which, the tick's own section, and the old SetParams (the axis
+/// built and copied inside the section) for reference.
+#[derive(Clone, Debug, Serialize)]
+pub struct InterruptsOff {
+    pub parameter_changes: f64,
+    pub longest: f64,
+    pub longest_request: String,
+    pub tick: f64,
+    pub old_set_params: f64,
+    /// The program's line per request.
+    pub requests: Vec<String>,
+}
+
+pub fn interrupts_off_on_cortex_m4() -> Result<InterruptsOff> {
+    build(&["--release", "-q", "-p", "core-vectors", "--bin", "interrupts-off"], &[])?;
+    let elf = workspace_root().join("target/fw/thumbv7em-none-eabihf/release/interrupts-off");
+    let run = Command::new("timeout")
+        .args(["300", "qemu-system-arm", "-machine", "netduinoplus2", "-nographic", "-monitor", "none"])
+        .args(["-serial", "none", "-icount", "shift=0", "-semihosting-config", "enable=on,target=native", "-kernel"])
+        .arg(&elf)
+        .output()
+        .context("cannot run qemu-system-arm (scripts/fw installs it)")?;
+    let text = format!("{}{}", String::from_utf8_lossy(&run.stdout), String::from_utf8_lossy(&run.stderr));
+    if !run.status.success() {
+        bail!("QEMU run of interrupts-off failed ({}): {text}", run.status);
+    }
+    let Some(summary) = text.lines().find(|l| l.starts_with("interrupts-off summary")) else {
+        bail!("interrupts-off printed no summary: {text}");
+    };
+    let w: Vec<&str> = summary.split_whitespace().collect();
+    let number = |key: &str| -> Result<f64> {
+        let at = w.iter().position(|x| *x == key).with_context(|| format!("no {key} in {summary}"))?;
+        w.get(at + 1).and_then(|v| v.parse().ok()).with_context(|| format!("no number after {key} in {summary}"))
+    };
+    let longest_at = w.iter().position(|x| *x == "longest").context("no longest")?;
+    Ok(InterruptsOff {
+        parameter_changes: number("changes")?,
+        longest: number("longest")?,
+        longest_request: w.get(longest_at + 2).unwrap_or(&"?").to_string(),
+        tick: number("tick")?,
+        old_set_params: number("old-set-params")?,
+        requests: text.lines().filter(|l| l.starts_with("interrupts-off request")).map(String::from).collect(),
+    })
+}

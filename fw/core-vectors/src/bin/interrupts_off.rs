@@ -84,14 +84,13 @@ unsafe impl critical_section::Impl for MeasuredSection {
     unsafe fn acquire() -> critical_section::RawRestoreState {
         let primask: u32;
         core::arch::asm!("mrs {}, PRIMASK", "cpsid i", out(reg) primask, options(nomem, nostack, preserves_flags));
-        let enabled = primask & 1 == 0;
-        if enabled {
+        if primask & 1 == 0 {
             ENTERED = clock::counter();
         }
-        enabled
+        primask
     }
-    unsafe fn release(was_enabled: critical_section::RawRestoreState) {
-        if was_enabled {
+    unsafe fn release(primask: critical_section::RawRestoreState) {
+        if primask & 1 == 0 {
             // The counter counts down.
             let held = ENTERED.wrapping_sub(clock::counter()) & 0x00FF_FFFF;
             if held > LONGEST {
@@ -133,8 +132,81 @@ fn print(args: core::fmt::Arguments) {
     semihosting::write(core::str::from_utf8(&line.buf[..line.len]).unwrap_or("?\n"));
 }
 
+extern "C" {
+    static mut _ebss: u32;
+}
+
+/// Fill the free stack below the caller's frame with a pattern; [`stack_used`] finds how far
+/// it was overwritten.
+#[inline(never)]
+fn paint_stack() {
+    let here = 0u32;
+    let top = core::ptr::addr_of!(here) as usize - 512;
+    let mut p = core::ptr::addr_of_mut!(_ebss) as usize;
+    while p < top {
+        // SAFETY: free stack between the end of .bss and below this frame.
+        unsafe { (p as *mut u32).write_volatile(0xDEAD_BEEF) };
+        p += 4;
+    }
+}
+
+/// The lowest address written below the painted stack.
+fn stack_low_water() -> usize {
+    let mut p = core::ptr::addr_of_mut!(_ebss) as usize;
+    // SAFETY: reads of the painted region.
+    while unsafe { (p as *const u32).read_volatile() } == 0xDEAD_BEEF {
+        p += 4;
+    }
+    p
+}
+
+/// The requests in turn (built one at a time: an array of them would be kilobytes of stack).
+#[inline(never)]
+fn request(i: usize, heavy: &Params) -> Option<(&'static str, Request)> {
+    let position = Commands { mode: Mode::Position, ..Default::default() };
+    let velocity = Commands { mode: Mode::Velocity, velocity: 10.0, ..Default::default() };
+    Some(match i {
+        0 => ("Hello", Request::Hello { version: VERSION }),
+        1 => ("GetTelemetry", Request::GetTelemetry),
+        2 => ("SetParams", Request::SetParams(*heavy)),
+        3 => ("LoadCorrection", Request::LoadCorrection(heavy.correction)),
+        4 => ("SetParams", Request::SetParams(Params::default())),
+        5 => ("LoadCorrection", Request::LoadCorrection(heavy.correction)),
+        6 => ("SaveParams", Request::SaveParams),
+        7 => ("Stream", Request::Stream { enabled: true }),
+        8 => ("SetCommands", Request::SetCommands(velocity)),
+        9 => ("StartSweep", Request::StartSweep),
+        10 => ("ClearFaults", Request::ClearFaults),
+        11 => ("SetCommands", Request::SetCommands(position)),
+        12 => ("Sequence", Request::Sequence(SequenceEvent::MoveTo(1000))),
+        13 => ("SetCommands", Request::SetCommands(Commands { mode: Mode::Sequence, ..Default::default() })),
+        14 => ("Sequence", Request::Sequence(SequenceEvent::RunOn)),
+        15 => ("SetCommands", Request::SetCommands(Commands::default())),
+        _ => return None,
+    })
+}
+
+/// The old SetParams: the new axis built and copied inside the section; its length.
+#[inline(never)]
+fn old_set_params(params: &Params) -> u32 {
+    // SAFETY: single-threaded; the slot is written here only.
+    let old = unsafe { &mut *core::ptr::addr_of_mut!(OLD_AXIS) };
+    if let Ok(axis) = Axis::new(Params::default()) {
+        old.write(axis);
+    }
+    let _ = take();
+    critical_section::with(|_| {
+        if let Ok(new) = Axis::new(*params) {
+            // SAFETY: written just above.
+            unsafe { *old.assume_init_mut() = new };
+        }
+    });
+    take()
+}
+
 #[no_mangle]
 fn program() -> bool {
+    paint_stack();
     clock::start();
     let passes = 100_000u32;
     let calibration = clock::calibrate(passes);
@@ -162,28 +234,11 @@ fn program() -> bool {
     // being at rest (parameters change only at rest).
     let mut heavy = preset(ALL_FEATURES).unwrap();
     heavy.friction.amplitude = 0.0;
-    let position = Commands { mode: Mode::Position, ..Default::default() };
-    let velocity = Commands { mode: Mode::Velocity, velocity: 10.0, ..Default::default() };
-    let requests: [(&str, Request); 16] = [
-        ("Hello", Request::Hello { version: VERSION }),
-        ("GetTelemetry", Request::GetTelemetry),
-        ("SetParams", Request::SetParams(heavy)),
-        ("LoadCorrection", Request::LoadCorrection(heavy.correction)),
-        ("SetParams", Request::SetParams(Params::default())),
-        ("LoadCorrection", Request::LoadCorrection(heavy.correction)),
-        ("SaveParams", Request::SaveParams),
-        ("Stream", Request::Stream { enabled: true }),
-        ("SetCommands", Request::SetCommands(velocity)),
-        ("StartSweep", Request::StartSweep),
-        ("ClearFaults", Request::ClearFaults),
-        ("SetCommands", Request::SetCommands(position)),
-        ("Sequence", Request::Sequence(SequenceEvent::MoveTo(1000))),
-        ("SetCommands", Request::SetCommands(Commands { mode: Mode::Sequence, ..Default::default() })),
-        ("Sequence", Request::Sequence(SequenceEvent::RunOn)),
-        ("SetCommands", Request::SetCommands(Commands::default())),
-    ];
     let mut longest = (0u32, "");
-    for (name, request) in requests {
+    // The parameter changes: SetParams, LoadCorrection, SaveParams.
+    let mut changes = 0u32;
+    for i in 0.. {
+        let Some((name, request)) = request(i, &heavy) else { break };
         let response = host.handle(request, flash);
         let held = take();
         let outcome = match response {
@@ -198,6 +253,9 @@ fn program() -> bool {
         if held > longest.0 {
             longest = (held, name);
         }
+        if matches!(name, "SetParams" | "LoadCorrection" | "SaveParams") {
+            changes = changes.max(held);
+        }
         for _ in 0..64 {
             DRIVE.tick(&mut stage);
         }
@@ -209,24 +267,20 @@ fn program() -> bool {
             longest = (batch, "stream batch");
         }
     }
-    // The old SetParams: the new axis built and copied inside the section.
-    // SAFETY: single-threaded; the slot is written once, here.
-    let old = unsafe { &mut *core::ptr::addr_of_mut!(OLD_AXIS) };
-    old.write(Axis::new(Params::default()).unwrap());
-    let _ = take();
-    critical_section::with(|_| {
-        if let Ok(new) = Axis::new(heavy) {
-            // SAFETY: written just above.
-            unsafe { *old.assume_init_mut() = new };
-        }
-    });
-    let old_way = take();
+    let old_way = old_set_params(&heavy);
     print(format_args!(
-        "interrupts-off longest {:.0} instructions ({}), tick {:.0}, old SetParams {:.0}, empty section {:.0}\n",
-        to_instructions(longest.0.saturating_sub(empty)),
+        "stack: {} bytes free at the deepest, .bss ends at {:#x}\n",
+        stack_low_water() - core::ptr::addr_of_mut!(_ebss) as usize,
+        core::ptr::addr_of_mut!(_ebss) as usize
+    ));
+    let instructions = |clocks: u32| to_instructions(clocks.saturating_sub(empty));
+    print(format_args!(
+        "interrupts-off summary changes {:.0} longest {:.0} {} tick {:.0} old-set-params {:.0} empty {:.0}\n",
+        instructions(changes),
+        instructions(longest.0),
         longest.1,
-        to_instructions(tick_section.saturating_sub(empty)),
-        to_instructions(old_way.saturating_sub(empty)),
+        instructions(tick_section),
+        instructions(old_way),
         to_instructions(empty)
     ));
     true
