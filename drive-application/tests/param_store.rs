@@ -156,3 +156,38 @@ fn save_params_over_the_link_is_loaded_at_the_next_boot_and_refused_in_motion() 
     assert_eq!(host.handle(Request::SaveParams, &mut flash), Response::Done);
     assert_eq!(boot(&mut flash), (set(6), ParamsOrigin::Stored { sequence: 1 }));
 }
+
+#[test]
+fn refused_parameter_changes_leave_the_axis_in_force() {
+    let mut flash = RamFlash::new();
+    let drive = Box::leak(Box::new(Drive::new()));
+    let mut host = drive.install::<RestingStage, _>(Params::default(), &mut flash).unwrap();
+    assert_eq!(host.handle(Request::SetParams(set(2)), &mut flash), Response::Done);
+    let mut bad = set(5);
+    bad.rates.position_divider = 0;
+    let field = Params::validate(&bad).unwrap_err().field();
+    assert_eq!(
+        host.handle(Request::SetParams(bad), &mut flash),
+        Response::Refused(control_core::protocol::RefusalReason::InvalidParams(FieldName::new(field)))
+    );
+    assert_eq!(drive.with(|_, axis| *axis.params()).unwrap(), set(2), "the axis in force is unchanged");
+    assert_eq!(*host.params(), set(2));
+    // Moving: refused as busy, nothing swapped.
+    let moving = control_core::Commands { mode: control_core::Mode::Velocity, velocity: 10.0, ..Default::default() };
+    assert_eq!(host.handle(Request::SetCommands(moving), &mut flash), Response::Done);
+    assert_eq!(
+        host.handle(Request::SetParams(set(7)), &mut flash),
+        Response::Refused(control_core::protocol::RefusalReason::Busy)
+    );
+    assert_eq!(drive.with(|_, axis| *axis.params()).unwrap(), set(2));
+    // A correction that does not design (a pole above the Nyquist frequency): refused, unchanged.
+    let mut c = Params::default().correction;
+    c.count = 1;
+    c.sections[0].poles.hz = 1.0e6;
+    assert_eq!(host.handle(Request::SetCommands(Default::default()), &mut flash), Response::Done);
+    assert_eq!(
+        host.handle(Request::LoadCorrection(c), &mut flash),
+        Response::Refused(control_core::protocol::RefusalReason::Correction)
+    );
+    assert_eq!(drive.with(|_, axis| *axis.params()).unwrap(), set(2));
+}
