@@ -38,7 +38,7 @@ fn all_delays_filter_follows_python_controls_difference_equation() {
             ys.rotate_right(1);
             xs[0] = x as f64;
             // y(k) = K·x(k − N) − Σ a_i y(k − i), with python-control's K.
-            let y = r.python_gain * xs[n] - (1..=n).map(|i| den[i] as f64 * ys[i]).sum::<f64>();
+            let y = r.python_gain * xs[n] - (1..=n).map(|i| den[i] * ys[i]).sum::<f64>();
             ys[0] = y;
             cum_ref += y;
             cum_out += filter.step(x);

@@ -1,8 +1,7 @@
 //! Fixed-point arithmetic of the Butterworth pulse filter: states in i64 counts with
-//! [`FRACTION_BITS`] fractional bits, and positive coefficients below 4 as a 64-bit mantissa with
-//! a binary exponent (every coefficient keeps its 53 significant bits from the f64 design, however
-//! small it is). A product is three 32 × 32 → 64-bit multiplies (UMULL/SMULL on a Cortex-M4) and
-//! a rounding shift; integer arithmetic gives the same bits on every target.
+//! [`FRACTION_BITS`] fractional bits, positive coefficients below 4 as a whole part and a 64-bit
+//! fraction. A product is three 32 × 32 → 64-bit multiplies (UMULL/SMULL on a Cortex-M4) and no
+//! shift; integer arithmetic gives the same bits on every target.
 
 /// Fractional bits of the states: 2⁻³⁰ counts (9.3·10⁻¹⁰).
 pub(super) const FRACTION_BITS: u32 = 30;
@@ -23,71 +22,69 @@ pub(super) fn limit(x: i64) -> i64 {
     }
 }
 
-/// A coefficient `mantissa · 2^−(64 + shift)`, `0 < value < 4`, mantissa normalised (top bit set).
+/// A positive coefficient below 4: a whole part (0 to 3) and a fraction in units of 2⁻⁶⁴. A
+/// coefficient of 1.4·10⁻⁷ (the smallest the design makes) keeps 41 significant bits, a relative
+/// error of 5·10⁻¹³: 5·10⁻⁴ count on a lag of 10⁹.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub(super) struct Coefficient {
-    mantissa: u64,
-    /// Right shift after the 64-bit high product; −1 or −2 for values of 1 to 4.
-    shift: i32,
-    /// Half a unit of the shifted result, added before shifting (round half up).
-    half: i64,
+    whole: i64,
+    fraction: u64,
 }
 
 impl Coefficient {
-    /// The exact value of a positive finite f64 below 4 and above 2⁻⁶⁰ (the design checks the
-    /// range before building its coefficients).
+    /// A positive finite f64 below 4 (the design's range).
     pub(super) fn new(value: f64) -> Self {
-        debug_assert!(value > 8.7e-19 && value < 4.0, "coefficient {value} outside (2^-60, 4)");
-        let bits = value.to_bits();
-        let exponent = ((bits >> 52) & 0x7FF) as i32 - 1023;
-        // value = 1.f · 2^exponent = (1.f · 2⁶³) · 2^(exponent − 63).
-        let mantissa = ((bits & ((1 << 52) - 1)) | (1 << 52)) << 11;
-        let shift = -1 - exponent;
-        let half = if shift > 0 { 1i64 << (shift - 1) } else { 0 };
-        Self { mantissa, shift, half }
+        debug_assert!(value > 0.0 && value < 4.0, "coefficient {value} outside (0, 4)");
+        let whole = libm::floor(value);
+        // value − whole is exact; below 1, so its 2⁶⁴ multiple rounds to at most 2⁶⁴ − 2¹¹.
+        let fraction = libm::round((value - whole) * 18_446_744_073_709_551_616.0) as u64;
+        Self { whole: whole as i64, fraction }
     }
 
-    /// `round(n · value)` for |n| ≤ 2⁶²: at most 2⁶² in magnitude below 1, 2⁶¹ from 1 to 4 (a
-    /// clamp only pathological inputs reach).
+    /// `n · value` within a unit, for |n| ≤ 2⁶²: at most 2⁶² in magnitude below 1, clamped to
+    /// ±2⁶¹ from 1 to 4 (which only pathological inputs reach).
     #[inline]
     pub(super) fn times(self, n: i64) -> i64 {
-        let t = mul_high(n, self.mantissa);
-        if self.shift >= 0 {
-            (t + self.half) >> self.shift
+        let f = mul_high(n, self.fraction);
+        if self.whole == 0 {
+            f
         } else {
-            t.clamp(-(1 << 59), 1 << 59) << -self.shift
+            n.saturating_mul(self.whole).saturating_add(f).clamp(-(1 << 61), 1 << 61)
         }
     }
 
     /// The value.
     #[cfg(test)]
     pub(super) fn value(self) -> f64 {
-        self.mantissa as f64 * libm::exp2(-(64 + self.shift) as f64)
+        self.whole as f64 + self.fraction as f64 * libm::exp2(-64.0)
     }
 }
 
-/// `⌊n · m / 2⁶⁴⌋` within −3 (the lowest partial product, below 2⁻³² of a unit, is left out).
+/// `n · m / 2⁶⁴` rounded, within a unit (the lowest partial product, below one unit, is left
+/// out; the two cross products are rounded): three 32 × 32 → 64-bit multiplies.
 #[inline]
 fn mul_high(n: i64, m: u64) -> i64 {
+    const HALF: u64 = 1 << 31;
     let (nh, nl) = (n >> 32, n as u32 as u64);
-    let (mh, ml) = ((m >> 32) as i64, m as u32 as i64);
-    // nl·mh < 2⁶⁴; |nh·ml| < 2⁶³; |nh·mh| < 2⁶³: none overflows.
-    nh * mh + ((nl * mh as u64) >> 32) as i64 + ((nh * ml) >> 32)
+    let (mh, ml) = (m >> 32, m as u32 as u64);
+    // nl·mh + 2³¹ < 2⁶⁴; |nh·ml| + 2³¹ < 2⁶³; |nh·mh| < 2⁶³ (|nh| < 2³¹): none overflows.
+    nh * mh as i64 + ((nl * mh + HALF) >> 32) as i64 + ((nh * ml as i64 + HALF as i64) >> 32)
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
 
-    /// ⌊n · value⌋ from the exact product in 128 bits, as the reference.
+    /// n · value from the exact product in 128 bits, as the reference.
     fn exact(n: i64, c: Coefficient) -> i128 {
-        (n as i128 * c.mantissa as i128) >> (64 + c.shift)
+        n as i128 * c.whole as i128 + ((n as i128 * c.fraction as i128) >> 64)
     }
 
     #[test]
-    fn coefficients_keep_the_f64_value_exactly() {
+    fn coefficients_keep_the_f64_value_to_2_to_the_minus_64() {
         for v in [1.5e-10, 1.54e-7, 3.9e-4, 0.499, 0.5, 0.75, 1.0, 1.37, 2.0, 3.99] {
-            assert_eq!(Coefficient::new(v).value(), v);
+            let c = Coefficient::new(v);
+            assert!((c.value() - v).abs() <= libm::exp2(-64.0) + v * 1e-16, "{v}: {}", c.value());
         }
     }
 
@@ -102,16 +99,13 @@ mod tests {
             let v = libm::exp2(-(((x >> 20) % 40) as f64)) * (1.0 + (x >> 44) as f64 / (1u64 << 20) as f64) * 1.9;
             let c = Coefficient::new(v);
             let (got, want) = (c.times(n) as i128, exact(n, c));
-            let clamp = (1i128 << 59) << (-c.shift).max(0);
-            if c.shift < 0 && want.abs() >= clamp {
-                // From 1 to 4, products beyond 2⁵⁹·2^−shift (≤ 2⁶¹) clamp there.
-                assert_eq!(got.abs(), clamp, "{n} × {v}");
+            if v >= 1.0 && want.abs() >= 1 << 61 {
+                // From 1 to 4, products beyond 2⁶¹ clamp there.
+                assert_eq!(got.abs(), 1 << 61, "{n} × {v}");
                 continue;
             }
-            // Rounding (one unit from the floor) and the left-out partial product (3 units
-            // before the shift, 12 after a left shift by 2).
-            let bound = 1 + (3 >> c.shift.max(0)) + (3 << (-c.shift).max(0));
-            assert!((got - want).abs() <= bound, "{n} × {v}: {got} vs {want}");
+            // The floor in `exact` (1), the two rounded cross products and the left-out one.
+            assert!((got - want).abs() <= 2, "{n} × {v}: {got} vs {want}");
         }
     }
 }
