@@ -16,8 +16,8 @@ pub mod reference;
 pub use butterworth::{
     ButterworthDesign, PolePair, RealPole, ZeroPlacement, MAX_ORDER, MIN_CUTOFF_HZ, MIN_CUTOFF_TIMES_PERIOD,
 };
-pub use pulse_filter::{ButterworthPulseFilter, MAX_FILTERED_PULSES};
 pub use moving_average::{MovingAverageCascade, MAX_MOVING_AVERAGE_LENGTH, MAX_MOVING_AVERAGE_STAGES};
+pub use pulse_filter::{ButterworthPulseFilter, MAX_FILTERED_PULSES};
 
 use core::fmt;
 

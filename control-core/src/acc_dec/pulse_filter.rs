@@ -44,18 +44,13 @@
 use super::butterworth::{ButterworthDesign, ZeroPlacement, MAX_ORDER, MAX_PAIRS};
 use super::fixed_point::{limit, Coefficient, FRACTION_BITS};
 
-/// Most pulses one tick takes into the filter's states.
-pub const MAX_FILTERED_PULSES: i64 = 1 << 31;
+/// Most pulses one tick takes into the filter's states (the i32 range).
+pub const MAX_FILTERED_PULSES: i64 = i32::MAX as i64;
+/// The zeros' output is scaled by 2⁵ whatever the order (their weights sum to 32).
+const ZERO_BITS: u32 = 5;
 /// The lags are summed at 2⁻²⁷ counts so that the sum cannot overflow (the truncation, below
 /// 4·2⁻²⁷ counts, is far below the states' own error).
 const LAG_GUARD_BITS: u32 = 3;
-
-/// One zero stage: `(1 + z⁻¹)` (mask −1) or `z⁻¹` (mask 0), on integers.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
-struct ZeroStage {
-    previous: i64,
-    mask: i64,
-}
 
 /// A pole pair's section: coefficients and state (lag and output, fixed point).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -77,12 +72,15 @@ struct RealSection {
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct ButterworthPulseFilter {
     design: ButterworthDesign,
-    zero_stages: [ZeroStage; MAX_ORDER as usize],
-    /// Factors `(1 + z⁻¹)` among them: their output is scaled by 2^this.
-    zero_bits: u32,
-    /// Lag of the zero stages (exact), in 2^−zero_bits counts.
+    /// The zeros as weights on the last N + 1 inputs (the newest first), summing to 2⁵: the
+    /// kept delay and the binomial coefficients of `(1 + z⁻¹)^{N−1}` scaled by `2^{6−N}`, or
+    /// one weight on the input N ticks ago.
+    zero_weights: [i32; MAX_ORDER as usize + 1],
+    inputs: [i32; MAX_ORDER as usize + 1],
+    /// Lag of the zeros (exact), in 2⁻⁵ counts.
     zero_lag: i64,
-    pairs: [Option<PairSection>; MAX_PAIRS],
+    pairs: [PairSection; MAX_PAIRS],
+    pair_count: usize,
     real: Option<RealSection>,
     /// Pulses taken in and not yet given out (exact).
     stock: i64,
@@ -91,29 +89,41 @@ pub struct ButterworthPulseFilter {
 impl ButterworthPulseFilter {
     pub fn new(design: ButterworthDesign) -> Self {
         let n = design.order as usize;
-        let mut zero_stages = [ZeroStage::default(); MAX_ORDER as usize];
-        // Stage 0 is the kept delay; the seed's other N − 1 are (1 + z⁻¹), python-control's
-        // are delays too.
-        let zero_bits = match design.zeros {
+        let mut zero_weights = [0; MAX_ORDER as usize + 1];
+        match design.zeros {
             ZeroPlacement::Seed => {
-                for s in &mut zero_stages[1..n] {
-                    s.mask = -1;
+                // Input j ticks ago, j = 1..=N: C(N − 1, j − 1) · 2^{6−N} (sum 2⁵).
+                let mut c = 1i32;
+                for j in 1..=n {
+                    zero_weights[j] = c << (1 + ZERO_BITS as usize - n);
+                    c = c * (n - j) as i32 / j as i32;
                 }
-                n as u32 - 1
             }
-            ZeroPlacement::AllDelays => 0,
-        };
-        let mut pairs = [None; MAX_PAIRS];
+            ZeroPlacement::AllDelays => zero_weights[n] = 1 << ZERO_BITS,
+        }
+        let unused =
+            PairSection { dc: Coefficient::new(1.0), one_minus_a2: Coefficient::new(1.0), lag: 0, velocity: 0 };
+        let mut pairs = [unused; MAX_PAIRS];
         for (section, p) in pairs.iter_mut().zip(design.pole_pairs()) {
-            *section = Some(PairSection {
+            *section = PairSection {
                 dc: Coefficient::new(p.dc),
                 one_minus_a2: Coefficient::new(p.one_minus_a2),
                 lag: 0,
                 velocity: 0,
-            });
+            };
         }
-        let real = design.real_pole().map(|r| RealSection { one_minus_pole: Coefficient::new(r.one_minus_pole), lag: 0 });
-        Self { design, zero_stages, zero_bits, zero_lag: 0, pairs, real, stock: 0 }
+        let real =
+            design.real_pole().map(|r| RealSection { one_minus_pole: Coefficient::new(r.one_minus_pole), lag: 0 });
+        Self {
+            design,
+            zero_weights,
+            inputs: [0; MAX_ORDER as usize + 1],
+            zero_lag: 0,
+            pairs,
+            pair_count: design.pole_pairs().len(),
+            real,
+            stock: 0,
+        }
     }
 
     pub fn design(&self) -> &ButterworthDesign {
@@ -127,15 +137,15 @@ impl ButterworthPulseFilter {
 
     /// The filter's lag before rounding (counts): what [`Self::stock`] is the rounding of.
     pub fn pending(&self) -> f64 {
-        let lags = self.pairs.iter().flatten().map(|p| p.lag).chain(self.real.map(|r| r.lag));
+        let lags = self.pairs[..self.pair_count].iter().map(|p| p.lag).chain(self.real.map(|r| r.lag));
         let states = lags.map(|l| l as f64).sum::<f64>() / (1u64 << FRACTION_BITS) as f64;
-        states + self.zero_lag as f64 / (1u64 << self.zero_bits) as f64
+        states + self.zero_lag as f64 / (1u64 << ZERO_BITS) as f64
     }
 
     /// The largest state magnitude (a section's lag or output, counts), against the limit of
     /// 2³¹ counts (for the bench's headroom figure).
     pub fn largest_state(&self) -> f64 {
-        let pairs = self.pairs.iter().flatten().flat_map(|p| [p.lag, p.velocity]);
+        let pairs = self.pairs[..self.pair_count].iter().flat_map(|p| [p.lag, p.velocity]);
         let largest = pairs.chain(self.real.map(|r| r.lag)).map(i64::unsigned_abs).max().unwrap_or(0);
         largest as f64 / (1u64 << FRACTION_BITS) as f64
     }
@@ -147,21 +157,20 @@ impl ButterworthPulseFilter {
 
     /// One tick: `pulses` in, whole pulses out.
     pub fn step(&mut self, pulses: i64) -> i64 {
-        let n = self.design.order as usize;
-        let u = pulses.clamp(-MAX_FILTERED_PULSES, MAX_FILTERED_PULSES);
-        // Zeros: |w| ≤ 2^zero_bits · 2³¹, |zero_lag| ≤ N · 2^zero_bits · 2³¹.
-        let mut w = u;
-        for s in &mut self.zero_stages[..n] {
-            let previous = core::mem::replace(&mut s.previous, w);
-            w = previous + (w & s.mask);
-        }
-        self.zero_lag += (u << self.zero_bits) - w;
-        let scale = FRACTION_BITS - self.zero_bits;
+        let u = match i32::try_from(pulses) {
+            Ok(u) => u,
+            Err(_) => saturate_to_i32(pulses),
+        };
+        // Zeros: |w| ≤ 2⁵ · 2³¹, |zero_lag| ≤ N · 2⁵ · 2³¹.
+        let i = &mut self.inputs;
+        (i[6], i[5], i[4], i[3], i[2], i[1], i[0]) = (i[5], i[4], i[3], i[2], i[1], i[0], u);
+        let w = self.inputs.iter().zip(&self.zero_weights).map(|(&x, &c)| x as i64 * c as i64).sum::<i64>();
+        self.zero_lag += ((u as i64) << ZERO_BITS) - w;
         // |x| ≤ 2⁶¹ (2³¹ counts), then a section's output (≤ 2⁶¹).
-        let mut x = w << scale;
+        let mut x = w << (FRACTION_BITS - ZERO_BITS);
         // The lags are summed with LAG_GUARD_BITS fewer fractional bits (≤ 6·2⁵⁸ + 4·2⁵⁸).
-        let mut lag = self.zero_lag << (scale - LAG_GUARD_BITS);
-        for p in self.pairs.iter_mut().flatten() {
+        let mut lag = self.zero_lag << (FRACTION_BITS - ZERO_BITS - LAG_GUARD_BITS);
+        for p in &mut self.pairs[..self.pair_count] {
             // |m| ≤ 2⁶²; |y| ≤ 2⁶¹ + 2⁶² before its limit; |m − y| ≤ 2⁶² + 2⁶¹.
             let m = p.lag + x;
             let y = limit(p.velocity - p.one_minus_a2.times(p.velocity) + p.dc.times(m));
@@ -179,4 +188,10 @@ impl ButterworthPulseFilter {
         let keep = (lag + (1 << (unit - 1))) >> unit;
         crate::release_whole_pulses(&mut self.stock, pulses, keep)
     }
+}
+
+/// The part of a larger jump the filter takes (the rest passes straight through).
+#[cold]
+fn saturate_to_i32(pulses: i64) -> i32 {
+    pulses.clamp(-MAX_FILTERED_PULSES, MAX_FILTERED_PULSES) as i32
 }

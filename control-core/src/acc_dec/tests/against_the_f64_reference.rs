@@ -39,7 +39,8 @@ fn move_pulses(distance: i64, kind: u64, ticks: usize) -> Vec<i64> {
 fn run(order: u32, cutoff: f32, period: f32, input: &[i64]) -> (f64, f64) {
     let mut drive = ButterworthPulseFilter::new(ButterworthDesign::new(order, cutoff, period).unwrap());
     let mut reference = ReferenceFilter::new(order, cutoff as f64, period as f64, ZeroPlacement::Seed);
-    let slowest = crate::TAU as f64 * cutoff as f64 * period as f64 * libm::sin(core::f64::consts::PI / (2 * order) as f64);
+    let slowest =
+        crate::TAU as f64 * cutoff as f64 * period as f64 * libm::sin(core::f64::consts::PI / (2 * order) as f64);
     let ticks = input.len() + (30.0 / slowest) as usize;
     let (mut position, mut sum, mut worst, mut worst_lag) = (0i64, 0i64, 0.0f64, 0.0f64);
     for k in 0..ticks {
