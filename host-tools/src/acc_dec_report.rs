@@ -343,7 +343,9 @@ impl AccDecReport {
         let b = &self.butterworth;
         println!("servo accdec — {} at T = {} s", b.label, self.sample_period);
         let poly = |c: &[f64]| c.iter().map(|x| format!("{x:.8}")).collect::<Vec<_>>().join(", ");
-        println!("  numerator   b0..bN : [{}]", poly(&d.numerator));
+        // K is (ωc·T)^N small: scientific notation keeps its digits.
+        let numerator = d.numerator.iter().map(|x| format!("{x:.9e}")).collect::<Vec<_>>().join(", ");
+        println!("  numerator   b0..bN : [{numerator}]");
         println!("  denominator 1..aN  : [{}]", poly(&d.denominator));
         println!(
             "  poles (z)          : {}",
