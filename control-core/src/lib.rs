@@ -57,11 +57,11 @@ pub fn counts_to_f32(x: i64) -> f32 {
     }
 }
 
-/// Whole-pulse output of a filter on pulses: keep exactly `round(pending)` pulses inside
-/// (`stock`) and give out the rest of what came in, so the sum out equals the sum in.
+/// Whole-pulse output of a filter on pulses: keep exactly `keep` pulses inside (`stock`; the
+/// filter's rounded pending output) and give out the rest of what came in, so the sum out
+/// equals the sum in.
 #[inline]
-pub(crate) fn release_whole_pulses(stock: &mut i64, pulses: i64, pending: f32) -> i64 {
-    let keep = round_to_counts(pending);
+pub(crate) fn release_whole_pulses(stock: &mut i64, pulses: i64, keep: i64) -> i64 {
     // Saturating: bounded for every accepted command (see `ranges`), never wrapping otherwise.
     let out = stock.saturating_add(pulses).saturating_sub(keep);
     *stock = keep;

@@ -208,7 +208,9 @@ impl ParamError {
             Self::RatesNotDivisible { .. } => "rates.position_divider",
             Self::BusLimitsInverted { .. } => "limits.bus_undervoltage",
             Self::AccDec(A::Order(_)) => "acc_dec.order",
-            Self::AccDec(A::Cutoff(_) | A::CutoffAboveNyquist { .. }) => "acc_dec.cutoff_hz",
+            Self::AccDec(A::Cutoff(_) | A::CutoffAboveNyquist { .. } | A::CutoffBelowMinimum { .. }) => {
+                "acc_dec.cutoff_hz"
+            }
             Self::AccDec(A::Stages(_)) => "acc_dec.stages",
             Self::AccDec(A::Length { .. }) => "acc_dec.lengths",
             Self::AccDec(_) => "acc_dec",

@@ -37,6 +37,13 @@ pub const MAX_SWEEP_SECONDS: f32 = 10_000.0;
 pub const MAX_SWEEP_CYCLES: f32 = 10_000.0;
 /// Lowest sweep frequency (Hz).
 pub const MIN_SWEEP_HZ: f32 = 0.001;
+/// Lowest Butterworth acc/dec cut-off (Hz): acc/dec time constants of machine tools reach
+/// 300 ms (0.5 Hz).
+pub const MIN_ACC_DEC_CUTOFF_HZ: f32 = 0.5;
+/// Lowest Butterworth acc/dec cut-off × position-loop period: below, the poles are too close to
+/// `z = 1` for the drive's integer filter to stay within a count of its design (0.5 Hz at a
+/// 0.125 ms period is 6.25·10⁻⁵).
+pub const MIN_ACC_DEC_CUTOFF_TIMES_PERIOD: f32 = 6.0e-5;
 
 /// A set-point the link or the loop checks against its range.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize, serde::Deserialize)]

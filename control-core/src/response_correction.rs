@@ -218,7 +218,7 @@ impl ResponseCorrection {
             v = b.process(v);
             pending += b.pending_output();
         }
-        crate::release_whole_pulses(&mut self.stock, pulses, pending)
+        crate::release_whole_pulses(&mut self.stock, pulses, crate::round_to_counts(pending))
     }
 }
 

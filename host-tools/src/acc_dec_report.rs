@@ -36,13 +36,13 @@ pub struct AccDecRequest {
 
 #[derive(Clone, Debug, Serialize)]
 pub struct Design {
-    pub numerator: Vec<f32>,
-    pub denominator: Vec<f32>,
+    pub numerator: Vec<f64>,
+    pub denominator: Vec<f64>,
     /// Poles (re, im) in z.
     pub poles: Vec<(f64, f64)>,
-    /// Second-order sections (b0, b1, b2, a1, a2) and the first-order one (b1, a1).
-    pub sections: Vec<[f32; 5]>,
-    pub first_order: Option<[f32; 2]>,
+    /// Pole pairs as the drive runs them: (a1, a2, 1 + a1 + a2, 1 − a2); the real pole (p, 1 − p).
+    pub sections: Vec<[f64; 4]>,
+    pub real_pole: Option<[f64; 2]>,
 }
 
 #[derive(Clone, Debug, Serialize)]
@@ -87,30 +87,12 @@ pub fn default_cutoff_hz() -> f32 {
 fn design_of(spec: &FilterSpec, period: f32) -> Result<Design> {
     let d = spec.design(period)?.context("not a Butterworth")?;
     let n = d.order as usize;
-    let mut poles = Vec::new();
-    let mut sections = Vec::new();
-    for b in d.biquads() {
-        sections.push([b.b0, b.b1, b.b2, b.a1, b.a2]);
-        let (a1, a2) = (b.a1 as f64, b.a2 as f64);
-        let disc = a1 * a1 / 4.0 - a2;
-        if disc < 0.0 {
-            poles.push((-a1 / 2.0, (-disc).sqrt()));
-            poles.push((-a1 / 2.0, -(-disc).sqrt()));
-        } else {
-            poles.push((-a1 / 2.0 + disc.sqrt(), 0.0));
-            poles.push((-a1 / 2.0 - disc.sqrt(), 0.0));
-        }
-    }
-    let first_order = d.first_order().map(|f| {
-        poles.push((-(f.a1 as f64), 0.0));
-        [f.b1, f.a1]
-    });
     Ok(Design {
         numerator: d.numerator()[..=n].to_vec(),
         denominator: d.denominator()[..=n].to_vec(),
-        poles,
-        sections,
-        first_order,
+        poles: d.poles().collect(),
+        sections: d.pole_pairs().iter().map(|p| [p.a1, p.a2, p.dc, p.one_minus_a2]).collect(),
+        real_pole: d.real_pole().map(|r| [r.pole, r.one_minus_pole]),
     })
 }
 
@@ -360,8 +342,10 @@ impl AccDecReport {
         let d = &self.design;
         let b = &self.butterworth;
         println!("servo accdec — {} at T = {} s", b.label, self.sample_period);
-        let poly = |c: &[f32]| c.iter().map(|x| format!("{x:.8}")).collect::<Vec<_>>().join(", ");
-        println!("  numerator   b0..bN : [{}]", poly(&d.numerator));
+        let poly = |c: &[f64]| c.iter().map(|x| format!("{x:.8}")).collect::<Vec<_>>().join(", ");
+        // K is (ωc·T)^N small: scientific notation keeps its digits.
+        let numerator = d.numerator.iter().map(|x| format!("{x:.9e}")).collect::<Vec<_>>().join(", ");
+        println!("  numerator   b0..bN : [{numerator}]");
         println!("  denominator 1..aN  : [{}]", poly(&d.denominator));
         println!(
             "  poles (z)          : {}",
@@ -369,17 +353,16 @@ impl AccDecReport {
         );
         for (i, s) in d.sections.iter().enumerate() {
             println!(
-                "  section {} b0 b1 b2 | a1 a2 : {:.8} {:.8} {:.8} | {:.8} {:.8}",
+                "  pole pair {} a1 a2 | 1+a1+a2 1-a2 (what the drive runs) : {:.8} {:.8} | {:.6e} {:.6e}",
                 i + 1,
                 s[0],
                 s[1],
                 s[2],
-                s[3],
-                s[4]
+                s[3]
             );
         }
-        if let Some(f) = d.first_order {
-            println!("  first-order section b1 | a1 : {:.8} | {:.8}", f[0], f[1]);
+        if let Some(r) = d.real_pole {
+            println!("  real pole p | 1-p : {:.8} | {:.6e}", r[0], r[1]);
         }
         println!(
             "\n  move: {} counts at {:.3} counts per tick (interpolator), both filters give out exactly the pulses they take in",

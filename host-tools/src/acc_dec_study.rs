@@ -8,6 +8,7 @@
 //! quantisation that dominates a numerically differentiated jerk).
 
 use anyhow::{anyhow, bail, Result};
+use control_core::acc_dec::reference::ReferenceFilter;
 use control_core::acc_dec::{
     AccDecFilter, ButterworthDesign, ButterworthPulseFilter, MovingAverageCascade, ZeroPlacement,
     MAX_MOVING_AVERAGE_LENGTH,
@@ -98,32 +99,12 @@ impl FilterSpec {
         // Refuse what the drive would refuse (length 0, order 7, …) with its reason.
         self.build(period)?;
         match self {
-            Self::Butterworth { .. } => {
-                // The drive's sections (f32 coefficients) evaluated in f64: the transfer
-                // function the drive runs, without its rounding to whole pulses. (The
-                // expanded direct form in f32 would move the poles at low cut-offs.)
-                let d = self.design(period)?.expect("a design");
-                let mut v = input.to_vec();
-                for b in d.biquads() {
-                    let [b0, b1, b2, a1, a2] = [b.b0, b.b1, b.b2, b.a1, b.a2].map(f64::from);
-                    let (mut s1, mut s2) = (0.0, 0.0);
-                    for x in &mut v {
-                        let y = b0 * *x + s1;
-                        s1 = b1 * *x - a1 * y + s2;
-                        s2 = b2 * *x - a2 * y;
-                        *x = y;
-                    }
-                }
-                if let Some(f) = d.first_order() {
-                    let (b1, a1) = (f64::from(f.b1), f64::from(f.a1));
-                    let mut s = 0.0;
-                    for x in &mut v {
-                        let y = s;
-                        s = b1 * *x - a1 * y;
-                        *x = y;
-                    }
-                }
-                Ok(v)
+            Self::Butterworth { order, cutoff_hz, all_delays } => {
+                // The designed filter in f64 (the reference the drive's integer filter is
+                // checked against), without the drive's rounding to whole pulses.
+                let zeros = if *all_delays { ZeroPlacement::AllDelays } else { ZeroPlacement::Seed };
+                let mut f = ReferenceFilter::new(*order, *cutoff_hz as f64, period as f64, zeros);
+                Ok(input.iter().map(|&x| f.step(x).0).collect())
             }
             Self::MovingAverage { lengths } => {
                 let mut v = input.to_vec();

@@ -29,7 +29,7 @@ use crate::polynomial::roots;
 pub struct SeedDigit {
     pub name: &'static str,
     pub printed: &'static str,
-    pub ours: f32,
+    pub ours: f64,
     pub equal: bool,
 }
 
@@ -129,20 +129,10 @@ pub fn matched_comparison() -> Result<Vec<MatchedComparison>> {
             .map_err(|e| anyhow::anyhow!("{e}"))?;
         let delays = ButterworthDesign::with_zeros(order, cutoff_hz, sample_period, ZeroPlacement::AllDelays)
             .map_err(|e| anyhow::anyhow!("{e}"))?;
-        let ours: Vec<f64> = seed.denominator()[..=order as usize].iter().map(|&a| a as f64).collect();
+        let ours: Vec<f64> = seed.denominator()[..=order as usize].to_vec();
         let denominator_error = ours.iter().zip(&den).map(|(a, b)| (a - b).abs()).fold(0.0, f64::max);
-        // Our poles straight from the sections (what the drive runs), theirs from the roots.
-        let mut our_poles = Vec::new();
-        for b in seed.biquads() {
-            let (a1, a2) = (b.a1 as f64, b.a2 as f64);
-            let disc = a1 * a1 / 4.0 - a2;
-            let (re, im) = if disc < 0.0 { (-a1 / 2.0, (-disc).sqrt()) } else { (-a1 / 2.0 + disc.sqrt(), 0.0) };
-            our_poles.push((re, im));
-            our_poles.push(if disc < 0.0 { (re, -im) } else { (-a1 / 2.0 - disc.sqrt(), 0.0) });
-        }
-        if let Some(f) = seed.first_order() {
-            our_poles.push((-(f.a1 as f64), 0.0));
-        }
+        // Our poles straight from the design (what the drive runs), theirs from the roots.
+        let our_poles: Vec<(f64, f64)> = seed.poles().collect();
         // den = [1, a1, …, aN] of z^N + a1·z^(N−1) + …: ascending order is its reverse.
         let ascending: Vec<f64> = den.iter().rev().copied().collect();
         let their_poles: Vec<(f64, f64)> = roots(&ascending).iter().map(|z| (z.re, z.im)).collect();
@@ -154,8 +144,8 @@ pub fn matched_comparison() -> Result<Vec<MatchedComparison>> {
             pole_error,
             denominator_error,
             python_gain,
-            all_delays_gain_error: (delays.gain as f64 - python_gain).abs() / python_gain,
-            seed_gain_error: (seed.gain as f64 * (1u32 << (order - 1)) as f64 - python_gain).abs() / python_gain,
+            all_delays_gain_error: (delays.gain - python_gain).abs() / python_gain,
+            seed_gain_error: (seed.gain * (1u32 << (order - 1)) as f64 - python_gain).abs() / python_gain,
         });
     }
     Ok(rows)

@@ -1,6 +1,7 @@
 //! Host side of the servo toolkit: scenarios run against the FMU through FMI 3.0, traces,
 //! plots, reports and benchmarks. The `servo` binary is a thin CLI over this library.
 
+pub mod acc_dec_deviation;
 pub mod acc_dec_report;
 pub mod acc_dec_study;
 pub mod bench;

@@ -1,4 +1,4 @@
-//! Butterworth low-pass acc/dec filter discretised by pole-zero matching (seed 003).
+//! Butterworth low-pass acc/dec filter discretised by pole-zero matching (seed 003): the design.
 //!
 //! Design: the `N` analogue poles `p = ωc·e^{jθ}` map to `z = e^{p·T}`; the gain makes
 //! `G(1) = 1`. The `N` zeros at infinity are placed by [`ZeroPlacement`]: the seed maps
@@ -7,44 +7,54 @@
 //! frequency is nulled), python-control's `sample_system(method='matched')` keeps every one as
 //! a delay (`K·z⁻ᴺ/A(z)`: same poles, `N` ticks of dead time, no null at Nyquist).
 //!
-//! Realisation: cascaded second-order sections (one first-order section for odd orders) in
-//! transposed direct form II. A direct form with one delay line, as the seed draws it,
-//! has the same transfer function but in f32 its pole positions are far more sensitive to
-//! coefficient rounding when the cut-off is low against the sample rate (poles near z = 1);
-//! [`ButterworthDesign::denominator`] still gives the direct-form coefficients to print and
-//! compare.
+//! The design is computed once, in f64, in the form the drive runs (see
+//! [`super::ButterworthPulseFilter`]): for each pole pair `r·e^{±jφ}` the values `1 + a1 + a2 =
+//! |1 − z|² = (1 − r)² + 4r·sin²(φ/2)` and `1 − a2 = 1 − r²`, and for the real pole `1 − p`, each
+//! built from `expm1` and `sin` of small arguments, so none of them is a difference of nearly
+//! equal numbers. With poles near `z = 1` (a cut-off of 0.5 Hz at 8 kHz: `ωc·T = 3.9·10⁻⁴`),
+//! `1 + a1 + a2 ≈ (ωc·T)² = 1.5·10⁻⁷` computed from `a1 ≈ −2`, `a2 ≈ 1` would keep only 3 of
+//! f32's 24 bits, and the filter would not be the one designed. f64 here is design-time only
+//! (a few thousand soft-float instructions on the Cortex-M4F when the parameters change, none
+//! per tick); `libm`'s f64 functions and IEEE f64 arithmetic give the same bits on the host and
+//! on the target.
 //!
-//! Whole pulses: each tick the filter's *pending output* (what it would still emit if the
-//! input stopped now: a linear function of its state) is rounded, and the output is what
-//! makes the integer stock of pulses inside the filter equal to it. The rounding error is
-//! carried to the next tick (the seed's claim 10) and the sum of the output equals the sum of
-//! the input exactly once the filter has settled, whatever the floating-point error.
+//! [`ButterworthDesign::denominator`] and [`ButterworthDesign::numerator`] give the direct-form
+//! polynomials to print and compare (python-control, the seed's digits).
 
 use super::AccDecError;
-use crate::biquad::Biquad;
 
 pub const MAX_ORDER: u32 = 6;
-const MAX_BIQUADS: usize = (MAX_ORDER as usize) / 2;
+pub(super) const MAX_PAIRS: usize = (MAX_ORDER as usize) / 2;
 
-/// `y(k) = b1·u(k−1) − a1·y(k−1)`: a real pole with the kept one-sample delay.
+/// The smallest cut-off (Hz) the filter takes, and the smallest cut-off × sample period: below
+/// either, the poles come so close to `z = 1` that the drive's integer states can no longer
+/// keep the commanded position within a count of the designed filter (see
+/// [`super::ButterworthPulseFilter`]). `servo bench accdec` checks the corner (0.5 Hz at
+/// 0.125 ms).
+pub const MIN_CUTOFF_HZ: f32 = crate::ranges::MIN_ACC_DEC_CUTOFF_HZ;
+pub const MIN_CUTOFF_TIMES_PERIOD: f32 = crate::ranges::MIN_ACC_DEC_CUTOFF_TIMES_PERIOD;
+
+/// A pair of complex poles `z = r·e^{±jφ}`: the factor `1 + a1·z⁻¹ + a2·z⁻²` of `A(z)`.
 #[derive(Clone, Copy, Debug, PartialEq)]
-pub struct FirstOrderSection {
-    pub b1: f32,
-    pub a1: f32,
-    s: f32,
+pub struct PolePair {
+    /// `r = e^{σT}` and `φ = ω_d·T` of the pole `e^{(σ + jω_d)·T}`.
+    pub radius: f64,
+    pub angle: f64,
+    /// `a1 = −2r·cos φ`, `a2 = r²`.
+    pub a1: f64,
+    pub a2: f64,
+    /// `1 + a1 + a2 = |1 − z|²`, without cancellation: the section's DC value.
+    pub dc: f64,
+    /// `1 − a2 = 1 − r²`, without cancellation.
+    pub one_minus_a2: f64,
 }
 
-impl FirstOrderSection {
-    fn process(&mut self, u: f32) -> f32 {
-        let y = self.s;
-        self.s = self.b1 * u - self.a1 * y;
-        y
-    }
-
-    /// Sum of every future output if the input stopped now: `Y = s − a1·Y`.
-    fn pending(&self) -> f32 {
-        self.s / (1.0 + self.a1)
-    }
+/// The real pole `p = e^{−ωc·T}` of an odd order: the factor `1 − p·z⁻¹`.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct RealPole {
+    pub pole: f64,
+    /// `1 − p`, without cancellation.
+    pub one_minus_pole: f64,
 }
 
 /// Where the `N` zeros at infinity of the analogue Butterworth go in `z`.
@@ -57,7 +67,7 @@ pub enum ZeroPlacement {
     AllDelays,
 }
 
-/// A designed filter: sections, and the direct-form polynomials for reports.
+/// A designed filter.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct ButterworthDesign {
     pub order: u32,
@@ -65,10 +75,10 @@ pub struct ButterworthDesign {
     pub cutoff_hz: f32,
     pub sample_period: f32,
     /// Overall gain `K` of `G(z) = K·z⁻¹·(1 + z⁻¹)^{N−1} / A(z)` (or `K·z⁻ᴺ / A(z)`).
-    pub gain: f32,
-    biquads: [Biquad; MAX_BIQUADS],
-    biquad_count: usize,
-    first_order: Option<FirstOrderSection>,
+    pub gain: f64,
+    pairs: [PolePair; MAX_PAIRS],
+    pair_count: usize,
+    real_pole: Option<RealPole>,
 }
 
 impl ButterworthDesign {
@@ -99,54 +109,59 @@ impl ButterworthDesign {
         if 2.0 * cutoff_hz * sample_period > 1.0 + 1e-6 {
             return Err(AccDecError::CutoffAboveNyquist { cutoff_hz, nyquist_hz });
         }
-        let wc_t = crate::TAU * cutoff_hz * sample_period;
+        let minimum_hz = MIN_CUTOFF_HZ.max(MIN_CUTOFF_TIMES_PERIOD / sample_period);
+        if cutoff_hz < minimum_hz {
+            return Err(AccDecError::CutoffBelowMinimum { cutoff_hz, minimum_hz });
+        }
+        let wc_t = core::f64::consts::TAU * cutoff_hz as f64 * sample_period as f64;
         let n = order as usize;
-        let mut biquads = [Biquad::identity(); MAX_BIQUADS];
-        // Poles in the left half plane at angles π(2k + N + 1)/(2N), k = 0..N/2 (the upper
-        // half's conjugates pair with them).
-        for (k, section) in biquads.iter_mut().enumerate().take(n / 2) {
-            let theta = core::f32::consts::PI * (2 * k + n + 1) as f32 / (2 * n) as f32;
-            let radius = libm::expf(wc_t * libm::cosf(theta));
-            let a1 = -2.0 * radius * libm::cosf(wc_t * libm::sinf(theta));
-            let a2 = radius * radius;
-            let dc = 1.0 + a1 + a2;
-            // (1 + z⁻¹)² has DC value 4; the section carrying the delay of an even order
-            // has z⁻¹(1 + z⁻¹) with DC value 2; z⁻² has DC value 1.
-            *section = if zeros == ZeroPlacement::AllDelays {
-                Biquad::new(0.0, 0.0, dc, a1, a2)
-            } else if n.is_multiple_of(2) && k == 0 {
-                Biquad::new(0.0, dc / 2.0, dc / 2.0, a1, a2)
-            } else {
-                Biquad::new(dc / 4.0, dc / 2.0, dc / 4.0, a1, a2)
+        let unit = PolePair { radius: 0.0, angle: 0.0, a1: 0.0, a2: 0.0, dc: 1.0, one_minus_a2: 1.0 };
+        let mut pairs = [unit; MAX_PAIRS];
+        // Poles in the left half plane at angles θ = π(2k + N + 1)/(2N), k = 0..N/2 (the upper
+        // half's conjugates pair with them): σT = ωc·T·cos θ < 0, ω_d·T = ωc·T·sin θ.
+        for (k, pair) in pairs.iter_mut().enumerate().take(n / 2) {
+            let theta = core::f64::consts::PI * (2 * k + n + 1) as f64 / (2 * n) as f64;
+            let sigma_t = wc_t * libm::cos(theta);
+            let angle = wc_t * libm::sin(theta);
+            let radius = libm::exp(sigma_t);
+            let one_minus_r = -libm::expm1(sigma_t);
+            let half_angle_sine = libm::sin(0.5 * angle);
+            *pair = PolePair {
+                radius,
+                angle,
+                a1: -2.0 * radius * libm::cos(angle),
+                a2: radius * radius,
+                dc: one_minus_r * one_minus_r + 4.0 * radius * half_angle_sine * half_angle_sine,
+                one_minus_a2: one_minus_r * (1.0 + radius),
             };
         }
-        let first_order = (n % 2 == 1).then(|| {
-            let a1 = -libm::expf(-wc_t);
-            FirstOrderSection { b1: 1.0 + a1, a1, s: 0.0 }
-        });
-        let mut design =
-            Self { order, zeros, cutoff_hz, sample_period, gain: 0.0, biquads, biquad_count: n / 2, first_order };
-        // G(1) = 1: K·2^{N−1} = A(1) (seed), K = A(1) (all delays). A(1) is the product of
-        // the sections' DC values, each `1 + a1 + a2` (or `1 + a1`): with poles near z = 1
-        // these sums are exact in f32 (Sterbenz), whereas summing the expanded direct-form
-        // coefficients would cancel catastrophically at high orders and low cut-offs.
-        let a_at_1 = design.biquads().iter().map(|b| 1.0 + b.a1 + b.a2).product::<f32>()
-            * design.first_order.map_or(1.0, |f| 1.0 + f.a1);
+        let real_pole = (n % 2 == 1).then(|| RealPole { pole: libm::exp(-wc_t), one_minus_pole: -libm::expm1(-wc_t) });
+        // G(1) = 1: K·2^{N−1} = A(1) (seed), K = A(1) (all delays); A(1) is the product of the
+        // sections' DC values.
+        let a_at_1 = pairs[..n / 2].iter().map(|p| p.dc).product::<f64>() * real_pole.map_or(1.0, |r| r.one_minus_pole);
         let numerator_dc = match zeros {
-            ZeroPlacement::Seed => (1u32 << (n - 1)) as f32,
+            ZeroPlacement::Seed => (1u32 << (n - 1)) as f64,
             ZeroPlacement::AllDelays => 1.0,
         };
-        design.gain = a_at_1 / numerator_dc;
-        Ok(design)
+        Ok(Self {
+            order,
+            zeros,
+            cutoff_hz,
+            sample_period,
+            gain: a_at_1 / numerator_dc,
+            pairs,
+            pair_count: n / 2,
+            real_pole,
+        })
     }
 
     /// `[1, a1, …, aN, 0, …]`: `A(z) = 1 + a1·z⁻¹ + … + aN·z⁻ᴺ` of the direct form.
-    pub fn denominator(&self) -> [f32; MAX_ORDER as usize + 1] {
-        let mut poly = [0.0f32; MAX_ORDER as usize + 1];
+    pub fn denominator(&self) -> [f64; MAX_ORDER as usize + 1] {
+        let mut poly = [0.0f64; MAX_ORDER as usize + 1];
         poly[0] = 1.0;
         let mut degree = 0;
-        let mut multiply = |factor: &[f32]| {
-            let mut out = [0.0f32; MAX_ORDER as usize + 1];
+        let mut multiply = |factor: &[f64]| {
+            let mut out = [0.0f64; MAX_ORDER as usize + 1];
             for (i, p) in poly.iter().enumerate().take(degree + 1) {
                 for (j, f) in factor.iter().enumerate() {
                     out[i + j] += p * f;
@@ -155,88 +170,50 @@ impl ButterworthDesign {
             poly = out;
             degree += factor.len() - 1;
         };
-        for b in &self.biquads[..self.biquad_count] {
-            multiply(&[1.0, b.a1, b.a2]);
+        for p in self.pole_pairs() {
+            multiply(&[1.0, p.a1, p.a2]);
         }
-        if let Some(f) = &self.first_order {
-            multiply(&[1.0, f.a1]);
+        if let Some(r) = &self.real_pole {
+            multiply(&[1.0, -r.pole]);
         }
         poly
     }
 
     /// `[0, b1, …, bN, 0, …]`: `K·z⁻¹·(1 + z⁻¹)^{N−1}` (or `K·z⁻ᴺ`) of the direct form.
-    pub fn numerator(&self) -> [f32; MAX_ORDER as usize + 1] {
-        let mut poly = [0.0f32; MAX_ORDER as usize + 1];
+    pub fn numerator(&self) -> [f64; MAX_ORDER as usize + 1] {
+        let mut poly = [0.0f64; MAX_ORDER as usize + 1];
         if self.zeros == ZeroPlacement::AllDelays {
             poly[self.order as usize] = self.gain;
             return poly;
         }
         // Binomial coefficients of (1 + z⁻¹)^{N−1}, shifted by the delay.
-        let mut c = 1.0f32;
+        let mut c = 1.0f64;
         let m = self.order - 1;
         for i in 0..=m {
             poly[i as usize + 1] = self.gain * c;
-            c = c * (m - i) as f32 / (i + 1) as f32;
+            c = c * (m - i) as f64 / (i + 1) as f64;
         }
         poly
     }
 
-    /// Second-order sections in cascade order.
-    pub fn biquads(&self) -> &[Biquad] {
-        &self.biquads[..self.biquad_count]
+    /// The complex pole pairs, in cascade order.
+    pub fn pole_pairs(&self) -> &[PolePair] {
+        &self.pairs[..self.pair_count]
     }
 
-    pub fn first_order(&self) -> Option<&FirstOrderSection> {
-        self.first_order.as_ref()
-    }
-}
-
-/// The designed filter running on pulses per tick, with whole-pulse output.
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub struct ButterworthPulseFilter {
-    design: ButterworthDesign,
-    /// Pulses taken in and not yet given out (exact).
-    stock: i64,
-}
-
-impl ButterworthPulseFilter {
-    pub fn new(design: ButterworthDesign) -> Self {
-        Self { design, stock: 0 }
+    /// The real pole of an odd order.
+    pub fn real_pole(&self) -> Option<&RealPole> {
+        self.real_pole.as_ref()
     }
 
-    pub fn design(&self) -> &ButterworthDesign {
-        &self.design
-    }
-
-    /// Pulses inside the filter (taken in, not yet given out).
-    pub fn stock(&self) -> i64 {
-        self.stock
-    }
-
-    /// Empty the filter: zero state, no pulse inside.
-    pub fn reset(&mut self) {
-        for b in &mut self.design.biquads {
-            b.reset();
-        }
-        if let Some(f) = &mut self.design.first_order {
-            f.s = 0.0;
-        }
-        self.stock = 0;
-    }
-
-    /// One tick: `pulses` in, whole pulses out.
-    pub fn step(&mut self, pulses: i64) -> i64 {
-        let d = &mut self.design;
-        let mut v = crate::counts_to_f32(pulses);
-        let mut pending = 0.0;
-        for b in &mut d.biquads[..d.biquad_count] {
-            v = b.process(v);
-            pending += b.pending_output();
-        }
-        if let Some(f) = &mut d.first_order {
-            f.process(v);
-            pending += f.pending();
-        }
-        crate::release_whole_pulses(&mut self.stock, pulses, pending)
+    /// Every pole `(re, im)` in `z`.
+    pub fn poles(&self) -> impl Iterator<Item = (f64, f64)> + '_ {
+        self.pole_pairs()
+            .iter()
+            .flat_map(|p| {
+                let (re, im) = (p.radius * libm::cos(p.angle), p.radius * libm::sin(p.angle));
+                [(re, im), (re, -im)]
+            })
+            .chain(self.real_pole.map(|r| (r.pole, 0.0)))
     }
 }

@@ -4,13 +4,20 @@
 //!
 //! Two filters: the prior art's cascaded moving averages ([`MovingAverageCascade`], integer
 //! arithmetic) and the seed's Butterworth low-pass discretised by pole-zero matching
-//! ([`ButterworthDesign`], [`ButterworthPulseFilter`]).
+//! ([`ButterworthDesign`], run on pulses by [`ButterworthPulseFilter`] in integer arithmetic;
+//! [`reference::ReferenceFilter`] is the same filter in f64 for the checks).
 
 mod butterworth;
+mod fixed_point;
 mod moving_average;
+mod pulse_filter;
+pub mod reference;
 
-pub use butterworth::{ButterworthDesign, ButterworthPulseFilter, FirstOrderSection, ZeroPlacement, MAX_ORDER};
+pub use butterworth::{
+    ButterworthDesign, PolePair, RealPole, ZeroPlacement, MAX_ORDER, MIN_CUTOFF_HZ, MIN_CUTOFF_TIMES_PERIOD,
+};
 pub use moving_average::{MovingAverageCascade, MAX_MOVING_AVERAGE_LENGTH, MAX_MOVING_AVERAGE_STAGES};
+pub use pulse_filter::{ButterworthPulseFilter, MAX_FILTERED_PULSES};
 
 use core::fmt;
 
@@ -50,7 +57,8 @@ pub struct AccDecParams {
     pub kind: AccDecKind,
     /// Butterworth order, 1 to 6.
     pub order: u32,
-    /// Butterworth cut-off (Hz); at most the position loop's Nyquist frequency.
+    /// Butterworth cut-off (Hz); at least [`MIN_CUTOFF_HZ`] (and [`MIN_CUTOFF_TIMES_PERIOD`]
+    /// over the position-loop period), at most the position loop's Nyquist frequency.
     pub cutoff_hz: f32,
     /// Moving-average stages in use (1 to 3) and their lengths (position ticks).
     pub ma_stages: u32,
@@ -123,6 +131,9 @@ pub enum AccDecError {
     /// Cut-off above the Nyquist frequency of the sample period (at Nyquist is allowed: the
     /// seed's own example sits there).
     CutoffAboveNyquist { cutoff_hz: f32, nyquist_hz: f32 },
+    /// Cut-off below the lowest the filter keeps within a count of its design at this sample
+    /// period ([`MIN_CUTOFF_HZ`], [`MIN_CUTOFF_TIMES_PERIOD`]).
+    CutoffBelowMinimum { cutoff_hz: f32, minimum_hz: f32 },
     /// Sample period not a positive finite time (s).
     SamplePeriod(f32),
     /// Number of moving-average stages outside 1..=3.
@@ -139,6 +150,11 @@ impl fmt::Display for AccDecError {
             Self::CutoffAboveNyquist { cutoff_hz, nyquist_hz } => {
                 write!(f, "cut-off {cutoff_hz} Hz is above the Nyquist frequency {nyquist_hz} Hz of the sample period")
             }
+            Self::CutoffBelowMinimum { cutoff_hz, minimum_hz } => write!(
+                f,
+                "cut-off {cutoff_hz} Hz is below {minimum_hz} Hz, the lowest the filter keeps within a count of its \
+                 design at this sample period (at least {MIN_CUTOFF_HZ} Hz and {MIN_CUTOFF_TIMES_PERIOD} / period)"
+            ),
             Self::SamplePeriod(t) => write!(f, "sample period {t} s must be a positive finite time"),
             Self::Stages(n) => {
                 write!(f, "{n} moving-average stages: use 1..={MAX_MOVING_AVERAGE_STAGES}")

@@ -162,6 +162,9 @@ const SPEED: Range = Range::new(-1.0e5, 1.0e5);
 const TORQUE: Range = Range::new(-1.0e6, 1.0e6);
 const FREQ: Range = Range::new(0.0, 1.0e6);
 const POS_FREQ: Range = Range::new(1.0e-3, 1.0e6);
+/// Butterworth acc/dec cut-off: from the core's lowest (the upper bound is the position loop's
+/// Nyquist frequency, which the core checks against the loop rate).
+const ACC_DEC_FREQ: Range = Range::new(control_core::ranges::MIN_ACC_DEC_CUTOFF_HZ as f64, 1.0e6);
 
 const S: Option<Unit> = Some(Unit::Second);
 const RAD: Option<Unit> = Some(Unit::Radian);
@@ -245,7 +248,7 @@ declare_variables! {
     // Acceleration/deceleration filter between the position command and the position loop.
     51 accdec_filter: Int32 "accdec.filter" Parameter Fixed = Params::default().acc_dec.kind.code(); NONE; r(0.0, 2.0); "0 none, 1 cascaded moving averages, 2 Butterworth (pole-zero matched)";
     52 accdec_order: Int32 "accdec.order" Parameter Fixed = core_count(|p| p.acc_dec.order); NONE; r(1.0, 6.0); "Butterworth order (1 to 6)";
-    53 accdec_cutoff_hz: Float64 "accdec.cutoff_hz" Parameter Fixed = core(|p| p.acc_dec.cutoff_hz); HZ; POS_FREQ; "Butterworth cut-off (at most the position loop's Nyquist frequency)";
+    53 accdec_cutoff_hz: Float64 "accdec.cutoff_hz" Parameter Fixed = core(|p| p.acc_dec.cutoff_hz); HZ; ACC_DEC_FREQ; "Butterworth cut-off (at least 0.5 Hz and 6e-5 / position-loop period, at most the position loop's Nyquist frequency)";
     54 accdec_ma_stages: Int32 "accdec.ma_stages" Parameter Fixed = core_count(|p| p.acc_dec.ma_stages); NONE; r(1.0, 3.0); "Moving-average stages in use (1 to 3)";
     55 accdec_ma_length_1: Int32 "accdec.ma_length_1" Parameter Fixed = core_count(|p| p.acc_dec.ma_lengths[0]); NONE; r(1.0, 512.0); "Length of moving-average stage 1 (position ticks)";
     56 accdec_ma_length_2: Int32 "accdec.ma_length_2" Parameter Fixed = core_count(|p| p.acc_dec.ma_lengths[1]); NONE; r(1.0, 512.0); "Length of moving-average stage 2 (position ticks)";
