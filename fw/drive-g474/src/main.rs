@@ -25,14 +25,20 @@ use static_cell::StaticCell;
 
 /// Bridge off first; then interrupts masked (the control interrupt sets MOE every tick, so it
 /// must not run again) and the bridge switched off once more in case it ran in between; then
-/// the message, and a HardFault as panic-probe does (a probe halts there; without one the
+/// the location, and a HardFault as panic-probe does (a probe halts there; without one the
 /// HardFault handler waits for the watchdog).
 #[panic_handler]
 fn panic(info: &core::panic::PanicInfo) -> ! {
     board::bridge_off_now();
     cortex_m::interrupt::disable();
     board::bridge_off_now();
-    defmt::error!("panic: {}", defmt::Display2Format(info));
+    // Where, not the message: formatting panic messages on the target would link core's
+    // float formatting (about 17 KiB of flash) for the few messages that carry a float; the
+    // location names the check, and the host-side tests give the message.
+    match info.location() {
+        Some(l) => defmt::error!("panic at {=str}:{=u32}", l.file(), l.line()),
+        None => defmt::error!("panic"),
+    }
     cortex_m::asm::udf()
 }
 
