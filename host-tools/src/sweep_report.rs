@@ -30,6 +30,7 @@ pub fn oracle_settings(s: &SweepParams) -> SweepParams {
         min_settle_s: s.min_settle_s.max(0.05),
         // Fixed long records: the reference does not adapt its length.
         precision_db: 0.0,
+        dither: 0.0,
         ..*s
     }
 }

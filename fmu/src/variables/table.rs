@@ -389,4 +389,8 @@ declare_variables! {
     // that every earlier value reference stays.
     182 seq_completion_hold: Float64 "seq.completion_hold" Parameter Fixed = core(|p| p.sequence.completion_hold); S; r(0.0, 10.0); "Completion is raised after |deviation| <= seq.completion_counts and |speed| <= seq.zero_speed held this long";
     183 seq_completion_hysteresis: Int32 "seq.completion_hysteresis" Parameter Fixed = core_count(|p| p.sequence.completion_hysteresis); NONE; r(0.0, 1.0e9); "Once raised, completion drops only when |deviation| > seq.completion_counts + this many counts (or on a new target)";
+
+    // Frequency-response dither (seed 000, issue 15), appended so that every earlier value
+    // reference stays.
+    184 sweep_dither: Float64 "sweep.dither" Parameter Fixed = core(|p| p.sweep.dither); NM; r(0.0, 1000.0); "Stepped sine: pseudo-random +/- dither added to the torque command every tick at and above the threshold, to break the lock of the encoder count pattern to the excitation (0 = none)";
 }
