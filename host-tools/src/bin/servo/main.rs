@@ -265,12 +265,17 @@ enum Command {
         /// Base ticks (62.5 µs) per acquisition sample
         #[arg(long, default_value_t = 4)]
         acquisition_divider: u32,
-        /// Lengthen a frequency's records by whole blocks so that the standard error of its
-        /// gain, predicted from the fit's residual after the first block (encoder
-        /// quantisation, noise), is at most this (dB); 0 = fixed records. Low-gain points (an
+        /// Lengthen a frequency's records by whole blocks so that the standard errors of its
+        /// response G = Y/U, gain and phase (the phase's in the same relative size: 0.03 dB =
+        /// 0.2 deg), predicted from the residuals of U and Y after the first block (encoder
+        /// quantisation, noise), are at most this (dB); 0 = fixed records. Low-gain points (an
         /// anti-resonance, the top of the sweep) need it; the others keep their base length
         #[arg(long, default_value_t = 0.03)]
         precision_db: f64,
+        /// Pseudo-random ±dither on the torque command at and above the threshold (N·m; 0 =
+        /// none): breaks the lock of the encoder's count pattern to the excitation
+        #[arg(long, default_value_t = 0.003)]
+        dither: f64,
         /// At most so many extra blocks (each one record's base measurement) per record
         #[arg(long, default_value_t = 8)]
         max_extensions: u32,
@@ -571,6 +576,7 @@ fn main() -> ExitCode {
             threshold,
             acquisition_divider,
             precision_db,
+            dither,
             max_extensions,
             velocity,
             set,
@@ -578,7 +584,9 @@ fn main() -> ExitCode {
             reference,
             common,
         } => (|| {
-            let settings = sweep::sweep_settings(
+            let settings = control_core::phase_shifted_sweep::SweepParams {
+                dither: *dither as f32,
+                ..sweep::sweep_settings(
                 point,
                 *amplitude,
                 *start,
@@ -596,7 +604,8 @@ fn main() -> ExitCode {
                 *acquisition_divider,
                 *precision_db,
                 *max_extensions,
-            )?;
+            )?
+            };
             let parameters = host_tools::circle_report::axis_parameters(set, &[])?;
             let run = host_tools::frequency_response::SweepRun { settings, parameters, velocity: *velocity };
             let reference = match reference {
