@@ -463,7 +463,12 @@ struct SineFitSums {
     duu: f32,
     dyy: f32,
     duy: f32,
-    previous: Option<(f32, f32)>,
+    previous: (f32, f32),
+    has_previous: bool,
+    /// Σcos², Σsin², Σcos·sin of the records' first samples (which start no difference).
+    first_cc: f32,
+    first_ss: f32,
+    first_cs: f32,
 }
 
 /// Standard errors of a measured response `G = Y/U`, relative to |G|: the gain's (radial) and
@@ -490,14 +495,19 @@ impl SineFitSums {
         }
         let u = u - self.u0;
         let y = y - self.y0;
-        if let Some((pu, py)) = self.previous {
-            let (du, dy) = (u - pu, y - py);
+        if self.has_previous {
+            let (du, dy) = (u - self.previous.0, y - self.previous.1);
             self.dn += 1.0;
             self.duu += du * du;
             self.dyy += dy * dy;
             self.duy += du * dy;
+        } else {
+            self.first_cc += c * c;
+            self.first_ss += s * s;
+            self.first_cs += c * s;
         }
-        self.previous = Some((u, y));
+        self.previous = (u, y);
+        self.has_previous = true;
         self.uu += u * u;
         self.yy += y * y;
         self.uy += u * y;
@@ -517,7 +527,7 @@ impl SineFitSums {
 
     /// A new record starts: its first sample has no predecessor.
     fn break_record(&mut self) {
-        self.previous = None;
+        self.has_previous = false;
     }
 
     /// The centred (cos, sin) normal equations: `n` (at least 1), `Scc'`, `Sss'`, `Scs'` and
@@ -577,15 +587,14 @@ impl SineFitSums {
         let ryy = self.yy - self.y * self.y / e.n - (by * pcy + cy * psy);
         let ruy = self.uy - self.u * self.y / e.n - (by * pcu + cy * psu);
         // The fitted sine's difference between consecutive samples is the sine of
-        // coefficients (b(1 − cos φ) + c·sin φ, c(1 − cos φ) − b·sin φ); its sum of squares
-        // over the differences, taken from the centred sums, comes off the differences'.
+        // coefficients (b(1 − cos φ) + c·sin φ, c(1 − cos φ) − b·sin φ) at the later sample;
+        // its sum of squares over the differences (the phase sums without the records' first
+        // samples) comes off the differences'.
         let (sin_step, cos_step) = crate::trigonometry::sin_cos(step);
-        let share = self.dn / e.n;
+        let (pcc, pss, pcs) = (self.cc - self.first_cc, self.ss - self.first_ss, self.cs - self.first_cs);
         let rotated = |b: f32, c: f32| (b * (1.0 - cos_step) + c * sin_step, c * (1.0 - cos_step) - b * sin_step);
         let ((dbu, dcu), (dby, dcy)) = (rotated(bu, cu), rotated(by, cy));
-        let quadratic = |b1: f32, c1: f32, b2: f32, c2: f32| {
-            share * (b1 * b2 * e.scc + c1 * c2 * e.sss + (b1 * c2 + c1 * b2) * e.scs)
-        };
+        let quadratic = |b1: f32, c1: f32, b2: f32, c2: f32| b1 * b2 * pcc + c1 * c2 * pss + (b1 * c2 + c1 * b2) * pcs;
         let druu = self.duu - quadratic(dbu, dcu, dbu, dcu);
         let dryy = self.dyy - quadratic(dby, dcy, dby, dcy);
         let druy = self.duy - quadratic(dbu, dcu, dby, dcy);
@@ -645,6 +654,8 @@ pub struct PhaseShiftedSweep {
     /// xorshift32 state of the dither and the dither of the present tick (N·m).
     dither_state: u32,
     dither: f32,
+    /// The present frequency is dithered (`dither` > 0, at or above the threshold).
+    dithering: bool,
     sequence: MSequence,
     chip: f32,
     /// The excitation value and phase of the present tick, and the phase's sine and cosine.
@@ -668,6 +679,7 @@ impl PhaseShiftedSweep {
             averaging: false,
             dither_state: DITHER_SEED,
             dither: 0.0,
+            dithering: false,
             // Validated with the parameters; the fallback only keeps this constructor total.
             sequence: MSequence::new(params.prbs_degree).unwrap_or(MSequence::DEGREE_15),
             chip: 0.0,
@@ -678,13 +690,10 @@ impl PhaseShiftedSweep {
         }
     }
 
-    /// The dither to add to the torque command on this tick (0 when no stepped sine runs).
+    /// The dither to add to the torque command on this tick (0 when no stepped sine runs: it
+    /// is cleared when the sweep ends).
     pub fn torque_dither(&self) -> f32 {
-        if self.running() {
-            self.dither
-        } else {
-            0.0
-        }
+        self.dither
     }
 
     pub fn params(&self) -> &SweepParams {
@@ -727,11 +736,13 @@ impl PhaseShiftedSweep {
             self.left = (libm::ceilf(p.min_settle_s * self.base_rate_hz / d as f32) as u64).saturating_mul(d);
             self.status.frequency = 0.0;
             self.averaging = false;
+            self.dithering = false;
             return;
         }
         let f = p.frequency(point as usize);
         self.status.frequency = f;
         self.averaging = f < p.threshold(self.base_rate_hz);
+        self.dithering = p.dither > 0.0 && !self.averaging;
         let initial = record as f32 * TAU / p.shifts as f32;
         self.generator = SineGenerator::new(p.amplitude, f, self.base_rate_hz, initial);
         self.left = p.record_length(f, self.base_rate_hz).0;
@@ -759,7 +770,7 @@ impl PhaseShiftedSweep {
             SweepSignal::SteppedSine => {
                 self.phase = self.generator.phase();
                 (self.value, self.sin_cos) = self.generator.next_with_sin_cos();
-                self.dither = if p.dither > 0.0 && !self.averaging {
+                self.dither = if self.dithering {
                     let mut x = self.dither_state;
                     x ^= x << 13;
                     x ^= x >> 17;
@@ -870,6 +881,7 @@ impl PhaseShiftedSweep {
                     self.begin_record(next, 0);
                 } else {
                     self.status.state = SweepState::Done;
+                    self.dither = 0.0;
                 }
             }
             _ => {}

@@ -44,8 +44,11 @@ pub const GOAL_DEG: f64 = 1.0;
 pub const GOAL_SECONDS: f64 = 10.0;
 
 /// Injection points and their sine amplitudes (the `servo sweep` defaults).
-pub const POINTS: [(InjectionPoint, f32); 3] =
-    [(InjectionPoint::VelocityCommand, 2.0), (InjectionPoint::TorqueCommand, 0.2), (InjectionPoint::VelocityFeedback, 2.0)];
+pub const POINTS: [(InjectionPoint, f32); 3] = [
+    (InjectionPoint::VelocityCommand, 2.0),
+    (InjectionPoint::TorqueCommand, 0.2),
+    (InjectionPoint::VelocityFeedback, 2.0),
+];
 
 pub fn point_name(p: InjectionPoint) -> &'static str {
     match p {

@@ -587,24 +587,24 @@ fn main() -> ExitCode {
             let settings = control_core::phase_shifted_sweep::SweepParams {
                 dither: *dither as f32,
                 ..sweep::sweep_settings(
-                point,
-                *amplitude,
-                *start,
-                *stop,
-                *points,
-                *linear,
-                *extra,
-                *settle_cycles,
-                *measure_cycles,
-                *min_settle,
-                *min_measure,
-                *shifts,
-                *repeats,
-                *threshold,
-                *acquisition_divider,
-                *precision_db,
-                *max_extensions,
-            )?
+                    point,
+                    *amplitude,
+                    *start,
+                    *stop,
+                    *points,
+                    *linear,
+                    *extra,
+                    *settle_cycles,
+                    *measure_cycles,
+                    *min_settle,
+                    *min_measure,
+                    *shifts,
+                    *repeats,
+                    *threshold,
+                    *acquisition_divider,
+                    *precision_db,
+                    *max_extensions,
+                )?
             };
             let parameters = host_tools::circle_report::axis_parameters(set, &[])?;
             let run = host_tools::frequency_response::SweepRun { settings, parameters, velocity: *velocity };
