@@ -993,6 +993,27 @@ mod tests {
     }
 
     #[test]
+    fn below_the_threshold_a_sample_is_the_mean_over_the_loop_ticks_and_above_it_the_value() {
+        for (f, averaged) in [(123.0, true), (2500.0, false)] {
+            let p = at(f, 3, 3);
+            let mut s = PhaseShiftedSweep::new(p, FS);
+            s.start().unwrap();
+            let mut ys = [0.0f32; 4];
+            for tick in 0..400u64 {
+                let (_, u) = s.excitation(true).unwrap();
+                let y = (tick * tick % 97) as f32;
+                ys[(tick % 4) as usize] = y;
+                let acquire = tick % 4 == 3;
+                s.end_tick(tick, tick % 2 == 1, acquire, u, y);
+                if acquire && tick > 4 {
+                    let expected = if averaged { 0.5 * (ys[1] + ys[3]) } else { y };
+                    assert_eq!(s.status().sample.y, expected, "{f} Hz, tick {tick}");
+                }
+            }
+        }
+    }
+
+    #[test]
     fn the_frequency_list_includes_the_extra_point_in_order() {
         let p = SweepParams::default();
         assert_eq!(p.count(), 41);
@@ -1017,6 +1038,14 @@ mod tests {
             Err(SweepError::AcquisitionDivider { acquisition: 3, velocity: 2 })
         );
         assert_eq!(v(SweepParams { points: 200, ..Default::default() }), Err(SweepError::TooManyPoints(200)));
+        assert!(matches!(
+            v(SweepParams { dither: f32::NAN, ..Default::default() }),
+            Err(SweepError::Setting { field: "dither", .. })
+        ));
+        assert!(matches!(
+            v(SweepParams { dither: 2000.0, ..Default::default() }),
+            Err(SweepError::Range { field: "dither", .. })
+        ));
         assert_eq!(v(SweepParams::default()), Ok(()));
     }
 
