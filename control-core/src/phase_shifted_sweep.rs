@@ -20,6 +20,13 @@
 //! - velocity feedback (the seed's figure): the controller sees estimate + s; U = estimate + s,
 //!   Y = estimate → `−Y/U` is the open loop L = CP (the sign is applied in the result).
 //!
+//! Below the threshold an acquisition sample is the mean of u and of y over the loop ticks of
+//! its acquisition period (the same average on both cancels in Y/U; it keeps the encoder's
+//! differentiated quantisation noise from folding down to low frequencies); from the
+//! threshold up it is the instantaneous value, as equivalent-time sampling needs. Precision
+//! control lengthens a frequency's records until the predicted standard errors of G, gain and
+//! phase, meet `precision_db` (see [`SineFitSums::response_error`]).
+//!
 //! The on-line correlator keeps the sums of a three-parameter sine fit per frequency (no
 //! sample buffers; see [`SineFitSums`]); results
 //! for up to [`MAX_SWEEP_POINTS`] frequencies are kept. A PRBS mode (an M-sequence of configurable
