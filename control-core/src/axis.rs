@@ -426,13 +426,14 @@ impl Axis {
         if excitation.0 == InjectionPoint::TorqueCommand {
             torque += excitation.1;
         }
+        torque += self.sweep.torque_dither();
         // The sweep's U and Y (see `phase_shifted_sweep`): Y is always the velocity estimate.
         let u = match excitation.0 {
             InjectionPoint::VelocityCommand => self.velocity_loop_inputs.0,
             InjectionPoint::VelocityFeedback => self.velocity_loop_inputs.1,
             _ => torque,
         };
-        self.sweep.end_tick(self.tick, acquire, u, self.velocity_estimate);
+        self.sweep.end_tick(self.tick, velocity_due, acquire, u, self.velocity_estimate);
 
         let iq_limit = p.current.max_current;
         let reference = Dq { d: 0.0, q: (torque / p.motor.torque_constant()).clamp(-iq_limit, iq_limit) };

@@ -20,6 +20,13 @@
 //! - velocity feedback (the seed's figure): the controller sees estimate + s; U = estimate + s,
 //!   Y = estimate → `−Y/U` is the open loop L = CP (the sign is applied in the result).
 //!
+//! Below the threshold an acquisition sample is the mean of u and of y over the loop ticks of
+//! its acquisition period (the same average on both cancels in Y/U; it keeps the encoder's
+//! differentiated quantisation noise from folding down to low frequencies); from the
+//! threshold up it is the instantaneous value, as equivalent-time sampling needs. Precision
+//! control lengthens a frequency's records until the predicted standard errors of G, gain and
+//! phase, meet `precision_db` (see [`SineFitSums::response_error`]).
+//!
 //! The on-line correlator keeps the sums of a three-parameter sine fit per frequency (no
 //! sample buffers; see [`SineFitSums`]); results
 //! for up to [`MAX_SWEEP_POINTS`] frequencies are kept. A PRBS mode (an M-sequence of configurable
@@ -35,6 +42,8 @@ pub const MAX_SWEEP_POINTS: usize = 128;
 const MAX_SHIFTS: u32 = 16;
 /// Upper bound of `SweepParams::max_extensions`.
 pub const MAX_EXTENSIONS: u32 = 64;
+/// Upper bound of `SweepParams::dither` (N·m).
+pub const MAX_SWEEP_DITHER: f32 = 1000.0;
 
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
 pub enum SweepSignal {
@@ -86,6 +95,15 @@ pub struct SweepParams {
     /// At most so many extra blocks (each as long as one record's base measurement) per
     /// record of a frequency.
     pub max_extensions: u32,
+    /// Stepped sine: a pseudo-random ±dither (N·m) added to the torque command on every base
+    /// tick of the frequencies at and above the threshold (0: none). At constant speed and
+    /// without sensor noise the encoder's count pattern is periodic and can lock to the
+    /// excitation: at the top of the sweep, where the response is a few counts, a
+    /// quantisation error that longer records do not remove (0.24 dB at 3 kHz on the default
+    /// axis). A dither of a few milli-newton-metres moves the axis by enough counts to break
+    /// the lock; the fit sees it as noise. Below the threshold the samples are period means
+    /// (see [`PhaseShiftedSweep::end_tick`]) and need none.
+    pub dither: f32,
 }
 
 impl Default for SweepParams {
@@ -117,6 +135,7 @@ impl Default for SweepParams {
             prbs_seconds: 5.0,
             precision_db: 0.03,
             max_extensions: 8,
+            dither: 0.003,
         }
     }
 }
@@ -304,6 +323,7 @@ impl SweepParams {
         }
         finite_positive("prbs_seconds", self.prbs_seconds)?;
         finite_non_negative("precision_db", self.precision_db)?;
+        finite_non_negative("dither", self.dither)?;
         if self.max_extensions > MAX_EXTENSIONS {
             return Err(SweepError::Setting {
                 field: "max_extensions (at most 64)",
@@ -329,6 +349,7 @@ impl SweepParams {
         range("min_settle_s", self.min_settle_s, 0.0, MAX_SWEEP_SECONDS)?;
         range("min_measure_s", self.min_measure_s, 0.0, MAX_SWEEP_SECONDS)?;
         range("prbs_seconds", self.prbs_seconds, 0.0, MAX_SWEEP_SECONDS)?;
+        range("dither", self.dither, 0.0, MAX_SWEEP_DITHER)?;
         range("acquisition_divider", self.acquisition_divider as f32, 1.0, MAX_SWEEP_DIVIDER as f32)?;
         range("prbs_divider", self.prbs_divider as f32, 1.0, MAX_SWEEP_DIVIDER as f32)?;
         // The sine is updated at the velocity-loop rate for velocity-loop points.
@@ -419,12 +440,18 @@ pub struct SweepStatus {
 /// phases determine the sine: the determinant of the (cos, sin) covariance, 0 when all
 /// samples sit at one phase and its opposite (a single record at exactly fs/2).
 ///
-/// y is summed about its first sample (`y0`): the constant speed the sweep rides on would
-/// otherwise swamp the f32 sums, in particular Σy², which gives the residual.
+/// u and y are summed about their first samples (`u0`, `y0`): the constant speed the sweep
+/// rides on would otherwise swamp the f32 sums, in particular the squares, which give the
+/// residuals. The squares and the cross product of u and y, and those of their differences
+/// between consecutive samples of a record, give the noise of U and Y at the excitation
+/// frequency (see [`SineFitSums::response_error`]).
 #[derive(Clone, Copy, Debug, Default)]
 struct SineFitSums {
+    u0: f32,
     y0: f32,
+    uu: f32,
     yy: f32,
+    uy: f32,
     n: f32,
     c: f32,
     s: f32,
@@ -437,16 +464,60 @@ struct SineFitSums {
     y: f32,
     yc: f32,
     ys: f32,
+    /// Differences between consecutive samples of one record: their count, squares and
+    /// cross product, and the previous sample (`None` at a record's start).
+    dn: f32,
+    duu: f32,
+    dyy: f32,
+    duy: f32,
+    previous: (f32, f32),
+    has_previous: bool,
+    /// Σcos², Σsin², Σcos·sin of the records' first samples (which start no difference).
+    first_cc: f32,
+    first_ss: f32,
+    first_cs: f32,
+}
+
+/// Standard errors of a measured response `G = Y/U`, relative to |G|: the gain's (radial) and
+/// the phase's (tangential, rad).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct ResponseError {
+    pub gain: f32,
+    pub phase: f32,
+}
+
+impl ResponseError {
+    /// The gain's standard error in dB.
+    pub fn gain_db(&self) -> f32 {
+        20.0 / core::f32::consts::LN_10 * self.gain
+    }
 }
 
 impl SineFitSums {
     /// One sample with the sine and cosine of its phase.
     fn add(&mut self, u: f32, y: f32, (s, c): (f32, f32)) {
         if self.n == 0.0 {
+            self.u0 = u;
             self.y0 = y;
         }
+        let u = u - self.u0;
         let y = y - self.y0;
+        if self.has_previous {
+            let (du, dy) = (u - self.previous.0, y - self.previous.1);
+            self.dn += 1.0;
+            self.duu += du * du;
+            self.dyy += dy * dy;
+            self.duy += du * dy;
+        } else {
+            self.first_cc += c * c;
+            self.first_ss += s * s;
+            self.first_cs += c * s;
+        }
+        self.previous = (u, y);
+        self.has_previous = true;
+        self.uu += u * u;
         self.yy += y * y;
+        self.uy += u * y;
         self.n += 1.0;
         self.c += c;
         self.s += s;
@@ -459,6 +530,11 @@ impl SineFitSums {
         self.y += y;
         self.yc += y * c;
         self.ys += y * s;
+    }
+
+    /// A new record starts: its first sample has no predecessor.
+    fn break_record(&mut self) {
+        self.has_previous = false;
     }
 
     /// The centred (cos, sin) normal equations: `n` (at least 1), `Scc'`, `Sss'`, `Scs'` and
@@ -489,27 +565,67 @@ impl SineFitSums {
         (amplitude(self.u, self.uc, self.us), amplitude(self.y, self.yc, self.ys), conditioning)
     }
 
-    /// Standard error of Y's gain in dB, from the residual of its fit: `σ² = SSR/(n − 3)`,
-    /// `Var b = σ²·Sss'/det`, `Var c = σ²·Scc'/det`, the radial part of the amplitude's error
-    /// over `|Y|`. None when the samples cannot tell (too few, phases degenerate, no
-    /// response).
-    fn y_gain_error_db(&self) -> Option<f32> {
-        if self.n < 8.0 {
+    /// Standard errors of `G = Y/U` (gain and phase, relative), from the residuals of both
+    /// fits. The noise of U and Y and their correlation (on the torque command U carries the
+    /// loop's reaction to the noise of Y) enter as `δG/G = δY/Y − δU/U`. The noise at the
+    /// excitation frequency, not its average over the band, decides: the residuals' variance
+    /// γ₀ and lag-one covariance γ₁ (from the differences of consecutive samples) give the
+    /// first-order noise spectrum `γ₀ + 2γ₁·cos(ω·Tₐ)` (`step`: ω·Tₐ, the excitation's
+    /// phase step between samples). Encoder quantisation in a velocity averaged over the
+    /// acquisition period has exactly this form (γ₁ = −γ₀/2: little noise at low
+    /// frequencies, twice the average near the acquisition Nyquist frequency). None when the
+    /// samples cannot tell (too few, phases degenerate, no response).
+    fn response_error(&self, step: f32) -> Option<ResponseError> {
+        if self.n < 8.0 || self.dn < 4.0 {
             return None;
         }
         let e = self.normal_equations();
         if !(e.det > 1e-6 * e.n * e.n) {
             return None;
         }
-        let ((b, c), (pc, ps)) = self.coefficients(&e, self.y, self.yc, self.ys);
-        let amplitude2 = b * b + c * c;
-        if !(amplitude2 > 0.0) {
+        let ((bu, cu), (pcu, psu)) = self.coefficients(&e, self.u, self.uc, self.us);
+        let ((by, cy), (pcy, psy)) = self.coefficients(&e, self.y, self.yc, self.ys);
+        let (au, ay) = (bu * bu + cu * cu, by * by + cy * cy);
+        if !(au > 0.0 && ay > 0.0) {
             return None;
         }
-        let residual = (self.yy - self.y * self.y / e.n - (b * pc + c * ps)).max(0.0);
-        let sigma2 = residual / (e.n - 3.0);
-        let relative = crate::square_root::sqrt(sigma2 * (e.scc + e.sss) / (2.0 * e.det) / amplitude2);
-        Some(20.0 / core::f32::consts::LN_10 * relative)
+        // Residual sums: Σr_u², Σr_y², Σr_u·r_y.
+        let ruu = self.uu - self.u * self.u / e.n - (bu * pcu + cu * psu);
+        let ryy = self.yy - self.y * self.y / e.n - (by * pcy + cy * psy);
+        let ruy = self.uy - self.u * self.y / e.n - (by * pcu + cy * psu);
+        // The fitted sine's difference between consecutive samples is the sine of
+        // coefficients (b(1 − cos φ) + c·sin φ, c(1 − cos φ) − b·sin φ) at the later sample;
+        // its sum of squares over the differences (the phase sums without the records' first
+        // samples) comes off the differences'.
+        let (sin_step, cos_step) = crate::trigonometry::sin_cos(step);
+        let (pcc, pss, pcs) = (self.cc - self.first_cc, self.ss - self.first_ss, self.cs - self.first_cs);
+        let rotated = |b: f32, c: f32| (b * (1.0 - cos_step) + c * sin_step, c * (1.0 - cos_step) - b * sin_step);
+        let ((dbu, dcu), (dby, dcy)) = (rotated(bu, cu), rotated(by, cy));
+        let quadratic = |b1: f32, c1: f32, b2: f32, c2: f32| b1 * b2 * pcc + c1 * c2 * pss + (b1 * c2 + c1 * b2) * pcs;
+        let druu = self.duu - quadratic(dbu, dcu, dbu, dcu);
+        let dryy = self.dyy - quadratic(dby, dcy, dby, dcy);
+        let druy = self.duy - quadratic(dbu, dcu, dby, dcy);
+        // Spectrum at the excitation: γ₀ + 2γ₁ cos φ with γ₁ = γ₀ − Σ(Δr)²/(2·dn).
+        let dof = e.n - 3.0;
+        let spectrum = |r: f32, dr: f32| {
+            let g0 = r / dof;
+            let g1 = g0 - dr / (2.0 * self.dn);
+            g0 + 2.0 * g1 * cos_step
+        };
+        let (suu, syy) = (spectrum(ruu, druu).max(0.0), spectrum(ryy, dryy).max(0.0));
+        let bound = crate::square_root::sqrt(suu * syy);
+        let suy = spectrum(ruy, druy).clamp(-bound, bound);
+        // (δb, δc) of any fit have the covariance σ²·[[Sss', −Scs'], [−Scs', Scc']]/det.
+        let form = |(p1, q1): (f32, f32), (p2, q2): (f32, f32)| {
+            (p1 * p2 * e.sss - (p1 * q2 + q1 * p2) * e.scs + q1 * q2 * e.scc) / e.det
+        };
+        // Re(δX/X) = (b·δb + c·δc)/|X|², Im(δX/X) = (c·δb − b·δc)/|X|².
+        let variance = |wy: (f32, f32), wu: (f32, f32)| {
+            (syy * form(wy, wy) + suu * form(wu, wu) - 2.0 * suy * form(wy, wu)).max(0.0)
+        };
+        let gain = variance((by / ay, cy / ay), (bu / au, cu / au));
+        let phase = variance((cy / ay, -by / ay), (cu / au, -bu / au));
+        Some(ResponseError { gain: crate::square_root::sqrt(gain), phase: crate::square_root::sqrt(phase) })
     }
 }
 
@@ -521,6 +637,9 @@ struct NormalEquations {
     scs: f32,
     det: f32,
 }
+
+/// Start of the dither's xorshift32 sequence (any non-zero value; the same for every sweep).
+const DITHER_SEED: u32 = 0x2545_F491;
 
 #[derive(Clone, Copy, Debug)]
 pub struct PhaseShiftedSweep {
@@ -535,6 +654,15 @@ pub struct PhaseShiftedSweep {
     /// until then, and when none are needed).
     extensions: u32,
     acc: SineFitSums,
+    /// Sums of u and y over the loop ticks of the present acquisition period, and their count.
+    period_sums: (f32, f32, f32),
+    /// The present frequency's samples are period means (a stepped sine below the threshold).
+    averaging: bool,
+    /// xorshift32 state of the dither and the dither of the present tick (N·m).
+    dither_state: u32,
+    dither: f32,
+    /// The present frequency is dithered (`dither` > 0, at or above the threshold).
+    dithering: bool,
     sequence: MSequence,
     chip: f32,
     /// The excitation value and phase of the present tick, and the phase's sine and cosine.
@@ -554,6 +682,11 @@ impl PhaseShiftedSweep {
             left: 0,
             extensions: 0,
             acc: SineFitSums::default(),
+            period_sums: (0.0, 0.0, 0.0),
+            averaging: false,
+            dither_state: DITHER_SEED,
+            dither: 0.0,
+            dithering: false,
             // Validated with the parameters; the fallback only keeps this constructor total.
             sequence: MSequence::new(params.prbs_degree).unwrap_or(MSequence::DEGREE_15),
             chip: 0.0,
@@ -562,6 +695,12 @@ impl PhaseShiftedSweep {
             sin_cos: (0.0, 1.0),
             results: [SweepResult::default(); MAX_SWEEP_POINTS],
         }
+    }
+
+    /// The dither to add to the torque command on this tick (0 when no stepped sine runs: it
+    /// is cleared when the sweep ends).
+    pub fn torque_dither(&self) -> f32 {
+        self.dither
     }
 
     pub fn params(&self) -> &SweepParams {
@@ -588,6 +727,8 @@ impl PhaseShiftedSweep {
         }
         self.status = SweepStatus::default();
         self.sequence.restart();
+        self.dither_state = DITHER_SEED;
+        self.dither = 0.0;
         self.begin_record(0, 0);
         Ok(())
     }
@@ -601,16 +742,22 @@ impl PhaseShiftedSweep {
             let d = p.acquisition_divider as u64;
             self.left = (libm::ceilf(p.min_settle_s * self.base_rate_hz / d as f32) as u64).saturating_mul(d);
             self.status.frequency = 0.0;
+            self.averaging = false;
+            self.dithering = false;
             return;
         }
         let f = p.frequency(point as usize);
         self.status.frequency = f;
+        self.averaging = f < p.threshold(self.base_rate_hz);
+        self.dithering = p.dither > 0.0 && !self.averaging;
         let initial = record as f32 * TAU / p.shifts as f32;
         self.generator = SineGenerator::new(p.amplitude, f, self.base_rate_hz, initial);
         self.left = p.record_length(f, self.base_rate_hz).0;
         if record == 0 {
             self.acc = SineFitSums::default();
             self.extensions = 0;
+        } else {
+            self.acc.break_record();
         }
     }
 
@@ -630,6 +777,20 @@ impl PhaseShiftedSweep {
             SweepSignal::SteppedSine => {
                 self.phase = self.generator.phase();
                 (self.value, self.sin_cos) = self.generator.next_with_sin_cos();
+                self.dither = if self.dithering {
+                    let mut x = self.dither_state;
+                    x ^= x << 13;
+                    x ^= x >> 17;
+                    x ^= x << 5;
+                    self.dither_state = x;
+                    if x & 0x8000_0000 != 0 {
+                        p.dither
+                    } else {
+                        -p.dither
+                    }
+                } else {
+                    0.0
+                };
             }
             SweepSignal::Prbs => {
                 if chip_due {
@@ -642,16 +803,32 @@ impl PhaseShiftedSweep {
         Some((p.point, self.value))
     }
 
-    /// End of a base tick: `u` and `y` as defined for the injection point (read only on
-    /// acquisition ticks: `acquire` when the tick is a multiple of `acquisition_divider`).
-    /// Advances the schedule.
-    pub fn end_tick(&mut self, tick: u64, acquire: bool, u: f32, y: f32) {
+    /// End of a base tick: `u` and `y` as defined for the injection point. `loop_tick`: the
+    /// velocity loop ran on this tick (u and y are new); `acquire`: the tick is a multiple of
+    /// `acquisition_divider` (a loop tick too). A stepped sine's acquisition sample is the
+    /// mean of u and of y over the loop ticks of the acquisition period (for y, the velocity
+    /// estimate, that is the position's change over the period): the same average on both,
+    /// so it cancels in Y/U, and it keeps the encoder's quantisation noise, which the
+    /// estimate differentiates, out of the low frequencies where a single sample per period
+    /// would fold it. PRBS samples are the values at the acquisition tick. Advances the
+    /// schedule.
+    pub fn end_tick(&mut self, tick: u64, loop_tick: bool, acquire: bool, u: f32, y: f32) {
         if !self.running() {
             return;
         }
         // Two fields, not the whole parameter set: this runs every tick while sweeping.
         let (signal, divider) = (self.params.signal, self.params.acquisition_divider);
+        if loop_tick && self.averaging {
+            self.period_sums.0 += u;
+            self.period_sums.1 += y;
+            self.period_sums.2 += 1.0;
+        }
         if acquire {
+            let (u, y) = match self.period_sums {
+                (su, sy, n) if self.averaging && n > 0.0 => (su / n, sy / n),
+                _ => (u, y),
+            };
+            self.period_sums = (0.0, 0.0, 0.0);
             let measuring = self.status.state == SweepState::Measuring;
             self.status.sample = AcquisitionSample {
                 tick,
@@ -711,21 +888,27 @@ impl PhaseShiftedSweep {
                     self.begin_record(next, 0);
                 } else {
                     self.status.state = SweepState::Done;
+                    self.dither = 0.0;
                 }
             }
             _ => {}
         }
     }
 
-    /// Extra blocks per record for the gain's standard error to reach `precision_db` over
-    /// all `records`, predicted from the first base block (error ∝ 1/√samples).
+    /// Extra blocks per record for the standard errors of the response, gain's and phase's,
+    /// to reach `precision_db` (the phase's: the same relative size, `precision_db·ln10/20`
+    /// rad, 0.2° at 0.03 dB) over all `records`, predicted from the first base block (error ∝
+    /// 1/√samples).
     fn blocks_needed(&self, records: u32) -> u32 {
         let p = &self.params;
         if !(p.precision_db > 0.0) || p.max_extensions == 0 {
             return 0;
         }
-        let Some(error) = self.acc.y_gain_error_db() else { return 0 };
-        let ratio = error / p.precision_db;
+        let turns = self.status.frequency * p.acquisition_divider as f32 / self.base_rate_hz;
+        let step = TAU * (turns - libm::floorf(turns));
+        let Some(error) = self.acc.response_error(step) else { return 0 };
+        let target = p.precision_db * (core::f32::consts::LN_10 / 20.0);
+        let ratio = error.gain.max(error.phase) / target;
         let blocks = libm::ceilf(ratio * ratio / records as f32);
         // Compared as floats: a huge ratio must not wrap in the conversion.
         if blocks <= 1.0 {
@@ -771,7 +954,7 @@ mod tests {
         while s.running() {
             let (_, u) = s.excitation(tick.is_multiple_of(params.prbs_divider as u64)).unwrap();
             let y = gain * params.amplitude * libm::sinf(s.phase + phase);
-            s.end_tick(tick, tick.is_multiple_of(params.acquisition_divider as u64), u, y);
+            s.end_tick(tick, tick.is_multiple_of(2), tick.is_multiple_of(params.acquisition_divider as u64), u, y);
             tick += 1;
         }
         assert_eq!(tick, params.total_ticks(FS), "the schedule the host computes is the one the drive runs");
@@ -817,6 +1000,27 @@ mod tests {
     }
 
     #[test]
+    fn below_the_threshold_a_sample_is_the_mean_over_the_loop_ticks_and_above_it_the_value() {
+        for (f, averaged) in [(123.0, true), (2500.0, false)] {
+            let p = at(f, 3, 3);
+            let mut s = PhaseShiftedSweep::new(p, FS);
+            s.start().unwrap();
+            let mut ys = [0.0f32; 4];
+            for tick in 0..400u64 {
+                let (_, u) = s.excitation(true).unwrap();
+                let y = (tick * tick % 97) as f32;
+                ys[(tick % 4) as usize] = y;
+                let acquire = tick % 4 == 3;
+                s.end_tick(tick, tick % 2 == 1, acquire, u, y);
+                if acquire && tick > 4 {
+                    let expected = if averaged { 0.5 * (ys[1] + ys[3]) } else { y };
+                    assert_eq!(s.status().sample.y, expected, "{f} Hz, tick {tick}");
+                }
+            }
+        }
+    }
+
+    #[test]
     fn the_frequency_list_includes_the_extra_point_in_order() {
         let p = SweepParams::default();
         assert_eq!(p.count(), 41);
@@ -841,6 +1045,14 @@ mod tests {
             Err(SweepError::AcquisitionDivider { acquisition: 3, velocity: 2 })
         );
         assert_eq!(v(SweepParams { points: 200, ..Default::default() }), Err(SweepError::TooManyPoints(200)));
+        assert!(matches!(
+            v(SweepParams { dither: f32::NAN, ..Default::default() }),
+            Err(SweepError::Setting { field: "dither", .. })
+        ));
+        assert!(matches!(
+            v(SweepParams { dither: 2000.0, ..Default::default() }),
+            Err(SweepError::Range { field: "dither", .. })
+        ));
         assert_eq!(v(SweepParams::default()), Ok(()));
     }
 
@@ -862,7 +1074,7 @@ mod tests {
             let (_, u) = s.excitation(true).unwrap();
             let r = uniform(&mut state);
             let y = 50.0 + gain * params.amplitude * libm::sinf(s.phase + 0.3) + noise * r;
-            s.end_tick(tick, tick.is_multiple_of(params.acquisition_divider as u64), u, y);
+            s.end_tick(tick, tick.is_multiple_of(2), tick.is_multiple_of(params.acquisition_divider as u64), u, y);
             tick += 1;
         }
         (s.results()[0], tick)
@@ -890,18 +1102,31 @@ mod tests {
             after = after.max(db(r_on));
         }
         assert!(after < 0.5 * before, "worst error {after} dB with extensions vs {before} dB without");
-        // The standard error the sweep computes is the spread it predicts: σ·√(2/n)/A in dB.
-        let mut fit = SineFitSums::default();
-        let mut state = 7u32;
+        // The standard errors the sweep computes are the spread it predicts, σ(f)·√(2/n)/A,
+        // with σ(f)² the noise's spectrum at the excitation: white noise, and differenced
+        // noise (the velocity estimate's quantisation), which is small at low frequencies.
+        let step = 0.731f32;
         let n = 4000;
-        for k in 0..n {
-            let theta = k as f32 * 0.731;
-            let r = uniform(&mut state);
-            fit.add(0.0, 50.0 + 0.12 * libm::sinf(theta) + 0.04 * r, libm::sincosf(theta));
+        let variance = 0.04 * 0.04 / 3.0;
+        for (differenced, spectrum) in [(false, variance), (true, variance * 2.0 * (1.0 - libm::cosf(step)))] {
+            let mut fit = SineFitSums::default();
+            let (mut state, mut last) = (7u32, 0.0f32);
+            for k in 0..n {
+                let theta = k as f32 * step;
+                let r = 0.04 * uniform(&mut state);
+                let noise = if differenced { r - last } else { r };
+                last = r;
+                let (s, c) = libm::sincosf(theta);
+                fit.add(1.0 * s, 50.0 + 0.12 * s + noise, (s, c));
+            }
+            let predicted = libm::sqrtf(spectrum) * libm::sqrtf(2.0 / n as f32) / 0.12;
+            let got = fit.response_error(step).unwrap();
+            for (what, value) in [("gain", got.gain), ("phase", got.phase)] {
+                assert!(
+                    (value / predicted - 1.0).abs() < 0.1,
+                    "differenced {differenced}: {what} {value}, expected {predicted}"
+                );
+            }
         }
-        let predicted =
-            20.0 / core::f32::consts::LN_10 * (0.04 / libm::sqrtf(3.0)) * libm::sqrtf(2.0 / n as f32) / 0.12;
-        let got = fit.y_gain_error_db().unwrap();
-        assert!((got / predicted - 1.0).abs() < 0.1, "estimated {got} dB, expected {predicted} dB");
     }
 }

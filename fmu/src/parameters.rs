@@ -199,6 +199,7 @@ fn sweep(v: &Values) -> Result<SweepParams, String> {
         prbs_seconds: v.sweep_prbs_seconds as f32,
         precision_db: v.sweep_precision_db as f32,
         max_extensions: count("sweep.max_extensions", v.sweep_max_extensions)?,
+        dither: v.sweep_dither as f32,
     })
 }
 
@@ -267,6 +268,7 @@ pub fn sweep_values(s: &SweepParams) -> Vec<(&'static str, Value)> {
         (name::sweep_prbs_seconds, f(s.prbs_seconds)),
         (name::sweep_precision_db, f(s.precision_db)),
         (name::sweep_max_extensions, i(s.max_extensions)),
+        (name::sweep_dither, f(s.dither)),
     ]
 }
 

@@ -1,44 +1,125 @@
-//! `servo bench sweep`: the figures of the frequency-response issue (seed 000), on the default
-//! axis: velocity loop 8 kHz, acquisition 4 kHz, 10 Hz to 3 kHz (plus 2 kHz exactly),
-//! velocity-command injection riding on 50 rad/s.
+//! `servo bench sweep`: the figures of the frequency-response issue (seed 000): 10 Hz to
+//! 3 kHz (41 points with 2 kHz exactly), velocity loop 8 kHz, acquisition 4 kHz, riding on
+//! 50 rad/s, the drive's default sweep settings.
 //!
-//! - errors against the oracle below and above 2 kHz, with phase shifting (ours) and without
-//!   (the same records all at phase 0: the same measurement time), and the 2 kHz point itself;
-//! - simulated measurement time of the full Bode;
-//! - PRBS with an H1 (Welch) estimate over the same measurement time;
-//! - the analytic linear model of the loop at low frequencies;
-//! - with current-sensor noise: error against measurement time, ours against PRBS.
+//! - the grid: every injection point (velocity command, torque command, velocity feedback) ×
+//!   plants (the default axis and the corners of inertia ratio 0.2–5 × shaft resonance
+//!   50–500 Hz) × current-sensor noise (none, [`DITHER_A`]): worst gain and phase error
+//!   against the oracle over all frequencies, and the measurement time;
+//! - the seed's point: at 2 kHz (the acquisition Nyquist frequency) phase shifting measures,
+//!   a single phase does not; the same records without shifts above it;
+//! - the drive's on-line correlator against the host's equivalent-time fit of the stream;
+//! - PRBS (H1, Welch) over the same measurement time;
+//! - the analytic linear model of the loop at low frequencies against the oracle.
 //!
-//! The headline runs have [`DITHER_A`] of current-sensor noise. On a noise-free simulated
-//! encoder at constant speed the count pattern is periodic and locks to the excitation: both
-//! ours and the oracle then carry a quantisation error that depends on the excitation's
-//! starting phase and does not shrink with longer records (about 0.25 dB at 3 kHz, −24.6 dB).
-//! A real drive's current noise breaks the lock, as a 16 times finer encoder removes the
-//! error; both are printed beside the headline.
+//! The oracle ([`oracle_run`]) is the same loop measured with 8 kHz acquisition, records ten
+//! times longer, a 2^24-count encoder and no sensor noise.
 
 use servo_axis::variables::name;
 use std::collections::BTreeMap;
 
 use anyhow::{anyhow, Result};
+use control_core::excitation::InjectionPoint;
 use control_core::phase_shifted_sweep::{SweepParams, SweepSignal};
 use serde::Serialize;
 
 use crate::fmu_runner::Fmu;
 use crate::frequency_response::{
-    errors, measured_time, online_results, prbs_results, stream_results, ErrorSummary, ResponsePoint, SweepRun,
+    difference, errors, measured_time, online_results, prbs_results, stream_results, ErrorSummary, ResponsePoint,
+    SweepRun,
 };
 use crate::scenario::Value;
 use crate::spectral::Complex;
-use crate::sweep_report::oracle_settings;
+use crate::sweep_report::oracle_run;
 
 pub const VELOCITY: f64 = 50.0;
-/// Current-sensor noise of the headline runs (A, standard deviation): about one count of a
+/// Current-sensor noise of the noisy grid rows (A, standard deviation): about one count of a
 /// 12-bit converter on the board's current range.
 pub const DITHER_A: f64 = 0.01;
-/// Encoder of the fine-encoder check (counts per revolution; the default is 2^20).
-pub const FINE_ENCODER: i64 = 1 << 24;
 /// Welch segment (samples at 4 kHz): 1 s, 1 Hz bins.
 pub const SEGMENT: usize = 4096;
+/// Goals of the issue: against the oracle at every frequency, and the measurement time.
+pub const GOAL_DB: f64 = 0.1;
+pub const GOAL_DEG: f64 = 1.0;
+pub const GOAL_SECONDS: f64 = 10.0;
+
+/// Injection points and their sine amplitudes (the `servo sweep` defaults).
+pub const POINTS: [(InjectionPoint, f32); 3] = [
+    (InjectionPoint::VelocityCommand, 2.0),
+    (InjectionPoint::TorqueCommand, 0.2),
+    (InjectionPoint::VelocityFeedback, 2.0),
+];
+
+pub fn point_name(p: InjectionPoint) -> &'static str {
+    match p {
+        InjectionPoint::VelocityCommand => "velocity command",
+        InjectionPoint::TorqueCommand => "torque command",
+        InjectionPoint::VelocityFeedback => "velocity feedback",
+        InjectionPoint::Off => "off",
+    }
+}
+
+/// One plant of the grid: load-to-motor inertia ratio and shaft resonance (None: the
+/// default axis, ratio 2 and 260 Hz).
+#[derive(Clone, Copy, Debug, Serialize)]
+pub struct PlantCase {
+    pub inertia_ratio: f64,
+    pub resonance_hz: Option<f64>,
+}
+
+pub const PLANTS: [PlantCase; 5] = [
+    PlantCase { inertia_ratio: 2.0, resonance_hz: None },
+    PlantCase { inertia_ratio: 0.2, resonance_hz: Some(500.0) },
+    PlantCase { inertia_ratio: 5.0, resonance_hz: Some(500.0) },
+    PlantCase { inertia_ratio: 0.2, resonance_hz: Some(50.0) },
+    PlantCase { inertia_ratio: 5.0, resonance_hz: Some(50.0) },
+];
+
+impl PlantCase {
+    /// The FMU parameters: load inertia = ratio × motor inertia; shaft stiffness for the
+    /// resonance `f_r = √(k·(1/J_M + 1/J_L))/2π` and damping for 5 % at the anti-resonance
+    /// (as the default axis). A light load's friction needs finer integration sub-steps.
+    pub fn parameters(&self) -> BTreeMap<String, Value> {
+        let plant = servo_axis::plant::PlantParams::default();
+        let jm = plant.motor_inertia;
+        let jl = jm * self.inertia_ratio;
+        let mut p = BTreeMap::new();
+        p.insert(name::plant_load_inertia.to_string(), Value::Float(jl));
+        if let Some(fr) = self.resonance_hz {
+            let w = std::f64::consts::TAU * fr;
+            let k = w * w / (1.0 / jm + 1.0 / jl);
+            p.insert(name::plant_shaft_stiffness.to_string(), Value::Float(k));
+            p.insert(name::plant_shaft_damping.to_string(), Value::Float(2.0 * 0.05 * (k * jl).sqrt()));
+        }
+        if self.inertia_ratio < 0.5 {
+            p.insert(name::plant_substeps.to_string(), Value::Int(8));
+        }
+        p
+    }
+
+    pub fn label(&self) -> String {
+        match self.resonance_hz {
+            None => "default (J_L/J_M 2, 260 Hz)".to_string(),
+            Some(f) => format!("J_L/J_M {}, {} Hz", self.inertia_ratio, f),
+        }
+    }
+}
+
+/// One row: an injection point on a plant with or without sensor noise.
+#[derive(Clone, Debug, Serialize)]
+pub struct GridRow {
+    pub point: String,
+    pub plant: String,
+    pub noise_a: f64,
+    pub amplitude: f32,
+    /// Worst |gain error| (dB) and |phase error| (deg) over all frequencies, and where.
+    pub gain_db: f64,
+    pub gain_at_hz: f64,
+    pub phase_deg: f64,
+    pub phase_at_hz: f64,
+    pub measurement_time_s: f64,
+    pub met: bool,
+}
 
 #[derive(Clone, Debug, Serialize)]
 pub struct MethodErrors {
@@ -50,15 +131,10 @@ pub struct MethodErrors {
 }
 
 #[derive(Clone, Debug, Serialize)]
-pub struct NoisePoint {
-    pub measurement_time_s: f64,
-    /// Largest error up to 1.9 kHz (where PRBS at 4 kHz acquisition still works): dB, deg.
-    pub ours: (f64, f64),
-    pub prbs: (f64, f64),
-}
-
-#[derive(Clone, Debug, Serialize)]
 pub struct SweepBench {
+    pub grid: Vec<GridRow>,
+    /// Default axis, velocity command, with sensor noise: ours, the same records unshifted,
+    /// PRBS over the same time.
     pub ours: MethodErrors,
     pub single_phase: MethodErrors,
     pub prbs: MethodErrors,
@@ -68,31 +144,39 @@ pub struct SweepBench {
     pub stream_vs_online: (f64, f64),
     /// Analytic model against the oracle up to 30 Hz: largest dB, deg.
     pub analytic_low_frequency: (f64, f64),
-    pub noise_std_a: f64,
-    pub noise: Vec<NoisePoint>,
-    /// Current-sensor noise of the headline runs (A).
-    pub dither_a: f64,
-    /// Ours against the oracle on a noise-free plant: the locked quantisation pattern.
-    pub noise_free: ErrorSummary,
-    /// The same with a 2^24-count encoder: the method's own accuracy.
-    pub fine_encoder: ErrorSummary,
-    /// Riding speeds of the spread check (rad/s) and the worst error over them (dB, deg)
-    /// with fixed records and with records lengthened for precision.
-    pub spread_speeds: Vec<f64>,
-    pub spread_fixed: (f64, f64),
-    pub spread_lengthened: (f64, f64),
+    /// The oracle's own residual error: against the same oracle with records twice as long
+    /// (default axis, every point; worst dB, deg).
+    pub oracle_self_check: (f64, f64),
 }
 
-/// Riding speeds of the spread check: the quantisation pattern, so the error at a low-gain
-/// point, changes with them.
-pub const SPREAD_SPEEDS: [f64; 6] = [49.0, 49.5, 50.0, 50.5, 51.0, 52.0];
-
-fn base(parameters: BTreeMap<String, Value>, settings: SweepParams) -> SweepRun {
-    SweepRun { settings, parameters, velocity: VELOCITY }
+impl SweepBench {
+    pub fn goals_met(&self) -> bool {
+        self.grid.iter().all(|r| r.met)
+    }
 }
 
 fn unmeasured(points: &[ResponsePoint]) -> Vec<f64> {
     points.iter().filter(|p| !(p.gain_db.is_finite() && p.phase_deg.is_finite())).map(|p| p.frequency).collect()
+}
+
+/// Worst |gain| and |phase| differences over all frequencies, with where they are.
+fn worst(a: &[ResponsePoint], reference: &[ResponsePoint]) -> (f64, f64, f64, f64) {
+    let mut w = (0.0f64, f64::NAN, 0.0f64, f64::NAN);
+    for p in a {
+        let Some(r) = reference.iter().find(|r| (r.frequency - p.frequency).abs() <= 1e-6 * p.frequency) else {
+            continue;
+        };
+        let (dg, dp) = difference(p, r);
+        if !(dg.abs() <= w.0) {
+            w.0 = dg.abs();
+            w.1 = p.frequency;
+        }
+        if !(dp.abs() <= w.2) {
+            w.2 = dp.abs();
+            w.3 = p.frequency;
+        }
+    }
+    w
 }
 
 /// Largest gain/phase error up to `max_hz`.
@@ -126,133 +210,141 @@ pub fn analytic_closed_loop(f: f64) -> ResponsePoint {
     ResponsePoint::from_complex(f, t, 1.0)
 }
 
-pub fn bench(fmu: &Fmu, noise_std: f64, mut progress: impl FnMut(f64)) -> Result<SweepBench> {
+fn noise_parameters(base: &BTreeMap<String, Value>, noise: f64) -> BTreeMap<String, Value> {
+    let mut p = base.clone();
+    p.insert(name::plant_current_noise_std.to_string(), Value::Float(noise));
+    p
+}
+
+/// Our sweep (the drive's defaults at `point` with `amplitude`) on `parameters`.
+fn our_run(point: InjectionPoint, amplitude: f32, parameters: BTreeMap<String, Value>) -> SweepRun {
+    SweepRun { settings: SweepParams { point, amplitude, ..SweepParams::default() }, parameters, velocity: VELOCITY }
+}
+
+/// The grid rows of one plant and point (the oracle once, then each noise level).
+fn grid_rows(fmu: &Fmu, plant: &PlantCase, (point, amplitude): (InjectionPoint, f32)) -> Result<Vec<GridRow>> {
+    let base = plant.parameters();
+    let oracle = online_results(&oracle_run(&our_run(point, amplitude, base.clone())).run(fmu, |_| {})?)?;
+    [0.0, DITHER_A]
+        .iter()
+        .map(|&noise| {
+            let run = our_run(point, amplitude, noise_parameters(&base, noise));
+            let trace = run.run(fmu, |_| {})?;
+            let ours = stream_results(&trace, &run.settings)?;
+            let (gain_db, gain_at_hz, phase_deg, phase_at_hz) = worst(&ours, &oracle);
+            let measurement_time_s = measured_time(&trace)?;
+            let compared = ours.iter().filter(|p| oracle.iter().any(|o| o.frequency == p.frequency)).count();
+            Ok(GridRow {
+                point: point_name(point).to_string(),
+                plant: plant.label(),
+                noise_a: noise,
+                amplitude,
+                gain_db,
+                gain_at_hz,
+                phase_deg,
+                phase_at_hz,
+                measurement_time_s,
+                met: compared == oracle.len()
+                    && gain_db <= GOAL_DB
+                    && phase_deg <= GOAL_DEG
+                    && measurement_time_s <= GOAL_SECONDS,
+            })
+        })
+        .collect()
+}
+
+pub fn bench(fmu: &Fmu, mut progress: impl FnMut(f64)) -> Result<SweepBench> {
     let fs = control_core::Params::default().rates.current_loop_hz;
+    let jobs = PLANTS.len() * POINTS.len();
+    let mut grid = Vec::new();
+    for (i, plant) in PLANTS.iter().enumerate() {
+        for (j, &point) in POINTS.iter().enumerate() {
+            progress((i * POINTS.len() + j) as f64 / (jobs + 3) as f64);
+            grid.extend(grid_rows(fmu, plant, point)?);
+        }
+    }
+    progress(jobs as f64 / (jobs + 3) as f64);
+
+    // The seed's comparison on the default axis, velocity command, with sensor noise.
     let ours_settings = SweepParams::default();
     let split = ours_settings.threshold(fs) as f64;
-    let clean: BTreeMap<String, Value> =
-        [(name::plant_current_noise_std.to_string(), Value::Float(DITHER_A))].into_iter().collect();
-    progress(0.0);
-    let oracle_run = base(clean.clone(), oracle_settings(&ours_settings));
-    let oracle = online_results(&oracle_run.run(fmu, |_| {})?)?;
-    progress(0.2);
-    let ours_run = base(clean.clone(), ours_settings);
+    let noisy = noise_parameters(&BTreeMap::new(), DITHER_A);
+    let ours_run = our_run(ours_settings.point, ours_settings.amplitude, noisy.clone());
+    let oracle_points = online_results(&oracle_run(&ours_run).run(fmu, |_| {})?)?;
     let ours_trace = ours_run.run(fmu, |_| {})?;
     let ours = stream_results(&ours_trace, &ours_settings)?;
     let online = online_results(&ours_trace)?;
     let stream_vs_online =
         ours.iter().zip(&online).filter(|(a, _)| a.quality > 0.01).fold((0.0f64, 0.0f64), |(g, p), (a, b)| {
-            let (dg, dp) = crate::frequency_response::difference(a, b);
+            let (dg, dp) = difference(a, b);
             (g.max(dg.abs()), p.max(dp.abs()))
         });
-    progress(0.35);
     let single_settings = SweepParams { shifts: 1, ..ours_settings };
-    let single_run = base(clean.clone(), single_settings);
+    let single_run = SweepRun { settings: single_settings, ..ours_run.clone() };
     let single_trace = single_run.run(fmu, |_| {})?;
     let single = stream_results(&single_trace, &single_settings)?;
-    progress(0.5);
     let time = measured_time(&ours_trace)?;
+    progress((jobs + 1) as f64 / (jobs + 3) as f64);
     // Chips at half the acquisition rate (2 kHz): every chip is seen by two samples, none
     // between them; the hold between samples is divided out (see `prbs_results`).
     let prbs_settings = SweepParams {
         signal: SweepSignal::Prbs,
         prbs_seconds: time as f32,
-        amplitude: 2.0,
         prbs_divider: 2 * ours_settings.acquisition_divider,
         ..ours_settings
     };
-    let prbs_run = base(clean.clone(), prbs_settings);
-    let frequencies: Vec<f64> = oracle.iter().map(|p| p.frequency).collect();
+    let prbs_run = SweepRun { settings: prbs_settings, ..ours_run.clone() };
+    let frequencies: Vec<f64> = oracle_points.iter().map(|p| p.frequency).collect();
     let prbs = prbs_results(&prbs_run.run(fmu, |_| {})?, &prbs_settings, &frequencies, SEGMENT)?;
-    progress(0.6);
     let find = |v: &[ResponsePoint], f: f64| {
         v.iter().copied().find(|p| (p.frequency - f).abs() < 1e-3).ok_or_else(|| anyhow!("no {f} Hz point"))
     };
-    let at_nyquist = [find(&oracle, 2000.0)?, find(&ours, 2000.0)?, find(&single, 2000.0)?];
+    let at_nyquist = [find(&oracle_points, 2000.0)?, find(&ours, 2000.0)?, find(&single, 2000.0)?];
     let analytic: Vec<ResponsePoint> =
-        oracle.iter().filter(|p| p.frequency <= 30.0).map(|p| analytic_closed_loop(p.frequency)).collect();
-    let analytic_low_frequency = worst_up_to(&analytic, &oracle, 30.0);
+        oracle_points.iter().filter(|p| p.frequency <= 30.0).map(|p| analytic_closed_loop(p.frequency)).collect();
+    let analytic_low_frequency = worst_up_to(&analytic, &oracle_points, 30.0);
+    progress((jobs + 2) as f64 / (jobs + 3) as f64);
 
-    // Noise: our sweep with longer records against PRBS over the same time.
-    let noisy: BTreeMap<String, Value> =
-        [(name::plant_current_noise_std.to_string(), Value::Float(noise_std))].into_iter().collect();
-    let mut noise = Vec::new();
-    for (i, scale) in [1.0f32, 2.0, 4.0].iter().enumerate() {
-        let settings = SweepParams {
-            measure_cycles: ours_settings.measure_cycles * scale,
-            min_measure_s: ours_settings.min_measure_s * scale,
-            ..ours_settings
+    // The oracle against itself with records twice as long, every point of the default axis.
+    let mut oracle_self_check = (0.0f64, 0.0f64);
+    for &(point, amplitude) in &POINTS {
+        let o = oracle_run(&our_run(point, amplitude, BTreeMap::new()));
+        let longer = SweepRun {
+            settings: SweepParams {
+                measure_cycles: 2.0 * o.settings.measure_cycles,
+                min_measure_s: 2.0 * o.settings.min_measure_s,
+                ..o.settings
+            },
+            ..o.clone()
         };
-        let run = base(noisy.clone(), settings);
-        let noisy_trace = run.run(fmu, |_| {})?;
-        let ours_noisy = stream_results(&noisy_trace, &settings)?;
-        let t = measured_time(&noisy_trace)?;
-        let p_settings = SweepParams { prbs_seconds: t as f32, ..prbs_settings };
-        let p_run = base(noisy.clone(), p_settings);
-        let prbs_noisy = prbs_results(&p_run.run(fmu, |_| {})?, &p_settings, &frequencies, SEGMENT)?;
-        noise.push(NoisePoint {
-            measurement_time_s: t,
-            ours: worst_up_to(&ours_noisy, &oracle, 1900.0),
-            prbs: worst_up_to(&prbs_noisy, &oracle, 1900.0),
-        });
-        progress(0.6 + 0.1 * (i + 1) as f64);
+        let (a, b) = (online_results(&o.run(fmu, |_| {})?)?, online_results(&longer.run(fmu, |_| {})?)?);
+        let (g, _, p, _) = worst(&a, &b);
+        oracle_self_check = (oracle_self_check.0.max(g), oracle_self_check.1.max(p));
     }
-    // Ours (each of `settings`) against the oracle, riding on `velocity` with `parameters`.
-    let against_oracle = |parameters: &BTreeMap<String, Value>,
-                          velocity: f64,
-                          settings: &[SweepParams]|
-     -> Result<Vec<ErrorSummary>> {
-        let at = |settings: SweepParams| SweepRun { settings, parameters: parameters.clone(), velocity };
-        let oracle = online_results(&at(oracle_settings(&ours_settings)).run(fmu, |_| {})?)?;
-        settings.iter().map(|s| Ok(errors(&stream_results(&at(*s).run(fmu, |_| {})?, s)?, &oracle, split))).collect()
-    };
-    // The same measurement without the dither, and without it on a finer encoder.
-    let noise_free = against_oracle(&BTreeMap::new(), VELOCITY, &[ours_settings])?[0];
-    progress(0.8);
-    let fine: BTreeMap<String, Value> =
-        [(name::plant_encoder_counts_per_rev.to_string(), Value::Int(FINE_ENCODER))].into_iter().collect();
-    let fine_encoder = against_oracle(&fine, VELOCITY, &[ours_settings])?[0];
-    progress(0.85);
-    // Worst error over riding speeds, with fixed and with lengthened records.
-    let fixed_settings = SweepParams { precision_db: 0.0, ..ours_settings };
-    let (mut spread_fixed, mut spread_lengthened) = ((0.0f64, 0.0f64), (0.0f64, 0.0f64));
-    for (i, &v) in SPREAD_SPEEDS.iter().enumerate() {
-        let e = against_oracle(&clean, v, &[fixed_settings, ours_settings])?;
-        for (e, worst) in e.iter().zip([&mut spread_fixed, &mut spread_lengthened]) {
-            worst.0 = worst.0.max(e.below_gain_db).max(e.above_gain_db);
-            worst.1 = worst.1.max(e.below_phase_deg).max(e.above_phase_deg);
-        }
-        progress(0.85 + 0.15 * (i + 1) as f64 / SPREAD_SPEEDS.len() as f64);
-    }
+    progress(1.0);
     Ok(SweepBench {
+        grid,
         ours: MethodErrors {
             method: "phase-shifted stepped sine".into(),
             measurement_time_s: time,
-            errors: errors(&ours, &oracle, split),
+            errors: errors(&ours, &oracle_points, split),
             unmeasured: unmeasured(&ours),
         },
         single_phase: MethodErrors {
             method: "single-phase stepped sine (same records, all at phase 0)".into(),
             measurement_time_s: measured_time(&single_trace)?,
-            errors: errors(&single, &oracle, split),
+            errors: errors(&single, &oracle_points, split),
             unmeasured: unmeasured(&single),
         },
         prbs: MethodErrors {
             method: format!("PRBS 2 kHz chips, H1 Welch ({SEGMENT}-sample Hann)"),
             measurement_time_s: prbs_run.measurement_time(),
-            errors: errors(&prbs, &oracle, split),
+            errors: errors(&prbs, &oracle_points, split),
             unmeasured: frequencies.iter().copied().filter(|f| !prbs.iter().any(|p| p.frequency == *f)).collect(),
         },
         at_nyquist,
         stream_vs_online,
         analytic_low_frequency,
-        noise_std_a: noise_std,
-        noise,
-        dither_a: DITHER_A,
-        noise_free,
-        fine_encoder,
-        spread_speeds: SPREAD_SPEEDS.to_vec(),
-        spread_fixed,
-        spread_lengthened,
+        oracle_self_check,
     })
 }

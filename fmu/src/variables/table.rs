@@ -292,7 +292,7 @@ declare_variables! {
     90 sweep_prbs_degree: Int32 "sweep.prbs_degree" Parameter Fixed = core_count(|p| p.sweep.prbs_degree); NONE; r(2.0, 20.0); "PRBS: M-sequence degree (2 to 20; period 2^n - 1 chips)";
     91 sweep_prbs_divider: Int32 "sweep.prbs_divider" Parameter Fixed = core_count(|p| p.sweep.prbs_divider); NONE; r(1.0, 1.0e6); "PRBS: base ticks per chip";
     92 sweep_prbs_seconds: Float64 "sweep.prbs_seconds" Parameter Fixed = core(|p| p.sweep.prbs_seconds); S; r(1.0e-3, 1.0e4); "PRBS: measured duration";
-    93 sweep_precision_db: Float64 "sweep.precision_db" Parameter Fixed = core(|p| p.sweep.precision_db); DB; r(0.0, 100.0); "Stepped sine: lengthen a frequency's records by whole blocks so that the standard error of its gain, predicted after the first block, is at most this (0 = fixed records)";
+    93 sweep_precision_db: Float64 "sweep.precision_db" Parameter Fixed = core(|p| p.sweep.precision_db); DB; r(0.0, 100.0); "Stepped sine: lengthen a frequency's records by whole blocks so that the standard errors of its response G = Y/U, gain and phase (the phase's in the same relative size: 0.03 dB = 0.2 deg), predicted after the first block, are at most this (0 = fixed records)";
     94 sweep_max_extensions: Int32 "sweep.max_extensions" Parameter Fixed = core_count(|p| p.sweep.max_extensions); NONE; r(0.0, 64.0); "At most so many extra measurement blocks per record (0 to 64)";
 
     // Response-correction filter in front of the position loop (seed 001): `servo tune` writes it.
@@ -392,4 +392,8 @@ declare_variables! {
     // that every earlier value reference stays.
     182 seq_completion_hold: Float64 "seq.completion_hold" Parameter Fixed = core(|p| p.sequence.completion_hold); S; r(0.0, 10.0); "Completion is raised after |deviation| <= seq.completion_counts and |speed| <= seq.zero_speed held this long";
     183 seq_completion_hysteresis: Int32 "seq.completion_hysteresis" Parameter Fixed = core_count(|p| p.sequence.completion_hysteresis); NONE; r(0.0, 1.0e9); "Once raised, completion drops only when |deviation| > seq.completion_counts + this many counts (or on a new target)";
+
+    // Frequency-response dither (seed 000, issue 15), appended so that every earlier value
+    // reference stays.
+    184 sweep_dither: Float64 "sweep.dither" Parameter Fixed = core(|p| p.sweep.dither); NM; r(0.0, 1000.0); "Stepped sine: pseudo-random +/- dither added to the torque command every tick at and above the threshold, to break the lock of the encoder count pattern to the excitation (0 = none)";
 }

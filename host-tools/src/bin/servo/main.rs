@@ -229,7 +229,7 @@ enum Command {
         /// Injection point: velocity, torque or feedback
         #[arg(long, default_value = "velocity")]
         point: String,
-        /// Sine amplitude (rad/s for velocity/feedback, N·m for torque); default 2 rad/s or 0.05 N·m
+        /// Sine amplitude (rad/s for velocity/feedback, N·m for torque); default 2 rad/s or 0.2 N·m
         #[arg(long)]
         amplitude: Option<f64>,
         #[arg(long, default_value_t = 10.0)]
@@ -265,12 +265,17 @@ enum Command {
         /// Base ticks (62.5 µs) per acquisition sample
         #[arg(long, default_value_t = 4)]
         acquisition_divider: u32,
-        /// Lengthen a frequency's records by whole blocks so that the standard error of its
-        /// gain, predicted from the fit's residual after the first block (encoder
-        /// quantisation, noise), is at most this (dB); 0 = fixed records. Low-gain points (an
+        /// Lengthen a frequency's records by whole blocks so that the standard errors of its
+        /// response G = Y/U, gain and phase (the phase's in the same relative size: 0.03 dB =
+        /// 0.2 deg), predicted from the residuals of U and Y after the first block (encoder
+        /// quantisation, noise), are at most this (dB); 0 = fixed records. Low-gain points (an
         /// anti-resonance, the top of the sweep) need it; the others keep their base length
         #[arg(long, default_value_t = 0.03)]
         precision_db: f64,
+        /// Pseudo-random ±dither on the torque command at and above the threshold (N·m; 0 =
+        /// none): breaks the lock of the encoder's count pattern to the excitation
+        #[arg(long, default_value_t = 0.003)]
+        dither: f64,
         /// At most so many extra blocks (each one record's base measurement) per record
         #[arg(long, default_value_t = 8)]
         max_extensions: u32,
@@ -474,13 +479,11 @@ enum BenchCommand {
         #[command(flatten)]
         common: Common,
     },
-    /// Frequency response (seed 000): errors against the oracle below and above 2 kHz with
-    /// and without phase shifting, the 2 kHz point, measurement time, PRBS/H1 baseline,
-    /// analytic model at low frequencies, error against measurement time with sensor noise.
+    /// Frequency response (seed 000): one row per injection point × plant × sensor noise with
+    /// the worst gain and phase error against the oracle and the measurement time (exit 1
+    /// when a row misses 0.1 dB, 1 deg or 10 s); phase shifting against a single phase at
+    /// 2 kHz, PRBS/H1 baseline, on-line vs stream, analytic model at low frequencies.
     Sweep {
-        /// Current-sensor noise for the noise comparison (A, standard deviation)
-        #[arg(long, default_value_t = 0.05)]
-        noise: f64,
         #[command(flatten)]
         common: Common,
     },
@@ -573,6 +576,7 @@ fn main() -> ExitCode {
             threshold,
             acquisition_divider,
             precision_db,
+            dither,
             max_extensions,
             velocity,
             set,
@@ -580,25 +584,28 @@ fn main() -> ExitCode {
             reference,
             common,
         } => (|| {
-            let settings = sweep::sweep_settings(
-                point,
-                *amplitude,
-                *start,
-                *stop,
-                *points,
-                *linear,
-                *extra,
-                *settle_cycles,
-                *measure_cycles,
-                *min_settle,
-                *min_measure,
-                *shifts,
-                *repeats,
-                *threshold,
-                *acquisition_divider,
-                *precision_db,
-                *max_extensions,
-            )?;
+            let settings = control_core::phase_shifted_sweep::SweepParams {
+                dither: *dither as f32,
+                ..sweep::sweep_settings(
+                    point,
+                    *amplitude,
+                    *start,
+                    *stop,
+                    *points,
+                    *linear,
+                    *extra,
+                    *settle_cycles,
+                    *measure_cycles,
+                    *min_settle,
+                    *min_measure,
+                    *shifts,
+                    *repeats,
+                    *threshold,
+                    *acquisition_divider,
+                    *precision_db,
+                    *max_extensions,
+                )?
+            };
             let parameters = host_tools::circle_report::axis_parameters(set, &[])?;
             let run = host_tools::frequency_response::SweepRun { settings, parameters, velocity: *velocity };
             let reference = match reference {
@@ -713,7 +720,7 @@ fn main() -> ExitCode {
         Command::Bench(BenchCommand::Sequence { zero_speed, common }) => sequence::bench_sequence(zero_speed, common),
         Command::Bench(BenchCommand::Circle { common }) => circle::bench_circle(common),
         Command::Bench(BenchCommand::Ident { common }) => ident::bench_ident(common),
-        Command::Bench(BenchCommand::Sweep { noise, common }) => sweep::bench_sweep(*noise, common),
+        Command::Bench(BenchCommand::Sweep { common }) => sweep::bench_sweep(common),
         Command::Bench(BenchCommand::AccdecProbe { filter, ticks }) => {
             host_tools::bench_accdec::cost_probe(filter, *ticks).map(|s| {
                 println!("{s}");
