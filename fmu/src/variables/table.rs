@@ -389,4 +389,8 @@ declare_variables! {
     // that every earlier value reference stays.
     182 seq_completion_hold: Float64 "seq.completion_hold" Parameter Fixed = core(|p| p.sequence.completion_hold); S; r(0.0, 10.0); "Completion is raised after |deviation| <= seq.completion_counts and |speed| <= seq.zero_speed held this long";
     183 seq_completion_hysteresis: Int32 "seq.completion_hysteresis" Parameter Fixed = core_count(|p| p.sequence.completion_hysteresis); NONE; r(0.0, 1.0e9); "Once raised, completion drops only when |deviation| > seq.completion_counts + this many counts (or on a new target)";
+
+    // Anti-aliased acquisition for the identification (seed 001), appended likewise.
+    184 electromagnetic_torque_mean: Float64 "electromagnetic_torque_mean" Output Continuous = 0.0; NM; ANY; "Mean of electromagnetic_torque over the last communication step (its base ticks' ends): an integrating acquisition, no aliasing from the loops' rates";
+    185 load_acceleration_mean: Float64 "load_acceleration_mean" Output Continuous = 0.0; RAD_S2; ANY; "Mean of load_acceleration (the accelerometer, with its noise) over the last communication step, as electromagnetic_torque_mean";
 }
