@@ -50,7 +50,7 @@ impl GridCase {
     /// What was found, for a table cell.
     pub fn outcome(&self) -> String {
         match (&self.found, &self.refusal) {
-            (Some(_), _) => format!("{:+.2} % / {:+.0} %", self.frequency_error * 100.0, self.damping_error * 100.0),
+            (Some(_), _) => format!("{:+.2}/{:+.0}", self.frequency_error * 100.0, self.damping_error * 100.0),
             (None, Some(_)) => "refused".into(),
             (None, None) => "no notch".into(),
         }

@@ -284,7 +284,7 @@ fn print_grid(grid: &[host_tools::bench_ident::GridCase], record: &host_tools::b
     let mut hz: Vec<f64> = grid.iter().map(|c| c.hz).collect();
     hz.dedup();
     for f in &hz {
-        let cells: Vec<String> = grid.iter().filter(|c| c.hz == *f).map(|c| format!("{:>15}", c.outcome())).collect();
+        let cells: Vec<String> = grid.iter().filter(|c| c.hz == *f).map(|c| format!("{:>11}", c.outcome())).collect();
         println!("  {f:>6.1} Hz {}", cells.join(""));
     }
     let worst = |key: fn(&host_tools::bench_ident::GridCase) -> f64| {
