@@ -353,6 +353,8 @@ impl AxisModel {
         o.id = t.current.d as f64;
         o.torque_command_out = t.torque_command as f64;
         o.electromagnetic_torque = sim.plant.electromagnetic_torque;
+        (o.electromagnetic_torque_mean, o.load_acceleration_mean) =
+            sim.step_means().means().unwrap_or((o.electromagnetic_torque, o.load_acceleration));
         o.velocity_estimate = t.velocity_estimate as f64;
         o.following_error = t.following_error as f64;
         let params = sim.axis.params();

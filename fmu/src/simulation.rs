@@ -59,6 +59,36 @@ pub struct UserInputs {
     pub disturbance_torque: f64,
 }
 
+/// Sums of two plant signals over the ticks of the last [`AxisSimulation::run_ticks`] (a
+/// communication step), for their means: what an integrating acquisition records. A value
+/// sampled once per step aliases whatever the loops put near the step's rate onto low
+/// frequencies (the velocity loop's encoder-quantisation torque near 4 kHz lands on a few
+/// hertz of a 4 kHz record); the mean over the step's ticks has nulls at the step's rate and
+/// its multiples.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct StepMeans {
+    torque: f64,
+    accelerometer: f64,
+    ticks: u64,
+}
+
+impl StepMeans {
+    fn add(&mut self, plant: &Plant) {
+        self.torque += plant.electromagnetic_torque;
+        self.accelerometer += plant.accelerometer;
+        self.ticks += 1;
+    }
+
+    /// Mean electromagnetic torque (N·m) and accelerometer reading (rad/s²) over the step's
+    /// tick ends; None before the first step.
+    pub fn means(&self) -> Option<(f64, f64)> {
+        (self.ticks > 0).then(|| {
+            let n = self.ticks as f64;
+            (self.torque / n, self.accelerometer / n)
+        })
+    }
+}
+
 #[derive(Clone, Copy, Debug)]
 pub struct AxisSimulation {
     pub axis: Axis,
@@ -66,6 +96,7 @@ pub struct AxisSimulation {
     pending: PwmOutput,
     tick_period: f64,
     ticks: u64,
+    step_means: StepMeans,
 }
 
 impl AxisSimulation {
@@ -98,7 +129,14 @@ impl AxisSimulation {
             SineGenerator::new(e.amplitude, e.frequency_hz, config.control.rates.current_loop_hz, 0.0),
         );
         let plant = Plant::new(plant_params).map_err(ConfigError::Plant)?;
-        Ok(Self { axis, plant, pending: PwmOutput::default(), tick_period: plant_params.tick, ticks: 0 })
+        Ok(Self {
+            axis,
+            plant,
+            pending: PwmOutput::default(),
+            tick_period: plant_params.tick,
+            ticks: 0,
+            step_means: StepMeans::default(),
+        })
     }
 
     pub fn tick_period(&self) -> f64 {
@@ -146,11 +184,19 @@ impl AxisSimulation {
     }
 
     /// `n` base ticks with the inputs held: the commands are converted once, not per tick.
+    /// [`Self::step_means`] then holds the means over these ticks.
     pub fn run_ticks(&mut self, n: u64, u: &UserInputs) {
         let commands = self.commands(u);
+        self.step_means = StepMeans::default();
         for _ in 0..n {
             self.tick_with(&commands, u.disturbance_torque);
+            self.step_means.add(&self.plant);
         }
+    }
+
+    /// Means of the electromagnetic torque and the accelerometer over the last `run_ticks`.
+    pub fn step_means(&self) -> &StepMeans {
+        &self.step_means
     }
 
     /// One base tick; returns what the control core was given (for golden vectors).

@@ -11,7 +11,7 @@ use serde::Serialize;
 use crate::bode_plot::plot_bode;
 use crate::fmu_runner::Fmu;
 use crate::frequency_response::ResponsePoint;
-use crate::identification::{acceleration_rms, identify, measure, AxisModel, Measured};
+use crate::identification::{acceleration_rms, identify, measure, AxisModel, FitRefused, Measured, Notch};
 use crate::scenario::Value;
 use crate::trace::Trace;
 
@@ -20,7 +20,13 @@ pub const BAND: (f64, f64) = (5.0, 500.0);
 
 #[derive(Clone, Debug, Serialize)]
 pub struct IdentifiedAxis {
-    pub model: AxisModel,
+    pub axis: String,
+    /// None when the fit was refused (see `refusal`): no model file is written.
+    pub model: Option<AxisModel>,
+    /// The notch search (embodiment 4): frequency, depth and confidence of the deepest dip.
+    pub notch: Option<Notch>,
+    /// Why the fitted model was refused.
+    pub refusal: Option<String>,
     /// Accelerometer noise used (rad/s², standard deviation) and the resulting SNR.
     pub noise_std: f64,
     pub snr_db: Option<f64>,
@@ -59,19 +65,50 @@ pub fn identify_axis(
             bail!("--snr-db must be a finite number of dB");
         }
         let rms = acceleration_rms(fmu, parameters, amplitude)?;
-        noise_std = rms / 10f64.powf(snr / 20.0);
+        // The accelerometer's noise is white per base tick; the record holds means over a
+        // communication step, which divide its deviation by √(ticks per step). The SNR is that
+        // of the record the identification uses.
+        let ticks_per_sample =
+            (crate::scenario::DEFAULT_STEP * control_core::Params::default().rates.current_loop_hz as f64).round();
+        noise_std = rms / 10f64.powf(snr / 20.0) * ticks_per_sample.sqrt();
         p.insert(name::plant_acceleration_noise_std.into(), Value::Float(noise_std));
     }
     let m = measure(fmu, &p, amplitude, BAND.0, BAND.1).with_context(|| format!("axis {axis}"))?;
-    let mut model = identify(axis, &m).with_context(|| format!("axis {axis}"))?;
-    // The plant as given (without the measurement noise), for `servo tune`'s check runs.
-    model.fmu_parameters = parameters.iter().map(|(k, v)| (k.clone(), v.as_f64())).collect();
+    // The measurement first: it is there to look at when the fit is refused.
     std::fs::create_dir_all(out)?;
-    let model_path = out.join(format!("{axis}.model.json"));
-    std::fs::write(&model_path, serde_json::to_string_pretty(&model)?)?;
     let measured_path = out.join(format!("{axis}.measured.csv"));
     write_measured(&measured_path, &m)?;
-    Ok(IdentifiedAxis { model, noise_std, snr_db, files: vec![model_path, measured_path] })
+    let model_path = out.join(format!("{axis}.model.json"));
+    let identified = match identify(axis, &m) {
+        Ok(i) => i,
+        Err(e) => {
+            let refused = e.downcast_ref::<FitRefused>().cloned().ok_or(e).with_context(|| format!("axis {axis}"))?;
+            // A stale model of an earlier run must not be taken for this one's.
+            let _ = std::fs::remove_file(&model_path);
+            return Ok(IdentifiedAxis {
+                axis: axis.into(),
+                model: None,
+                notch: Some(refused.notch),
+                refusal: Some(refused.reason),
+                noise_std,
+                snr_db,
+                files: vec![measured_path],
+            });
+        }
+    };
+    let mut model = identified.model;
+    // The plant as given (without the measurement noise), for `servo tune`'s check runs.
+    model.fmu_parameters = parameters.iter().map(|(k, v)| (k.clone(), v.as_f64())).collect();
+    std::fs::write(&model_path, serde_json::to_string_pretty(&model)?)?;
+    Ok(IdentifiedAxis {
+        axis: axis.into(),
+        model: Some(model),
+        notch: identified.notch,
+        refusal: None,
+        noise_std,
+        snr_db,
+        files: vec![model_path, measured_path],
+    })
 }
 
 /// Bode plot of every axis's measured response and its model.

@@ -7,6 +7,7 @@ pub mod acc_dec_study;
 pub mod bench;
 pub mod bench_accdec;
 pub mod bench_circle;
+pub mod bench_ident;
 pub mod bench_plant;
 pub mod bench_sequence;
 pub mod bench_sweep;

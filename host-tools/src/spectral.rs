@@ -1,5 +1,9 @@
-//! Spectral estimation for the broadband baseline: a radix-2 FFT and the H1 estimator
+//! Spectral estimation for the broadband baseline: the FFT (rustfft) and the H1 estimator
 //! `S_uy / S_uu` with Welch averaging (Hann windows, 50 % overlap) and its coherence.
+//!
+//! `Complex` stays the project's own small value type (its `{re, im}` JSON form is in the
+//! tuning files, and the sweep's code calls its methods); it converts to and from
+//! `num_complex::Complex64`, which the FFT and nalgebra use.
 
 use anyhow::{bail, Result};
 
@@ -42,6 +46,18 @@ impl Complex {
     }
 }
 
+impl From<Complex> for num_complex::Complex64 {
+    fn from(z: Complex) -> Self {
+        Self::new(z.re, z.im)
+    }
+}
+
+impl From<num_complex::Complex64> for Complex {
+    fn from(z: num_complex::Complex64) -> Self {
+        Self::new(z.re, z.im)
+    }
+}
+
 /// One DFT bin: `Σ x[i]·e^{−j2πki/N}` over the whole record (k may be any harmonic of the
 /// record, for periodic excitations whose period is the record).
 pub fn dft_bin(x: &[f64], k: f64) -> Complex {
@@ -52,34 +68,12 @@ pub fn dft_bin(x: &[f64], k: f64) -> Complex {
     })
 }
 
-/// In-place radix-2 FFT (length a power of two).
+/// In-place forward FFT `X[k] = Σ x[i]·e^{−j2πki/N}` (rustfft; any length).
 pub fn fft(x: &mut [Complex]) {
-    let n = x.len();
-    let mut j = 0;
-    for i in 1..n {
-        let mut bit = n >> 1;
-        while j & bit != 0 {
-            j ^= bit;
-            bit >>= 1;
-        }
-        j |= bit;
-        if i < j {
-            x.swap(i, j);
-        }
-    }
-    let mut len = 2;
-    while len <= n {
-        let angle = -std::f64::consts::TAU / len as f64;
-        for start in (0..n).step_by(len) {
-            for k in 0..len / 2 {
-                let w = Complex::new((angle * k as f64).cos(), (angle * k as f64).sin());
-                let a = x[start + k];
-                let b = x[start + k + len / 2].mul(w);
-                x[start + k] = a.add(b);
-                x[start + k + len / 2] = a.sub(b);
-            }
-        }
-        len <<= 1;
+    let mut buffer: Vec<num_complex::Complex64> = x.iter().map(|&z| z.into()).collect();
+    rustfft::FftPlanner::new().plan_fft_forward(buffer.len()).process(&mut buffer);
+    for (out, z) in x.iter_mut().zip(buffer) {
+        *out = z.into();
     }
 }
 

@@ -20,9 +20,13 @@ fn truth(hz: f64) -> host_tools::identification::Factor {
 fn anti_resonances_are_found_within_one_percent_at_20_db_snr() {
     let fmu = load_fmu();
     let out = std::env::temp_dir().join(format!("servo-ident-{}", std::process::id()));
-    for hz in [40.0, 55.0, 70.0] {
+    // The grid's ends and its hardest cases: 15 Hz (the closed loop cuts the torque there),
+    // 200 Hz (a shallow notch next to the shaft's resonance), and the demo's 40 Hz.
+    for hz in [15.0, 40.0, 200.0] {
         let r = identify_axis(&fmu, "x", &absorber_parameters(hz, 0.05, LOAD), 0.05, Some(20.0), &out).unwrap();
-        let (z, t) = (r.model.anti_resonance.expect("an anti-resonance"), truth(hz));
+        assert_eq!(r.refusal, None, "{hz} Hz");
+        let model = r.model.expect("a model");
+        let (z, t) = (model.anti_resonance.expect("an anti-resonance"), truth(hz));
         assert!(((z.hz - t.hz) / t.hz).abs() <= 0.01, "{hz} Hz: found {z:?}, truth {t:?}");
         assert!(((z.damping - t.damping) / t.damping).abs() <= 0.2, "{hz} Hz: found {z:?}, truth {t:?}");
     }
@@ -31,8 +35,11 @@ fn anti_resonances_are_found_within_one_percent_at_20_db_snr() {
 #[test]
 fn a_rigid_axis_has_no_anti_resonance() {
     let m = measure(&load_fmu(), &BTreeMap::new(), 0.05, 5.0, 500.0).unwrap();
-    let model = identify("w", &m).unwrap();
-    assert_eq!(model.anti_resonance, None, "{model:?}");
+    let identified = identify("w", &m).unwrap();
+    assert_eq!(identified.model.anti_resonance, None, "{identified:?}");
+    // The reason: the deepest dip is too shallow to count.
+    let notch = identified.notch.expect("searched");
+    assert!(!notch.is_clear(), "{notch:?}");
 }
 
 #[test]
