@@ -417,10 +417,10 @@ impl Axis {
             }
             self.velocity_loop_inputs = (reference, feedback);
             let torque = self.velocity_loop.step(p, reference, feedback) + compensation;
-            self.torque_command = torque.clamp(-p.velocity.torque_limit, p.velocity.torque_limit);
+            self.torque_command = crate::limit(torque, -p.velocity.torque_limit, p.velocity.torque_limit);
         }
         if commands.mode == Mode::Torque {
-            self.torque_command = commands.torque.clamp(-p.velocity.torque_limit, p.velocity.torque_limit);
+            self.torque_command = crate::limit(commands.torque, -p.velocity.torque_limit, p.velocity.torque_limit);
         }
         let mut torque = self.torque_command;
         if excitation.0 == InjectionPoint::TorqueCommand {
@@ -436,7 +436,7 @@ impl Axis {
         self.sweep.end_tick(self.tick, velocity_due, acquire, u, self.velocity_estimate);
 
         let iq_limit = p.current.max_current;
-        let reference = Dq { d: 0.0, q: (torque / p.motor.torque_constant()).clamp(-iq_limit, iq_limit) };
+        let reference = Dq { d: 0.0, q: crate::limit(torque / p.motor.torque_constant(), -iq_limit, iq_limit) };
         let theta_e = self.encoder.electrical_angle(p.encoder_counts_per_rev, p.motor.pole_pairs);
         let omega_e = self.velocity_estimate * p.motor.pole_pairs as f32;
         let out: CurrentLoopOutput = if faults.any() {

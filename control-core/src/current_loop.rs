@@ -66,16 +66,16 @@ impl CurrentLoop {
 
         // d-axis has priority inside the circle; q gets what is left.
         let vmax = voltage_circle_radius(bus_voltage);
-        let vd = vd_total.clamp(-vmax, vmax);
+        let vd = crate::limit(vd_total, -vmax, vmax);
         let vq_max = crate::square_root::sqrt((vmax * vmax - vd * vd).max(0.0));
-        let vq = vq_total.clamp(-vq_max, vq_max);
+        let vq = crate::limit(vq_total, -vq_max, vq_max);
         let sat_d = vd != vd_total;
         let sat_q = vq != vq_total;
         if !(sat_d && (vd_total > 0.0) == (ed > 0.0)) {
-            self.d.commit(id_int.clamp(-vmax, vmax));
+            self.d.commit(crate::limit(id_int, -vmax, vmax));
         }
         if !(sat_q && (vq_total > 0.0) == (eq > 0.0)) {
-            self.q.commit(iq_int.clamp(-vmax, vmax));
+            self.q.commit(crate::limit(iq_int, -vmax, vmax));
         }
 
         let theta_out = theta_e + omega_e * dt * p.current.angle_advance_ticks;

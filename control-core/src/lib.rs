@@ -43,6 +43,21 @@ pub use params::{ParamError, Params};
 /// 2π in f32.
 pub const TAU: f32 = core::f32::consts::TAU;
 
+/// `x` limited to `[lo, hi]`: what `f32::clamp` returns for ordered bounds (NaN passes
+/// through), without its panic path. `f32::clamp` asserts `lo <= hi` and its panic message
+/// formats both floats, which links core's float formatting into the drive's image (about
+/// 15 KiB of flash) and costs a compare per call in the tick.
+#[inline]
+pub fn limit(x: f32, lo: f32, hi: f32) -> f32 {
+    if x < lo {
+        lo
+    } else if x > hi {
+        hi
+    } else {
+        x
+    }
+}
+
 /// `x as f32` for encoder counts, through 32 bits when they fit: the same rounding (one
 /// exact integer rounded to f32 either way), but an i64 → f32 conversion is a library call on
 /// a Cortex-M4 and an i32 → f32 one is one instruction.

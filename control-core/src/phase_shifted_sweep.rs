@@ -561,7 +561,7 @@ impl SineFitSums {
             let ((b, c), _) = self.coefficients(&e, x, xc, xs);
             (b, -c)
         };
-        let conditioning = (e.det / (0.25 * e.n * e.n)).clamp(0.0, 1.0);
+        let conditioning = crate::limit(e.det / (0.25 * e.n * e.n), 0.0, 1.0);
         (amplitude(self.u, self.uc, self.us), amplitude(self.y, self.yc, self.ys), conditioning)
     }
 
@@ -614,7 +614,7 @@ impl SineFitSums {
         };
         let (suu, syy) = (spectrum(ruu, druu).max(0.0), spectrum(ryy, dryy).max(0.0));
         let bound = crate::square_root::sqrt(suu * syy);
-        let suy = spectrum(ruy, druy).clamp(-bound, bound);
+        let suy = crate::limit(spectrum(ruy, druy), -bound, bound);
         // (δb, δc) of any fit have the covariance σ²·[[Sss', −Scs'], [−Scs', Scc']]/det.
         let form = |(p1, q1): (f32, f32), (p2, q2): (f32, f32)| {
             (p1 * p2 * e.sss - (p1 * q2 + q1 * p2) * e.scs + q1 * q2 * e.scc) / e.det

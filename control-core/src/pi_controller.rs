@@ -43,11 +43,11 @@ impl PiController {
     pub fn update(&mut self, e: f32, dt: f32, limit: f32) -> PiOutput {
         let candidate = self.integral + self.ki * e * dt;
         let unlimited = self.kp * e + candidate;
-        let value = unlimited.clamp(-limit, limit);
+        let value = crate::limit(unlimited, -limit, limit);
         let saturated = value != unlimited;
         let winding_up = saturated && (unlimited > 0.0) == (e > 0.0);
         if !winding_up {
-            self.integral = candidate.clamp(-limit, limit);
+            self.integral = crate::limit(candidate, -limit, limit);
         }
         PiOutput { value, unlimited, saturated }
     }

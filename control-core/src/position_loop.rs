@@ -30,6 +30,6 @@ impl PositionLoop {
             crate::counts_to_f32(command.saturating_sub(previous)) * rad_per_count / p.rates.position_period();
         let v = p.position.kp * error + p.position.velocity_feedforward * feedforward;
         let limit = p.position.velocity_limit;
-        PositionLoopOutput { velocity_reference: v.clamp(-limit, limit), following_error: error }
+        PositionLoopOutput { velocity_reference: crate::limit(v, -limit, limit), following_error: error }
     }
 }

@@ -434,7 +434,7 @@ impl StopSequence {
         };
         let max_change = p.acceleration * dt;
         let before = s.speed_reference;
-        s.speed_reference += (wanted - s.speed_reference).clamp(-max_change, max_change);
+        s.speed_reference += crate::limit(wanted - s.speed_reference, -max_change, max_change);
         if self.releasing && (wanted - before).abs() <= max_change {
             // The reference has caught up with the position law: the deceleration is over,
             // so is the torque the integrator holds for it.

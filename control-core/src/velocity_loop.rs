@@ -58,6 +58,6 @@ impl VelocityLoop {
         if let Some(n) = self.notch.as_mut() {
             torque = n.process(torque);
         }
-        torque.clamp(-p.velocity.torque_limit, p.velocity.torque_limit)
+        crate::limit(torque, -p.velocity.torque_limit, p.velocity.torque_limit)
     }
 }
