@@ -4,8 +4,8 @@
 
 use control_core::acc_dec::{AccDecFilter, ButterworthDesign, ButterworthPulseFilter, ZeroPlacement};
 use cross_checks::load_fmu;
-use host_tools::acc_dec_study::{profile, residual_vibration, FilterSpec, PulseMove, Resonance};
-use host_tools::bench_accdec::matched_comparison;
+use host_tools::accdec::bench::matched_comparison;
+use host_tools::accdec::study::{profile, residual_vibration, FilterSpec, PulseMove, Resonance};
 
 #[test]
 fn poles_and_gains_match_python_control_for_both_zero_placements() {

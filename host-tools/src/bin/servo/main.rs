@@ -1,29 +1,16 @@
 //! `servo`: experiments on the servo FMU (default) and, later, on a real drive.
 
-mod acc_dec;
-mod backbone;
-mod circle;
-mod device;
-mod firmware;
-mod ident;
-mod robustness;
-mod sequence;
-mod sweep;
-
 use std::path::PathBuf;
 use std::process::ExitCode;
 
 use anyhow::{bail, Context, Result};
 use clap::{Parser, Subcommand};
-use indicatif::{ProgressBar, ProgressStyle};
 
-use host_tools::bench;
-use host_tools::fmu_runner::{evaluate_checks, Fmu};
+use host_tools::cli::{progress_bar, Common};
+use host_tools::fmu::runner::Fmu;
+use host_tools::fmu::trace::{compare_exact, Trace};
 use host_tools::paths::{default_fmu, default_out, workspace_root};
-use host_tools::plot::plot_signals;
-use host_tools::report::{write_html, ScenarioReport};
-use host_tools::scenario::Scenario;
-use host_tools::trace::{compare_exact, Trace};
+use host_tools::{accdec, bench, circle, device, ident, run, sequence, sweep};
 
 #[derive(Parser)]
 #[command(
@@ -38,19 +25,6 @@ use host_tools::trace::{compare_exact, Trace};
 struct Cli {
     #[command(subcommand)]
     command: Command,
-}
-
-#[derive(clap::Args, Clone)]
-struct Common {
-    /// FMU to run (default: the one the project builds)
-    #[arg(long, global = true)]
-    fmu: Option<PathBuf>,
-    /// Output folder (default: out/<command>/)
-    #[arg(long, global = true)]
-    out: Option<PathBuf>,
-    /// Print machine-readable figures (JSON) on stdout instead of tables
-    #[arg(long, global = true)]
-    json: bool,
 }
 
 #[derive(Subcommand)]
@@ -137,7 +111,7 @@ enum Command {
     /// A file lists key events (run, run_off, stop, release, move, return, gain) at times
     /// and expectations ("completion within 200 ms after 0.3 s", "state servo_lock at 0.5 s",
     /// "|deviation| <= 2 counts at 1.5 s", "1 refused by 0.4 s", signal bounds); see the doc
-    /// comment of host-tools/src/sequence_scenario.rs and scenarios/sequences/. Prints a
+    /// comment of host-tools/src/sequence/timeline.rs and scenarios/sequences/. Prints a
     /// pass/fail table, writes <name>.csv, <name>.svg (speed, position, deviation, state,
     /// completion, refusals on one timeline) and <name>.json. With --fmpy the same input
     /// table also runs through fmpy and must give identical outputs.
@@ -531,30 +505,14 @@ enum BenchCommand {
     },
 }
 
-fn progress_bar(label: &str, quiet: bool) -> ProgressBar {
-    if quiet {
-        return ProgressBar::hidden();
-    }
-    let pb = ProgressBar::new(1000);
-    pb.set_style(
-        ProgressStyle::with_template("{prefix:>22} [{bar:40}] {percent:>3}% {elapsed_precise}")
-            .unwrap()
-            .progress_chars("=> "),
-    );
-    pb.set_prefix(label.to_string());
-    pb
-}
-
-const DEFAULT_PLOT: [&str; 5] = ["motor_position", "motor_velocity", "load_velocity", "iq", "torque_command_out"];
-
 fn main() -> ExitCode {
     let cli = Cli::parse();
     let result = match &cli.command {
-        Command::Run { scenarios, fmpy, common } => backbone::run(scenarios, *fmpy, common),
-        Command::Sequence { files, fmpy, common } => sequence::sequence(files, *fmpy, common),
-        Command::Tune { models, method, no_check, common } => ident::tune(models, method, *no_check, common),
+        Command::Run { scenarios, fmpy, common } => run::command::run(scenarios, *fmpy, common),
+        Command::Sequence { files, fmpy, common } => sequence::command::sequence(files, *fmpy, common),
+        Command::Tune { models, method, no_check, common } => ident::command::tune(models, method, *no_check, common),
         Command::Ident { axes, set, anti_resonance, amplitude, snr_db, model, common } => {
-            ident::ident(axes, set, anti_resonance, *amplitude, *snr_db, model, common)
+            ident::command::ident(axes, set, anti_resonance, *amplitude, *snr_db, model, common)
         }
         Command::Sweep {
             point,
@@ -580,7 +538,7 @@ fn main() -> ExitCode {
             reference,
             common,
         } => (|| {
-            let settings = sweep::sweep_settings(
+            let settings = sweep::command::sweep_settings(
                 point,
                 *amplitude,
                 *start,
@@ -599,16 +557,16 @@ fn main() -> ExitCode {
                 *precision_db,
                 *max_extensions,
             )?;
-            let parameters = host_tools::circle_report::axis_parameters(set, &[])?;
-            let run = host_tools::frequency_response::SweepRun { settings, parameters, velocity: *velocity };
+            let parameters = host_tools::circle::report::axis_parameters(set, &[])?;
+            let run = host_tools::sweep::measurement::SweepRun { settings, parameters, velocity: *velocity };
             let reference = match reference {
-                Some(p) => Some((p.display().to_string(), host_tools::sweep_report::read_reference(p)?)),
+                Some(p) => Some((p.display().to_string(), host_tools::sweep::report::read_reference(p)?)),
                 None => None,
             };
             let fmu = Fmu::load(&common.fmu.clone().unwrap_or_else(default_fmu))?;
             let out = common.out.clone().unwrap_or_else(|| default_out("sweep"));
             let pb = progress_bar("sweep", common.json);
-            let r = host_tools::sweep_report::run(
+            let r = host_tools::sweep::report::run(
                 &fmu,
                 &run,
                 *oracle,
@@ -643,11 +601,11 @@ fn main() -> ExitCode {
             tuned,
             fmpy,
             common,
-        } => circle::circle(
+        } => circle::command::circle(
             axes, single, *radius, *feed, *cw, *lead_in, measure, set, x_set, y_set, compare, tuned, *fmpy, common,
         ),
         Command::Device { port, baud, timeout_ms, seconds, action, common } => {
-            device::device(port, *baud, *timeout_ms, *seconds, action, common)
+            device::command::device(port, *baud, *timeout_ms, *seconds, action, common)
         }
         Command::Compare { a, b } => (|| {
             let (ta, tb) = (Trace::read_csv(a)?, Trace::read_csv(b)?);
@@ -677,7 +635,7 @@ fn main() -> ExitCode {
             no_sweep,
             no_fmu,
             common,
-        } => acc_dec::accdec(
+        } => accdec::command::accdec(
             *order,
             *cutoff,
             *sample_period,
@@ -694,28 +652,30 @@ fn main() -> ExitCode {
             common,
         ),
         Command::Bench(BenchCommand::Fmu { seconds, no_fmpy, goal, common }) => {
-            backbone::bench_fmu(*seconds, *no_fmpy, *goal, common)
+            run::command::bench_fmu(*seconds, *no_fmpy, *goal, common)
         }
-        Command::Bench(BenchCommand::Plant { common }) => backbone::bench_plant(common),
+        Command::Bench(BenchCommand::Plant { common }) => run::command::bench_plant(common),
         Command::Bench(BenchCommand::FmiCampaign { seconds, seed, common }) => {
-            robustness::bench_fmi_campaign(*seconds, *seed, common)
+            bench::campaign_command::bench_fmi_campaign(*seconds, *seed, common)
         }
         Command::Bench(BenchCommand::FaultCampaign { runs, seed, common }) => {
-            robustness::bench_fault_campaign(*runs, *seed, common)
+            bench::campaign_command::bench_fault_campaign(*runs, *seed, common)
         }
         Command::Bench(BenchCommand::Robustness { campaign, seconds, seed, common }) => {
             bench_robustness(campaign, *seconds, *seed, common)
         }
-        Command::Bench(BenchCommand::Firmware { common }) => firmware::bench_firmware(common),
+        Command::Bench(BenchCommand::Firmware { common }) => bench::firmware_command::bench_firmware(common),
         Command::Bench(BenchCommand::Accdec { sequences, resonance, no_cost, common }) => {
-            acc_dec::bench_accdec(*sequences, resonance, *no_cost, common)
+            accdec::command::bench_accdec(*sequences, resonance, *no_cost, common)
         }
-        Command::Bench(BenchCommand::Sequence { zero_speed, common }) => sequence::bench_sequence(zero_speed, common),
-        Command::Bench(BenchCommand::Circle { common }) => circle::bench_circle(common),
-        Command::Bench(BenchCommand::Ident { common }) => ident::bench_ident(common),
-        Command::Bench(BenchCommand::Sweep { noise, common }) => sweep::bench_sweep(*noise, common),
+        Command::Bench(BenchCommand::Sequence { zero_speed, common }) => {
+            sequence::command::bench_sequence(zero_speed, common)
+        }
+        Command::Bench(BenchCommand::Circle { common }) => circle::command::bench_circle(common),
+        Command::Bench(BenchCommand::Ident { common }) => ident::command::bench_ident(common),
+        Command::Bench(BenchCommand::Sweep { noise, common }) => sweep::command::bench_sweep(*noise, common),
         Command::Bench(BenchCommand::AccdecProbe { filter, ticks }) => {
-            host_tools::bench_accdec::cost_probe(filter, *ticks).map(|s| {
+            host_tools::accdec::bench::cost_probe(filter, *ticks).map(|s| {
                 println!("{s}");
                 true
             })

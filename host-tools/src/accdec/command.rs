@@ -1,0 +1,171 @@
+//! `servo accdec` and `servo bench accdec` (seed 003).
+
+use anyhow::Result;
+
+use crate::cli::{progress_bar, Common};
+use crate::paths::{default_fmu, default_out};
+
+#[allow(clippy::too_many_arguments)]
+pub fn accdec(
+    order: u32,
+    cutoff: Option<f32>,
+    sample_period: f32,
+    zeros_as_delays: bool,
+    ma_lengths: &Option<Vec<u32>>,
+    distance: f64,
+    speed: f64,
+    counts_per_rev: u32,
+    resonance: &[f64],
+    damping_ratio: f64,
+    sweep: &Option<Vec<f32>>,
+    no_sweep: bool,
+    no_fmu: bool,
+    common: &Common,
+) -> Result<bool> {
+    let cutoff = cutoff.unwrap_or_else(crate::accdec::report::default_cutoff_hz);
+    let nyquist = 0.5 / sample_period;
+    let sweep = match (no_sweep, sweep) {
+        (true, _) => vec![],
+        (false, Some(s)) => s.clone(),
+        (false, None) => [0.25, 0.5, 1.0, 2.0, 4.0].iter().map(|f| f * cutoff).filter(|&c| c <= nyquist).collect(),
+    };
+    let request = crate::accdec::report::AccDecRequest {
+        order,
+        cutoff_hz: cutoff,
+        sample_period,
+        all_delays: zeros_as_delays,
+        ma_lengths: ma_lengths.clone(),
+        distance_rad: distance,
+        speed_rad_s: speed,
+        counts_per_rev,
+        resonances: resonance.iter().map(|&hz| crate::accdec::study::Resonance { hz, damping_ratio }).collect(),
+        sweep,
+        fmu: (!no_fmu && !zeros_as_delays).then(|| common.fmu.clone().unwrap_or_else(default_fmu)),
+        out: common.out.clone().unwrap_or_else(|| default_out("accdec")),
+    };
+    if zeros_as_delays && !no_fmu && !common.json {
+        eprintln!(
+            "note: --zeros-as-delays runs on the host only (the FMU's filter keeps the seed's zeros): no FMU runs"
+        );
+    }
+    let pb = progress_bar("accdec", common.json);
+    let report = crate::accdec::report::run(&request, |label, f| {
+        pb.set_prefix(label.to_string());
+        pb.set_position((f * 1000.0) as u64)
+    })?;
+    pb.finish_and_clear();
+    if common.json {
+        println!("{}", serde_json::to_string_pretty(&report)?);
+    } else {
+        report.print();
+    }
+    Ok(report.butterworth.shape.pulse_balance == 0 && report.moving_average.shape.pulse_balance == 0)
+}
+
+pub fn bench_accdec(sequences: usize, resonance: &[f64], no_cost: bool, common: &Common) -> Result<bool> {
+    use crate::accdec::bench as b;
+    let fmu_path = common.fmu.clone().unwrap_or_else(default_fmu);
+    let pb = progress_bar("seed digits", common.json);
+    let digits = b::seed_digits()?;
+    let seed_test = b::seed_test()?;
+    pb.set_prefix("python-control");
+    pb.set_position(100);
+    let matched = b::matched_comparison()?;
+    pb.set_prefix("pulse conservation");
+    pb.set_position(300);
+    let props = b::properties(sequences);
+    pb.set_prefix("FMU vibration");
+    pb.set_position(600);
+    let vibration = b::equal_delay_vibration(&fmu_path, resonance, false)?;
+    let vibration_t50 = b::equal_delay_vibration(&fmu_path, resonance, true)?;
+    pb.set_prefix("instruction count");
+    pb.set_position(700);
+    let costs = if no_cost { vec![] } else { b::filter_costs()? };
+    pb.finish_and_clear();
+    let worst = |f: fn(&b::MatchedComparison) -> f64| matched.iter().map(f).fold(0.0, f64::max);
+    let (pole, den, gd, gs) = (
+        worst(|m| m.pole_error),
+        worst(|m| m.denominator_error),
+        worst(|m| m.all_delays_gain_error),
+        worst(|m| m.seed_gain_error),
+    );
+    let ok = digits.iter().all(|d| d.equal)
+        && pole < 1e-5
+        && gd < 1e-4
+        && gs < 1e-4
+        && props.conservation_failures == 0
+        && props.zero_input_nonzero_outputs == 0;
+    if common.json {
+        println!(
+            "{}",
+            serde_json::to_string_pretty(&serde_json::json!({
+                "bench": "accdec", "seed_digits": digits, "seed_test": seed_test, "matched": matched, "properties": props,
+                "equal_delay_vibration": [vibration, vibration_t50], "costs": costs, "passed": ok
+            }))?
+        );
+        return Ok(ok);
+    }
+    println!("servo bench accdec — seed 003");
+    println!("  1. seed example, 3rd order, 1 kHz, 0.5 ms (printed digits):");
+    for d in &digits {
+        println!(
+            "     {:<20} seed {:>11}  ours {:>13.8}  {}",
+            d.name,
+            d.printed,
+            d.ours,
+            if d.equal { "equal" } else { "DIFFERENT" }
+        );
+    }
+    for (cutoff, out) in &seed_test {
+        println!(
+            "     seed's test, 100 pulses x 30 samples, {cutoff} Hz: {} pulses out over {} samples: {}",
+            out.iter().sum::<i64>(),
+            out.len(),
+            out.iter().map(i64::to_string).collect::<Vec<_>>().join(" ")
+        );
+    }
+    println!(
+        "  2. against python-control sample_system(method='matched'), orders 1-6 at {} (Hz, s):",
+        b::MATCHED_CASES.map(|(c, t)| format!("{c}/{t}")).join(", ")
+    );
+    println!("     largest pole error |z - z_py|            {pole:.2e}");
+    println!("     largest denominator coefficient error    {den:.2e}");
+    println!(
+        "     gain, every zero at infinity a delay: K = A(1), relative error {gd:.2e}  (python-control's convention)"
+    );
+    println!("     gain, seed: N-1 zeros at z = -1 + one delay: K·2^(N-1) = A(1), relative error {gs:.2e}");
+    println!("     (same poles; the seed's form answers one tick after the input and nulls Nyquist, python-control's waits N ticks)");
+    println!("  3. properties of the whole-pulse filters (random Butterworth 1-6 / moving-average cascades):");
+    println!("     {} random sequences: {} with output sum != input sum", props.sequences, props.conservation_failures);
+    println!(
+        "     {} ticks of zero input: {} non-zero outputs",
+        props.zero_input_ticks, props.zero_input_nonzero_outputs
+    );
+    println!("  4. residual load vibration (peak shaft twist after end of interpolation + 99 % delay; 2 rad at 50 rad/s, 2 % damping, friction off):");
+    for v in [&vibration, &vibration_t50] {
+        println!(
+            "     at equal {}: {} (t50 {:.2} ms, t99 {:.2} ms) vs {} (t50 {:.2} ms, t99 {:.2} ms)",
+            v.matched_on,
+            v.butterworth,
+            v.butterworth_t50 * 1e3,
+            v.butterworth_t99 * 1e3,
+            v.moving_average,
+            v.moving_average_t50 * 1e3,
+            v.moving_average_t99 * 1e3
+        );
+        for (hz, bw, ma, ratio) in &v.resonances {
+            println!("     {hz:>7} Hz load resonance: Butterworth {bw:.3e} rad, moving average {ma:.3e} rad, ratio BW/MA {ratio:.3}");
+        }
+    }
+    if !costs.is_empty() {
+        println!("  5. cost per tick (x86-64 instructions, valgrind; the probe's own input generation subtracted):");
+        for c in &costs {
+            println!("     {:<22} {:>7.1}", c.filter, c.instructions_per_tick);
+        }
+    }
+    println!(
+        "  checks (seed digits, poles < 1e-5, gains < 1e-4, conservation, zero in -> zero out): {}",
+        if ok { "pass" } else { "FAIL" }
+    );
+    Ok(ok)
+}

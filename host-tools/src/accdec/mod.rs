@@ -1,0 +1,6 @@
+//! Acc/dec after interpolation (seed 003): `servo accdec` and `servo bench accdec`.
+
+pub mod bench;
+pub mod command;
+pub mod report;
+pub mod study;

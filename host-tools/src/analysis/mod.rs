@@ -1,0 +1,4 @@
+//! Signal analysis shared by the experiments.
+
+pub mod polynomial;
+pub mod spectral;

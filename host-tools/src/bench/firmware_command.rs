@@ -1,0 +1,66 @@
+//! `servo bench firmware`: the drive image and the core on a Cortex-M4.
+
+use anyhow::Result;
+
+use crate::cli::{progress_bar, Common};
+
+/// Goals of the issue.
+const FLASH_GOAL: u32 = 128 * 1024;
+const RAM_GOAL: u32 = 48 * 1024;
+const TICK_GOAL: f64 = 1000.0;
+
+pub fn bench_firmware(common: &Common) -> Result<bool> {
+    use crate::bench::firmware::{all_features_recordings, drive_image_size, encode, recordings, replay_on_cortex_m4};
+    let pb = progress_bar("firmware bench", common.json);
+    pb.set_position(50);
+    let size = drive_image_size()?;
+    pb.set_position(300);
+    let vectors = replay_on_cortex_m4(&encode(&recordings()), "golden-vectors")?;
+    pb.set_position(700);
+    let all = replay_on_cortex_m4(&encode(&all_features_recordings()), "all-features-vectors")?;
+    pb.finish_and_clear();
+    let per_tick_all = all.instructions_per_tick.unwrap_or(f64::INFINITY);
+    let ok = vectors.identical && all.identical && size.flash <= FLASH_GOAL && size.ram <= RAM_GOAL;
+    let tick_goal = per_tick_all <= TICK_GOAL;
+    if common.json {
+        println!(
+            "{}",
+            serde_json::to_string_pretty(&serde_json::json!({
+                "bench": "firmware", "image": size, "golden_vectors": vectors, "all_features": all,
+                "tick_goal_met": tick_goal, "passed": ok
+            }))?
+        );
+        return Ok(ok);
+    }
+    println!(
+        "servo bench firmware — drive-g474 (STM32G474RE) and the control core on a Cortex-M4F (QEMU netduinoplus2)"
+    );
+    println!(
+        "  drive image: flash {} bytes ({:.1} KiB, goal ≤ 128 KiB), static RAM {} bytes ({:.1} KiB, goal ≤ 48 KiB; stack not included)",
+        size.flash,
+        size.flash as f64 / 1024.0,
+        size.ram,
+        size.ram as f64 / 1024.0
+    );
+    for (name, r) in
+        [("golden vectors (the shipped scenarios' situations)", &vectors), ("every feature on at once", &all)]
+    {
+        println!(
+            "  {name}: {} ticks compared bit for bit, host digest {}, target: {} → {}",
+            r.ticks,
+            r.host_digest,
+            r.target,
+            if r.identical { "identical" } else { "DIFFERENT" }
+        );
+        println!(
+            "    instructions per 16 kHz tick on the Cortex-M4 (QEMU -icount, average): {:.0} for Axis::step, {:.0} with the output digest",
+            r.instructions_per_tick.unwrap_or(f64::NAN),
+            r.instructions_per_tick_with_digest.unwrap_or(f64::NAN)
+        );
+    }
+    println!(
+        "  goal: at most {TICK_GOAL:.0} instructions per tick with every feature on: {} ({per_tick_all:.0})",
+        if tick_goal { "met" } else { "NOT met" }
+    );
+    Ok(ok)
+}

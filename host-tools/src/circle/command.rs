@@ -1,0 +1,146 @@
+//! `servo circle` and `servo bench circle` (seed 002).
+
+use std::path::PathBuf;
+
+use anyhow::{bail, Result};
+
+use crate::bench::fmu_speed as bench;
+use crate::cli::{progress_bar, Common};
+use crate::fmu::runner::Fmu;
+use crate::paths::{default_fmu, default_out};
+
+#[allow(clippy::too_many_arguments)]
+pub fn circle(
+    axes: &str,
+    single: &Option<String>,
+    radius: f64,
+    feed: f64,
+    cw: bool,
+    lead_in: u32,
+    measure: &str,
+    set: &[String],
+    x_set: &[String],
+    y_set: &[String],
+    compare: &[String],
+    tuned: &Option<PathBuf>,
+    with_fmpy: bool,
+    common: &Common,
+) -> Result<bool> {
+    use crate::circle::report::{axis_parameters, parse_assignment, run};
+    use crate::fmu::circle::{CircleRequest, Direction, Measure};
+    if axes.replace(' ', "") != "x,y" {
+        bail!("--axes: the XY test runs the axes x,y (got `{axes}`)");
+    }
+    let measure = match measure {
+        "load" => Measure::Load,
+        "motor" => Measure::Motor,
+        other => bail!("--measure must be load or motor (got `{other}`)"),
+    };
+    let (mut xp, mut yp) = (axis_parameters(set, x_set)?, axis_parameters(set, y_set)?);
+    let mut comparison = crate::circle::report::Comparison::default();
+    let mut labels = ("as given".to_string(), String::new());
+    if let Some(dir) = tuned {
+        // The axes as `servo tune` measured them (--set / --x-set / --y-set still apply on
+        // top); the second run adds each axis's correction.
+        let [(x_base, x_corr), (y_base, y_corr)] = crate::circle::report::tuned_axes(dir)?;
+        xp = x_base.into_iter().chain(xp).collect();
+        yp = y_base.into_iter().chain(yp).collect();
+        comparison.x = x_corr;
+        comparison.y = y_corr;
+        comparison.shape_only = true;
+        labels = ("without correction".into(), "with correction".into());
+    }
+    let (x_parameters, y_parameters) = match single.as_deref() {
+        None | Some("x") => (xp, yp),
+        Some("y") => (yp.clone(), yp),
+        Some(other) => bail!("--single takes x or y (got `{other}`)"),
+    };
+    if lead_in == 0 && single.is_some() {
+        bail!("--lead-in must be at least 1 for the single-axis test (the quarter-period copy needs history)");
+    }
+    let request = CircleRequest {
+        radius,
+        feed,
+        direction: if cw { Direction::Clockwise } else { Direction::CounterClockwise },
+        lead_in,
+        measure,
+        x_parameters,
+        y_parameters,
+    };
+    comparison.both = compare.iter().map(|s| parse_assignment(s)).collect::<Result<_>>()?;
+    if tuned.is_some() && !comparison.both.is_empty() {
+        bail!("--tuned compares without and with the correction: leave out --compare");
+    }
+    let out = common.out.clone().unwrap_or_else(|| default_out("circle"));
+    let fmu_path = common.fmu.clone().unwrap_or_else(default_fmu);
+    let fmu = Fmu::load(&fmu_path)?;
+    if tuned.is_none() {
+        labels.1 = comparison.both.iter().map(|(k, v)| format!("{k} = {}", v.as_f64())).collect::<Vec<_>>().join(", ");
+    }
+    let pb = progress_bar("circle", common.json);
+    pb.set_position(100);
+    let (report, pseudo) = run(&fmu, &request, single.is_some(), &comparison, (&labels.0, &labels.1), &out)?;
+    pb.finish_and_clear();
+    let mut ok = true;
+    let mut fmpy_note = None;
+    if with_fmpy {
+        let Some((_, first)) = pseudo.first() else {
+            bail!("--fmpy cross-checks the single-axis run: add --single x");
+        };
+        let inputs = out.join("pseudo_circle.inputs.toml");
+        std::fs::write(&inputs, first.scenario.to_toml())?;
+        let csv = out.join("pseudo_circle.fmpy.csv");
+        let (verdict, _) = bench::fmpy_cross_check(&fmu_path, &inputs, &first.trace, &csv)?;
+        ok &= verdict.is_ok();
+        fmpy_note = Some(verdict);
+    }
+    if common.json {
+        println!(
+            "{}",
+            serde_json::to_string_pretty(
+                &serde_json::json!({"circle": report, "fmpy": fmpy_note.as_ref().map(bench::verdict_json)})
+            )?
+        );
+    } else {
+        report.print();
+        if let Some(v) = &fmpy_note {
+            bench::print_verdict("fmpy cross-check of the single-axis feedback", v);
+        }
+    }
+    Ok(ok)
+}
+
+pub fn bench_circle(common: &Common) -> Result<bool> {
+    let fmu = Fmu::load(&common.fmu.clone().unwrap_or_else(default_fmu))?;
+    let r = crate::circle::bench::bench(&fmu)?;
+    let ok = r.pseudo_vs_two_axis_relative <= 1e-3 && r.protrusion_ratio < 1.0;
+    if common.json {
+        println!(
+            "{}",
+            serde_json::to_string_pretty(&serde_json::json!({"bench": "circle", "result": r, "passed": ok}))?
+        );
+        return Ok(ok);
+    }
+    println!(
+        "servo bench circle — seed 002, radius {} rad, feed {} rad/s (1 revolution per second), machine-end positions",
+        r.radius, r.feed
+    );
+    println!("  demo axis (default Coulomb friction 0.01 N·m motor, 0.02 N·m load), two-axis circle:");
+    println!(
+        "    compensation off: largest quadrant protrusion {:.3e} rad, roundness {:.3e} rad",
+        r.protrusion_off, r.roundness_off
+    );
+    println!(
+        "    compensation on ({}): largest quadrant protrusion {:.3e} rad, roundness {:.3e} rad",
+        crate::circle::bench::COMPENSATION.map(|(k, v)| format!("{k} = {v}")).join(", "),
+        r.protrusion_on,
+        r.roundness_on
+    );
+    println!("    ratio on / off: {:.3}", r.protrusion_ratio);
+    println!(
+        "  friction-free axis: pseudo-circle (x(t), x(t - T/4)) vs two-axis circle of two identical axes: largest radial difference {:.3e} rad = {:.5} % of the radius (goal <= 0.1 %)",
+        r.pseudo_vs_two_axis,
+        r.pseudo_vs_two_axis_relative * 100.0
+    );
+    Ok(ok)
+}

@@ -1,0 +1,5 @@
+//! The drive link: `servo device`.
+
+pub mod command;
+pub mod frame_stream;
+pub mod link;

@@ -1,0 +1,7 @@
+//! Identification and correction (seed 001): `servo ident`, `servo tune`, `servo bench ident`.
+
+pub mod command;
+pub mod identification;
+pub mod report;
+pub mod response_model;
+pub mod tuning;

@@ -1,0 +1,4 @@
+//! Scenario runs: `servo run`, its report, `servo bench fmu` and `servo bench plant`.
+
+pub mod command;
+pub mod report;

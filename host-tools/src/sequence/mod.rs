@@ -1,0 +1,5 @@
+//! Stop, zero-servo and fine-adjust sequences (seed 004): `servo sequence` and `servo bench sequence`.
+
+pub mod bench;
+pub mod command;
+pub mod timeline;

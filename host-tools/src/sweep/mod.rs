@@ -1,0 +1,6 @@
+//! Frequency response with phase-shifted sine repeats (seed 000): `servo sweep` and `servo bench sweep`.
+
+pub mod bench;
+pub mod command;
+pub mod measurement;
+pub mod report;
