@@ -15,6 +15,7 @@ pub mod analysis;
 pub mod bench;
 pub mod circle;
 pub mod cli;
+pub mod correction;
 pub mod device;
 pub mod fmu;
 pub mod ident;

@@ -3,9 +3,9 @@
 //! protrusions; fmpy gives the same single-axis feedback trace.
 
 use cross_checks::{fmu_path, load_fmu};
-use host_tools::bench::fmu_speed::run_fmpy;
 use host_tools::circle::bench::{bench, demo_request};
 use host_tools::fmu::circle::single_axis;
+use host_tools::fmu::fmpy::run_fmpy;
 use host_tools::fmu::trace::{compare_exact, Trace};
 
 #[test]

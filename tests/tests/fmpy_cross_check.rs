@@ -4,7 +4,7 @@
 use std::process::Command;
 
 use cross_checks::{fmu_path, load_fmu, scenario_from_text};
-use host_tools::bench::fmu_speed::{python, run_fmpy};
+use host_tools::fmu::fmpy::{python, run_fmpy};
 use host_tools::fmu::scenario::Scenario;
 use host_tools::fmu::trace::{compare_exact, Trace};
 use host_tools::paths::workspace_root;

@@ -13,7 +13,7 @@ use std::sync::OnceLock;
 use std::time::Instant;
 
 use cross_checks::{fmu_path, load_fmu};
-use host_tools::bench::fmu_speed::{python, run_fmpy};
+use host_tools::fmu::fmpy::{python, run_fmpy};
 use host_tools::fmu::scenario::Scenario;
 use host_tools::fmu::trace::{compare_exact, Trace};
 use host_tools::paths::{default_fmu, workspace_root};

@@ -78,7 +78,7 @@ fn bad_tuning_requests_are_refused_with_the_reason() {
     let mut whole = axis("y", 70.0);
     whole.fmu_parameters.insert("ctrl.position_divider".into(), 4.0);
     assert!(tune(&fmu, &[axis("x", 40.0), whole], Method::Response, false, |_| {}).is_ok());
-    let e = host_tools::circle::report::tuned_axes(std::path::Path::new("/nonexistent/tune")).unwrap_err().to_string();
+    let e = host_tools::correction::tuned_axes(std::path::Path::new("/nonexistent/tune")).unwrap_err().to_string();
     assert!(e.contains("servo tune"), "{e}");
 }
 

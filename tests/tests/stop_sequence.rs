@@ -3,7 +3,7 @@
 //! the hand-over to position control does not jump the torque; higher gains settle faster.
 
 use cross_checks::{fmu_path, load_fmu};
-use host_tools::bench::fmu_speed::run_fmpy;
+use host_tools::fmu::fmpy::run_fmpy;
 use host_tools::fmu::trace::{compare_exact, Trace};
 use host_tools::paths::workspace_root;
 use host_tools::sequence::bench::bench;

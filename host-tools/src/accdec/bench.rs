@@ -20,7 +20,7 @@ use crate::accdec::study::{
     delay, moving_average_matched_on, profile, residual_vibration, DelayMatch, FilterSpec, PulseMove, Resonance,
 };
 use crate::analysis::polynomial::roots;
-use crate::bench::fmu_speed::python;
+use crate::fmu::fmpy::python;
 use crate::fmu::runner::Fmu;
 use crate::paths::workspace_root;
 

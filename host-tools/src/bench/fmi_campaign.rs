@@ -8,7 +8,7 @@ use std::process::Command;
 use anyhow::{Context, Result};
 use serde::{Deserialize, Serialize};
 
-use crate::bench::fmu_speed::python;
+use crate::fmu::fmpy::python;
 use crate::paths::workspace_root;
 
 #[derive(Clone, Debug, Default, Serialize, Deserialize)]

@@ -4,8 +4,8 @@ use std::path::PathBuf;
 
 use anyhow::{bail, Result};
 
-use crate::bench::fmu_speed as bench;
 use crate::cli::{progress_bar, Common};
+use crate::fmu::fmpy;
 use crate::fmu::runner::Fmu;
 use crate::paths::{default_fmu, default_out};
 
@@ -26,7 +26,8 @@ pub fn circle(
     with_fmpy: bool,
     common: &Common,
 ) -> Result<bool> {
-    use crate::circle::report::{axis_parameters, parse_assignment, run};
+    use crate::circle::report::run;
+    use crate::fmu::assignment::{axis_parameters, parse_assignment};
     use crate::fmu::circle::{CircleRequest, Direction, Measure};
     if axes.replace(' ', "") != "x,y" {
         bail!("--axes: the XY test runs the axes x,y (got `{axes}`)");
@@ -42,7 +43,7 @@ pub fn circle(
     if let Some(dir) = tuned {
         // The axes as `servo tune` measured them (--set / --x-set / --y-set still apply on
         // top); the second run adds each axis's correction.
-        let [(x_base, x_corr), (y_base, y_corr)] = crate::circle::report::tuned_axes(dir)?;
+        let [(x_base, x_corr), (y_base, y_corr)] = crate::correction::tuned_axes(dir)?;
         xp = x_base.into_iter().chain(xp).collect();
         yp = y_base.into_iter().chain(yp).collect();
         comparison.x = x_corr;
@@ -90,7 +91,7 @@ pub fn circle(
         let inputs = out.join("pseudo_circle.inputs.toml");
         std::fs::write(&inputs, first.scenario.to_toml())?;
         let csv = out.join("pseudo_circle.fmpy.csv");
-        let (verdict, _) = bench::fmpy_cross_check(&fmu_path, &inputs, &first.trace, &csv)?;
+        let (verdict, _) = fmpy::fmpy_cross_check(&fmu_path, &inputs, &first.trace, &csv)?;
         ok &= verdict.is_ok();
         fmpy_note = Some(verdict);
     }
@@ -98,13 +99,13 @@ pub fn circle(
         println!(
             "{}",
             serde_json::to_string_pretty(
-                &serde_json::json!({"circle": report, "fmpy": fmpy_note.as_ref().map(bench::verdict_json)})
+                &serde_json::json!({"circle": report, "fmpy": fmpy_note.as_ref().map(fmpy::verdict_json)})
             )?
         );
     } else {
         report.print();
         if let Some(v) = &fmpy_note {
-            bench::print_verdict("fmpy cross-check of the single-axis feedback", v);
+            fmpy::print_verdict("fmpy cross-check of the single-axis feedback", v);
         }
     }
     Ok(ok)

@@ -4,7 +4,7 @@
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 
-use anyhow::{bail, Context, Result};
+use anyhow::{Context, Result};
 use serde::Serialize;
 
 use crate::circle::plot::plot_circle;
@@ -12,27 +12,6 @@ use crate::fmu::circle::{single_axis, two_axis, CircleRequest, Figure, Roundness
 use crate::fmu::runner::Fmu;
 use crate::fmu::scenario::Value;
 use crate::fmu::trace::Trace;
-
-/// Parse `NAME=VALUE` (an integer stays an integer, `true`/`false` a boolean).
-pub fn parse_assignment(s: &str) -> Result<(String, Value)> {
-    let Some((name, value)) = s.split_once('=') else {
-        bail!("`{s}` is not NAME=VALUE");
-    };
-    let value = value.trim();
-    let v = if let Ok(i) = value.parse::<i64>() {
-        Value::Int(i)
-    } else if let Ok(x) = value.parse::<f64>() {
-        if !x.is_finite() {
-            bail!("`{s}`: the value must be a finite number");
-        }
-        Value::Float(x)
-    } else if let Ok(b) = value.parse::<bool>() {
-        Value::Bool(b)
-    } else {
-        bail!("`{s}`: `{value}` is not a number or a boolean");
-    };
-    Ok((name.trim().to_string(), v))
-}
 
 #[derive(Clone, Debug, Serialize)]
 pub struct CircleFigures {
@@ -227,44 +206,4 @@ impl CircleReport {
             println!("  → {}", f.display());
         }
     }
-}
-
-/// Parameters per axis from `--set` (both), `--x-set`, `--y-set`.
-pub fn axis_parameters(both: &[String], own: &[String]) -> Result<BTreeMap<String, Value>> {
-    let mut m = BTreeMap::new();
-    for s in both.iter().chain(own) {
-        let (k, v) = parse_assignment(s)?;
-        m.insert(k, v);
-    }
-    Ok(m)
-}
-
-/// One tuned axis: the FMU parameters the tuning measured it with, its correction parameters.
-pub type TunedAxisParameters = (BTreeMap<String, Value>, BTreeMap<String, Value>);
-
-/// The x and y axes of a `servo tune` output directory.
-pub fn tuned_axes(dir: &Path) -> Result<[TunedAxisParameters; 2]> {
-    let path = dir.join("tune.json");
-    let text = std::fs::read_to_string(&path)
-        .with_context(|| format!("cannot read {} (run `servo tune --out {}` first)", path.display(), dir.display()))?;
-    let json: serde_json::Value =
-        serde_json::from_str(&text).with_context(|| format!("{} is not a tuning file", path.display()))?;
-    let axes = json["axes"].as_array().ok_or_else(|| anyhow::anyhow!("{}: no axes", path.display()))?;
-    let axis = |name: &str| -> Result<TunedAxisParameters> {
-        let a = axes.iter().find(|a| a["axis"] == name).ok_or_else(|| {
-            anyhow::anyhow!("{}: no axis `{name}` (the XY circle needs axes x and y)", path.display())
-        })?;
-        let floats = |v: &serde_json::Value| -> BTreeMap<String, Value> {
-            v.as_object()
-                .map(|o| o.iter().filter_map(|(k, v)| v.as_f64().map(|x| (k.clone(), Value::Float(x)))).collect())
-                .unwrap_or_default()
-        };
-        let base = floats(&a["fmu_parameters"]);
-        let correction: crate::ident::tuning::AxisCorrection = serde_json::from_value(a["correction"].clone())
-            .with_context(|| format!("{}: axis {name}: the correction is not readable", path.display()))?;
-        crate::ident::tuning::validate(&correction)?;
-        let corr = correction.parameters();
-        Ok((base, corr))
-    };
-    Ok([axis("x")?, axis("y")?])
 }

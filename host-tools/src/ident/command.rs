@@ -32,7 +32,7 @@ pub fn ident(
     > = axes.iter().map(|a| (a.clone(), Default::default())).collect();
     for s in set {
         let (axis, rest) = s.split_once(':').ok_or_else(|| anyhow::anyhow!("--set `{s}`: use AXIS:NAME=VALUE"))?;
-        let (k, v) = crate::circle::report::parse_assignment(rest)?;
+        let (k, v) = crate::fmu::assignment::parse_assignment(rest)?;
         parameters
             .get_mut(axis)
             .ok_or_else(|| anyhow::anyhow!("--set `{s}`: no axis `{axis}` in --axes"))?
@@ -69,7 +69,7 @@ pub fn ident(
                 t.column("phase_deg").unwrap_or_default(),
             );
             let pts = (0..f.len())
-                .map(|i| crate::sweep::measurement::ResponsePoint {
+                .map(|i| crate::analysis::response_point::ResponsePoint {
                     frequency: f[i],
                     gain_db: g[i],
                     phase_deg: p[i],

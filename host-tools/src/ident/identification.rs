@@ -22,10 +22,11 @@ use control_core::phase_shifted_sweep::{SweepParams, SweepSignal};
 use serde::{Deserialize, Serialize};
 
 use crate::analysis::polynomial::roots;
+use crate::analysis::response_point::ResponsePoint;
 use crate::analysis::spectral::{dft_bin, Complex};
 use crate::fmu::runner::Fmu;
 use crate::fmu::scenario::Value;
-use crate::sweep::measurement::{ResponsePoint, SweepRun};
+use crate::fmu::sweep_run::SweepRun;
 
 pub const DEGREE: u32 = 11;
 /// Base ticks per acquisition sample (4 kHz) and per chip (1 kHz: the chips' spectrum has its

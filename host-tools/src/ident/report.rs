@@ -8,12 +8,12 @@ use std::path::{Path, PathBuf};
 use anyhow::{anyhow, bail, Context, Result};
 use serde::Serialize;
 
+use crate::analysis::response_point::ResponsePoint;
 use crate::fmu::runner::Fmu;
 use crate::fmu::scenario::Value;
 use crate::fmu::trace::Trace;
 use crate::ident::identification::{acceleration_rms, identify, measure, AxisModel, Measured};
 use crate::plot::bode::plot_bode;
-use crate::sweep::measurement::ResponsePoint;
 
 /// Band the response is measured over (Hz).
 pub const BAND: (f64, f64) = (5.0, 500.0);

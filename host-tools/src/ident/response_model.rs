@@ -25,8 +25,8 @@ use anyhow::{bail, Result};
 use serde::{Deserialize, Serialize};
 
 use crate::analysis::spectral::Complex;
+use crate::correction::Section;
 use crate::ident::identification::{fit_rational, Factor, Measured};
-use crate::ident::tuning::Section;
 
 /// Fitted command → machine-end model of one axis.
 #[derive(Clone, Debug, Serialize, Deserialize, PartialEq)]

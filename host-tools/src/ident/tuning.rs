@@ -19,44 +19,15 @@ use servo_axis::variables::name;
 use std::collections::BTreeMap;
 
 use anyhow::{bail, Result};
-use serde::{Deserialize, Serialize};
+use serde::Serialize;
 
+use crate::analysis::response_point::ResponsePoint;
 use crate::analysis::spectral::{dft_bin, Complex};
+use crate::correction::{drive_frame, validate, AxisCorrection, Section};
 use crate::fmu::runner::Fmu;
 use crate::fmu::scenario::{Scenario, Value, DEFAULT_STEP};
 use crate::ident::identification::{AxisModel, Factor};
 use crate::ident::response_model::{self, ResponseModel};
-use crate::sweep::measurement::ResponsePoint;
-
-/// One correction section as the FMU takes it.
-#[derive(Clone, Copy, Debug, Serialize, Deserialize, PartialEq)]
-pub struct Section {
-    /// Anti-resonance numerator (Hz, damping); None: F alone.
-    pub zeros: Option<(f64, f64)>,
-    pub pole_hz: f64,
-    pub pole_damping: f64,
-}
-
-#[derive(Clone, Debug, Serialize, Deserialize)]
-pub struct AxisCorrection {
-    pub axis: String,
-    pub sections: Vec<Section>,
-}
-
-impl AxisCorrection {
-    /// `corr.*` FMU parameters.
-    pub fn parameters(&self) -> BTreeMap<String, Value> {
-        let mut p = BTreeMap::new();
-        p.insert(name::corr_count.into(), Value::Int(self.sections.len() as i64));
-        for (s, names) in self.sections.iter().zip(servo_axis::parameters::CORRECTION_SECTIONS) {
-            let (zh, zd) = s.zeros.unwrap_or((0.0, 0.0));
-            for (n, x) in names.into_iter().zip([zh, zd, s.pole_hz, s.pole_damping]) {
-                p.insert(n.into(), Value::Float(x));
-            }
-        }
-        p
-    }
-}
 
 /// The filters of every axis.
 pub fn corrections(models: &[AxisModel], position_bandwidth_hz: f64) -> Result<(f64, Vec<AxisCorrection>)> {
@@ -167,7 +138,7 @@ pub fn spread(responses: &[Vec<ResponsePoint>]) -> (f64, f64) {
     for a in responses {
         for b in responses {
             for (p, q) in a.iter().zip(b) {
-                let (dg, dp) = crate::sweep::measurement::difference(p, q);
+                let (dg, dp) = crate::analysis::response_point::difference(p, q);
                 worst = (worst.0.max(dg.abs()), worst.1.max(dp.abs()));
             }
         }
@@ -251,42 +222,6 @@ pub fn response_corrections(models: &[ResponseModel]) -> Result<Vec<AxisCorrecti
             Ok(AxisCorrection { axis: m.axis.clone(), sections })
         })
         .collect()
-}
-
-/// The core's filter parameters of a correction (what the FMU builds from the `corr.*`
-/// parameters and the drive receives in a `LoadCorrection` frame), checked against the core's
-/// own rules before any FMU or drive sees them.
-pub fn core_parameters(c: &AxisCorrection) -> Result<control_core::response_correction::CorrectionParams> {
-    use control_core::response_correction::{CorrectionParams, CorrectionSection, SecondOrder};
-    let mut p = CorrectionParams { count: c.sections.len(), ..Default::default() };
-    if c.sections.len() > p.sections.len() {
-        bail!("axis {}: {} sections; the filter holds {}", c.axis, c.sections.len(), p.sections.len());
-    }
-    for (o, s) in p.sections.iter_mut().zip(&c.sections) {
-        *o = CorrectionSection {
-            zeros: s.zeros.map(|(hz, damping)| SecondOrder { hz: hz as f32, damping: damping as f32 }),
-            poles: SecondOrder { hz: s.pole_hz as f32, damping: s.pole_damping as f32 },
-        };
-    }
-    let period = control_core::Params::default().rates.position_period();
-    p.validate(period).map_err(|e| anyhow::anyhow!("axis {}: {e}", c.axis))?;
-    Ok(p)
-}
-
-/// Check a correction against the core's rules.
-pub fn validate(c: &AxisCorrection) -> Result<()> {
-    core_parameters(c).map(|_| ())
-}
-
-/// The drive's `LoadCorrection` request for a correction, as one framed message (postcard,
-/// CRC-16, COBS, zero delimiter) ready for the link.
-pub fn drive_frame(c: &AxisCorrection) -> Result<Vec<u8>> {
-    use control_core::protocol::{encode, Request, MAX_FRAME};
-    let mut buf = vec![0u8; MAX_FRAME + 8];
-    let n = encode(&Request::LoadCorrection(core_parameters(c)?), &mut buf)
-        .map_err(|e| anyhow::anyhow!("axis {}: {e}", c.axis))?;
-    buf.truncate(n);
-    Ok(buf)
 }
 
 /// Measure, fit, correct and (with `check`) measure again. `progress` gets 0..1.

@@ -7,8 +7,8 @@ use std::path::Path;
 
 use anyhow::{Context, Result};
 
+use crate::analysis::response_point::ResponsePoint;
 use crate::plot::signals::{escape, tick_step};
-use crate::sweep::measurement::ResponsePoint;
 
 const WIDTH: f64 = 900.0;
 const PANEL_H: f64 = 220.0;

@@ -1,30 +1,20 @@
-//! `servo run`, `servo bench fmu`, `servo bench plant`: scenarios on the FMU and the backbone benchmarks.
+//! `servo run`: scenarios on the FMU.
 
 use std::path::PathBuf;
 
 use anyhow::{bail, Context, Result};
 
-use crate::bench::fmu_speed as bench;
 use crate::cli::{progress_bar, Common};
+use crate::fmu::fmpy;
 use crate::fmu::runner::{evaluate_checks, Fmu};
 use crate::fmu::scenario::Scenario;
 use crate::fmu::trace::Trace;
+use crate::paths::toml_files_in;
 use crate::paths::{default_fmu, default_out, workspace_root};
 use crate::plot::signals::plot_signals;
 use crate::run::report::{write_html, ScenarioReport};
 
 const DEFAULT_PLOT: [&str; 5] = ["motor_position", "motor_velocity", "load_velocity", "iq", "torque_command_out"];
-
-/// The `.toml` files of a folder, sorted.
-pub fn toml_files_in(dir: &std::path::Path) -> Result<Vec<PathBuf>> {
-    let mut v: Vec<PathBuf> = std::fs::read_dir(dir)
-        .with_context(|| format!("cannot list {}", dir.display()))?
-        .filter_map(|e| e.ok().map(|e| e.path()))
-        .filter(|p| p.extension().is_some_and(|x| x == "toml"))
-        .collect();
-    v.sort();
-    Ok(v)
-}
 
 pub fn scenario_files(given: &[PathBuf]) -> Result<Vec<PathBuf>> {
     if !given.is_empty() {
@@ -60,7 +50,7 @@ pub fn run(files: &[PathBuf], with_fmpy: bool, common: &Common) -> Result<bool> 
         if with_fmpy {
             let fmpy_csv = out.join(format!("{}.fmpy.csv", scenario.name));
             let verdict;
-            (verdict, fmpy_trace) = bench::fmpy_cross_check(&fmu_path, &file, &trace, &fmpy_csv)?;
+            (verdict, fmpy_trace) = fmpy::fmpy_cross_check(&fmu_path, &file, &trace, &fmpy_csv)?;
             all_ok &= verdict.is_ok();
             fmpy_verdict = Some(verdict);
             traces.push(("fmpy", &fmpy_trace));
@@ -85,7 +75,7 @@ pub fn run(files: &[PathBuf], with_fmpy: bool, common: &Common) -> Result<bool> 
             "scenario": scenario.name,
             "passed": passed,
             "checks": checks,
-            "fmpy": fmpy_verdict.as_ref().map(bench::verdict_json),
+            "fmpy": fmpy_verdict.as_ref().map(fmpy::verdict_json),
             "csv": csv,
             "plot": svg,
         });
@@ -105,7 +95,7 @@ pub fn run(files: &[PathBuf], with_fmpy: bool, common: &Common) -> Result<bool> 
                 );
             }
             if let Some(v) = &fmpy_verdict {
-                bench::print_verdict("fmpy cross-check", v);
+                fmpy::print_verdict("fmpy cross-check", v);
             }
             println!("  → {} , {}", csv.display(), svg.display());
         }
@@ -127,94 +117,4 @@ pub fn run(files: &[PathBuf], with_fmpy: bool, common: &Common) -> Result<bool> 
         println!("report: {}", index.display());
     }
     Ok(all_ok)
-}
-
-pub fn bench_fmu(seconds: f64, no_fmpy: bool, goal: f64, common: &Common) -> Result<bool> {
-    if !(seconds.is_finite() && seconds > 0.0) {
-        bail!("--seconds must be a positive number");
-    }
-    let fmu_path = common.fmu.clone().unwrap_or_else(default_fmu);
-    let out = common.out.clone().unwrap_or_else(|| default_out("bench"));
-    let pb = progress_bar("Rust host", common.json);
-    let r = bench::bench_fmu(&fmu_path, &out, seconds, !no_fmpy, |f| pb.set_position((f * 1000.0) as u64))?;
-    pb.finish_and_clear();
-    let speed_ok = r.rust_real_time_factor >= goal;
-    let ok = speed_ok && r.boundary_overhead <= 0.10;
-    if common.json {
-        println!(
-            "{}",
-            serde_json::to_string_pretty(
-                &serde_json::json!({"bench": "fmu", "result": r, "goal": goal, "passed": ok})
-            )?
-        );
-    } else {
-        println!(
-            "servo bench fmu — default axis, {} s simulated, {} communication steps",
-            r.simulated_seconds, r.communication_steps
-        );
-        println!(
-            "  recording the {} outputs the FMU's specification names ({}) at every step:",
-            r.recorded_outputs.len(),
-            r.recorded_outputs.join(", ")
-        );
-        println!(
-            "    Rust host (fmi crate): {:>8.3} s wall  → {:>8.1} x real time  (median of {} runs)",
-            r.rust_wall_seconds,
-            r.rust_real_time_factor,
-            bench::RUST_RUNS
-        );
-        if let (Some(w), Some(f)) = (r.fmpy_wall_seconds, r.fmpy_real_time_factor) {
-            println!("    fmpy                 : {:>8.3} s wall  → {:>8.1} x real time", w, f);
-            println!("    ratio Rust / fmpy    : {:>8.2}", r.rust_over_fmpy.unwrap_or(f64::NAN));
-        }
-        println!("  recording all {} outputs at every step:", r.all_outputs);
-        println!(
-            "    Rust host (fmi crate): {:>8.3} s wall  → {:>8.1} x real time  (median of {} runs)",
-            r.all_outputs_wall_seconds,
-            r.all_outputs_real_time_factor,
-            bench::RUST_RUNS
-        );
-        println!(
-            "  bare simulation (core + plant, no FMI): {:>8.3} s wall  → {:>8.1} x real time  (median of {} runs)",
-            r.bare_wall_seconds,
-            r.bare_real_time_factor,
-            bench::RUST_RUNS
-        );
-        println!(
-            "  reading all {} outputs at every step without keeping them: {:>8.3} s wall, {:+.1} % of the bare simulation (the boundary alone)",
-            r.all_outputs,
-            r.read_only_wall_seconds,
-            100.0 * r.read_only_overhead
-        );
-        println!(
-            "  the FMI boundary and recording all {} outputs cost {:+.1} % of the bare simulation (goal ≤ 10 %): {}",
-            r.all_outputs,
-            100.0 * r.boundary_overhead,
-            if r.boundary_overhead <= 0.10 { "met" } else { "NOT met" }
-        );
-        println!(
-            "  goal ≥ {goal} x real time through the Rust host (the specification's outputs): {}",
-            if speed_ok { "met" } else { "NOT met" }
-        );
-    }
-    Ok(ok)
-}
-
-pub fn bench_plant(common: &Common) -> Result<bool> {
-    let r = crate::bench::plant::step_error()?;
-    if common.json {
-        println!("{}", serde_json::to_string_pretty(&r)?);
-    } else {
-        println!("servo bench plant — exact linear parts, {} sub-step(s) per 62.5 µs tick vs {} (reference), inverter commands of {} s of closed-loop velocity steps replayed open loop", r.substeps, r.reference_substeps, r.simulated_seconds);
-        for (name, err, scale) in &r.errors {
-            println!("  {name:<16} max |error| {err:>10.3e}  (signal peak {scale:.3e}, relative {:.2e})", err / scale);
-        }
-        println!(
-            "  largest relative error: {:.2e} (goal ≤ {:.0e}): {}",
-            r.worst_relative,
-            crate::bench::plant::GOAL,
-            if r.passed { "met" } else { "NOT met" }
-        );
-    }
-    Ok(r.passed)
 }

@@ -4,8 +4,8 @@ use std::path::PathBuf;
 
 use anyhow::{Context, Result};
 
-use crate::bench::fmu_speed as bench;
 use crate::cli::{progress_bar, Common};
+use crate::fmu::fmpy;
 use crate::fmu::runner::Fmu;
 use crate::fmu::trace::Trace;
 use crate::paths::{default_fmu, default_out, workspace_root};
@@ -17,7 +17,7 @@ pub fn sequence(files: &[PathBuf], with_fmpy: bool, common: &Common) -> Result<b
     let out = common.out.clone().unwrap_or_else(|| default_out("sequence"));
     std::fs::create_dir_all(&out).with_context(|| format!("cannot create {}", out.display()))?;
     let files = if files.is_empty() {
-        crate::run::command::toml_files_in(&workspace_root().join("scenarios/sequences"))?
+        crate::paths::toml_files_in(&workspace_root().join("scenarios/sequences"))?
     } else {
         files.to_vec()
     };
@@ -41,7 +41,7 @@ pub fn sequence(files: &[PathBuf], with_fmpy: bool, common: &Common) -> Result<b
             std::fs::write(&inputs, scenario.to_toml())?;
             let fmpy_csv = out.join(format!("{}.fmpy.csv", s.name));
             let v;
-            (v, fmpy_trace) = bench::fmpy_cross_check(&fmu_path, &inputs, &trace, &fmpy_csv)?;
+            (v, fmpy_trace) = fmpy::fmpy_cross_check(&fmu_path, &inputs, &trace, &fmpy_csv)?;
             all_ok &= v.is_ok();
             fmpy_verdict = Some(v);
             traces.push(("fmpy", &fmpy_trace));
@@ -52,7 +52,7 @@ pub fn sequence(files: &[PathBuf], with_fmpy: bool, common: &Common) -> Result<b
         all_ok &= passed;
         let json = serde_json::json!({
             "scenario": s.name, "passed": passed, "expectations": outcomes,
-            "fmpy": fmpy_verdict.as_ref().map(bench::verdict_json),
+            "fmpy": fmpy_verdict.as_ref().map(fmpy::verdict_json),
             "csv": csv, "plot": svg,
         });
         std::fs::write(out.join(format!("{}.json", s.name)), serde_json::to_string_pretty(&json)?)?;
@@ -68,7 +68,7 @@ pub fn sequence(files: &[PathBuf], with_fmpy: bool, common: &Common) -> Result<b
                 );
             }
             if let Some(v) = &fmpy_verdict {
-                bench::print_verdict("fmpy cross-check", v);
+                fmpy::print_verdict("fmpy cross-check", v);
             }
             println!("  → {} , {}", csv.display(), svg.display());
         }

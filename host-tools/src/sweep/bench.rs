@@ -23,12 +23,12 @@ use anyhow::{anyhow, Result};
 use control_core::phase_shifted_sweep::{SweepParams, SweepSignal};
 use serde::Serialize;
 
+use crate::analysis::response_point::ResponsePoint;
 use crate::analysis::spectral::Complex;
 use crate::fmu::runner::Fmu;
 use crate::fmu::scenario::Value;
-use crate::sweep::measurement::{
-    errors, measured_time, online_results, prbs_results, stream_results, ErrorSummary, ResponsePoint, SweepRun,
-};
+use crate::fmu::sweep_run::SweepRun;
+use crate::sweep::measurement::{errors, measured_time, online_results, prbs_results, stream_results, ErrorSummary};
 use crate::sweep::report::oracle_settings;
 
 pub const VELOCITY: f64 = 50.0;
@@ -142,7 +142,7 @@ pub fn bench(fmu: &Fmu, noise_std: f64, mut progress: impl FnMut(f64)) -> Result
     let online = online_results(&ours_trace)?;
     let stream_vs_online =
         ours.iter().zip(&online).filter(|(a, _)| a.quality > 0.01).fold((0.0f64, 0.0f64), |(g, p), (a, b)| {
-            let (dg, dp) = crate::sweep::measurement::difference(a, b);
+            let (dg, dp) = crate::analysis::response_point::difference(a, b);
             (g.max(dg.abs()), p.max(dp.abs()))
         });
     progress(0.35);

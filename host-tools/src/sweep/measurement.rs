@@ -4,127 +4,15 @@
 
 use std::collections::BTreeMap;
 
-use anyhow::{anyhow, bail, Result};
+use anyhow::{anyhow, Result};
 use control_core::excitation::InjectionPoint;
 use control_core::phase_shifted_sweep::SweepParams;
 use serde::Serialize;
 
+use crate::analysis::response_point::{difference, ResponsePoint};
 use crate::analysis::spectral::{welch_h1, Complex};
-use crate::fmu::runner::Fmu;
-use crate::fmu::scenario::{Event, Scenario, Value, DEFAULT_STEP};
+use crate::fmu::sweep_run::START_AT;
 use crate::fmu::trace::Trace;
-
-/// One frequency of a response.
-#[derive(Clone, Copy, Debug, Serialize, PartialEq)]
-pub struct ResponsePoint {
-    pub frequency: f64,
-    pub gain_db: f64,
-    pub phase_deg: f64,
-    /// Fraction of U's AC power at the frequency (1 = a clean sine was seen).
-    pub quality: f64,
-}
-
-impl ResponsePoint {
-    pub fn from_complex(frequency: f64, g: Complex, quality: f64) -> Self {
-        Self { frequency, gain_db: 20.0 * g.abs().log10(), phase_deg: g.arg().to_degrees(), quality }
-    }
-}
-
-/// Gain difference (dB) and phase difference (degrees, wrapped to ±180).
-pub fn difference(a: &ResponsePoint, b: &ResponsePoint) -> (f64, f64) {
-    let dg = a.gain_db - b.gain_db;
-    let dp = (a.phase_deg - b.phase_deg + 540.0).rem_euclid(360.0) - 180.0;
-    (if dg.is_finite() { dg } else { f64::INFINITY }, if dp.is_finite() { dp } else { f64::INFINITY })
-}
-
-/// A sweep as run: the FMU parameters, the settings and where it starts.
-#[derive(Clone, Debug)]
-pub struct SweepRun {
-    pub settings: SweepParams,
-    /// Other FMU parameters (plant, controller).
-    pub parameters: BTreeMap<String, Value>,
-    /// Velocity-mode offset (rad/s): a constant speed keeps friction on one side.
-    pub velocity: f64,
-}
-
-pub const START_AT: f64 = 0.1;
-
-fn sweep_parameters(s: &SweepParams) -> Vec<(String, Value)> {
-    servo_axis::parameters::sweep_values(s).into_iter().map(|(n, v)| (n.to_string(), Value::from(v))).collect()
-}
-
-impl SweepRun {
-    /// Simulated time the sweep's fixed schedule takes (s): its length when no frequency is
-    /// lengthened for precision (see [`measured_time`] for what a run took).
-    pub fn measurement_time(&self) -> f64 {
-        let fs = control_core::Params::default().rates.current_loop_hz;
-        self.settings.total_ticks(fs) as f64 / fs as f64
-    }
-
-    /// The longest the sweep can take: every record lengthened by `max_extensions` blocks.
-    pub fn max_measurement_time(&self) -> f64 {
-        let fs = control_core::Params::default().rates.current_loop_hz;
-        self.settings.max_total_ticks(fs) as f64 / fs as f64
-    }
-
-    pub fn scenario(&self) -> Result<Scenario> {
-        let fs = control_core::Params::default().rates.current_loop_hz;
-        self.settings
-            .validate(fs, control_core::Params::default().rates.velocity_divider)
-            .map_err(|e| anyhow!("{e}"))?;
-        let mut parameters = self.parameters.clone();
-        parameters.extend(sweep_parameters(&self.settings));
-        // Long enough for the longest sweep; `run` stops when it is done.
-        let stop = ((START_AT + self.max_measurement_time()) / DEFAULT_STEP).ceil() * DEFAULT_STEP + 4.0 * DEFAULT_STEP;
-        let mode = if self.settings.point == InjectionPoint::TorqueCommand && self.velocity == 0.0 { 0 } else { 1 };
-        let start: BTreeMap<String, Value> =
-            [("mode".to_string(), Value::Int(mode)), ("velocity_command".to_string(), Value::Float(self.velocity))]
-                .into_iter()
-                .collect();
-        Ok(Scenario {
-            name: "sweep".into(),
-            description: String::new(),
-            stop_time: stop,
-            step: Some(DEFAULT_STEP),
-            parameters,
-            events: vec![
-                Event { time: 0.0, inputs: start },
-                Event { time: START_AT, inputs: [("sweep_start".to_string(), Value::Int(1))].into_iter().collect() },
-            ],
-            checks: vec![],
-            plot: vec![],
-            record: vec![],
-        })
-    }
-
-    /// Run the sweep until it is done (the trace ends at the first step after it finishes).
-    pub fn run(&self, fmu: &Fmu, mut progress: impl FnMut(f64)) -> Result<Trace> {
-        let scenario = self.scenario()?;
-        let state = 1 + fmu
-            .recorded(&scenario.record)?
-            .iter()
-            .position(|v| v.name == "sweep_state")
-            .ok_or_else(|| anyhow!("the FMU has no sweep outputs"))?;
-        // Progress against the fixed schedule (the usual length), not the longest possible.
-        let scale = scenario.stop_time / (START_AT + self.measurement_time());
-        let t = fmu.run_until(
-            &scenario,
-            |f| progress((f * scale).min(0.99)),
-            |row| row[0] > START_AT && row[state] == 3.0,
-        )?;
-        progress(1.0);
-        if t.rows.last().map(|r| r[state]) != Some(3.0) {
-            bail!("the sweep did not finish within the simulated time");
-        }
-        Ok(t)
-    }
-
-    /// The scenario as far as `trace` ran it (for another importer to run the same steps).
-    pub fn scenario_as_run(&self, trace: &Trace) -> Result<Scenario> {
-        let end = trace.rows.last().map(|r| r[0]).ok_or_else(|| anyhow!("empty trace"))?;
-        Ok(Scenario { stop_time: end, ..self.scenario()? })
-    }
-}
 
 /// Simulated time a sweep took in `trace`: from its start to the first step it reports done.
 pub fn measured_time(trace: &Trace) -> Result<f64> {

@@ -9,12 +9,12 @@ use anyhow::{bail, Result};
 use control_core::phase_shifted_sweep::SweepParams;
 use serde::Serialize;
 
+use crate::analysis::response_point::{difference, ResponsePoint};
 use crate::fmu::runner::Fmu;
+use crate::fmu::sweep_run::SweepRun;
 use crate::fmu::trace::Trace;
 use crate::plot::bode::plot_bode;
-use crate::sweep::measurement::{
-    difference, errors, measured_time, online_results, stream_results, ErrorSummary, ResponsePoint, SweepRun,
-};
+use crate::sweep::measurement::{errors, measured_time, online_results, stream_results, ErrorSummary};
 
 /// The oracle: the same loop with acquisition at the velocity-loop rate (every 2 ticks: no
 /// aliasing up to 4 kHz), one unshifted record ten times as long, read from the on-line

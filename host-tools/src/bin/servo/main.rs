@@ -557,8 +557,8 @@ fn main() -> ExitCode {
                 *precision_db,
                 *max_extensions,
             )?;
-            let parameters = host_tools::circle::report::axis_parameters(set, &[])?;
-            let run = host_tools::sweep::measurement::SweepRun { settings, parameters, velocity: *velocity };
+            let parameters = host_tools::fmu::assignment::axis_parameters(set, &[])?;
+            let run = host_tools::fmu::sweep_run::SweepRun { settings, parameters, velocity: *velocity };
             let reference = match reference {
                 Some(p) => Some((p.display().to_string(), host_tools::sweep::report::read_reference(p)?)),
                 None => None,
@@ -652,9 +652,9 @@ fn main() -> ExitCode {
             common,
         ),
         Command::Bench(BenchCommand::Fmu { seconds, no_fmpy, goal, common }) => {
-            run::command::bench_fmu(*seconds, *no_fmpy, *goal, common)
+            bench::backbone_command::bench_fmu(*seconds, *no_fmpy, *goal, common)
         }
-        Command::Bench(BenchCommand::Plant { common }) => run::command::bench_plant(common),
+        Command::Bench(BenchCommand::Plant { common }) => bench::backbone_command::bench_plant(common),
         Command::Bench(BenchCommand::FmiCampaign { seconds, seed, common }) => {
             bench::campaign_command::bench_fmi_campaign(*seconds, *seed, common)
         }
