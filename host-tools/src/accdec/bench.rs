@@ -277,8 +277,8 @@ pub fn equal_delay_vibration(fmu_path: &Path, resonances_hz: &[f64], on_t50: boo
     for &hz in resonances_hz {
         let res = Resonance { hz, damping_ratio: 0.02 };
         let duration = windows[0].max(windows[1]) + 0.3;
-        let (vb, _) = residual_vibration(&fmu, &bw, res, period as f64, distance, speed, windows[0], duration)?;
-        let (vm, _) = residual_vibration(&fmu, &ma, res, period as f64, distance, speed, windows[1], duration)?;
+        let (vb, _) = residual_vibration(&fmu, &bw, res, period as f64, distance, speed, (windows[0], duration))?;
+        let (vm, _) = residual_vibration(&fmu, &ma, res, period as f64, distance, speed, (windows[1], duration))?;
         rows.push((hz, vb.residual, vm.residual, vb.residual / vm.residual));
     }
     Ok(EqualDelayVibration {

@@ -212,8 +212,7 @@ pub fn run(r: &AccDecRequest, mut progress: impl FnMut(&str, f64)) -> Result<Acc
                     r.sample_period as f64,
                     r.distance_rad,
                     r.speed_rad_s,
-                    window_start(f),
-                    duration,
+                    (window_start(f), duration),
                 )?;
                 vibration.push(v);
                 traces.push(t);
@@ -253,8 +252,7 @@ pub fn run(r: &AccDecRequest, mut progress: impl FnMut(&str, f64)) -> Result<Acc
                     period,
                     r.distance_rad,
                     r.speed_rad_s,
-                    window_start(&bres),
-                    duration,
+                    (window_start(&bres), duration),
                 )?;
                 let (va, _) = residual_vibration(
                     fmu,
@@ -263,8 +261,7 @@ pub fn run(r: &AccDecRequest, mut progress: impl FnMut(&str, f64)) -> Result<Acc
                     period,
                     r.distance_rad,
                     r.speed_rad_s,
-                    window_start(&ares),
-                    duration,
+                    (window_start(&ares), duration),
                 )?;
                 residuals.push((res.hz, vb.residual, va.residual));
             }

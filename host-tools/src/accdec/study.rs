@@ -416,7 +416,6 @@ fn divider_step(period: f64) -> f64 {
 /// Run the move on the FMU (position mode, the filter between command and position loop,
 /// position loop at `period`) and measure the load's residual vibration from `window_start`
 /// (s after the move starts; at equal delay, the same for both filters) until `duration`.
-#[allow(clippy::too_many_arguments)]
 pub fn residual_vibration(
     fmu: &Fmu,
     spec: &FilterSpec,
@@ -424,8 +423,7 @@ pub fn residual_vibration(
     period: f64,
     distance_rad: f64,
     speed_rad_s: f64,
-    window_start: f64,
-    duration: f64,
+    (window_start, duration): (f64, f64),
 ) -> Result<(Vibration, Trace)> {
     let mut parameters: std::collections::BTreeMap<String, Value> = spec.fmu_parameters()?.into_iter().collect();
     parameters.extend(resonance.plant_parameters()?);

@@ -6,7 +6,30 @@ use crate::bench::fmu_speed as bench;
 use crate::cli::{progress_bar, Common};
 use crate::paths::{default_fmu, default_out};
 
-pub fn bench_fmu(seconds: f64, no_fmpy: bool, goal: f64, common: &Common) -> Result<bool> {
+/// Simulated seconds per wall second, Rust host vs fmpy (default axis, 10 s simulated).
+#[derive(clap::Args)]
+pub struct FmuBenchArgs {
+    /// Simulated time (s)
+    #[arg(long, default_value_t = 10.0)]
+    seconds: f64,
+    /// Skip the fmpy half
+    #[arg(long)]
+    no_fmpy: bool,
+    /// Fail (exit 1) below this real-time factor through the Rust host
+    #[arg(long, default_value_t = 300.0)]
+    goal: f64,
+    #[command(flatten)]
+    common: Common,
+}
+
+impl FmuBenchArgs {
+    pub fn run(&self) -> Result<bool> {
+        bench_fmu(self)
+    }
+}
+
+fn bench_fmu(args: &FmuBenchArgs) -> Result<bool> {
+    let (seconds, no_fmpy, goal, common) = (args.seconds, args.no_fmpy, args.goal, &args.common);
     if !(seconds.is_finite() && seconds > 0.0) {
         bail!("--seconds must be a positive number");
     }
@@ -77,7 +100,21 @@ pub fn bench_fmu(seconds: f64, no_fmpy: bool, goal: f64, common: &Common) -> Res
     Ok(ok)
 }
 
-pub fn bench_plant(common: &Common) -> Result<bool> {
+/// Plant integration error: the default sub-step against one ten times finer.
+#[derive(clap::Args)]
+pub struct PlantBenchArgs {
+    #[command(flatten)]
+    common: Common,
+}
+
+impl PlantBenchArgs {
+    pub fn run(&self) -> Result<bool> {
+        bench_plant(self)
+    }
+}
+
+fn bench_plant(args: &PlantBenchArgs) -> Result<bool> {
+    let common = &args.common;
     let r = crate::bench::plant::step_error()?;
     if common.json {
         println!("{}", serde_json::to_string_pretty(&r)?);

@@ -1,13 +1,36 @@
-//! `servo bench fmi-campaign` and `servo bench fault-campaign`: the FMU under random call
-//! sequences, and the axis under injected faults.
+//! `servo bench fmi-campaign`, `servo bench fault-campaign` and `servo bench robustness`: the
+//! FMU under random call sequences, the axis under injected faults, the drive link's campaigns.
+
+use anyhow::{bail, Context, Result};
 
 use crate::bench::{fault_campaign, fmi_campaign};
-use crate::paths::default_fmu;
-use anyhow::Result;
-
 use crate::cli::{progress_bar, Common};
+use crate::paths::{default_fmu, workspace_root};
 
-pub fn bench_fmi_campaign(seconds: f64, seed: u64, common: &Common) -> Result<bool> {
+/// Random FMI call sequences through fmpy on both archives (FMI 3.0 and 2.0): every
+/// function in any state, valid and hostile arguments (unknown value references, NaN,
+/// huge values, steps of 0, 1e300 or off the grid, corrupt serialized states). Goals: no
+/// crash, no hang, no OK step with a non-finite output.
+#[derive(clap::Args)]
+pub struct FmiCampaignArgs {
+    /// Seconds of calls per archive
+    #[arg(long, default_value_t = 20.0)]
+    seconds: f64,
+    /// Seed of the call sequences (the same seed gives the same calls)
+    #[arg(long, default_value_t = 1)]
+    seed: u64,
+    #[command(flatten)]
+    common: Common,
+}
+
+impl FmiCampaignArgs {
+    pub fn run(&self) -> Result<bool> {
+        bench_fmi_campaign(self)
+    }
+}
+
+fn bench_fmi_campaign(args: &FmiCampaignArgs) -> Result<bool> {
+    let (seconds, seed, common) = (args.seconds, args.seed, &args.common);
     anyhow::ensure!(seconds.is_finite() && seconds > 0.0, "--seconds must be a positive number");
     let fmi3 = common.fmu.clone().unwrap_or_else(default_fmu);
     let fmi2 = fmi3.with_file_name(format!(
@@ -77,7 +100,30 @@ pub fn bench_fmi_campaign(seconds: f64, seed: u64, common: &Common) -> Result<bo
     Ok(passed)
 }
 
-pub fn bench_fault_campaign(runs: usize, seed: u64, common: &Common) -> Result<bool> {
+/// Faults injected at random times into the simulated axis: a NaN or saturated current
+/// sample, an encoder disconnect, bus under- and over-voltage, the power stage's break, a
+/// following-error runaway. Prints per fault the worst reaction (ticks from detection to
+/// the bridge off; goal ≤ 1), restarts before ClearFaults (goal 0) and recovery after it.
+#[derive(clap::Args)]
+pub struct FaultCampaignArgs {
+    /// Runs per fault kind
+    #[arg(long, default_value_t = 100)]
+    runs: usize,
+    /// Seed of the injection times and settings
+    #[arg(long, default_value_t = 1)]
+    seed: u64,
+    #[command(flatten)]
+    common: Common,
+}
+
+impl FaultCampaignArgs {
+    pub fn run(&self) -> Result<bool> {
+        bench_fault_campaign(self)
+    }
+}
+
+fn bench_fault_campaign(args: &FaultCampaignArgs) -> Result<bool> {
+    let (runs, seed, common) = (args.runs, args.seed, &args.common);
     anyhow::ensure!(runs > 0, "--runs must be at least 1");
     let pb = progress_bar("fault campaign", common.json);
     let r = fault_campaign::run(runs, seed, |f| pb.set_position((f * 1000.0) as u64))?;
@@ -111,4 +157,61 @@ pub fn bench_fault_campaign(runs: usize, seed: u64, common: &Common) -> Result<b
         );
     }
     Ok(r.passed)
+}
+
+/// Robustness campaigns of the drive link, seeded and time-bounded, run with integer
+/// overflow checks on (cargo profile `robustness`, built on first use): `frames` (the
+/// frame decoder under byte mutations), `requests` (decode → handle → ticks of the
+/// drive), `stream` (the host's parsing of the drive's bytes). Prints inputs tried,
+/// crashes, accepted-corrupt frames, overflow panics (goal 0 each) and wall time; exits 1
+/// when a goal is missed.
+#[derive(clap::Args)]
+pub struct RobustnessBenchArgs {
+    /// frames, requests, stream or all
+    #[arg(long, default_value = "all")]
+    campaign: String,
+    /// Wall time per campaign (s)
+    #[arg(long, default_value_t = 20.0)]
+    seconds: f64,
+    /// Seed of the mutations
+    #[arg(long, default_value_t = 0x5EED_0018)]
+    seed: u64,
+    #[command(flatten)]
+    common: Common,
+}
+
+impl RobustnessBenchArgs {
+    pub fn run(&self) -> Result<bool> {
+        bench_robustness(&self.campaign, self.seconds, self.seed, &self.common)
+    }
+}
+
+/// `servo bench robustness`: the campaigns live in `robustness/` and run from a build with
+/// overflow checks (`cargo run --profile robustness -p robustness`), which this release
+/// binary is not; their figures are printed as they come.
+fn bench_robustness(campaign: &str, seconds: f64, seed: u64, common: &Common) -> Result<bool> {
+    if !["frames", "requests", "stream", "all"].contains(&campaign) {
+        bail!("unknown campaign `{campaign}`: frames, requests, stream or all");
+    }
+    if !(seconds.is_finite() && seconds > 0.0 && seconds <= 86_400.0) {
+        bail!("--seconds must be in (0, 86400] (got {seconds})");
+    }
+    let mut cmd = std::process::Command::new(std::env::var("CARGO").unwrap_or_else(|_| "cargo".into()));
+    cmd.current_dir(workspace_root()).args(["run", "--profile", "robustness", "-q", "-p", "robustness", "--"]).args([
+        "--campaign",
+        campaign,
+        "--seconds",
+        &seconds.to_string(),
+        "--seed",
+        &seed.to_string(),
+    ]);
+    if common.json {
+        cmd.arg("--json");
+    }
+    let status = cmd.status().context("cannot run cargo for the robustness campaigns")?;
+    match status.code() {
+        Some(0) => Ok(true),
+        Some(1) => Ok(false),
+        _ => bail!("the robustness campaigns did not run to the end ({status})"),
+    }
 }

@@ -9,7 +9,25 @@ const FLASH_GOAL: u32 = 128 * 1024;
 const RAM_GOAL: u32 = 48 * 1024;
 const TICK_GOAL: f64 = 1000.0;
 
-pub fn bench_firmware(common: &Common) -> Result<bool> {
+/// The firmware's figures: flash and RAM of the drive image; golden vectors
+/// replayed bit for bit on a Cortex-M4F in QEMU against the host; instructions per 16 kHz
+/// tick on the Cortex-M4 (QEMU -icount: instructions, not cycles), on average over the
+/// vectors and with every feature on at once. Builds the firmware first (scripts/fw
+/// installs the toolchain and QEMU on first use).
+#[derive(clap::Args)]
+pub struct FirmwareBenchArgs {
+    #[command(flatten)]
+    common: Common,
+}
+
+impl FirmwareBenchArgs {
+    pub fn run(&self) -> Result<bool> {
+        bench_firmware(self)
+    }
+}
+
+fn bench_firmware(args: &FirmwareBenchArgs) -> Result<bool> {
+    let common = &args.common;
     use crate::bench::firmware::{all_features_recordings, drive_image_size, encode, recordings, replay_on_cortex_m4};
     let pb = progress_bar("firmware bench", common.json);
     pb.set_position(50);

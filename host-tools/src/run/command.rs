@@ -1,4 +1,4 @@
-//! `servo run`: scenarios on the FMU.
+//! `servo run`: scenarios on the FMU; `servo compare`: two traces bit for bit.
 
 use std::path::PathBuf;
 
@@ -8,7 +8,7 @@ use crate::cli::{progress_bar, Common};
 use crate::fmu::fmpy;
 use crate::fmu::runner::{evaluate_checks, Fmu};
 use crate::fmu::scenario::Scenario;
-use crate::fmu::trace::Trace;
+use crate::fmu::trace::{compare_exact, Trace};
 use crate::paths::toml_files_in;
 use crate::paths::{default_fmu, default_out, workspace_root};
 use crate::plot::signals::plot_signals;
@@ -28,7 +28,30 @@ pub fn scenario_files(given: &[PathBuf]) -> Result<Vec<PathBuf>> {
     Ok(v)
 }
 
-pub fn run(files: &[PathBuf], with_fmpy: bool, common: &Common) -> Result<bool> {
+/// Run scenario files (TOML: parameters, input events, stop time, checks) on the FMU.
+///
+/// Writes <name>.csv (all outputs at every communication step), <name>.svg (plot),
+/// <name>.json (check results) and index.html. With --fmpy the same scenario also runs
+/// through fmpy and the two traces must be identical bit for bit.
+/// Without scenario arguments, runs every file in scenarios/.
+#[derive(clap::Args)]
+pub struct RunArgs {
+    scenarios: Vec<PathBuf>,
+    /// Also run each scenario through fmpy and demand identical outputs
+    #[arg(long)]
+    fmpy: bool,
+    #[command(flatten)]
+    common: Common,
+}
+
+impl RunArgs {
+    pub fn run(&self) -> Result<bool> {
+        run(self)
+    }
+}
+
+fn run(args: &RunArgs) -> Result<bool> {
+    let (files, with_fmpy, common) = (&args.scenarios, args.fmpy, &args.common);
     let fmu_path = common.fmu.clone().unwrap_or_else(default_fmu);
     let out = common.out.clone().unwrap_or_else(|| default_out("run"));
     std::fs::create_dir_all(&out).with_context(|| format!("cannot create {}", out.display()))?;
@@ -117,4 +140,27 @@ pub fn run(files: &[PathBuf], with_fmpy: bool, common: &Common) -> Result<bool> 
         println!("report: {}", index.display());
     }
     Ok(all_ok)
+}
+
+/// Compare two trace CSVs bit for bit on their common columns.
+#[derive(clap::Args)]
+pub struct CompareArgs {
+    a: PathBuf,
+    b: PathBuf,
+}
+
+impl CompareArgs {
+    pub fn run(&self) -> Result<bool> {
+        let (ta, tb) = (Trace::read_csv(&self.a)?, Trace::read_csv(&self.b)?);
+        match compare_exact(&ta, &tb)? {
+            Ok(n) => {
+                println!("identical: {} rows × {n} common columns, bit for bit", ta.rows.len());
+                Ok(true)
+            }
+            Err(m) => {
+                println!("differ: {} at row {}: {:?} vs {:?}", m.column, m.row, m.left, m.right);
+                Ok(false)
+            }
+        }
+    }
 }
