@@ -9,9 +9,10 @@
 
 use anyhow::{anyhow, bail, Result};
 use control_core::acc_dec::{
-    AccDecFilter, ButterworthDesign, ButterworthPulseFilter, MovingAverageCascade, ZeroPlacement,
+    AccDecFilter, AccDecKind, ButterworthDesign, ButterworthPulseFilter, MovingAverageCascade, ZeroPlacement,
     MAX_MOVING_AVERAGE_LENGTH,
 };
+use control_core::axis::Mode;
 use control_core::command_path::{CommandPath, Move};
 use serde::Serialize;
 use servo_axis::variables::name;
@@ -75,13 +76,13 @@ impl FilterSpec {
                 bail!("the FMU's Butterworth keeps the seed's zeros (N-1 at z = -1); zeros-as-delays runs on the host only")
             }
             Self::Butterworth { order, cutoff_hz, .. } => vec![
-                (name::accdec_filter.into(), Value::Int(2)),
+                (name::accdec_filter.into(), Value::code(AccDecKind::Butterworth.code())),
                 (name::accdec_order.into(), Value::Int(*order as i64)),
                 (name::accdec_cutoff_hz.into(), Value::Float(*cutoff_hz as f64)),
             ],
             Self::MovingAverage { lengths } => {
                 let mut v = vec![
-                    (name::accdec_filter.into(), Value::Int(1)),
+                    (name::accdec_filter.into(), Value::code(AccDecKind::MovingAverage.code())),
                     (name::accdec_ma_stages.into(), Value::Int(lengths.len() as i64)),
                 ];
                 // More than three stages: accdec.ma_stages says so and the FMU refuses it.
@@ -439,7 +440,7 @@ pub fn residual_vibration(
         events: vec![Event {
             time: 0.0,
             inputs: [
-                ("mode".to_string(), Value::Int(2)),
+                ("mode".to_string(), Value::code(Mode::Position.code())),
                 ("move_speed".to_string(), Value::Float(speed_rad_s)),
                 ("position_command".to_string(), Value::Float(distance_rad)),
             ]

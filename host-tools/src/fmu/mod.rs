@@ -2,6 +2,7 @@
 
 pub mod assignment;
 pub mod circle;
+pub mod configuration;
 pub mod fmpy;
 pub mod log;
 pub mod runner;

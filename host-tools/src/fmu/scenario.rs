@@ -29,6 +29,7 @@ use std::collections::BTreeMap;
 use std::path::Path;
 
 use anyhow::{bail, Context, Result};
+use control_core::axis::Mode;
 use serde::Deserialize;
 
 /// Value of a parameter or an input: a number, an integer or a boolean.
@@ -51,6 +52,11 @@ impl From<servo_axis::variables::Value> for Value {
 }
 
 impl Value {
+    /// A coded value (a mode, a filter kind, …): the `code()` of its enum.
+    pub fn code(code: i32) -> Self {
+        Value::Int(code.into())
+    }
+
     pub fn as_f64(self) -> f64 {
         match self {
             Value::Bool(b) => b as i64 as f64,
@@ -224,7 +230,7 @@ impl Scenario {
                 let mut inputs: BTreeMap<String, Value> =
                     [("position_command".to_string(), Value::Float(c))].into_iter().collect();
                 if k == 0 {
-                    inputs.insert("mode".into(), Value::Int(2));
+                    inputs.insert("mode".into(), Value::code(Mode::Position.code()));
                     inputs.insert("move_speed".into(), Value::Float(0.0));
                 }
                 Event { time: k as f64 * DEFAULT_STEP, inputs }

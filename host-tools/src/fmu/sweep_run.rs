@@ -4,9 +4,12 @@
 use std::collections::BTreeMap;
 
 use anyhow::{anyhow, bail, Result};
+use control_core::axis::Mode;
 use control_core::excitation::InjectionPoint;
-use control_core::phase_shifted_sweep::SweepParams;
+use control_core::params::Rates;
+use control_core::phase_shifted_sweep::{SweepParams, SweepState};
 
+use crate::fmu::configuration::configuration;
 use crate::fmu::runner::Fmu;
 use crate::fmu::scenario::{Event, Scenario, Value, DEFAULT_STEP};
 use crate::fmu::trace::Trace;
@@ -23,38 +26,53 @@ pub struct SweepRun {
 
 pub const START_AT: f64 = 0.1;
 
+/// Whether a `sweep_state` output value says the sweep is done.
+pub fn is_done(sweep_state: f64) -> bool {
+    SweepState::from_code(sweep_state as i32) == Some(SweepState::Done)
+}
+
 fn sweep_parameters(s: &SweepParams) -> Vec<(String, Value)> {
     servo_axis::parameters::sweep_values(s).into_iter().map(|(n, v)| (n.to_string(), Value::from(v))).collect()
 }
 
 impl SweepRun {
+    /// The loop rates the FMU runs with these parameters.
+    pub fn rates(&self) -> Result<Rates> {
+        Ok(configuration(&self.parameters)?.control.rates)
+    }
+
     /// Simulated time the sweep's fixed schedule takes (s): its length when no frequency is
-    /// lengthened for precision (see [`measured_time`] for what a run took).
-    pub fn measurement_time(&self) -> f64 {
-        let fs = control_core::Params::default().rates.current_loop_hz;
-        self.settings.total_ticks(fs) as f64 / fs as f64
+    /// lengthened for precision (see `sweep::measurement::measured_time` for what a run took).
+    pub fn measurement_time(&self) -> Result<f64> {
+        let fs = self.rates()?.current_loop_hz;
+        Ok(self.settings.total_ticks(fs) as f64 / fs as f64)
     }
 
     /// The longest the sweep can take: every record lengthened by `max_extensions` blocks.
-    pub fn max_measurement_time(&self) -> f64 {
-        let fs = control_core::Params::default().rates.current_loop_hz;
-        self.settings.max_total_ticks(fs) as f64 / fs as f64
+    pub fn max_measurement_time(&self) -> Result<f64> {
+        let fs = self.rates()?.current_loop_hz;
+        Ok(self.settings.max_total_ticks(fs) as f64 / fs as f64)
     }
 
     pub fn scenario(&self) -> Result<Scenario> {
-        let fs = control_core::Params::default().rates.current_loop_hz;
-        self.settings
-            .validate(fs, control_core::Params::default().rates.velocity_divider)
-            .map_err(|e| anyhow!("{e}"))?;
+        let rates = self.rates()?;
+        self.settings.validate(rates.current_loop_hz, rates.velocity_divider).map_err(|e| anyhow!("{e}"))?;
         let mut parameters = self.parameters.clone();
         parameters.extend(sweep_parameters(&self.settings));
         // Long enough for the longest sweep; `run` stops when it is done.
-        let stop = ((START_AT + self.max_measurement_time()) / DEFAULT_STEP).ceil() * DEFAULT_STEP + 4.0 * DEFAULT_STEP;
-        let mode = if self.settings.point == InjectionPoint::TorqueCommand && self.velocity == 0.0 { 0 } else { 1 };
-        let start: BTreeMap<String, Value> =
-            [("mode".to_string(), Value::Int(mode)), ("velocity_command".to_string(), Value::Float(self.velocity))]
-                .into_iter()
-                .collect();
+        let stop =
+            ((START_AT + self.max_measurement_time()?) / DEFAULT_STEP).ceil() * DEFAULT_STEP + 4.0 * DEFAULT_STEP;
+        let mode = if self.settings.point == InjectionPoint::TorqueCommand && self.velocity == 0.0 {
+            Mode::Torque
+        } else {
+            Mode::Velocity
+        };
+        let start: BTreeMap<String, Value> = [
+            ("mode".to_string(), Value::code(mode.code())),
+            ("velocity_command".to_string(), Value::Float(self.velocity)),
+        ]
+        .into_iter()
+        .collect();
         Ok(Scenario {
             name: "sweep".into(),
             description: String::new(),
@@ -80,14 +98,14 @@ impl SweepRun {
             .position(|v| v.name == "sweep_state")
             .ok_or_else(|| anyhow!("the FMU has no sweep outputs"))?;
         // Progress against the fixed schedule (the usual length), not the longest possible.
-        let scale = scenario.stop_time / (START_AT + self.measurement_time());
+        let scale = scenario.stop_time / (START_AT + self.measurement_time()?);
         let t = fmu.run_until(
             &scenario,
             |f| progress((f * scale).min(0.99)),
-            |row| row[0] > START_AT && row[state] == 3.0,
+            |row| row[0] > START_AT && is_done(row[state]),
         )?;
         progress(1.0);
-        if t.rows.last().map(|r| r[state]) != Some(3.0) {
+        if !t.rows.last().is_some_and(|r| is_done(r[state])) {
             bail!("the sweep did not finish within the simulated time");
         }
         Ok(t)

@@ -5,6 +5,7 @@ use std::path::PathBuf;
 use anyhow::{bail, Context, Result};
 
 use crate::cli::{progress_bar, Common};
+use crate::fmu::configuration::configuration;
 use crate::fmu::runner::Fmu;
 use crate::fmu::trace::Trace;
 use crate::paths::{default_fmu, default_out};
@@ -78,11 +79,12 @@ fn ident(args: &IdentArgs) -> Result<bool> {
         if !(hz.is_finite() && hz > 0.0) {
             bail!("--anti-resonance `{s}`: the frequency must be positive");
         }
-        let load = servo_axis::plant::PlantParams::default().load_inertia;
-        parameters
+        let axis_parameters = parameters
             .get_mut(axis)
-            .ok_or_else(|| anyhow::anyhow!("--anti-resonance `{s}`: no axis `{axis}` in --axes"))?
-            .extend(crate::ident::identification::absorber_parameters(hz, 0.05, load));
+            .ok_or_else(|| anyhow::anyhow!("--anti-resonance `{s}`: no axis `{axis}` in --axes"))?;
+        // The absorber's inertia equals the load's: the load this axis runs with.
+        let load = configuration(axis_parameters)?.plant.load_inertia;
+        axis_parameters.extend(crate::ident::identification::absorber_parameters(hz, 0.05, load));
     }
     let fmu = Fmu::load(&common.fmu.clone().unwrap_or_else(default_fmu))?;
     let pb = progress_bar("identification", common.json);
@@ -168,7 +170,7 @@ fn bench_ident(args: &IdentBenchArgs) -> Result<bool> {
     use crate::ident::tuning::{circle_check, tune, Method};
     let fmu = Fmu::load(&common.fmu.clone().unwrap_or_else(default_fmu))?;
     let out = common.out.clone().unwrap_or_else(|| default_out("bench/ident"));
-    let load = servo_axis::plant::PlantParams::default().load_inertia;
+    let load = configuration(&Default::default())?.plant.load_inertia;
     // (case, [(axis, anti-resonance in Hz or none)])
     type Axes<'a> = Vec<(&'a str, Option<f64>)>;
     let cases: Vec<(&str, Axes)> = vec![

@@ -24,6 +24,7 @@ use serde::{Deserialize, Serialize};
 use crate::analysis::polynomial::roots;
 use crate::analysis::response_point::ResponsePoint;
 use crate::analysis::spectral::{dft_bin, Complex};
+use crate::fmu::configuration::configuration;
 use crate::fmu::runner::Fmu;
 use crate::fmu::scenario::Value;
 use crate::fmu::sweep_run::SweepRun;
@@ -133,7 +134,8 @@ pub fn measure(
     f_max: f64,
 ) -> Result<Measured> {
     let chips = (1u64 << DEGREE) - 1;
-    let fs = control_core::Params::default().rates.current_loop_hz as f64;
+    let control = configuration(parameters)?.control;
+    let fs = control.rates.current_loop_hz as f64;
     let period = chips as f64 * CHIP_DIVIDER as f64 / fs;
     let trace = excitation(parameters, amplitude, TRANSIENT_S + period).run(fmu, |_| {})?;
     let col = |n: &str| trace.column(n).ok_or_else(|| anyhow!("the FMU has no output {n}"));
@@ -145,7 +147,7 @@ pub fn measure(
             faults.iter().cloned().fold(0.0, f64::max)
         );
     }
-    let torque_limit = control_core::Params::default().velocity.torque_limit as f64;
+    let torque_limit = control.velocity.torque_limit as f64;
     if u_all.iter().any(|u| u.abs() >= 0.999 * torque_limit) {
         bail!("the torque command saturated at {torque_limit} N·m during the excitation: the data cannot be used (lower the amplitude)");
     }

@@ -24,6 +24,7 @@ use serde::Serialize;
 use crate::analysis::response_point::ResponsePoint;
 use crate::analysis::spectral::{dft_bin, Complex};
 use crate::correction::{drive_frame, validate, AxisCorrection, Section};
+use crate::fmu::configuration::configuration;
 use crate::fmu::runner::Fmu;
 use crate::fmu::scenario::{Scenario, Value, DEFAULT_STEP};
 use crate::ident::identification::{AxisModel, Factor};
@@ -111,9 +112,7 @@ pub fn command_to_load(
             largest("faults")
         );
     }
-    let max_current = parameters
-        .get(name::ctrl_max_current)
-        .map_or(control_core::Params::default().current.max_current as f64, |v| v.as_f64());
+    let max_current = configuration(parameters)?.control.current.max_current as f64;
     if largest("iq") >= 0.9 * max_current {
         bail!(
             "the multisine drove the current to {:.1} A, near the {max_current} A limit: the measured response would not be linear (the correction filter lifts the command too much near a lightly damped mode?)",
@@ -240,14 +239,23 @@ pub fn tune(
             bail!("axis `{}` is given twice", m.axis);
         }
     }
-    let defaults = control_core::Params::default();
-    let bandwidth = defaults.position.kp as f64 / std::f64::consts::TAU;
-    let nyquist = 0.5 / defaults.rates.position_period() as f64;
+    let parameters: Vec<BTreeMap<String, Value>> = models.iter().map(measurement_parameters).collect();
+    // The position loop the axes run (the same on every axis: one bandwidth to make them alike at).
+    let mut position_loops = Vec::new();
+    for (m, p) in models.iter().zip(&parameters) {
+        let control = configuration(p)?.control;
+        position_loops.push((m.axis.as_str(), control.position.kp, control.rates.position_period()));
+    }
+    let (_, kp, position_period) = position_loops[0];
+    if let Some((axis, ..)) = position_loops.iter().find(|&&(_, k, t)| (k, t) != (kp, position_period)) {
+        bail!("axis `{axis}` runs another position loop (gain or period) than axis `{}`: tuning makes axes alike at one position-loop bandwidth", models[0].axis);
+    }
+    let bandwidth = kp as f64 / std::f64::consts::TAU;
+    let nyquist = 0.5 / position_period as f64;
     let frequencies: Vec<u32> = (1..=(2.0 * bandwidth).round() as u32).collect();
     let runs = models.len() as f64 * if check { 2.0 } else { 1.0 };
     let mut done = 0.0;
     let measure_before = check || method == Method::Response;
-    let parameters: Vec<BTreeMap<String, Value>> = models.iter().map(measurement_parameters).collect();
     let mut before = Vec::new();
     if measure_before {
         for p in &parameters {

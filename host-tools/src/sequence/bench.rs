@@ -8,6 +8,7 @@
 //!   value of the deceleration ramp for comparison.
 
 use anyhow::{anyhow, bail, Result};
+use control_core::stop_sequence::SequenceState;
 use serde::Serialize;
 
 use crate::fmu::runner::Fmu;
@@ -125,6 +126,11 @@ fn settled_from(complete: &[f64], from: usize, end: usize) -> Option<usize> {
     (from..=end).rev().take_while(|&i| complete[i] != 0.0).last()
 }
 
+/// Whether a `seq_state` output value says the stop was accepted (servo lock).
+fn is_servo_lock(seq_state: f64) -> bool {
+    SequenceState::from_code(seq_state as i32) == Some(SequenceState::ServoLock)
+}
+
 fn stop_and_move(fmu: &Fmu, index: usize, multiplier: f64) -> Result<GainFigures> {
     // Phase 1: stop at speed with this gain; the move target is 1 rad past the lock.
     let stop_text = format!(
@@ -134,7 +140,8 @@ fn stop_and_move(fmu: &Fmu, index: usize, multiplier: f64) -> Result<GainFigures
     let t = run(fmu, &stop_text)?;
     let (time, state, complete, dev) =
         (col(&t, "time")?, col(&t, "seq_state")?, col(&t, "seq_complete")?, col(&t, "seq_deviation")?);
-    let accepted = state.iter().position(|&s| s == 3.0).ok_or_else(|| anyhow!("the stop was never accepted"))?;
+    let accepted =
+        state.iter().position(|&s| is_servo_lock(s)).ok_or_else(|| anyhow!("the stop was never accepted"))?;
     let end = time.len() - 1;
     let settled = settled_from(&complete, accepted, end)
         .ok_or_else(|| anyhow!("no completion after the stop at gain {multiplier}"))?;
@@ -183,8 +190,10 @@ fn grid_stop(fmu: &Fmu, speed: f64, vh: f64, width: u32, index: usize, multiplie
         col(&t, "time")?,
         col(&t, "velocity_estimate")?,
     );
-    let accepted =
-        state.iter().position(|&s| s == 3.0).ok_or_else(|| anyhow!("no acceptance at {speed} rad/s, level {vh}"))?;
+    let accepted = state
+        .iter()
+        .position(|&s| is_servo_lock(s))
+        .ok_or_else(|| anyhow!("no acceptance at {speed} rad/s, level {vh}"))?;
     let counts_per_rad =
         servo_axis::plant::PlantParams::default().encoder_counts_per_rev as f64 / std::f64::consts::TAU;
     let va = v[accepted].abs();
@@ -271,7 +280,8 @@ pub fn bench(fmu: &Fmu, zero_speeds: &[f64], mut progress: impl FnMut(f64)) -> R
         );
         let t = run(fmu, &text)?;
         let (time, state) = (col(&t, "time")?, col(&t, "seq_state")?);
-        let accepted = state.iter().position(|&s| s == 3.0).ok_or_else(|| anyhow!("no acceptance at {vh} rad/s"))?;
+        let accepted =
+            state.iter().position(|&s| is_servo_lock(s)).ok_or_else(|| anyhow!("no acceptance at {vh} rad/s"))?;
         acceptance.push(AcceptanceFigure {
             zero_speed: vh,
             measured: time[accepted] - STOP_AT,

@@ -54,6 +54,7 @@ use std::collections::BTreeMap;
 use std::path::Path;
 
 use anyhow::{anyhow, bail, Context, Result};
+use control_core::axis::Mode;
 use serde::{Deserialize, Serialize};
 
 use crate::fmu::scenario::{Check, Event, Scenario, Value, DEFAULT_STEP};
@@ -225,8 +226,10 @@ impl SequenceScenario {
     /// switch and the gain index levels.
     pub fn to_scenario(&self) -> Scenario {
         let mut counters: BTreeMap<&str, i64> = BTreeMap::new();
-        let mut events: Vec<Event> =
-            vec![Event { time: 0.0, inputs: [("mode".to_string(), Value::Int(3))].into_iter().collect() }];
+        let mut events: Vec<Event> = vec![Event {
+            time: 0.0,
+            inputs: [("mode".to_string(), Value::code(Mode::Sequence.code()))].into_iter().collect(),
+        }];
         for e in &self.events {
             if events.last().is_none_or(|last| last.time != e.time) {
                 events.push(Event { time: e.time, inputs: BTreeMap::new() });

@@ -163,7 +163,7 @@ pub fn bench(fmu: &Fmu, noise_std: f64, mut progress: impl FnMut(f64)) -> Result
     };
     let prbs_run = base(clean.clone(), prbs_settings);
     let frequencies: Vec<f64> = oracle.iter().map(|p| p.frequency).collect();
-    let prbs = prbs_results(&prbs_run.run(fmu, |_| {})?, &prbs_settings, &frequencies, SEGMENT)?;
+    let prbs = prbs_results(&prbs_run.run(fmu, |_| {})?, &prbs_run, &frequencies, SEGMENT)?;
     progress(0.6);
     let find = |v: &[ResponsePoint], f: f64| {
         v.iter().copied().find(|p| (p.frequency - f).abs() < 1e-3).ok_or_else(|| anyhow!("no {f} Hz point"))
@@ -189,7 +189,7 @@ pub fn bench(fmu: &Fmu, noise_std: f64, mut progress: impl FnMut(f64)) -> Result
         let t = measured_time(&noisy_trace)?;
         let p_settings = SweepParams { prbs_seconds: t as f32, ..prbs_settings };
         let p_run = base(noisy.clone(), p_settings);
-        let prbs_noisy = prbs_results(&p_run.run(fmu, |_| {})?, &p_settings, &frequencies, SEGMENT)?;
+        let prbs_noisy = prbs_results(&p_run.run(fmu, |_| {})?, &p_run, &frequencies, SEGMENT)?;
         noise.push(NoisePoint {
             measurement_time_s: t,
             ours: worst_up_to(&ours_noisy, &oracle, 1900.0),
@@ -239,7 +239,7 @@ pub fn bench(fmu: &Fmu, noise_std: f64, mut progress: impl FnMut(f64)) -> Result
         },
         prbs: MethodErrors {
             method: format!("PRBS 2 kHz chips, H1 Welch ({SEGMENT}-sample Hann)"),
-            measurement_time_s: prbs_run.measurement_time(),
+            measurement_time_s: prbs_run.measurement_time()?,
             errors: errors(&prbs, &oracle, split),
             unmeasured: frequencies.iter().copied().filter(|f| !prbs.iter().any(|p| p.frequency == *f)).collect(),
         },

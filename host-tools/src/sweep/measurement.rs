@@ -11,7 +11,7 @@ use serde::Serialize;
 
 use crate::analysis::response_point::{difference, ResponsePoint};
 use crate::analysis::spectral::{welch_h1, Complex};
-use crate::fmu::sweep_run::START_AT;
+use crate::fmu::sweep_run::{is_done, SweepRun, START_AT};
 use crate::fmu::trace::Trace;
 
 /// Simulated time a sweep took in `trace`: from its start to the first step it reports done.
@@ -20,7 +20,7 @@ pub fn measured_time(trace: &Trace) -> Result<f64> {
     let done = time
         .iter()
         .zip(&state)
-        .find(|(t, s)| **t > START_AT && **s == 3.0)
+        .find(|(t, s)| **t > START_AT && is_done(**s))
         .ok_or_else(|| anyhow!("the sweep never finished"))?;
     Ok(done.0 - START_AT)
 }
@@ -140,12 +140,8 @@ pub fn stream_results(t: &Trace, settings: &SweepParams) -> Result<Vec<ResponseP
 /// response times that hold, `(1/m)·Σ e^{−jωiT}`; the known factor is divided out (chips
 /// must change only at acquisition ticks: a `prbs_divider` multiple of the acquisition
 /// divider).
-pub fn prbs_results(
-    t: &Trace,
-    settings: &SweepParams,
-    frequencies: &[f64],
-    segment: usize,
-) -> Result<Vec<ResponsePoint>> {
+pub fn prbs_results(t: &Trace, run: &SweepRun, frequencies: &[f64], segment: usize) -> Result<Vec<ResponsePoint>> {
+    let (settings, rates) = (&run.settings, run.rates()?);
     let [measuring, u, y, time] = columns(t, ["acq_measuring", "acq_u", "acq_y", "acq_time"])?;
     let (mut us, mut ys) = (Vec::new(), Vec::new());
     let mut last_time = f64::NEG_INFINITY;
@@ -156,11 +152,10 @@ pub fn prbs_results(
             last_time = time[i];
         }
     }
-    let fs = control_core::Params::default().rates.current_loop_hz as f64 / settings.acquisition_divider as f64;
+    let fs = rates.current_loop_hz as f64 / settings.acquisition_divider as f64;
     let (h, coherence) = welch_h1(&us, &ys, segment)?;
     let df = fs / segment as f64;
     let sign = if settings.point == InjectionPoint::VelocityFeedback { -1.0 } else { 1.0 };
-    let rates = control_core::Params::default().rates;
     let loop_ticks = if settings.point == InjectionPoint::TorqueCommand { 1 } else { rates.velocity_divider };
     let m = (settings.acquisition_divider / loop_ticks).max(1);
     let loop_period = loop_ticks as f64 / rates.current_loop_hz as f64;

@@ -67,8 +67,8 @@ pub fn run(
     mut progress: impl FnMut(&str, f64),
 ) -> Result<SweepReport> {
     std::fs::create_dir_all(out)?;
-    let fs = control_core::Params::default().rates.current_loop_hz;
-    let pdiv = control_core::Params::default().rates.position_divider;
+    let rates = sweep.rates()?;
+    let (fs, pdiv) = (rates.current_loop_hz, rates.position_divider);
     sweep.scenario()?; // refuses invalid settings with the drive's reason first
     if sweep.settings.acquisition_divider != pdiv {
         bail!(
