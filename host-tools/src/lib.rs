@@ -19,6 +19,8 @@ pub mod correction;
 pub mod device;
 pub mod fmu;
 pub mod ident;
+pub mod index;
+pub mod page;
 pub mod paths;
 pub mod plot;
 pub mod random;

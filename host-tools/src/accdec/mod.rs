@@ -2,5 +2,6 @@
 
 pub mod bench;
 pub mod command;
+pub mod index;
 pub mod report;
 pub mod study;

@@ -2,6 +2,7 @@
 
 pub mod command;
 pub mod identification;
+pub mod index;
 pub mod report;
 pub mod response_model;
 pub mod tuning;

@@ -1,4 +1,5 @@
 //! Scenario runs: `servo run`, its report, `servo bench fmu` and `servo bench plant`.
 
 pub mod command;
+pub mod index;
 pub mod report;

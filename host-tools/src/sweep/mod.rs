@@ -2,5 +2,6 @@
 
 pub mod bench;
 pub mod command;
+pub mod index;
 pub mod measurement;
 pub mod report;

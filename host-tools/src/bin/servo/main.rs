@@ -4,7 +4,7 @@ use std::process::ExitCode;
 
 use clap::{Parser, Subcommand};
 
-use host_tools::{accdec, bench, circle, device, ident, run, sequence, sweep};
+use host_tools::{accdec, bench, circle, device, ident, index, run, sequence, sweep};
 
 #[derive(Parser)]
 #[command(
@@ -32,7 +32,9 @@ enum Command {
     Tune(ident::command::TuneArgs),
     Compare(run::command::CompareArgs),
     Device(device::command::DeviceArgs),
-    /// Benchmarks that print the figures the issues ask for.
+    Index(index::IndexArgs),
+    /// Benchmarks: each prints its figures against their goals (worst case over the range users
+    /// work in) and exits 1 when a goal is missed.
     #[command(subcommand)]
     Bench(BenchCommand),
 }
@@ -66,6 +68,7 @@ fn main() -> ExitCode {
         Command::Tune(args) => args.run(),
         Command::Compare(args) => args.run(),
         Command::Device(args) => args.run(),
+        Command::Index(args) => args.run(),
         Command::Bench(BenchCommand::Robustness(args)) => args.run(),
         Command::Bench(BenchCommand::Firmware(args)) => args.run(),
         Command::Bench(BenchCommand::Fmu(args)) => args.run(),
