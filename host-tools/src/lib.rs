@@ -5,10 +5,13 @@
 //! One folder per experiment — `run` (scenarios), `sweep` (seed 000), `ident` (seed 001, with
 //! `tune`), `circle` (seed 002), `accdec` (seed 003), `sequence` (seed 004), `device` (the drive
 //! link) — each with its command (`command.rs`: the clap arguments and `run`), measurement,
-//! report, plot and bench. `bench` holds the benches that are not experiments (FMU speed, plant,
-//! firmware, robustness campaigns). Shared pieces: `fmu` (runner, scenario, trace, fmpy), `analysis`
-//! (spectral), `plot`, `cli` (options every command takes). Experiments use shared pieces,
-//! never each other.
+//! report, plot, bench and its section of out/index.html (`index.rs`). `bench` holds the benches
+//! that are not experiments (FMU speed, plant, firmware, robustness and fault campaigns). Shared
+//! pieces: `fmu` (runner, scenario, trace, fmpy, the configuration a run gives the FMU, the
+//! sweep and circle runs), `analysis` (spectral, response points, polynomials), `plot`,
+//! `correction` (the response correction as the FMU and the drive take it), `page` (the
+//! index page), `cli` (options every command takes). Experiments use shared pieces, never each
+//! other; `index` (`servo index`) gathers their sections.
 
 pub mod accdec;
 pub mod analysis;
