@@ -7,7 +7,7 @@ use std::path::Path;
 use anyhow::{Context, Result};
 
 use crate::fmu::circle::Figure;
-use crate::plot::signals::{escape, nice_step};
+use crate::plot::signals::{escape, fitted_text, nice_step};
 
 const SIZE: f64 = 640.0;
 const COLOURS: [&str; 4] = ["#888888", "#d62728", "#1f77b4", "#2ca02c"];
@@ -53,7 +53,7 @@ pub fn plot_circle(
         r#"<svg xmlns="http://www.w3.org/2000/svg" width="{SIZE}" height="{height}" viewBox="0 0 {SIZE} {height}" font-family="sans-serif" font-size="11">"#
     )?;
     writeln!(svg, r#"<rect width="100%" height="100%" fill="white"/>"#)?;
-    writeln!(svg, r#"<text x="{}" y="18" font-size="14" text-anchor="middle">{}</text>"#, SIZE / 2.0, escape(title))?;
+    writeln!(svg, "{}", fitted_text(SIZE / 2.0, 18.0, 14.0, "middle", SIZE - 20.0, title))?;
     for i in -3..=3 {
         let r = nominal + i as f64 * ring * per_error;
         let stroke = if i == 0 { "#444" } else { "#ddd" };
@@ -106,7 +106,7 @@ pub fn plot_circle(
     .iter()
     .chain(notes)
     {
-        writeln!(svg, r#"<text x="12" y="{y}">{}</text>"#, escape(n))?;
+        writeln!(svg, "{}", fitted_text(12.0, y, 11.0, "start", SIZE - 24.0, n))?;
         y += 16.0;
     }
     svg.push_str("</svg>\n");

@@ -8,7 +8,7 @@ use std::path::Path;
 use anyhow::{Context, Result};
 
 use crate::analysis::response_point::ResponsePoint;
-use crate::plot::signals::{escape, tick_step};
+use crate::plot::signals::{escape, fitted_text, tick_step};
 
 const WIDTH: f64 = 900.0;
 const PANEL_H: f64 = 220.0;
@@ -40,7 +40,7 @@ pub fn plot_bode(
         r#"<svg xmlns="http://www.w3.org/2000/svg" width="{WIDTH}" height="{height}" viewBox="0 0 {WIDTH} {height}" font-family="sans-serif" font-size="11">"#
     )?;
     writeln!(svg, r#"<rect width="100%" height="100%" fill="white"/>"#)?;
-    writeln!(svg, r#"<text x="{}" y="18" font-size="14" text-anchor="middle">{}</text>"#, WIDTH / 2.0, escape(title))?;
+    writeln!(svg, "{}", fitted_text(WIDTH / 2.0, 18.0, 14.0, "middle", WIDTH - 20.0, title))?;
     for (i, (label, _)) in curves.iter().enumerate() {
         let lx = LEFT + (i % 3) as f64 * 270.0;
         let ly = 34.0 + (i / 3) as f64 * 14.0;

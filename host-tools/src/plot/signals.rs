@@ -49,6 +49,18 @@ fn label(x: f64) -> String {
 }
 
 /// Text made safe for SVG.
+/// A line of text that fits `max_width` pixels: wider text (estimated at 0.6 em a character)
+/// is squeezed to that width (SVG `textLength`) instead of running off the canvas.
+pub(crate) fn fitted_text(x: f64, y: f64, font_size: f64, anchor: &str, max_width: f64, text: &str) -> String {
+    let estimated = 0.6 * font_size * text.chars().count() as f64;
+    let fit = if estimated > max_width {
+        format!(r#" textLength="{max_width:.0}" lengthAdjust="spacingAndGlyphs""#)
+    } else {
+        String::new()
+    };
+    format!(r#"<text x="{x}" y="{y}" font-size="{font_size}" text-anchor="{anchor}"{fit}>{}</text>"#, escape(text))
+}
+
 pub(crate) fn escape(s: &str) -> String {
     s.replace('&', "&amp;").replace('<', "&lt;").replace('>', "&gt;")
 }
@@ -75,7 +87,7 @@ pub fn plot_against(
         r#"<svg xmlns="http://www.w3.org/2000/svg" width="{WIDTH}" height="{height}" viewBox="0 0 {WIDTH} {height}" font-family="sans-serif" font-size="11">"#
     )?;
     writeln!(svg, r#"<rect width="100%" height="100%" fill="white"/>"#)?;
-    writeln!(svg, r#"<text x="{}" y="20" font-size="15" text-anchor="middle">{}</text>"#, WIDTH / 2.0, escape(title))?;
+    writeln!(svg, "{}", fitted_text(WIDTH / 2.0, 20.0, 15.0, "middle", WIDTH - 20.0, title))?;
     for (li, (name, _)) in traces.iter().enumerate().filter(|_| traces.len() > 1) {
         let x = LEFT + 10.0 + li as f64 * 160.0;
         writeln!(
@@ -168,4 +180,18 @@ pub fn plot_against(
     )?;
     svg.push_str("</svg>\n");
     std::fs::write(path, svg).with_context(|| format!("cannot write {}", path.display()))
+}
+
+#[cfg(test)]
+mod fitted_text_tests {
+    use super::fitted_text;
+
+    #[test]
+    fn long_text_is_squeezed_to_the_canvas_and_short_text_is_left_alone() {
+        let short = fitted_text(450.0, 20.0, 15.0, "middle", 880.0, "position_step");
+        assert!(!short.contains("textLength"), "{short}");
+        let long = fitted_text(450.0, 20.0, 15.0, "middle", 880.0, &"a very long title ".repeat(10));
+        assert!(long.contains(r#"textLength="880""#), "{long}");
+        assert!(fitted_text(0.0, 0.0, 11.0, "start", 100.0, "a < b").contains("a &lt; b"));
+    }
 }
