@@ -2,25 +2,10 @@
 
 use anyhow::{bail, Result};
 
+use crate::bench::args::{FmuBenchArgs, PlantBenchArgs};
 use crate::bench::fmu_speed as bench;
-use crate::cli::{progress_bar, Common};
+use crate::cli::progress_bar;
 use crate::paths::{default_fmu, default_out};
-
-/// Simulated seconds per wall second, Rust host vs fmpy (default axis, 10 s simulated).
-#[derive(clap::Args)]
-pub struct FmuBenchArgs {
-    /// Simulated time (s)
-    #[arg(long, default_value_t = 10.0)]
-    seconds: f64,
-    /// Skip the fmpy half
-    #[arg(long)]
-    no_fmpy: bool,
-    /// Fail (exit 1) below this real-time factor through the Rust host
-    #[arg(long, default_value_t = 300.0)]
-    goal: f64,
-    #[command(flatten)]
-    common: Common,
-}
 
 impl FmuBenchArgs {
     pub fn run(&self) -> Result<bool> {
@@ -98,13 +83,6 @@ fn bench_fmu(args: &FmuBenchArgs) -> Result<bool> {
         );
     }
     Ok(ok)
-}
-
-/// Plant integration error: the default sub-step against one ten times finer.
-#[derive(clap::Args)]
-pub struct PlantBenchArgs {
-    #[command(flatten)]
-    common: Common,
 }
 
 impl PlantBenchArgs {

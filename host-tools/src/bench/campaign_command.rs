@@ -3,25 +3,10 @@
 
 use anyhow::{bail, Context, Result};
 
+use crate::bench::args::{FaultCampaignArgs, FmiCampaignArgs, RobustnessBenchArgs};
 use crate::bench::{fault_campaign, fmi_campaign};
 use crate::cli::{progress_bar, Common};
 use crate::paths::{default_fmu, workspace_root};
-
-/// Random FMI call sequences through fmpy on both archives (FMI 3.0 and 2.0): every
-/// function in any state, valid and hostile arguments (unknown value references, NaN,
-/// huge values, steps of 0, 1e300 or off the grid, corrupt serialized states). Goals: no
-/// crash, no hang, no OK step with a non-finite output.
-#[derive(clap::Args)]
-pub struct FmiCampaignArgs {
-    /// Seconds of calls per archive
-    #[arg(long, default_value_t = 20.0)]
-    seconds: f64,
-    /// Seed of the call sequences (the same seed gives the same calls)
-    #[arg(long, default_value_t = 1)]
-    seed: u64,
-    #[command(flatten)]
-    common: Common,
-}
 
 impl FmiCampaignArgs {
     pub fn run(&self) -> Result<bool> {
@@ -100,22 +85,6 @@ fn bench_fmi_campaign(args: &FmiCampaignArgs) -> Result<bool> {
     Ok(passed)
 }
 
-/// Faults injected at random times into the simulated axis: a NaN or saturated current
-/// sample, an encoder disconnect, bus under- and over-voltage, the power stage's break, a
-/// following-error runaway. Prints per fault the worst reaction (ticks from detection to
-/// the bridge off; goal ≤ 1), restarts before ClearFaults (goal 0) and recovery after it.
-#[derive(clap::Args)]
-pub struct FaultCampaignArgs {
-    /// Runs per fault kind
-    #[arg(long, default_value_t = 100)]
-    runs: usize,
-    /// Seed of the injection times and settings
-    #[arg(long, default_value_t = 1)]
-    seed: u64,
-    #[command(flatten)]
-    common: Common,
-}
-
 impl FaultCampaignArgs {
     pub fn run(&self) -> Result<bool> {
         bench_fault_campaign(self)
@@ -157,27 +126,6 @@ fn bench_fault_campaign(args: &FaultCampaignArgs) -> Result<bool> {
         );
     }
     Ok(r.passed)
-}
-
-/// Robustness campaigns of the drive link, seeded and time-bounded, run with integer
-/// overflow checks on (cargo profile `robustness`, built on first use): `frames` (the
-/// frame decoder under byte mutations), `requests` (decode → handle → ticks of the
-/// drive), `stream` (the host's parsing of the drive's bytes). Prints inputs tried,
-/// crashes, accepted-corrupt frames, overflow panics (goal 0 each) and wall time; exits 1
-/// when a goal is missed.
-#[derive(clap::Args)]
-pub struct RobustnessBenchArgs {
-    /// frames, requests, stream or all
-    #[arg(long, default_value = "all")]
-    campaign: String,
-    /// Wall time per campaign (s)
-    #[arg(long, default_value_t = 20.0)]
-    seconds: f64,
-    /// Seed of the mutations
-    #[arg(long, default_value_t = 0x5EED_0018)]
-    seed: u64,
-    #[command(flatten)]
-    common: Common,
 }
 
 impl RobustnessBenchArgs {

@@ -2,23 +2,13 @@
 
 use anyhow::Result;
 
-use crate::cli::{progress_bar, Common};
+use crate::bench::args::FirmwareBenchArgs;
+use crate::cli::progress_bar;
 
 /// Goals of the issue.
 const FLASH_GOAL: u32 = 128 * 1024;
 const RAM_GOAL: u32 = 48 * 1024;
 const TICK_GOAL: f64 = 1000.0;
-
-/// The firmware's figures: flash and RAM of the drive image; golden vectors
-/// replayed bit for bit on a Cortex-M4F in QEMU against the host; instructions per 16 kHz
-/// tick on the Cortex-M4 (QEMU -icount: instructions, not cycles), on average over the
-/// vectors and with every feature on at once. Builds the firmware first (scripts/fw
-/// installs the toolchain and QEMU on first use).
-#[derive(clap::Args)]
-pub struct FirmwareBenchArgs {
-    #[command(flatten)]
-    common: Common,
-}
 
 impl FirmwareBenchArgs {
     pub fn run(&self) -> Result<bool> {

@@ -1,5 +1,6 @@
 //! Benches that are not experiments: FMU speed, plant integration, firmware, robustness and fault campaigns.
 
+pub mod args;
 pub mod backbone_command;
 pub mod campaign_command;
 pub mod fault_campaign;

@@ -1,77 +1,12 @@
 //! `servo circle` and `servo bench circle` (seed 002).
 
-use std::path::PathBuf;
-
 use anyhow::{bail, Result};
 
-use crate::cli::{progress_bar, Common};
+use crate::circle::args::{CircleArgs, CircleBenchArgs};
+use crate::cli::progress_bar;
 use crate::fmu::fmpy;
 use crate::fmu::runner::Fmu;
 use crate::paths::{default_fmu, default_out};
-
-/// Circle tests (seed 002): the two-axis XY circle, or the single-axis pseudo-circle.
-///
-/// Two axes (default): two FMU instances, each with its own parameters (--x-set, --y-set;
-/// --set for both), follow X = R·sin ωt and Y = R − R·cos ωt (feed = R·ω); the plot shows
-/// the machine-end (or --measure motor) path about the centre with the radial error
-/// magnified, over the commanded circle. Single axis (--single x): one axis follows
-/// R·sin ωt and its feedback is drawn against its own copy a quarter period later,
-/// (x(t), x(t − T/4)); the same construction on the command is the reference, and the
-/// feedback against the shifted command is drawn too. The first --lead-in revolutions
-/// settle the start; the last one is measured.
-///
-/// Figures: roundness (max − min radius), mean radius error, quadrant protrusion heights
-/// and angles (at the axis reversals 0°, 90°, 180°, 270°). --compare NAME=VALUE[,...]
-/// runs a second time with those parameters and overlays both (for example
-/// --compare ctrl.friction_comp_amplitude=0.03). Writes circle.svg / pseudo_circle.svg,
-/// the points and traces as CSV, and the figures as JSON into --out (default out/circle/).
-///
-/// Example: servo circle --radius 1 --feed 6.283185307179586 --compare ctrl.friction_comp_amplitude=0.03
-#[derive(clap::Args)]
-pub struct CircleArgs {
-    /// Axes of the XY test (only "x,y")
-    #[arg(long, default_value = "x,y")]
-    axes: String,
-    /// Single-axis pseudo-circle on this axis (x or y: whose parameters it takes)
-    #[arg(long)]
-    single: Option<String>,
-    /// Radius (rad of axis travel)
-    #[arg(long, default_value_t = 1.0)]
-    radius: f64,
-    /// Feed: tangential speed (rad/s); the revolution must be a whole number of 250 µs samples
-    #[arg(long, default_value_t = std::f64::consts::TAU)]
-    feed: f64,
-    /// Clockwise (two-axis test)
-    #[arg(long)]
-    cw: bool,
-    /// Revolutions before the measured one
-    #[arg(long, default_value_t = 1)]
-    lead_in: u32,
-    /// Position measured: load (machine end) or motor
-    #[arg(long, default_value = "load")]
-    measure: String,
-    /// FMU parameter for both axes, NAME=VALUE (repeatable)
-    #[arg(long = "set")]
-    set: Vec<String>,
-    /// FMU parameter for the X axis only
-    #[arg(long = "x-set")]
-    x_set: Vec<String>,
-    /// FMU parameter for the Y axis only
-    #[arg(long = "y-set")]
-    y_set: Vec<String>,
-    /// Second run with these parameter overrides, overlaid (NAME=VALUE, comma separated)
-    #[arg(long, value_delimiter = ',')]
-    compare: Vec<String>,
-    /// A `servo tune` output directory: run its x and y axes without and then with their
-    /// response corrections (seed 001), overlaid, and print the roundness ratio
-    #[arg(long)]
-    tuned: Option<PathBuf>,
-    /// Single axis: also run through fmpy and demand the same feedback trace
-    #[arg(long)]
-    fmpy: bool,
-    #[command(flatten)]
-    common: Common,
-}
 
 impl CircleArgs {
     pub fn run(&self) -> Result<bool> {
@@ -179,14 +114,6 @@ fn circle(args: &CircleArgs) -> Result<bool> {
         }
     }
     Ok(ok)
-}
-
-/// Circle tests (seed 002): quadrant protrusion with friction compensation off and on;
-/// pseudo-circle of one friction-free axis against the two-axis circle.
-#[derive(clap::Args)]
-pub struct CircleBenchArgs {
-    #[command(flatten)]
-    common: Common,
 }
 
 impl CircleBenchArgs {

@@ -1,5 +1,6 @@
 //! Circle tests (seed 002): `servo circle` and `servo bench circle`.
 
+pub mod args;
 pub mod bench;
 pub mod command;
 pub mod index;

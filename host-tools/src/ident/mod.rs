@@ -1,5 +1,6 @@
 //! Identification and correction (seed 001): `servo ident`, `servo tune`, `servo bench ident`.
 
+pub mod args;
 pub mod command;
 pub mod identification;
 pub mod index;

@@ -4,7 +4,7 @@ use std::path::PathBuf;
 
 use anyhow::{bail, Context, Result};
 
-use crate::cli::{progress_bar, Common};
+use crate::cli::progress_bar;
 use crate::fmu::fmpy;
 use crate::fmu::runner::{evaluate_checks, Fmu};
 use crate::fmu::scenario::Scenario;
@@ -12,6 +12,7 @@ use crate::fmu::trace::{compare_exact, Trace};
 use crate::paths::toml_files_in;
 use crate::paths::{default_fmu, default_out, workspace_root};
 use crate::plot::signals::plot_signals;
+use crate::run::args::{CompareArgs, RunArgs};
 use crate::run::report::{write_html, ScenarioReport};
 
 const DEFAULT_PLOT: [&str; 5] = ["motor_position", "motor_velocity", "load_velocity", "iq", "torque_command_out"];
@@ -26,22 +27,6 @@ pub fn scenario_files(given: &[PathBuf]) -> Result<Vec<PathBuf>> {
         bail!("no scenario files in {}", dir.display());
     }
     Ok(v)
-}
-
-/// Run scenario files (TOML: parameters, input events, stop time, checks) on the FMU.
-///
-/// Writes <name>.csv (all outputs at every communication step), <name>.svg (plot),
-/// <name>.json (check results) and index.html. With --fmpy the same scenario also runs
-/// through fmpy and the two traces must be identical bit for bit.
-/// Without scenario arguments, runs every file in scenarios/.
-#[derive(clap::Args)]
-pub struct RunArgs {
-    scenarios: Vec<PathBuf>,
-    /// Also run each scenario through fmpy and demand identical outputs
-    #[arg(long)]
-    fmpy: bool,
-    #[command(flatten)]
-    common: Common,
 }
 
 impl RunArgs {
@@ -140,13 +125,6 @@ fn run(args: &RunArgs) -> Result<bool> {
         println!("report: {}", index.display());
     }
     Ok(all_ok)
-}
-
-/// Compare two trace CSVs bit for bit on their common columns.
-#[derive(clap::Args)]
-pub struct CompareArgs {
-    a: PathBuf,
-    b: PathBuf,
 }
 
 impl CompareArgs {

@@ -1,35 +1,14 @@
 //! `servo sequence` and `servo bench sequence` (seed 004).
 
-use std::path::PathBuf;
-
 use anyhow::{Context, Result};
 
-use crate::cli::{progress_bar, Common};
+use crate::cli::progress_bar;
 use crate::fmu::fmpy;
 use crate::fmu::runner::Fmu;
 use crate::fmu::trace::Trace;
 use crate::paths::{default_fmu, default_out, workspace_root};
 use crate::plot::signals::plot_signals;
-
-/// Stop, zero-servo and fine-adjust sequences (seed 004) on the FMU, from timeline files.
-///
-/// A file lists key events (run, run_off, stop, release, move, return, gain) at times
-/// and expectations ("completion within 200 ms after 0.3 s", "state servo_lock at 0.5 s",
-/// "|deviation| <= 2 counts at 1.5 s", "1 refused by 0.4 s", signal bounds); see the doc
-/// comment of host-tools/src/sequence/timeline.rs and scenarios/sequences/. Prints a
-/// pass/fail table, writes <name>.csv, <name>.svg (speed, position, deviation, state,
-/// completion, refusals on one timeline) and <name>.json. With --fmpy the same input
-/// table also runs through fmpy and must give identical outputs.
-/// Without files, runs every file in scenarios/sequences/.
-#[derive(clap::Args)]
-pub struct SequenceArgs {
-    files: Vec<PathBuf>,
-    /// Also run through fmpy and demand identical outputs
-    #[arg(long)]
-    fmpy: bool,
-    #[command(flatten)]
-    common: Common,
-}
+use crate::sequence::args::{SequenceArgs, SequenceBenchArgs};
 
 impl SequenceArgs {
     pub fn run(&self) -> Result<bool> {
@@ -105,18 +84,6 @@ fn sequence(args: &SequenceArgs) -> Result<bool> {
         println!("{}", serde_json::to_string_pretty(&summary)?);
     }
     Ok(all_ok)
-}
-
-/// Stop sequence (seed 004): per gain multiplier the stop error, settle time and
-/// overshoot (stop at speed and a 1 rad fine adjustment); time from the stop key to
-/// acceptance against the zero-speed level.
-#[derive(clap::Args)]
-pub struct SequenceBenchArgs {
-    /// Zero-speed levels to try (rad/s, comma separated)
-    #[arg(long, value_delimiter = ',', default_values_t = [0.5, 1.0, 2.0, 5.0, 10.0, 20.0, 50.0])]
-    zero_speed: Vec<f64>,
-    #[command(flatten)]
-    common: Common,
 }
 
 impl SequenceBenchArgs {

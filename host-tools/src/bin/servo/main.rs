@@ -23,15 +23,15 @@ struct Cli {
 
 #[derive(Subcommand)]
 enum Command {
-    Run(run::command::RunArgs),
-    Accdec(accdec::command::AccdecArgs),
-    Sequence(sequence::command::SequenceArgs),
-    Circle(circle::command::CircleArgs),
-    Sweep(sweep::command::SweepArgs),
-    Ident(ident::command::IdentArgs),
-    Tune(ident::command::TuneArgs),
-    Compare(run::command::CompareArgs),
-    Device(device::command::DeviceArgs),
+    Run(run::args::RunArgs),
+    Accdec(accdec::args::AccdecArgs),
+    Sequence(sequence::args::SequenceArgs),
+    Circle(circle::args::CircleArgs),
+    Sweep(sweep::args::SweepArgs),
+    Ident(ident::args::IdentArgs),
+    Tune(ident::args::TuneArgs),
+    Compare(run::args::CompareArgs),
+    Device(device::args::DeviceArgs),
     Index(index::IndexArgs),
     /// Benchmarks: each prints its figures against their goals (worst case over the range users
     /// work in) and exits 1 when a goal is missed.
@@ -41,19 +41,19 @@ enum Command {
 
 #[derive(Subcommand)]
 enum BenchCommand {
-    Robustness(bench::campaign_command::RobustnessBenchArgs),
-    Firmware(bench::firmware_command::FirmwareBenchArgs),
-    Fmu(bench::backbone_command::FmuBenchArgs),
-    Plant(bench::backbone_command::PlantBenchArgs),
-    Accdec(accdec::command::AccdecBenchArgs),
-    Sequence(sequence::command::SequenceBenchArgs),
-    Circle(circle::command::CircleBenchArgs),
-    Sweep(sweep::command::SweepBenchArgs),
-    Ident(ident::command::IdentBenchArgs),
-    FmiCampaign(bench::campaign_command::FmiCampaignArgs),
-    FaultCampaign(bench::campaign_command::FaultCampaignArgs),
+    Robustness(bench::args::RobustnessBenchArgs),
+    Firmware(bench::args::FirmwareBenchArgs),
+    Fmu(bench::args::FmuBenchArgs),
+    Plant(bench::args::PlantBenchArgs),
+    Accdec(accdec::args::AccdecBenchArgs),
+    Sequence(sequence::args::SequenceBenchArgs),
+    Circle(circle::args::CircleBenchArgs),
+    Sweep(sweep::args::SweepBenchArgs),
+    Ident(ident::args::IdentBenchArgs),
+    FmiCampaign(bench::args::FmiCampaignArgs),
+    FaultCampaign(bench::args::FaultCampaignArgs),
     #[command(hide = true)]
-    AccdecProbe(accdec::command::AccdecProbeArgs),
+    AccdecProbe(accdec::args::AccdecProbeArgs),
 }
 
 fn main() -> ExitCode {
