@@ -4,8 +4,8 @@
 //!
 //! One folder per experiment — `run` (scenarios), `sweep` (seed 000), `ident` (seed 001, with
 //! `tune`), `circle` (seed 002), `accdec` (seed 003), `sequence` (seed 004), `device` (the drive
-//! link) — each with its command (`command.rs`: the clap arguments and `run`), measurement,
-//! report, plot, bench and its section of out/index.html (`index.rs`). `bench` holds the benches
+//! link) — each with its options (`args.rs`, clap), commands (`command.rs`: their `run`),
+//! measurement, report, plot, bench and its section of out/index.html (`index.rs`). `bench` holds the benches
 //! that are not experiments (FMU speed, plant, firmware, robustness and fault campaigns). Shared
 //! pieces: `fmu` (runner, scenario, trace, fmpy, the configuration a run gives the FMU, the
 //! sweep and circle runs), `analysis` (spectral, response points, polynomials), `plot`,
