@@ -32,6 +32,7 @@ pub enum Mode {
 }
 
 impl Mode {
+    /// The mode of a `mode` input code: 0 torque, 1 velocity, 2 position, 3 stop sequence.
     pub fn from_code(code: i32) -> Option<Self> {
         match code {
             0 => Some(Self::Torque),
@@ -41,6 +42,8 @@ impl Mode {
             _ => None,
         }
     }
+
+    /// The inverse of [`Self::from_code`].
     pub fn code(self) -> i32 {
         match self {
             Self::Torque => 0,

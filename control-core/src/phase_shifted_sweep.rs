@@ -53,6 +53,25 @@ pub enum SweepSignal {
     Prbs,
 }
 
+impl SweepSignal {
+    /// The signal of a `sweep.signal` code: 0 stepped sine, 1 PRBS.
+    pub fn from_code(code: i32) -> Option<Self> {
+        match code {
+            0 => Some(Self::SteppedSine),
+            1 => Some(Self::Prbs),
+            _ => None,
+        }
+    }
+
+    /// The inverse of [`Self::from_code`].
+    pub fn code(self) -> i32 {
+        match self {
+            Self::SteppedSine => 0,
+            Self::Prbs => 1,
+        }
+    }
+}
+
 #[derive(Clone, Copy, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct SweepParams {
     pub point: InjectionPoint,
@@ -397,6 +416,18 @@ pub enum SweepState {
 }
 
 impl SweepState {
+    /// The state of a `sweep_state` output code: 0 idle, 1 settling, 2 measuring, 3 done.
+    pub fn from_code(code: i32) -> Option<Self> {
+        match code {
+            0 => Some(Self::Idle),
+            1 => Some(Self::Settling),
+            2 => Some(Self::Measuring),
+            3 => Some(Self::Done),
+            _ => None,
+        }
+    }
+
+    /// The inverse of [`Self::from_code`].
     pub fn code(self) -> i32 {
         match self {
             Self::Idle => 0,
@@ -942,6 +973,19 @@ impl PhaseShiftedSweep {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn sweep_codes_round_trip() {
+        for s in [SweepSignal::SteppedSine, SweepSignal::Prbs] {
+            assert_eq!(SweepSignal::from_code(s.code()), Some(s));
+        }
+        for s in [SweepState::Idle, SweepState::Settling, SweepState::Measuring, SweepState::Done] {
+            assert_eq!(SweepState::from_code(s.code()), Some(s));
+        }
+        assert_eq!(SweepState::Done.code(), 3);
+        assert_eq!(SweepSignal::from_code(2), None);
+        assert_eq!(SweepState::from_code(-1), None);
+    }
 
     const FS: f32 = 16_000.0;
 

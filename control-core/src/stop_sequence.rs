@@ -165,6 +165,20 @@ pub enum SequenceState {
 }
 
 impl SequenceState {
+    /// The state of a `seq_state` output code: 0 idle, 1 running, 2 decelerating, 3 servo
+    /// lock, 4 fine adjust.
+    pub fn from_code(code: i32) -> Option<Self> {
+        match code {
+            0 => Some(Self::Idle),
+            1 => Some(Self::Running),
+            2 => Some(Self::Decelerating),
+            3 => Some(Self::ServoLock),
+            4 => Some(Self::FineAdjust),
+            _ => None,
+        }
+    }
+
+    /// The inverse of [`Self::from_code`].
     pub fn code(self) -> i32 {
         match self {
             Self::Idle => 0,
@@ -467,6 +481,15 @@ impl StopSequence {
 
 #[cfg(test)]
 mod tests {
+    #[test]
+    fn state_codes_round_trip() {
+        use super::SequenceState::*;
+        for s in [Idle, Running, Decelerating, ServoLock, FineAdjust] {
+            assert_eq!(super::SequenceState::from_code(s.code()), Some(s));
+        }
+        assert_eq!(super::SequenceState::from_code(5), None);
+    }
+
     use super::*;
 
     const CPR: u32 = 1 << 20;

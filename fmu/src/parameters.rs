@@ -172,10 +172,9 @@ fn sweep(v: &Values) -> Result<SweepParams, String> {
     let point = InjectionPoint::from_code(v.sweep_point).filter(|p| *p != InjectionPoint::Off).ok_or_else(|| {
         format!("sweep.point must be 1 (torque), 2 (velocity command) or 3 (velocity feedback), got {}", v.sweep_point)
     })?;
-    let signal = match v.sweep_signal {
-        0 => SweepSignal::SteppedSine,
-        1 => SweepSignal::Prbs,
-        other => return Err(format!("sweep.signal must be 0 (stepped sine) or 1 (PRBS), got {other}")),
+    let signal = match SweepSignal::from_code(v.sweep_signal) {
+        Some(signal) => signal,
+        None => return Err(format!("sweep.signal must be 0 (stepped sine) or 1 (PRBS), got {}", v.sweep_signal)),
     };
     Ok(SweepParams {
         point,
@@ -248,7 +247,7 @@ pub fn sweep_values(s: &SweepParams) -> Vec<(&'static str, Value)> {
     let i = |x: u32| Value::Int32(x.min(i32::MAX as u32) as i32);
     vec![
         (name::sweep_point, Value::Int32(s.point.code())),
-        (name::sweep_signal, Value::Int32((s.signal == SweepSignal::Prbs) as i32)),
+        (name::sweep_signal, Value::Int32(s.signal.code())),
         (name::sweep_amplitude, f(s.amplitude)),
         (name::sweep_start_hz, f(s.start_hz)),
         (name::sweep_stop_hz, f(s.stop_hz)),

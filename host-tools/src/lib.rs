@@ -1,40 +1,32 @@
-//! Host side of the servo toolkit: scenarios run against the FMU through FMI 3.0, traces,
-//! plots, reports and benchmarks. The `servo` binary is a thin CLI over this library.
+//! Host side of the servo toolkit: experiments run against the FMU through FMI 3.0 (or a drive),
+//! their measurements, reports, plots and benchmarks. The `servo` binary only dispatches to the
+//! experiments' commands.
+//!
+//! One folder per experiment — `run` (scenarios), `sweep` (seed 000), `ident` (seed 001, with
+//! `tune`), `circle` (seed 002), `accdec` (seed 003), `sequence` (seed 004), `device` (the drive
+//! link) — each with its options (`args.rs`, clap), commands (`command.rs`: their `run`),
+//! measurement, report, plot, bench and its section of out/index.html (`index.rs`). `bench` holds the benches
+//! that are not experiments (FMU speed, plant, firmware, robustness and fault campaigns). Shared
+//! pieces: `fmu` (runner, scenario, trace, fmpy, the configuration a run gives the FMU, the
+//! sweep and circle runs), `analysis` (spectral, response points, polynomials), `plot`,
+//! `correction` (the response correction as the FMU and the drive take it), `page` (the
+//! index page), `cli` (options every command takes). Experiments use shared pieces, never each
+//! other; `index` (`servo index`) gathers their sections.
 
-pub mod acc_dec_deviation;
-pub mod acc_dec_report;
-pub mod acc_dec_study;
+pub mod accdec;
+pub mod analysis;
 pub mod bench;
-pub mod bench_accdec;
-pub mod bench_circle;
-pub mod bench_ident;
-pub mod bench_plant;
-pub mod bench_sequence;
-pub mod bench_sweep;
-pub mod bode_plot;
-pub mod circle_plot;
-pub mod circle_report;
-pub mod circle_test;
-pub mod device_link;
-pub mod fault_campaign;
-pub mod firmware;
-pub mod fmi_campaign;
-pub mod fmu_log;
-pub mod fmu_runner;
-pub mod frame_stream;
-pub mod frequency_response;
-pub mod ident_report;
-pub mod identification;
+pub mod circle;
+pub mod cli;
+pub mod correction;
+pub mod device;
+pub mod fmu;
+pub mod ident;
+pub mod index;
+pub mod page;
 pub mod paths;
 pub mod plot;
-pub mod polynomial;
 pub mod random;
-pub mod report;
-pub mod response_model;
-pub mod scenario;
-pub mod sequence_scenario;
-pub mod spectral;
-pub mod sweep_report;
-pub mod timeline_reference;
-pub mod trace;
-pub mod tuning;
+pub mod run;
+pub mod sequence;
+pub mod sweep;

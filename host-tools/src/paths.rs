@@ -1,6 +1,8 @@
-//! Default locations: the FMU the project builds and the output folder.
+//! Default locations: the FMU the project builds, the output folder, the files of a folder.
 
 use std::path::PathBuf;
+
+use anyhow::{Context, Result};
 
 /// Workspace root (where `Cargo.toml` of the host workspace is).
 pub fn workspace_root() -> PathBuf {
@@ -22,4 +24,15 @@ pub fn shipped_linux_fmu_library() -> PathBuf {
 /// `out/<command>/` under the current directory.
 pub fn default_out(command: &str) -> PathBuf {
     PathBuf::from("out").join(command)
+}
+
+/// The `.toml` files of a folder, sorted.
+pub fn toml_files_in(dir: &std::path::Path) -> Result<Vec<PathBuf>> {
+    let mut v: Vec<PathBuf> = std::fs::read_dir(dir)
+        .with_context(|| format!("cannot list {}", dir.display()))?
+        .filter_map(|e| e.ok().map(|e| e.path()))
+        .filter(|p| p.extension().is_some_and(|x| x == "toml"))
+        .collect();
+    v.sort();
+    Ok(v)
 }

@@ -353,3 +353,38 @@ fn device_refuses_what_it_cannot_send_before_touching_a_port() {
     // A valid request, but no drive there: the port is named in the error.
     assert!(err(&["hello"]).contains("/nonexistent/tty"));
 }
+
+#[test]
+fn index_gathers_the_experiments_into_one_page() {
+    let root = tmp("index");
+    let empty = servo().arg("index").arg("--out").arg(&root).output().unwrap();
+    assert_eq!(empty.status.code(), Some(2), "an empty folder has nothing to gather");
+    assert!(String::from_utf8_lossy(&empty.stderr).contains("no experiment results"));
+    let passing = workspace_root().join("scenarios/position_step.toml");
+    let o = servo()
+        .arg("run")
+        .arg(&passing)
+        .arg("--fmu")
+        .arg(fmu_path())
+        .arg("--out")
+        .arg(root.join("run"))
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let o = servo().arg("index").arg("--out").arg(&root).output().unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let page = std::fs::read_to_string(root.join("index.html")).unwrap();
+    assert!(page.contains("position_step: checks") && page.contains("src=\"run/position_step.svg\""), "{page}");
+    // A failing scenario in the same folder: the page says so and the exit status is 1.
+    let strict = root.join("strict.toml");
+    std::fs::write(
+        &strict,
+        "name='strict'\nstop_time=0.01\n[[events]]\ntime=0.0\nmode=1\nvelocity_command=10.0\n[[checks]]\nsignal='motor_velocity'\nat=0.01\nmin=1000.0\n",
+    )
+    .unwrap();
+    servo().arg("run").arg(&strict).arg("--fmu").arg(fmu_path()).arg("--out").arg(root.join("run")).output().unwrap();
+    let o = servo().arg("index").arg("--out").arg(&root).output().unwrap();
+    assert_eq!(o.status.code(), Some(1));
+    let page = std::fs::read_to_string(root.join("index.html")).unwrap();
+    assert!(page.contains("1 of 2 checks"), "{page}");
+}

@@ -2,9 +2,9 @@
 
 use std::path::PathBuf;
 
-use host_tools::fmu_runner::Fmu;
+use host_tools::fmu::runner::Fmu;
+use host_tools::fmu::scenario::Scenario;
 use host_tools::paths::default_fmu;
-use host_tools::scenario::Scenario;
 
 /// The FMU built by `cargo run -p xtask -- bundle` (scripts/test builds it first).
 pub fn fmu_path() -> PathBuf {

@@ -4,8 +4,8 @@
 
 use control_core::acc_dec::{AccDecFilter, ButterworthDesign, ButterworthPulseFilter, ZeroPlacement};
 use cross_checks::load_fmu;
-use host_tools::acc_dec_study::{profile, residual_vibration, FilterSpec, PulseMove, Resonance};
-use host_tools::bench_accdec::matched_comparison;
+use host_tools::accdec::bench::matched_comparison;
+use host_tools::accdec::study::{profile, residual_vibration, FilterSpec, PulseMove, Resonance};
 
 #[test]
 fn poles_and_gains_match_python_control_for_both_zero_placements() {
@@ -65,7 +65,7 @@ fn fmu_command_equals_the_core_command_path_count_for_count() {
     for spec in [FilterSpec::butterworth(3, 40.0), FilterSpec::MovingAverage { lengths: vec![20, 21, 21] }] {
         let p = profile(&spec, period, m, 64).unwrap();
         let res = Resonance { hz: 60.0, damping_ratio: 0.02 };
-        let (_, trace) = residual_vibration(&fmu, &spec, res, period as f64, distance, speed, 0.1, 0.2).unwrap();
+        let (_, trace) = residual_vibration(&fmu, &spec, res, period as f64, distance, speed, (0.1, 0.2)).unwrap();
         let command = trace.column("position_command_out").unwrap();
         let mut position = 0i64;
         for (k, pulses) in p.output.iter().enumerate().take(command.len() - 1) {

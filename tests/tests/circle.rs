@@ -3,10 +3,10 @@
 //! protrusions; fmpy gives the same single-axis feedback trace.
 
 use cross_checks::{fmu_path, load_fmu};
-use host_tools::bench::run_fmpy;
-use host_tools::bench_circle::{bench, demo_request};
-use host_tools::circle_test::single_axis;
-use host_tools::trace::{compare_exact, Trace};
+use host_tools::circle::bench::{bench, demo_request};
+use host_tools::fmu::circle::single_axis;
+use host_tools::fmu::fmpy::run_fmpy;
+use host_tools::fmu::trace::{compare_exact, Trace};
 
 #[test]
 fn pseudo_circle_equals_the_two_axis_circle_and_compensation_shrinks_protrusions() {
@@ -20,7 +20,7 @@ fn pseudo_circle_equals_the_two_axis_circle_and_compensation_shrinks_protrusions
 
 #[test]
 fn protrusions_sit_just_after_the_axis_reversals() {
-    let run = host_tools::circle_test::two_axis(&load_fmu(), &demo_request(Default::default())).unwrap();
+    let run = host_tools::fmu::circle::two_axis(&load_fmu(), &demo_request(Default::default())).unwrap();
     let f = run.feedback.roundness(1.0);
     for ((angle, height), quadrant) in f.protrusions.iter().zip([0.0, 90.0, 180.0, 270.0]) {
         let after = (angle - quadrant + 540.0f64).rem_euclid(360.0) - 180.0;

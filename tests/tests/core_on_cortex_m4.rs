@@ -5,7 +5,7 @@
 //!
 //! Needs the firmware toolchain and QEMU; `scripts/fw` installs them (apt) on first use.
 
-use host_tools::firmware::{
+use host_tools::bench::firmware::{
     all_features_recordings, build, drive_image_size, encode, recordings, replay_on_cortex_m4, sections,
 };
 use host_tools::paths::workspace_root;

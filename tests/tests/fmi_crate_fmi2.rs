@@ -4,8 +4,8 @@
 
 use fmi::fmi2::import::Fmi2Import;
 use fmi::fmi2::instance::{CoSimulation, Common};
+use host_tools::fmu::scenario::Scenario;
 use host_tools::paths::{default_fmu, workspace_root};
-use host_tools::scenario::Scenario;
 use servo_axis::variables::{by_name, Kind};
 
 #[test]

@@ -4,10 +4,10 @@
 use std::process::Command;
 
 use cross_checks::{fmu_path, load_fmu, scenario_from_text};
-use host_tools::bench::{python, run_fmpy};
+use host_tools::fmu::fmpy::{python, run_fmpy};
+use host_tools::fmu::scenario::Scenario;
+use host_tools::fmu::trace::{compare_exact, Trace};
 use host_tools::paths::workspace_root;
-use host_tools::scenario::Scenario;
-use host_tools::trace::{compare_exact, Trace};
 
 #[test]
 fn fmpy_validate_finds_no_problem_in_either_archive() {

@@ -6,10 +6,10 @@ use std::collections::BTreeMap;
 
 use control_core::phase_shifted_sweep::SweepParams;
 use cross_checks::{fmu_path, load_fmu};
-use host_tools::bench::run_fmpy;
-use host_tools::bench_sweep::bench;
-use host_tools::frequency_response::SweepRun;
-use host_tools::trace::{compare_exact, Trace};
+use host_tools::fmu::fmpy::run_fmpy;
+use host_tools::fmu::sweep_run::SweepRun;
+use host_tools::fmu::trace::{compare_exact, Trace};
+use host_tools::sweep::bench::bench;
 
 #[test]
 fn phase_shifting_measures_every_injection_point_against_the_oracle_and_single_phase_does_not() {

@@ -5,13 +5,13 @@
 use std::collections::BTreeMap;
 
 use cross_checks::load_fmu;
-use host_tools::ident_report::identify_axis;
-use host_tools::identification::{absorber_parameters, identify, measure, true_anti_resonance};
-use host_tools::scenario::Value;
+use host_tools::fmu::scenario::Value;
+use host_tools::ident::identification::{absorber_parameters, identify, measure, true_anti_resonance};
+use host_tools::ident::report::identify_axis;
 
 const LOAD: f64 = 1.0e-4;
 
-fn truth(hz: f64) -> host_tools::identification::Factor {
+fn truth(hz: f64) -> host_tools::ident::identification::Factor {
     let w = std::f64::consts::TAU * hz;
     true_anti_resonance(LOAD, LOAD * w * w, 2.0 * 0.05 * LOAD * w)
 }

@@ -13,10 +13,10 @@ use std::sync::OnceLock;
 use std::time::Instant;
 
 use cross_checks::{fmu_path, load_fmu};
-use host_tools::bench::{python, run_fmpy};
+use host_tools::fmu::fmpy::{python, run_fmpy};
+use host_tools::fmu::scenario::Scenario;
+use host_tools::fmu::trace::{compare_exact, Trace};
 use host_tools::paths::{default_fmu, workspace_root};
-use host_tools::scenario::Scenario;
-use host_tools::trace::{compare_exact, Trace};
 
 /// The FMI 2.0 Co-Simulation archive the bundle writes beside the FMI 3.0 one.
 fn fmi2_path() -> PathBuf {

@@ -12,7 +12,7 @@
 //! sampled measurement, not of the plant — and at 64 kHz it is 16 times smaller.
 
 use cross_checks::{frequency_response, load_fmu, scenario_from_text, wrap_deg, C};
-use host_tools::scenario::Scenario;
+use host_tools::fmu::scenario::Scenario;
 
 const TICK_HZ: f64 = 64_000.0;
 const H: f64 = 4.0 / TICK_HZ;

@@ -17,11 +17,11 @@ use std::time::Instant;
 
 use cross_checks::{fmu_path, load_fmu};
 use fmi::schema::fmi3::Causality;
-use host_tools::fmu_runner::{Fmu, Kind};
+use host_tools::fmu::runner::{Fmu, Kind};
+use host_tools::fmu::scenario::{Scenario, Value};
+use host_tools::fmu::trace::Trace;
 use host_tools::paths::workspace_root;
-use host_tools::scenario::{Scenario, Value};
-use host_tools::sequence_scenario::SequenceScenario;
-use host_tools::trace::Trace;
+use host_tools::sequence::timeline::SequenceScenario;
 
 /// `binaries/` folders: (FMI 3.0 name, FMI 2.0 name, file name).
 const BINARIES: [(&str, &str, &str); 3] = [

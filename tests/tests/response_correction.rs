@@ -4,8 +4,8 @@
 //! circle gets rounder by the factor.
 
 use cross_checks::load_fmu;
-use host_tools::identification::{absorber_parameters, AxisModel, Factor};
-use host_tools::tuning::{circle_check, tune, Method};
+use host_tools::ident::identification::{absorber_parameters, AxisModel, Factor};
+use host_tools::ident::tuning::{circle_check, tune, Method};
 
 const LOAD: f64 = 1.0e-4;
 
@@ -78,7 +78,7 @@ fn bad_tuning_requests_are_refused_with_the_reason() {
     let mut whole = axis("y", 70.0);
     whole.fmu_parameters.insert("ctrl.position_divider".into(), 4.0);
     assert!(tune(&fmu, &[axis("x", 40.0), whole], Method::Response, false, |_| {}).is_ok());
-    let e = host_tools::circle_report::tuned_axes(std::path::Path::new("/nonexistent/tune")).unwrap_err().to_string();
+    let e = host_tools::correction::tuned_axes(std::path::Path::new("/nonexistent/tune")).unwrap_err().to_string();
     assert!(e.contains("servo tune"), "{e}");
 }
 
@@ -87,7 +87,7 @@ fn the_drive_accepts_the_correction_frame_the_fmu_runs() {
     use control_core::protocol::{decode, handle, Request, Response};
     let t = tune(&load_fmu(), &[axis("x", 40.0), axis("y", 70.0)], Method::Response, false, |_| {}).unwrap();
     let dir = std::env::temp_dir().join(format!("servo-tune-frame-{}", std::process::id()));
-    let files = host_tools::tuning::write(&t, &dir).unwrap();
+    let files = host_tools::ident::tuning::write(&t, &dir).unwrap();
     for a in &t.axes {
         let path = dir.join(format!("{}.corr.frame", a.axis));
         assert!(files.contains(&path));

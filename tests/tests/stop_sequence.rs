@@ -3,11 +3,11 @@
 //! the hand-over to position control does not jump the torque; higher gains settle faster.
 
 use cross_checks::{fmu_path, load_fmu};
-use host_tools::bench::run_fmpy;
-use host_tools::bench_sequence::bench;
+use host_tools::fmu::fmpy::run_fmpy;
+use host_tools::fmu::trace::{compare_exact, Trace};
 use host_tools::paths::workspace_root;
-use host_tools::sequence_scenario::SequenceScenario;
-use host_tools::trace::{compare_exact, Trace};
+use host_tools::sequence::bench::bench;
+use host_tools::sequence::timeline::SequenceScenario;
 
 fn shipped() -> Vec<SequenceScenario> {
     let dir = workspace_root().join("scenarios/sequences");

@@ -6,8 +6,9 @@
 //! validation accepts for the value alone; rules between values (a filter below the loop's
 //! Nyquist frequency, under-voltage below over-voltage, …) are the core's and the plant's.
 
+use control_core::axis::Mode;
+use control_core::excitation::InjectionPoint;
 use control_core::params::Params;
-use control_core::phase_shifted_sweep::SweepSignal;
 
 use super::{Causality, Declaration, Kind, Range, Unit, Value, Variability};
 use crate::plant::PlantParams;
@@ -241,7 +242,7 @@ declare_variables! {
     47 plant_substeps: Int32 "plant.substeps" Parameter Fixed = plant_count(|p| p.substeps); NONE; r(1.0, 1000.0); "Integration sub-steps per base tick (linear parts exact, couplings held)";
 
     // A sine added inside the drive at the loop rate.
-    48 excitation_point: Int32 "excitation.point" Parameter Fixed = 0; NONE; r(0.0, 2.0); "0 off, 1 torque command (N.m), 2 velocity command (rad/s)";
+    48 excitation_point: Int32 "excitation.point" Parameter Fixed = InjectionPoint::Off.code(); NONE; r(0.0, 2.0); "0 off, 1 torque command (N.m), 2 velocity command (rad/s)";
     49 excitation_amplitude: Float64 "excitation.amplitude" Parameter Fixed = 0.0; NONE; r(-1.0e6, 1.0e6); "Amplitude (N.m or rad/s, as the point)";
     50 excitation_frequency: Float64 "excitation.frequency" Parameter Fixed = 0.0; HZ; FREQ; "Frequency (below half the loop rate)";
 
@@ -274,7 +275,7 @@ declare_variables! {
 
     // Frequency-response sweep (seed 000), started by `sweep_start`.
     74 sweep_point: Int32 "sweep.point" Parameter Fixed = Params::default().sweep.point.code(); NONE; r(1.0, 3.0); "Injection point: 1 torque command, 2 velocity command, 3 velocity feedback (open loop)";
-    75 sweep_signal: Int32 "sweep.signal" Parameter Fixed = (Params::default().sweep.signal == SweepSignal::Prbs) as i32; NONE; r(0.0, 1.0); "0 stepped sine (phase shifted above the threshold), 1 PRBS (broadband baseline)";
+    75 sweep_signal: Int32 "sweep.signal" Parameter Fixed = Params::default().sweep.signal.code(); NONE; r(0.0, 1.0); "0 stepped sine (phase shifted above the threshold), 1 PRBS (broadband baseline)";
     76 sweep_amplitude: Float64 "sweep.amplitude" Parameter Fixed = core(|p| p.sweep.amplitude); NONE; r(1.0e-9, 1.0e6); "Sine or PRBS amplitude (rad/s or N.m, as the point)";
     77 sweep_start_hz: Float64 "sweep.start_hz" Parameter Fixed = core(|p| p.sweep.start_hz); HZ; POS_FREQ; "First frequency (below stop_hz)";
     78 sweep_stop_hz: Float64 "sweep.stop_hz" Parameter Fixed = core(|p| p.sweep.stop_hz); HZ; POS_FREQ; "Last frequency";
@@ -331,7 +332,7 @@ declare_variables! {
     127 corr_pole_damping_8: Float64 "corr.pole_damping_8" Parameter Fixed = section(|s| s.poles.damping); NONE; r(1.0e-6, 1.0e3); "Section 8: low-pass pole-pair damping";
 
     // Inputs.
-    128 mode: Int32 "mode" Input Discrete = 2; NONE; r(0.0, 3.0); "Control mode: 0 torque, 1 velocity, 2 position, 3 stop sequence (seq_* inputs)";
+    128 mode: Int32 "mode" Input Discrete = Mode::Position.code(); NONE; r(0.0, 3.0); "Control mode: 0 torque, 1 velocity, 2 position, 3 stop sequence (seq_* inputs)";
     129 position_command: Float64 "position_command" Input Continuous = 0.0; RAD; ANGLE; "Motor-side position command: streamed through the acc/dec filter, or the target of a move when move_speed > 0";
     130 move_speed: Float64 "move_speed" Input Continuous = 0.0; RAD_S; r(0.0, 1.0e5); "Positioning speed towards position_command (0: stream position_command)";
     131 jog_velocity: Float64 "jog_velocity" Input Continuous = 0.0; RAD_S; SPEED; "Jog speed in position mode (non-zero overrides position_command)";

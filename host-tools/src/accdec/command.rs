@@ -1,0 +1,263 @@
+//! `servo accdec` and `servo bench accdec` (seed 003).
+
+use anyhow::{Context, Result};
+
+use crate::accdec::args::{AccdecArgs, AccdecBenchArgs, AccdecProbeArgs};
+use crate::cli::progress_bar;
+use crate::paths::{default_fmu, default_out};
+
+impl AccdecArgs {
+    pub fn run(&self) -> Result<bool> {
+        accdec(self)
+    }
+}
+
+fn accdec(args: &AccdecArgs) -> Result<bool> {
+    let (
+        order,
+        cutoff,
+        sample_period,
+        zeros_as_delays,
+        ma_lengths,
+        distance,
+        speed,
+        counts_per_rev,
+        resonance,
+        damping_ratio,
+        sweep,
+        no_sweep,
+        no_fmu,
+        common,
+    ) = (
+        args.order,
+        args.cutoff,
+        args.sample_period,
+        args.zeros_as_delays,
+        &args.ma_lengths,
+        args.distance,
+        args.speed,
+        args.counts_per_rev,
+        &args.resonance,
+        args.damping_ratio,
+        &args.sweep,
+        args.no_sweep,
+        args.no_fmu,
+        &args.common,
+    );
+    let cutoff = cutoff.unwrap_or_else(crate::accdec::report::default_cutoff_hz);
+    let nyquist = 0.5 / sample_period;
+    let sweep = match (no_sweep, sweep) {
+        (true, _) => vec![],
+        (false, Some(s)) => s.clone(),
+        (false, None) => [0.25, 0.5, 1.0, 2.0, 4.0].iter().map(|f| f * cutoff).filter(|&c| c <= nyquist).collect(),
+    };
+    let request = crate::accdec::report::AccDecRequest {
+        order,
+        cutoff_hz: cutoff,
+        sample_period,
+        all_delays: zeros_as_delays,
+        ma_lengths: ma_lengths.clone(),
+        distance_rad: distance,
+        speed_rad_s: speed,
+        counts_per_rev,
+        resonances: resonance.iter().map(|&hz| crate::accdec::study::Resonance { hz, damping_ratio }).collect(),
+        sweep,
+        fmu: (!no_fmu && !zeros_as_delays).then(|| common.fmu.clone().unwrap_or_else(default_fmu)),
+        out: common.out.clone().unwrap_or_else(|| default_out("accdec")),
+    };
+    if zeros_as_delays && !no_fmu && !common.json {
+        eprintln!(
+            "note: --zeros-as-delays runs on the host only (the FMU's filter keeps the seed's zeros): no FMU runs"
+        );
+    }
+    let pb = progress_bar("accdec", common.json);
+    let report = crate::accdec::report::run(&request, |label, f| {
+        pb.set_prefix(label.to_string());
+        pb.set_position((f * 1000.0) as u64)
+    })?;
+    pb.finish_and_clear();
+    if common.json {
+        println!("{}", serde_json::to_string_pretty(&report)?);
+    } else {
+        report.print();
+    }
+    Ok(report.butterworth.shape.pulse_balance == 0 && report.moving_average.shape.pulse_balance == 0)
+}
+
+impl AccdecBenchArgs {
+    pub fn run(&self) -> Result<bool> {
+        bench_accdec(self)
+    }
+}
+
+fn bench_accdec(args: &AccdecBenchArgs) -> Result<bool> {
+    let (sequences, resonance, no_cost, common) = (args.sequences, &args.resonance, args.no_cost, &args.common);
+    use crate::accdec::bench as b;
+    let fmu_path = common.fmu.clone().unwrap_or_else(default_fmu);
+    let pb = progress_bar("seed digits", common.json);
+    let digits = b::seed_digits()?;
+    let seed_test = b::seed_test()?;
+    pb.set_prefix("python-control");
+    pb.set_position(100);
+    let matched = b::matched_comparison()?;
+    pb.set_prefix("pulse conservation");
+    pb.set_position(300);
+    let props = b::properties(sequences);
+    pb.set_prefix("f64 reference grid");
+    pb.set_position(350);
+    let grid = crate::accdec::deviation::run_grid(|f| pb.set_position(350 + (f * 250.0) as u64))
+        .map_err(|e| anyhow::anyhow!("{e}"))?;
+    let worst_position = grid.iter().max_by(|a, b| a.worst.total_cmp(&b.worst)).context("an empty grid")?.clone();
+    let worst_lag_error = grid.iter().max_by(|a, b| a.lag_error.total_cmp(&b.lag_error)).context("grid")?.clone();
+    let largest_state = grid.iter().map(|r| r.largest_state).fold(0.0, f64::max);
+    let unbalanced = grid.iter().filter(|r| r.pulse_balance != 0).count();
+    let grid_ticks: usize = grid.iter().map(|r| r.ticks).sum();
+    pb.set_prefix("FMU vibration");
+    pb.set_position(600);
+    let vibration = b::equal_delay_vibration(&fmu_path, resonance, false)?;
+    let vibration_t50 = b::equal_delay_vibration(&fmu_path, resonance, true)?;
+    pb.set_prefix("instruction count");
+    pb.set_position(700);
+    let costs = if no_cost { vec![] } else { b::filter_costs()? };
+    pb.finish_and_clear();
+    let worst = |f: fn(&b::MatchedComparison) -> f64| matched.iter().map(f).fold(0.0, f64::max);
+    let (pole, den, gd, gs) = (
+        worst(|m| m.pole_error),
+        worst(|m| m.denominator_error),
+        worst(|m| m.all_delays_gain_error),
+        worst(|m| m.seed_gain_error),
+    );
+    let ok = digits.iter().all(|d| d.equal)
+        && pole < 1e-7
+        && gd < 1e-10
+        && gs < 1e-10
+        && props.conservation_failures == 0
+        && props.zero_input_nonzero_outputs == 0
+        && worst_position.worst <= 1.0
+        && unbalanced == 0;
+    if common.json {
+        println!(
+            "{}",
+            serde_json::to_string_pretty(&serde_json::json!({
+                "bench": "accdec", "seed_digits": digits, "seed_test": seed_test, "matched": matched, "properties": props,
+                "equal_delay_vibration": [vibration, vibration_t50], "costs": costs,
+                "reference_grid": {"runs": grid.len(), "ticks": grid_ticks, "worst": worst_position,
+                    "worst_lag_error": worst_lag_error, "largest_state_counts": largest_state,
+                    "unbalanced_runs": unbalanced},
+                "passed": ok
+            }))?
+        );
+        return Ok(ok);
+    }
+    println!("servo bench accdec — seed 003");
+    println!("  1. seed example, 3rd order, 1 kHz, 0.5 ms (printed digits):");
+    for d in &digits {
+        println!(
+            "     {:<20} seed {:>11}  ours {:>13.8}  {}",
+            d.name,
+            d.printed,
+            d.ours,
+            if d.equal { "equal" } else { "DIFFERENT" }
+        );
+    }
+    for (cutoff, out) in &seed_test {
+        println!(
+            "     seed's test, 100 pulses x 30 samples, {cutoff} Hz: {} pulses out over {} samples: {}",
+            out.iter().sum::<i64>(),
+            out.len(),
+            out.iter().map(i64::to_string).collect::<Vec<_>>().join(" ")
+        );
+    }
+    println!(
+        "  2. against python-control sample_system(method='matched'), orders 1-6 at {} (Hz, s):",
+        b::MATCHED_CASES.map(|(c, t)| format!("{c}/{t}")).join(", ")
+    );
+    println!("     largest pole error |z - z_py|            {pole:.2e}");
+    println!("     largest denominator coefficient error    {den:.2e}");
+    println!(
+        "     gain, every zero at infinity a delay: K = A(1), relative error {gd:.2e}  (python-control's convention)"
+    );
+    println!("     gain, seed: N-1 zeros at z = -1 + one delay: K·2^(N-1) = A(1), relative error {gs:.2e}");
+    println!("     (same poles; the seed's form answers one tick after the input and nulls Nyquist, python-control's waits N ticks)");
+    println!("  3. properties of the whole-pulse filters (random Butterworth 1-6 / moving-average cascades):");
+    println!("     {} random sequences: {} with output sum != input sum", props.sequences, props.conservation_failures);
+    println!(
+        "     {} ticks of zero input: {} non-zero outputs",
+        props.zero_input_ticks, props.zero_input_nonzero_outputs
+    );
+    println!(
+        "  4. commanded position against the same filter in f64 (control_core::acc_dec::reference), at every tick until settled:"
+    );
+    println!(
+        "     grid: orders 1-6 x cut-offs {} Hz and a quarter of the sampling rate (up to it) x periods {} ms x moves ±{} counts x {}",
+        crate::accdec::deviation::CUTOFFS_HZ.map(|c| c.to_string()).join(", "),
+        crate::accdec::deviation::PERIODS.map(|t| (t * 1e3).to_string()).join(", "),
+        crate::accdec::deviation::DISTANCES.map(|d| d.to_string()).join(", "),
+        crate::accdec::deviation::PROFILES.map(|p| p.label()).join(", ")
+    );
+    println!("     {} runs, {} ticks; output sum != input sum in {} of them", grid.len(), grid_ticks, unbalanced);
+    let describe = |r: &crate::accdec::deviation::Deviation| {
+        format!(
+            "order {}, {} Hz, T = {} ms, {} counts, {}, tick {} (reference lag there {:.4e} counts)",
+            r.order,
+            r.cutoff_hz,
+            r.sample_period * 1e3,
+            r.distance,
+            r.profile.label(),
+            r.worst_tick,
+            r.lag_then
+        )
+    };
+    println!(
+        "     worst |position - reference position|: {:.4} counts (goal <= 1: {}) at {}",
+        worst_position.worst,
+        if worst_position.worst <= 1.0 { "met" } else { "NOT met" },
+        describe(&worst_position)
+    );
+    println!(
+        "     worst lag error before rounding to whole pulses: {:.2e} counts (order {}, {} Hz, T = {} ms, {} counts, {})",
+        worst_lag_error.lag_error,
+        worst_lag_error.order,
+        worst_lag_error.cutoff_hz,
+        worst_lag_error.sample_period * 1e3,
+        worst_lag_error.distance,
+        worst_lag_error.profile.label()
+    );
+    println!("     largest state of the drive's filter: {largest_state:.4e} counts (saturates at 2^31 = 2.147e9)");
+    println!("  5. residual load vibration (peak shaft twist after end of interpolation + 99 % delay; 2 rad at 50 rad/s, 2 % damping, friction off):");
+    for v in [&vibration, &vibration_t50] {
+        println!(
+            "     at equal {}: {} (t50 {:.2} ms, t99 {:.2} ms) vs {} (t50 {:.2} ms, t99 {:.2} ms)",
+            v.matched_on,
+            v.butterworth,
+            v.butterworth_t50 * 1e3,
+            v.butterworth_t99 * 1e3,
+            v.moving_average,
+            v.moving_average_t50 * 1e3,
+            v.moving_average_t99 * 1e3
+        );
+        for (hz, bw, ma, ratio) in &v.resonances {
+            println!("     {hz:>7} Hz load resonance: Butterworth {bw:.3e} rad, moving average {ma:.3e} rad, ratio BW/MA {ratio:.3}");
+        }
+    }
+    if !costs.is_empty() {
+        println!("  6. cost per tick (x86-64 instructions, valgrind; the probe's own input generation subtracted):");
+        for c in &costs {
+            println!("     {:<22} {:>7.1}", c.filter, c.instructions_per_tick);
+        }
+    }
+    println!(
+        "  checks (seed digits, poles < 1e-7, gains < 1e-10, conservation, zero in -> zero out, position within 1 count of the f64 filter): {}",
+        if ok { "pass" } else { "FAIL" }
+    );
+    Ok(ok)
+}
+
+impl AccdecProbeArgs {
+    pub fn run(&self) -> Result<bool> {
+        crate::accdec::bench::cost_probe(&self.filter, self.ticks).map(|s| {
+            println!("{s}");
+            true
+        })
+    }
+}

@@ -1,0 +1,5 @@
+//! Signal analysis shared by the experiments.
+
+pub mod polynomial;
+pub mod response_point;
+pub mod spectral;

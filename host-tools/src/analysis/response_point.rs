@@ -1,0 +1,29 @@
+//! One frequency of a measured or modelled frequency response: gain, phase and how clean the
+//! measurement was; differences between two responses.
+
+use serde::Serialize;
+
+use crate::analysis::spectral::Complex;
+
+/// One frequency of a response.
+#[derive(Clone, Copy, Debug, Serialize, PartialEq)]
+pub struct ResponsePoint {
+    pub frequency: f64,
+    pub gain_db: f64,
+    pub phase_deg: f64,
+    /// Fraction of U's AC power at the frequency (1 = a clean sine was seen).
+    pub quality: f64,
+}
+
+impl ResponsePoint {
+    pub fn from_complex(frequency: f64, g: Complex, quality: f64) -> Self {
+        Self { frequency, gain_db: 20.0 * g.abs().log10(), phase_deg: g.arg().to_degrees(), quality }
+    }
+}
+
+/// Gain difference (dB) and phase difference (degrees, wrapped to ±180).
+pub fn difference(a: &ResponsePoint, b: &ResponsePoint) -> (f64, f64) {
+    let dg = a.gain_db - b.gain_db;
+    let dp = (a.phase_deg - b.phase_deg + 540.0).rem_euclid(360.0) - 180.0;
+    (if dg.is_finite() { dg } else { f64::INFINITY }, if dp.is_finite() { dp } else { f64::INFINITY })
+}

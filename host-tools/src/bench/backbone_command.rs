@@ -1,0 +1,112 @@
+//! `servo bench fmu` and `servo bench plant`: the backbone benchmarks.
+
+use anyhow::{bail, Result};
+
+use crate::bench::args::{FmuBenchArgs, PlantBenchArgs};
+use crate::bench::fmu_speed as bench;
+use crate::cli::progress_bar;
+use crate::paths::{default_fmu, default_out};
+
+impl FmuBenchArgs {
+    pub fn run(&self) -> Result<bool> {
+        bench_fmu(self)
+    }
+}
+
+fn bench_fmu(args: &FmuBenchArgs) -> Result<bool> {
+    let (seconds, no_fmpy, goal, common) = (args.seconds, args.no_fmpy, args.goal, &args.common);
+    if !(seconds.is_finite() && seconds > 0.0) {
+        bail!("--seconds must be a positive number");
+    }
+    let fmu_path = common.fmu.clone().unwrap_or_else(default_fmu);
+    let out = common.out.clone().unwrap_or_else(|| default_out("bench"));
+    let pb = progress_bar("Rust host", common.json);
+    let r = bench::bench_fmu(&fmu_path, &out, seconds, !no_fmpy, |f| pb.set_position((f * 1000.0) as u64))?;
+    pb.finish_and_clear();
+    let speed_ok = r.rust_real_time_factor >= goal;
+    let ok = speed_ok && r.boundary_overhead <= 0.10;
+    if common.json {
+        println!(
+            "{}",
+            serde_json::to_string_pretty(
+                &serde_json::json!({"bench": "fmu", "result": r, "goal": goal, "passed": ok})
+            )?
+        );
+    } else {
+        println!(
+            "servo bench fmu — default axis, {} s simulated, {} communication steps",
+            r.simulated_seconds, r.communication_steps
+        );
+        println!(
+            "  recording the {} outputs the FMU's specification names ({}) at every step:",
+            r.recorded_outputs.len(),
+            r.recorded_outputs.join(", ")
+        );
+        println!(
+            "    Rust host (fmi crate): {:>8.3} s wall  → {:>8.1} x real time  (median of {} runs)",
+            r.rust_wall_seconds,
+            r.rust_real_time_factor,
+            bench::RUST_RUNS
+        );
+        if let (Some(w), Some(f)) = (r.fmpy_wall_seconds, r.fmpy_real_time_factor) {
+            println!("    fmpy                 : {:>8.3} s wall  → {:>8.1} x real time", w, f);
+            println!("    ratio Rust / fmpy    : {:>8.2}", r.rust_over_fmpy.unwrap_or(f64::NAN));
+        }
+        println!("  recording all {} outputs at every step:", r.all_outputs);
+        println!(
+            "    Rust host (fmi crate): {:>8.3} s wall  → {:>8.1} x real time  (median of {} runs)",
+            r.all_outputs_wall_seconds,
+            r.all_outputs_real_time_factor,
+            bench::RUST_RUNS
+        );
+        println!(
+            "  bare simulation (core + plant, no FMI): {:>8.3} s wall  → {:>8.1} x real time  (median of {} runs)",
+            r.bare_wall_seconds,
+            r.bare_real_time_factor,
+            bench::RUST_RUNS
+        );
+        println!(
+            "  reading all {} outputs at every step without keeping them: {:>8.3} s wall, {:+.1} % of the bare simulation (the boundary alone)",
+            r.all_outputs,
+            r.read_only_wall_seconds,
+            100.0 * r.read_only_overhead
+        );
+        println!(
+            "  the FMI boundary and recording all {} outputs cost {:+.1} % of the bare simulation (goal ≤ 10 %): {}",
+            r.all_outputs,
+            100.0 * r.boundary_overhead,
+            if r.boundary_overhead <= 0.10 { "met" } else { "NOT met" }
+        );
+        println!(
+            "  goal ≥ {goal} x real time through the Rust host (the specification's outputs): {}",
+            if speed_ok { "met" } else { "NOT met" }
+        );
+    }
+    Ok(ok)
+}
+
+impl PlantBenchArgs {
+    pub fn run(&self) -> Result<bool> {
+        bench_plant(self)
+    }
+}
+
+fn bench_plant(args: &PlantBenchArgs) -> Result<bool> {
+    let common = &args.common;
+    let r = crate::bench::plant::step_error()?;
+    if common.json {
+        println!("{}", serde_json::to_string_pretty(&r)?);
+    } else {
+        println!("servo bench plant — exact linear parts, {} sub-step(s) per 62.5 µs tick vs {} (reference), inverter commands of {} s of closed-loop velocity steps replayed open loop", r.substeps, r.reference_substeps, r.simulated_seconds);
+        for (name, err, scale) in &r.errors {
+            println!("  {name:<16} max |error| {err:>10.3e}  (signal peak {scale:.3e}, relative {:.2e})", err / scale);
+        }
+        println!(
+            "  largest relative error: {:.2e} (goal ≤ {:.0e}): {}",
+            r.worst_relative,
+            crate::bench::plant::GOAL,
+            if r.passed { "met" } else { "NOT met" }
+        );
+    }
+    Ok(r.passed)
+}

@@ -1,0 +1,93 @@
+//! `servo bench firmware`: the drive image and the core on a Cortex-M4.
+
+use anyhow::Result;
+
+use crate::bench::args::FirmwareBenchArgs;
+use crate::cli::progress_bar;
+
+/// Goals of the issue.
+const FLASH_GOAL: u32 = 128 * 1024;
+const RAM_GOAL: u32 = 48 * 1024;
+const TICK_GOAL: f64 = 1000.0;
+/// Longest interrupts-off section of a parameter change (issue 16 item 2).
+const INTERRUPTS_OFF_GOAL: f64 = 300.0;
+
+impl FirmwareBenchArgs {
+    pub fn run(&self) -> Result<bool> {
+        bench_firmware(self)
+    }
+}
+
+fn bench_firmware(args: &FirmwareBenchArgs) -> Result<bool> {
+    let common = &args.common;
+    use crate::bench::firmware::{
+        all_features_recordings, drive_image_size, encode, interrupts_off_on_cortex_m4, recordings, replay_on_cortex_m4,
+    };
+    let pb = progress_bar("firmware bench", common.json);
+    pb.set_position(50);
+    let size = drive_image_size()?;
+    pb.set_position(300);
+    let vectors = replay_on_cortex_m4(&encode(&recordings()), "golden-vectors")?;
+    pb.set_position(700);
+    let all = replay_on_cortex_m4(&encode(&all_features_recordings()), "all-features-vectors")?;
+    pb.set_position(900);
+    let off = interrupts_off_on_cortex_m4()?;
+    pb.finish_and_clear();
+    let off_goal = off.parameter_changes <= INTERRUPTS_OFF_GOAL;
+    let per_tick_all = all.instructions_per_tick.unwrap_or(f64::INFINITY);
+    let ok = vectors.identical && all.identical && size.flash <= FLASH_GOAL && size.ram <= RAM_GOAL;
+    let tick_goal = per_tick_all <= TICK_GOAL;
+    if common.json {
+        println!(
+            "{}",
+            serde_json::to_string_pretty(&serde_json::json!({
+                "bench": "firmware", "image": size, "golden_vectors": vectors, "all_features": all,
+                "tick_goal_met": tick_goal, "interrupts_off": off, "interrupts_off_goal_met": off_goal, "passed": ok
+            }))?
+        );
+        return Ok(ok);
+    }
+    println!(
+        "servo bench firmware — drive-g474 (STM32G474RE) and the control core on a Cortex-M4F (QEMU netduinoplus2)"
+    );
+    println!(
+        "  drive image: flash {} bytes ({:.1} KiB, goal ≤ 128 KiB), static RAM {} bytes ({:.1} KiB, goal ≤ 48 KiB; stack not included)",
+        size.flash,
+        size.flash as f64 / 1024.0,
+        size.ram,
+        size.ram as f64 / 1024.0
+    );
+    for (name, r) in
+        [("golden vectors (the shipped scenarios' situations)", &vectors), ("every feature on at once", &all)]
+    {
+        println!(
+            "  {name}: {} ticks compared bit for bit, host digest {}, target: {} → {}",
+            r.ticks,
+            r.host_digest,
+            r.target,
+            if r.identical { "identical" } else { "DIFFERENT" }
+        );
+        println!(
+            "    instructions per 16 kHz tick on the Cortex-M4 (QEMU -icount, average): {:.0} for Axis::step, {:.0} with the output digest",
+            r.instructions_per_tick.unwrap_or(f64::NAN),
+            r.instructions_per_tick_with_digest.unwrap_or(f64::NAN)
+        );
+    }
+    println!(
+        "  goal: at most {TICK_GOAL:.0} instructions per tick with every feature on: {} ({per_tick_all:.0})",
+        if tick_goal { "met" } else { "NOT met" }
+    );
+    println!(
+        "  interrupts off (drive application on a board without registers, QEMU -icount, instructions): longest during a parameter change (SetParams, LoadCorrection with 8 sections, SaveParams) {:.0}, goal ≤ {INTERRUPTS_OFF_GOAL:.0}: {}; longest over every request {:.0} ({}); the tick's own {:.0}; the old SetParams (axis built and copied inside) {:.0}",
+        off.parameter_changes,
+        if off_goal { "met" } else { "NOT met" },
+        off.longest,
+        off.longest_request,
+        off.tick,
+        off.old_set_params
+    );
+    for line in &off.requests {
+        println!("    {}", line.trim_start_matches("interrupts-off request "));
+    }
+    Ok(ok)
+}

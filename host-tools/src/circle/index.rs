@@ -1,0 +1,33 @@
+//! `servo circle`'s part of out/index.html: every circle run under out/circle/ (the XY circle,
+//! the pseudo-circle with its fmpy verdict, the tuned axes), plots and figures.
+
+use std::path::Path;
+
+use crate::page::{files_with, read_json, relative, Section};
+
+pub fn section(root: &Path) -> Option<Section> {
+    let dir = root.join("circle");
+    let mut dirs = vec![dir.clone()];
+    let mut subdirs: Vec<_> =
+        std::fs::read_dir(&dir).ok()?.filter_map(|e| e.ok().map(|e| e.path())).filter(|p| p.is_dir()).collect();
+    subdirs.sort();
+    dirs.extend(subdirs);
+    let mut s =
+        Section { title: "Circle tests (seed 002)".into(), command: "servo circle …".into(), ..Default::default() };
+    for d in &dirs {
+        for name in ["circle.json", "pseudo_circle.json"] {
+            let path = d.join(name);
+            let Some(json) = read_json(&path) else { continue };
+            if let Some(i) = json["fmpy"]["identical"].as_bool() {
+                s.verdicts
+                    .push((format!("{}: fmpy gives the same feedback bit for bit", relative(root, d).display()), i));
+            }
+            s.files.push(relative(root, &path));
+        }
+        s.plots.extend(files_with(d, "svg").iter().map(|p| relative(root, p)));
+    }
+    if s.files.is_empty() {
+        return None;
+    }
+    Some(s)
+}

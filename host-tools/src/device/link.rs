@@ -1,0 +1,244 @@
+//! The host's side of the drive link: the core's protocol (`control_core::protocol`: postcard
+//! messages, CRC-32C, COBS, zero-delimited frames, version 3; every count field checked
+//! before use, `frame_stream`) over any byte stream — the drive's USART
+//! through the ST-LINK virtual COM port, or a socket to a simulated drive in tests.
+//!
+//! Every request gets one answer. While streaming is on, the drive also sends `Samples`
+//! frames unasked; they are kept aside in arrival order and handed out by
+//! [`DeviceLink::take_samples`], so a request never mistakes a sample batch for its answer.
+
+use std::io::{Read, Write};
+use std::time::{Duration, Instant};
+
+use anyhow::{bail, Context, Result};
+use control_core::acquisition_stream::SampleBatch;
+use control_core::protocol::{encode, Request, Response, MAX_FRAME, VERSION};
+
+use crate::device::frame_stream::FrameStream;
+
+pub struct DeviceLink<T: Read + Write> {
+    port: T,
+    /// Bytes read but not yet part of a complete frame.
+    pending: FrameStream,
+    samples: Vec<SampleBatch>,
+    timeout: Duration,
+}
+
+impl<T: Read + Write> DeviceLink<T> {
+    pub fn new(port: T, timeout: Duration) -> Self {
+        Self { port, pending: FrameStream::default(), samples: Vec::new(), timeout }
+    }
+
+    /// Send one request and wait for its answer.
+    pub fn request(&mut self, request: &Request) -> Result<Response> {
+        let mut buf = vec![0u8; MAX_FRAME + 8];
+        let n = encode(request, &mut buf).map_err(|e| anyhow::anyhow!("cannot encode the request: {e}"))?;
+        self.port.write_all(&buf[..n]).context("cannot write to the drive")?;
+        self.port.flush().ok();
+        let deadline = Instant::now() + self.timeout;
+        loop {
+            match self.next_frame(deadline)? {
+                Response::Samples(b) => self.samples.push(b),
+                other => return Ok(other),
+            }
+        }
+    }
+
+    /// Check the drive speaks this protocol version.
+    pub fn hello(&mut self) -> Result<()> {
+        match self.request(&Request::Hello { version: VERSION })? {
+            Response::Hello { version, .. } if version == VERSION => Ok(()),
+            Response::FrameError(e) => bail!("the drive refused the handshake: {e}"),
+            other => bail!("unexpected answer to the handshake: {other:?}"),
+        }
+    }
+
+    /// Sample batches received so far (streaming), oldest first.
+    pub fn take_samples(&mut self) -> Vec<SampleBatch> {
+        std::mem::take(&mut self.samples)
+    }
+
+    /// Read frames for `duration`, keeping sample batches.
+    pub fn listen(&mut self, duration: Duration) -> Result<()> {
+        let until = Instant::now() + duration;
+        while Instant::now() < until {
+            match self.next_frame(until) {
+                Ok(Response::Samples(b)) => self.samples.push(b),
+                Ok(other) => bail!("unasked frame from the drive: {other:?}"),
+                Err(_) if Instant::now() >= until => break,
+                Err(e) => return Err(e),
+            }
+        }
+        Ok(())
+    }
+
+    /// The next complete frame, decoded.
+    fn next_frame(&mut self, deadline: Instant) -> Result<Response> {
+        let mut chunk = [0u8; 256];
+        loop {
+            match self.pending.next_frame() {
+                Some(Ok(r)) => return Ok(r),
+                Some(Err(e)) => bail!("corrupt frame from the drive: {e}"),
+                None => {}
+            }
+            if Instant::now() >= deadline {
+                bail!("no answer from the drive within {:?}", self.timeout);
+            }
+            match self.port.read(&mut chunk) {
+                Ok(0) => bail!("the drive closed the link"),
+                Ok(n) => self.pending.push(&chunk[..n]),
+                Err(e)
+                    if matches!(
+                        e.kind(),
+                        std::io::ErrorKind::TimedOut | std::io::ErrorKind::WouldBlock | std::io::ErrorKind::Interrupted
+                    ) => {}
+                Err(e) => return Err(e).context("cannot read from the drive"),
+            }
+        }
+    }
+}
+
+/// A `LoadCorrection` frame (`servo tune`'s `<axis>.corr.frame`), checked as the drive would
+/// check it (`CorrectionParams::validate` through `Axis::load_correction`) at the
+/// position-loop period of the parameters the firmware installs (`Params::default` rates).
+pub fn correction_request(frame: &mut [u8]) -> Result<Request> {
+    match control_core::protocol::decode::<Request>(frame) {
+        Ok(r @ Request::LoadCorrection(c)) => {
+            let period = control_core::Params::default().rates.position_period();
+            c.validate(period).map_err(|e| anyhow::anyhow!("the drive would refuse this correction: {e}"))?;
+            Ok(r)
+        }
+        Ok(other) => bail!("a {other:?} request, not a correction"),
+        Err(e) => bail!("not a frame of protocol version {VERSION}: {e}"),
+    }
+}
+
+/// Open the drive's serial port (8N1, no flow control).
+pub fn open_serial(path: &str, baud: u32) -> Result<Box<dyn serialport::SerialPort>> {
+    serialport::new(path, baud).timeout(Duration::from_millis(50)).open().with_context(|| {
+        format!("cannot open the serial port {path} (is the board attached, and may you use the port?)")
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use control_core::acquisition_stream::AcquisitionStream;
+    use control_core::phase_shifted_sweep::AcquisitionSample;
+    use control_core::protocol::{decode, handle};
+    use control_core::{Axis, Commands, Params};
+    use std::os::unix::net::UnixStream;
+
+    /// A drive in a thread: the core's own `handle` on an axis, over a socket, sending sample
+    /// batches between answers while streaming — as the firmware's link task does.
+    fn simulated_drive(mut s: UnixStream) {
+        let mut axis = Axis::new(Params::default()).unwrap();
+        let mut commands = Commands::default();
+        let mut stream = AcquisitionStream::default();
+        let mut frame = Vec::new();
+        let mut byte = [0u8; 1];
+        let mut tick = 0u64;
+        while s.read(&mut byte).map(|n| n == 1).unwrap_or(false) {
+            if byte[0] != 0 {
+                frame.push(byte[0]);
+                continue;
+            }
+            let response = match decode::<Request>(&mut frame) {
+                Ok(r) => handle(&mut axis, &mut commands, &mut stream, r),
+                Err(e) => Response::FrameError(e),
+            };
+            frame.clear();
+            // Some samples arrive before the answer, as they would from a running drive.
+            for _ in 0..20 {
+                stream.offer(&AcquisitionSample { tick, u: tick as f32, ..Default::default() });
+                tick += 4;
+            }
+            let mut out = vec![0u8; MAX_FRAME + 8];
+            while let Some(b) = stream.take_batch() {
+                let n = encode(&Response::Samples(b), &mut out).unwrap();
+                s.write_all(&out[..n]).unwrap();
+            }
+            let n = encode(&response, &mut out).unwrap();
+            s.write_all(&out[..n]).unwrap();
+        }
+    }
+
+    #[test]
+    fn requests_get_their_answers_and_streamed_samples_are_kept_aside_in_order() {
+        let (host, drive) = UnixStream::pair().unwrap();
+        let t = std::thread::spawn(move || simulated_drive(drive));
+        host.set_read_timeout(Some(Duration::from_millis(50))).unwrap();
+        let mut link = DeviceLink::new(host, Duration::from_secs(2));
+        link.hello().unwrap();
+        assert_eq!(link.request(&Request::Stream { enabled: true }).unwrap(), Response::Done);
+        assert!(matches!(link.request(&Request::GetTelemetry).unwrap(), Response::Telemetry(_)));
+        assert_eq!(link.request(&Request::ClearFaults).unwrap(), Response::Done);
+        let ticks: Vec<u64> = link
+            .take_samples()
+            .iter()
+            .flat_map(|b| {
+                crate::device::frame_stream::batch_samples(b).unwrap().iter().map(|s| s.tick).collect::<Vec<_>>()
+            })
+            .collect();
+        assert!(ticks.len() >= 40, "{} samples", ticks.len());
+        assert!(ticks.windows(2).all(|w| w[1] == w[0] + 4), "in order, none lost: {ticks:?}");
+        // A version the drive does not speak is an error with the reason.
+        let e = match link.request(&Request::Hello { version: VERSION + 1 }).unwrap() {
+            Response::FrameError(e) => e.to_string(),
+            other => panic!("{other:?}"),
+        };
+        assert!(e.contains("version"), "{e}");
+        drop(link);
+        t.join().unwrap();
+    }
+
+    /// Issue 18: a correction with a NaN pole or 99 sections is refused before it is sent.
+    #[test]
+    fn corrections_are_checked_as_the_drive_checks_them() {
+        let good = control_core::Params::default().correction;
+        let frame = |c| {
+            let mut buf = vec![0u8; MAX_FRAME + 8];
+            let n = encode(&Request::LoadCorrection(c), &mut buf).unwrap();
+            buf.truncate(n);
+            buf
+        };
+        assert!(correction_request(&mut frame(good)).is_ok());
+        let mut nan = good;
+        nan.count = 1;
+        nan.sections[0].poles.hz = f32::NAN;
+        let e = correction_request(&mut frame(nan)).unwrap_err().to_string();
+        assert!(e.contains("would refuse"), "{e}");
+        let many = control_core::response_correction::CorrectionParams { count: 99, ..good };
+        let e = correction_request(&mut frame(many)).unwrap_err().to_string();
+        assert!(e.contains("would refuse"), "{e}");
+        // And the drive does refuse both (the host's check is the drive's).
+        let mut axis = Axis::new(control_core::Params::default()).unwrap();
+        for c in [nan, many] {
+            assert!(axis.load_correction(&c).is_err());
+        }
+    }
+
+    /// Issue 18: a CRC-valid Samples frame whose count says 200 is an error, not a panic.
+    #[test]
+    fn a_sample_count_beyond_its_slots_is_an_error() {
+        let b = SampleBatch { count: 200, ..Default::default() };
+        let mut buf = vec![0u8; MAX_FRAME + 8];
+        let n = encode(&Response::Samples(b), &mut buf).unwrap();
+        let mut s = FrameStream::default();
+        s.push(&buf[..n]);
+        assert!(matches!(s.next_frame(), Some(Err(control_core::protocol::FrameError::Count { got: 200, max: 16 }))));
+        assert!(crate::device::frame_stream::sample_rows(&[b]).is_err());
+    }
+
+    #[test]
+    fn a_silent_or_garbling_drive_is_an_error_not_a_hang() {
+        let (host, mut drive) = UnixStream::pair().unwrap();
+        host.set_read_timeout(Some(Duration::from_millis(20))).unwrap();
+        let mut link = DeviceLink::new(host, Duration::from_millis(200));
+        let e = link.request(&Request::GetTelemetry).unwrap_err().to_string();
+        assert!(e.contains("no answer"), "{e}");
+        drive.write_all(&[0x05, 0x11, 0x22, 0x33, 0x44, 0x00]).unwrap();
+        let e = link.request(&Request::GetTelemetry).unwrap_err().to_string();
+        assert!(e.contains("corrupt frame"), "{e}");
+    }
+}

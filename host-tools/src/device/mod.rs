@@ -1,0 +1,6 @@
+//! The drive link: `servo device`.
+
+pub mod args;
+pub mod command;
+pub mod frame_stream;
+pub mod link;

@@ -1,0 +1,343 @@
+//! Run a scenario on the FMU through the `fmi` crate (FMI 3.0 Co-Simulation import).
+
+use std::collections::BTreeMap;
+use std::path::Path;
+
+use anyhow::{anyhow, bail, Context, Result};
+use fmi::fmi3::import::Fmi3Import;
+use fmi::fmi3::instance::InstanceCS;
+use fmi::fmi3::{CoSimulation, Common, Fmi3Model, GetSet};
+use fmi::schema::fmi3::{Causality, VariableType};
+use fmi::traits::FmiImport;
+
+use crate::fmu::scenario::{Scenario, Value};
+use crate::fmu::trace::Trace;
+
+/// A variable of the model description.
+#[derive(Clone, Debug)]
+pub struct VariableInfo {
+    pub name: String,
+    pub vr: u32,
+    pub kind: Kind,
+    pub causality: Causality,
+}
+
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Kind {
+    Float64,
+    Int32,
+    Boolean,
+}
+
+/// Unpack an FMI 3.0 archive and read its model description with the `fmi` crate.
+///
+/// fmi-schema 0.8 reads `BaseUnit`'s ampere and kelvin exponents under the names `a` and `k`
+/// and refuses the standard's `A` and `K` (strict attributes): the model description in the
+/// unpacked copy gets its `BaseUnit` exponents renamed for it, nothing else changes. The
+/// archive itself keeps the standard's spelling (fmpy validate, fmutool and the FMI 2.0 side
+/// of the crate read it as the standard says).
+pub fn import_fmi3(path: &Path) -> Result<Fmi3Import> {
+    let file = std::fs::File::open(path)?;
+    let mut archive = zip::ZipArchive::new(file)?;
+    let dir = tempfile::Builder::new().prefix("servo-fmu").tempdir()?;
+    archive.extract(dir.path())?;
+    let xml =
+        std::fs::read_to_string(dir.path().join("modelDescription.xml")).context("reading modelDescription.xml")?;
+    let patched = base_units_for_fmi_schema(&xml);
+    Ok(<Fmi3Import as FmiImport>::new(dir, &patched)?)
+}
+
+fn base_units_for_fmi_schema(xml: &str) -> String {
+    let mut out = String::with_capacity(xml.len());
+    let mut rest = xml;
+    while let Some(i) = rest.find("<BaseUnit") {
+        let end = i + rest[i..].find('>').unwrap_or(rest.len() - i);
+        out.push_str(&rest[..i]);
+        out.push_str(&rest[i..end].replace(" A=\"", " a=\"").replace(" K=\"", " k=\""));
+        rest = &rest[end..];
+    }
+    out.push_str(rest);
+    out
+}
+
+/// A loaded FMU (unpacked once, instantiated per run).
+pub struct Fmu {
+    import: Fmi3Import,
+    variables: BTreeMap<String, VariableInfo>,
+}
+
+impl Fmu {
+    pub fn load(path: &Path) -> Result<Self> {
+        if !path.exists() {
+            bail!(
+                "FMU {} not found: build it with `cargo run -p xtask -- bundle` (or pass --fmu PATH)",
+                path.display()
+            );
+        }
+        let import = import_fmi3(path).map_err(|e| anyhow!("cannot import {}: {e}", path.display()))?;
+        let mut variables = BTreeMap::new();
+        for v in import.model_description().model_variables.iter_abstract() {
+            let kind = match v.data_type() {
+                VariableType::FmiFloat64 => Kind::Float64,
+                VariableType::FmiInt32 => Kind::Int32,
+                VariableType::FmiBoolean => Kind::Boolean,
+                _ => continue,
+            };
+            variables.insert(
+                v.name().to_string(),
+                VariableInfo { name: v.name().to_string(), vr: v.value_reference(), kind, causality: v.causality() },
+            );
+        }
+        Ok(Self { import, variables })
+    }
+
+    pub fn variable(&self, name: &str) -> Result<&VariableInfo> {
+        self.variables.get(name).ok_or_else(|| {
+            let close: Vec<&str> = self
+                .variables
+                .keys()
+                .filter(|k| k.contains(name) || name.contains(k.as_str()))
+                .map(String::as_str)
+                .take(5)
+                .collect();
+            anyhow!(
+                "the FMU has no variable `{name}`{}",
+                if close.is_empty() { String::new() } else { format!(" (did you mean {close:?}?)") }
+            )
+        })
+    }
+
+    /// All outputs, in model-description order of value reference.
+    pub fn outputs(&self) -> Vec<&VariableInfo> {
+        let mut v: Vec<&VariableInfo> = self.variables.values().filter(|v| v.causality == Causality::Output).collect();
+        v.sort_by_key(|v| v.vr);
+        v
+    }
+
+    fn set(inst: &mut InstanceCS, var: &VariableInfo, value: Value) -> Result<()> {
+        let r = match (var.kind, value) {
+            (Kind::Float64, v) => inst.set_float64(&[var.vr], &[v.as_f64()]),
+            (Kind::Int32, Value::Int(i)) => {
+                let i = i32::try_from(i).map_err(|_| anyhow!("{} = {i} does not fit a 32-bit integer", var.name))?;
+                inst.set_int32(&[var.vr], &[i])
+            }
+            // Model files keep every parameter as a number: a whole one sets an integer.
+            (Kind::Int32, Value::Float(f)) if f.fract() == 0.0 && f >= i32::MIN as f64 && f <= i32::MAX as f64 => {
+                inst.set_int32(&[var.vr], &[f as i32])
+            }
+            (Kind::Boolean, Value::Bool(b)) => inst.set_boolean(&[var.vr], &[b]),
+            (kind, v) => bail!("{} is {kind:?}; {v:?} is not a value of that type", var.name),
+        };
+        r.map(|_| ()).map_err(|_| anyhow!("the FMU refused {} = {value:?}: {}", var.name, crate::fmu::log::reasons()))
+    }
+
+    /// The outputs `names` (the scenario's `record` list), or every output when it is empty.
+    pub fn recorded(&self, names: &[String]) -> Result<Vec<&VariableInfo>> {
+        if names.is_empty() {
+            return Ok(self.outputs());
+        }
+        names
+            .iter()
+            .map(|n| {
+                let var = self.variable(n)?;
+                if var.causality != Causality::Output {
+                    bail!("record lists `{n}`, which is not an output of the FMU (it is {:?})", var.causality);
+                }
+                Ok(var)
+            })
+            .collect()
+    }
+
+    /// Run `scenario`; `progress` is called with the fraction done.
+    pub fn run(&self, scenario: &Scenario, progress: impl FnMut(f64)) -> Result<Trace> {
+        self.run_until(scenario, progress, |_| false)
+    }
+
+    /// Run `scenario` until its stop time or until `done` says so of a recorded row (time,
+    /// then the recorded outputs in trace order); the trace ends with that row.
+    pub fn run_until(
+        &self,
+        scenario: &Scenario,
+        progress: impl FnMut(f64),
+        done: impl FnMut(&[f64]) -> bool,
+    ) -> Result<Trace> {
+        self.run_inner(scenario, progress, done, true)
+    }
+
+    /// Run `scenario` reading every recorded output at every step but keeping only the last
+    /// row (what the FMI boundary costs without the memory a trace takes; `servo bench fmu`).
+    pub fn run_reading_only(&self, scenario: &Scenario) -> Result<Trace> {
+        self.run_inner(scenario, |_| {}, |_| false, false)
+    }
+
+    fn run_inner(
+        &self,
+        scenario: &Scenario,
+        mut progress: impl FnMut(f64),
+        mut done: impl FnMut(&[f64]) -> bool,
+        keep_rows: bool,
+    ) -> Result<Trace> {
+        let params: Vec<(&VariableInfo, Value)> = scenario
+            .parameters
+            .iter()
+            .map(|(n, v)| {
+                let var = self.variable(n)?;
+                if var.causality != Causality::Parameter {
+                    bail!("`{n}` is not a parameter of the FMU (it is {:?})", var.causality);
+                }
+                Ok((var, *v))
+            })
+            .collect::<Result<_>>()?;
+        // Inputs are set when they change, not at every step.
+        let changes: Vec<(usize, Vec<(&VariableInfo, Value)>)> = scenario
+            .changes()
+            .into_iter()
+            .map(|(k, group)| {
+                let group = group
+                    .into_iter()
+                    .map(|(n, v)| {
+                        let var = self.variable(n)?;
+                        if var.causality != Causality::Input {
+                            bail!("event sets `{n}`, which is not an input of the FMU (it is {:?})", var.causality);
+                        }
+                        Ok((var, v))
+                    })
+                    .collect::<Result<Vec<_>>>()?;
+                Ok((k, group))
+            })
+            .collect::<Result<_>>()?;
+        let outputs = self.recorded(&scenario.record)?;
+
+        crate::fmu::log::install();
+        crate::fmu::log::clear();
+        let mut inst = self
+            .import
+            .instantiate_cs(&scenario.name, false, false, false, false, &[])
+            .map_err(|e| anyhow!("cannot instantiate the FMU: {e}"))?;
+        for (var, v) in &params {
+            Self::set(&mut inst, var, *v)?;
+        }
+        let h = scenario.step();
+        let n = scenario.steps();
+        inst.enter_initialization_mode(None, 0.0, Some(scenario.stop_time))
+            .map_err(|_| anyhow!("enter initialization mode failed: {}", crate::fmu::log::reasons()))?;
+        let mut pending = changes.iter().peekable();
+        let mut apply = |inst: &mut InstanceCS, k: usize| -> Result<()> {
+            while let Some((_, group)) = pending.next_if(|(j, _)| *j <= k) {
+                for (var, v) in group {
+                    Self::set(inst, var, *v)?;
+                }
+            }
+            Ok(())
+        };
+        apply(&mut inst, 0)?;
+        inst.exit_initialization_mode()
+            .map_err(|_| anyhow!("the FMU refused its parameters at initialization: {}", crate::fmu::log::reasons()))?;
+
+        let mut columns = vec!["time".to_string()];
+        columns.extend(outputs.iter().map(|v| v.name.clone()));
+        let mut trace = Trace::new(columns);
+        trace.rows.reserve_exact(if keep_rows { n + 1 } else { 1 });
+        // Outputs are read in one call per type, then put back in column order.
+        let of_kind = |kind: Kind| -> (Vec<usize>, Vec<u32>) {
+            outputs.iter().enumerate().filter(|(_, v)| v.kind == kind).map(|(i, v)| (i, v.vr)).unzip()
+        };
+        let (f64_cols, f64_vrs) = of_kind(Kind::Float64);
+        let (i32_cols, i32_vrs) = of_kind(Kind::Int32);
+        let (bool_cols, bool_vrs) = of_kind(Kind::Boolean);
+        let (mut f64_buf, mut i32_buf, mut bool_buf) =
+            (vec![0.0; f64_vrs.len()], vec![0; i32_vrs.len()], vec![false; bool_vrs.len()]);
+        let mut record = |inst: &mut InstanceCS, t: f64, trace: &mut Trace| -> Result<()> {
+            if !f64_vrs.is_empty() {
+                inst.get_float64(&f64_vrs, &mut f64_buf).map_err(|e| anyhow!("get outputs: {e:?}"))?;
+            }
+            if !i32_vrs.is_empty() {
+                inst.get_int32(&i32_vrs, &mut i32_buf).map_err(|e| anyhow!("get outputs: {e:?}"))?;
+            }
+            if !bool_vrs.is_empty() {
+                inst.get_boolean(&bool_vrs, &mut bool_buf).map_err(|e| anyhow!("get outputs: {e:?}"))?;
+            }
+            if !keep_rows {
+                trace.rows.clear();
+            }
+            trace.rows.push_with(|row| {
+                row[0] = t;
+                for (&c, &v) in f64_cols.iter().zip(&f64_buf) {
+                    row[c + 1] = v;
+                }
+                for (&c, &v) in i32_cols.iter().zip(&i32_buf) {
+                    row[c + 1] = v as f64;
+                }
+                for (&c, &v) in bool_cols.iter().zip(&bool_buf) {
+                    row[c + 1] = v as i32 as f64;
+                }
+            });
+            Ok(())
+        };
+        record(&mut inst, 0.0, &mut trace)?;
+        let (mut ev, mut term, mut early, mut last) = (false, false, false, 0.0);
+        for k in 0..n {
+            let t = k as f64 * h;
+            apply(&mut inst, k)?;
+            inst.do_step(t, h, true, &mut ev, &mut term, &mut early, &mut last)
+                .map_err(|_| anyhow!("do_step at t = {t} s failed: {}", crate::fmu::log::reasons()))?;
+            record(&mut inst, (k + 1) as f64 * h, &mut trace)?;
+            if k % 256 == 0 {
+                progress(k as f64 / n as f64);
+            }
+            if trace.rows.last().is_some_and(&mut done) {
+                break;
+            }
+        }
+        progress(1.0);
+        inst.terminate().ok();
+        Ok(trace)
+    }
+}
+
+/// Result of one check of a scenario.
+#[derive(Clone, Debug, serde::Serialize)]
+pub struct CheckResult {
+    pub signal: String,
+    pub description: String,
+    pub passed: bool,
+    /// Smallest and largest value of the signal in the window.
+    pub observed: (f64, f64),
+    pub min: Option<f64>,
+    pub max: Option<f64>,
+    pub window: (f64, f64),
+}
+
+pub fn evaluate_checks(scenario: &Scenario, trace: &Trace) -> Result<Vec<CheckResult>> {
+    let time = trace.column("time").context("trace has no time column")?;
+    let mut results = Vec::new();
+    for c in &scenario.checks {
+        let values =
+            trace.column(&c.signal).with_context(|| format!("check: no signal `{}` in the result", c.signal))?;
+        let (from, to) = match c.at {
+            Some(at) => (at, at),
+            None => (c.from.unwrap_or(0.0), c.to.unwrap_or(scenario.stop_time)),
+        };
+        let h = scenario.step();
+        let idx: Vec<usize> =
+            (0..time.len()).filter(|&i| time[i] >= from - 0.5 * h && time[i] <= to + 0.5 * h).collect();
+        if idx.is_empty() {
+            bail!("check on {}: no sample in [{from}, {to}] s", c.signal);
+        }
+        let lo = c.min.unwrap_or(f64::NEG_INFINITY);
+        let hi = c.max.unwrap_or(f64::INFINITY);
+        let observed =
+            idx.iter().fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), &i| (a.min(values[i]), b.max(values[i])));
+        let passed = idx.iter().all(|&i| values[i] >= lo && values[i] <= hi);
+        results.push(CheckResult {
+            signal: c.signal.clone(),
+            description: c.description.clone().unwrap_or_default(),
+            passed,
+            observed,
+            min: c.min,
+            max: c.max,
+            window: (from, to),
+        });
+    }
+    Ok(results)
+}

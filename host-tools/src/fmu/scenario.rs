@@ -1,0 +1,338 @@
+//! Scenario files: parameters, input events over time, stop time and checks.
+//!
+//! ```toml
+//! name = "position_step"
+//! description = "1 rad position step on the default axis"
+//! stop_time = 0.3          # s, a whole number of steps
+//! step = 0.00025           # s, optional: communication step (default: position-loop period)
+//!
+//! [parameters]             # FMU parameters by name
+//! "ctrl.position_kp" = 125.7
+//!
+//! [[events]]               # inputs change at `time` and hold until the next event
+//! time = 0.0
+//! mode = 2
+//! [[events]]
+//! time = 0.01
+//! position_command = 1.0
+//!
+//! record = ["motor_position", "iq"]   # optional: outputs to record (default: all)
+//!
+//! [[checks]]               # evaluated on the result; a failed check makes `servo` exit 1
+//! signal = "motor_position"
+//! at = 0.3                 # or `from`/`to` for a window
+//! min = 0.99
+//! max = 1.01
+//! ```
+
+use std::collections::BTreeMap;
+use std::path::Path;
+
+use anyhow::{bail, Context, Result};
+use control_core::axis::Mode;
+use serde::Deserialize;
+
+/// Value of a parameter or an input: a number, an integer or a boolean.
+#[derive(Clone, Copy, Debug, PartialEq, Deserialize)]
+#[serde(untagged)]
+pub enum Value {
+    Bool(bool),
+    Int(i64),
+    Float(f64),
+}
+
+impl From<servo_axis::variables::Value> for Value {
+    fn from(v: servo_axis::variables::Value) -> Self {
+        match v {
+            servo_axis::variables::Value::Float64(x) => Value::Float(x),
+            servo_axis::variables::Value::Int32(x) => Value::Int(x as i64),
+            servo_axis::variables::Value::Boolean(x) => Value::Bool(x),
+        }
+    }
+}
+
+impl Value {
+    /// A coded value (a mode, a filter kind, …): the `code()` of its enum.
+    pub fn code(code: i32) -> Self {
+        Value::Int(code.into())
+    }
+
+    pub fn as_f64(self) -> f64 {
+        match self {
+            Value::Bool(b) => b as i64 as f64,
+            Value::Int(i) => i as f64,
+            Value::Float(x) => x,
+        }
+    }
+}
+
+#[derive(Clone, Debug, Deserialize)]
+pub struct Event {
+    pub time: f64,
+    #[serde(flatten)]
+    pub inputs: BTreeMap<String, Value>,
+}
+
+#[derive(Clone, Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Check {
+    pub signal: String,
+    /// Evaluate at this time (the nearest sample).
+    pub at: Option<f64>,
+    /// Or over a window [from, to] (every sample must satisfy the bounds).
+    pub from: Option<f64>,
+    pub to: Option<f64>,
+    pub min: Option<f64>,
+    pub max: Option<f64>,
+    /// Optional text for reports.
+    pub description: Option<String>,
+}
+
+#[derive(Clone, Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Scenario {
+    pub name: String,
+    #[serde(default)]
+    pub description: String,
+    pub stop_time: f64,
+    pub step: Option<f64>,
+    #[serde(default)]
+    pub parameters: BTreeMap<String, Value>,
+    #[serde(default)]
+    pub events: Vec<Event>,
+    #[serde(default)]
+    pub checks: Vec<Check>,
+    /// Signals to plot (default: a standard set).
+    #[serde(default)]
+    pub plot: Vec<String>,
+    /// Outputs to record, in this order (default: every output of the FMU). Each recorded
+    /// value is one more lookup in the FMU per step: a long run that needs a few signals
+    /// runs faster when it records only those.
+    #[serde(default)]
+    pub record: Vec<String>,
+}
+
+/// Default communication step: the position-loop period of the default parameters.
+pub const DEFAULT_STEP: f64 = 4.0 / 16_000.0;
+
+impl Scenario {
+    pub fn load(path: &Path) -> Result<Self> {
+        let text = std::fs::read_to_string(path).with_context(|| format!("cannot read scenario {}", path.display()))?;
+        let s: Scenario = toml::from_str(&text).with_context(|| format!("scenario {} is malformed", path.display()))?;
+        s.validate().with_context(|| format!("scenario {} is invalid", path.display()))?;
+        Ok(s)
+    }
+
+    pub fn step(&self) -> f64 {
+        self.step.unwrap_or(DEFAULT_STEP)
+    }
+
+    /// Number of communication steps (stop_time / step, which must be whole).
+    pub fn steps(&self) -> usize {
+        (self.stop_time / self.step()).round() as usize
+    }
+
+    pub fn validate(&self) -> Result<()> {
+        let h = self.step();
+        if !(h.is_finite() && h > 0.0) {
+            bail!("step must be a positive number of seconds (got {h})");
+        }
+        if !(self.stop_time.is_finite() && self.stop_time > 0.0) {
+            bail!("stop_time must be a positive number of seconds (got {})", self.stop_time);
+        }
+        let n = self.stop_time / h;
+        if (n - n.round()).abs() > 1e-6 {
+            bail!("stop_time {} s is not a whole number of steps of {h} s", self.stop_time);
+        }
+        for (name, v) in &self.parameters {
+            if !v.as_f64().is_finite() {
+                bail!("parameter {name} is not a finite number");
+            }
+        }
+        let mut last = f64::NEG_INFINITY;
+        for e in &self.events {
+            if !(e.time.is_finite() && e.time >= 0.0 && e.time <= self.stop_time) {
+                bail!("event time {} s is outside [0, stop_time = {}]", e.time, self.stop_time);
+            }
+            if e.time < last {
+                bail!("events must be in time order ({} s comes after {} s)", e.time, last);
+            }
+            let k = e.time / h;
+            if (k - k.round()).abs() > 1e-6 {
+                bail!("event time {} s is not on the communication grid (a multiple of {h} s)", e.time);
+            }
+            last = e.time;
+            if e.inputs.is_empty() {
+                bail!("event at {} s sets no input", e.time);
+            }
+            for (name, v) in &e.inputs {
+                if !v.as_f64().is_finite() {
+                    bail!("event at {} s: input {name} is not a finite number", e.time);
+                }
+            }
+        }
+        for (i, name) in self.record.iter().enumerate() {
+            if self.record[..i].contains(name) {
+                bail!("record lists `{name}` twice");
+            }
+        }
+        if let Some(p) = self.plot.iter().find(|p| !self.record.is_empty() && !self.record.contains(p)) {
+            bail!("plot lists {p}, which is not recorded: add it to `record`");
+        }
+        for c in &self.checks {
+            if !self.record.is_empty() && !self.record.contains(&c.signal) {
+                bail!("check on {} needs it recorded: add it to `record`", c.signal);
+            }
+            if c.at.is_none() && (c.from.is_none() || c.to.is_none()) {
+                bail!("check on {} needs `at` or both `from` and `to`", c.signal);
+            }
+            if c.min.is_none() && c.max.is_none() {
+                bail!("check on {} needs `min` and/or `max`", c.signal);
+            }
+        }
+        Ok(())
+    }
+
+    /// Every input any event sets, sorted by name.
+    pub fn input_names(&self) -> Vec<String> {
+        let mut names: Vec<String> = self.events.iter().flat_map(|e| e.inputs.keys().cloned()).collect();
+        names.sort();
+        names.dedup();
+        names
+    }
+
+    /// Input changes by step index: the events at time `k·h`, in file order (a later event at
+    /// the same time wins). Inputs hold between changes.
+    pub fn changes(&self) -> Vec<(usize, Vec<(&str, Value)>)> {
+        let h = self.step();
+        let mut out: Vec<(usize, Vec<(&str, Value)>)> = Vec::new();
+        for e in &self.events {
+            let k = (e.time / h).round() as usize;
+            if out.last().map(|(j, _)| *j) != Some(k) {
+                out.push((k, Vec::new()));
+            }
+            let group = &mut out.last_mut().expect("pushed above").1;
+            for (name, v) in &e.inputs {
+                group.retain(|(n, _)| n != name);
+                group.push((name.as_str(), *v));
+            }
+        }
+        out
+    }
+
+    /// Position mode with the position command streamed: `commands[k]` (rad) for the step
+    /// starting at `k·DEFAULT_STEP`, no acc/dec move (`move_speed` 0).
+    pub fn streamed_position(name: &str, parameters: &BTreeMap<String, Value>, commands: &[f64]) -> Self {
+        let events = commands
+            .iter()
+            .enumerate()
+            .map(|(k, &c)| {
+                let mut inputs: BTreeMap<String, Value> =
+                    [("position_command".to_string(), Value::Float(c))].into_iter().collect();
+                if k == 0 {
+                    inputs.insert("mode".into(), Value::code(Mode::Position.code()));
+                    inputs.insert("move_speed".into(), Value::Float(0.0));
+                }
+                Event { time: k as f64 * DEFAULT_STEP, inputs }
+            })
+            .collect();
+        Self {
+            name: name.into(),
+            description: String::new(),
+            stop_time: commands.len() as f64 * DEFAULT_STEP,
+            step: Some(DEFAULT_STEP),
+            parameters: parameters.clone(),
+            events,
+            checks: vec![],
+            plot: vec![],
+            record: vec![],
+        }
+    }
+
+    /// The scenario as TOML (name, step, stop time, parameters, events; not checks or plot):
+    /// what the fmpy runner reads when a scenario was built in code.
+    pub fn to_toml(&self) -> String {
+        let value = |v: &Value| match v {
+            Value::Bool(b) => b.to_string(),
+            Value::Int(i) => i.to_string(),
+            // `{:?}` is the shortest text that reads back to the same bits.
+            Value::Float(x) => format!("{x:?}"),
+        };
+        let mut t = format!("name = {:?}\nstop_time = {:?}\n", self.name, self.stop_time);
+        if let Some(h) = self.step {
+            t += &format!("step = {h:?}\n");
+        }
+        if !self.record.is_empty() {
+            t += &format!("record = {:?}\n", self.record);
+        }
+        t += "\n[parameters]\n";
+        for (k, v) in &self.parameters {
+            t += &format!("{k:?} = {}\n", value(v));
+        }
+        for e in &self.events {
+            t += &format!("\n[[events]]\ntime = {:?}\n", e.time);
+            for (k, v) in &e.inputs {
+                t += &format!("{k} = {}\n", value(v));
+            }
+        }
+        t
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn parse(s: &str) -> Result<Scenario> {
+        let sc: Scenario = toml::from_str(s)?;
+        sc.validate()?;
+        Ok(sc)
+    }
+
+    #[test]
+    fn events_become_changes_at_their_step() {
+        let s = parse(
+            "name='x'\nstop_time=0.01\n[[events]]\ntime=0.0\nmode=1\n[[events]]\ntime=0.005\nvelocity_command=3.0\n",
+        )
+        .unwrap();
+        assert_eq!(s.input_names(), vec!["mode", "velocity_command"]);
+        assert_eq!(
+            s.changes(),
+            vec![(0, vec![("mode", Value::Int(1))]), (20, vec![("velocity_command", Value::Float(3.0))])]
+        );
+    }
+
+    #[test]
+    fn toml_round_trip_keeps_every_bit() {
+        let s = parse(
+            "name='x'\nstop_time=0.01\nrecord=['iq','motor_position']\n[parameters]\n\"ctrl.velocity_kp\"=0.1\n[[events]]\ntime=0.0\nmode=3\nseq_target=0.30000000000000004\n",
+        )
+        .unwrap();
+        let back = parse(&s.to_toml()).unwrap();
+        assert_eq!(back.parameters, s.parameters);
+        assert_eq!(back.changes(), s.changes());
+        assert_eq!(back.record, s.record);
+        assert_eq!(back.stop_time.to_bits(), s.stop_time.to_bits());
+    }
+
+    #[test]
+    fn refuses_a_record_list_with_twins_or_without_a_checked_signal() {
+        let e = parse("name='x'\nstop_time=0.01\nrecord=['iq','iq']\n").unwrap_err();
+        assert!(e.to_string().contains("twice"), "{e}");
+        let e =
+            parse("name='x'\nstop_time=0.01\nrecord=['iq']\n[[checks]]\nsignal='id'\nat=0.01\nmax=1.0\n").unwrap_err();
+        assert!(e.to_string().contains("add it to `record`"), "{e}");
+        assert!(parse("name='x'\nstop_time=0.01\nrecord=['iq']\n[[checks]]\nsignal='iq'\nat=0.01\nmax=1.0\n").is_ok());
+        let e = parse("name='x'\nstop_time=0.01\nrecord=['iq']\nplot=['iq','id']\n").unwrap_err();
+        assert!(e.to_string().contains("plot lists id"), "{e}");
+    }
+
+    #[test]
+    fn refuses_off_grid_events_and_fractional_stop_times() {
+        assert!(parse("name='x'\nstop_time=0.0101\n").is_err());
+        let e = parse("name='x'\nstop_time=0.01\n[[events]]\ntime=0.0001\nmode=1\n").unwrap_err();
+        assert!(e.to_string().contains("grid"), "{e}");
+        assert!(parse("name='x'\nstop_time=0.01\n[[events]]\ntime=0.02\nmode=1\n").is_err());
+        assert!(parse("name='x'\nstop_time=0.01\nbogus=1\n").is_err());
+    }
+}

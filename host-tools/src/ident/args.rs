@@ -1,0 +1,89 @@
+//! The options of `servo ident`, `servo tune` and `servo bench ident` (clap); their `run` is in the commands.
+
+use std::path::PathBuf;
+
+use crate::cli::Common;
+
+/// Identify each axis's anti-resonance (seed 001) on the FMU: an M-sequence on the torque
+/// command, the machine-end acceleration recorded, the response searched for an
+/// anti-resonance (moving-average-smoothed minimum; none means N = 1) and a rational
+/// model fitted around it.
+///
+/// Axes are named by --axes (default x,y); each gets its own FMU parameters with
+/// --set AXIS:NAME=VALUE (for example y:plant.absorber_stiffness=19.34), or an absorber
+/// (second mode) at a given anti-resonance with --anti-resonance AXIS=HZ. Writes
+/// <axis>.model.json (editable), <axis>.measured.csv and ident.svg (measured response and
+/// model) into --out (default out/ident/). With --model FILE... it only re-plots edited
+/// models against the measurements saved next to them.
+#[derive(clap::Args)]
+pub struct IdentArgs {
+    #[arg(long, value_delimiter = ',', default_value = "x,y")]
+    pub axes: Vec<String>,
+    /// AXIS:NAME=VALUE FMU parameter of one axis (repeatable)
+    #[arg(long = "set")]
+    pub set: Vec<String>,
+    /// AXIS=HZ: an absorber on that axis's load with this anti-resonance (5 % damping,
+    /// absorber inertia equal to the load's)
+    #[arg(long = "anti-resonance", value_delimiter = ',')]
+    pub anti_resonance: Vec<String>,
+    /// M-sequence amplitude on the torque command (N·m)
+    #[arg(long, default_value_t = 0.05)]
+    pub amplitude: f64,
+    /// Accelerometer noise for this signal-to-noise ratio (dB); default: the FMU's setting
+    #[arg(long)]
+    pub snr_db: Option<f64>,
+    /// Re-plot these (edited) model files instead of identifying
+    #[arg(long, num_args = 1..)]
+    pub model: Vec<PathBuf>,
+    #[command(flatten)]
+    pub common: Common,
+}
+
+/// Identification and correction (seed 001): anti-resonance frequency and damping errors
+/// against the plant's truth at 20 dB SNR with 2 s of excitation (two and three axes, a
+/// rigid axis); the axes' largest response difference before and after `servo tune`
+/// (measured models, and the seed's zeros-only form); the XY circle's roundness without
+/// and with the correction.
+#[derive(clap::Args)]
+pub struct IdentBenchArgs {
+    #[command(flatten)]
+    pub common: Common,
+}
+
+/// Response-correction filters that make every axis's command → machine-end response
+/// the same (seed 001).
+///
+/// Reads the model files `servo ident` wrote (edited or not) and runs each axis on the
+/// FMU with the parameters it was identified with (friction off).
+///
+/// --method response (default): measures each axis's command → machine-end response
+/// (a periodic multisine on the position command, 1 Hz to twice the position-loop
+/// bandwidth), fits a model of second-order factors to it, and gives every axis the
+/// OTHER axes' models: all axes then answer the product of all models, alike whatever
+/// their closed-loop denominators. --method zeros: the seed as written, F·Π N_other from
+/// the identified anti-resonances over a critically damped F; it equalises only when all
+/// axes have the same closed-loop denominator, which a loop closed on the motor encoder
+/// does not give (`servo bench ident` shows both).
+///
+/// Writes <axis>.corr.toml (the FMU's corr.* parameters, ready for a scenario's
+/// [parameters] or --set), <axis>.corr.frame (the drive's LoadCorrection request, framed
+/// for the link), tune.json (read by `servo circle --tuned DIR`) and tune.svg
+/// (every axis before and after), and prints the largest difference between axes up to
+/// the position-loop bandwidth before and after. The exit status is non-zero when the
+/// correction does not bring the axes closer.
+///
+/// Example: servo ident --anti-resonance x=40,y=70 && servo tune --model out/ident/x.model.json out/ident/y.model.json
+#[derive(clap::Args)]
+pub struct TuneArgs {
+    /// Model files from `servo ident`
+    #[arg(long = "model", num_args = 1.., required = true)]
+    pub models: Vec<PathBuf>,
+    /// response (measured closed-loop models) or zeros (the seed's F·Π N_other)
+    #[arg(long, default_value = "response")]
+    pub method: String,
+    /// Skip the check runs on the FMU (the response method still measures once)
+    #[arg(long)]
+    pub no_check: bool,
+    #[command(flatten)]
+    pub common: Common,
+}

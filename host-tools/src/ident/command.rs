@@ -1,0 +1,381 @@
+//! `servo ident` and `servo bench ident` (seed 001).
+
+use anyhow::{bail, Context, Result};
+
+use crate::cli::progress_bar;
+use crate::fmu::configuration::configuration;
+use crate::fmu::runner::Fmu;
+use crate::fmu::trace::Trace;
+use crate::ident::args::{IdentArgs, IdentBenchArgs, TuneArgs};
+use crate::paths::{default_fmu, default_out};
+
+impl IdentArgs {
+    pub fn run(&self) -> Result<bool> {
+        ident(self)
+    }
+}
+
+fn ident(args: &IdentArgs) -> Result<bool> {
+    let (axes, set, anti_resonance, amplitude, snr_db, model, common) =
+        (&args.axes, &args.set, &args.anti_resonance, args.amplitude, args.snr_db, &args.model, &args.common);
+    use crate::ident::report::{identify_axis, plot, replot};
+    let out = common.out.clone().unwrap_or_else(|| default_out("ident"));
+    if !model.is_empty() {
+        let svg = replot(model, &out)?;
+        println!("re-plotted {} model(s) → {}", model.len(), svg.display());
+        return Ok(true);
+    }
+    let mut parameters: std::collections::BTreeMap<
+        String,
+        std::collections::BTreeMap<String, crate::fmu::scenario::Value>,
+    > = axes.iter().map(|a| (a.clone(), Default::default())).collect();
+    for s in set {
+        let (axis, rest) = s.split_once(':').ok_or_else(|| anyhow::anyhow!("--set `{s}`: use AXIS:NAME=VALUE"))?;
+        let (k, v) = crate::fmu::assignment::parse_assignment(rest)?;
+        parameters
+            .get_mut(axis)
+            .ok_or_else(|| anyhow::anyhow!("--set `{s}`: no axis `{axis}` in --axes"))?
+            .insert(k, v);
+    }
+    for s in anti_resonance {
+        let (axis, hz) = s.split_once('=').ok_or_else(|| anyhow::anyhow!("--anti-resonance `{s}`: use AXIS=HZ"))?;
+        let hz: f64 = hz.parse().map_err(|_| anyhow::anyhow!("--anti-resonance `{s}`: `{hz}` is not a frequency"))?;
+        if !(hz.is_finite() && hz > 0.0) {
+            bail!("--anti-resonance `{s}`: the frequency must be positive");
+        }
+        let axis_parameters = parameters
+            .get_mut(axis)
+            .ok_or_else(|| anyhow::anyhow!("--anti-resonance `{s}`: no axis `{axis}` in --axes"))?;
+        // The absorber's inertia equals the load's: the load this axis runs with.
+        let load = configuration(axis_parameters)?.plant.load_inertia;
+        axis_parameters.extend(crate::ident::identification::absorber_parameters(hz, 0.05, load));
+    }
+    let fmu = Fmu::load(&common.fmu.clone().unwrap_or_else(default_fmu))?;
+    let pb = progress_bar("identification", common.json);
+    let mut results = Vec::new();
+    for (i, axis) in axes.iter().enumerate() {
+        pb.set_prefix(format!("axis {axis}"));
+        pb.set_position((i * 1000 / axes.len()) as u64);
+        results.push(identify_axis(&fmu, axis, &parameters[axis], amplitude, snr_db, &out)?);
+    }
+    pb.finish_and_clear();
+    let plotted: Vec<_> = results
+        .iter()
+        .filter_map(|r| r.model.as_ref().map(|m| (m, &r.files[1])))
+        .map(|(model, measured)| {
+            let t = Trace::read_csv(measured)?;
+            let (f, g, p) = (
+                t.column("frequency").unwrap_or_default(),
+                t.column("gain_db").unwrap_or_default(),
+                t.column("phase_deg").unwrap_or_default(),
+            );
+            let pts = (0..f.len())
+                .map(|i| crate::analysis::response_point::ResponsePoint {
+                    frequency: f[i],
+                    gain_db: g[i],
+                    phase_deg: p[i],
+                    quality: 1.0,
+                })
+                .collect();
+            Ok((model.clone(), pts))
+        })
+        .collect::<Result<_>>()?;
+    let svg = out.join("ident.svg");
+    plot(&svg, &plotted)?;
+    let refused = results.iter().filter(|r| r.refusal.is_some()).count();
+    if common.json {
+        println!("{}", serde_json::to_string_pretty(&serde_json::json!({"axes": results, "plot": svg}))?);
+        return Ok(refused == 0);
+    }
+    println!(
+        "servo ident — M-sequence degree {} at 1 kHz on the torque at {} rad/s: {:.2} s of transients, then {} periods of {:.2} s averaged ({:.1} s per axis)",
+        crate::ident::identification::DEGREE,
+        crate::ident::identification::SPEED,
+        crate::ident::identification::TRANSIENT_S,
+        crate::ident::identification::PERIODS,
+        crate::ident::identification::period_s(),
+        crate::ident::identification::measurement_time_s()
+    );
+    for r in &results {
+        let notch = r.notch.map_or("band too narrow to search for a notch".to_string(), |n| n.verdict());
+        let noise = r
+            .snr_db
+            .map_or(String::new(), |s| format!(" (accelerometer noise {:.3e} rad/s² for {s} dB SNR)", r.noise_std));
+        match (&r.model, &r.refusal) {
+            (_, Some(why)) => println!("  {}: REFUSED: {why}; {notch}{noise}", r.axis),
+            (Some(m), None) => match (m.anti_resonance, m.resonance) {
+                (Some(z), p) => println!(
+                    "  {}: anti-resonance {:.3} Hz, damping {:.4}; resonance {}; gain {:.4e}; fit band {:.1}–{:.1} Hz, rms fit error {:.1} %; {notch}{noise}",
+                    m.axis,
+                    z.hz,
+                    z.damping,
+                    p.map_or("-".into(), |p| format!("{:.2} Hz, damping {:.4}", p.hz, p.damping)),
+                    m.gain,
+                    m.band.0,
+                    m.band.1,
+                    m.fit_error * 100.0,
+                ),
+                (None, _) => println!(
+                    "  {}: no clear anti-resonance (rigid axis, N = 1): {notch}; gain {:.4e}{noise}",
+                    m.axis, m.gain
+                ),
+            },
+            (None, None) => {}
+        }
+        for f in &r.files {
+            println!("    → {}", f.display());
+        }
+    }
+    println!("  → {}", svg.display());
+    if refused > 0 {
+        println!("  {refused} axis/axes refused: no model written for them");
+    }
+    Ok(refused == 0)
+}
+
+impl IdentBenchArgs {
+    pub fn run(&self) -> Result<bool> {
+        bench_ident(self)
+    }
+}
+
+fn bench_ident(args: &IdentBenchArgs) -> Result<bool> {
+    let common = &args.common;
+    use crate::ident::identification::{absorber_parameters, true_anti_resonance, AxisModel};
+    use crate::ident::tuning::{circle_check, tune, Method};
+    let fmu = Fmu::load(&common.fmu.clone().unwrap_or_else(default_fmu))?;
+    let out = common.out.clone().unwrap_or_else(|| default_out("bench/ident"));
+    let load = configuration(&Default::default())?.plant.load_inertia;
+    // (case, [(axis, anti-resonance in Hz or none)])
+    type Axes<'a> = Vec<(&'a str, Option<f64>)>;
+    let cases: Vec<(&str, Axes)> = vec![
+        ("two axes", vec![("x", Some(40.0)), ("y", Some(70.0))]),
+        ("three axes", vec![("x", Some(40.0)), ("y", Some(70.0)), ("z", Some(55.0))]),
+        ("rigid axis", vec![("w", None)]),
+    ];
+    let mut rows = Vec::new();
+    let mut tunings = Vec::new();
+    let pb = progress_bar("ident bench", common.json);
+    // The grid: every anti-resonance × every noise seed at 20 dB SNR.
+    pb.set_prefix("grid");
+    let grid = crate::ident::bench::run_grid(&fmu, &out, |x| pb.set_position((x * 800.0) as u64))?;
+    let record_bands = [(5.0, 8.0), (8.0, 15.0), (15.0, 25.0), (25.0, 100.0), (100.0, 300.0), (300.0, 500.0)];
+    let record = crate::ident::bench::record_check(&fmu, 15.0, &record_bands)?;
+    let mut ok = grid.iter().all(|c| c.passed());
+    pb.set_prefix("tuning");
+    let total: usize = cases.iter().map(|c| c.1.len()).sum::<usize>() + 5;
+    let mut done = 0;
+    let mut tick = |pb: &indicatif::ProgressBar| {
+        pb.set_position((800 + done * 200 / total) as u64);
+        done += 1;
+    };
+    for (case, axes) in &cases {
+        let mut models: Vec<AxisModel> = Vec::new();
+        for (axis, hz) in axes {
+            tick(&pb);
+            let params = hz.map(|h| absorber_parameters(h, 0.05, load)).unwrap_or_default();
+            let r = crate::ident::report::identify_axis(
+                &fmu,
+                axis,
+                &params,
+                0.05,
+                Some(20.0),
+                &out.join(case.replace(' ', "_")),
+            )?;
+            let Some(model) = r.model else {
+                bail!("axis {axis} of `{case}`: {}", r.refusal.unwrap_or_default());
+            };
+            let truth = hz.map(|h| {
+                let w = std::f64::consts::TAU * h;
+                true_anti_resonance(load, load * w * w, 2.0 * 0.05 * load * w)
+            });
+            let (f_err, d_err) = match (truth, model.anti_resonance) {
+                (Some(t), Some(z)) => ((z.hz - t.hz) / t.hz, (z.damping - t.damping) / t.damping),
+                (None, None) => (0.0, 0.0),
+                _ => (f64::INFINITY, f64::INFINITY),
+            };
+            ok &= f_err.abs() <= 0.01 && d_err.abs() <= 0.2;
+            rows.push(serde_json::json!({"case": case, "axis": axis, "truth": truth, "model": model, "notch": r.notch, "frequency_error": f_err, "damping_error": d_err}));
+            models.push(model);
+        }
+        if models.len() < 2 {
+            continue;
+        }
+        // Correction of the identified axes, measured form and the seed as written.
+        tick(&pb);
+        let response = tune(&fmu, &models, Method::Response, true, |_| {})?;
+        tick(&pb);
+        let zeros = tune(&fmu, &models, Method::Zeros, true, |_| {})?;
+        let circle = if *case == "two axes" {
+            tick(&pb);
+            Some(circle_check(&fmu, &response, CIRCLE_RADIUS, CIRCLE_HZ, CIRCLE_LEAD_IN)?)
+        } else {
+            None
+        };
+        let (b, a) = (response.spread_before.unwrap_or_default(), response.spread_after.unwrap_or_default());
+        ok &= a.0 < b.0 && a.1 < b.1;
+        if let Some(c) = &circle {
+            ok &= c.roundness_without / c.roundness_with >= 20.0;
+        }
+        tunings.push(serde_json::json!({"case": case, "response": response, "zeros": zeros, "circle": circle}));
+    }
+    pb.finish_and_clear();
+    if common.json {
+        println!(
+            "{}",
+            serde_json::to_string_pretty(
+                &serde_json::json!({"bench": "ident", "grid": grid, "record": record, "measurement_time_s": crate::ident::identification::measurement_time_s(), "rows": rows, "tunings": tunings, "passed": ok})
+            )?
+        );
+        return Ok(ok);
+    }
+    print_grid(&grid, &record);
+    println!("  demo axes:");
+    println!(
+        "  {:<11} {:<5} {:>12} {:>12} {:>12} {:>12} {:>10} {:>10}",
+        "case", "axis", "true Hz", "found Hz", "true ζ", "found ζ", "Hz err %", "ζ err %"
+    );
+    for r in &rows {
+        let t = &r["truth"];
+        let m = &r["model"]["anti_resonance"];
+        let num = |v: &serde_json::Value, k: &str| {
+            v.get(k).and_then(|x| x.as_f64()).map_or("-".to_string(), |x| format!("{x:.4}"))
+        };
+        println!(
+            "  {:<11} {:<5} {:>12} {:>12} {:>12} {:>12} {:>10.3} {:>10.2}",
+            r["case"].as_str().unwrap_or(""),
+            r["axis"].as_str().unwrap_or(""),
+            num(t, "hz"),
+            num(m, "hz"),
+            num(t, "damping"),
+            num(m, "damping"),
+            r["frequency_error"].as_f64().unwrap_or(f64::NAN) * 100.0,
+            r["damping_error"].as_f64().unwrap_or(f64::NAN) * 100.0
+        );
+    }
+    println!("  goal: at most 1 % in frequency and 20 % in damping");
+    println!("  largest difference between the axes' command → machine-end responses up to the position-loop bandwidth (friction off; controllers alike):");
+    let pair = |v: &serde_json::Value| {
+        format!("{:.4} dB / {:.3}°", v[0].as_f64().unwrap_or(f64::NAN), v[1].as_f64().unwrap_or(f64::NAN))
+    };
+    for t in &tunings {
+        let (r, z) = (&t["response"], &t["zeros"]);
+        println!(
+            "    {:<10} before {}   after, measured models (default) {}   after, seed's F·Π N_other {}",
+            t["case"].as_str().unwrap_or(""),
+            pair(&r["spread_before"]),
+            pair(&r["spread_after"]),
+            pair(&z["spread_after"])
+        );
+        if let Some(c) = t["circle"].as_object() {
+            let (w, c2) =
+                (c["roundness_without"].as_f64().unwrap_or(f64::NAN), c["roundness_with"].as_f64().unwrap_or(f64::NAN));
+            println!(
+                "    XY circle of x and y, radius {} rad at {} Hz (the position-loop bandwidth), machine-end roundness: without {:.3e} rad, with {:.3e} rad: {:.1}× smaller (goal 20×)",
+                CIRCLE_RADIUS, CIRCLE_HZ, w, c2, w / c2
+            );
+        }
+    }
+    println!("  {}", if ok { "all goals met" } else { "a goal is NOT met" });
+    Ok(ok)
+}
+
+/// The grid's table: per anti-resonance, each seed's errors; then the worst case.
+fn print_grid(grid: &[crate::ident::bench::GridCase], record: &crate::ident::bench::RecordCheck) {
+    use crate::ident::bench::{DAMPING, SEEDS, SNR_DB};
+    use crate::ident::identification::{measurement_time_s, period_s, PERIODS, TRANSIENT_S};
+    println!(
+        "servo bench ident — seed 001: absorbers {}–{} Hz (damping {DAMPING}) × {SEEDS} noise seeds, accelerometer noise at {SNR_DB} dB SNR of the record",
+        grid.first().map_or(0.0, |c| c.hz),
+        grid.last().map_or(0.0, |c| c.hz)
+    );
+    println!(
+        "  measurement per axis: {TRANSIENT_S} s of transients + {PERIODS} periods of {:.2} s averaged = {:.1} s (was 0.5 s + one period = 2.55 s)",
+        period_s(),
+        measurement_time_s()
+    );
+    println!("  frequency error % / damping error % per seed:");
+    let mut hz: Vec<f64> = grid.iter().map(|c| c.hz).collect();
+    hz.dedup();
+    for f in &hz {
+        let cells: Vec<String> = grid.iter().filter(|c| c.hz == *f).map(|c| format!("{:>11}", c.outcome())).collect();
+        println!("  {f:>6.1} Hz {}", cells.join(""));
+    }
+    let worst = |key: fn(&crate::ident::bench::GridCase) -> f64| {
+        grid.iter().max_by(|a, b| key(a).abs().total_cmp(&key(b).abs()))
+    };
+    let describe = |c: Option<&crate::ident::bench::GridCase>, v: fn(&crate::ident::bench::GridCase) -> f64| {
+        c.map_or("-".to_string(), |c| {
+            let why = match (&c.refusal, c.found, c.notch) {
+                (Some(r), _, _) => format!(" (refused: {r})"),
+                (None, None, Some(n)) => format!(" (no clear anti-resonance: {})", n.verdict()),
+                _ => String::new(),
+            };
+            format!("{:.2} % at {} Hz, seed {}{why}", v(c) * 100.0, c.hz, c.seed)
+        })
+    };
+    println!(
+        "  worst frequency error over the grid: {} (goal 1 %)",
+        describe(worst(|c| c.frequency_error), |c| c.frequency_error)
+    );
+    println!(
+        "  worst damping error over the grid:   {} (goal 20 %)",
+        describe(worst(|c| c.damping_error), |c| c.damping_error)
+    );
+    let missed = grid.iter().filter(|c| !c.passed()).count();
+    println!("  identifications missing a goal: {missed} of {}", grid.len());
+    println!(
+        "  the record against the analytic plant, noise-free, {} Hz absorber (largest relative error; point samples / means over each acquisition period):",
+        record.hz
+    );
+    for ((lo, hi), point, mean) in &record.bands {
+        println!("    {lo:>5.0}–{hi:<5.0} Hz: {:>8.2} % / {:>6.2} %", point * 100.0, mean * 100.0);
+    }
+}
+
+/// The bench's circle: at the position-loop bandwidth, where the axes differ most in band;
+/// 30 revolutions (1.5 s) of lead-in let the lightly damped closed-loop poles settle.
+const CIRCLE_RADIUS: f64 = 0.05;
+const CIRCLE_HZ: f64 = 20.0;
+const CIRCLE_LEAD_IN: u32 = 30;
+
+impl TuneArgs {
+    pub fn run(&self) -> Result<bool> {
+        tune(self)
+    }
+}
+
+fn tune(args: &TuneArgs) -> Result<bool> {
+    let (models, method, no_check, common) = (&args.models, args.method.as_str(), args.no_check, &args.common);
+    use crate::ident::identification::AxisModel;
+    use crate::ident::tuning::Method;
+    let method: Method = method.parse()?;
+    let out = common.out.clone().unwrap_or_else(|| default_out("tune"));
+    std::fs::create_dir_all(&out).with_context(|| format!("cannot create {}", out.display()))?;
+    let models: Vec<AxisModel> = models.iter().map(|p| AxisModel::load(p)).collect::<Result<_>>()?;
+    let fmu = Fmu::load(&common.fmu.clone().unwrap_or_else(default_fmu))?;
+    let pb = progress_bar("tune", common.json);
+    let tuning =
+        crate::ident::tuning::tune(&fmu, &models, method, !no_check, |x| pb.set_position((x * 1000.0) as u64))?;
+    pb.finish_and_clear();
+    let files = crate::ident::tuning::write(&tuning, &out)?;
+    let improved = match (tuning.spread_before, tuning.spread_after) {
+        (Some(b), Some(a)) => a.0 < b.0 && a.1 < b.1,
+        _ => true,
+    };
+    if common.json {
+        println!(
+            "{}",
+            serde_json::to_string_pretty(&serde_json::json!({"tuning": tuning, "files": files, "improved": improved}))?
+        );
+        return Ok(improved);
+    }
+    tuning.print();
+    for f in &files {
+        println!("  → {}", f.display());
+    }
+    if !improved {
+        println!("  the correction does NOT bring the axes' responses closer");
+    }
+    Ok(improved)
+}

@@ -1,0 +1,28 @@
+//! `servo ident` and `servo tune`'s part of out/index.html: measured responses and models, the
+//! axes before and after the correction, the files a user edits or loads.
+
+use std::path::Path;
+
+use crate::page::{files_with, relative, Section};
+
+pub fn section(root: &Path) -> Option<Section> {
+    let (ident, tune) = (root.join("ident"), root.join("tune"));
+    let models = files_with(&ident, "json");
+    if models.is_empty() && !tune.join("tune.json").is_file() {
+        return None;
+    }
+    let mut files: Vec<_> = models.iter().map(|p| relative(root, p)).collect();
+    files.extend(files_with(&tune, "toml").iter().map(|p| relative(root, p)));
+    files.extend(files_with(&tune, "json").iter().map(|p| relative(root, p)));
+    Some(Section {
+        title: "Identification and response correction (seed 001)".into(),
+        command: "servo ident …; servo tune --model out/ident/*.model.json".into(),
+        plots: [files_with(&ident, "svg"), files_with(&tune, "svg")]
+            .concat()
+            .iter()
+            .map(|p| relative(root, p))
+            .collect(),
+        files,
+        ..Default::default()
+    })
+}

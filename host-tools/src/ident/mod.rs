@@ -1,0 +1,10 @@
+//! Identification and correction (seed 001): `servo ident`, `servo tune`, `servo bench ident`.
+
+pub mod args;
+pub mod bench;
+pub mod command;
+pub mod identification;
+pub mod index;
+pub mod report;
+pub mod response_model;
+pub mod tuning;

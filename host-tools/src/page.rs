@@ -1,0 +1,113 @@
+//! The report a user opens first (`out/index.html`): one section per experiment, each built by
+//! the experiment's own `index.rs` from the files it wrote — its checks and their verdicts, the
+//! fmpy cross-check, its plots and the files behind them.
+
+use std::fmt::Write as _;
+use std::path::{Path, PathBuf};
+
+use anyhow::Result;
+
+/// One experiment's part of the page.
+#[derive(Default)]
+pub struct Section {
+    pub title: String,
+    /// The command that wrote it.
+    pub command: String,
+    /// Check or cross-check → passed.
+    pub verdicts: Vec<(String, bool)>,
+    /// Plots (paths relative to the out folder).
+    pub plots: Vec<PathBuf>,
+    /// Other files worth opening (relative to the out folder).
+    pub files: Vec<PathBuf>,
+}
+
+/// The files of `dir` with extension `ext`, sorted (none when the folder is missing).
+pub fn files_with(dir: &Path, ext: &str) -> Vec<PathBuf> {
+    let mut v: Vec<PathBuf> = std::fs::read_dir(dir)
+        .map(|d| {
+            d.filter_map(|e| e.ok().map(|e| e.path())).filter(|p| p.extension().is_some_and(|x| x == ext)).collect()
+        })
+        .unwrap_or_default();
+    v.sort();
+    v
+}
+
+/// A JSON file, if it is there and readable.
+pub fn read_json(path: &Path) -> Option<serde_json::Value> {
+    serde_json::from_str(&std::fs::read_to_string(path).ok()?).ok()
+}
+
+/// The verdicts of a file a scenario-like command writes: `passed` and the fmpy cross-check.
+pub fn scenario_verdicts(name: &str, json: &serde_json::Value) -> Vec<(String, bool)> {
+    let mut v = Vec::new();
+    if let Some(p) = json["passed"].as_bool() {
+        v.push((format!("{name}: checks"), p));
+    }
+    if let Some(i) = json["fmpy"]["identical"].as_bool() {
+        v.push((format!("{name}: fmpy gives the same outputs bit for bit"), i));
+    }
+    v
+}
+
+fn esc(s: &str) -> String {
+    s.replace('&', "&amp;").replace('<', "&lt;").replace('>', "&gt;").replace('"', "&quot;")
+}
+
+/// `path` relative to `root`, with forward slashes (for a link in `root/index.html`).
+pub fn relative(root: &Path, path: &Path) -> PathBuf {
+    path.strip_prefix(root).map(Path::to_path_buf).unwrap_or_else(|_| path.to_path_buf())
+}
+
+/// Write `root/index.html` with the sections (in order); returns its path.
+pub fn write_index(root: &Path, sections: &[Section]) -> Result<PathBuf> {
+    let mut h = String::new();
+    h.push_str("<!doctype html><html><head><meta charset=\"utf-8\"><title>servo: experiments</title>");
+    h.push_str(
+        "<style>body{font-family:sans-serif;max-width:980px;margin:2em auto}table{border-collapse:collapse}\
+         td,th{border:1px solid #ccc;padding:3px 8px}.pass{color:#080}.fail{color:#c00;font-weight:bold}\
+         img{max-width:100%;border:1px solid #eee}code{background:#f4f4f4}</style></head><body>",
+    );
+    let failed: usize = sections.iter().map(|s| s.verdicts.iter().filter(|v| !v.1).count()).sum();
+    let total: usize = sections.iter().map(|s| s.verdicts.len()).sum();
+    writeln!(h, "<h1>servo: experiments on the servo-axis FMU</h1>")?;
+    writeln!(
+        h,
+        "<p class=\"{}\">{} of {total} checks and cross-checks pass.</p><ul>",
+        if failed == 0 { "pass" } else { "fail" },
+        total - failed
+    )?;
+    for (i, s) in sections.iter().enumerate() {
+        writeln!(h, "<li><a href=\"#s{i}\">{}</a></li>", esc(&s.title))?;
+    }
+    h.push_str("</ul>");
+    for (i, s) in sections.iter().enumerate() {
+        writeln!(h, "<h2 id=\"s{i}\">{}</h2><p><code>{}</code></p>", esc(&s.title), esc(&s.command))?;
+        if !s.verdicts.is_empty() {
+            h.push_str("<table><tr><th>check</th><th>result</th></tr>");
+            for (label, ok) in &s.verdicts {
+                let class = if *ok { "pass" } else { "fail" };
+                writeln!(
+                    h,
+                    "<tr><td>{}</td><td class=\"{class}\">{}</td></tr>",
+                    esc(label),
+                    if *ok { "pass" } else { "FAIL" }
+                )?;
+            }
+            h.push_str("</table>");
+        }
+        for p in &s.plots {
+            writeln!(h, "<p><img src=\"{0}\" alt=\"{0}\"></p>", esc(&p.display().to_string()))?;
+        }
+        if !s.files.is_empty() {
+            h.push_str("<p>");
+            for f in &s.files {
+                writeln!(h, "<a href=\"{0}\">{0}</a> ", esc(&f.display().to_string()))?;
+            }
+            h.push_str("</p>");
+        }
+    }
+    h.push_str("</body></html>\n");
+    let path = root.join("index.html");
+    std::fs::write(&path, h)?;
+    Ok(path)
+}

@@ -1,0 +1,6 @@
+//! Scenario runs: `servo run`, its report, `servo bench fmu` and `servo bench plant`.
+
+pub mod args;
+pub mod command;
+pub mod index;
+pub mod report;

@@ -1,0 +1,37 @@
+//! The options of `servo sequence` and `servo bench sequence` (clap); their `run` is in the commands.
+
+use std::path::PathBuf;
+
+use crate::cli::Common;
+
+/// Stop, zero-servo and fine-adjust sequences (seed 004) on the FMU, from timeline files.
+///
+/// A file lists key events (run, run_off, stop, release, move, return, gain) at times
+/// and expectations ("completion within 200 ms after 0.3 s", "state servo_lock at 0.5 s",
+/// "|deviation| <= 2 counts at 1.5 s", "1 refused by 0.4 s", signal bounds); see the doc
+/// comment of host-tools/src/sequence/timeline.rs and scenarios/sequences/. Prints a
+/// pass/fail table, writes <name>.csv, <name>.svg (speed, position, deviation, state,
+/// completion, refusals on one timeline) and <name>.json. With --fmpy the same input
+/// table also runs through fmpy and must give identical outputs.
+/// Without files, runs every file in scenarios/sequences/.
+#[derive(clap::Args)]
+pub struct SequenceArgs {
+    pub files: Vec<PathBuf>,
+    /// Also run through fmpy and demand identical outputs
+    #[arg(long)]
+    pub fmpy: bool,
+    #[command(flatten)]
+    pub common: Common,
+}
+
+/// Stop sequence (seed 004): per gain multiplier the stop error, settle time and
+/// overshoot (stop at speed and a 1 rad fine adjustment); time from the stop key to
+/// acceptance against the zero-speed level.
+#[derive(clap::Args)]
+pub struct SequenceBenchArgs {
+    /// Zero-speed levels to try (rad/s, comma separated)
+    #[arg(long, value_delimiter = ',', default_values_t = [0.5, 1.0, 2.0, 5.0, 10.0, 20.0, 50.0])]
+    pub zero_speed: Vec<f64>,
+    #[command(flatten)]
+    pub common: Common,
+}

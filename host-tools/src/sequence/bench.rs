@@ -1,0 +1,294 @@
+//! `servo bench sequence`: the figures of the stop-sequence issue (seed 004), from runs of
+//! the FMU in mode 3.
+//!
+//! - per gain multiplier: stop at speed (time to acceptance, settle time to completion for
+//!   good, overshoot past the accepted position, position error at completion and at rest)
+//!   and a 1 rad fine adjustment (settle time, overshoot past the target);
+//! - time from the stop key to acceptance against the zero-speed level, with the analytic
+//!   value of the deceleration ramp for comparison.
+
+use anyhow::{anyhow, bail, Result};
+use control_core::stop_sequence::SequenceState;
+use serde::Serialize;
+
+use crate::fmu::runner::Fmu;
+use crate::fmu::scenario::DEFAULT_STEP;
+use crate::fmu::trace::Trace;
+use crate::sequence::timeline::SequenceScenario;
+
+const RUN_SPEED: f64 = 100.0;
+const ACCELERATION: f64 = 2000.0;
+const STOP_AT: f64 = 0.3;
+
+#[derive(Clone, Debug, Serialize)]
+pub struct GainFigures {
+    pub multiplier: f64,
+    /// Stop key to acceptance (s).
+    pub acceptance: f64,
+    /// Acceptance to completion for good (s).
+    pub stop_settle: f64,
+    /// Largest |deviation| after acceptance (counts): how far the axis runs past the stop.
+    pub stop_overshoot_counts: i64,
+    /// |deviation| when completion is reached for good, and at the end (counts).
+    pub stop_error_at_completion: i64,
+    pub stop_error_at_rest: i64,
+    /// 1 rad fine adjustment: key to completion for good (s), overshoot past the target
+    /// (counts, in the direction of the move).
+    pub move_settle: f64,
+    pub move_overshoot_counts: i64,
+}
+
+#[derive(Clone, Debug, Serialize)]
+pub struct AcceptanceFigure {
+    pub zero_speed: f64,
+    pub measured: f64,
+    /// The ramp's own time from the run speed to the zero-speed level: (V − VH)/a.
+    pub ramp: f64,
+}
+
+/// One stop of the grid: run at `speed`, run off and stop key at once, with this zero-speed
+/// level, completion width and gain multiplier (completion hold and hysteresis at their
+/// defaults).
+#[derive(Clone, Debug, Serialize)]
+pub struct GridStop {
+    pub speed: f64,
+    pub zero_speed: f64,
+    pub width: u32,
+    pub multiplier: f64,
+    /// Measured speed at acceptance (rad/s).
+    pub speed_at_acceptance: f64,
+    /// Stopping distance that speed implies at the gradient, v²/(2a) (counts).
+    pub stopping_counts: f64,
+    /// Largest |deviation| after acceptance (counts).
+    pub swing_counts: i64,
+    /// Largest |deviation| beyond the width once completion was first raised (counts).
+    pub overshoot_counts: i64,
+    /// Acceptance to the first raise of completion (s); NaN if never raised.
+    pub settle: f64,
+    /// Changes of the completion signal after its first raise (goal 0).
+    pub toggles: u32,
+}
+
+/// Worst case of the grid, and whether the figure holds everywhere: completion raised in
+/// every run, no toggle, and the swing within `swing_bound_factor` × the stopping distance
+/// plus the width.
+#[derive(Clone, Debug, Serialize)]
+pub struct GridFigures {
+    pub runs: usize,
+    pub never_complete: usize,
+    pub max_toggles: u32,
+    pub max_overshoot_counts: i64,
+    pub max_settle: f64,
+    /// Largest swing / its bound (see [`SWING_BOUND_FACTOR`]); the figure holds at ≤ 1.
+    pub worst_swing_ratio: f64,
+    pub worst_swing: Option<GridStop>,
+    pub holds: bool,
+}
+
+pub const GRID_SPEEDS: [f64; 3] = [10.0, 50.0, 200.0];
+pub const GRID_ZERO_SPEEDS: [f64; 3] = [0.5, 2.0, 20.0];
+pub const GRID_WIDTHS: [u32; 3] = [1, 8, 100];
+/// Bound of the swing after acceptance: `SWING_BOUND_FACTOR` × the stopping distance
+/// v²/(2a) of the speed v measured at acceptance, plus `SWING_FLOOR_COUNTS` (the motion while
+/// the velocity loop lets go of the deceleration torque and the compliant shaft gives back
+/// its energy: about 2 mrad at the defaults, measured where v²/(2a) is nil), plus the width
+/// and the hysteresis.
+pub const SWING_BOUND_FACTOR: f64 = 1.5;
+pub const SWING_FLOOR_COUNTS: f64 = 500.0;
+
+#[derive(Clone, Debug, Serialize)]
+pub struct SequenceBench {
+    pub grid: Vec<GridStop>,
+    pub grid_figures: GridFigures,
+    pub gains: Vec<GainFigures>,
+    pub acceptance: Vec<AcceptanceFigure>,
+    /// Settle times fall as the gain rises (both the stop and the move).
+    pub settle_falls_with_gain: bool,
+}
+
+fn run(fmu: &Fmu, toml_text: &str) -> Result<Trace> {
+    let s: SequenceScenario = toml::from_str(toml_text)?;
+    s.validate()?;
+    fmu.run(&s.to_scenario(), |_| {})
+}
+
+fn col(t: &Trace, n: &str) -> Result<Vec<f64>> {
+    t.column(n).ok_or_else(|| anyhow!("the FMU has no output {n}"))
+}
+
+/// First index at or after time `t`.
+fn at(time: &[f64], t: f64) -> usize {
+    time.iter().position(|&x| x >= t - 0.5 * DEFAULT_STEP).unwrap_or(time.len() - 1)
+}
+
+/// Index from which `complete` stays set until `end` (exclusive of nothing): None if unset at `end`.
+fn settled_from(complete: &[f64], from: usize, end: usize) -> Option<usize> {
+    (from..=end).rev().take_while(|&i| complete[i] != 0.0).last()
+}
+
+/// Whether a `seq_state` output value says the stop was accepted (servo lock).
+fn is_servo_lock(seq_state: f64) -> bool {
+    SequenceState::from_code(seq_state as i32) == Some(SequenceState::ServoLock)
+}
+
+fn stop_and_move(fmu: &Fmu, index: usize, multiplier: f64) -> Result<GainFigures> {
+    // Phase 1: stop at speed with this gain; the move target is 1 rad past the lock.
+    let stop_text = format!(
+        "name='bench_stop'\nstop_time=1.5\n[[events]]\ntime=0.0\nevent='run'\n[[events]]\ntime=0.0\nevent='gain'\nindex={index}\n\
+         [[events]]\ntime={STOP_AT}\nevent='run_off'\n[[events]]\ntime={STOP_AT}\nevent='stop'\n"
+    );
+    let t = run(fmu, &stop_text)?;
+    let (time, state, complete, dev) =
+        (col(&t, "time")?, col(&t, "seq_state")?, col(&t, "seq_complete")?, col(&t, "seq_deviation")?);
+    let accepted =
+        state.iter().position(|&s| is_servo_lock(s)).ok_or_else(|| anyhow!("the stop was never accepted"))?;
+    let end = time.len() - 1;
+    let settled = settled_from(&complete, accepted, end)
+        .ok_or_else(|| anyhow!("no completion after the stop at gain {multiplier}"))?;
+    let hold = col(&t, "seq_hold_position")?[end];
+    let overshoot = dev[accepted..].iter().fold(0.0f64, |m, d| m.max(d.abs())) as i64;
+
+    // Phase 2: from the lock, release and move 1 rad forward.
+    let target = hold + 1.0;
+    let move_at = 1.0;
+    let move_text = format!(
+        "{stop_text}[[events]]\ntime={move_at}\nevent='release'\n[[events]]\ntime={move_at}\nevent='move'\ntarget={target:?}\n"
+    )
+    .replace("stop_time=1.5", "stop_time=2.5");
+    let m = run(fmu, &move_text)?;
+    let (mtime, mcomplete, mpos) = (col(&m, "time")?, col(&m, "seq_complete")?, col(&m, "motor_position")?);
+    let k = at(&mtime, move_at);
+    let mend = mtime.len() - 1;
+    let msettled = settled_from(&mcomplete, k + 1, mend)
+        .ok_or_else(|| anyhow!("no completion after the move at gain {multiplier}"))?;
+    let counts_per_rad =
+        servo_axis::plant::PlantParams::default().encoder_counts_per_rev as f64 / std::f64::consts::TAU;
+    let past = mpos[k..].iter().fold(0.0f64, |m, p| m.max(p - target));
+    Ok(GainFigures {
+        multiplier,
+        acceptance: time[accepted] - STOP_AT,
+        stop_settle: time[settled] - time[accepted],
+        stop_overshoot_counts: overshoot,
+        stop_error_at_completion: dev[settled].abs() as i64,
+        stop_error_at_rest: dev[end].abs() as i64,
+        move_settle: mtime[msettled] - move_at,
+        move_overshoot_counts: (past * counts_per_rad).round() as i64,
+    })
+}
+
+fn grid_stop(fmu: &Fmu, speed: f64, vh: f64, width: u32, index: usize, multiplier: f64) -> Result<GridStop> {
+    let text = format!(
+        "name='bench_grid'\nstop_time=1.5\n[parameters]\n\"seq.target_speed\"={speed:?}\n\"seq.zero_speed\"={vh:?}\n\"seq.completion_counts\"={width}\n\
+         [[events]]\ntime=0.0\nevent='run'\n[[events]]\ntime=0.0\nevent='gain'\nindex={index}\n\
+         [[events]]\ntime={STOP_AT}\nevent='run_off'\n[[events]]\ntime={STOP_AT}\nevent='stop'\n"
+    );
+    let t = run(fmu, &text)?;
+    let (state, complete, dev, time, v) = (
+        col(&t, "seq_state")?,
+        col(&t, "seq_complete")?,
+        col(&t, "seq_deviation")?,
+        col(&t, "time")?,
+        col(&t, "velocity_estimate")?,
+    );
+    let accepted = state
+        .iter()
+        .position(|&s| is_servo_lock(s))
+        .ok_or_else(|| anyhow!("no acceptance at {speed} rad/s, level {vh}"))?;
+    let counts_per_rad =
+        servo_axis::plant::PlantParams::default().encoder_counts_per_rev as f64 / std::f64::consts::TAU;
+    let va = v[accepted].abs();
+    let first = (accepted..complete.len()).find(|&i| complete[i] != 0.0);
+    let toggles = first.map_or(0, |f| complete[f..].windows(2).filter(|w| w[0] != w[1]).count() as u32);
+    Ok(GridStop {
+        speed,
+        zero_speed: vh,
+        width,
+        multiplier,
+        speed_at_acceptance: va,
+        stopping_counts: va * va / (2.0 * ACCELERATION) * counts_per_rad,
+        swing_counts: dev[accepted..].iter().fold(0.0f64, |m, d| m.max(d.abs())) as i64,
+        overshoot_counts: first
+            .map_or(0, |f| dev[f..].iter().fold(0.0f64, |m, d| m.max(d.abs() - width as f64)) as i64),
+        settle: first.map_or(f64::NAN, |f| time[f] - time[accepted]),
+        toggles,
+    })
+}
+
+pub fn grid_figures(grid: &[GridStop]) -> GridFigures {
+    let hysteresis = control_core::Params::default().sequence.completion_hysteresis as f64;
+    let ratio = |g: &GridStop| {
+        g.swing_counts as f64
+            / (SWING_BOUND_FACTOR * g.stopping_counts + SWING_FLOOR_COUNTS + g.width as f64 + hysteresis)
+    };
+    let worst = grid.iter().max_by(|a, b| ratio(a).total_cmp(&ratio(b))).cloned();
+    let never_complete = grid.iter().filter(|g| g.settle.is_nan()).count();
+    let max_toggles = grid.iter().map(|g| g.toggles).max().unwrap_or(0);
+    let worst_swing_ratio = worst.as_ref().map_or(0.0, ratio);
+    GridFigures {
+        runs: grid.len(),
+        never_complete,
+        max_toggles,
+        max_overshoot_counts: grid.iter().map(|g| g.overshoot_counts).max().unwrap_or(0),
+        max_settle: grid.iter().map(|g| g.settle).filter(|s| !s.is_nan()).fold(0.0, f64::max),
+        worst_swing_ratio,
+        worst_swing: worst,
+        holds: never_complete == 0 && max_toggles == 0 && worst_swing_ratio <= 1.0,
+    }
+}
+
+/// The grid alone: every speed, zero-speed level, width and gain of the default table.
+pub fn bench_grid(fmu: &Fmu, mut progress: impl FnMut(f64)) -> Result<Vec<GridStop>> {
+    let defaults = control_core::Params::default().sequence;
+    let total = GRID_SPEEDS.len() * GRID_ZERO_SPEEDS.len() * GRID_WIDTHS.len() * defaults.gain_count;
+    let mut grid = Vec::with_capacity(total);
+    for &speed in &GRID_SPEEDS {
+        for &vh in &GRID_ZERO_SPEEDS {
+            for &width in &GRID_WIDTHS {
+                for i in 0..defaults.gain_count {
+                    progress(grid.len() as f64 / total as f64);
+                    grid.push(grid_stop(fmu, speed, vh, width, i, defaults.gains[i] as f64)?);
+                }
+            }
+        }
+    }
+    Ok(grid)
+}
+
+pub fn bench(fmu: &Fmu, zero_speeds: &[f64], mut progress: impl FnMut(f64)) -> Result<SequenceBench> {
+    let grid = bench_grid(fmu, |f| progress(0.8 * f))?;
+    let grid_figures = grid_figures(&grid);
+    let mut progress = |f: f64| progress(0.8 + 0.2 * f);
+    let defaults = control_core::Params::default().sequence;
+    if defaults.target_speed as f64 != RUN_SPEED || defaults.acceleration as f64 != ACCELERATION {
+        bail!("the bench assumes the default run speed and gradient");
+    }
+    let mut gains = Vec::new();
+    let total = defaults.gain_count + zero_speeds.len();
+    for i in 0..defaults.gain_count {
+        progress(i as f64 / total as f64);
+        gains.push(stop_and_move(fmu, i, defaults.gains[i] as f64)?);
+    }
+    let mut acceptance = Vec::new();
+    for (j, &vh) in zero_speeds.iter().enumerate() {
+        progress((defaults.gain_count + j) as f64 / total as f64);
+        if !(vh.is_finite() && vh > 0.0 && vh < RUN_SPEED) {
+            bail!("zero-speed level {vh} rad/s must lie between 0 and the run speed {RUN_SPEED}");
+        }
+        let text = format!(
+            "name='bench_zero_speed'\nstop_time=0.5\n[parameters]\n\"seq.zero_speed\"={vh:?}\n[[events]]\ntime=0.0\nevent='run'\n\
+             [[events]]\ntime={STOP_AT}\nevent='run_off'\n[[events]]\ntime={STOP_AT}\nevent='stop'\n"
+        );
+        let t = run(fmu, &text)?;
+        let (time, state) = (col(&t, "time")?, col(&t, "seq_state")?);
+        let accepted =
+            state.iter().position(|&s| is_servo_lock(s)).ok_or_else(|| anyhow!("no acceptance at {vh} rad/s"))?;
+        acceptance.push(AcceptanceFigure {
+            zero_speed: vh,
+            measured: time[accepted] - STOP_AT,
+            ramp: (RUN_SPEED - vh) / ACCELERATION,
+        });
+    }
+    progress(1.0);
+    let falls = gains.windows(2).all(|w| w[1].move_settle < w[0].move_settle && w[1].stop_settle < w[0].stop_settle);
+    Ok(SequenceBench { grid, grid_figures, gains, acceptance, settle_falls_with_gain: falls })
+}

@@ -1,0 +1,8 @@
+//! Stop, zero-servo and fine-adjust sequences (seed 004): `servo sequence` and `servo bench sequence`.
+
+pub mod args;
+pub mod bench;
+pub mod command;
+pub mod index;
+pub mod timeline;
+pub mod timeline_reference;

@@ -1,0 +1,349 @@
+//! `servo bench sweep`: the figures of the frequency-response issue (seed 000): 10 Hz to
+//! 3 kHz (41 points with 2 kHz exactly), velocity loop 8 kHz, acquisition 4 kHz, riding on
+//! 50 rad/s, the drive's default sweep settings.
+//!
+//! - the grid: every injection point (velocity command, torque command, velocity feedback) ×
+//!   plants (the default axis and the corners of inertia ratio 0.2–5 × shaft resonance
+//!   50–500 Hz) × current-sensor noise (none, [`DITHER_A`]): worst gain and phase error
+//!   against the oracle over all frequencies, and the measurement time;
+//! - the seed's point: at 2 kHz (the acquisition Nyquist frequency) phase shifting measures,
+//!   a single phase does not; the same records without shifts above it;
+//! - the drive's on-line correlator against the host's equivalent-time fit of the stream;
+//! - PRBS (H1, Welch) over the same measurement time;
+//! - the analytic linear model of the loop at low frequencies against the oracle.
+//!
+//! The oracle ([`oracle_run`]) is the same loop measured with 8 kHz acquisition, records ten
+//! times longer, a 2^24-count encoder and no sensor noise.
+
+use servo_axis::variables::name;
+use std::collections::BTreeMap;
+
+use anyhow::{anyhow, Result};
+use control_core::excitation::InjectionPoint;
+use control_core::phase_shifted_sweep::{SweepParams, SweepSignal};
+use serde::Serialize;
+
+use crate::analysis::response_point::{difference, ResponsePoint};
+use crate::analysis::spectral::Complex;
+use crate::fmu::runner::Fmu;
+use crate::fmu::scenario::Value;
+use crate::fmu::sweep_run::SweepRun;
+use crate::sweep::measurement::{errors, measured_time, online_results, prbs_results, stream_results, ErrorSummary};
+use crate::sweep::report::oracle_run;
+
+pub const VELOCITY: f64 = 50.0;
+/// Current-sensor noise of the noisy grid rows (A, standard deviation): about one count of a
+/// 12-bit converter on the board's current range.
+pub const DITHER_A: f64 = 0.01;
+/// Welch segment (samples at 4 kHz): 1 s, 1 Hz bins.
+pub const SEGMENT: usize = 4096;
+/// Goals of the issue: against the oracle at every frequency, and the measurement time.
+pub const GOAL_DB: f64 = 0.1;
+pub const GOAL_DEG: f64 = 1.0;
+pub const GOAL_SECONDS: f64 = 10.0;
+
+/// Injection points and their sine amplitudes (the `servo sweep` defaults).
+pub const POINTS: [(InjectionPoint, f32); 3] = [
+    (InjectionPoint::VelocityCommand, 2.0),
+    (InjectionPoint::TorqueCommand, 0.2),
+    (InjectionPoint::VelocityFeedback, 2.0),
+];
+
+pub fn point_name(p: InjectionPoint) -> &'static str {
+    match p {
+        InjectionPoint::VelocityCommand => "velocity command",
+        InjectionPoint::TorqueCommand => "torque command",
+        InjectionPoint::VelocityFeedback => "velocity feedback",
+        InjectionPoint::Off => "off",
+    }
+}
+
+/// One plant of the grid: load-to-motor inertia ratio and shaft resonance (None: the
+/// default axis, ratio 2 and 260 Hz).
+#[derive(Clone, Copy, Debug, Serialize)]
+pub struct PlantCase {
+    pub inertia_ratio: f64,
+    pub resonance_hz: Option<f64>,
+}
+
+pub const PLANTS: [PlantCase; 5] = [
+    PlantCase { inertia_ratio: 2.0, resonance_hz: None },
+    PlantCase { inertia_ratio: 0.2, resonance_hz: Some(500.0) },
+    PlantCase { inertia_ratio: 5.0, resonance_hz: Some(500.0) },
+    PlantCase { inertia_ratio: 0.2, resonance_hz: Some(50.0) },
+    PlantCase { inertia_ratio: 5.0, resonance_hz: Some(50.0) },
+];
+
+impl PlantCase {
+    /// The FMU parameters: load inertia = ratio × motor inertia; shaft stiffness for the
+    /// resonance `f_r = √(k·(1/J_M + 1/J_L))/2π` and damping for 5 % at the anti-resonance
+    /// (as the default axis). A light load's friction needs finer integration sub-steps.
+    pub fn parameters(&self) -> BTreeMap<String, Value> {
+        let plant = servo_axis::plant::PlantParams::default();
+        let jm = plant.motor_inertia;
+        let jl = jm * self.inertia_ratio;
+        let mut p = BTreeMap::new();
+        p.insert(name::plant_load_inertia.to_string(), Value::Float(jl));
+        if let Some(fr) = self.resonance_hz {
+            let w = std::f64::consts::TAU * fr;
+            let k = w * w / (1.0 / jm + 1.0 / jl);
+            p.insert(name::plant_shaft_stiffness.to_string(), Value::Float(k));
+            p.insert(name::plant_shaft_damping.to_string(), Value::Float(2.0 * 0.05 * (k * jl).sqrt()));
+        }
+        if self.inertia_ratio < 0.5 {
+            p.insert(name::plant_substeps.to_string(), Value::Int(8));
+        }
+        p
+    }
+
+    pub fn label(&self) -> String {
+        match self.resonance_hz {
+            None => "default (J_L/J_M 2, 260 Hz)".to_string(),
+            Some(f) => format!("J_L/J_M {}, {} Hz", self.inertia_ratio, f),
+        }
+    }
+}
+
+/// One row: an injection point on a plant with or without sensor noise.
+#[derive(Clone, Debug, Serialize)]
+pub struct GridRow {
+    pub point: String,
+    pub plant: String,
+    pub noise_a: f64,
+    pub amplitude: f32,
+    /// Worst |gain error| (dB) and |phase error| (deg) over all frequencies, and where.
+    pub gain_db: f64,
+    pub gain_at_hz: f64,
+    pub phase_deg: f64,
+    pub phase_at_hz: f64,
+    pub measurement_time_s: f64,
+    pub met: bool,
+}
+
+#[derive(Clone, Debug, Serialize)]
+pub struct MethodErrors {
+    pub method: String,
+    pub measurement_time_s: f64,
+    pub errors: ErrorSummary,
+    /// Frequencies the method could not measure (non-finite result).
+    pub unmeasured: Vec<f64>,
+}
+
+#[derive(Clone, Debug, Serialize)]
+pub struct SweepBench {
+    pub grid: Vec<GridRow>,
+    /// Default axis, velocity command, with sensor noise: ours, the same records unshifted,
+    /// PRBS over the same time.
+    pub ours: MethodErrors,
+    pub single_phase: MethodErrors,
+    pub prbs: MethodErrors,
+    /// The 2 kHz point: oracle, ours, single phase.
+    pub at_nyquist: [ResponsePoint; 3],
+    /// Largest |stream − on-line| difference of our run (dB, deg).
+    pub stream_vs_online: (f64, f64),
+    /// Analytic model against the oracle up to 30 Hz: largest dB, deg.
+    pub analytic_low_frequency: (f64, f64),
+    /// The oracle's own residual error: against the same oracle with records twice as long
+    /// (default axis, every point; worst dB, deg).
+    pub oracle_self_check: (f64, f64),
+}
+
+impl SweepBench {
+    pub fn goals_met(&self) -> bool {
+        self.grid.iter().all(|r| r.met)
+    }
+}
+
+fn unmeasured(points: &[ResponsePoint]) -> Vec<f64> {
+    points.iter().filter(|p| !(p.gain_db.is_finite() && p.phase_deg.is_finite())).map(|p| p.frequency).collect()
+}
+
+/// Worst |gain| and |phase| differences over all frequencies, with where they are.
+fn worst(a: &[ResponsePoint], reference: &[ResponsePoint]) -> (f64, f64, f64, f64) {
+    let mut w = (0.0f64, f64::NAN, 0.0f64, f64::NAN);
+    for p in a {
+        let Some(r) = reference.iter().find(|r| (r.frequency - p.frequency).abs() <= 1e-6 * p.frequency) else {
+            continue;
+        };
+        let (dg, dp) = difference(p, r);
+        if !(dg.abs() <= w.0) {
+            w.0 = dg.abs();
+            w.1 = p.frequency;
+        }
+        if !(dp.abs() <= w.2) {
+            w.2 = dp.abs();
+            w.3 = p.frequency;
+        }
+    }
+    w
+}
+
+/// Largest gain/phase error up to `max_hz`.
+fn worst_up_to(a: &[ResponsePoint], reference: &[ResponsePoint], max_hz: f64) -> (f64, f64) {
+    let e = errors(&a.iter().copied().filter(|p| p.frequency <= max_hz).collect::<Vec<_>>(), reference, f64::INFINITY);
+    (e.below_gain_db, e.below_phase_deg)
+}
+
+/// Closed velocity loop of the default axis, linearised: PI velocity controller, two-inertia
+/// plant (motor side), backward-difference velocity estimate (half a velocity period of
+/// delay) and one and a half base ticks of torque delay (computation and PWM hold).
+pub fn analytic_closed_loop(f: f64) -> ResponsePoint {
+    let p = control_core::Params::default();
+    let plant = servo_axis::plant::PlantParams::default();
+    let w = std::f64::consts::TAU * f;
+    let s = Complex::new(0.0, w);
+    let (jm, jl, k, c) = (plant.motor_inertia, plant.load_inertia, plant.shaft_stiffness, plant.shaft_damping);
+    let (bm, bl) = (plant.motor_viscous, plant.load_viscous);
+    // Motor velocity / torque: (JL s + bl + (cs + k)/s) / ((Jm s + bm)(JL s + bl) + (Jm s + bm + JL s + bl)(cs + k)/s).
+    let spring = Complex::new(k, c * w).div(s);
+    let load = s.scale(jl).add(Complex::new(bl, 0.0));
+    let motor = s.scale(jm).add(Complex::new(bm, 0.0));
+    let plant_tf = load.add(spring).div(motor.mul(load).add(motor.add(load).mul(spring)));
+    let controller = Complex::new(p.velocity.kp as f64, 0.0).add(Complex::new(p.velocity.ki as f64, 0.0).div(s));
+    let delay = |t: f64| Complex::new((w * t).cos(), -(w * t).sin());
+    let tick = 1.0 / p.rates.current_loop_hz as f64;
+    let feedback = delay(0.5 * p.rates.velocity_period() as f64);
+    let forward = controller.mul(plant_tf).mul(delay(1.5 * tick));
+    let loop_gain = forward.mul(feedback);
+    let t = loop_gain.div(Complex::new(1.0, 0.0).add(loop_gain));
+    ResponsePoint::from_complex(f, t, 1.0)
+}
+
+fn noise_parameters(base: &BTreeMap<String, Value>, noise: f64) -> BTreeMap<String, Value> {
+    let mut p = base.clone();
+    p.insert(name::plant_current_noise_std.to_string(), Value::Float(noise));
+    p
+}
+
+/// Our sweep (the drive's defaults at `point` with `amplitude`) on `parameters`.
+fn our_run(point: InjectionPoint, amplitude: f32, parameters: BTreeMap<String, Value>) -> SweepRun {
+    SweepRun { settings: SweepParams { point, amplitude, ..SweepParams::default() }, parameters, velocity: VELOCITY }
+}
+
+/// The grid rows of one plant and point (the oracle once, then each noise level).
+fn grid_rows(fmu: &Fmu, plant: &PlantCase, (point, amplitude): (InjectionPoint, f32)) -> Result<Vec<GridRow>> {
+    let base = plant.parameters();
+    let oracle = online_results(&oracle_run(&our_run(point, amplitude, base.clone())).run(fmu, |_| {})?)?;
+    [0.0, DITHER_A]
+        .iter()
+        .map(|&noise| {
+            let run = our_run(point, amplitude, noise_parameters(&base, noise));
+            let trace = run.run(fmu, |_| {})?;
+            let ours = stream_results(&trace, &run.settings)?;
+            let (gain_db, gain_at_hz, phase_deg, phase_at_hz) = worst(&ours, &oracle);
+            let measurement_time_s = measured_time(&trace)?;
+            let compared = ours.iter().filter(|p| oracle.iter().any(|o| o.frequency == p.frequency)).count();
+            Ok(GridRow {
+                point: point_name(point).to_string(),
+                plant: plant.label(),
+                noise_a: noise,
+                amplitude,
+                gain_db,
+                gain_at_hz,
+                phase_deg,
+                phase_at_hz,
+                measurement_time_s,
+                met: compared == oracle.len()
+                    && gain_db <= GOAL_DB
+                    && phase_deg <= GOAL_DEG
+                    && measurement_time_s <= GOAL_SECONDS,
+            })
+        })
+        .collect()
+}
+
+pub fn bench(fmu: &Fmu, mut progress: impl FnMut(f64)) -> Result<SweepBench> {
+    let fs = control_core::Params::default().rates.current_loop_hz;
+    let jobs = PLANTS.len() * POINTS.len();
+    let mut grid = Vec::new();
+    for (i, plant) in PLANTS.iter().enumerate() {
+        for (j, &point) in POINTS.iter().enumerate() {
+            progress((i * POINTS.len() + j) as f64 / (jobs + 3) as f64);
+            grid.extend(grid_rows(fmu, plant, point)?);
+        }
+    }
+    progress(jobs as f64 / (jobs + 3) as f64);
+
+    // The seed's comparison on the default axis, velocity command, with sensor noise.
+    let ours_settings = SweepParams::default();
+    let split = ours_settings.threshold(fs) as f64;
+    let noisy = noise_parameters(&BTreeMap::new(), DITHER_A);
+    let ours_run = our_run(ours_settings.point, ours_settings.amplitude, noisy.clone());
+    let oracle_points = online_results(&oracle_run(&ours_run).run(fmu, |_| {})?)?;
+    let ours_trace = ours_run.run(fmu, |_| {})?;
+    let ours = stream_results(&ours_trace, &ours_settings)?;
+    let online = online_results(&ours_trace)?;
+    let stream_vs_online =
+        ours.iter().zip(&online).filter(|(a, _)| a.quality > 0.01).fold((0.0f64, 0.0f64), |(g, p), (a, b)| {
+            let (dg, dp) = difference(a, b);
+            (g.max(dg.abs()), p.max(dp.abs()))
+        });
+    let single_settings = SweepParams { shifts: 1, ..ours_settings };
+    let single_run = SweepRun { settings: single_settings, ..ours_run.clone() };
+    let single_trace = single_run.run(fmu, |_| {})?;
+    let single = stream_results(&single_trace, &single_settings)?;
+    let time = measured_time(&ours_trace)?;
+    progress((jobs + 1) as f64 / (jobs + 3) as f64);
+    // Chips at half the acquisition rate (2 kHz): every chip is seen by two samples, none
+    // between them; the hold between samples is divided out (see `prbs_results`).
+    let prbs_settings = SweepParams {
+        signal: SweepSignal::Prbs,
+        prbs_seconds: time as f32,
+        prbs_divider: 2 * ours_settings.acquisition_divider,
+        ..ours_settings
+    };
+    let prbs_run = SweepRun { settings: prbs_settings, ..ours_run.clone() };
+    let frequencies: Vec<f64> = oracle_points.iter().map(|p| p.frequency).collect();
+    let prbs = prbs_results(&prbs_run.run(fmu, |_| {})?, &prbs_run, &frequencies, SEGMENT)?;
+    let find = |v: &[ResponsePoint], f: f64| {
+        v.iter().copied().find(|p| (p.frequency - f).abs() < 1e-3).ok_or_else(|| anyhow!("no {f} Hz point"))
+    };
+    let at_nyquist = [find(&oracle_points, 2000.0)?, find(&ours, 2000.0)?, find(&single, 2000.0)?];
+    let analytic: Vec<ResponsePoint> =
+        oracle_points.iter().filter(|p| p.frequency <= 30.0).map(|p| analytic_closed_loop(p.frequency)).collect();
+    let analytic_low_frequency = worst_up_to(&analytic, &oracle_points, 30.0);
+    progress((jobs + 2) as f64 / (jobs + 3) as f64);
+
+    // The oracle against itself with records twice as long, every point of the default axis.
+    let mut oracle_self_check = (0.0f64, 0.0f64);
+    for &(point, amplitude) in &POINTS {
+        let o = oracle_run(&our_run(point, amplitude, BTreeMap::new()));
+        let longer = SweepRun {
+            settings: SweepParams {
+                measure_cycles: 2.0 * o.settings.measure_cycles,
+                min_measure_s: 2.0 * o.settings.min_measure_s,
+                ..o.settings
+            },
+            ..o.clone()
+        };
+        let (a, b) = (online_results(&o.run(fmu, |_| {})?)?, online_results(&longer.run(fmu, |_| {})?)?);
+        let (g, _, p, _) = worst(&a, &b);
+        oracle_self_check = (oracle_self_check.0.max(g), oracle_self_check.1.max(p));
+    }
+    progress(1.0);
+    Ok(SweepBench {
+        grid,
+        ours: MethodErrors {
+            method: "phase-shifted stepped sine".into(),
+            measurement_time_s: time,
+            errors: errors(&ours, &oracle_points, split),
+            unmeasured: unmeasured(&ours),
+        },
+        single_phase: MethodErrors {
+            method: "single-phase stepped sine (same records, all at phase 0)".into(),
+            measurement_time_s: measured_time(&single_trace)?,
+            errors: errors(&single, &oracle_points, split),
+            unmeasured: unmeasured(&single),
+        },
+        prbs: MethodErrors {
+            method: format!("PRBS 2 kHz chips, H1 Welch ({SEGMENT}-sample Hann)"),
+            measurement_time_s: prbs_run.measurement_time()?,
+            errors: errors(&prbs, &oracle_points, split),
+            unmeasured: frequencies.iter().copied().filter(|f| !prbs.iter().any(|p| p.frequency == *f)).collect(),
+        },
+        at_nyquist,
+        stream_vs_online,
+        analytic_low_frequency,
+        oracle_self_check,
+    })
+}

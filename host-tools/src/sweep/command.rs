@@ -1,0 +1,206 @@
+//! `servo sweep` (its options, the sweep settings they give) and `servo bench sweep` (seed 000).
+
+use anyhow::{bail, Result};
+
+use crate::cli::{progress_bar, Common};
+use crate::fmu::runner::Fmu;
+use crate::paths::{default_fmu, default_out};
+use crate::sweep::args::{SweepArgs, SweepBenchArgs};
+
+/// Sweep settings from the command line.
+pub fn sweep_settings(args: &SweepArgs) -> Result<control_core::phase_shifted_sweep::SweepParams> {
+    let (
+        point,
+        amplitude,
+        start,
+        stop,
+        points,
+        linear,
+        extra,
+        settle_cycles,
+        measure_cycles,
+        min_settle,
+        min_measure,
+        shifts,
+        repeats,
+        threshold,
+        acquisition_divider,
+        precision_db,
+        max_extensions,
+    ) = (
+        args.point.as_str(),
+        args.amplitude,
+        args.start,
+        args.stop,
+        args.points,
+        args.linear,
+        args.extra,
+        args.settle_cycles,
+        args.measure_cycles,
+        args.min_settle,
+        args.min_measure,
+        args.shifts,
+        args.repeats,
+        args.threshold,
+        args.acquisition_divider,
+        args.precision_db,
+        args.max_extensions,
+    );
+    use control_core::excitation::InjectionPoint;
+    let (point, default_amplitude) = match point {
+        "velocity" => (InjectionPoint::VelocityCommand, 2.0),
+        "torque" => (InjectionPoint::TorqueCommand, 0.2),
+        "feedback" => (InjectionPoint::VelocityFeedback, 2.0),
+        other => bail!("--point must be velocity, torque or feedback (got `{other}`)"),
+    };
+    Ok(control_core::phase_shifted_sweep::SweepParams {
+        point,
+        signal: control_core::phase_shifted_sweep::SweepSignal::SteppedSine,
+        amplitude: amplitude.unwrap_or(default_amplitude) as f32,
+        start_hz: start as f32,
+        stop_hz: stop as f32,
+        points,
+        logarithmic: !linear,
+        extra_hz: extra as f32,
+        settle_cycles: settle_cycles as f32,
+        min_settle_s: min_settle as f32,
+        measure_cycles: measure_cycles as f32,
+        min_measure_s: min_measure as f32,
+        shifts,
+        repeats,
+        threshold_hz: threshold as f32,
+        acquisition_divider,
+        precision_db: precision_db as f32,
+        max_extensions,
+        dither: args.dither as f32,
+        ..Default::default()
+    })
+}
+
+impl SweepBenchArgs {
+    pub fn run(&self) -> Result<bool> {
+        bench_sweep(&self.common)
+    }
+}
+
+fn bench_sweep(common: &Common) -> Result<bool> {
+    use crate::sweep::bench::{GOAL_DB, GOAL_DEG, GOAL_SECONDS};
+    let fmu = Fmu::load(&common.fmu.clone().unwrap_or_else(default_fmu))?;
+    let pb = progress_bar("sweep bench", common.json);
+    let r = crate::sweep::bench::bench(&fmu, |f| pb.set_position((f * 1000.0) as u64))?;
+    pb.finish_and_clear();
+    let ok = r.goals_met();
+    if common.json {
+        println!(
+            "{}",
+            serde_json::to_string_pretty(&serde_json::json!({"bench": "sweep", "result": r, "passed": ok}))?
+        );
+        return Ok(ok);
+    }
+    let d = control_core::phase_shifted_sweep::SweepParams::default();
+    println!(
+        "servo bench sweep — seed 000: velocity loop 8 kHz, acquisition 4 kHz, 10 Hz to 3 kHz (41 points incl. 2 kHz), riding on 50 rad/s, default settings (precision {} dB, dither {} N·m)",
+        d.precision_db, d.dither
+    );
+    println!(
+        "  worst error over all frequencies against the oracle (8 kHz acquisition, 10x longer records, 2^24-count encoder, no sensor noise); goal <= {GOAL_DB} dB, <= {GOAL_DEG} deg, <= {GOAL_SECONDS} s:"
+    );
+    println!(
+        "  {:<18} {:<28} {:>7} {:>9} {:>8} {:>9} {:>8} {:>9} {:>7}  goal",
+        "injection point", "plant", "noise A", "amplitude", "dB", "at Hz", "deg", "at Hz", "time s"
+    );
+    for row in &r.grid {
+        println!(
+            "  {:<18} {:<28} {:>7} {:>9} {:>8.3} {:>9.1} {:>8.2} {:>9.1} {:>7.2}  {}",
+            row.point,
+            row.plant,
+            row.noise_a,
+            row.amplitude,
+            row.gain_db,
+            row.gain_at_hz,
+            row.phase_deg,
+            row.phase_at_hz,
+            row.measurement_time_s,
+            if row.met { "met" } else { "MISSED" }
+        );
+    }
+    let missed = r.grid.iter().filter(|row| !row.met).count();
+    println!("  rows missing a goal: {missed} of {}", r.grid.len());
+    println!(
+        "  the oracle against itself with records twice as long (default axis, every point): {:.4} dB, {:.3} deg",
+        r.oracle_self_check.0, r.oracle_self_check.1
+    );
+    println!("  default axis, velocity command, current-sensor noise {} A:", crate::sweep::bench::DITHER_A);
+    println!("  {:<58} {:>8} {:>22} {:>22}", "method", "time s", "below 2 kHz dB / deg", "2 kHz and up dB / deg");
+    for m in [&r.ours, &r.single_phase, &r.prbs] {
+        let x = &m.errors;
+        println!(
+            "  {:<58} {:>8.3} {:>10.3} / {:>9.2} {:>10.3} / {:>9.2}{}",
+            m.method,
+            m.measurement_time_s,
+            x.below_gain_db,
+            x.below_phase_deg,
+            x.above_gain_db,
+            x.above_phase_deg,
+            if m.unmeasured.is_empty() {
+                String::new()
+            } else {
+                format!(
+                    "   cannot measure {} point(s): {:?} Hz",
+                    m.unmeasured.len(),
+                    m.unmeasured.iter().map(|f| f.round()).collect::<Vec<_>>()
+                )
+            }
+        );
+    }
+    let [o, ours, single] = r.at_nyquist;
+    println!(
+        "  at exactly 2 kHz: oracle {:.3} dB / {:.2} deg; phase shifted {:.3} dB / {:.2} deg (quality {:.3}); single phase {:.3} dB / {:.2} deg (quality {:.3})",
+        o.gain_db, o.phase_deg, ours.gain_db, ours.phase_deg, ours.quality, single.gain_db, single.phase_deg, single.quality
+    );
+    println!(
+        "  equivalent-time stream vs the drive's on-line correlator: {:.1e} dB, {:.1e} deg",
+        r.stream_vs_online.0, r.stream_vs_online.1
+    );
+    println!(
+        "  analytic linear model vs oracle up to 30 Hz: {:.3} dB, {:.2} deg",
+        r.analytic_low_frequency.0, r.analytic_low_frequency.1
+    );
+    println!("  goal on every row: {}", if ok { "met" } else { "NOT met" });
+    Ok(ok)
+}
+
+impl SweepArgs {
+    pub fn run(&self) -> Result<bool> {
+        let settings = sweep_settings(self)?;
+        let parameters = crate::fmu::assignment::axis_parameters(&self.set, &[])?;
+        let run = crate::fmu::sweep_run::SweepRun { settings, parameters, velocity: self.velocity };
+        let reference = match &self.reference {
+            Some(p) => Some((p.display().to_string(), crate::sweep::report::read_reference(p)?)),
+            None => None,
+        };
+        let common = &self.common;
+        let fmu = Fmu::load(&common.fmu.clone().unwrap_or_else(default_fmu))?;
+        let out = common.out.clone().unwrap_or_else(|| default_out("sweep"));
+        let pb = progress_bar("sweep", common.json);
+        let r = crate::sweep::report::run(
+            &fmu,
+            &run,
+            self.oracle,
+            reference.as_ref().map(|(l, v)| (l.as_str(), v.clone())),
+            &out,
+            |label, f| {
+                pb.set_prefix(label.to_string());
+                pb.set_position((f * 1000.0) as u64)
+            },
+        )?;
+        pb.finish_and_clear();
+        if common.json {
+            println!("{}", serde_json::to_string_pretty(&r)?);
+        } else {
+            r.print();
+        }
+        // The drive's correlator and the host's equivalent-time estimate must agree.
+        Ok(r.stream_vs_online.0 <= 0.01 && r.stream_vs_online.1 <= 0.1)
+    }
+}

@@ -1,0 +1,27 @@
+//! `servo sweep`'s part of out/index.html: the drive's correlator against the host's
+//! equivalent-time estimate (the command's own check), the Bode plot and the data.
+
+use std::path::Path;
+
+use crate::page::{read_json, relative, Section};
+
+pub fn section(root: &Path) -> Option<Section> {
+    let dir = root.join("sweep");
+    let json = read_json(&dir.join("sweep.json"))?;
+    let mut s = Section {
+        title: "Frequency response, phase-shifted stepped sine (seed 000)".into(),
+        command: "servo sweep --oracle".into(),
+        plots: vec![relative(root, &dir.join("bode.svg"))],
+        files: ["sweep.csv", "sweep.json"].iter().map(|f| relative(root, &dir.join(f))).collect(),
+        ..Default::default()
+    };
+    if let (Some(db), Some(deg)) = (json["stream_vs_online"][0].as_f64(), json["stream_vs_online"][1].as_f64()) {
+        s.verdicts.push((
+            format!(
+                "equivalent-time stream vs the drive's correlator: {db:.1e} dB, {deg:.1e} deg (≤ 0.01 dB, 0.1 deg)"
+            ),
+            db <= 0.01 && deg <= 0.1,
+        ));
+    }
+    Some(s)
+}

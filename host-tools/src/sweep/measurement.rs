@@ -1,0 +1,212 @@
+//! Frequency response from a sweep run on the FMU (seed 000): the equivalent-time estimate
+//! from the acquisition stream, the drive's on-line correlator results, the broadband H1
+//! (Welch) estimate of a PRBS run, and their comparison.
+
+use std::collections::BTreeMap;
+
+use anyhow::{anyhow, Result};
+use control_core::excitation::InjectionPoint;
+use control_core::phase_shifted_sweep::SweepParams;
+use serde::Serialize;
+
+use crate::analysis::response_point::{difference, ResponsePoint};
+use crate::analysis::spectral::{welch_h1, Complex};
+use crate::fmu::sweep_run::{is_done, SweepRun, START_AT};
+use crate::fmu::trace::Trace;
+
+/// Simulated time a sweep took in `trace`: from its start to the first step it reports done.
+pub fn measured_time(trace: &Trace) -> Result<f64> {
+    let [time, state] = columns(trace, ["time", "sweep_state"])?;
+    let done = time
+        .iter()
+        .zip(&state)
+        .find(|(t, s)| **t > START_AT && is_done(**s))
+        .ok_or_else(|| anyhow!("the sweep never finished"))?;
+    Ok(done.0 - START_AT)
+}
+
+fn columns<const N: usize>(t: &Trace, names: [&str; N]) -> Result<[Vec<f64>; N]> {
+    let mut out: [Vec<f64>; N] = std::array::from_fn(|_| Vec::new());
+    for (o, n) in out.iter_mut().zip(names) {
+        *o = t.column(n).ok_or_else(|| anyhow!("the FMU has no output {n}"))?;
+    }
+    Ok(out)
+}
+
+/// The drive's on-line correlator results, read at each completion.
+pub fn online_results(t: &Trace) -> Result<Vec<ResponsePoint>> {
+    let [done, f, g, p, q] = columns(
+        t,
+        [
+            "sweep_done_points",
+            "sweep_last_frequency",
+            "sweep_last_gain_db",
+            "sweep_last_phase_deg",
+            "sweep_last_quality",
+        ],
+    )?;
+    let mut out = Vec::new();
+    for i in 1..done.len() {
+        if done[i] > done[i - 1] {
+            out.push(ResponsePoint { frequency: f[i], gain_db: g[i], phase_deg: p[i], quality: q[i] });
+        }
+    }
+    Ok(out)
+}
+
+/// Three-parameter sine fit (known phase) in f64: complex amplitudes of u and y and the
+/// conditioning of the phases, as the drive computes them in f32.
+#[derive(Clone, Copy, Debug, Default)]
+struct SineFit {
+    n: f64,
+    c: f64,
+    s: f64,
+    cc: f64,
+    ss: f64,
+    cs: f64,
+    u: f64,
+    uc: f64,
+    us: f64,
+    y: f64,
+    yc: f64,
+    ys: f64,
+}
+
+impl SineFit {
+    fn add(&mut self, u: f64, y: f64, phase: f64) {
+        let (s, c) = phase.sin_cos();
+        self.n += 1.0;
+        self.c += c;
+        self.s += s;
+        self.cc += c * c;
+        self.ss += s * s;
+        self.cs += c * s;
+        self.u += u;
+        self.uc += u * c;
+        self.us += u * s;
+        self.y += y;
+        self.yc += y * c;
+        self.ys += y * s;
+    }
+
+    fn solve(&self) -> (Complex, Complex, f64) {
+        let n = self.n.max(1.0);
+        let scc = self.cc - self.c * self.c / n;
+        let sss = self.ss - self.s * self.s / n;
+        let scs = self.cs - self.c * self.s / n;
+        let det = scc * sss - scs * scs;
+        let amplitude = |x: f64, xc: f64, xs: f64| {
+            let (pc, ps) = (xc - x * self.c / n, xs - x * self.s / n);
+            Complex::new((sss * pc - scs * ps) / det, -(scc * ps - scs * pc) / det)
+        };
+        (
+            amplitude(self.u, self.uc, self.us),
+            amplitude(self.y, self.yc, self.ys),
+            (det / (0.25 * n * n)).clamp(0.0, 1.0),
+        )
+    }
+}
+
+/// The equivalent-time estimate from the acquisition stream: per frequency, a sine fitted at
+/// the excitation phase of every measured sample of every record (f64). Needs one acquisition
+/// sample per communication step (acquisition divider = the position divider).
+pub fn stream_results(t: &Trace, settings: &SweepParams) -> Result<Vec<ResponsePoint>> {
+    let [point, measuring, u, y, phase, time] =
+        columns(t, ["acq_point", "acq_measuring", "acq_u", "acq_y", "acq_phase", "acq_time"])?;
+    let mut fits: BTreeMap<i64, SineFit> = BTreeMap::new();
+    let mut last_time = f64::NEG_INFINITY;
+    for i in 0..u.len() {
+        if measuring[i] == 0.0 || time[i] == last_time {
+            continue;
+        }
+        last_time = time[i];
+        fits.entry(point[i] as i64).or_default().add(u[i], y[i], phase[i]);
+    }
+    let sign = if settings.point == InjectionPoint::VelocityFeedback { -1.0 } else { 1.0 };
+    Ok(fits
+        .iter()
+        .map(|(&k, fit)| {
+            let (uu, yy, quality) = fit.solve();
+            let g = if quality > 0.0 { yy.div(uu).scale(sign) } else { Complex::new(f64::NAN, f64::NAN) };
+            ResponsePoint::from_complex(settings.frequency(k as usize) as f64, g, quality)
+        })
+        .collect())
+}
+
+/// H1 = S_uy / S_uu (Welch, Hann windows, 50 % overlap) of a PRBS run's acquisition stream,
+/// read at `frequencies` (linear interpolation between bins); points above the acquisition
+/// Nyquist frequency cannot be estimated and are left out. Between two acquisition samples the
+/// loop reads the same chip at each of its m ticks, so H1 (from the sampled u) sees the loop's
+/// response times that hold, `(1/m)·Σ e^{−jωiT}`; the known factor is divided out (chips
+/// must change only at acquisition ticks: a `prbs_divider` multiple of the acquisition
+/// divider).
+pub fn prbs_results(t: &Trace, run: &SweepRun, frequencies: &[f64], segment: usize) -> Result<Vec<ResponsePoint>> {
+    let (settings, rates) = (&run.settings, run.rates()?);
+    let [measuring, u, y, time] = columns(t, ["acq_measuring", "acq_u", "acq_y", "acq_time"])?;
+    let (mut us, mut ys) = (Vec::new(), Vec::new());
+    let mut last_time = f64::NEG_INFINITY;
+    for i in 0..u.len() {
+        if measuring[i] != 0.0 && time[i] != last_time {
+            us.push(u[i]);
+            ys.push(y[i]);
+            last_time = time[i];
+        }
+    }
+    let fs = rates.current_loop_hz as f64 / settings.acquisition_divider as f64;
+    let (h, coherence) = welch_h1(&us, &ys, segment)?;
+    let df = fs / segment as f64;
+    let sign = if settings.point == InjectionPoint::VelocityFeedback { -1.0 } else { 1.0 };
+    let loop_ticks = if settings.point == InjectionPoint::TorqueCommand { 1 } else { rates.velocity_divider };
+    let m = (settings.acquisition_divider / loop_ticks).max(1);
+    let loop_period = loop_ticks as f64 / rates.current_loop_hz as f64;
+    let hold = |f: f64| {
+        (0..m)
+            .map(|i| {
+                let a = -std::f64::consts::TAU * f * i as f64 * loop_period;
+                Complex::new(a.cos(), a.sin())
+            })
+            .fold(Complex::default(), Complex::add)
+            .scale(1.0 / m as f64)
+    };
+    Ok(frequencies
+        .iter()
+        .filter(|&&f| f < fs / 2.0)
+        .map(|&f| {
+            let x = f / df;
+            let k = (x.floor() as usize).min(h.len() - 2);
+            let w = x - k as f64;
+            let g = h[k].scale(1.0 - w).add(h[k + 1].scale(w)).scale(sign).div(hold(f));
+            ResponsePoint::from_complex(f, g, coherence[k] * (1.0 - w) + coherence[k + 1] * w)
+        })
+        .collect())
+}
+
+/// Errors of `a` against a reference at the same frequencies, split at `split_hz`:
+/// (max |gain| dB, max |phase| deg) below and at-or-above.
+#[derive(Clone, Copy, Debug, Default, Serialize)]
+pub struct ErrorSummary {
+    pub below_gain_db: f64,
+    pub below_phase_deg: f64,
+    pub above_gain_db: f64,
+    pub above_phase_deg: f64,
+    pub points_compared: usize,
+}
+
+pub fn errors(a: &[ResponsePoint], reference: &[ResponsePoint], split_hz: f64) -> ErrorSummary {
+    let mut s = ErrorSummary::default();
+    for p in a {
+        let Some(r) = reference.iter().find(|r| (r.frequency - p.frequency).abs() <= 1e-6 * p.frequency) else {
+            continue;
+        };
+        let (dg, dp) = difference(p, r);
+        s.points_compared += 1;
+        if p.frequency < split_hz {
+            s.below_gain_db = s.below_gain_db.max(dg.abs());
+            s.below_phase_deg = s.below_phase_deg.max(dp.abs());
+        } else {
+            s.above_gain_db = s.above_gain_db.max(dg.abs());
+            s.above_phase_deg = s.above_phase_deg.max(dp.abs());
+        }
+    }
+    s
+}

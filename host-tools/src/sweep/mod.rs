@@ -1,0 +1,8 @@
+//! Frequency response with phase-shifted sine repeats (seed 000): `servo sweep` and `servo bench sweep`.
+
+pub mod args;
+pub mod bench;
+pub mod command;
+pub mod index;
+pub mod measurement;
+pub mod report;

@@ -1,0 +1,209 @@
+//! `servo sweep`: run a frequency-response sweep on the FMU, compute the response from the
+//! acquisition stream (equivalent time) and read the drive's on-line results, check that the
+//! two agree, optionally measure the oracle, and write CSV, Bode plot and JSON.
+
+use servo_axis::variables::name;
+use std::path::{Path, PathBuf};
+
+use anyhow::{bail, Result};
+use control_core::phase_shifted_sweep::SweepParams;
+use serde::Serialize;
+
+use crate::analysis::response_point::{difference, ResponsePoint};
+use crate::fmu::runner::Fmu;
+use crate::fmu::scenario::Value;
+use crate::fmu::sweep_run::SweepRun;
+use crate::fmu::trace::Trace;
+use crate::plot::bode::plot_bode;
+use crate::sweep::measurement::{errors, measured_time, online_results, stream_results, ErrorSummary};
+
+/// Encoder of the oracle (counts per revolution; the FMU's finest, 16 times the default 2^20).
+pub const ORACLE_ENCODER: i64 = 1 << 24;
+
+/// The oracle's settings: acquisition at the velocity-loop rate (every 2 ticks: no aliasing
+/// up to 4 kHz, each sample a single velocity estimate), one unshifted record ten times as
+/// long, no dither, read from the on-line correlator.
+pub fn oracle_settings(s: &SweepParams) -> SweepParams {
+    SweepParams {
+        acquisition_divider: 2,
+        shifts: 1,
+        repeats: 1,
+        measure_cycles: s.measure_cycles * 10.0,
+        min_measure_s: (s.min_measure_s * 10.0).max(1.0),
+        settle_cycles: s.settle_cycles * 2.0,
+        min_settle_s: s.min_settle_s.max(0.05),
+        // Fixed long records: the reference does not adapt its length.
+        precision_db: 0.0,
+        dither: 0.0,
+        ..*s
+    }
+}
+
+/// The oracle of a sweep: the same axis, loop, injection point, amplitude, riding speed and
+/// frequencies, measured with [`oracle_settings`] on a 2^24-count encoder without current-sensor
+/// noise: the loop's linear response, without the quantisation and the noise a measurement
+/// has to average out (its own residual error is below 0.01 dB / 0.1°: `servo bench sweep`).
+pub fn oracle_run(run: &SweepRun) -> SweepRun {
+    let mut parameters = run.parameters.clone();
+    parameters.insert(name::plant_encoder_counts_per_rev.to_string(), Value::Int(ORACLE_ENCODER));
+    parameters.insert(name::plant_current_noise_std.to_string(), Value::Float(0.0));
+    SweepRun { settings: oracle_settings(&run.settings), parameters, velocity: run.velocity }
+}
+
+#[derive(Clone, Debug, Serialize)]
+pub struct SweepReport {
+    pub measurement_time_s: f64,
+    pub acquisition_hz: f64,
+    pub threshold_hz: f64,
+    pub stream: Vec<ResponsePoint>,
+    pub online: Vec<ResponsePoint>,
+    /// Largest |stream − on-line| difference: (dB, degrees).
+    pub stream_vs_online: (f64, f64),
+    pub oracle: Option<Vec<ResponsePoint>>,
+    pub errors_vs_oracle: Option<ErrorSummary>,
+    pub files: Vec<PathBuf>,
+}
+
+pub fn read_reference(path: &Path) -> Result<Vec<ResponsePoint>> {
+    let t = Trace::read_csv(path)?;
+    let (Some(f), Some(g), Some(p)) = (t.column("frequency"), t.column("gain_db"), t.column("phase_deg")) else {
+        bail!("{}: a reference needs the columns frequency, gain_db, phase_deg", path.display());
+    };
+    Ok((0..f.len()).map(|i| ResponsePoint { frequency: f[i], gain_db: g[i], phase_deg: p[i], quality: 1.0 }).collect())
+}
+
+pub fn run(
+    fmu: &Fmu,
+    sweep: &SweepRun,
+    with_oracle: bool,
+    reference: Option<(&str, Vec<ResponsePoint>)>,
+    out: &Path,
+    mut progress: impl FnMut(&str, f64),
+) -> Result<SweepReport> {
+    std::fs::create_dir_all(out)?;
+    let rates = sweep.rates()?;
+    let (fs, pdiv) = (rates.current_loop_hz, rates.position_divider);
+    sweep.scenario()?; // refuses invalid settings with the drive's reason first
+    if sweep.settings.acquisition_divider != pdiv {
+        bail!(
+            "the acquisition stream reaches the host once per communication step ({pdiv} ticks): use --acquisition-divider {pdiv} (the oracle uses the drive's own correlator at any rate)"
+        );
+    }
+    let trace = sweep.run(fmu, |f| progress("sweep", f))?;
+    let measurement_time = measured_time(&trace)?;
+    let stream = stream_results(&trace, &sweep.settings)?;
+    let online = online_results(&trace)?;
+    if stream.len() != online.len() {
+        bail!("{} frequencies from the stream, {} from the drive", stream.len(), online.len());
+    }
+    let agreement = stream.iter().zip(&online).fold((0.0f64, 0.0f64), |(g, p), (a, b)| {
+        let (dg, dp) = difference(a, b);
+        if a.quality < 0.01 {
+            (g, p) // nothing measurable there (a single record at fs/2): both are noise
+        } else {
+            (g.max(dg.abs()), p.max(dp.abs()))
+        }
+    });
+    let mut files = Vec::new();
+    let csv = out.join("sweep.csv");
+    let mut t = Trace::new(
+        ["frequency", "gain_db", "phase_deg", "quality", "online_gain_db", "online_phase_deg", "online_quality"]
+            .map(String::from)
+            .to_vec(),
+    );
+    for (a, b) in stream.iter().zip(&online) {
+        t.rows.push(vec![a.frequency, a.gain_db, a.phase_deg, a.quality, b.gain_db, b.phase_deg, b.quality]);
+    }
+    t.write_csv(&csv)?;
+    let trace_csv = out.join("sweep_trace.csv");
+    trace.write_csv(&trace_csv)?;
+    files.extend([csv, trace_csv]);
+    let (oracle, errors_vs_oracle) = if with_oracle {
+        let o = oracle_run(sweep);
+        let ot = o.run(fmu, |f| progress("oracle", f))?;
+        let oracle = online_results(&ot)?;
+        let e = errors(&stream, &oracle, sweep.settings.threshold(fs) as f64);
+        let path = out.join("oracle.csv");
+        let mut t = Trace::new(["frequency", "gain_db", "phase_deg", "quality"].map(String::from).to_vec());
+        for p in &oracle {
+            t.rows.push(vec![p.frequency, p.gain_db, p.phase_deg, p.quality]);
+        }
+        t.write_csv(&path)?;
+        files.push(path);
+        (Some(oracle), Some(e))
+    } else {
+        (None, None)
+    };
+    let acquisition_hz = fs as f64 / sweep.settings.acquisition_divider as f64;
+    let mut curves: Vec<(&str, &[ResponsePoint])> = vec![];
+    if let Some(o) = &oracle {
+        curves.push(("oracle (8 kHz acquisition, 10x longer, 2^24-count encoder, no noise)", o));
+    }
+    if let Some((label, r)) = &reference {
+        curves.push((label, r));
+    }
+    curves.push(("equivalent time (acquisition stream)", &stream));
+    curves.push(("on-line correlator (drive)", &online));
+    let svg = out.join("bode.svg");
+    plot_bode(
+        &svg,
+        &format!("Frequency response, {measurement_time:.2} s of measurement, acquisition {acquisition_hz} Hz"),
+        &curves,
+        Some((acquisition_hz / 2.0, "acquisition Nyquist")),
+    )?;
+    files.push(svg);
+    let report = SweepReport {
+        measurement_time_s: measurement_time,
+        acquisition_hz,
+        threshold_hz: sweep.settings.threshold(fs) as f64,
+        stream,
+        online,
+        stream_vs_online: agreement,
+        oracle,
+        errors_vs_oracle,
+        files: files.clone(),
+    };
+    let json = out.join("sweep.json");
+    std::fs::write(&json, serde_json::to_string_pretty(&report)?)?;
+    Ok(SweepReport { files: [files, vec![json]].concat(), ..report })
+}
+
+impl SweepReport {
+    pub fn print(&self) {
+        println!(
+            "servo sweep — {} frequencies, {:.3} s of measurement, acquisition {} Hz, phase shifting from {} Hz",
+            self.stream.len(),
+            self.measurement_time_s,
+            self.acquisition_hz,
+            self.threshold_hz
+        );
+        println!(
+            "  {:>10} {:>10} {:>10} {:>8} {:>12} {:>12}",
+            "Hz", "gain dB", "phase deg", "quality", "online dB", "online deg"
+        );
+        for (a, b) in self.stream.iter().zip(&self.online) {
+            println!(
+                "  {:>10.2} {:>10.3} {:>10.2} {:>8.4} {:>12.3} {:>12.2}",
+                a.frequency, a.gain_db, a.phase_deg, a.quality, b.gain_db, b.phase_deg
+            );
+        }
+        println!(
+            "  stream vs on-line correlator: largest difference {:.2e} dB, {:.2e} deg",
+            self.stream_vs_online.0, self.stream_vs_online.1
+        );
+        if let Some(e) = &self.errors_vs_oracle {
+            println!(
+                "  against the oracle: below {} Hz max {:.3} dB / {:.2} deg; from {} Hz up max {:.3} dB / {:.2} deg",
+                self.threshold_hz,
+                e.below_gain_db,
+                e.below_phase_deg,
+                self.threshold_hz,
+                e.above_gain_db,
+                e.above_phase_deg
+            );
+        }
+        for f in &self.files {
+            println!("  → {}", f.display());
+        }
+    }
+}
