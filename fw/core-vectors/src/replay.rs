@@ -4,28 +4,12 @@ use core::fmt::Write as _;
 
 use control_core::golden_vectors::{decode_only, replay, replay_only};
 
-use core_vectors::semihosting::write;
+use core_vectors::semihosting::{write, Line};
 
 static VECTORS: &[u8] = include_bytes!(env!("CORE_VECTORS_FILE"));
 
-/// A line buffer for `write!`.
-struct Line {
-    buf: [u8; 128],
-    len: usize,
-}
-
-impl core::fmt::Write for Line {
-    fn write_str(&mut self, s: &str) -> core::fmt::Result {
-        let b = s.as_bytes();
-        let n = b.len().min(self.buf.len() - self.len);
-        self.buf[self.len..self.len + n].copy_from_slice(&b[..n]);
-        self.len += n;
-        Ok(())
-    }
-}
-
 pub fn run() -> bool {
-    let mut line = Line { buf: [0; 128], len: 0 };
+    let mut line = Line::new();
     core_vectors::clock::start();
     // Calibration: a loop of known length (2 instructions per pass).
     let passes: u32 = 100_000;
@@ -48,13 +32,13 @@ pub fn run() -> bool {
     let ok = match result {
         Ok((ticks, digest)) => {
             let _ = writeln!(line, "core-vectors ticks {ticks} digest {digest:016x}");
-            let mut cost = Line { buf: [0; 128], len: 0 };
+            let mut cost = Line::new();
             let _ = writeln!(
                 cost,
                 "core-vectors clock {clocks} core {core_clocks} calibration {calibration} for {} instructions",
                 2 * passes
             );
-            write(core::str::from_utf8(&cost.buf[..cost.len]).unwrap_or(""));
+            write(cost.as_str(""));
             true
         }
         Err(e) => {
@@ -62,6 +46,6 @@ pub fn run() -> bool {
             false
         }
     };
-    write(core::str::from_utf8(&line.buf[..line.len]).unwrap_or("core-vectors: bad line\n"));
+    write(line.as_str("core-vectors: bad line\n"));
     ok
 }

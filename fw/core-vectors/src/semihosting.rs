@@ -17,6 +17,46 @@ pub fn write(s: &str) {
     }
 }
 
+/// A line buffer for `write!` (what does not fit is cut off).
+pub struct Line {
+    buf: [u8; 160],
+    len: usize,
+}
+
+impl Line {
+    pub const fn new() -> Self {
+        Self { buf: [0; 160], len: 0 }
+    }
+
+    /// The text so far (`fallback` if a cut split a character).
+    pub fn as_str<'a>(&'a self, fallback: &'a str) -> &'a str {
+        core::str::from_utf8(&self.buf[..self.len]).unwrap_or(fallback)
+    }
+}
+
+impl Default for Line {
+    fn default() -> Self {
+        Self::new()
+    }
+}
+
+impl core::fmt::Write for Line {
+    fn write_str(&mut self, s: &str) -> core::fmt::Result {
+        let b = s.as_bytes();
+        let n = b.len().min(self.buf.len() - self.len);
+        self.buf[self.len..self.len + n].copy_from_slice(&b[..n]);
+        self.len += n;
+        Ok(())
+    }
+}
+
+/// Format one line and print it.
+pub fn print(args: core::fmt::Arguments) {
+    let mut line = Line::new();
+    let _ = core::fmt::Write::write_fmt(&mut line, args);
+    write(line.as_str("?\n"));
+}
+
 pub fn exit(ok: bool) -> ! {
     // ADP_Stopped_ApplicationExit (0x20026) or ADP_Stopped_InternalError (0x20024).
     let reason: u32 = if ok { 0x20026 } else { 0x20024 };

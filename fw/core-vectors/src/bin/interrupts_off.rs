@@ -11,14 +11,13 @@
 #![no_std]
 #![no_main]
 
-use core::fmt::Write as _;
-
 use control_core::current_sensing::SensingScales;
 use control_core::golden_vectors::{preset, ALL_FEATURES};
 use control_core::params::Params;
 use control_core::protocol::{Request, Response, VERSION};
 use control_core::stop_sequence::SequenceEvent;
 use control_core::{Axis, Commands, Mode};
+use core_vectors::semihosting::print;
 use core_vectors::{clock, semihosting};
 use drive_application::board::{FlashError, ParamFlash, PowerStage, Sample};
 use drive_application::Drive;
@@ -110,27 +109,6 @@ fn take() -> u32 {
 static DRIVE: Drive = Drive::new();
 static mut FLASH: RamFlash = RamFlash { pages: [[0xFF; PAGE]; 2] };
 static mut OLD_AXIS: core::mem::MaybeUninit<Axis> = core::mem::MaybeUninit::uninit();
-
-struct Line {
-    buf: [u8; 160],
-    len: usize,
-}
-
-impl core::fmt::Write for Line {
-    fn write_str(&mut self, s: &str) -> core::fmt::Result {
-        let b = s.as_bytes();
-        let n = b.len().min(self.buf.len() - self.len);
-        self.buf[self.len..self.len + n].copy_from_slice(&b[..n]);
-        self.len += n;
-        Ok(())
-    }
-}
-
-fn print(args: core::fmt::Arguments) {
-    let mut line = Line { buf: [0; 160], len: 0 };
-    let _ = line.write_fmt(args);
-    semihosting::write(core::str::from_utf8(&line.buf[..line.len]).unwrap_or("?\n"));
-}
 
 extern "C" {
     static mut _ebss: u32;
