@@ -200,11 +200,37 @@ impl fmt::Display for SweepError {
     }
 }
 
+/// Where the extra frequency sits among the planned ones, found once: both the count and the
+/// position take every base frequency (a power each, about 20 000 instructions for 128 points
+/// on a Cortex-M4), which the runner must not compute inside a control tick.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct FrequencyPlan {
+    /// Number of frequencies (with the extra one; at most `MAX_SWEEP_POINTS`).
+    pub count: u16,
+    /// Index of the extra frequency (`NO_EXTRA`: none, or it is one of the base frequencies).
+    pub extra_at: u16,
+}
+
+/// [`FrequencyPlan::extra_at`] when there is no extra frequency.
+pub const NO_EXTRA: u16 = u16::MAX;
+
 impl SweepParams {
     /// Number of frequencies (with the extra one).
     pub fn count(&self) -> usize {
         let extra = self.extra_hz > 0.0 && !(0..self.points as usize).any(|i| self.base(i) == self.extra_hz);
         self.points as usize + extra as usize
+    }
+
+    /// The count and the extra frequency's place (see [`FrequencyPlan`]).
+    /// Settings that passed [`Self::validate`] have at most `MAX_SWEEP_POINTS`; larger counts
+    /// saturate (a sweep is never built from them).
+    pub fn plan(&self) -> FrequencyPlan {
+        let count = u16::try_from(self.count()).unwrap_or(u16::MAX);
+        if count as u32 == self.points {
+            return FrequencyPlan { count, extra_at: NO_EXTRA };
+        }
+        let at = (0..self.points as usize).filter(|&j| self.base(j) < self.extra_hz).count();
+        FrequencyPlan { count, extra_at: u16::try_from(at).unwrap_or(NO_EXTRA - 1) }
     }
 
     fn base(&self, i: usize) -> f32 {
@@ -218,10 +244,15 @@ impl SweepParams {
 
     /// The i-th frequency in ascending order.
     pub fn frequency(&self, i: usize) -> f32 {
-        if self.count() == self.points as usize {
+        self.frequency_in(&self.plan(), i)
+    }
+
+    /// The i-th frequency of `plan` (this parameter set's [`Self::plan`]): one power at most.
+    pub fn frequency_in(&self, plan: &FrequencyPlan, i: usize) -> f32 {
+        if plan.extra_at == NO_EXTRA {
             return self.base(i);
         }
-        let at = (0..self.points as usize).filter(|&j| self.base(j) < self.extra_hz).count();
+        let at = plan.extra_at as usize;
         match i.cmp(&at) {
             core::cmp::Ordering::Less => self.base(i),
             core::cmp::Ordering::Equal => self.extra_hz,
@@ -701,11 +732,14 @@ pub struct PhaseShiftedSweep {
     phase: f32,
     sin_cos: (f32, f32),
     results: [SweepResult; MAX_SWEEP_POINTS],
+    /// The parameters' frequency plan, found when the sweep is built (outside the tick).
+    plan: FrequencyPlan,
 }
 
 impl PhaseShiftedSweep {
     pub fn new(params: SweepParams, base_rate_hz: f32) -> Self {
         Self {
+            plan: params.plan(),
             params,
             base_rate_hz,
             status: SweepStatus::default(),
@@ -764,6 +798,8 @@ impl PhaseShiftedSweep {
         Ok(())
     }
 
+    // Once per record or frequency: kept out of line so that the every-tick path stays small.
+    #[inline(never)]
     fn begin_record(&mut self, point: u32, record: u32) {
         let p = &self.params;
         self.status.point = point;
@@ -777,7 +813,7 @@ impl PhaseShiftedSweep {
             self.dithering = false;
             return;
         }
-        let f = p.frequency(point as usize);
+        let f = p.frequency_in(&self.plan, point as usize);
         self.status.frequency = f;
         self.averaging = f < p.threshold(self.base_rate_hz);
         self.dithering = p.dither > 0.0 && !self.averaging;
@@ -915,7 +951,7 @@ impl PhaseShiftedSweep {
                 }
                 self.finish_point();
                 let next = self.status.point + 1;
-                if (next as usize) < self.params.count() {
+                if next < self.plan.count as u32 {
                     self.begin_record(next, 0);
                 } else {
                     self.status.state = SweepState::Done;
@@ -930,6 +966,8 @@ impl PhaseShiftedSweep {
     /// to reach `precision_db` (the phase's: the same relative size, `precision_db·ln10/20`
     /// rad, 0.2° at 0.03 dB) over all `records`, predicted from the first base block (error ∝
     /// 1/√samples).
+    // Once per record or frequency: kept out of line so that the every-tick path stays small.
+    #[inline(never)]
     fn blocks_needed(&self, records: u32) -> u32 {
         let p = &self.params;
         if !(p.precision_db > 0.0) || p.max_extensions == 0 {
@@ -951,6 +989,8 @@ impl PhaseShiftedSweep {
         }
     }
 
+    // Once per record or frequency: kept out of line so that the every-tick path stays small.
+    #[inline(never)]
     fn finish_point(&mut self) {
         let ((u_re, u_im), (y_re, y_im), quality) = self.acc.solve();
         let den = u_re * u_re + u_im * u_im;
@@ -1071,6 +1111,62 @@ mod tests {
         let f: [f32; 41] = core::array::from_fn(|i| p.frequency(i));
         assert!(f.windows(2).all(|w| w[0] < w[1]));
         assert!(f.contains(&2000.0) && (f[0] - 10.0).abs() < 1e-4 && (f[40] - 3000.0).abs() < 0.1);
+    }
+
+    #[test]
+    fn the_plan_found_once_gives_the_frequencies_of_a_sorted_list() {
+        // Reference: the base frequencies, the extra one added unless already there, sorted.
+        for (points, extra, logarithmic) in [
+            (41, 2000.0, true),
+            (41, 0.0, true),
+            (5, 10.0, true),
+            (5, 3000.0, true),
+            (9, 777.0, false),
+            (9, 1.0, false),
+        ] {
+            let p = SweepParams { points, extra_hz: extra, logarithmic, ..Default::default() };
+            let mut list: heapless_list::List = heapless_list::List::new();
+            for i in 0..points as usize {
+                let x = i as f32 / (points - 1) as f32;
+                list.push(if logarithmic {
+                    p.start_hz * libm::powf(p.stop_hz / p.start_hz, x)
+                } else {
+                    p.start_hz + (p.stop_hz - p.start_hz) * x
+                });
+            }
+            if extra > 0.0 && !list.as_slice().contains(&extra) {
+                list.push(extra);
+            }
+            list.sort();
+            let plan = p.plan();
+            assert_eq!(plan.count as usize, list.len, "{points} {extra}");
+            for (i, f) in list.as_slice().iter().enumerate() {
+                assert_eq!(p.frequency_in(&plan, i), *f, "{points} {extra} #{i}");
+            }
+        }
+    }
+
+    /// A fixed-capacity list for the test (the core has no allocator).
+    mod heapless_list {
+        pub struct List {
+            items: [f32; 64],
+            pub len: usize,
+        }
+        impl List {
+            pub fn new() -> Self {
+                Self { items: [0.0; 64], len: 0 }
+            }
+            pub fn push(&mut self, x: f32) {
+                self.items[self.len] = x;
+                self.len += 1;
+            }
+            pub fn as_slice(&self) -> &[f32] {
+                &self.items[..self.len]
+            }
+            pub fn sort(&mut self) {
+                self.items[..self.len].sort_unstable_by(f32::total_cmp);
+            }
+        }
     }
 
     #[test]
