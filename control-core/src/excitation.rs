@@ -4,6 +4,7 @@
 //! that long runs do not lose precision. Used for the plant checks and, later, the
 //! phase-shifted frequency sweep (seed 000).
 
+use crate::trigonometry::ReducedAngle;
 use crate::TAU;
 
 /// Where an excitation signal is added in the loop.
@@ -63,21 +64,33 @@ impl SineGenerator {
 
     /// Current phase in `[0, 2π)`.
     pub fn phase(&self) -> f32 {
-        // The top 24 bits convert to f32 exactly.
-        (self.phase >> 8) as f32 * (TAU / 16_777_216.0)
+        phase_angle(self.phase)
+    }
+
+    /// Current phase as the accumulator's word (one turn is 2³²): [`phase_angle`] converts it,
+    /// for a caller that needs the angle on some ticks only.
+    pub fn phase_word(&self) -> u32 {
+        self.phase
     }
 
     pub fn next_sample(&mut self) -> f32 {
-        self.next_with_sin_cos().0
+        self.next_with_angle().0
     }
 
-    /// The sample, and the sine and cosine of its phase (for a correlator on the same tick:
-    /// one evaluation instead of two).
-    pub fn next_with_sin_cos(&mut self) -> (f32, (f32, f32)) {
-        let (s, c) = crate::trigonometry::sin_cos(self.phase());
+    /// The sample, and its phase reduced for the sine and cosine (for a correlator on the same
+    /// tick: one reduction, and the cosine's polynomial only on the ticks that need it).
+    #[inline(always)]
+    pub fn next_with_angle(&mut self) -> (f32, ReducedAngle) {
+        let angle = ReducedAngle::of_phase_word(self.phase);
         self.phase = self.phase.wrapping_add(self.increment);
-        (self.amplitude * s, (s, c))
+        (self.amplitude * angle.sin(), angle)
     }
+}
+
+/// A phase accumulator's word as an angle in `[0, 2π)`.
+pub fn phase_angle(word: u32) -> f32 {
+    // The top 24 bits convert to f32 exactly.
+    (word >> 8) as f32 * (TAU / 16_777_216.0)
 }
 
 fn to_accumulator(turns: f64) -> u32 {

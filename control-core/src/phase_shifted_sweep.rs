@@ -34,8 +34,9 @@
 
 use core::fmt;
 
-use crate::excitation::{InjectionPoint, SineGenerator};
+use crate::excitation::{phase_angle, InjectionPoint, SineGenerator};
 use crate::m_sequence::MSequence;
+use crate::trigonometry::ReducedAngle;
 use crate::TAU;
 
 pub const MAX_SWEEP_POINTS: usize = 128;
@@ -727,10 +728,12 @@ pub struct PhaseShiftedSweep {
     dithering: bool,
     sequence: MSequence,
     chip: f32,
-    /// The excitation value and phase of the present tick, and the phase's sine and cosine.
+    /// The excitation value and phase (the generator's accumulator word, converted on
+    /// acquisition ticks only) of the present tick, and the phase reduced for its sine and
+    /// cosine (evaluated on acquisition ticks only).
     value: f32,
-    phase: f32,
-    sin_cos: (f32, f32),
+    phase_word: u32,
+    angle: ReducedAngle,
     results: [SweepResult; MAX_SWEEP_POINTS],
     /// The parameters' frequency plan, found when the sweep is built (outside the tick).
     plan: FrequencyPlan,
@@ -756,8 +759,8 @@ impl PhaseShiftedSweep {
             sequence: MSequence::new(params.prbs_degree).unwrap_or(MSequence::DEGREE_15),
             chip: 0.0,
             value: 0.0,
-            phase: 0.0,
-            sin_cos: (0.0, 1.0),
+            phase_word: 0,
+            angle: ReducedAngle::default(),
             results: [SweepResult::default(); MAX_SWEEP_POINTS],
         }
     }
@@ -831,8 +834,8 @@ impl PhaseShiftedSweep {
     /// Excitation for this base tick (call once per tick, before the loops): the value to
     /// add at the injection point, or None when no sweep runs. `chip_due`: the tick is a
     /// multiple of `prbs_divider` (the caller counts ticks; a 64-bit modulo is software on a
-    /// Cortex-M4). The phase's sine and cosine are kept for the correlator on the same tick
-    /// (one evaluation instead of two). Rotating them on between acquisition ticks instead
+    /// Cortex-M4). The phase's reduction is kept for the correlator on the same tick, which
+    /// evaluates the cosine only when it acquires (one reduction, no cosine on other ticks). Rotating them on between acquisition ticks instead
     /// of evaluating every tick saved the Cortex-M4 about 20 instructions per tick, but changes
     /// what the loop computes (the golden vectors and the drive's own results): not done.
     pub fn excitation(&mut self, chip_due: bool) -> Option<(InjectionPoint, f32)> {
@@ -842,8 +845,8 @@ impl PhaseShiftedSweep {
         let p = &self.params;
         match p.signal {
             SweepSignal::SteppedSine => {
-                self.phase = self.generator.phase();
-                (self.value, self.sin_cos) = self.generator.next_with_sin_cos();
+                self.phase_word = self.generator.phase_word();
+                (self.value, self.angle) = self.generator.next_with_angle();
                 self.dither = if self.dithering {
                     let mut x = self.dither_state;
                     x ^= x << 13;
@@ -864,7 +867,7 @@ impl PhaseShiftedSweep {
                     self.chip = p.amplitude * self.sequence.next_chip() as f32;
                 }
                 self.value = self.chip;
-                self.phase = 0.0;
+                self.phase_word = 0;
             }
         }
         Some((p.point, self.value))
@@ -901,13 +904,13 @@ impl PhaseShiftedSweep {
                 tick,
                 u,
                 y,
-                phase: self.phase,
+                phase: phase_angle(self.phase_word),
                 measuring,
                 point: self.status.point,
                 record: self.status.record,
             };
             if measuring && signal == SweepSignal::SteppedSine {
-                self.acc.add(u, y, self.sin_cos);
+                self.acc.add(u, y, self.angle.sin_cos());
             }
         }
         self.left = self.left.saturating_sub(1);
@@ -1037,7 +1040,7 @@ mod tests {
         let mut tick = 0u64;
         while s.running() {
             let (_, u) = s.excitation(tick.is_multiple_of(params.prbs_divider as u64)).unwrap();
-            let y = gain * params.amplitude * libm::sinf(s.phase + phase);
+            let y = gain * params.amplitude * libm::sinf(phase_angle(s.phase_word) + phase);
             s.end_tick(tick, tick.is_multiple_of(2), tick.is_multiple_of(params.acquisition_divider as u64), u, y);
             tick += 1;
         }
@@ -1213,7 +1216,7 @@ mod tests {
         while s.running() {
             let (_, u) = s.excitation(true).unwrap();
             let r = uniform(&mut state);
-            let y = 50.0 + gain * params.amplitude * libm::sinf(s.phase + 0.3) + noise * r;
+            let y = 50.0 + gain * params.amplitude * libm::sinf(phase_angle(s.phase_word) + 0.3) + noise * r;
             s.end_tick(tick, tick.is_multiple_of(2), tick.is_multiple_of(params.acquisition_divider as u64), u, y);
             tick += 1;
         }
