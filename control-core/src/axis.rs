@@ -201,13 +201,13 @@ impl Axis {
         self.telemetry.faults
     }
 
-    /// Clear latched faults; the loops restart from rest.
     /// Latch a fault found outside the core (the power stage's break input, current sensing):
     /// the next [`Axis::step`] switches the PWM off, like any fault, until cleared.
     pub fn latch_fault(&mut self, bit: u32) {
         self.telemetry.faults.latch(bit);
     }
 
+    /// Clear latched faults; the loops restart from rest.
     pub fn clear_faults(&mut self) {
         self.telemetry.faults = Faults::default();
         self.friction.reset();

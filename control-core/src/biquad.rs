@@ -30,7 +30,6 @@ impl Biquad {
         Self { b0, b1, b2, a1, a2, s1: 0.0, s2: 0.0 }
     }
 
-    /// The transposed-direct-form-II state `(s1, s2)`.
     /// Take `other`'s coefficients and state, field by field (a struct copy of this size
     /// becomes a `memcpy` call on the Cortex-M4, some 40 instructions).
     #[inline(always)]
@@ -39,6 +38,7 @@ impl Biquad {
         (self.b0, self.b1, self.b2, self.a1, self.a2, self.s1, self.s2) = (b0, b1, b2, a1, a2, s1, s2);
     }
 
+    /// The transposed-direct-form-II state `(s1, s2)`.
     pub fn state(&self) -> (f32, f32) {
         (self.s1, self.s2)
     }

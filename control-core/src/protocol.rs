@@ -177,7 +177,10 @@ impl fmt::Display for RefusalReason {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         match self {
             Self::InvalidParams(field) => write!(f, "invalid parameters: {}", field.as_str()),
-            Self::Busy => write!(f, "parameters only while the axis stands still in torque mode at zero torque"),
+            Self::Busy => write!(
+                f,
+                "parameters only while the axis stands still in torque mode at zero torque, with no fault latched (ClearFaults first) and no sweep running"
+            ),
             Self::Sequence(r) => write!(f, "the stop sequence refused the event: {r}"),
             Self::Sweep => write!(f, "the sweep cannot start (injection point, mode, or already running)"),
             Self::Correction => write!(f, "invalid correction, or a command still in motion through the filter"),
@@ -302,6 +305,18 @@ pub fn decode_response(frame: &mut [u8]) -> Result<Response, FrameError> {
     Ok(r)
 }
 
+/// Parameters (and the parameter store) may change only while the axis stands still in torque
+/// mode at zero torque, with no fault latched and no sweep running: a new axis starts without
+/// faults (a latched fault must be cleared by `ClearFaults`, never by a parameter change) and
+/// without the sweep's results.
+pub fn parameters_may_change(commands: &Commands, axis: &Axis) -> bool {
+    commands.mode == Mode::Torque
+        && commands.torque == 0.0
+        && axis.telemetry().torque_command == 0.0
+        && !axis.faults().any()
+        && !axis.sweep().running()
+}
+
 /// The drive's side: carry out one request on `axis` (its `commands`, its sample `stream`).
 /// Every value is checked here, where it enters the drive: parameters by `Params::validate`,
 /// set-points and targets against their ranges (`crate::ranges`); a refusal changes nothing.
@@ -313,9 +328,7 @@ pub fn handle(axis: &mut Axis, commands: &mut Commands, stream: &mut Acquisition
             Response::Hello { version: VERSION, boot_params: ParamsOrigin::Defaults(DefaultsReason::NoStorage) }
         }
         Request::SetParams(p) => {
-            let at_rest =
-                commands.mode == Mode::Torque && commands.torque == 0.0 && axis.telemetry().torque_command == 0.0;
-            if !at_rest {
+            if !parameters_may_change(commands, axis) {
                 return refused(RefusalReason::Busy);
             }
             match Axis::new(p) {
@@ -588,6 +601,34 @@ mod tests {
         b.count = 16;
         let n = encode(&Response::Samples(b), &mut buf).unwrap();
         assert_eq!(decode_response(&mut buf[..n]), Ok(Response::Samples(b)));
+    }
+
+    #[test]
+    fn a_parameter_change_never_clears_a_latched_fault_nor_drops_a_running_sweep() {
+        let mut stream = AcquisitionStream::default();
+        let mut commands = Commands::default();
+        let mut axis = Axis::new(Params::default()).unwrap();
+        axis.latch_fault(crate::faults::Faults::OVERCURRENT);
+        assert_eq!(
+            handle(&mut axis, &mut commands, &mut stream, Request::SetParams(Params::default())),
+            Response::Refused(RefusalReason::Busy)
+        );
+        assert!(axis.faults().contains(crate::faults::Faults::OVERCURRENT), "the fault stays latched");
+        axis.clear_faults();
+        assert_eq!(
+            handle(&mut axis, &mut commands, &mut stream, Request::SetParams(Params::default())),
+            Response::Done
+        );
+        // A torque-command sweep at rest: torque mode, zero set-point.
+        let mut p = Params::default();
+        p.sweep.point = crate::excitation::InjectionPoint::TorqueCommand;
+        let mut axis = Axis::new(p).unwrap();
+        axis.start_sweep().unwrap();
+        assert_eq!(
+            handle(&mut axis, &mut commands, &mut stream, Request::SetParams(Params::default())),
+            Response::Refused(RefusalReason::Busy)
+        );
+        assert!(axis.sweep().running());
     }
 
     #[test]

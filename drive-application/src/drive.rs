@@ -9,15 +9,18 @@
 //!    that were in force when they were sampled;
 //! 4. a break (the power stage's own overcurrent comparator) latches a core fault;
 //! 5. `Axis::step`; the duties go to the PWM and the gate drive follows the core's `enabled`
-//!    at once, so any fault the core sees switches the PWM off within the tick (and while the
-//!    parameters are being written to flash, the gate drive stays off);
+//!    at once, so any fault the core sees switches the PWM off within the tick (and from the
+//!    tick after a save starts, the gate drive stays off until it ends; the flash erase itself
+//!    may start before that tick, so the board's [`ParamFlash`] switches the gate drive off
+//!    around each erase and write — the G474's single bank stalls the interrupt meanwhile);
 //! 6. the latest acquisition sample is offered to the link's stream;
 //! 7. the watchdog is fed: a loop that stops running resets the chip.
 //!
 //! Parameter and correction changes (issue 16 item 2): the link side ([`Host`]) builds the
 //! new axis in the spare of two axis slots, or the new correction on its own stack, outside
-//! the critical section; inside it only checks that the axis is at rest and swaps the slot
-//! index (or copies the correction in). Everything else the link does under the critical
+//! the critical section; inside it only checks that the axis is at rest (no fault latched,
+//! no sweep running) and swaps the slot index, or copies the correction in (which the
+//! correction filter refuses while pulses are in flight through it). Everything else the link does under the critical
 //! section is a short copy (telemetry, a sample batch) or a request the core carries out in
 //! a few hundred instructions at most.
 
@@ -33,7 +36,7 @@ use control_core::protocol::{
     handle, DefaultsReason, FieldName, FrameError, ParamsOrigin, RefusalReason, Request, Response, VERSION,
 };
 use control_core::response_correction::ResponseCorrection;
-use control_core::{Axis, AxisInputs, Commands, Mode};
+use control_core::{Axis, AxisInputs, Commands};
 use critical_section::Mutex;
 
 use crate::board::{ParamFlash, PowerStage, CURRENT_CHANNELS};
@@ -42,8 +45,9 @@ use crate::param_store::{self, StoreState};
 
 /// What the tick and the link share under the critical section.
 pub struct Shared {
-    /// The axis slot the tick steps (0 or 1).
-    pub active: usize,
+    /// The axis slot the tick steps (0 or 1). Private: only [`Host`] (one exists) changes it,
+    /// and only to a slot it has built; the tick relies on that.
+    active: usize,
     pub commands: Commands,
     pub sensing: CurrentSensing<CURRENT_CHANNELS>,
     pub stream: AcquisitionStream,
@@ -267,9 +271,10 @@ fn build_axis(slot: &mut MaybeUninit<Result<Axis, ParamError>>, params: Params) 
     }
 }
 
-/// Only while the axis stands still in torque mode at zero torque.
+/// See [`control_core::protocol::parameters_may_change`]: at rest, no fault latched (a new
+/// axis must not clear one), no sweep running.
 fn at_rest(commands: &Commands, axis: &Axis) -> bool {
-    commands.mode == Mode::Torque && commands.torque == 0.0 && axis.telemetry().torque_command == 0.0
+    control_core::protocol::parameters_may_change(commands, axis)
 }
 
 /// The link side of the drive: one exists ([`Drive::install`] hands it out). It owns the

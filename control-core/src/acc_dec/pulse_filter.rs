@@ -16,7 +16,7 @@
 //! f64 unit (software f64 would cost thousands of instructions per tick), but it multiplies
 //! 32 × 32 → 64 bits in one instruction.
 //!
-//! **The form.** Integer states (i64, 2⁻²⁸ count resolution, [`super::fixed_point`]) in a delta
+//! **The form.** Integer states (i64, 2⁻³⁰ count resolution, [`super::fixed_point`]) in a delta
 //! form whose states are the lag itself and the output velocity:
 //! - the zeros first, on the integer input, exactly: the one-tick delay and `(1 + z⁻¹)^{N−1}`
 //!   (seed) or `z⁻ᴺ` (all delays) as a cascade of `N` integer stages; their lag is kept
@@ -28,7 +28,7 @@
 //! - and the real pole `(1 − p)/(1 − p·z⁻¹)` of an odd order as `m = e + x`, `e ← m − (1 − p)·m`.
 //!
 //! The filter's lag is the sum of the stages' lags: no division, nothing amplified by
-//! `1/(ωc·T)²` except the rounding of `y` (2⁻²⁹ counts a product: at most `2⁻²⁹/c0 ≈ 0.01`
+//! `1/(ωc·T)²` except the rounding of `y` (2⁻³⁰ counts a product: at most `2⁻³⁰/c0 ≈ 0.006`
 //! count of lag at the 0.5 Hz / 0.125 ms corner), and the coefficients carry the design's 53
 //! bits. An error-feedback form would also remove the amplification but needs the rounding
 //! residue of every product carried; double-f32 states cost more instructions than these

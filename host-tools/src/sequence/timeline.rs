@@ -153,6 +153,10 @@ impl SequenceScenario {
         if !(self.stop_time.is_finite() && self.stop_time > 0.0) {
             bail!("stop_time must be a positive number of seconds");
         }
+        let cpr = self.counts_per_rev();
+        if !(cpr.is_finite() && cpr >= 1.0) {
+            bail!("plant.encoder_counts_per_rev {cpr} must be a positive number of counts");
+        }
         on_grid(self.stop_time, "stop_time", self.stop_time)?;
         let mut last = 0.0;
         let mut seen_at_time: Vec<(f64, &str)> = Vec::new();
@@ -323,7 +327,12 @@ impl SequenceScenario {
             Some(Anchor::Accepted(n)) => mark(&marks.accepted, *n, "stop acceptance(s)")?,
             Some(Anchor::Completed(n)) => mark(&marks.completed, *n, "completion(s)")?,
         };
-        Ok(base + r.offset)
+        let t = base + r.offset;
+        // Judged on a sample of the run, never on the nearest end of it.
+        if !(t >= -1e-12 && t <= self.stop_time + 1e-12) {
+            bail!("`{spec}` is {t:.4} s, outside the run [0, {} s]", self.stop_time);
+        }
+        Ok(t)
     }
 
     /// The FMU input table: mode 3 from the start; keys become counter increases, the run
@@ -383,6 +392,9 @@ impl SequenceScenario {
     pub fn evaluate(&self, trace: &Trace) -> Result<Vec<Outcome>> {
         let col = |n: &str| trace.column(n).ok_or_else(|| anyhow!("the FMU has no output `{n}`"));
         let time = col("time")?;
+        if time.is_empty() {
+            bail!("the run has no samples");
+        }
         let marks = RunMarks::find(&col("seq_state")?, &col("seq_complete")?);
         let mut out = Vec::new();
         for x in &self.expect {
@@ -607,6 +619,9 @@ mod tests {
         let passed = |v: &[Outcome]| v.iter().map(|o| o.passed).collect::<Vec<_>>();
         assert_eq!(passed(&relative), vec![true, true, true, false, true]);
         assert_eq!(passed(&relative), passed(&absolute));
+        // A time beyond the run fails with the reason, not judged on the last sample.
+        let o = outcomes("[[expect]]\nstate='servo_lock'\nat='accepted + 5 s'\n");
+        assert!(!o[0].passed && o[0].observed.contains("outside the run"), "{:?}", o[0]);
         // A moment the run never reaches fails its expectation with the reason.
         let o = outcomes("[[expect]]\nstate='servo_lock'\nat='accepted#2'\n");
         assert!(!o[0].passed && o[0].observed.contains("shows 1 stop acceptance"), "{:?}", o[0]);

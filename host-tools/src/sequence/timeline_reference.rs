@@ -189,9 +189,19 @@ impl AngleSpec {
         Ok(x * rad_per)
     }
 
-    /// The value in encoder counts (not rounded).
+    /// The value in encoder counts (not rounded). Counts given as counts stay exact (no trip
+    /// through radians: 13 counts at 1000 counts per turn would come back as 12.999…).
     pub fn to_counts(&self, plain: PlainUnit, counts_per_rev: f64) -> Result<f64> {
-        Ok(self.to_rad(plain, counts_per_rev)? / (TAU / counts_per_rev))
+        let rad = self.to_rad(plain, counts_per_rev)?;
+        let exact = match self {
+            Self::Plain(x) if plain == PlainUnit::Counts => Some(*x),
+            Self::WithUnit(s) => match s.split_whitespace().collect::<Vec<_>>()[..] {
+                [n, "count" | "counts"] => n.parse::<f64>().ok(),
+                _ => None,
+            },
+            _ => None,
+        };
+        Ok(exact.unwrap_or(rad / (TAU / counts_per_rev)))
     }
 }
 
@@ -242,6 +252,9 @@ mod tests {
         assert!((a("90 deg").to_rad(PlainUnit::Counts, cpr).unwrap() - TAU / 4.0).abs() < 1e-15);
         assert!((a("1.5 mrad").to_rad(PlainUnit::Rad, cpr).unwrap() - 1.5e-3).abs() < 1e-18);
         assert_eq!(AngleSpec::Plain(2.0).to_counts(PlainUnit::Counts, cpr).unwrap(), 2.0);
+        // Counts stay exact whatever the encoder (through radians 13 would be 12.999…).
+        assert_eq!(AngleSpec::Plain(13.0).to_counts(PlainUnit::Counts, 1000.0).unwrap(), 13.0);
+        assert_eq!(a("13 counts").to_counts(PlainUnit::Rad, 1000.0).unwrap(), 13.0);
         assert_eq!(AngleSpec::Plain(TAU).to_counts(PlainUnit::Rad, cpr).unwrap(), cpr);
         for (bad, reason) in [("2", "<number> <unit>"), ("2 furlongs", "unknown unit"), ("x rad", "not a number")] {
             let e = a(bad).to_rad(PlainUnit::Rad, cpr).unwrap_err().to_string();
