@@ -375,6 +375,12 @@ impl Params {
         self.sequence.validate().map_err(ParamError::Sequence)?;
         self.friction.validate().map_err(ParamError::Friction)?;
         self.sweep.validate(r.current_loop_hz, r.velocity_divider).map_err(ParamError::Sweep)?;
+        // The dither is added after the torque limit: one beyond the limit would be cut by the
+        // current limit instead of injected as asked.
+        if self.sweep.dither > v.torque_limit {
+            let (value, max) = (self.sweep.dither, v.torque_limit);
+            return Err(ParamError::Sweep(SweepError::Range { field: "dither", value, min: 0.0, max }));
+        }
         self.correction.validate(r.position_period()).map_err(ParamError::Correction)?;
         Ok(())
     }
@@ -383,6 +389,17 @@ impl Params {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn a_sweep_dither_beyond_the_torque_limit_is_refused_not_cut() {
+        let mut p = Params::default();
+        p.sweep.dither = p.velocity.torque_limit;
+        assert_eq!(p.validate(), Ok(()));
+        p.sweep.dither = p.velocity.torque_limit * 1.5;
+        let e = p.validate().unwrap_err();
+        assert!(matches!(e, ParamError::Sweep(SweepError::Range { field: "dither", .. })), "{e:?}");
+        assert_eq!(e.field(), "dither");
+    }
 
     #[test]
     fn defaults_are_valid() {
