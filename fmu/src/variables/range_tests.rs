@@ -30,6 +30,9 @@ const COUPLED: &[(&str, &str, &str)] = &[
     ("sweep.start_hz", "max", "must exceed start_hz"),
     ("sweep.stop_hz", "min", "must exceed start_hz"),
     ("plant.absorber_inertia", "max", "absorber_stiffness must be > 0"),
+    // The sweep's dither within the torque limit (it is added after the limit).
+    ("sweep.dither", "max", "sweep dither"),
+    ("ctrl.torque_limit", "min", "sweep dither"),
     // The plant's explicit terms against its sub-step (plant.substeps raises the limit).
     ("plant.pole_pairs", "max", "too fast for a sub-step"),
     ("plant.lq", "min", "too fast for a sub-step"),
