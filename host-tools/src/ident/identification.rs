@@ -60,12 +60,13 @@ pub const TRANSIENT_S: f64 = 2.0;
 /// Periods recorded and averaged into one (noise variance divided by as many).
 pub const PERIODS: usize = 8;
 
-/// One period of the M-sequence (s).
+/// One period of the M-sequence at the default loop rate (s).
 pub fn period_s() -> f64 {
     ((1u64 << DEGREE) - 1) as f64 * CHIP_DIVIDER as f64 / control_core::Params::default().rates.current_loop_hz as f64
 }
 
-/// Simulated time of one axis's measurement (s): transients and the averaged periods.
+/// Simulated time of one axis's measurement at the default loop rate (s): transients and the
+/// averaged periods.
 pub fn measurement_time_s() -> f64 {
     TRANSIENT_S + PERIODS as f64 * period_s()
 }
@@ -190,7 +191,9 @@ pub fn measure_records(
     let control = configuration(parameters)?.control;
     let fs = control.rates.current_loop_hz as f64;
     let periods = PERIODS;
-    let trace = excitation(parameters, amplitude, measurement_time_s()).run(fmu, |_| {})?;
+    // The run's own loop rate sets the period (`measurement_time_s` is the default axis's).
+    let period = chips as f64 * CHIP_DIVIDER as f64 / fs;
+    let trace = excitation(parameters, amplitude, TRANSIENT_S + periods as f64 * period).run(fmu, |_| {})?;
     let col = |n: &str| trace.column(n).ok_or_else(|| anyhow!("the FMU has no output {n}"));
     let (measuring, u_all, y_all, faults) = (col("acq_measuring")?, col(input)?, col(output)?, col("faults")?);
     if faults.iter().any(|&f| f != 0.0) {
