@@ -49,6 +49,18 @@ pub fn scenario_verdicts(name: &str, json: &serde_json::Value) -> Vec<(String, b
     v
 }
 
+/// Each scenario-like file's verdicts and plot (`<name>.svg` beside it) added to `section`:
+/// the part `servo run` and `servo sequence` share (fmpy's timing files name no scenario and
+/// are skipped).
+pub fn add_scenario_files(section: &mut Section, root: &Path, dir: &Path, jsons: &[PathBuf]) {
+    for j in jsons {
+        let Some(json) = read_json(j) else { continue };
+        let Some(name) = json["scenario"].as_str().map(str::to_string) else { continue };
+        section.verdicts.extend(scenario_verdicts(&name, &json));
+        section.plots.push(relative(root, &dir.join(format!("{name}.svg"))));
+    }
+}
+
 fn esc(s: &str) -> String {
     s.replace('&', "&amp;").replace('<', "&lt;").replace('>', "&gt;").replace('"', "&quot;")
 }

@@ -7,7 +7,7 @@ use std::path::Path;
 use anyhow::{Context, Result};
 
 use crate::fmu::circle::Figure;
-use crate::plot::signals::{escape, fitted_text, nice_step};
+use crate::plot::signals::{escape, fitted_text, nice_step, svg_opening};
 
 const SIZE: f64 = 640.0;
 const COLOURS: [&str; 4] = ["#888888", "#d62728", "#1f77b4", "#2ca02c"];
@@ -48,12 +48,7 @@ pub fn plot_circle(
     let (cx, cy) = (SIZE / 2.0, SIZE / 2.0 + 20.0);
     let mut svg = String::new();
     let height = SIZE + 40.0 + 16.0 * notes.len() as f64;
-    writeln!(
-        svg,
-        r#"<svg xmlns="http://www.w3.org/2000/svg" width="{SIZE}" height="{height}" viewBox="0 0 {SIZE} {height}" font-family="sans-serif" font-size="11">"#
-    )?;
-    writeln!(svg, r#"<rect width="100%" height="100%" fill="white"/>"#)?;
-    writeln!(svg, "{}", fitted_text(SIZE / 2.0, 18.0, 14.0, "middle", SIZE - 20.0, title))?;
+    svg.push_str(&svg_opening(SIZE, height, title, 18.0, 14.0));
     for i in -3..=3 {
         let r = nominal + i as f64 * ring * per_error;
         let stroke = if i == 0 { "#444" } else { "#ddd" };

@@ -8,7 +8,7 @@ use std::path::Path;
 use anyhow::{Context, Result};
 
 use crate::analysis::response_point::ResponsePoint;
-use crate::plot::signals::{escape, fitted_text, tick_step};
+use crate::plot::signals::{escape, svg_opening, tick_step};
 
 const WIDTH: f64 = 900.0;
 const PANEL_H: f64 = 220.0;
@@ -35,12 +35,7 @@ pub fn plot_bode(
     let x = |f: f64| LEFT + (f.log10() - l0) / (l1 - l0) * plot_w;
     let height = top + 2.0 * (PANEL_H + GAP) + 10.0;
     let mut svg = String::new();
-    writeln!(
-        svg,
-        r#"<svg xmlns="http://www.w3.org/2000/svg" width="{WIDTH}" height="{height}" viewBox="0 0 {WIDTH} {height}" font-family="sans-serif" font-size="11">"#
-    )?;
-    writeln!(svg, r#"<rect width="100%" height="100%" fill="white"/>"#)?;
-    writeln!(svg, "{}", fitted_text(WIDTH / 2.0, 18.0, 14.0, "middle", WIDTH - 20.0, title))?;
+    svg.push_str(&svg_opening(WIDTH, height, title, 18.0, 14.0));
     for (i, (label, _)) in curves.iter().enumerate() {
         let lx = LEFT + (i % 3) as f64 * 270.0;
         let ly = 34.0 + (i / 3) as f64 * 14.0;

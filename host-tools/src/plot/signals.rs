@@ -51,6 +51,15 @@ fn label(x: f64) -> String {
 /// Text made safe for SVG.
 /// A line of text that fits `max_width` pixels: wider text (estimated at 0.6 em a character)
 /// is squeezed to that width (SVG `textLength`) instead of running off the canvas.
+/// The opening of a plot: the `<svg>` element of `width` × `height`, a white background and
+/// the title centred at `title_y` in `title_size`, shrunk to fit the width.
+pub(crate) fn svg_opening(width: f64, height: f64, title: &str, title_y: f64, title_size: f64) -> String {
+    format!(
+        "<svg xmlns=\"http://www.w3.org/2000/svg\" width=\"{width}\" height=\"{height}\" viewBox=\"0 0 {width} {height}\" font-family=\"sans-serif\" font-size=\"11\">\n<rect width=\"100%\" height=\"100%\" fill=\"white\"/>\n{}\n",
+        fitted_text(width / 2.0, title_y, title_size, "middle", width - 20.0, title)
+    )
+}
+
 pub(crate) fn fitted_text(x: f64, y: f64, font_size: f64, anchor: &str, max_width: f64, text: &str) -> String {
     let estimated = 0.6 * font_size * text.chars().count() as f64;
     let fit = if estimated > max_width {
@@ -82,12 +91,7 @@ pub fn plot_against(
 ) -> Result<()> {
     let height = TOP + signals.len() as f64 * (PANEL_H + GAP) + 30.0;
     let mut svg = String::new();
-    writeln!(
-        svg,
-        r#"<svg xmlns="http://www.w3.org/2000/svg" width="{WIDTH}" height="{height}" viewBox="0 0 {WIDTH} {height}" font-family="sans-serif" font-size="11">"#
-    )?;
-    writeln!(svg, r#"<rect width="100%" height="100%" fill="white"/>"#)?;
-    writeln!(svg, "{}", fitted_text(WIDTH / 2.0, 20.0, 15.0, "middle", WIDTH - 20.0, title))?;
+    svg.push_str(&svg_opening(WIDTH, height, title, 20.0, 15.0));
     for (li, (name, _)) in traces.iter().enumerate().filter(|_| traces.len() > 1) {
         let x = LEFT + 10.0 + li as f64 * 160.0;
         writeln!(

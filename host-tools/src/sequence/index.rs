@@ -2,7 +2,7 @@
 
 use std::path::Path;
 
-use crate::page::{files_with, read_json, relative, scenario_verdicts, Section};
+use crate::page::{add_scenario_files, files_with, Section};
 
 pub fn section(root: &Path) -> Option<Section> {
     let dir = root.join("sequence");
@@ -15,12 +15,6 @@ pub fn section(root: &Path) -> Option<Section> {
         command: "servo sequence --fmpy".into(),
         ..Default::default()
     };
-    for j in &jsons {
-        // A scenario's file names it (fmpy's timing files do not).
-        let Some(json) = read_json(j) else { continue };
-        let Some(name) = json["scenario"].as_str().map(str::to_string) else { continue };
-        s.verdicts.extend(scenario_verdicts(&name, &json));
-        s.plots.push(relative(root, &dir.join(format!("{name}.svg"))));
-    }
+    add_scenario_files(&mut s, root, &dir, &jsons);
     Some(s)
 }
