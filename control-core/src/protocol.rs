@@ -26,10 +26,11 @@ use crate::ranges::{check_position, Quantity, RangeError};
 use crate::response_correction::CorrectionParams;
 use crate::stop_sequence::{Refusal, SequenceEvent};
 
-/// Protocol version 4: `SaveParams`, and the answer to `Hello` says where the drive's
-/// parameters came from at boot (version 3: CRC-32C instead of CRC-16, trailing bytes
+/// Protocol version 5: parameters whose current-loop rate is not the board's PWM rate are
+/// refused with that rate (version 4: `SaveParams`, and the answer to `Hello` says where the
+/// drive's parameters came from at boot; version 3: CRC-32C instead of CRC-16, trailing bytes
 /// refused, range refusals).
-pub const VERSION: u16 = 4;
+pub const VERSION: u16 = 5;
 /// Largest encoded frame, COBS body without its terminator (a full parameter set fits with
 /// room to spare).
 pub const MAX_FRAME: usize = 1024;
@@ -171,6 +172,9 @@ pub enum RefusalReason {
     OutOfRange(RangeError),
     /// The parameters could not be saved.
     Storage(StorageError),
+    /// The parameters' current-loop rate is not the board's: its PWM timer samples and runs
+    /// the tick at `board_hz`, fixed when the drive starts.
+    LoopRate { board_hz: f32 },
 }
 
 impl fmt::Display for RefusalReason {
@@ -189,6 +193,10 @@ impl fmt::Display for RefusalReason {
             Self::Storage(StorageError::Unavailable) => write!(f, "this drive has no parameter storage"),
             Self::Storage(StorageError::Flash) => write!(f, "the flash refused the write or read back something else"),
             Self::Storage(StorageError::TooLarge) => write!(f, "the parameter set does not fit a flash page"),
+            Self::LoopRate { board_hz } => write!(
+                f,
+                "rates.current_loop_hz must be the board's PWM rate, {board_hz} Hz (the tick runs at the timer's rate)"
+            ),
         }
     }
 }

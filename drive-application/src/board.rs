@@ -27,6 +27,9 @@ pub struct Sample {
 pub trait PowerStage {
     /// ADC counts to amperes and volts.
     const SCALES: SensingScales;
+    /// The PWM rate, at which the board samples and calls the tick (Hz): the only
+    /// current-loop rate the drive accepts.
+    const TICK_HZ: f32;
     /// This tick's sample (acknowledges the conversion).
     fn take_sample(&mut self) -> Sample;
     /// The encoder's quadrature count.

@@ -120,6 +120,7 @@ impl Drive {
         defaults: Params,
         flash: &mut F,
     ) -> Result<Host<'_>, InstallError> {
+        let board_hz = P::TICK_HZ;
         if self.claimed.swap(true, Ordering::AcqRel) {
             return Err(InstallError::Twice);
         }
@@ -135,7 +136,11 @@ impl Drive {
         // 0 (the tick waits for `installed`, set below under the critical section).
         let slot = unsafe { &mut *self.axes[0].get() };
         loop {
-            match build_axis(slot, params) {
+            let built = match at_board_rate(&params, board_hz) {
+                Ok(()) => build_axis(slot, params),
+                Err(field) => Err(field),
+            };
+            match built {
                 Ok(()) => break,
                 Err(field) if matches!(boot_params, ParamsOrigin::Stored { .. }) => {
                     boot_params = ParamsOrigin::Defaults(DefaultsReason::Invalid(FieldName::new(field)));
@@ -146,7 +151,7 @@ impl Drive {
         }
         let sensing = CurrentSensing::new(P::SCALES).map_err(|_| InstallError::Scales)?;
         self.share(sensing);
-        Ok(Host { drive: self, params, boot_params, store, assembler: FrameAssembler::new() })
+        Ok(Host { drive: self, params, boot_params, store, assembler: FrameAssembler::new(), board_hz })
     }
 
     /// The shared state, built in place inside the section (at boot, before the tick runs):
@@ -271,6 +276,15 @@ fn build_axis(slot: &mut MaybeUninit<Result<Axis, ParamError>>, params: Params) 
     }
 }
 
+/// The parameters run the tick at the board's PWM rate (the field that says otherwise).
+fn at_board_rate(params: &Params, board_hz: f32) -> Result<(), &'static str> {
+    if params.rates.current_loop_hz == board_hz {
+        Ok(())
+    } else {
+        Err("rates.current_loop_hz")
+    }
+}
+
 /// See [`control_core::protocol::parameters_may_change`]: at rest, no fault latched (a new
 /// axis must not clear one), no sweep running.
 fn at_rest(commands: &Commands, axis: &Axis) -> bool {
@@ -286,6 +300,8 @@ pub struct Host<'d> {
     boot_params: ParamsOrigin,
     store: StoreState,
     assembler: FrameAssembler,
+    /// The board's PWM rate: the only current-loop rate the drive accepts.
+    board_hz: f32,
 }
 
 impl Host<'_> {
@@ -345,6 +361,9 @@ impl Host<'_> {
         };
         if !rest {
             return Response::Refused(RefusalReason::Busy);
+        }
+        if at_board_rate(&p, self.board_hz).is_err() {
+            return Response::Refused(RefusalReason::LoopRate { board_hz: self.board_hz });
         }
         let spare = 1 - active;
         // SAFETY: the spare slot is not the active one, and only this `Host` (there is one)

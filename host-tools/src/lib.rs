@@ -30,3 +30,4 @@ pub mod random;
 pub mod run;
 pub mod sequence;
 pub mod sweep;
+pub mod virtual_drive;

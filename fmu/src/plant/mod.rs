@@ -101,6 +101,15 @@ impl Plant {
         &self.params
     }
 
+    /// The bus supply changes to `volts` from the next tick on (a supply that sags or
+    /// surges: the virtual drive's fault injection). Refused unless finite and positive.
+    pub fn set_bus_voltage(&mut self, volts: f64) -> Result<(), PlantError> {
+        let params = PlantParams { bus_voltage: volts, ..self.params };
+        params.validate()?;
+        self.params = params;
+        Ok(())
+    }
+
     /// Advance one base tick (`params.tick`) with the inputs held.
     // Inlined into the tick so that the inputs arrive in registers: read back from memory just
     // after being stored, they stalled the load (store forwarding fails on the paired loads).

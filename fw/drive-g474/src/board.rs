@@ -296,6 +296,7 @@ pub struct Stage;
 
 impl PowerStage for Stage {
     const SCALES: SensingScales = SCALES;
+    const TICK_HZ: f32 = power_stage::config::IHM08M1.pwm_hz as f32;
     #[inline(always)]
     fn take_sample(&mut self) -> Sample {
         let (shunts, bus) = take_sample();

@@ -25,6 +25,7 @@ fn device(args: &DeviceArgs) -> Result<bool> {
         ("telemetry", None) => Some(Request::GetTelemetry),
         ("clear-faults", None) => Some(Request::ClearFaults),
         ("start-sweep", None) => Some(Request::StartSweep),
+        ("save-params", None) => Some(Request::SaveParams),
         ("stream", None) => {
             if !(seconds.is_finite() && seconds > 0.0 && seconds <= 3600.0) {
                 bail!("--seconds must be between 0 and 3600 (got {seconds})");
@@ -37,12 +38,14 @@ fn device(args: &DeviceArgs) -> Result<bool> {
         }
         ("load-correction", None) => bail!("load-correction needs the <axis>.corr.frame file `servo tune` wrote"),
         _ => bail!(
-            "unknown action `{}`: use hello, telemetry, clear-faults, start-sweep, load-correction FILE or stream",
+            "unknown action `{}`: use hello, telemetry, clear-faults, start-sweep, save-params, load-correction FILE or stream",
             action.join(" ")
         ),
     };
-    let mut link = DeviceLink::new(open_serial(port, baud)?, std::time::Duration::from_millis(timeout_ms));
-    link.hello()?;
+    let link = DeviceLink::new(open_serial(port, baud)?, std::time::Duration::from_millis(timeout_ms));
+    let session = crate::device::session::DriveSession::open(link)?;
+    let boot_params = session.boot_params;
+    let mut link = session.link;
     let answer = match (what, request) {
         ("stream", _) => {
             expect_done(link.request(&Request::Stream { enabled: true })?, "Stream")?;
@@ -69,7 +72,11 @@ fn device(args: &DeviceArgs) -> Result<bool> {
             t.write_csv(&csv)?;
             serde_json::json!({"samples": t.rows.len(), "dropped": dropped, "file": csv})
         }
-        (_, None) => serde_json::json!({"hello": "ok", "version": control_core::protocol::VERSION}),
+        (_, None) => serde_json::json!({
+            "hello": "ok",
+            "version": control_core::protocol::VERSION,
+            "boot_params": boot_params.to_string(),
+        }),
         (_, Some(r)) => match link.request(&r)? {
             Response::Telemetry(t) => serde_json::json!({"telemetry": format!("{t:?}")}),
             Response::Done => serde_json::json!({"done": true}),

@@ -22,11 +22,13 @@ pub struct DeviceLink<T: Read + Write> {
     pending: FrameStream,
     samples: Vec<SampleBatch>,
     timeout: Duration,
+    /// Bytes received from the drive so far.
+    pub bytes_read: u64,
 }
 
 impl<T: Read + Write> DeviceLink<T> {
     pub fn new(port: T, timeout: Duration) -> Self {
-        Self { port, pending: FrameStream::default(), samples: Vec::new(), timeout }
+        Self { port, pending: FrameStream::default(), samples: Vec::new(), timeout, bytes_read: 0 }
     }
 
     /// Send one request and wait for its answer.
@@ -44,13 +46,9 @@ impl<T: Read + Write> DeviceLink<T> {
         }
     }
 
-    /// Check the drive speaks this protocol version.
-    pub fn hello(&mut self) -> Result<()> {
-        match self.request(&Request::Hello { version: VERSION })? {
-            Response::Hello { version, .. } if version == VERSION => Ok(()),
-            Response::FrameError(e) => bail!("the drive refused the handshake: {e}"),
-            other => bail!("unexpected answer to the handshake: {other:?}"),
-        }
+    /// The byte stream underneath.
+    pub fn into_port(self) -> T {
+        self.port
     }
 
     /// Sample batches received so far (streaming), oldest first.
@@ -74,7 +72,7 @@ impl<T: Read + Write> DeviceLink<T> {
 
     /// The next complete frame, decoded.
     fn next_frame(&mut self, deadline: Instant) -> Result<Response> {
-        let mut chunk = [0u8; 256];
+        let mut chunk = [0u8; 4096];
         loop {
             match self.pending.next_frame() {
                 Some(Ok(r)) => return Ok(r),
@@ -86,7 +84,10 @@ impl<T: Read + Write> DeviceLink<T> {
             }
             match self.port.read(&mut chunk) {
                 Ok(0) => bail!("the drive closed the link"),
-                Ok(n) => self.pending.push(&chunk[..n]),
+                Ok(n) => {
+                    self.bytes_read += n as u64;
+                    self.pending.push(&chunk[..n]);
+                }
                 Err(e)
                     if matches!(
                         e.kind(),
@@ -115,9 +116,12 @@ pub fn correction_request(frame: &mut [u8]) -> Result<Request> {
 
 /// Open the drive's serial port (8N1, no flow control).
 pub fn open_serial(path: &str, baud: u32) -> Result<Box<dyn serialport::SerialPort>> {
-    serialport::new(path, baud).timeout(Duration::from_millis(50)).open().with_context(|| {
-        format!("cannot open the serial port {path} (is the board attached, and may you use the port?)")
-    })
+    let port = serialport::new(path, baud).timeout(Duration::from_millis(50)).open().with_context(|| {
+        format!("cannot open the serial port {path} (is the board attached, or the virtual drive running, and may you use the port?)")
+    })?;
+    // Whatever an earlier session left unread is not an answer to this one.
+    port.clear(serialport::ClearBuffer::Input).ok();
+    Ok(port)
 }
 
 #[cfg(test)]
@@ -169,7 +173,7 @@ mod tests {
         let t = std::thread::spawn(move || simulated_drive(drive));
         host.set_read_timeout(Some(Duration::from_millis(50))).unwrap();
         let mut link = DeviceLink::new(host, Duration::from_secs(2));
-        link.hello().unwrap();
+        assert!(matches!(link.request(&Request::Hello { version: VERSION }).unwrap(), Response::Hello { .. }));
         assert_eq!(link.request(&Request::Stream { enabled: true }).unwrap(), Response::Done);
         assert!(matches!(link.request(&Request::GetTelemetry).unwrap(), Response::Telemetry(_)));
         assert_eq!(link.request(&Request::ClearFaults).unwrap(), Response::Done);

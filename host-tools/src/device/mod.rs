@@ -4,3 +4,4 @@ pub mod args;
 pub mod command;
 pub mod frame_stream;
 pub mod link;
+pub mod session;

@@ -54,6 +54,25 @@ impl SweepRun {
         Ok(self.settings.max_total_ticks(fs) as f64 / fs as f64)
     }
 
+    /// The parameters a drive is given for this sweep: the run's, with the sweep's settings.
+    pub fn drive_params(&self) -> Result<control_core::Params> {
+        let rates = self.rates()?;
+        self.settings.validate(rates.current_loop_hz, rates.velocity_divider).map_err(|e| anyhow!("{e}"))?;
+        let mut parameters = self.parameters.clone();
+        parameters.extend(sweep_parameters(&self.settings));
+        Ok(configuration(&parameters)?.control)
+    }
+
+    /// The mode the sweep rides in: torque for a torque-command sweep standing still,
+    /// velocity otherwise.
+    pub fn mode(&self) -> Mode {
+        if self.settings.point == InjectionPoint::TorqueCommand && self.velocity == 0.0 {
+            Mode::Torque
+        } else {
+            Mode::Velocity
+        }
+    }
+
     pub fn scenario(&self) -> Result<Scenario> {
         let rates = self.rates()?;
         self.settings.validate(rates.current_loop_hz, rates.velocity_divider).map_err(|e| anyhow!("{e}"))?;
@@ -62,11 +81,7 @@ impl SweepRun {
         // Long enough for the longest sweep; `run` stops when it is done.
         let stop =
             ((START_AT + self.max_measurement_time()?) / DEFAULT_STEP).ceil() * DEFAULT_STEP + 4.0 * DEFAULT_STEP;
-        let mode = if self.settings.point == InjectionPoint::TorqueCommand && self.velocity == 0.0 {
-            Mode::Torque
-        } else {
-            Mode::Velocity
-        };
+        let mode = self.mode();
         let start: BTreeMap<String, Value> = [
             ("mode".to_string(), Value::code(mode.code())),
             ("velocity_command".to_string(), Value::Float(self.velocity)),

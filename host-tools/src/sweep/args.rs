@@ -85,6 +85,8 @@ pub struct SweepArgs {
     #[arg(long)]
     pub reference: Option<PathBuf>,
     #[command(flatten)]
+    pub target: crate::device::args::TargetArgs,
+    #[command(flatten)]
     pub common: Common,
 }
 

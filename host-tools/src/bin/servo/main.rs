@@ -4,7 +4,7 @@ use std::process::ExitCode;
 
 use clap::{Parser, Subcommand};
 
-use host_tools::{accdec, bench, circle, device, ident, index, run, sequence, sweep};
+use host_tools::{accdec, bench, circle, device, ident, index, run, sequence, sweep, virtual_drive};
 
 #[derive(Parser)]
 #[command(
@@ -32,6 +32,7 @@ enum Command {
     Tune(ident::args::TuneArgs),
     Compare(run::args::CompareArgs),
     Device(device::args::DeviceArgs),
+    VirtualDrive(virtual_drive::args::VirtualDriveArgs),
     Index(index::IndexArgs),
     /// Benchmarks: each prints its figures against their goals (worst case over the range users
     /// work in) and exits 1 when a goal is missed.
@@ -68,6 +69,7 @@ fn main() -> ExitCode {
         Command::Tune(args) => args.run(),
         Command::Compare(args) => args.run(),
         Command::Device(args) => args.run(),
+        Command::VirtualDrive(args) => args.run(),
         Command::Index(args) => args.run(),
         Command::Bench(BenchCommand::Robustness(args)) => args.run(),
         Command::Bench(BenchCommand::Firmware(args)) => args.run(),

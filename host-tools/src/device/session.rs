@@ -1,0 +1,127 @@
+//! An experiment's conversation with a drive: the handshake, the axis brought to rest, the
+//! parameters and set-points given, the drive's own clock waited on. Every answer is checked
+//! (a refusal is an error with the drive's reason) and every wait is bounded twice: in the
+//! drive's ticks (what the experiment means) and in wall-clock time (a drive that stops
+//! ticking or answering is an error, never a hang) — the same on a board and on the virtual
+//! drive at any speed.
+
+use std::io::{Read, Write};
+use std::time::{Duration, Instant};
+
+use anyhow::{bail, Result};
+use control_core::acquisition_stream::SampleBatch;
+use control_core::axis::{Mode, Telemetry};
+use control_core::protocol::{ParamsOrigin, Request, Response, VERSION};
+use control_core::{Commands, Params};
+
+use crate::device::link::DeviceLink;
+
+/// A drive whose tick counter has not moved for this long has stopped.
+pub const STALLED: Duration = Duration::from_secs(3);
+
+pub struct DriveSession<T: Read + Write> {
+    pub link: DeviceLink<T>,
+    pub boot_params: ParamsOrigin,
+    /// The drive's tick rate (its parameters' current-loop rate, once given).
+    pub tick_hz: f64,
+    /// Pause between two telemetry polls (none for a drive simulated in this process: there
+    /// the drive's time moves only while the host waits for an answer).
+    pub poll: Duration,
+    /// The link's baud rate (for the share of the line an experiment uses).
+    pub baud: u32,
+}
+
+impl<T: Read + Write> DriveSession<T> {
+    /// The handshake: the drive speaks this protocol version (and says where its parameters
+    /// came from).
+    pub fn open(mut link: DeviceLink<T>) -> Result<Self> {
+        let boot_params = match link.request(&Request::Hello { version: VERSION })? {
+            Response::Hello { version, boot_params } if version == VERSION => boot_params,
+            Response::FrameError(e) => {
+                bail!("the drive refused the handshake: {e} (update the host tools or the firmware)")
+            }
+            other => bail!("unexpected answer to the handshake: {other:?}"),
+        };
+        Ok(Self {
+            link,
+            boot_params,
+            tick_hz: Params::default().rates.current_loop_hz as f64,
+            poll: Duration::from_millis(2),
+            baud: 921_600,
+        })
+    }
+
+    /// Send a request the drive must carry out (`Done`), or fail with its reason.
+    pub fn order(&mut self, request: Request, what: &str) -> Result<()> {
+        match self.link.request(&request)? {
+            Response::Done => Ok(()),
+            Response::Refused(why) => bail!("the drive refused {what}: {why}"),
+            Response::FrameError(e) => bail!("the drive could not read {what}: {e}"),
+            other => bail!("unexpected answer to {what}: {other:?}"),
+        }
+    }
+
+    pub fn telemetry(&mut self) -> Result<Telemetry> {
+        match self.link.request(&Request::GetTelemetry)? {
+            Response::Telemetry(t) => Ok(t),
+            other => bail!("unexpected answer to a telemetry request: {other:?}"),
+        }
+    }
+
+    /// Torque mode at zero torque; refuses to go on with faults latched (they are the
+    /// user's to look at and clear, never an experiment's).
+    pub fn rest(&mut self) -> Result<Telemetry> {
+        self.order(Request::SetCommands(Commands { mode: Mode::Torque, ..Commands::default() }), "the rest command")?;
+        let t = self.telemetry()?;
+        if t.faults.any() {
+            bail!(
+                "the drive has faults latched: {} (look at them, then `servo device --port … clear-faults`)",
+                t.faults.names().collect::<Vec<_>>().join(", ")
+            );
+        }
+        Ok(t)
+    }
+
+    /// Give the drive `params` (at rest).
+    pub fn set_params(&mut self, params: &Params) -> Result<()> {
+        self.rest()?;
+        self.order(Request::SetParams(*params), "the parameters")?;
+        self.tick_hz = params.rates.current_loop_hz as f64;
+        Ok(())
+    }
+
+    /// Poll the telemetry until `done` says so; a bound on the drive's time
+    /// (`max_s` seconds of its ticks from now) and on a drive that stops ticking.
+    pub fn wait_until(&mut self, max_s: f64, mut done: impl FnMut(&Telemetry) -> Result<bool>) -> Result<Telemetry> {
+        let first = self.telemetry()?;
+        let limit = first.tick + (max_s * self.tick_hz).ceil() as u64;
+        let (mut last_tick, mut moved) = (first.tick, Instant::now());
+        let mut t = first;
+        loop {
+            if done(&t)? {
+                return Ok(t);
+            }
+            if t.tick >= limit {
+                bail!("the drive did not get there within {max_s:.1} s of its time");
+            }
+            if t.tick != last_tick {
+                (last_tick, moved) = (t.tick, Instant::now());
+            } else if moved.elapsed() > STALLED {
+                bail!("the drive's tick counter stopped at {} (is it still running?)", t.tick);
+            }
+            std::thread::sleep(self.poll);
+            t = self.telemetry()?;
+        }
+    }
+
+    /// Let `seconds` of the drive's time pass.
+    pub fn wait(&mut self, seconds: f64) -> Result<Telemetry> {
+        let start = self.telemetry()?.tick;
+        let target = start + (seconds * self.tick_hz).round() as u64;
+        self.wait_until(seconds * 2.0 + 0.1, |t| Ok(t.tick >= target))
+    }
+
+    pub fn take_samples(&mut self) -> Vec<SampleBatch> {
+        self.link.take_samples()
+    }
+}

@@ -1,0 +1,116 @@
+//! The sweep on a drive over its link (`servo sweep --device`): the drive's own sweep (seed
+//! 000) started with the run's parameters, its acquisition samples streamed and fitted as on
+//! the FMU (`measurement::stream_results`), its on-line results read from the telemetry.
+//!
+//! Sequence: handshake; at rest (no faults latched, or the run stops with them named); the
+//! parameters (the run's, the sweep's settings included, the IHM08M1's protective limits);
+//! the riding speed; `START_AT` of the drive's time; streaming on; `StartSweep`; telemetry
+//! polled until the drive says done (bounded by the longest the sweep can take, in the drive's
+//! time, and by a drive that stops ticking); streaming off; the axis back at rest.
+
+use std::io::{Read, Write};
+
+use anyhow::{anyhow, Result};
+use control_core::phase_shifted_sweep::SweepState;
+use control_core::protocol::Request;
+use control_core::Commands;
+use serde::Serialize;
+
+use crate::analysis::response_point::ResponsePoint;
+use crate::device::frame_stream::sample_rows;
+use crate::device::session::DriveSession;
+use crate::fmu::sweep_run::{SweepRun, START_AT};
+use crate::fmu::trace::Trace;
+use crate::sweep::measurement::stream_results;
+use crate::virtual_drive::simulator::power_stage_limits;
+
+/// What a sweep over the link brought back.
+#[derive(Clone, Debug, Serialize)]
+pub struct DeviceSweep {
+    /// The drive's time from `StartSweep` to done (s).
+    pub measurement_time_s: f64,
+    /// Frequency response from the streamed samples.
+    pub stream: Vec<ResponsePoint>,
+    /// The drive's on-line results as the telemetry polls caught them (a point finished and
+    /// overwritten between two polls is missing here, not in `stream`).
+    pub online: Vec<ResponsePoint>,
+    pub samples: usize,
+    /// Samples the drive could not send (its ring full: the link too slow).
+    pub dropped: u32,
+    /// Bytes a second received from the drive during the sweep (its time), and the line's
+    /// capacity at the baud rate.
+    pub link_bytes_per_s: f64,
+    /// The samples as received (`acq_*` columns, as the FMU's trace has them).
+    #[serde(skip)]
+    pub trace: Trace,
+}
+
+/// Run `run` on the drive behind `session`; `progress` gets 0..1 by points done.
+pub fn sweep_on_drive<T: Read + Write>(
+    session: &mut DriveSession<T>,
+    run: &SweepRun,
+    mut progress: impl FnMut(f64),
+) -> Result<DeviceSweep> {
+    let params = power_stage_limits(run.drive_params()?);
+    session.set_params(&params)?;
+    let commands = Commands { mode: run.mode(), velocity: run.velocity as f32, ..Commands::default() };
+    session.order(Request::SetCommands(commands), "the riding speed")?;
+    session.wait(START_AT)?;
+    session.order(Request::Stream { enabled: true }, "streaming on")?;
+    session.take_samples();
+    let bytes_before = session.link.bytes_read;
+    session.order(Request::StartSweep, "the sweep's start")?;
+    let start = session.telemetry()?.tick;
+    let points = run.settings.points.max(1) as f64;
+    let longest = run.max_measurement_time()? * 1.2 + 1.0;
+    let mut online = Vec::new();
+    let mut seen = 0;
+    let end = session.wait_until(longest, |t| {
+        if t.faults.any() {
+            return Err(anyhow!(
+                "the drive latched a fault during the sweep: {}",
+                t.faults.names().collect::<Vec<_>>().join(", ")
+            ));
+        }
+        if t.sweep.done_points > seen {
+            seen = t.sweep.done_points;
+            let l = t.sweep.last;
+            online.push(ResponsePoint::from_complex(
+                l.frequency as f64,
+                crate::analysis::spectral::Complex::new(l.re as f64, l.im as f64),
+                l.quality as f64,
+            ));
+            progress(seen as f64 / points);
+        }
+        Ok(t.sweep.state == SweepState::Done)
+    });
+    // Whatever happened, the axis goes back to rest and stops streaming.
+    let stop =
+        session.order(Request::Stream { enabled: false }, "streaming off").and_then(|()| session.rest().map(|_| ()));
+    let end = end?;
+    stop?;
+    let batches = session.take_samples();
+    let dropped = batches.iter().map(|b| b.dropped).max().unwrap_or(0);
+    let rows = sample_rows(&batches).map_err(|e| anyhow!("corrupt sample batch from the drive: {e}"))?;
+    let mut trace = Trace::new(
+        ["acq_time", "acq_u", "acq_y", "acq_phase", "acq_measuring", "acq_point", "acq_record"]
+            .map(String::from)
+            .to_vec(),
+    );
+    for r in &rows {
+        let mut row = r.to_vec();
+        row[0] /= session.tick_hz;
+        trace.rows.push(row);
+    }
+    let stream = stream_results(&trace, &run.settings)?;
+    let measurement_time_s = (end.tick - start) as f64 / session.tick_hz;
+    Ok(DeviceSweep {
+        measurement_time_s,
+        stream,
+        online,
+        samples: rows.len(),
+        dropped,
+        link_bytes_per_s: (session.link.bytes_read - bytes_before) as f64 / measurement_time_s.max(1e-9),
+        trace,
+    })
+}

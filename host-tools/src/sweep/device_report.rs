@@ -1,0 +1,174 @@
+//! `servo sweep --device`: the sweep on the drive, its twin on the FMU (the same run: the
+//! drive's parameters, plant and sweep settings), their difference per frequency point, and
+//! what the link carried — in a table, a Bode plot with both curves, CSV and JSON.
+
+use std::io::{Read, Write};
+use std::path::{Path, PathBuf};
+
+use anyhow::Result;
+use serde::Serialize;
+
+use crate::analysis::response_point::{difference, ResponsePoint};
+use crate::device::session::DriveSession;
+use crate::fmu::runner::Fmu;
+use crate::fmu::sweep_run::SweepRun;
+use crate::fmu::trace::Trace;
+use crate::plot::bode::plot_bode;
+use crate::sweep::device::{sweep_on_drive, DeviceSweep};
+use crate::sweep::measurement::stream_results;
+
+/// One frequency point: the drive's response, the twin's, and the difference.
+#[derive(Clone, Copy, Debug, Serialize)]
+pub struct TwinPoint {
+    pub frequency: f64,
+    pub drive: ResponsePoint,
+    pub twin: ResponsePoint,
+    pub difference_db: f64,
+    pub difference_deg: f64,
+}
+
+#[derive(Clone, Debug, Serialize)]
+pub struct DeviceSweepReport {
+    pub port: String,
+    pub drive: DeviceSweep,
+    pub twin_measurement_time_s: f64,
+    pub points: Vec<TwinPoint>,
+    /// Largest |drive − twin| over the points: (dB, degrees).
+    pub largest_difference: (f64, f64),
+    /// The line's capacity at the baud rate (bytes/s), and the share the sweep used.
+    pub line_capacity_bytes_per_s: f64,
+    pub line_use: f64,
+    pub files: Vec<PathBuf>,
+}
+
+/// The drive's sweep and its twin's, compared point by point.
+pub fn compare_with_twin(drive: &DeviceSweep, twin: &[ResponsePoint]) -> (Vec<TwinPoint>, (f64, f64)) {
+    let mut largest = (0.0f64, 0.0f64);
+    let points: Vec<TwinPoint> = drive
+        .stream
+        .iter()
+        .zip(twin)
+        .map(|(d, t)| {
+            let (dg, dp) = difference(d, t);
+            largest = (largest.0.max(dg.abs()), largest.1.max(dp.abs()));
+            TwinPoint { frequency: d.frequency, drive: *d, twin: *t, difference_db: dg, difference_deg: dp }
+        })
+        .collect();
+    if drive.stream.len() != twin.len() {
+        largest = (f64::INFINITY, f64::INFINITY);
+    }
+    (points, largest)
+}
+
+/// The twin: the same sweep on the FMU, its response from the stream as the drive's is.
+pub fn twin_sweep(fmu: &Fmu, run: &SweepRun, progress: impl FnMut(f64)) -> Result<(Vec<ResponsePoint>, f64)> {
+    let trace = run.run(fmu, progress)?;
+    let time = crate::sweep::measurement::measured_time(&trace)?;
+    Ok((stream_results(&trace, &run.settings)?, time))
+}
+
+pub fn run_on_device<T: Read + Write>(
+    fmu: &Fmu,
+    run: &SweepRun,
+    (port, session): (&str, &mut DriveSession<T>),
+    out: &Path,
+    mut progress: impl FnMut(&str, f64),
+) -> Result<DeviceSweepReport> {
+    std::fs::create_dir_all(out)?;
+    let drive = sweep_on_drive(session, run, |f| progress("sweep on the drive", f))?;
+    let mut files = vec![out.join("device_stream.csv")];
+    drive.trace.write_csv(&files[0])?;
+    let (twin, twin_time) = twin_sweep(fmu, run, |f| progress("twin on the FMU", f))?;
+    let (points, largest) = compare_with_twin(&drive, &twin);
+    let csv = out.join("sweep.csv");
+    let mut t = Trace::new(
+        ["frequency", "gain_db", "phase_deg", "quality", "twin_gain_db", "twin_phase_deg", "diff_db", "diff_deg"]
+            .map(String::from)
+            .to_vec(),
+    );
+    for p in &points {
+        t.rows.push(vec![
+            p.frequency,
+            p.drive.gain_db,
+            p.drive.phase_deg,
+            p.drive.quality,
+            p.twin.gain_db,
+            p.twin.phase_deg,
+            p.difference_db,
+            p.difference_deg,
+        ]);
+    }
+    t.write_csv(&csv)?;
+    let svg = out.join("bode.svg");
+    plot_bode(
+        &svg,
+        &format!("Frequency response on the drive at {port}, and its FMU twin"),
+        &[("drive (stream over the link)", &drive.stream), ("FMU twin", &twin)],
+        None,
+    )?;
+    files.extend([csv, svg]);
+    let capacity = session_capacity(session);
+    let report = DeviceSweepReport {
+        port: port.to_string(),
+        line_use: drive.link_bytes_per_s / capacity,
+        drive,
+        twin_measurement_time_s: twin_time,
+        points,
+        largest_difference: largest,
+        line_capacity_bytes_per_s: capacity,
+        files: files.clone(),
+    };
+    let json = out.join("sweep.json");
+    std::fs::write(&json, serde_json::to_string_pretty(&report)?)?;
+    files.push(json);
+    Ok(DeviceSweepReport { files, ..report })
+}
+
+fn session_capacity<T: Read + Write>(session: &DriveSession<T>) -> f64 {
+    session.baud as f64 / crate::virtual_drive::uart::BITS_PER_BYTE
+}
+
+impl DeviceSweepReport {
+    pub fn print(&self) {
+        let d = &self.drive;
+        println!(
+            "servo sweep on the drive at {} — {} frequencies, {:.3} s of the drive's time (twin {:.3} s)",
+            self.port,
+            d.stream.len(),
+            d.measurement_time_s,
+            self.twin_measurement_time_s
+        );
+        println!(
+            "  {:>10} {:>10} {:>10} {:>8} {:>10} {:>10} {:>9} {:>9}",
+            "Hz", "gain dB", "phase deg", "quality", "twin dB", "twin deg", "diff dB", "diff deg"
+        );
+        for p in &self.points {
+            println!(
+                "  {:>10.2} {:>10.3} {:>10.2} {:>8.4} {:>10.3} {:>10.2} {:>9.3} {:>9.2}",
+                p.frequency,
+                p.drive.gain_db,
+                p.drive.phase_deg,
+                p.drive.quality,
+                p.twin.gain_db,
+                p.twin.phase_deg,
+                p.difference_db,
+                p.difference_deg
+            );
+        }
+        println!(
+            "  drive vs twin: largest difference {:.3} dB, {:.2} deg",
+            self.largest_difference.0, self.largest_difference.1
+        );
+        println!(
+            "  link: {} samples, {} dropped by the drive; {:.0} B/s of {:.0} B/s ({:.0} % of the line)",
+            d.samples,
+            d.dropped,
+            d.link_bytes_per_s,
+            self.line_capacity_bytes_per_s,
+            100.0 * self.line_use
+        );
+        for f in &self.files {
+            println!("  → {}", f.display());
+        }
+    }
+}

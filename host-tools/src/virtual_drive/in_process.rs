@@ -1,0 +1,64 @@
+//! A virtual drive inside the host's own process, as a byte stream (`Read + Write`) that the
+//! host's drive link (`device::link::DeviceLink`) uses as it uses a serial port: reading
+//! advances the simulation until bytes arrive. Deterministic and as fast as the machine runs:
+//! the benches and tests use it; `servo virtual-drive` puts the same drive behind a
+//! pseudo-terminal.
+
+use std::io::{ErrorKind, Read, Write};
+
+use drive_application::board::ParamFlash;
+
+use crate::virtual_drive::simulator::VirtualDrive;
+use crate::virtual_drive::uart::Wire;
+
+/// Ticks simulated per read that finds nothing (1 ms at 16 kHz).
+const TICKS_PER_WAIT: usize = 16;
+
+pub struct InProcessDrive<F: ParamFlash> {
+    pub drive: VirtualDrive<F>,
+    pub wire: Wire,
+}
+
+impl<F: ParamFlash> InProcessDrive<F> {
+    pub fn new(drive: VirtualDrive<F>) -> Self {
+        Self { drive, wire: Wire::default() }
+    }
+
+    /// Let the drive run for `seconds` with nothing read (bytes it sends are kept).
+    pub fn run_for(&mut self, seconds: f64) {
+        let until = self.drive.time() + seconds;
+        while self.drive.time() < until {
+            self.drive.tick(&mut self.wire);
+        }
+    }
+}
+
+impl<F: ParamFlash> Read for InProcessDrive<F> {
+    fn read(&mut self, buf: &mut [u8]) -> std::io::Result<usize> {
+        for _ in 0..TICKS_PER_WAIT {
+            if !self.wire.from_drive.is_empty() {
+                break;
+            }
+            self.drive.tick(&mut self.wire);
+        }
+        if self.wire.from_drive.is_empty() {
+            return Err(ErrorKind::WouldBlock.into());
+        }
+        let n = buf.len().min(self.wire.from_drive.len());
+        for (d, s) in buf.iter_mut().zip(self.wire.from_drive.drain(..n)) {
+            *d = s;
+        }
+        Ok(n)
+    }
+}
+
+impl<F: ParamFlash> Write for InProcessDrive<F> {
+    fn write(&mut self, buf: &[u8]) -> std::io::Result<usize> {
+        self.wire.to_drive.extend(buf);
+        Ok(buf.len())
+    }
+
+    fn flush(&mut self) -> std::io::Result<()> {
+        Ok(())
+    }
+}
