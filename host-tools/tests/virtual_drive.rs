@@ -1,0 +1,139 @@
+//! Issue 16 item 7: the virtual drive as a user (and CI) runs it — `servo virtual-drive
+//! --speed max` behind its pseudo-terminal — and experiments over it with the same commands
+//! as on a board: a sweep compared with its FMU twin, a parameter save, a restart that loads
+//! it, a correction loaded; and what goes wrong (faults, no device, a drive that dies) ends
+//! in a clear error and an exit status, never a hang.
+
+use std::path::{Path, PathBuf};
+use std::process::{Child, Command, Stdio};
+use std::time::{Duration, Instant};
+
+use host_tools::paths::default_fmu as fmu_path;
+
+fn servo() -> Command {
+    let mut c = Command::new(env!("CARGO_BIN_EXE_servo"));
+    c.current_dir(std::env::temp_dir());
+    c
+}
+
+fn tmp(name: &str) -> PathBuf {
+    let d = std::env::temp_dir().join(format!("servo-vd-{}-{name}", std::process::id()));
+    std::fs::create_dir_all(&d).unwrap();
+    d
+}
+
+/// A running virtual drive and its port; killed when dropped.
+struct VirtualDrive {
+    child: Child,
+    port: String,
+}
+
+impl VirtualDrive {
+    fn start(dir: &Path, speed: &str, extra: &[&str]) -> Self {
+        let port_file = dir.join("port");
+        let _ = std::fs::remove_file(&port_file);
+        let child = servo()
+            .args(["virtual-drive", "--speed", speed, "--flash"])
+            .arg(dir.join("flash.bin"))
+            .arg("--port-file")
+            .arg(&port_file)
+            .args(extra)
+            .stdout(Stdio::null())
+            .stderr(Stdio::null())
+            .spawn()
+            .unwrap();
+        let until = Instant::now() + Duration::from_secs(20);
+        while !port_file.exists() {
+            assert!(Instant::now() < until, "the virtual drive did not open its port");
+            std::thread::sleep(Duration::from_millis(20));
+        }
+        std::thread::sleep(Duration::from_millis(50));
+        let port = std::fs::read_to_string(&port_file).unwrap();
+        Self { child, port }
+    }
+}
+
+impl Drop for VirtualDrive {
+    fn drop(&mut self) {
+        let _ = self.child.kill();
+        let _ = self.child.wait();
+    }
+}
+
+fn device(port: &str, action: &[&str]) -> std::process::Output {
+    servo().args(["device", "--port", port, "--json"]).args(action).output().unwrap()
+}
+
+fn json(o: &std::process::Output) -> serde_json::Value {
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    serde_json::from_slice(&o.stdout).unwrap()
+}
+
+#[test]
+fn a_sweep_over_the_virtual_drive_matches_its_twin_and_parameters_survive_a_restart() {
+    let dir = tmp("sweep");
+    let _ = std::fs::remove_file(dir.join("flash.bin"));
+    let vd = VirtualDrive::start(&dir, "max", &[]);
+    let hello = json(&device(&vd.port, &["hello"]));
+    assert!(hello["boot_params"].as_str().unwrap().contains("nothing saved"), "{hello}");
+    let o = servo()
+        .args(["sweep", "--device", &vd.port, "--json", "--out"])
+        .arg(dir.join("out"))
+        .arg("--fmu")
+        .arg(fmu_path())
+        .output()
+        .unwrap();
+    let r = json(&o);
+    assert_eq!(r["drive"]["dropped"], 0, "samples dropped on the link");
+    assert_eq!(r["points"].as_array().unwrap().len(), 41);
+    // The same core on the same plant; the drive's currents pass a 12-bit ADC (15.6 mA a count)
+    // and its offset calibration: within the sweep's own accuracy goal (0.1 dB, 1 deg).
+    let (db, deg) = (r["largest_difference"][0].as_f64().unwrap(), r["largest_difference"][1].as_f64().unwrap());
+    assert!(db <= 0.1 && deg <= 1.0, "drive vs twin {db} dB, {deg} deg");
+    // The sweep gave the drive its parameters: save them, power-cycle, and they are loaded.
+    assert_eq!(json(&device(&vd.port, &["save-params"]))["done"], true);
+    drop(vd);
+    let vd = VirtualDrive::start(&dir, "max", &[]);
+    let hello = json(&device(&vd.port, &["hello"]));
+    assert!(hello["boot_params"].as_str().unwrap().contains("loaded from flash (record 1)"), "{hello}");
+    // A correction frame as `servo tune` writes it loads.
+    let mut frame = vec![0u8; control_core::protocol::MAX_FRAME + 8];
+    let n = control_core::protocol::encode(
+        &control_core::protocol::Request::LoadCorrection(control_core::Params::default().correction),
+        &mut frame,
+    )
+    .unwrap();
+    let file = dir.join("x.corr.frame");
+    std::fs::write(&file, &frame[..n]).unwrap();
+    assert_eq!(json(&device(&vd.port, &["load-correction", file.to_str().unwrap()]))["done"], true);
+}
+
+#[test]
+fn faults_a_missing_device_and_a_dying_drive_end_in_clear_errors() {
+    let dir = tmp("faults");
+    // A break at 0.2 s: the sweep refuses to start and names the fault.
+    let vd = VirtualDrive::start(&dir, "max", &["--fault", "break@0.2"]);
+    std::thread::sleep(Duration::from_millis(300));
+    let o = servo().args(["sweep", "--device", &vd.port, "--fmu"]).arg(fmu_path()).output().unwrap();
+    let e = String::from_utf8_lossy(&o.stderr);
+    assert_eq!(o.status.code(), Some(2), "{e}");
+    assert!(e.contains("hardware break input"), "{e}");
+    drop(vd);
+    // No device at the path.
+    let o = servo().args(["sweep", "--device", "/dev/no-such-port", "--fmu"]).arg(fmu_path()).output().unwrap();
+    let e = String::from_utf8_lossy(&o.stderr);
+    assert_eq!(o.status.code(), Some(2), "{e}");
+    assert!(e.contains("cannot open the serial port"), "{e}");
+    // The drive dies mid-sweep (real-time pace: the sweep takes seconds): an error, no hang.
+    let mut vd = VirtualDrive::start(&dir, "realtime", &[]);
+    let started = Instant::now();
+    let sweep =
+        servo().args(["sweep", "--device", &vd.port, "--fmu"]).arg(fmu_path()).stderr(Stdio::piped()).spawn().unwrap();
+    std::thread::sleep(Duration::from_millis(1500));
+    vd.child.kill().unwrap();
+    let o = sweep.wait_with_output().unwrap();
+    let e = String::from_utf8_lossy(&o.stderr);
+    assert_eq!(o.status.code(), Some(2), "{e}");
+    assert!(started.elapsed() < Duration::from_secs(15), "took {:?}", started.elapsed());
+    assert!(e.contains("drive"), "{e}");
+}
