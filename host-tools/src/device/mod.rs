@@ -1,6 +1,7 @@
 //! The drive link: `servo device`.
 
 pub mod args;
+pub mod bench;
 pub mod command;
 pub mod frame_stream;
 pub mod link;

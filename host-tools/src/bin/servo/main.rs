@@ -53,6 +53,7 @@ enum BenchCommand {
     Ident(ident::args::IdentBenchArgs),
     FmiCampaign(bench::args::FmiCampaignArgs),
     FaultCampaign(bench::args::FaultCampaignArgs),
+    Device(device::bench::DeviceBenchArgs),
     #[command(hide = true)]
     AccdecProbe(accdec::args::AccdecProbeArgs),
 }
@@ -82,6 +83,7 @@ fn main() -> ExitCode {
         Command::Bench(BenchCommand::Ident(args)) => args.run(),
         Command::Bench(BenchCommand::FmiCampaign(args)) => args.run(),
         Command::Bench(BenchCommand::FaultCampaign(args)) => args.run(),
+        Command::Bench(BenchCommand::Device(args)) => args.run(),
         Command::Bench(BenchCommand::AccdecProbe(args)) => args.run(),
     };
     match result {

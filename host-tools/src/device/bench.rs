@@ -1,0 +1,141 @@
+//! `servo bench device` (issue 16 item 6): what the link carries. The default sweep at each
+//! injection point on the virtual drive (in this process, deterministic), over the simulated
+//! 921 600 Bd line: bytes a second received against the line's capacity, samples the drive
+//! had to drop, and the sweep over the link against the same sweep on the FMU (its twin).
+
+use anyhow::Result;
+use serde::Serialize;
+
+use crate::cli::{progress_bar, Common};
+use crate::device::link::DeviceLink;
+use crate::device::session::DriveSession;
+use crate::fmu::configuration::configuration;
+use crate::fmu::runner::Fmu;
+use crate::fmu::sweep_run::SweepRun;
+use crate::paths::default_fmu;
+use crate::sweep::device::sweep_on_drive;
+use crate::sweep::device_report::{compare_with_twin, twin_sweep};
+use crate::virtual_drive::flash::FileFlash;
+use crate::virtual_drive::in_process::InProcessDrive;
+use crate::virtual_drive::simulator::{VirtualDrive, VirtualDriveSettings};
+use crate::virtual_drive::uart::LineSettings;
+
+/// Goals: every sample arrives; the drive and its twin agree within the sweep's own accuracy
+/// goal (the same core on the same plant; the drive's currents pass the 12-bit ADC, 15.6 mA a
+/// count, and its offset calibration, which the FMU's do not).
+pub const GOAL_DROPPED: u32 = 0;
+pub const GOAL_DB: f64 = 0.1;
+pub const GOAL_DEG: f64 = 1.0;
+
+/// Time the bench gives each answer (the drive runs in this process: generous).
+const ANSWER_TIMEOUT: std::time::Duration = std::time::Duration::from_secs(10);
+
+#[derive(Clone, Debug, Serialize)]
+pub struct LinkRow {
+    pub point: String,
+    pub samples: usize,
+    pub dropped: u32,
+    pub bytes_per_s: f64,
+    pub capacity_bytes_per_s: f64,
+    pub difference_db: f64,
+    pub difference_deg: f64,
+    pub measurement_time_s: f64,
+    pub met: bool,
+}
+
+/// The measurement behind `servo bench device`: one row per injection point.
+#[derive(clap::Args)]
+pub struct DeviceBenchArgs {
+    /// Baud rate of the simulated line
+    #[arg(long, default_value_t = 921_600)]
+    pub baud: u32,
+    #[command(flatten)]
+    pub common: Common,
+}
+
+pub fn bench(fmu: &Fmu, baud: u32, mut progress: impl FnMut(f64)) -> Result<Vec<LinkRow>> {
+    let mut rows = Vec::new();
+    let points = [("velocity", 2.0), ("torque", 0.2), ("feedback", 2.0)];
+    for (k, (name, amplitude)) in points.into_iter().enumerate() {
+        let point = match name {
+            "velocity" => control_core::excitation::InjectionPoint::VelocityCommand,
+            "torque" => control_core::excitation::InjectionPoint::TorqueCommand,
+            _ => control_core::excitation::InjectionPoint::VelocityFeedback,
+        };
+        let settings = control_core::phase_shifted_sweep::SweepParams { point, amplitude, ..Default::default() };
+        let run = SweepRun { settings, parameters: Default::default(), velocity: 50.0 };
+        let c = configuration(&run.parameters)?;
+        let vd = VirtualDriveSettings {
+            defaults: c.control,
+            plant: c.plant,
+            line: LineSettings { baud, ..LineSettings::default() },
+            faults: vec![],
+        };
+        let drive = VirtualDrive::power_on(&vd, FileFlash::in_memory())?;
+        let capacity = drive.line_capacity();
+        let mut session = DriveSession::open(DeviceLink::new(InProcessDrive::new(drive), ANSWER_TIMEOUT))?;
+        session.poll = std::time::Duration::ZERO;
+        session.baud = baud;
+        let base = k as f64 / points.len() as f64;
+        let share = 1.0 / points.len() as f64;
+        let d = sweep_on_drive(&mut session, &run, |f| progress(base + share * 0.5 * f))?;
+        let (twin, _) = twin_sweep(fmu, &run, |f| progress(base + share * (0.5 + 0.5 * f)))?;
+        let (_, (db, deg)) = compare_with_twin(&d, &twin);
+        rows.push(LinkRow {
+            point: name.to_string(),
+            samples: d.samples,
+            dropped: d.dropped,
+            bytes_per_s: d.link_bytes_per_s,
+            capacity_bytes_per_s: capacity,
+            difference_db: db,
+            difference_deg: deg,
+            measurement_time_s: d.measurement_time_s,
+            met: d.dropped <= GOAL_DROPPED && db <= GOAL_DB && deg <= GOAL_DEG,
+        });
+    }
+    Ok(rows)
+}
+
+impl DeviceBenchArgs {
+    pub fn run(&self) -> Result<bool> {
+        let c = &self.common;
+        let fmu = Fmu::load(&c.fmu.clone().unwrap_or_else(default_fmu))?;
+        let pb = progress_bar("device bench", c.json);
+        let rows = bench(&fmu, self.baud, |f| pb.set_position((f * 1000.0) as u64))?;
+        pb.finish_and_clear();
+        let ok = rows.iter().all(|r| r.met);
+        if c.json {
+            let j = serde_json::json!({"bench": "device", "rows": rows, "passed": ok});
+            println!("{}", serde_json::to_string_pretty(&j)?);
+            return Ok(ok);
+        }
+        println!(
+            "servo bench device — the default sweep (10 Hz–3 kHz, 4 kHz acquisition streamed) on the virtual drive over a {} Bd line, against its FMU twin",
+            self.baud
+        );
+        println!(
+            "  goals: {GOAL_DROPPED} samples dropped; drive vs twin <= {GOAL_DB} dB and <= {GOAL_DEG} deg at every point"
+        );
+        println!(
+            "  {:<10} {:>8} {:>8} {:>10} {:>10} {:>7} {:>9} {:>9} {:>7}  goal",
+            "point", "samples", "dropped", "B/s", "line B/s", "use %", "diff dB", "diff deg", "time s"
+        );
+        for r in &rows {
+            println!(
+                "  {:<10} {:>8} {:>8} {:>10.0} {:>10.0} {:>7.1} {:>9.3} {:>9.2} {:>7.2}  {}",
+                r.point,
+                r.samples,
+                r.dropped,
+                r.bytes_per_s,
+                r.capacity_bytes_per_s,
+                100.0 * r.bytes_per_s / r.capacity_bytes_per_s,
+                r.difference_db,
+                r.difference_deg,
+                r.measurement_time_s,
+                if r.met { "met" } else { "MISSED" }
+            );
+        }
+        println!("  goal on every row: {}", if ok { "met" } else { "NOT met" });
+        Ok(ok)
+    }
+}
