@@ -161,7 +161,7 @@ fn announce(
     }
     let pace = match pace {
         Pace::Max => "as fast as it runs".to_string(),
-        Pace::Factor(f) if f == 1.0 => "real time".to_string(),
+        Pace::Factor(1.0) => "real time".to_string(),
         Pace::Factor(f) => format!("{f}× real time"),
     };
     println!("{}", path.display());

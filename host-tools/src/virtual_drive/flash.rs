@@ -72,7 +72,11 @@ impl FileFlash {
 }
 
 fn span(page: usize, offset: usize, len: usize, unit: usize) -> Result<(), FlashError> {
-    if page > 1 || offset % unit != 0 || len % unit != 0 || offset.checked_add(len).is_none_or(|e| e > PAGE_BYTES) {
+    if page > 1
+        || !offset.is_multiple_of(unit)
+        || !len.is_multiple_of(unit)
+        || offset.checked_add(len).is_none_or(|e| e > PAGE_BYTES)
+    {
         return Err(FlashError::Alignment);
     }
     Ok(())

@@ -45,7 +45,7 @@ impl PseudoTerminal {
             let flags = OFlag::from_bits_truncate(fcntl(fd, FcntlArg::F_GETFL).context("fcntl")?);
             fcntl(fd, FcntlArg::F_SETFL(flags | OFlag::O_NONBLOCK)).context("fcntl")?;
         }
-        Ok(Self { master, slave: slave, path, unread_bytes_lost: 0 })
+        Ok(Self { master, slave, path, unread_bytes_lost: 0 })
     }
 
     /// The port a host program opens.
