@@ -601,14 +601,33 @@ mod tests {
     }
 
     #[test]
-    fn a_sample_count_beyond_the_batch_is_refused_by_the_host() {
+    fn a_sample_count_beyond_the_batch_is_refused_on_both_sides() {
         let mut b = SampleBatch { count: 200, ..Default::default() };
         let mut buf = [0u8; MAX_FRAME + 8];
-        let n = encode(&Response::Samples(b), &mut buf).unwrap();
-        assert_eq!(decode_response(&mut buf[..n]), Err(FrameError::Count { got: 200, max: 16 }));
+        assert!(encode(&Response::Samples(b), &mut buf).is_err(), "a batch that claims 200 samples is not sent");
         b.count = 16;
+        for (k, s) in b.samples.iter_mut().enumerate() {
+            s.tick = 1_000_000 + 4 * k as u64;
+            s.u = k as f32;
+        }
         let n = encode(&Response::Samples(b), &mut buf).unwrap();
         assert_eq!(decode_response(&mut buf[..n]), Ok(Response::Samples(b)));
+        // 17 samples under a valid CRC (a sequence length the drive never sends) do not decode.
+        let mut payload = [0u8; 600];
+        let body = postcard::to_slice(&Response::Samples(b), &mut payload).unwrap().len();
+        // The variant tag, `dropped`, then the sequence's length: 16 → 17 with one more sample.
+        assert_eq!(payload[2], 16);
+        payload[2] = 17;
+        let sample_bytes = (body - 3) / 16;
+        payload.copy_within(3..3 + sample_bytes, body);
+        let raw = &mut payload[..body + sample_bytes];
+        let crc = crc32(raw).to_le_bytes();
+        let mut framed = [0u8; 700];
+        let mut with_crc = [0u8; 700];
+        with_crc[..raw.len()].copy_from_slice(raw);
+        with_crc[raw.len()..raw.len() + 4].copy_from_slice(&crc);
+        let m = cobs::encode(&with_crc[..raw.len() + 4], &mut framed);
+        assert_eq!(decode_response(&mut framed[..m]), Err(FrameError::Message));
     }
 
     #[test]

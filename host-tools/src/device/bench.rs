@@ -20,11 +20,15 @@ use crate::virtual_drive::in_process::InProcessDrive;
 use crate::virtual_drive::simulator::{VirtualDrive, VirtualDriveSettings};
 use crate::virtual_drive::uart::LineSettings;
 
-/// Goals: every sample arrives; the drive and its twin agree within the sweep's own accuracy
-/// goal (the same core on the same plant; the drive's currents pass the 12-bit ADC, 15.6 mA a
-/// count, and its offset calibration, which the FMU's do not).
+/// Goals: every sample arrives; the drive and its twin agree as two measurements of the same
+/// response do. The same core runs on the same plant, but the drive's currents pass the 12-bit
+/// ADC (15.6 mA a count) and its offset calibration, which the FMU's do not: the loop's noise
+/// differs sample by sample, so each sweep carries its own random error, held by the precision
+/// control to a standard error of 0.03 dB / 0.2° per point. Two independent such errors differ
+/// by √2 times that; over 41 points the largest stays within about 3.5 standard deviations:
+/// 0.15 dB and 1°.
 pub const GOAL_DROPPED: u32 = 0;
-pub const GOAL_DB: f64 = 0.1;
+pub const GOAL_DB: f64 = 0.15;
 pub const GOAL_DEG: f64 = 1.0;
 
 /// Time the bench gives each answer (the drive runs in this process: generous).
@@ -74,7 +78,6 @@ pub fn bench(fmu: &Fmu, baud: u32, mut progress: impl FnMut(f64)) -> Result<Vec<
         let drive = VirtualDrive::power_on(&vd, FileFlash::in_memory())?;
         let capacity = drive.line_capacity();
         let mut session = DriveSession::open(DeviceLink::new(InProcessDrive::new(drive), ANSWER_TIMEOUT))?;
-        session.poll = std::time::Duration::ZERO;
         session.baud = baud;
         let base = k as f64 / points.len() as f64;
         let share = 1.0 / points.len() as f64;

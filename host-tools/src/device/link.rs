@@ -16,6 +16,17 @@ use control_core::protocol::{encode, Request, Response, MAX_FRAME, VERSION};
 
 use crate::device::frame_stream::FrameStream;
 
+/// A drive's byte stream, and how the host lets time pass on it: a serial port sleeps; a
+/// drive simulated in this process runs meanwhile (its time moves only when asked to).
+pub trait DrivePort: Read + Write {
+    fn pause(&mut self, d: Duration) {
+        std::thread::sleep(d);
+    }
+}
+
+impl DrivePort for Box<dyn serialport::SerialPort> {}
+impl DrivePort for std::os::unix::net::UnixStream {}
+
 pub struct DeviceLink<T: Read + Write> {
     port: T,
     /// Bytes read but not yet part of a complete frame.
@@ -44,6 +55,19 @@ impl<T: Read + Write> DeviceLink<T> {
                 other => return Ok(other),
             }
         }
+    }
+
+    /// Let `d` pass (see [`DrivePort::pause`]).
+    pub fn pause(&mut self, d: Duration)
+    where
+        T: DrivePort,
+    {
+        self.port.pause(d);
+    }
+
+    /// The byte stream underneath.
+    pub fn port(&self) -> &T {
+        &self.port
     }
 
     /// The byte stream underneath.
@@ -222,15 +246,14 @@ mod tests {
         }
     }
 
-    /// Issue 18: a CRC-valid Samples frame whose count says 200 is an error, not a panic.
+    /// Issue 18: a batch whose count says 200 is an error, not a panic (the drive cannot send
+    /// one: its encoding refuses it; a longer sample sequence does not decode, see
+    /// `control_core::protocol`'s tests).
     #[test]
     fn a_sample_count_beyond_its_slots_is_an_error() {
         let b = SampleBatch { count: 200, ..Default::default() };
         let mut buf = vec![0u8; MAX_FRAME + 8];
-        let n = encode(&Response::Samples(b), &mut buf).unwrap();
-        let mut s = FrameStream::default();
-        s.push(&buf[..n]);
-        assert!(matches!(s.next_frame(), Some(Err(control_core::protocol::FrameError::Count { got: 200, max: 16 }))));
+        assert!(encode(&Response::Samples(b), &mut buf).is_err());
         assert!(crate::device::frame_stream::sample_rows(&[b]).is_err());
     }
 

@@ -5,7 +5,6 @@
 //! ticking or answering is an error, never a hang) — the same on a board and on the virtual
 //! drive at any speed.
 
-use std::io::{Read, Write};
 use std::time::{Duration, Instant};
 
 use anyhow::{bail, Result};
@@ -14,24 +13,23 @@ use control_core::axis::{Mode, Telemetry};
 use control_core::protocol::{ParamsOrigin, Request, Response, VERSION};
 use control_core::{Commands, Params};
 
-use crate::device::link::DeviceLink;
+use crate::device::link::{DeviceLink, DrivePort};
 
 /// A drive whose tick counter has not moved for this long has stopped.
 pub const STALLED: Duration = Duration::from_secs(3);
 
-pub struct DriveSession<T: Read + Write> {
+pub struct DriveSession<T: DrivePort> {
     pub link: DeviceLink<T>,
     pub boot_params: ParamsOrigin,
     /// The drive's tick rate (its parameters' current-loop rate, once given).
     pub tick_hz: f64,
-    /// Pause between two telemetry polls (none for a drive simulated in this process: there
-    /// the drive's time moves only while the host waits for an answer).
+    /// Pause between two telemetry polls (the telemetry shares the line with the stream).
     pub poll: Duration,
     /// The link's baud rate (for the share of the line an experiment uses).
     pub baud: u32,
 }
 
-impl<T: Read + Write> DriveSession<T> {
+impl<T: DrivePort> DriveSession<T> {
     /// The handshake: the drive speaks this protocol version (and says where its parameters
     /// came from).
     pub fn open(mut link: DeviceLink<T>) -> Result<Self> {
@@ -46,7 +44,7 @@ impl<T: Read + Write> DriveSession<T> {
             link,
             boot_params,
             tick_hz: Params::default().rates.current_loop_hz as f64,
-            poll: Duration::from_millis(2),
+            poll: Duration::from_millis(5),
             baud: 921_600,
         })
     }
@@ -109,7 +107,7 @@ impl<T: Read + Write> DriveSession<T> {
             } else if moved.elapsed() > STALLED {
                 bail!("the drive's tick counter stopped at {} (is it still running?)", t.tick);
             }
-            std::thread::sleep(self.poll);
+            self.link.pause(self.poll);
             t = self.telemetry()?;
         }
     }

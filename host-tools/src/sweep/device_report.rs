@@ -2,7 +2,6 @@
 //! drive's parameters, plant and sweep settings), their difference per frequency point, and
 //! what the link carried — in a table, a Bode plot with both curves, CSV and JSON.
 
-use std::io::{Read, Write};
 use std::path::{Path, PathBuf};
 
 use anyhow::Result;
@@ -67,7 +66,7 @@ pub fn twin_sweep(fmu: &Fmu, run: &SweepRun, progress: impl FnMut(f64)) -> Resul
     Ok((stream_results(&trace, &run.settings)?, time))
 }
 
-pub fn run_on_device<T: Read + Write>(
+pub fn run_on_device<T: crate::device::link::DrivePort>(
     fmu: &Fmu,
     run: &SweepRun,
     (port, session): (&str, &mut DriveSession<T>),
@@ -124,7 +123,7 @@ pub fn run_on_device<T: Read + Write>(
     Ok(DeviceSweepReport { files, ..report })
 }
 
-fn session_capacity<T: Read + Write>(session: &DriveSession<T>) -> f64 {
+fn session_capacity<T: crate::device::link::DrivePort>(session: &DriveSession<T>) -> f64 {
     session.baud as f64 / crate::virtual_drive::uart::BITS_PER_BYTE
 }
 

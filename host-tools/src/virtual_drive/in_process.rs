@@ -33,6 +33,13 @@ impl<F: ParamFlash> InProcessDrive<F> {
     }
 }
 
+impl<F: ParamFlash> crate::device::link::DrivePort for InProcessDrive<F> {
+    /// The drive runs for `d` of its time.
+    fn pause(&mut self, d: std::time::Duration) {
+        self.run_for(d.as_secs_f64());
+    }
+}
+
 impl<F: ParamFlash> Read for InProcessDrive<F> {
     fn read(&mut self, buf: &mut [u8]) -> std::io::Result<usize> {
         for _ in 0..TICKS_PER_WAIT {

@@ -23,9 +23,7 @@ fn settings() -> VirtualDriveSettings {
 
 fn session(drive: VirtualDrive<FileFlash>) -> DriveSession<InProcessDrive<FileFlash>> {
     let link = DeviceLink::new(InProcessDrive::new(drive), Duration::from_millis(300));
-    let mut s = DriveSession::open(link).unwrap();
-    s.poll = Duration::ZERO;
-    s
+    DriveSession::open(link).unwrap()
 }
 
 #[test]
