@@ -116,3 +116,23 @@ impl CurrentLoop {
         CurrentLoopOutput { current: i, voltage: v, duties, saturated: sat_d || sat_q }
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::params::Params;
+
+    #[test]
+    fn a_torque_becomes_q_current_through_the_torque_constant_within_the_current_limit() {
+        let p = Params::default();
+        let l = CurrentLoop::new(&p.current, &p.motor, p.rates.tick_period());
+        // Kt = 1.5 · pole pairs · flux linkage.
+        let kt = 1.5 * p.motor.pole_pairs as f64 * p.motor.flux_linkage as f64;
+        let r = l.reference(0.5);
+        assert_eq!(r.d, 0.0);
+        assert!((r.q as f64 - 0.5 / kt).abs() < 1e-5, "{r:?}");
+        let max = p.current.max_current;
+        assert_eq!(l.reference(1e3).q, max);
+        assert_eq!(l.reference(-1e3).q, -max);
+    }
+}

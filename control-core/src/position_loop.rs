@@ -52,3 +52,28 @@ impl PositionLoop {
         PositionLoopOutput { velocity_reference: crate::limit(v, -limit, limit), following_error: error }
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn velocity_reference_is_gain_times_error_plus_the_command_speed_within_the_limit() {
+        let gains = PositionLoopGains { kp: 100.0, velocity_feedforward: 0.5, velocity_limit: 50.0 };
+        let (cpr, period) = (1u32 << 20, 0.00025f32);
+        let mut l = PositionLoop::new(&gains, cpr, period);
+        let rad = |counts: f64| counts * core::f64::consts::TAU / cpr as f64;
+        // First tick: no previous command, no feed-forward; the error is 1000 counts.
+        let out = l.step(1000, 0);
+        assert!((out.following_error as f64 - rad(1000.0)).abs() < 1e-9, "{out:?}");
+        assert!((out.velocity_reference as f64 - 100.0 * rad(1000.0)).abs() < 1e-4, "{out:?}");
+        // The command moves 2000 counts in a period: half of its speed is fed forward.
+        let out = l.step(3000, 2900);
+        let expected = 100.0 * rad(100.0) + 0.5 * rad(2000.0) / period as f64;
+        assert!((out.velocity_reference as f64 - expected).abs() < 1e-3, "{} vs {expected}", out.velocity_reference);
+        // A large error is limited; after a reset the feed-forward starts again from zero.
+        assert_eq!(l.step(1 << 30, 0).velocity_reference, 50.0);
+        l.reset();
+        assert_eq!(l.step(-(1 << 30), 0).velocity_reference, -50.0);
+    }
+}
