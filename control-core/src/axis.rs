@@ -1,5 +1,7 @@
 //! One servo axis: the three cascaded loops, called once per base tick.
 
+use core::num::NonZeroU32;
+
 use crate::acc_dec::AccDecFilter;
 use crate::command_path::{CommandPath, Move};
 use crate::current_loop::{CurrentLoop, CurrentLoopOutput};
@@ -7,7 +9,7 @@ use crate::encoder::{EncoderTracker, EncoderUpdate};
 use crate::excitation::{InjectionPoint, SineGenerator};
 use crate::faults::Faults;
 use crate::friction_compensation::FrictionCompensation;
-use crate::params::{ParamError, Params};
+use crate::params::{Limits, ParamError, Params};
 use crate::phase_shifted_sweep::{PhaseShiftedSweep, SweepError, SweepStatus};
 use crate::position_loop::PositionLoop;
 use crate::ranges::{check_f32, check_position, Quantity, RangeError, MAX_SPEED};
@@ -126,11 +128,79 @@ pub struct Telemetry {
     pub sweep: SweepStatus,
 }
 
+/// What the tick needs of the parameters outside the loops, derived once by [`Axis::new`].
+#[derive(Clone, Copy, Debug)]
+#[repr(C)]
+struct TickSettings {
+    /// Base ticks per velocity, position, acquisition and PRBS-chip tick.
+    dividers: [u32; 4],
+    /// Encoder count to rad.
+    rad_per_count: f32,
+    /// Velocity-loop period (s).
+    velocity_period: f32,
+    /// Encoder counts per position tick at 1 rad/s (speeds to the interpolator's pulses).
+    counts_per_position_tick: f32,
+    limits: Limits,
+}
+
+impl TickSettings {
+    fn new(p: &Params) -> Self {
+        Self {
+            dividers: [
+                p.rates.velocity_divider,
+                p.rates.position_divider,
+                p.sweep.acquisition_divider,
+                p.sweep.prbs_divider,
+            ],
+            rad_per_count: TAU / p.encoder_counts_per_rev as f32,
+            velocity_period: p.rates.velocity_period(),
+            counts_per_position_tick: p.counts_per_position_tick(),
+            limits: p.limits,
+        }
+    }
+}
+
+/// Which of the slower ticks fall on this base tick.
+#[derive(Clone, Copy)]
+struct Due {
+    velocity: bool,
+    position: bool,
+    acquisition: bool,
+    prbs_chip: bool,
+}
+
+/// What sensing found on this tick.
+struct Sensed {
+    faults: Faults,
+    /// The motion speeds within their range (a command that is not has latched a fault and
+    /// must not reach the interpolator's carry).
+    speeds_in_range: bool,
+    /// Encoder position (counts).
+    position: i64,
+}
+
+/// The position set-point within its range (`crate::ranges`).
+#[inline(always)]
+fn position_in_range(commands: &Commands) -> bool {
+    commands.position.unsigned_abs() <= crate::ranges::MAX_POSITION_COUNTS as u64
+}
+
+/// What the inner loop produced on this tick.
+struct InnerLoop {
+    /// Torque command with the injections (Nm).
+    torque: f32,
+    current_reference: Dq,
+    out: CurrentLoopOutput,
+}
+
 /// In C order, the per-tick scalars and loops first and the big blocks last (the sweep and
 /// its result table at the end): with Rust's own order the every-feature tick took 2–3 more
 /// instructions on the Cortex-M4 (`servo bench firmware`; probably address arithmetic for hot
 /// fields placed beyond the immediate offsets of the FPU's loads, ±1020 bytes).
-#[derive(Clone, Copy, Debug)]
+///
+/// Not `Copy`: an axis is kilobytes (the acc/dec filter's and the sweep's tables); clone it
+/// where a copy is meant.
+#[derive(Clone, Debug)]
 #[repr(C)]
 pub struct Axis {
     /// Ticks since the last velocity, position, acquisition and PRBS-chip tick (`tick` modulo
@@ -143,6 +213,7 @@ pub struct Axis {
     torque_command: f32,
     /// Velocity-loop inputs of the last velocity tick: reference and feedback as used.
     velocity_loop_inputs: (f32, f32),
+    settings: TickSettings,
     mode: Option<Mode>,
     encoder: EncoderTracker,
     current_loop: CurrentLoop,
@@ -150,6 +221,7 @@ pub struct Axis {
     position_loop: PositionLoop,
     friction: FrictionCompensation,
     excitation: Option<(InjectionPoint, SineGenerator)>,
+    /// The parameters as given (for [`Axis::params`]; the tick reads the loops' own settings).
     params: Params,
     command_path: CommandPath,
     sequence: StopSequence,
@@ -158,26 +230,31 @@ pub struct Axis {
 }
 
 impl Axis {
-    /// Build an axis; refuses parameters that do not validate.
+    /// Build an axis; refuses parameters that do not validate. Each loop is built from its
+    /// settings here, with what its tick derives from them (periods, scales, filter
+    /// coefficients), so the tick reads them and computes none.
     pub fn new(params: Params) -> Result<Self, ParamError> {
         params.validate()?;
-        let acc_dec = AccDecFilter::new(&params.acc_dec, params.rates.position_period()).map_err(ParamError::AccDec)?;
+        let position_period = params.rates.position_period();
+        let acc_dec = AccDecFilter::new(&params.acc_dec, position_period).map_err(ParamError::AccDec)?;
+        let cpr = params.encoder_counts_per_rev;
+        let counts_per_rev = NonZeroU32::new(cpr).ok_or(ParamError::Zero { field: "encoder_counts_per_rev" })?;
         Ok(Self {
             params,
-            current_loop: CurrentLoop::new(&params),
-            velocity_loop: VelocityLoop::new(&params),
-            position_loop: PositionLoop::default(),
+            settings: TickSettings::new(&params),
+            current_loop: CurrentLoop::new(&params.current, &params.motor, params.rates.tick_period()),
+            velocity_loop: VelocityLoop::new(&params.velocity, &params.filters, &params.rates),
+            position_loop: PositionLoop::new(&params.position, cpr, position_period),
             command_path: CommandPath::with_correction(
                 acc_dec,
-                ResponseCorrection::new(&params.correction, params.rates.position_period())
-                    .map_err(ParamError::Correction)?,
+                ResponseCorrection::new(&params.correction, position_period).map_err(ParamError::Correction)?,
             ),
-            sequence: StopSequence::default(),
+            sequence: StopSequence::new(&params.sequence, cpr, position_period),
             friction: FrictionCompensation::new(&params.friction, params.rates.velocity_period()),
             sweep: PhaseShiftedSweep::new(params.sweep, params.rates.current_loop_hz),
             velocity_loop_inputs: (0.0, 0.0),
             phases: [0; 4],
-            encoder: EncoderTracker::default(),
+            encoder: EncoderTracker::new(counts_per_rev, params.motor.pole_pairs),
             excitation: None,
             tick: 0,
             mode: None,
@@ -223,7 +300,7 @@ impl Axis {
         if self.mode != Some(Mode::Sequence) {
             return self.sequence.refuse(Refusal::NotInSequenceMode);
         }
-        let r = self.sequence.event(&self.params.sequence, e);
+        let r = self.sequence.event(e);
         self.telemetry.sequence = *self.sequence.status();
         r
     }
@@ -305,13 +382,54 @@ impl Axis {
         self.excitation = (point != InjectionPoint::Off).then_some((point, sine));
     }
 
-    /// One base tick: read sensors, run the loops that are due, return the PWM command.
+    /// One base tick: sense, run the commanded mode's outer loops that are due, run the inner
+    /// (current) loop, record; returns the PWM command.
     pub fn step(&mut self, inputs: &AxisInputs, commands: &Commands) -> PwmOutput {
-        // A reference, not a copy: the parameters are hundreds of bytes, and copying them every
-        // tick cost a Cortex-M4 about 800 instructions.
-        let mut faults = self.telemetry.faults;
-        let p = &self.params;
+        // Sense: inputs checked, encoder followed, the mode switched, the velocity estimated.
+        let mut sensed = self.sense(inputs, commands);
+        self.apply_mode(commands);
+        let due = self.due();
+        self.estimate_velocity(due.velocity, sensed.position);
+        let excitation = self.excitation(due.prbs_chip);
 
+        // Mode: the commanded mode's outer loops on their ticks. On a velocity tick of a mode
+        // with a velocity loop, the commanded velocity, which the friction compensation
+        // follows (the commanded motion, not the feedback).
+        let commanded_velocity = match commands.mode {
+            Mode::Torque => {
+                self.torque_command = self.velocity_loop.limit_torque(commands.torque);
+                None
+            }
+            Mode::Velocity => due.velocity.then(|| {
+                self.velocity_reference = commands.velocity;
+                commands.velocity
+            }),
+            Mode::Position => {
+                if due.position {
+                    self.position_tick(commands, &mut sensed);
+                }
+                due.velocity.then(|| crate::counts_to_f32(self.command_path.pulses()))
+            }
+            Mode::Sequence => {
+                if due.position {
+                    self.sequence_tick(sensed.position);
+                }
+                due.velocity.then(|| self.sequence.status().speed_reference)
+            }
+        };
+        if let Some(commanded) = commanded_velocity {
+            self.velocity_tick(commanded, excitation);
+        }
+
+        // Inner loop: torque to current to PWM; then the record of the tick.
+        let inner = self.inner_loop(inputs, excitation, due, &mut sensed.faults);
+        self.record(commands.mode, &sensed, &inner, due)
+    }
+
+    /// Sensing: the inputs and set-points checked (faults latched), the encoder followed.
+    #[inline(always)]
+    fn sense(&mut self, inputs: &AxisInputs, commands: &Commands) -> Sensed {
+        let mut faults = self.telemetry.faults;
         if !inputs.phase_currents.iter().all(|x| x.is_finite()) || !inputs.bus_voltage.is_finite() {
             faults.latch(Faults::NOT_FINITE);
         }
@@ -321,115 +439,130 @@ impl Axis {
         let speeds_in_range = commands.move_speed.abs() <= MAX_SPEED && commands.jog_velocity.abs() <= MAX_SPEED;
         if !(speeds_in_range
             && commands.velocity.abs() <= MAX_SPEED
-            && commands.torque.abs() <= crate::ranges::MAX_TORQUE)
-            || commands.position.unsigned_abs() > crate::ranges::MAX_POSITION_COUNTS as u64
+            && commands.torque.abs() <= crate::ranges::MAX_TORQUE
+            && position_in_range(commands))
         {
             let finite = [commands.move_speed, commands.jog_velocity, commands.velocity, commands.torque]
                 .iter()
                 .all(|x| x.is_finite());
             faults.latch(if finite { Faults::COMMAND_RANGE } else { Faults::NOT_FINITE });
         }
-        if self.encoder.update(inputs.encoder_count, p.encoder_counts_per_rev) == EncoderUpdate::Jump {
+        if self.encoder.update(inputs.encoder_count) == EncoderUpdate::Jump {
             faults.latch(Faults::ENCODER);
         }
+        let limits = &self.settings.limits;
         let [ia, ib] = inputs.phase_currents;
         let ic = -(ia + ib);
-        if ia.abs().max(ib.abs()).max(ic.abs()) > p.limits.overcurrent {
+        if ia.abs().max(ib.abs()).max(ic.abs()) > limits.overcurrent {
             faults.latch(Faults::OVERCURRENT);
         }
-        if inputs.bus_voltage < p.limits.bus_undervoltage {
+        if inputs.bus_voltage < limits.bus_undervoltage {
             faults.latch(Faults::BUS_UNDERVOLTAGE);
         }
-        if inputs.bus_voltage > p.limits.bus_overvoltage {
+        if inputs.bus_voltage > limits.bus_overvoltage {
             faults.latch(Faults::BUS_OVERVOLTAGE);
         }
+        Sensed { faults, speeds_in_range, position: self.encoder.position() }
+    }
 
-        self.apply_mode(commands);
-        let p = &self.params;
-
+    #[inline(always)]
+    fn due(&self) -> Due {
         // Four plain comparisons (an array `map` here cost several times as much).
-        let velocity_due = self.phases[0] == 0;
-        let position_due = self.phases[1] == 0;
-        let acquire = self.phases[2] == 0;
-        let chip_due = self.phases[3] == 0;
-        let excitation = match (self.sweep.excitation(chip_due), self.excitation.as_mut()) {
-            (Some(e), _) => e,
-            (None, Some((point, sine))) => (*point, sine.next_sample()),
-            (None, None) => (InjectionPoint::Off, 0.0),
-        };
+        Due {
+            velocity: self.phases[0] == 0,
+            position: self.phases[1] == 0,
+            acquisition: self.phases[2] == 0,
+            prbs_chip: self.phases[3] == 0,
+        }
+    }
 
-        let position = self.encoder.position();
+    /// The velocity estimate from the encoder counts of the last velocity period.
+    #[inline(always)]
+    fn estimate_velocity(&mut self, velocity_due: bool, position: i64) {
         if velocity_due {
             let counts = position.saturating_sub(self.position_at_velocity_tick);
             self.position_at_velocity_tick = position;
             if self.tick > 0 {
-                self.velocity_estimate =
-                    crate::counts_to_f32(counts) * (TAU / p.encoder_counts_per_rev as f32) / p.rates.velocity_period();
+                let s = &self.settings;
+                self.velocity_estimate = crate::counts_to_f32(counts) * s.rad_per_count / s.velocity_period;
             }
         }
-        if commands.mode == Mode::Position && position_due {
-            let counts_per_tick = p.counts_per_position_tick();
-            let motion = if commands.jog_velocity != 0.0 {
-                Move::Jog(commands.jog_velocity * counts_per_tick)
-            } else if commands.move_speed != 0.0 {
-                Move::Absolute { target: commands.position, speed: commands.move_speed.abs() * counts_per_tick }
-            } else {
-                Move::Stream
-            };
-            // A non-finite or out-of-range speed has latched a fault above; it must not reach
-            // the carry.
-            let command =
-                if speeds_in_range && commands.position.unsigned_abs() <= crate::ranges::MAX_POSITION_COUNTS as u64 {
-                    self.command_path.step(motion, commands.position)
-                } else {
-                    self.command_path.position()
-                };
-            let out = self.position_loop.step(p, command, position);
-            self.velocity_reference = out.velocity_reference;
-            self.telemetry.following_error = out.following_error;
-            if out.following_error.abs() > p.limits.following_error {
-                faults.latch(Faults::FOLLOWING_ERROR);
-            }
+    }
+
+    /// This tick's injection: the sweep's, else the test sine's, else none.
+    #[inline(always)]
+    fn excitation(&mut self, chip_due: bool) -> (InjectionPoint, f32) {
+        match (self.sweep.excitation(chip_due), self.excitation.as_mut()) {
+            (Some(e), _) => e,
+            (None, Some((point, sine))) => (*point, sine.next_sample()),
+            (None, None) => (InjectionPoint::Off, 0.0),
         }
-        if commands.mode == Mode::Sequence && position_due {
-            self.velocity_reference = self.sequence.step(
-                &p.sequence,
-                p.encoder_counts_per_rev,
-                position,
-                self.velocity_estimate,
-                p.rates.position_period(),
-            );
-            // The stop's hand-over: the deceleration torque lets go (see `stop_sequence`).
-            if self.sequence.take_integrator_release() {
-                self.velocity_loop.set_integral(0.0);
-            }
+    }
+
+    /// Position mode's position tick: the command path, then the position loop.
+    #[inline(always)]
+    fn position_tick(&mut self, commands: &Commands, sensed: &mut Sensed) {
+        let counts_per_tick = self.settings.counts_per_position_tick;
+        let motion = if commands.jog_velocity != 0.0 {
+            Move::Jog(commands.jog_velocity * counts_per_tick)
+        } else if commands.move_speed != 0.0 {
+            Move::Absolute { target: commands.position, speed: commands.move_speed.abs() * counts_per_tick }
+        } else {
+            Move::Stream
+        };
+        // A non-finite or out-of-range speed or position has latched a fault in sensing; it
+        // must not reach the carry.
+        let command = if sensed.speeds_in_range && position_in_range(commands) {
+            self.command_path.step(motion, commands.position)
+        } else {
+            self.command_path.position()
+        };
+        let out = self.position_loop.step(command, sensed.position);
+        self.velocity_reference = out.velocity_reference;
+        self.telemetry.following_error = out.following_error;
+        if out.following_error.abs() > self.settings.limits.following_error {
+            sensed.faults.latch(Faults::FOLLOWING_ERROR);
         }
-        if commands.mode != Mode::Torque && velocity_due {
-            if commands.mode == Mode::Velocity {
-                self.velocity_reference = commands.velocity;
-            }
-            let mut reference = self.velocity_reference;
-            if excitation.0 == InjectionPoint::VelocityCommand {
-                reference += excitation.1;
-            }
-            // Friction compensation follows the commanded motion, not the feedback.
-            let commanded = match commands.mode {
-                Mode::Velocity => commands.velocity,
-                Mode::Sequence => self.sequence.status().speed_reference,
-                _ => crate::counts_to_f32(self.command_path.pulses()),
-            };
-            let compensation = self.friction.step(commanded);
-            let mut feedback = self.velocity_estimate;
-            if excitation.0 == InjectionPoint::VelocityFeedback {
-                feedback += excitation.1;
-            }
-            self.velocity_loop_inputs = (reference, feedback);
-            let torque = self.velocity_loop.step(p, reference, feedback) + compensation;
-            self.torque_command = crate::limit(torque, -p.velocity.torque_limit, p.velocity.torque_limit);
+    }
+
+    /// Sequence mode's position tick: the stop sequence's speed reference.
+    #[inline(always)]
+    fn sequence_tick(&mut self, position: i64) {
+        self.velocity_reference = self.sequence.step(position, self.velocity_estimate);
+        // The stop's hand-over: the deceleration torque lets go (see `stop_sequence`).
+        if self.sequence.take_integrator_release() {
+            self.velocity_loop.set_integral(0.0);
         }
-        if commands.mode == Mode::Torque {
-            self.torque_command = crate::limit(commands.torque, -p.velocity.torque_limit, p.velocity.torque_limit);
+    }
+
+    /// A velocity tick: the velocity loop on the reference with the injection, plus friction
+    /// compensation for the `commanded` velocity, within the torque limit.
+    #[inline(always)]
+    fn velocity_tick(&mut self, commanded: f32, excitation: (InjectionPoint, f32)) {
+        let mut reference = self.velocity_reference;
+        if excitation.0 == InjectionPoint::VelocityCommand {
+            reference += excitation.1;
         }
+        let compensation = self.friction.step(commanded);
+        let mut feedback = self.velocity_estimate;
+        if excitation.0 == InjectionPoint::VelocityFeedback {
+            feedback += excitation.1;
+        }
+        self.velocity_loop_inputs = (reference, feedback);
+        let torque = self.velocity_loop.step(reference, feedback) + compensation;
+        self.torque_command = self.velocity_loop.limit_torque(torque);
+    }
+
+    /// The inner loop: the torque command with the injections, the sweep's acquisition, the
+    /// current loop (off while a fault is latched).
+    #[inline(always)]
+    fn inner_loop(
+        &mut self,
+        inputs: &AxisInputs,
+        excitation: (InjectionPoint, f32),
+        due: Due,
+        faults: &mut Faults,
+    ) -> InnerLoop {
         let mut torque = self.torque_command;
         if excitation.0 == InjectionPoint::TorqueCommand {
             torque += excitation.1;
@@ -441,21 +574,32 @@ impl Axis {
             InjectionPoint::VelocityFeedback => self.velocity_loop_inputs.1,
             _ => torque,
         };
-        self.sweep.end_tick(self.tick, velocity_due, acquire, u, self.velocity_estimate);
+        self.sweep.end_tick(self.tick, due.velocity, due.acquisition, u, self.velocity_estimate);
 
-        let iq_limit = p.current.max_current;
-        let reference = Dq { d: 0.0, q: crate::limit(torque / p.motor.torque_constant(), -iq_limit, iq_limit) };
-        let theta_e = self.encoder.electrical_angle(p.encoder_counts_per_rev, p.motor.pole_pairs);
-        let omega_e = self.velocity_estimate * p.motor.pole_pairs as f32;
-        let out: CurrentLoopOutput = if faults.any() {
+        let current_reference = self.current_loop.reference(torque);
+        let theta_e = self.encoder.electrical_angle();
+        let out = if faults.any() {
             CurrentLoopOutput::default()
         } else {
-            self.current_loop.step(p, inputs.phase_currents, theta_e, omega_e, reference, inputs.bus_voltage)
+            self.current_loop.step(
+                inputs.phase_currents,
+                theta_e,
+                self.velocity_estimate,
+                current_reference,
+                inputs.bus_voltage,
+            )
         };
         if !(out.voltage.d.is_finite() && out.voltage.q.is_finite() && torque.is_finite()) {
             faults.latch(Faults::NOT_FINITE);
         }
+        InnerLoop { torque, current_reference, out }
+    }
 
+    /// Record the tick in the telemetry, move the slower ticks' phases on; the PWM command
+    /// (off while a fault is latched, the loops reset).
+    #[inline(always)]
+    fn record(&mut self, mode: Mode, sensed: &Sensed, inner: &InnerLoop, due: Due) -> PwmOutput {
+        let faults = sensed.faults;
         let enabled = !faults.any();
         if !enabled {
             self.current_loop.reset();
@@ -465,21 +609,21 @@ impl Axis {
         // In place, field by field: building a new record copied all of it every tick.
         let t = &mut self.telemetry;
         t.tick = self.tick;
-        t.mode = commands.mode;
-        t.position = position;
+        t.mode = mode;
+        t.position = sensed.position;
         t.position_command = self.command_path.position();
         t.command_pulses = self.command_path.pulses();
         t.velocity_estimate = self.velocity_estimate;
         t.velocity_reference = self.velocity_reference;
-        t.torque_command = torque;
-        t.current_reference = reference;
-        t.current = out.current;
-        t.voltage = out.voltage;
-        t.voltage_saturated = out.saturated;
+        t.torque_command = inner.torque;
+        t.current_reference = inner.current_reference;
+        t.current = inner.out.current;
+        t.voltage = inner.out.voltage;
+        t.voltage_saturated = inner.out.saturated;
         t.faults = faults;
         // The sequence changes on position ticks (and events, which copy it themselves); the
         // sweep while it runs and on the tick it ends.
-        if position_due {
+        if due.position {
             t.sequence = *self.sequence.status();
         }
         // The sweep's status changes on acquisition ticks (the sample only) and when its
@@ -489,16 +633,14 @@ impl Axis {
         let s = self.sweep.status();
         if t.sweep.state != s.state || t.sweep.point != s.point || t.sweep.record != s.record {
             t.sweep = *s;
-        } else if acquire && self.sweep.running() {
+        } else if due.acquisition && self.sweep.running() {
             t.sweep.sample = s.sample;
         }
         self.tick += 1;
-        let dividers =
-            [p.rates.velocity_divider, p.rates.position_divider, p.sweep.acquisition_divider, p.sweep.prbs_divider];
-        for (phase, divider) in self.phases.iter_mut().zip(dividers) {
+        for (phase, divider) in self.phases.iter_mut().zip(self.settings.dividers) {
             *phase = if *phase + 1 >= divider { 0 } else { *phase + 1 };
         }
-        PwmOutput { duties: if enabled { out.duties } else { [0.0; 3] }, enabled }
+        PwmOutput { duties: if enabled { inner.out.duties } else { [0.0; 3] }, enabled }
     }
 }
 

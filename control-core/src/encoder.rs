@@ -1,9 +1,11 @@
 //! Incremental-encoder tracking: a wrapping hardware counter turned into an unbounded
 //! position and the electrical angle.
 
+use core::num::NonZeroU32;
+
 use crate::TAU;
 
-#[derive(Clone, Copy, Debug, Default)]
+#[derive(Clone, Copy, Debug)]
 pub struct EncoderTracker {
     last_raw: i32,
     position: i64,
@@ -11,6 +13,11 @@ pub struct EncoderTracker {
     /// steps (a 64-bit remainder every tick is software on a Cortex-M4).
     within_rev: u32,
     started: bool,
+    /// Non-zero: the remainders need no check for a zero divisor.
+    counts_per_rev: NonZeroU32,
+    /// `counts_per_rev` as f32 (for the electrical angle).
+    revolution: f32,
+    pole_pairs: u32,
 }
 
 /// What one encoder update found.
@@ -22,13 +29,28 @@ pub enum EncoderUpdate {
 }
 
 impl EncoderTracker {
+    /// A tracker for an encoder of `counts_per_rev` on a motor of `pole_pairs`; its first
+    /// update sets the position.
+    pub fn new(counts_per_rev: NonZeroU32, pole_pairs: u32) -> Self {
+        Self {
+            last_raw: 0,
+            position: 0,
+            within_rev: 0,
+            started: false,
+            counts_per_rev,
+            revolution: counts_per_rev.get() as f32,
+            pole_pairs,
+        }
+    }
+
     /// Accumulated position in counts since the first update (the first raw value is zero).
     pub fn position(&self) -> i64 {
         self.position
     }
 
     /// Feed the raw (wrapping 32-bit) counter value.
-    pub fn update(&mut self, raw: i32, counts_per_rev: u32) -> EncoderUpdate {
+    pub fn update(&mut self, raw: i32) -> EncoderUpdate {
+        let counts_per_rev = self.counts_per_rev.get();
         let cpr = counts_per_rev as i64;
         if !self.started {
             self.started = true;
@@ -57,12 +79,12 @@ impl EncoderTracker {
         }
     }
 
-    /// Electrical angle in `[0, 2π)` for `pole_pairs`, assuming count 0 is electrical zero.
-    pub fn electrical_angle(&self, counts_per_rev: u32, pole_pairs: u32) -> f32 {
+    /// Electrical angle in `[0, 2π)`, assuming count 0 is electrical zero.
+    pub fn electrical_angle(&self) -> f32 {
         // (count · p) mod cpr stays exact in integers: within_rev < 2²⁴ and p ≤ 64 (validated),
         // so the product fits 32 bits.
-        let e = (self.within_rev * pole_pairs) % counts_per_rev;
-        TAU * (e as f32 / counts_per_rev as f32)
+        let e = (self.within_rev * self.pole_pairs) % self.counts_per_rev;
+        TAU * (e as f32 / self.revolution)
     }
 }
 
@@ -70,26 +92,30 @@ impl EncoderTracker {
 mod tests {
     use super::*;
 
+    fn tracker(counts_per_rev: u32, pole_pairs: u32) -> EncoderTracker {
+        EncoderTracker::new(NonZeroU32::new(counts_per_rev).unwrap(), pole_pairs)
+    }
+
     #[test]
     fn accumulates_across_counter_wrap() {
-        let mut e = EncoderTracker::default();
-        e.update(i32::MAX - 5, 1 << 20);
-        assert_eq!(e.update(i32::MIN + 4, 1 << 20), EncoderUpdate::Ok);
+        let mut e = tracker(1 << 20, 4);
+        e.update(i32::MAX - 5);
+        assert_eq!(e.update(i32::MIN + 4), EncoderUpdate::Ok);
         assert_eq!(e.position(), i32::MAX as i64 + 5);
     }
 
     #[test]
     fn flags_jumps_over_half_a_revolution() {
-        let mut e = EncoderTracker::default();
-        e.update(0, 1000);
-        assert_eq!(e.update(600, 1000), EncoderUpdate::Jump);
+        let mut e = tracker(1000, 4);
+        e.update(0);
+        assert_eq!(e.update(600), EncoderUpdate::Jump);
     }
 
     #[test]
     fn electrical_angle_turns_pole_pairs_times_per_revolution() {
-        let mut e = EncoderTracker::default();
-        e.update(0, 1000);
-        e.update(125, 1000); // 1/8 rev, 4 pole pairs → half an electrical turn
-        assert!((e.electrical_angle(1000, 4) - core::f32::consts::PI).abs() < 1e-6);
+        let mut e = tracker(1000, 4);
+        e.update(0);
+        e.update(125); // 1/8 rev, 4 pole pairs → half an electrical turn
+        assert!((e.electrical_angle() - core::f32::consts::PI).abs() < 1e-6);
     }
 }

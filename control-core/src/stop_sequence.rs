@@ -282,8 +282,20 @@ pub struct SequenceStatus {
     pub speed_reference: f32,
 }
 
-#[derive(Clone, Copy, Debug, Default, PartialEq)]
+/// The sequence's settings, with what its tick derives from them computed once by
+/// [`StopSequence::new`], and its state.
+#[derive(Clone, Copy, Debug, PartialEq)]
 pub struct StopSequence {
+    settings: SequenceParams,
+    /// Encoder count to rad.
+    rad_per_count: f32,
+    /// Position-loop period (s).
+    period: f32,
+    /// Largest change of the speed reference in one tick: acceleration × period (rad/s).
+    max_change: f32,
+    /// The completion hold less a relative 10⁻⁶, so that a hold of whole ticks is reached on
+    /// its last tick despite rounding (s).
+    hold: f32,
     status: SequenceStatus,
     /// Where the last run began (counts).
     start: i64,
@@ -299,6 +311,24 @@ pub struct StopSequence {
 }
 
 impl StopSequence {
+    /// The sequence of `settings` on an encoder of `counts_per_rev`, stepped every `period`
+    /// seconds (the position loop's), idle.
+    pub fn new(settings: &SequenceParams, counts_per_rev: u32, period: f32) -> Self {
+        Self {
+            settings: *settings,
+            rad_per_count: TAU / counts_per_rev as f32,
+            period,
+            max_change: settings.acceleration * period,
+            hold: settings.completion_hold * (1.0 - 1e-6),
+            status: SequenceStatus::default(),
+            start: 0,
+            position: 0,
+            in_position_ticks: 0,
+            releasing: false,
+            release: false,
+        }
+    }
+
     /// Enter the sequence at `position` moving at `speed` (rad/s): idle, speed reference
     /// = the present speed (it then ramps to zero), nothing pending.
     pub fn enter(&mut self, position: i64, speed: f32, gain_index: usize) {
@@ -323,8 +353,8 @@ impl StopSequence {
     }
 
     /// Apply an event, or refuse it with the reason (counted) and change nothing else.
-    pub fn event(&mut self, p: &SequenceParams, e: SequenceEvent) -> Result<(), Refusal> {
-        match self.try_event(p, e) {
+    pub fn event(&mut self, e: SequenceEvent) -> Result<(), Refusal> {
+        match self.try_event(e) {
             Ok(()) => Ok(()),
             Err(reason) => self.refuse(reason),
         }
@@ -337,8 +367,9 @@ impl StopSequence {
         Err(reason)
     }
 
-    fn try_event(&mut self, p: &SequenceParams, e: SequenceEvent) -> Result<(), Refusal> {
+    fn try_event(&mut self, e: SequenceEvent) -> Result<(), Refusal> {
         use SequenceState::*;
+        let p = &self.settings;
         let s = &mut self.status;
         match e {
             SequenceEvent::RunOn => {
@@ -396,8 +427,8 @@ impl StopSequence {
         Ok(())
     }
 
-    /// One position-loop tick: `position` (counts), measured `speed` (rad/s), period `dt`
-    /// (s). Returns the speed reference for the velocity loop (rad/s).
+    /// One position-loop tick: `position` (counts), measured `speed` (rad/s). Returns the
+    /// speed reference for the velocity loop (rad/s).
     ///
     /// **Hand-over.** At the end of a deceleration the velocity loop's integrator holds
     /// the deceleration torque (≈ J·a). Discharging it takes ∫(reference − speed) dt =
@@ -416,9 +447,10 @@ impl StopSequence {
     /// `completion_hold` without a break; once raised it drops only when |deviation| >
     /// `completion_counts + completion_hysteresis`, on a new target, or on leaving position
     /// control.
-    pub fn step(&mut self, p: &SequenceParams, counts_per_rev: u32, position: i64, speed: f32, dt: f32) -> f32 {
+    pub fn step(&mut self, position: i64, speed: f32) -> f32 {
         use SequenceState::*;
         self.position = position;
+        let p = &self.settings;
         let s = &mut self.status;
         if s.stop_pending && speed.abs() <= p.zero_speed {
             // Servo lock at the position of acceptance: the deviation counter starts at 0.
@@ -439,14 +471,14 @@ impl StopSequence {
                 // The P branch decelerates at gain²·|e| ≤ a, so no gain in the table can
                 // make the slewed reference lag behind and overshoot.
                 let gain = p.position_gain * p.gains[s.gain_index];
-                let deviation = crate::counts_to_f32(s.target.saturating_sub(position)) * (TAU / counts_per_rev as f32);
+                let deviation = crate::counts_to_f32(s.target.saturating_sub(position)) * self.rad_per_count;
                 let magnitude = deviation.abs();
                 let speed =
                     (gain * magnitude).min(crate::square_root::sqrt(p.acceleration * magnitude)).min(p.target_speed);
                 libm::copysignf(speed, deviation)
             }
         };
-        let max_change = p.acceleration * dt;
+        let max_change = self.max_change;
         let before = s.speed_reference;
         s.speed_reference += crate::limit(wanted - s.speed_reference, -max_change, max_change);
         if self.releasing && (wanted - before).abs() <= max_change {
@@ -465,7 +497,7 @@ impl StopSequence {
                 }
             } else if magnitude <= p.completion_counts as u64 && speed.abs() <= p.zero_speed {
                 self.in_position_ticks = self.in_position_ticks.saturating_add(1);
-                s.complete = self.in_position_ticks as f32 * dt >= p.completion_hold * (1.0 - 1e-6);
+                s.complete = self.in_position_ticks as f32 * self.period >= self.hold;
             } else {
                 self.in_position_ticks = 0;
             }
@@ -496,10 +528,10 @@ mod tests {
     const DT: f32 = 0.00025;
 
     /// A perfect velocity loop: the speed equals the reference; position integrates it.
-    fn run(seq: &mut StopSequence, p: &SequenceParams, position: &mut f64, ticks: usize) -> f32 {
+    fn run(seq: &mut StopSequence, position: &mut f64, ticks: usize) -> f32 {
         let mut speed = 0.0;
         for _ in 0..ticks {
-            speed = seq.step(p, CPR, position.round() as i64, speed, DT);
+            speed = seq.step(position.round() as i64, speed);
             *position += speed as f64 * DT as f64 * CPR as f64 / core::f64::consts::TAU;
         }
         speed
@@ -508,32 +540,32 @@ mod tests {
     #[test]
     fn run_stop_lock_fine_adjust_and_return() {
         let p = SequenceParams::default();
-        let mut seq = StopSequence::default();
+        let mut seq = StopSequence::new(&p, CPR, DT);
         let mut x = 0.0;
         seq.enter(0, 0.0, 0);
-        seq.event(&p, SequenceEvent::RunOn).unwrap();
-        let v = run(&mut seq, &p, &mut x, 1000);
+        seq.event(SequenceEvent::RunOn).unwrap();
+        let v = run(&mut seq, &mut x, 1000);
         assert!((v - p.target_speed).abs() < 1e-3, "reached the target speed: {v}");
-        assert_eq!(seq.event(&p, SequenceEvent::Stop), Err(Refusal::StopWhileRunning));
-        seq.event(&p, SequenceEvent::RunOff).unwrap();
-        seq.event(&p, SequenceEvent::Stop).unwrap();
+        assert_eq!(seq.event(SequenceEvent::Stop), Err(Refusal::StopWhileRunning));
+        seq.event(SequenceEvent::RunOff).unwrap();
+        seq.event(SequenceEvent::Stop).unwrap();
         assert!(seq.status().stop_pending);
-        run(&mut seq, &p, &mut x, 400);
+        run(&mut seq, &mut x, 400);
         assert_eq!(seq.status().state, SequenceState::ServoLock);
         let lock = seq.status().target;
-        run(&mut seq, &p, &mut x, 4000);
+        run(&mut seq, &mut x, 4000);
         assert!(seq.status().complete && (x.round() as i64 - lock).abs() <= 2);
-        assert_eq!(seq.event(&p, SequenceEvent::MoveTo(lock + 1000)), Err(Refusal::TargetBlocked));
-        seq.event(&p, SequenceEvent::ReleaseBlocking).unwrap();
-        seq.event(&p, SequenceEvent::MoveTo(lock + 100_000)).unwrap();
+        assert_eq!(seq.event(SequenceEvent::MoveTo(lock + 1000)), Err(Refusal::TargetBlocked));
+        seq.event(SequenceEvent::ReleaseBlocking).unwrap();
+        seq.event(SequenceEvent::MoveTo(lock + 100_000)).unwrap();
         assert!(!{
-            run(&mut seq, &p, &mut x, 1);
+            run(&mut seq, &mut x, 1);
             seq.status().complete
         });
-        run(&mut seq, &p, &mut x, 8000);
+        run(&mut seq, &mut x, 8000);
         assert!(seq.status().complete, "{:?}", seq.status());
-        seq.event(&p, SequenceEvent::ReturnToStart).unwrap();
-        run(&mut seq, &p, &mut x, 20000);
+        seq.event(SequenceEvent::ReturnToStart).unwrap();
+        run(&mut seq, &mut x, 20000);
         assert!(seq.status().complete && x.round().abs() <= 2.0, "back at the start: {x}");
         assert_eq!(seq.status().refused, 2);
     }
@@ -541,7 +573,7 @@ mod tests {
     #[test]
     fn refused_events_change_nothing_but_the_counter() {
         let p = SequenceParams::default();
-        let mut seq = StopSequence::default();
+        let mut seq = StopSequence::new(&p, CPR, DT);
         seq.enter(0, 0.0, 0);
         let before = seq;
         for (e, why) in [
@@ -551,7 +583,7 @@ mod tests {
             (SequenceEvent::ReturnToStart, Refusal::NoAcceptedStop),
             (SequenceEvent::SelectGain(4), Refusal::GainIndex),
         ] {
-            assert_eq!(seq.event(&p, e), Err(why));
+            assert_eq!(seq.event(e), Err(why));
         }
         assert_eq!(seq.status().refused, 5);
         assert_eq!(seq.status().last_refusal, Some(Refusal::GainIndex));
@@ -564,30 +596,30 @@ mod tests {
     #[test]
     fn soft_limits_refuse_far_targets() {
         let p = SequenceParams { soft_limit_min: -1000, soft_limit_max: 1000, ..Default::default() };
-        let mut seq = StopSequence::default();
+        let mut seq = StopSequence::new(&p, CPR, DT);
         seq.enter(0, 0.0, 0);
-        seq.event(&p, SequenceEvent::Stop).unwrap();
-        seq.step(&p, CPR, 0, 0.0, DT);
-        seq.event(&p, SequenceEvent::ReleaseBlocking).unwrap();
-        assert_eq!(seq.event(&p, SequenceEvent::MoveTo(1001)), Err(Refusal::BeyondSoftLimits));
+        seq.event(SequenceEvent::Stop).unwrap();
+        seq.step(0, 0.0);
+        seq.event(SequenceEvent::ReleaseBlocking).unwrap();
+        assert_eq!(seq.event(SequenceEvent::MoveTo(1001)), Err(Refusal::BeyondSoftLimits));
         assert_eq!(seq.status().target, 0);
-        seq.event(&p, SequenceEvent::MoveTo(1000)).unwrap();
+        seq.event(SequenceEvent::MoveTo(1000)).unwrap();
     }
 
     #[test]
     fn gain_change_never_steps_the_speed_reference() {
         let p = SequenceParams::default();
-        let mut seq = StopSequence::default();
+        let mut seq = StopSequence::new(&p, CPR, DT);
         let mut x = 0.0;
         seq.enter(0, 0.0, 0);
-        seq.event(&p, SequenceEvent::Stop).unwrap();
-        run(&mut seq, &p, &mut x, 1);
-        seq.event(&p, SequenceEvent::ReleaseBlocking).unwrap();
-        seq.event(&p, SequenceEvent::MoveTo(200_000)).unwrap();
-        let mut previous = run(&mut seq, &p, &mut x, 40);
-        seq.event(&p, SequenceEvent::SelectGain(3)).unwrap();
+        seq.event(SequenceEvent::Stop).unwrap();
+        run(&mut seq, &mut x, 1);
+        seq.event(SequenceEvent::ReleaseBlocking).unwrap();
+        seq.event(SequenceEvent::MoveTo(200_000)).unwrap();
+        let mut previous = run(&mut seq, &mut x, 40);
+        seq.event(SequenceEvent::SelectGain(3)).unwrap();
         for _ in 0..200 {
-            let v = run(&mut seq, &p, &mut x, 1);
+            let v = run(&mut seq, &mut x, 1);
             assert!((v - previous).abs() <= p.acceleration * DT * 1.0001, "{previous} -> {v}");
             previous = v;
         }
@@ -597,28 +629,28 @@ mod tests {
     fn completion_waits_for_the_hold_and_drops_only_beyond_the_hysteresis() {
         let p = SequenceParams { completion_hold: 0.01, completion_hysteresis: 5, ..Default::default() };
         let hold_ticks = (p.completion_hold / DT).round() as usize;
-        let mut seq = StopSequence::default();
+        let mut seq = StopSequence::new(&p, CPR, DT);
         seq.enter(0, 0.0, 0);
-        seq.event(&p, SequenceEvent::Stop).unwrap();
-        seq.step(&p, CPR, 0, 0.0, DT);
+        seq.event(SequenceEvent::Stop).unwrap();
+        seq.step(0, 0.0);
         assert_eq!((seq.status().state, seq.status().target), (SequenceState::ServoLock, 0));
         // In position but moving faster than the zero-speed level: never complete.
         for _ in 0..2 * hold_ticks {
-            seq.step(&p, CPR, 0, p.zero_speed * 1.5, DT);
+            seq.step(0, p.zero_speed * 1.5);
             assert!(!seq.status().complete);
         }
         // Still: raised on exactly the hold's last tick, not before.
         for k in 1..=hold_ticks {
-            seq.step(&p, CPR, 3, 0.0, DT);
+            seq.step(3, 0.0);
             assert_eq!(seq.status().complete, k == hold_ticks, "tick {k}");
         }
         // Beyond the width but inside the hysteresis: stays; beyond it: drops.
-        seq.step(&p, CPR, p.completion_counts as i64 + 5, 0.0, DT);
+        seq.step(p.completion_counts as i64 + 5, 0.0);
         assert!(seq.status().complete);
-        seq.step(&p, CPR, p.completion_counts as i64 + 6, 0.0, DT);
+        seq.step(p.completion_counts as i64 + 6, 0.0);
         assert!(!seq.status().complete);
         // Back in position: the hold starts again.
-        seq.step(&p, CPR, 0, 0.0, DT);
+        seq.step(0, 0.0);
         assert!(!seq.status().complete);
     }
 

@@ -2,25 +2,36 @@
 //! low-pass and notch.
 
 use crate::biquad::Biquad;
-use crate::params::Params;
-use crate::pi_controller::PiController;
+use crate::params::{Rates, TorqueFilters, VelocityLoopGains};
+use crate::pi_controller::{PiController, PiGains};
 
-#[derive(Clone, Copy, Debug, Default)]
+/// The loop's gains and filters, designed for its rate once by [`VelocityLoop::new`].
+#[derive(Clone, Copy, Debug)]
 pub struct VelocityLoop {
     pi: PiController,
     low_pass: Option<Biquad>,
     notch: Option<Biquad>,
+    /// Torque limit (Nm).
+    torque_limit: f32,
 }
 
 impl VelocityLoop {
-    pub fn new(p: &Params) -> Self {
-        let rate = p.rates.current_loop_hz / p.rates.velocity_divider as f32;
-        let f = &p.filters;
+    /// The loop for `gains` and `filters` at the velocity rate of `rates`.
+    pub fn new(gains: &VelocityLoopGains, filters: &TorqueFilters, rates: &Rates) -> Self {
+        let rate = rates.current_loop_hz / rates.velocity_divider as f32;
+        let f = filters;
         Self {
-            pi: PiController::new(p.velocity.kp, p.velocity.ki),
+            pi: PiController::new(PiGains { kp: gains.kp, ki: gains.ki, period: rates.velocity_period() }),
             low_pass: (f.low_pass_hz > 0.0).then(|| Biquad::low_pass(f.low_pass_hz, rate)),
             notch: (f.notch_hz > 0.0).then(|| Biquad::notch(f.notch_hz, f.notch_q, f.notch_depth, rate)),
+            torque_limit: gains.torque_limit,
         }
+    }
+
+    /// `torque` within the torque limit.
+    #[inline(always)]
+    pub fn limit_torque(&self, torque: f32) -> f32 {
+        crate::limit(torque, -self.torque_limit, self.torque_limit)
     }
 
     /// Take over from torque control without a jump: the loop output starts at `torque`.
@@ -49,15 +60,14 @@ impl VelocityLoop {
     }
 
     /// One update: velocity reference and estimate in rad/s, returns the torque command (Nm).
-    pub fn step(&mut self, p: &Params, reference: f32, estimate: f32) -> f32 {
-        let dt = p.rates.velocity_period();
-        let mut torque = self.pi.update(reference - estimate, dt, p.velocity.torque_limit).value;
+    pub fn step(&mut self, reference: f32, estimate: f32) -> f32 {
+        let mut torque = self.pi.update(reference - estimate, self.torque_limit).value;
         if let Some(lp) = self.low_pass.as_mut() {
             torque = lp.process(torque);
         }
         if let Some(n) = self.notch.as_mut() {
             torque = n.process(torque);
         }
-        crate::limit(torque, -p.velocity.torque_limit, p.velocity.torque_limit)
+        self.limit_torque(torque)
     }
 }

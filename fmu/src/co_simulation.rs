@@ -27,7 +27,7 @@ struct SequenceInputsSeen {
 
 /// Everything that makes up the instance's state (`Copy`: no pointers, so a saved state is
 /// a plain copy and its serialisation a plain byte image, see `crate::fmu_state`).
-#[derive(Clone, Copy, Debug)]
+#[derive(Clone, Debug)]
 pub struct ModelState {
     pub values: Values,
     sim: Option<AxisSimulation>,

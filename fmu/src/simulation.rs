@@ -89,7 +89,7 @@ impl StepMeans {
     }
 }
 
-#[derive(Clone, Copy, Debug)]
+#[derive(Clone, Debug)]
 pub struct AxisSimulation {
     pub axis: Axis,
     pub plant: Plant,

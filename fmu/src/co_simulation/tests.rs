@@ -167,7 +167,7 @@ fn a_restored_state_continues_bit_for_bit_like_the_uninterrupted_run() {
     };
     let mut m = initialized();
     run(&mut m, 0, 30);
-    let saved = m.state;
+    let saved = m.state.clone();
     let first = run(&mut m, 30, 200);
     m.state = saved;
     let second = run(&mut m, 30, 200);

@@ -69,7 +69,7 @@ pub unsafe fn get_fmu_state(i: &mut Instance, state: *mut *mut c_void) -> Result
     if state.is_null() {
         return Err("FMUState is NULL".into());
     }
-    unsafe { store(state, Snapshot::new(i.model.state, i.phase, i.stop_time)) }
+    unsafe { store(state, Snapshot::new(i.model.state.clone(), i.phase, i.stop_time)) }
 }
 
 /// Put a snapshot behind `*state`: a new one when it is NULL, else over the one it points to.
@@ -89,7 +89,7 @@ unsafe fn store(state: *mut *mut c_void, snapshot: Snapshot) -> Result<Status, S
 
 pub unsafe fn set_fmu_state(i: &mut Instance, state: *mut c_void) -> Result<Status, String> {
     let s = unsafe { Snapshot::from_ptr(state)? };
-    i.model.state = s.model;
+    i.model.state = s.model.clone();
     i.model.refusals.clear();
     i.phase = s.phase;
     i.stop_time = s.stop_time;
