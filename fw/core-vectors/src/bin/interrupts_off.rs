@@ -27,6 +27,7 @@ struct RestingStage;
 
 impl PowerStage for RestingStage {
     const SCALES: SensingScales = power_stage::ratings::SCALES;
+    const TICK_HZ: f32 = power_stage::config::IHM08M1.pwm_hz as f32;
     fn take_sample(&mut self) -> Sample {
         Sample { shunts: [2048; 3], bus: 1365 }
     }
