@@ -6,3 +6,4 @@ pub mod command;
 pub mod frame_stream;
 pub mod link;
 pub mod session;
+pub mod telemetry_trace;

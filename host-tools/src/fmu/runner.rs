@@ -319,8 +319,13 @@ pub fn evaluate_checks(scenario: &Scenario, trace: &Trace) -> Result<Vec<CheckRe
             None => (c.from.unwrap_or(0.0), c.to.unwrap_or(scenario.stop_time)),
         };
         let h = scenario.step();
-        let idx: Vec<usize> =
+        let mut idx: Vec<usize> =
             (0..time.len()).filter(|&i| time[i] >= from - 0.5 * h && time[i] <= to + 0.5 * h).collect();
+        if idx.is_empty() && c.at.is_some() {
+            // A trace sampled off the step grid (a drive's telemetry): the value in force at
+            // that time is the latest sample before it.
+            idx.extend(time.iter().rposition(|&t| t <= to + 0.5 * h));
+        }
         if idx.is_empty() {
             bail!("check on {}: no sample in [{from}, {to}] s", c.signal);
         }

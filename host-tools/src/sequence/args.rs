@@ -14,12 +14,17 @@ use crate::cli::Common;
 /// completion, refusals on one timeline) and <name>.json. With --fmpy the same input
 /// table also runs through fmpy and must give identical outputs.
 /// Without files, runs every file in scenarios/sequences/.
+/// With --device PORT the keys go to a drive at their times (its clock), its telemetry is
+/// the trace the expectations are checked on, and the FMU replays the keys as the drive got
+/// them (the twin): the report gives the difference per trace (largest, rms).
 #[derive(clap::Args)]
 pub struct SequenceArgs {
     pub files: Vec<PathBuf>,
     /// Also run through fmpy and demand identical outputs
     #[arg(long)]
     pub fmpy: bool,
+    #[command(flatten)]
+    pub target: crate::device::args::TargetArgs,
     #[command(flatten)]
     pub common: Common,
 }

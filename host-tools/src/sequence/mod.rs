@@ -3,6 +3,8 @@
 pub mod args;
 pub mod bench;
 pub mod command;
+pub mod device;
+pub mod device_report;
 pub mod index;
 pub mod timeline;
 pub mod timeline_reference;
