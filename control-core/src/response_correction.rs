@@ -330,6 +330,51 @@ mod tests {
         assert_eq!(f.step(77), 77, "no sections: pulses pass");
     }
 
+    /// `install` (what the drive does with interrupts off) as `load`: refused with the
+    /// filter untouched while pulses are inside; at rest, the filter `new` designs, whatever
+    /// the number of sections before and after.
+    #[test]
+    fn installing_a_built_correction_only_at_rest_and_as_designed() {
+        let section = |hz| CorrectionSection {
+            zeros: Some(SecondOrder { hz, damping: 0.05 }),
+            poles: SecondOrder { hz: 1.5 * hz, damping: 1.0 },
+        };
+        let eight = params(&[30.0, 40.0, 50.0, 60.0, 70.0, 80.0, 90.0, 100.0].map(section));
+        let two = params(&[45.0, 65.0].map(section));
+        let mut f = ResponseCorrection::new(&eight, T).unwrap();
+        let built = ResponseCorrection::new(&two, T).unwrap();
+        let mut sum_out = 0;
+        for _ in 0..50 {
+            sum_out += f.step(300);
+        }
+        let in_motion = f;
+        assert_eq!(f.install(&built), Err(CorrectionError::InMotion));
+        assert_eq!(f, in_motion, "a refused install changes nothing");
+        // Pulses still inside after the input stops: refused until the last has come out.
+        let mut refusals = 0;
+        while f.install(&built).is_err() {
+            refusals += 1;
+            sum_out += f.step(0);
+            assert!(refusals < 100_000);
+        }
+        assert!(refusals > 10);
+        assert_eq!(sum_out, 50 * 300, "installed only once every pulse was out");
+        // Now the two-section filter: the same outputs as a fresh one.
+        let mut fresh = built;
+        for k in 0..400 {
+            let x = if k < 100 { 77 } else { 0 };
+            assert_eq!(f.step(x), fresh.step(x), "tick {k}");
+        }
+        // And back to eight sections from two.
+        let mut g = built;
+        assert_eq!(g.install(&ResponseCorrection::new(&eight, T).unwrap()), Ok(()));
+        let mut fresh = ResponseCorrection::new(&eight, T).unwrap();
+        for k in 0..400 {
+            let x = if k < 100 { -55 } else { 0 };
+            assert_eq!(g.step(x), fresh.step(x), "tick {k}");
+        }
+    }
+
     /// The rest check on the bits against the floating-point comparison it replaces: every
     /// special value, the bits around the threshold, and a spread over all 2³² patterns.
     #[test]
