@@ -137,5 +137,31 @@ fn faults_a_missing_device_and_a_dying_drive_end_in_clear_errors() {
     let e = String::from_utf8_lossy(&o.stderr);
     assert_eq!(o.status.code(), Some(2), "{e}");
     assert!(started.elapsed() < Duration::from_secs(15), "took {:?}", started.elapsed());
-    assert!(e.contains("drive"), "{e}");
+    assert!(e.contains("drive") && e.contains("sweep incomplete"), "{e}");
+}
+
+/// A timeline on the virtual drive in real time (a drive keeps its own time): every
+/// expectation holds on the drive's telemetry and on the FMU twin replaying the keys.
+#[test]
+fn a_sequence_timeline_over_the_virtual_drive_meets_its_expectations_and_the_twin_too() {
+    let dir = tmp("sequence");
+    let vd = VirtualDrive::start(&dir, "realtime", &[]);
+    let timeline = host_tools::paths::workspace_root().join("scenarios/sequences/stop_at_speed.toml");
+    let o = servo()
+        .args(["sequence", "--device", &vd.port, "--json", "--out"])
+        .arg(dir.join("out"))
+        .arg("--fmu")
+        .arg(fmu_path())
+        .arg(&timeline)
+        .output()
+        .unwrap();
+    let r = json(&o);
+    let r = &r[0];
+    assert_eq!(r["passed"], true, "{r:#}");
+    assert_eq!(r["twin_passed"], true, "{r:#}");
+    // Keys reach the drive within a few milliseconds of their time.
+    for k in r["keys"].as_array().unwrap() {
+        let late = k["before"].as_f64().unwrap() - k["planned"].as_f64().unwrap();
+        assert!((0.0..0.02).contains(&late), "{k}");
+    }
 }

@@ -74,7 +74,10 @@ pub fn run_on_device<T: crate::device::link::DrivePort>(
     mut progress: impl FnMut(&str, f64),
 ) -> Result<DeviceSweepReport> {
     std::fs::create_dir_all(out)?;
-    let drive = sweep_on_drive(session, run, |f| progress("sweep on the drive", f))?;
+    let drive = match sweep_on_drive(session, run, |f| progress("sweep on the drive", f)) {
+        Ok(d) => d,
+        Err(e) => return Err(save_partial(session, out, e)),
+    };
     let mut files = vec![out.join("device_stream.csv")];
     drive.trace.write_csv(&files[0])?;
     let (twin, twin_time) = twin_sweep(fmu, run, |f| progress("twin on the FMU", f))?;
@@ -121,6 +124,31 @@ pub fn run_on_device<T: crate::device::link::DrivePort>(
     std::fs::write(&json, serde_json::to_string_pretty(&report)?)?;
     files.push(json);
     Ok(DeviceSweepReport { files, ..report })
+}
+
+/// The sweep stopped: what the drive streamed so far goes to `sweep_partial.csv`, marked
+/// incomplete in `sweep.json` with the reason; the error says where.
+fn save_partial<T: crate::device::link::DrivePort>(
+    session: &mut DriveSession<T>,
+    out: &Path,
+    e: anyhow::Error,
+) -> anyhow::Error {
+    let batches = session.take_samples();
+    let rows = crate::device::frame_stream::sample_rows(&batches).unwrap_or_default();
+    let csv = out.join("sweep_partial.csv");
+    let mut t = Trace::new(["tick", "u", "y", "phase", "measuring", "point", "record"].map(String::from).to_vec());
+    for r in &rows {
+        t.rows.push(r);
+    }
+    let json =
+        serde_json::json!({"complete": false, "reason": format!("{e:#}"), "samples": rows.len(), "partial": csv});
+    let saved = t.write_csv(&csv).is_ok()
+        && std::fs::write(out.join("sweep.json"), serde_json::to_string_pretty(&json).unwrap_or_default()).is_ok();
+    if saved {
+        e.context(format!("sweep incomplete: {} samples saved in {}", rows.len(), csv.display()))
+    } else {
+        e.context("sweep incomplete")
+    }
 }
 
 fn session_capacity<T: crate::device::link::DrivePort>(session: &DriveSession<T>) -> f64 {
