@@ -165,3 +165,33 @@ fn a_sequence_timeline_over_the_virtual_drive_meets_its_expectations_and_the_twi
         assert!((0.0..0.02).contains(&late), "{k}");
     }
 }
+
+/// A scenario on the virtual drive in real time: its set-points at their times, its checks on
+/// the drive's telemetry; a scenario with an input a drive lacks is skipped with the reason.
+#[test]
+fn a_scenario_over_the_virtual_drive_passes_its_checks_and_the_twin_too() {
+    let dir = tmp("run");
+    let vd = VirtualDrive::start(&dir, "realtime", &[]);
+    let root = host_tools::paths::workspace_root();
+    let o = servo()
+        .args(["run", "--device", &vd.port, "--json", "--out"])
+        .arg(dir.join("out"))
+        .arg("--fmu")
+        .arg(fmu_path())
+        .arg(root.join("scenarios/position_step.toml"))
+        .output()
+        .unwrap();
+    let r = json(&o);
+    let r = &r[0];
+    assert_eq!(r["passed"], true, "{r:#}");
+    assert_eq!(r["twin_passed"], true, "{r:#}");
+    assert_eq!(r["checks"].as_array().unwrap().len(), 3, "{r:#}");
+    let o = servo()
+        .args(["run", "--device", &vd.port, "--fmu"])
+        .arg(fmu_path())
+        .arg(root.join("scenarios/velocity_ramp.toml"))
+        .output()
+        .unwrap();
+    assert!(o.status.success());
+    assert!(String::from_utf8_lossy(&o.stdout).contains("skipped on the drive: it sets `disturbance_torque`"));
+}

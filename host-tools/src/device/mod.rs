@@ -7,3 +7,4 @@ pub mod frame_stream;
 pub mod link;
 pub mod session;
 pub mod telemetry_trace;
+pub mod timed_run;

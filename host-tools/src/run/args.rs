@@ -10,12 +10,17 @@ use crate::cli::Common;
 /// <name>.json (check results) and index.html. With --fmpy the same scenario also runs
 /// through fmpy and the two traces must be identical bit for bit.
 /// Without scenario arguments, runs every file in scenarios/.
+/// With --device PORT the events go to a drive as set-points at their times (its clock), its
+/// telemetry is the trace the checks read, and the FMU runs the events as the drive got them
+/// (the twin): the report gives the difference per trace (largest, rms).
 #[derive(clap::Args)]
 pub struct RunArgs {
     pub scenarios: Vec<PathBuf>,
     /// Also run each scenario through fmpy and demand identical outputs
     #[arg(long)]
     pub fmpy: bool,
+    #[command(flatten)]
+    pub target: crate::device::args::TargetArgs,
     #[command(flatten)]
     pub common: Common,
 }

@@ -41,6 +41,16 @@ fn run(args: &RunArgs) -> Result<bool> {
     let out = common.out.clone().unwrap_or_else(|| default_out("run"));
     std::fs::create_dir_all(&out).with_context(|| format!("cannot create {}", out.display()))?;
     let fmu = Fmu::load(&fmu_path)?;
+    if let Some(mut session) = args.target.session()? {
+        let port = args.target.device.as_deref().unwrap_or_default();
+        return crate::run::device_report::run_on_device(
+            &fmu,
+            (port, &mut session),
+            &scenario_files(files)?,
+            &out,
+            common.json,
+        );
+    }
     let mut all_ok = true;
     let mut reports = Vec::new();
     let mut summary = Vec::new();

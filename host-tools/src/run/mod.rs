@@ -2,5 +2,7 @@
 
 pub mod args;
 pub mod command;
+pub mod device;
+pub mod device_report;
 pub mod index;
 pub mod report;

@@ -11,10 +11,11 @@ use crate::cli::progress_bar;
 use crate::device::link::DrivePort;
 use crate::device::session::DriveSession;
 use crate::device::telemetry_trace::difference;
+use crate::device::timed_run::SentAt;
 use crate::fmu::runner::Fmu;
 use crate::fmu::trace::Trace;
 use crate::plot::signals::plot_signals;
-use crate::sequence::device::{timeline_on_drive, SentKey};
+use crate::sequence::device::timeline_on_drive;
 use crate::sequence::timeline::{Outcome, SequenceScenario, PLOT};
 
 /// The traces compared with the twin.
@@ -33,7 +34,7 @@ pub struct DeviceTimelineReport {
     pub port: String,
     pub passed: bool,
     pub expectations: Vec<Outcome>,
-    pub keys: Vec<SentKey>,
+    pub keys: Vec<SentAt>,
     pub twin_passed: bool,
     pub differences: Vec<TraceDifference>,
     pub files: Vec<PathBuf>,
@@ -122,7 +123,7 @@ fn print(r: &DeviceTimelineReport) {
         );
     }
     let keys: Vec<String> =
-        r.keys.iter().map(|k| format!("{} {:.4} → {:.4}…{:.4} s", k.event, k.planned, k.before, k.after)).collect();
+        r.keys.iter().map(|k| format!("{} {:.4} → {:.4}…{:.4} s", k.label, k.planned, k.before, k.after)).collect();
     println!("  keys as planned → when the drive got them: {}", keys.join(", "));
     println!("  FMU twin (same keys at the same times): expectations {}", if r.twin_passed { "pass" } else { "FAIL" });
     for d in &r.differences {
