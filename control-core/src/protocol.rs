@@ -685,6 +685,7 @@ mod tests {
                 measuring: true,
                 point: 7,
                 record: 2,
+                half_block: 3,
             });
         }
         let batch = stream.take_batch().unwrap();

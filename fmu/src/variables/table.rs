@@ -400,4 +400,6 @@ declare_variables! {
     // Anti-aliased acquisition for the identification (seed 001), appended likewise.
     185 electromagnetic_torque_mean: Float64 "electromagnetic_torque_mean" Output Continuous = 0.0; NM; ANY; "Mean of electromagnetic_torque over the last communication step (its base ticks' ends): an integrating acquisition, no aliasing from the loops' rates";
     186 load_acceleration_mean: Float64 "load_acceleration_mean" Output Continuous = 0.0; RAD_S2; ANY; "Mean of load_acceleration (the accelerometer, with its noise) over the last communication step, as electromagnetic_torque_mean";
+    // The sweep's settling check (seed 000, issue 15), appended likewise.
+    187 acq_half_block: Int32 "acq_half_block" Output Discrete = 0; NONE; ANY; "Half block of its frequency's first record the sample belongs to (the settling check; later samples keep the last index): the response is fitted to the samples from the frequency's last index minus one up, the earlier ones were taken before the loop settled";
 }

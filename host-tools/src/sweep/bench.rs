@@ -118,7 +118,54 @@ pub struct GridRow {
     pub phase_at_hz: f64,
     pub measurement_time_s: f64,
     pub met: bool,
+    /// Every compared frequency's signed gain (dB) and phase (deg) error.
+    pub per_frequency: Vec<FrequencyError>,
 }
+
+/// One frequency's error against the oracle.
+#[derive(Clone, Copy, Debug, Serialize)]
+pub struct FrequencyError {
+    pub frequency: f64,
+    pub gain_db: f64,
+    pub phase_deg: f64,
+}
+
+/// Which grid rows to run (empty: all).
+#[derive(Clone, Debug, Default)]
+pub struct GridSelection {
+    /// Indices into [`PLANTS`].
+    pub plants: Vec<usize>,
+    pub points: Vec<InjectionPoint>,
+    pub noise: Option<f64>,
+}
+
+impl GridSelection {
+    /// Refuses a plant index outside the grid and a noise level the grid does not have.
+    pub fn validate(&self) -> Result<()> {
+        if let Some(&i) = self.plants.iter().find(|&&i| i >= PLANTS.len()) {
+            return Err(anyhow!("plant {i} is not in the grid (0 to {})", PLANTS.len() - 1));
+        }
+        if let Some(n) = self.noise.filter(|n| !NOISE_LEVELS.contains(n)) {
+            return Err(anyhow!("noise {n} A is not in the grid ({NOISE_LEVELS:?})"));
+        }
+        Ok(())
+    }
+
+    fn plant(&self, i: usize) -> bool {
+        self.plants.is_empty() || self.plants.contains(&i)
+    }
+
+    fn point(&self, p: InjectionPoint) -> bool {
+        self.points.is_empty() || self.points.contains(&p)
+    }
+
+    fn noise(&self, n: f64) -> bool {
+        self.noise.is_none_or(|x| x == n)
+    }
+}
+
+/// Current-sensor noise levels of the grid (A).
+pub const NOISE_LEVELS: [f64; 2] = [0.0, DITHER_A];
 
 #[derive(Clone, Debug, Serialize)]
 pub struct MethodErrors {
@@ -221,18 +268,32 @@ fn our_run(point: InjectionPoint, amplitude: f32, parameters: BTreeMap<String, V
 }
 
 /// The grid rows of one plant and point (the oracle once, then each noise level).
-fn grid_rows(fmu: &Fmu, plant: &PlantCase, (point, amplitude): (InjectionPoint, f32)) -> Result<Vec<GridRow>> {
+fn grid_rows(
+    fmu: &Fmu,
+    plant: &PlantCase,
+    (point, amplitude): (InjectionPoint, f32),
+    selection: &GridSelection,
+) -> Result<Vec<GridRow>> {
     let base = plant.parameters();
     let oracle = online_results(&oracle_run(&our_run(point, amplitude, base.clone())).run(fmu, |_| {})?)?;
-    [0.0, DITHER_A]
+    NOISE_LEVELS
         .iter()
+        .filter(|&&noise| selection.noise(noise))
         .map(|&noise| {
             let run = our_run(point, amplitude, noise_parameters(&base, noise));
             let trace = run.run(fmu, |_| {})?;
             let ours = stream_results(&trace, &run.settings)?;
             let (gain_db, gain_at_hz, phase_deg, phase_at_hz) = worst(&ours, &oracle);
             let measurement_time_s = measured_time(&trace)?;
-            let compared = ours.iter().filter(|p| oracle.iter().any(|o| o.frequency == p.frequency)).count();
+            let per_frequency: Vec<FrequencyError> = ours
+                .iter()
+                .filter_map(|p| {
+                    let o = oracle.iter().find(|o| o.frequency == p.frequency)?;
+                    let (gain_db, phase_deg) = difference(p, o);
+                    Some(FrequencyError { frequency: p.frequency, gain_db, phase_deg })
+                })
+                .collect();
+            let compared = per_frequency.len();
             Ok(GridRow {
                 point: point_name(point).to_string(),
                 plant: plant.label(),
@@ -247,22 +308,35 @@ fn grid_rows(fmu: &Fmu, plant: &PlantCase, (point, amplitude): (InjectionPoint, 
                     && gain_db <= GOAL_DB
                     && phase_deg <= GOAL_DEG
                     && measurement_time_s <= GOAL_SECONDS,
+                per_frequency,
             })
         })
         .collect()
 }
 
+/// The selected rows of the grid (plant by plant, point by point, noise levels in order).
+pub fn grid(fmu: &Fmu, selection: &GridSelection, mut progress: impl FnMut(f64)) -> Result<Vec<GridRow>> {
+    selection.validate()?;
+    let jobs: Vec<(&PlantCase, (InjectionPoint, f32))> = PLANTS
+        .iter()
+        .enumerate()
+        .filter(|(i, _)| selection.plant(*i))
+        .flat_map(|(_, plant)| POINTS.iter().filter(|(p, _)| selection.point(*p)).map(move |&point| (plant, point)))
+        .collect();
+    let mut rows = Vec::new();
+    for (k, (plant, point)) in jobs.iter().enumerate() {
+        progress(k as f64 / jobs.len() as f64);
+        rows.extend(grid_rows(fmu, plant, *point, selection)?);
+    }
+    progress(1.0);
+    Ok(rows)
+}
+
 pub fn bench(fmu: &Fmu, mut progress: impl FnMut(f64)) -> Result<SweepBench> {
     let fs = control_core::Params::default().rates.current_loop_hz;
-    let jobs = PLANTS.len() * POINTS.len();
-    let mut grid = Vec::new();
-    for (i, plant) in PLANTS.iter().enumerate() {
-        for (j, &point) in POINTS.iter().enumerate() {
-            progress((i * POINTS.len() + j) as f64 / (jobs + 3) as f64);
-            grid.extend(grid_rows(fmu, plant, point)?);
-        }
-    }
-    progress(jobs as f64 / (jobs + 3) as f64);
+    let steps = (PLANTS.len() * POINTS.len()) as f64;
+    let grid = grid(fmu, &GridSelection::default(), |f| progress(f * steps / (steps + 3.0)))?;
+    let jobs = steps as usize;
 
     // The seed's comparison on the default axis, velocity command, with sensor noise.
     let ours_settings = SweepParams::default();

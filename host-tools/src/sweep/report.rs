@@ -22,15 +22,16 @@ pub const ORACLE_ENCODER: i64 = 1 << 24;
 
 /// The oracle's settings: acquisition at the velocity-loop rate (every 2 ticks: no aliasing
 /// up to 4 kHz, each sample a single velocity estimate), one unshifted record ten times as
-/// long, no dither, read from the on-line correlator.
+/// long (at least 40 cycles and 1 s), settling twice as long (at least 4 cycles and 50 ms),
+/// no dither, read from the on-line correlator.
 pub fn oracle_settings(s: &SweepParams) -> SweepParams {
     SweepParams {
         acquisition_divider: 2,
         shifts: 1,
         repeats: 1,
-        measure_cycles: s.measure_cycles * 10.0,
+        measure_cycles: (s.measure_cycles * 10.0).max(40.0),
         min_measure_s: (s.min_measure_s * 10.0).max(1.0),
-        settle_cycles: s.settle_cycles * 2.0,
+        settle_cycles: (s.settle_cycles * 2.0).max(4.0),
         min_settle_s: s.min_settle_s.max(0.05),
         // Fixed long records: the reference does not adapt its length.
         precision_db: 0.0,
