@@ -499,13 +499,29 @@ pub struct AcquisitionSample {
     /// The sample belongs to a measured record.
     pub measuring: bool,
     pub point: u32,
-    /// Record (at most `MAX_SHIFTS`: 16 bits keep the sample, 256 of which the acquisition
-    /// stream buffers, at 32 bytes with the half block below).
-    pub record: u16,
+    /// The record (phase-shifted repeat, low 16 bits) and the half block (high 16 bits) the
+    /// sample belongs to: see [`Self::record`] and [`Self::half_block`]. One word, as the
+    /// record alone was: the sample stays as it was on the tick and on the link.
+    pub segment: u32,
+}
+
+impl AcquisitionSample {
+    /// The word of [`Self::segment`].
+    pub fn segment_of(record: u32, half_block: u32) -> u32 {
+        (record & 0xFFFF) | (half_block.min(0xFFFF) << 16)
+    }
+
+    /// Record (phase-shifted repeat) the sample belongs to.
+    pub fn record(&self) -> u32 {
+        self.segment & 0xFFFF
+    }
+
     /// Half block of the frequency's first record the sample belongs to (see
     /// `PhaseShiftedSweep::settled`; later samples keep the last index). The response is
     /// fitted to the samples from the frequency's last index minus one up.
-    pub half_block: u16,
+    pub fn half_block(&self) -> u32 {
+        self.segment >> 16
+    }
 }
 
 #[derive(Clone, Copy, Debug, Default, PartialEq, serde::Serialize, serde::Deserialize)]
@@ -782,8 +798,11 @@ pub struct PhaseShiftedSweep {
     base_rate_hz: f32,
     status: SweepStatus,
     generator: SineGenerator,
-    /// Ticks left in the present state.
-    left: u64,
+    /// Ticks left in the present stage after this one: `left + 1 + left_high·2³²` (see
+    /// [`Self::set_left`]; a 32-bit countdown on the tick, the Cortex-M4 has no 64-bit
+    /// arithmetic).
+    left: u32,
+    left_high: u32,
     /// Half blocks (half a base measurement each) added to each record of the present frequency (see
     /// `SweepParams::precision_db`), decided once the first record's base block is in (0
     /// until then, and when none are needed).
@@ -796,8 +815,11 @@ pub struct PhaseShiftedSweep {
     previous_half: Option<((f32, f32), f32)>,
     discarded_halves: u32,
     checking_settling: bool,
-    /// Index of the present half block (see [`AcquisitionSample::half_block`]).
+    /// Index of the present half block (see [`AcquisitionSample::half_block`]; at most
+    /// `1 + 2·MAX_EXTENSIONS`), and the samples' word of record and half block (found when
+    /// either changes, not on every sample: the Cortex-M4's tick budget).
     half_block: u32,
+    segment: u32,
     /// Sums of u and y over the loop ticks of the present acquisition period, and their count.
     period_sums: (f32, f32, f32),
     /// The present frequency's samples are period means (a stepped sine below the threshold).
@@ -829,6 +851,7 @@ impl PhaseShiftedSweep {
             status: SweepStatus::default(),
             generator: SineGenerator::default(),
             left: 0,
+            left_high: 0,
             extensions: 0,
             acc: SineFitSums::default(),
             half_start: SineFitSums::default(),
@@ -836,6 +859,7 @@ impl PhaseShiftedSweep {
             discarded_halves: 0,
             checking_settling: false,
             half_block: 0,
+            segment: 0,
             period_sums: (0.0, 0.0, 0.0),
             averaging: false,
             dither_state: DITHER_SEED,
@@ -894,10 +918,12 @@ impl PhaseShiftedSweep {
         let p = &self.params;
         self.status.point = point;
         self.status.record = record;
+        self.segment = AcquisitionSample::segment_of(record, 0);
         self.status.state = SweepState::Settling;
         if p.signal == SweepSignal::Prbs {
             let d = p.acquisition_divider as u64;
-            self.left = (libm::ceilf(p.min_settle_s * self.base_rate_hz / d as f32) as u64).saturating_mul(d);
+            let ticks = (libm::ceilf(p.min_settle_s * self.base_rate_hz / d as f32) as u64).saturating_mul(d);
+            self.set_left(ticks);
             self.status.frequency = 0.0;
             self.averaging = false;
             self.dithering = false;
@@ -914,7 +940,7 @@ impl PhaseShiftedSweep {
         let shift = if record == 0 { 0.0 } else { TAU / p.shifts as f32 };
         let initial = phase_angle(self.generator.phase_word()) + shift;
         self.generator = SineGenerator::new(p.amplitude, f, self.base_rate_hz, initial);
-        self.left = p.record_length(f, self.base_rate_hz).0;
+        let ticks = p.record_length(f, self.base_rate_hz).0;
         if record == 0 {
             self.acc = SineFitSums::default();
             self.extensions = 0;
@@ -928,6 +954,8 @@ impl PhaseShiftedSweep {
         } else {
             self.acc.break_record();
         }
+        self.segment = AcquisitionSample::segment_of(record, self.half_block);
+        self.set_left(ticks);
     }
 
     /// Excitation for this base tick (call once per tick, before the loops): the value to
@@ -981,12 +1009,13 @@ impl PhaseShiftedSweep {
     /// estimate differentiates, out of the low frequencies where a single sample per period
     /// would fold it. PRBS samples are the values at the acquisition tick. Advances the
     /// schedule.
+    #[inline(always)]
     pub fn end_tick(&mut self, tick: u64, loop_tick: bool, acquire: bool, u: f32, y: f32) {
         if !self.running() {
             return;
         }
-        // Two fields, not the whole parameter set: this runs every tick while sweeping.
-        let (signal, divider) = (self.params.signal, self.params.acquisition_divider);
+        // One field, not the whole parameter set: this runs every tick while sweeping.
+        let signal = self.params.signal;
         if loop_tick && self.averaging {
             self.period_sums.0 += u;
             self.period_sums.1 += y;
@@ -1006,22 +1035,43 @@ impl PhaseShiftedSweep {
                 phase: phase_angle(self.phase_word),
                 measuring,
                 point: self.status.point,
-                record: self.status.record as u16,
-                half_block: self.half_block.min(u16::MAX as u32) as u16,
+                segment: self.segment,
             };
             if measuring && signal == SweepSignal::SteppedSine {
                 self.acc.add(u, y, self.angle.sin_cos());
             }
         }
-        self.left = self.left.saturating_sub(1);
-        if self.left > 0 {
+        if self.left == 0 {
+            self.next_stage();
+        } else {
+            self.left -= 1;
+        }
+    }
+
+    /// The present stage lasts `ticks` more ticks, this one included (at least this one).
+    fn set_left(&mut self, ticks: u64) {
+        let rest = ticks.max(1) - 1;
+        self.left = rest as u32;
+        self.left_high = (rest >> 32) as u32;
+    }
+
+    /// The present stage (settling, a half block, a block, a record) is over: the next one,
+    /// or the next frequency. Once per stage: kept out of line so that the every-tick path
+    /// stays small.
+    #[inline(never)]
+    fn next_stage(&mut self) {
+        if self.left_high > 0 {
+            // Another 2³² ticks of the same stage.
+            self.left_high -= 1;
+            self.left = u32::MAX;
             return;
         }
+        let (signal, divider) = (self.params.signal, self.params.acquisition_divider);
         match self.status.state {
             SweepState::Settling => {
                 let p = &self.params;
                 self.status.state = SweepState::Measuring;
-                self.left = match signal {
+                let ticks = match signal {
                     SweepSignal::Prbs => libm::roundf(p.prbs_seconds * self.base_rate_hz / divider as f32) as u64,
                     // Later records take the blocks the first one was given.
                     SweepSignal::SteppedSine => {
@@ -1036,6 +1086,7 @@ impl PhaseShiftedSweep {
                     }
                 }
                 .saturating_mul(divider as u64);
+                self.set_left(ticks);
             }
             SweepState::Measuring if signal == SweepSignal::Prbs => self.status.state = SweepState::Done,
             SweepState::Measuring => {
@@ -1048,15 +1099,16 @@ impl PhaseShiftedSweep {
                 if self.status.record == 0 && self.extensions == 0 {
                     if self.checking_settling {
                         if let Some(samples) = self.settled() {
-                            self.left = samples.saturating_mul(divider as u64);
+                            self.set_left(samples.saturating_mul(divider as u64));
                             return;
                         }
                     }
                     self.extensions = self.halves_needed(records);
                     if self.extensions > 0 {
-                        self.left = (self.extensions as u64)
+                        let ticks = (self.extensions as u64)
                             .saturating_mul(self.params.record_length(f, self.base_rate_hz).1 / 2)
                             .saturating_mul(divider as u64);
+                        self.set_left(ticks);
                         return;
                     }
                 }
@@ -1110,6 +1162,7 @@ impl PhaseShiftedSweep {
             self.half_start = self.acc;
             self.checking_settling = first && this.is_some();
             self.half_block = 1;
+            self.segment = AcquisitionSample::segment_of(self.status.record, 1);
             return first.then_some(samples - samples / 2);
         };
         let target = p.precision_db * (core::f32::consts::LN_10 / 20.0);
@@ -1136,7 +1189,8 @@ impl PhaseShiftedSweep {
         self.half_start = half;
         self.previous_half = this;
         self.discarded_halves += 1;
-        self.half_block += 1;
+        self.half_block = self.half_block.saturating_add(1);
+        self.segment = AcquisitionSample::segment_of(self.status.record, self.half_block);
         Some((samples / 2).max(1))
     }
 
@@ -1402,10 +1456,10 @@ mod tests {
     /// A response of gain 1.5 and phase −0.4 rad plus a lightly damped ring at 52 Hz that
     /// starts with the sweep (30 % of the response, τ = 50 ms), as a loop's mode rings after
     /// a frequency step; the first frequency's result and the ticks run.
-    fn ringing(params: SweepParams) -> (SweepResult, u64, u16) {
+    fn ringing(params: SweepParams) -> (SweepResult, u64, u32) {
         let mut s = PhaseShiftedSweep::new(params, FS);
         s.start().unwrap();
-        let (mut tick, mut last_half) = (0u64, 0u16);
+        let (mut tick, mut last_half) = (0u64, 0u32);
         while s.running() {
             let (_, u) = s.excitation(true).unwrap();
             let t = tick as f32 / FS;
@@ -1413,7 +1467,7 @@ mod tests {
             let y = 1.5 * params.amplitude * libm::sinf(phase_angle(s.phase_word) - 0.4) + ring;
             s.end_tick(tick, tick.is_multiple_of(2), tick.is_multiple_of(params.acquisition_divider as u64), u, y);
             if s.status().sample.point == 0 {
-                last_half = s.status().sample.half_block;
+                last_half = s.status().sample.half_block();
             }
             tick += 1;
         }
