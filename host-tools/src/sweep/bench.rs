@@ -13,7 +13,7 @@
 //! - the analytic linear model of the loop at low frequencies against the oracle.
 //!
 //! The oracle ([`oracle_run`]) is the same loop measured with 8 kHz acquisition, records ten
-//! times longer, a 2^24-count encoder and no sensor noise.
+//! times longer, at least 0.5 s of settling, a 2^24-count encoder and no sensor noise.
 
 use servo_axis::variables::name;
 use std::collections::BTreeMap;

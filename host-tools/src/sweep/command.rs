@@ -157,7 +157,7 @@ fn bench_sweep(common: &Common, detail: bool) -> Result<bool> {
         d.precision_db, d.dither
     );
     println!(
-        "  worst error over all frequencies against the oracle (8 kHz acquisition, 10x longer records, 2^24-count encoder, no sensor noise); goal <= {GOAL_DB} dB, <= {GOAL_DEG} deg, <= {GOAL_SECONDS} s:"
+        "  worst error over all frequencies against the oracle (8 kHz acquisition, 10x longer records, at least 0.5 s settling, 2^24-count encoder, no sensor noise); goal <= {GOAL_DB} dB, <= {GOAL_DEG} deg, <= {GOAL_SECONDS} s:"
     );
     print_grid(&r.grid, detail);
     println!(

@@ -51,7 +51,8 @@ pub fn oracle_settings(s: &SweepParams) -> SweepParams {
 /// The oracle of a sweep: the same axis, loop, injection point, amplitude, riding speed and
 /// frequencies, measured with [`oracle_settings`] on a 2^24-count encoder without current-sensor
 /// noise: the loop's linear response, without the quantisation and the noise a measurement
-/// has to average out (its own residual error is below 0.01 dB / 0.1°: `servo bench sweep`).
+/// has to average out (its own residual error, against itself with settling and records twice as
+/// long, is 0.022 dB / 0.13° over the bench's plants: `servo bench sweep`).
 pub fn oracle_run(run: &SweepRun) -> SweepRun {
     let mut parameters = run.parameters.clone();
     parameters.insert(name::plant_encoder_counts_per_rev.to_string(), Value::Int(ORACLE_ENCODER));
