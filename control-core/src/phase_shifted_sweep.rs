@@ -23,8 +23,16 @@
 //! Below the threshold an acquisition sample is the mean of u and of y over the loop ticks of
 //! its acquisition period (the same average on both cancels in Y/U; it keeps the encoder's
 //! differentiated quantisation noise from folding down to low frequencies); from the
-//! threshold up it is the instantaneous value, as equivalent-time sampling needs. Precision
-//! control lengthens a frequency's records until the predicted standard errors of G, gain and
+//! threshold up it is the instantaneous value, as equivalent-time sampling needs.
+//!
+//! The sine is phase continuous across frequencies (a new frequency starts at the phase the
+//! old one reached), so a step does not jolt the loop. The measurement starts when the loop
+//! has settled, judged from the response itself, not from a number of periods: the first
+//! record of a frequency is measured in half blocks, and the earlier of two half blocks is
+//! discarded while their responses disagree beyond the precision (or their residuals still
+//! decay; see [`PhaseShiftedSweep::settled`]). Each sample carries its half-block index, so
+//! that a host fitting the stream keeps the same samples. Precision control then lengthens a
+//! frequency's records by half blocks until the predicted standard errors of G, gain and
 //! phase, meet `precision_db` (see [`SineFitSums::response_error`]).
 //!
 //! The on-line correlator keeps the sums of a three-parameter sine fit per frequency (no
@@ -113,7 +121,8 @@ pub struct SweepParams {
     /// the motion; the well-measured points are not lengthened.
     pub precision_db: f32,
     /// At most so many extra blocks (each as long as one record's base measurement) per
-    /// record of a frequency.
+    /// record of a frequency, and at most twice as many half blocks discarded while its first
+    /// record settles.
     pub max_extensions: u32,
     /// Stepped sine: a pseudo-random ±dither (N·m) added to the torque command on every base
     /// tick of the frequencies at and above the threshold (0: none). At constant speed and
@@ -127,11 +136,13 @@ pub struct SweepParams {
 }
 
 impl Default for SweepParams {
-    /// Velocity-command injection, 10 Hz to 3 kHz in 40 log steps plus 2 kHz, 2 settle and
-    /// 4 measure cycles (at least 20 ms of settling and 80 ms of measurement: near 3 kHz the
-    /// response is a few encoder counts per velocity period, and shorter records leave
-    /// 0.1–0.25 dB of quantisation error), 3 records shifted by 2π/3 from the acquisition
-    /// Nyquist frequency up, acquisition every 4 ticks (4 kHz at 16 kHz).
+    /// Velocity-command injection, 10 Hz to 3 kHz in 40 log steps plus 2 kHz, 1 settle and
+    /// 3 measure cycles (at least 10 ms of settling and 40 ms of measurement), 3 records
+    /// shifted by 2π/3 from the acquisition Nyquist frequency up, acquisition every 4 ticks
+    /// (4 kHz at 16 kHz). The base records are short: the settling check lengthens the wait
+    /// where the loop rings (see `PhaseShiftedSweep::settled`), the precision control the
+    /// records where the response is noisy (near 3 kHz it is a few encoder counts per
+    /// velocity period).
     fn default() -> Self {
         Self {
             point: InjectionPoint::VelocityCommand,
@@ -142,10 +153,10 @@ impl Default for SweepParams {
             points: 40,
             logarithmic: true,
             extra_hz: 2000.0,
-            settle_cycles: 2.0,
-            min_settle_s: 0.02,
-            measure_cycles: 4.0,
-            min_measure_s: 0.08,
+            settle_cycles: 1.0,
+            min_settle_s: 0.01,
+            measure_cycles: 3.0,
+            min_measure_s: 0.04,
             shifts: 3,
             repeats: 3,
             threshold_hz: 0.0,
@@ -294,13 +305,15 @@ impl SweepParams {
         self.ticks_with_extensions(base_rate_hz, 0)
     }
 
-    /// Base ticks of the sweep when every frequency takes all `max_extensions` blocks: the
-    /// longest it can run.
+    /// Base ticks of the sweep when every frequency takes all `max_extensions` blocks and
+    /// discards `2·max_extensions` half blocks while settling: the longest it can run.
     pub fn max_total_ticks(&self, base_rate_hz: f32) -> u64 {
         let extensions = if self.precision_db > 0.0 { self.max_extensions } else { 0 };
         self.ticks_with_extensions(base_rate_hz, extensions)
     }
 
+    /// `extensions` blocks per record, and as many blocks of half blocks discarded while the
+    /// first record settles (see `PhaseShiftedSweep::settled`).
     fn ticks_with_extensions(&self, base_rate_hz: f32, extensions: u32) -> u64 {
         let d = self.acquisition_divider as u64;
         match self.signal {
@@ -314,8 +327,12 @@ impl SweepParams {
                 .map(|i| {
                     let f = self.frequency(i);
                     let (settle, samples) = self.record_length(f, base_rate_hz);
-                    let measure = samples.saturating_mul(d).saturating_mul(1 + extensions as u64);
-                    (self.records(f, base_rate_hz) as u64).saturating_mul(settle.saturating_add(measure))
+                    let added = (samples / 2).saturating_mul(2 * extensions as u64);
+                    let measure = samples.saturating_add(added).saturating_mul(d);
+                    let discarded = (samples / 2).saturating_mul(d).saturating_mul(2 * extensions as u64);
+                    (self.records(f, base_rate_hz) as u64)
+                        .saturating_mul(settle.saturating_add(measure))
+                        .saturating_add(discarded)
                 })
                 .fold(0u64, u64::saturating_add),
         }
@@ -482,7 +499,29 @@ pub struct AcquisitionSample {
     /// The sample belongs to a measured record.
     pub measuring: bool,
     pub point: u32,
-    pub record: u32,
+    /// The record (phase-shifted repeat, low 16 bits) and the half block (high 16 bits) the
+    /// sample belongs to: see [`Self::record`] and [`Self::half_block`]. One word, as the
+    /// record alone was: the sample stays as it was on the tick and on the link.
+    pub segment: u32,
+}
+
+impl AcquisitionSample {
+    /// The word of [`Self::segment`].
+    pub fn segment_of(record: u32, half_block: u32) -> u32 {
+        (record & 0xFFFF) | (half_block.min(0xFFFF) << 16)
+    }
+
+    /// Record (phase-shifted repeat) the sample belongs to.
+    pub fn record(&self) -> u32 {
+        self.segment & 0xFFFF
+    }
+
+    /// Half block of the frequency's first record the sample belongs to (see
+    /// `PhaseShiftedSweep::settled`; later samples keep the last index). The response is
+    /// fitted to the samples from the frequency's last index minus one up.
+    pub fn half_block(&self) -> u32 {
+        self.segment >> 16
+    }
 }
 
 #[derive(Clone, Copy, Debug, Default, PartialEq, serde::Serialize, serde::Deserialize)]
@@ -595,6 +634,47 @@ impl SineFitSums {
         self.ys += y * s;
     }
 
+    /// The sums of the samples added since `earlier` (a copy of these sums taken before):
+    /// the same fit over that stretch only (same offsets, same last sample).
+    fn since(&self, earlier: &Self) -> Self {
+        Self {
+            uu: self.uu - earlier.uu,
+            yy: self.yy - earlier.yy,
+            uy: self.uy - earlier.uy,
+            n: self.n - earlier.n,
+            c: self.c - earlier.c,
+            s: self.s - earlier.s,
+            cc: self.cc - earlier.cc,
+            ss: self.ss - earlier.ss,
+            cs: self.cs - earlier.cs,
+            u: self.u - earlier.u,
+            uc: self.uc - earlier.uc,
+            us: self.us - earlier.us,
+            y: self.y - earlier.y,
+            yc: self.yc - earlier.yc,
+            ys: self.ys - earlier.ys,
+            dn: self.dn - earlier.dn,
+            duu: self.duu - earlier.duu,
+            dyy: self.dyy - earlier.dyy,
+            duy: self.duy - earlier.duy,
+            first_cc: self.first_cc - earlier.first_cc,
+            first_ss: self.first_ss - earlier.first_ss,
+            first_cs: self.first_cs - earlier.first_cs,
+            ..*self
+        }
+    }
+
+    /// `G = Y/U` of these sums (None when the phases or U cannot tell).
+    fn response(&self) -> Option<(f32, f32)> {
+        let ((u_re, u_im), (y_re, y_im), quality) = self.solve();
+        let den = u_re * u_re + u_im * u_im;
+        if den > 0.0 && quality > 0.0 {
+            Some(((y_re * u_re + y_im * u_im) / den, (y_im * u_re - y_re * u_im) / den))
+        } else {
+            None
+        }
+    }
+
     /// A new record starts: its first sample has no predecessor.
     fn break_record(&mut self) {
         self.has_previous = false;
@@ -701,6 +781,14 @@ struct NormalEquations {
     det: f32,
 }
 
+/// Half blocks agree within so many standard deviations of their difference (see
+/// `PhaseShiftedSweep::settled`).
+const SETTLING_NOISE_SIGMAS: f32 = 1.5;
+
+/// Base blocks shorter than this (samples) are not checked for settling: a half block would
+/// be too short to fit a sine and estimate its noise.
+const MIN_CHECKED_SAMPLES: u64 = 32;
+
 /// Start of the dither's xorshift32 sequence (any non-zero value; the same for every sweep).
 const DITHER_SEED: u32 = 0x2545_F491;
 
@@ -710,13 +798,28 @@ pub struct PhaseShiftedSweep {
     base_rate_hz: f32,
     status: SweepStatus,
     generator: SineGenerator,
-    /// Ticks left in the present state.
-    left: u64,
-    /// Measurement blocks added to each record of the present frequency (see
+    /// Ticks left in the present stage after this one: `left + 1 + left_high·2³²` (see
+    /// [`Self::set_left`]; a 32-bit countdown on the tick, the Cortex-M4 has no 64-bit
+    /// arithmetic).
+    left: u32,
+    left_high: u32,
+    /// Half blocks (half a base measurement each) added to each record of the present frequency (see
     /// `SweepParams::precision_db`), decided once the first record's base block is in (0
     /// until then, and when none are needed).
     extensions: u32,
     acc: SineFitSums,
+    /// Settling check of the present frequency's first record (see [`Self::settled`]): the
+    /// sums at the start of the present half block, the response of the previous half block,
+    /// the half blocks discarded so far, and whether the check still runs.
+    half_start: SineFitSums,
+    previous_half: Option<((f32, f32), f32)>,
+    discarded_halves: u32,
+    checking_settling: bool,
+    /// Index of the present half block (see [`AcquisitionSample::half_block`]; at most
+    /// `1 + 2·MAX_EXTENSIONS`), and the samples' word of record and half block (found when
+    /// either changes, not on every sample: the Cortex-M4's tick budget).
+    half_block: u32,
+    segment: u32,
     /// Sums of u and y over the loop ticks of the present acquisition period, and their count.
     period_sums: (f32, f32, f32),
     /// The present frequency's samples are period means (a stepped sine below the threshold).
@@ -748,8 +851,15 @@ impl PhaseShiftedSweep {
             status: SweepStatus::default(),
             generator: SineGenerator::default(),
             left: 0,
+            left_high: 0,
             extensions: 0,
             acc: SineFitSums::default(),
+            half_start: SineFitSums::default(),
+            previous_half: None,
+            discarded_halves: 0,
+            checking_settling: false,
+            half_block: 0,
+            segment: 0,
             period_sums: (0.0, 0.0, 0.0),
             averaging: false,
             dither_state: DITHER_SEED,
@@ -794,6 +904,7 @@ impl PhaseShiftedSweep {
             return Err(SweepError::Busy);
         }
         self.status = SweepStatus::default();
+        self.generator = SineGenerator::default();
         self.sequence.restart();
         self.dither_state = DITHER_SEED;
         self.dither = 0.0;
@@ -807,10 +918,12 @@ impl PhaseShiftedSweep {
         let p = &self.params;
         self.status.point = point;
         self.status.record = record;
+        self.segment = AcquisitionSample::segment_of(record, 0);
         self.status.state = SweepState::Settling;
         if p.signal == SweepSignal::Prbs {
             let d = p.acquisition_divider as u64;
-            self.left = (libm::ceilf(p.min_settle_s * self.base_rate_hz / d as f32) as u64).saturating_mul(d);
+            let ticks = (libm::ceilf(p.min_settle_s * self.base_rate_hz / d as f32) as u64).saturating_mul(d);
+            self.set_left(ticks);
             self.status.frequency = 0.0;
             self.averaging = false;
             self.dithering = false;
@@ -820,15 +933,29 @@ impl PhaseShiftedSweep {
         self.status.frequency = f;
         self.averaging = f < p.threshold(self.base_rate_hz);
         self.dithering = p.dither > 0.0 && !self.averaging;
-        let initial = record as f32 * TAU / p.shifts as f32;
+        // Phase continuous: the new frequency (or record) starts at the phase the sine has
+        // reached (0 at the start), so that the excitation does not jump: a restart at phase 0
+        // steps the input by up to its amplitude and rings the loop's lightly damped modes
+        // for many periods. A record after the first adds the shift 2π/shifts.
+        let shift = if record == 0 { 0.0 } else { TAU / p.shifts as f32 };
+        let initial = phase_angle(self.generator.phase_word()) + shift;
         self.generator = SineGenerator::new(p.amplitude, f, self.base_rate_hz, initial);
-        self.left = p.record_length(f, self.base_rate_hz).0;
+        let ticks = p.record_length(f, self.base_rate_hz).0;
         if record == 0 {
             self.acc = SineFitSums::default();
             self.extensions = 0;
+            self.half_start = SineFitSums::default();
+            self.previous_half = None;
+            self.discarded_halves = 0;
+            self.half_block = 0;
+            self.checking_settling = p.precision_db > 0.0
+                && p.max_extensions > 0
+                && p.record_length(f, self.base_rate_hz).1 >= MIN_CHECKED_SAMPLES;
         } else {
             self.acc.break_record();
         }
+        self.segment = AcquisitionSample::segment_of(record, self.half_block);
+        self.set_left(ticks);
     }
 
     /// Excitation for this base tick (call once per tick, before the loops): the value to
@@ -882,12 +1009,13 @@ impl PhaseShiftedSweep {
     /// estimate differentiates, out of the low frequencies where a single sample per period
     /// would fold it. PRBS samples are the values at the acquisition tick. Advances the
     /// schedule.
+    #[inline(always)]
     pub fn end_tick(&mut self, tick: u64, loop_tick: bool, acquire: bool, u: f32, y: f32) {
         if !self.running() {
             return;
         }
-        // Two fields, not the whole parameter set: this runs every tick while sweeping.
-        let (signal, divider) = (self.params.signal, self.params.acquisition_divider);
+        // One field, not the whole parameter set: this runs every tick while sweeping.
+        let signal = self.params.signal;
         if loop_tick && self.averaging {
             self.period_sums.0 += u;
             self.period_sums.1 += y;
@@ -907,29 +1035,58 @@ impl PhaseShiftedSweep {
                 phase: phase_angle(self.phase_word),
                 measuring,
                 point: self.status.point,
-                record: self.status.record,
+                segment: self.segment,
             };
             if measuring && signal == SweepSignal::SteppedSine {
                 self.acc.add(u, y, self.angle.sin_cos());
             }
         }
-        self.left = self.left.saturating_sub(1);
-        if self.left > 0 {
+        if self.left == 0 {
+            self.next_stage();
+        } else {
+            self.left -= 1;
+        }
+    }
+
+    /// The present stage lasts `ticks` more ticks, this one included (at least this one).
+    fn set_left(&mut self, ticks: u64) {
+        let rest = ticks.max(1) - 1;
+        self.left = rest as u32;
+        self.left_high = (rest >> 32) as u32;
+    }
+
+    /// The present stage (settling, a half block, a block, a record) is over: the next one,
+    /// or the next frequency. Once per stage: kept out of line so that the every-tick path
+    /// stays small.
+    #[inline(never)]
+    fn next_stage(&mut self) {
+        if self.left_high > 0 {
+            // Another 2³² ticks of the same stage.
+            self.left_high -= 1;
+            self.left = u32::MAX;
             return;
         }
+        let (signal, divider) = (self.params.signal, self.params.acquisition_divider);
         match self.status.state {
             SweepState::Settling => {
                 let p = &self.params;
                 self.status.state = SweepState::Measuring;
-                self.left = match signal {
+                let ticks = match signal {
                     SweepSignal::Prbs => libm::roundf(p.prbs_seconds * self.base_rate_hz / divider as f32) as u64,
                     // Later records take the blocks the first one was given.
                     SweepSignal::SteppedSine => {
-                        let blocks = if self.status.record == 0 { 1 } else { 1 + self.extensions as u64 };
-                        p.record_length(self.status.frequency, self.base_rate_hz).1.saturating_mul(blocks)
+                        let samples = p.record_length(self.status.frequency, self.base_rate_hz).1;
+                        if self.checking_settling {
+                            // The first record's base block in two halves (see `settled`).
+                            samples / 2
+                        } else {
+                            let extra = if self.status.record == 0 { 0 } else { self.extensions as u64 };
+                            samples.saturating_add(extra.saturating_mul(samples / 2))
+                        }
                     }
                 }
                 .saturating_mul(divider as u64);
+                self.set_left(ticks);
             }
             SweepState::Measuring if signal == SweepSignal::Prbs => self.status.state = SweepState::Done,
             SweepState::Measuring => {
@@ -940,11 +1097,18 @@ impl PhaseShiftedSweep {
                 // stay balanced); the first one measures on at once, without settling. Its
                 // end comes back here only when blocks were added, with `extensions` > 0.
                 if self.status.record == 0 && self.extensions == 0 {
-                    self.extensions = self.blocks_needed(records);
+                    if self.checking_settling {
+                        if let Some(samples) = self.settled() {
+                            self.set_left(samples.saturating_mul(divider as u64));
+                            return;
+                        }
+                    }
+                    self.extensions = self.halves_needed(records);
                     if self.extensions > 0 {
-                        self.left = (self.extensions as u64)
-                            .saturating_mul(self.params.record_length(f, self.base_rate_hz).1)
+                        let ticks = (self.extensions as u64)
+                            .saturating_mul(self.params.record_length(f, self.base_rate_hz).1 / 2)
                             .saturating_mul(divider as u64);
+                        self.set_left(ticks);
                         return;
                     }
                 }
@@ -965,13 +1129,78 @@ impl PhaseShiftedSweep {
         }
     }
 
-    /// Extra blocks per record for the standard errors of the response, gain's and phase's,
+    /// The settling check, at the end of each half block of the first record: None when the
+    /// record has settled (the response of the last half block agrees with the previous
+    /// one's), else the samples of the next half block to measure. The closed loop's slowest
+    /// transient, not a number of periods, decides when the measurement starts: a lightly
+    /// damped mode near the excitation (an anti-resonance of a soft shaft inside a stiff
+    /// velocity loop) rings for many periods after the frequency step and biases the fit by
+    /// tenths of a decibel and degrees. Two successive half blocks agree when their responses
+    /// differ, relative to |G|, by at most the precision (`precision_db` as a relative size,
+    /// gain and phase together) or three standard deviations of the difference under the
+    /// measured noise, whichever is larger. When they differ, the earlier half block is
+    /// discarded and the last one is compared with a new one; the kept data is always the last
+    /// two half blocks, one base block. At most `2·max_extensions` half blocks are discarded.
+    // Once per half block: kept out of line so that the every-tick path stays small.
+    #[inline(never)]
+    fn settled(&mut self) -> Option<u64> {
+        let p = &self.params;
+        let samples = p.record_length(self.status.frequency, self.base_rate_hz).1;
+        let half = self.acc.since(&self.half_start);
+        let turns = self.status.frequency * p.acquisition_divider as f32 / self.base_rate_hz;
+        let step = TAU * (turns - libm::floorf(turns));
+        // This half block's response and the variance of its relative error (gain and phase).
+        let this = match (half.response(), half.response_error(step)) {
+            (Some(g), Some(e)) => Some((g, e.gain * e.gain + e.phase * e.phase)),
+            _ => None,
+        };
+        let first = self.previous_half.is_none();
+        let (Some(((re, im), spread)), Some(((re0, im0), spread0))) = (this, self.previous_half) else {
+            // The first half block (or one that tells nothing): the second one completes the
+            // base block, checked only when both tell.
+            self.previous_half = this;
+            self.half_start = self.acc;
+            self.checking_settling = first && this.is_some();
+            self.half_block = 1;
+            self.segment = AcquisitionSample::segment_of(self.status.record, 1);
+            return first.then_some(samples - samples / 2);
+        };
+        let target = p.precision_db * (core::f32::consts::LN_10 / 20.0);
+        // The responses differ beyond the precision and beyond three standard deviations of a
+        // difference of two half blocks (twice one's variance).
+        let noise = SETTLING_NOISE_SIGMAS * crate::square_root::sqrt(2.0 * spread);
+        let (dre, dim) = (re - re0, im - im0);
+        let difference = crate::square_root::sqrt((dre * dre + dim * dim) / (re * re + im * im));
+        // Or the earlier half's residual is larger than the noise's variance ratio allows (a
+        // decaying transient, which can bias both halves alike when it rings near the
+        // excitation: the responses then agree before the loop has settled) and large
+        // enough to matter: its relative size `√(spread·n/2)` above the precision. The log
+        // of the ratio of two noise variances of n samples each has a spread of about 2/√n:
+        // three of those.
+        let n = half.n;
+        let ratio = libm::expf(6.0 / crate::square_root::sqrt(n));
+        let decaying = spread0 > ratio * spread && spread0 * 0.5 * n > target * target;
+        if !(difference > target.max(noise) || decaying) || self.discarded_halves >= 2 * p.max_extensions {
+            self.checking_settling = false;
+            return None;
+        }
+        // Keep the last half block only and compare it with the next one.
+        self.acc = half;
+        self.half_start = half;
+        self.previous_half = this;
+        self.discarded_halves += 1;
+        self.half_block = self.half_block.saturating_add(1);
+        self.segment = AcquisitionSample::segment_of(self.status.record, self.half_block);
+        Some((samples / 2).max(1))
+    }
+
+    /// Extra half blocks per record (at most `2·max_extensions`) for the standard errors of the response, gain's and phase's,
     /// to reach `precision_db` (the phase's: the same relative size, `precision_db·ln10/20`
     /// rad, 0.2° at 0.03 dB) over all `records`, predicted from the first base block (error ∝
     /// 1/√samples).
     // Once per record or frequency: kept out of line so that the every-tick path stays small.
     #[inline(never)]
-    fn blocks_needed(&self, records: u32) -> u32 {
+    fn halves_needed(&self, records: u32) -> u32 {
         let p = &self.params;
         if !(p.precision_db > 0.0) || p.max_extensions == 0 {
             return 0;
@@ -981,14 +1210,15 @@ impl PhaseShiftedSweep {
         let Some(error) = self.acc.response_error(step) else { return 0 };
         let target = p.precision_db * (core::f32::consts::LN_10 / 20.0);
         let ratio = error.gain.max(error.phase) / target;
-        let blocks = libm::ceilf(ratio * ratio / records as f32);
+        // Half blocks per record (the base block is two).
+        let halves = libm::ceilf(2.0 * ratio * ratio / records as f32);
         // Compared as floats: a huge ratio must not wrap in the conversion.
-        if blocks <= 1.0 {
+        if halves <= 2.0 {
             0
-        } else if blocks > (p.max_extensions + 1) as f32 {
-            p.max_extensions
+        } else if halves > (2 * p.max_extensions + 2) as f32 {
+            2 * p.max_extensions
         } else {
-            blocks as u32 - 1
+            halves as u32 - 2
         }
     }
 
@@ -1223,9 +1453,61 @@ mod tests {
         (s.results()[0], tick)
     }
 
+    /// A response of gain 1.5 and phase −0.4 rad plus a lightly damped ring at 52 Hz that
+    /// starts with the sweep (30 % of the response, τ = 50 ms), as a loop's mode rings after
+    /// a frequency step; the first frequency's result and the ticks run.
+    fn ringing(params: SweepParams) -> (SweepResult, u64, u32) {
+        let mut s = PhaseShiftedSweep::new(params, FS);
+        s.start().unwrap();
+        let (mut tick, mut last_half) = (0u64, 0u32);
+        while s.running() {
+            let (_, u) = s.excitation(true).unwrap();
+            let t = tick as f32 / FS;
+            let ring = 0.3 * 1.5 * params.amplitude * libm::expf(-t / 0.05) * libm::sinf(TAU * 52.0 * t);
+            let y = 1.5 * params.amplitude * libm::sinf(phase_angle(s.phase_word) - 0.4) + ring;
+            s.end_tick(tick, tick.is_multiple_of(2), tick.is_multiple_of(params.acquisition_divider as u64), u, y);
+            if s.status().sample.point == 0 {
+                last_half = s.status().sample.half_block();
+            }
+            tick += 1;
+        }
+        (s.results()[0], tick, last_half)
+    }
+
+    #[test]
+    fn a_ringing_loop_is_measured_once_it_has_settled() {
+        let p = SweepParams { start_hz: 50.0, stop_hz: 50.05, points: 2, extra_hz: 0.0, ..Default::default() };
+        let error = |r: SweepResult| (r.gain_db() - 20.0 * libm::log10f(1.5), r.phase_deg() + 0.4f32.to_degrees());
+        // Without the check (fixed records) the ring is in the record.
+        let (fixed, ticks, _) = ringing(SweepParams { precision_db: 0.0, ..p });
+        let (db, deg) = error(fixed);
+        assert_eq!(ticks, p.total_ticks(FS));
+        assert!(db.abs() > 0.3 || deg.abs() > 3.0, "{db} dB {deg} deg");
+        // With it, the half blocks measured while it rings are discarded.
+        let (checked, ticks, last_half) = ringing(p);
+        let (db, deg) = error(checked);
+        assert!(db.abs() < 0.03 && deg.abs() < 0.2, "{db} dB {deg} deg");
+        assert!(ticks > p.total_ticks(FS) && ticks <= p.max_total_ticks(FS), "{ticks}");
+        assert!(last_half >= 3, "{last_half} half blocks");
+    }
+
+    #[test]
+    fn an_acquisition_sample_stays_32_bytes() {
+        // The acquisition stream buffers 256 of them.
+        assert!(core::mem::size_of::<AcquisitionSample>() <= 32);
+    }
+
     #[test]
     fn a_noisy_low_gain_point_is_lengthened_until_precise_and_a_clean_one_is_not() {
-        let p = SweepParams { start_hz: 300.0, stop_hz: 400.0, points: 2, extra_hz: 0.0, ..Default::default() };
+        // Base records of 80 ms (not the defaults: the test is about the extension).
+        let p = SweepParams {
+            start_hz: 300.0,
+            stop_hz: 400.0,
+            points: 2,
+            extra_hz: 0.0,
+            min_measure_s: 0.08,
+            ..Default::default()
+        };
         let off = SweepParams { precision_db: 0.0, ..p };
         // A clean response: no extension, the schedule the host computes.
         assert_eq!(noisy(p, 1.0, 0.0, 1).1, p.total_ticks(FS));

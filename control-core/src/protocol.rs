@@ -711,7 +711,7 @@ mod tests {
                 phase: 3.0,
                 measuring: true,
                 point: 7,
-                record: 2,
+                segment: crate::phase_shifted_sweep::AcquisitionSample::segment_of(2, 3),
             });
         }
         let batch = stream.take_batch().unwrap();

@@ -398,7 +398,8 @@ impl AxisModel {
         o.acq_phase = w.sample.phase as f64;
         o.acq_measuring = w.sample.measuring as i32;
         o.acq_point = w.sample.point as i32;
-        o.acq_record = w.sample.record as i32;
+        o.acq_record = w.sample.record() as i32;
+        o.acq_half_block = w.sample.half_block() as i32;
         o.faults = t.faults.0 as i32;
     }
 }

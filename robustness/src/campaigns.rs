@@ -569,7 +569,7 @@ fn random_response(rng: &mut Rng, tick: &mut u64) -> Response {
                     phase: rng.f32() * std::f32::consts::TAU,
                     measuring: rng.bool(),
                     point: rng.u32(0..128),
-                    record: rng.u32(0..16),
+                    segment: AcquisitionSample::segment_of(rng.u32(0..16), rng.u32(0..32)),
                 };
                 *tick += 4;
             }

@@ -21,16 +21,20 @@ fn phase_shifting_measures_every_injection_point_against_the_oracle_and_single_p
     for row in &default_rows {
         assert!(row.met, "{row:?}");
     }
-    // The stiff plants (500 Hz) at both inertia ratios stay within the accuracy goal; their
-    // measurement time is what the grid shows (some rows take a little over 10 s).
-    for row in r.grid.iter().filter(|row| row.plant.ends_with("500 Hz")) {
+    // Every plant (both inertia ratios, shaft resonance 50 and 500 Hz) meets the accuracy
+    // goal at every point, with and without noise; the stiff plants and the light 50 Hz one
+    // also the time; the heavy 50 Hz plant's rows take up to about 11 s (its 20 Hz
+    // anti-resonance rings after each step and the settling check waits for it).
+    for row in &r.grid {
         assert!(row.gain_db <= 0.1 && row.phase_deg <= 1.0, "{row:?}");
-        assert!(row.measurement_time_s <= 12.5, "{row:?}");
+        let limit = if row.plant.starts_with("J_L/J_M 5, 50 Hz") { 12.0 } else { 10.0 };
+        assert!(row.measurement_time_s <= limit, "{row:?}");
     }
     // The bench reports a miss as a miss.
     assert_eq!(r.goals_met(), r.grid.iter().all(|row| row.met));
-    // The oracle's own error is far below the goal.
-    assert!(r.oracle_self_check.0 <= 0.01 && r.oracle_self_check.1 <= 0.1, "{:?}", r.oracle_self_check);
+    // The oracle's own error, over every plant and point against itself with settling and
+    // records twice as long, is far below the goal.
+    assert!(r.oracle_self_check.0 <= 0.03 && r.oracle_self_check.1 <= 0.2, "{:?}", r.oracle_self_check);
     // The drive's f32 correlator and the host's f64 fit of the same samples agree.
     assert!(r.stream_vs_online.0 <= 0.01 && r.stream_vs_online.1 <= 0.1, "{:?}", r.stream_vs_online);
     // At exactly 2 kHz a single phase sees the sine at one phase and its opposite.

@@ -282,7 +282,7 @@ declare_variables! {
     79 sweep_points: Int32 "sweep.points" Parameter Fixed = core_count(|p| p.sweep.points); NONE; r(2.0, 127.0); "Frequencies from start to stop, both included";
     80 sweep_logarithmic: Int32 "sweep.logarithmic" Parameter Fixed = Params::default().sweep.logarithmic as i32; NONE; r(0.0, 1.0); "1 logarithmic, 0 linear spacing";
     81 sweep_extra_hz: Float64 "sweep.extra_hz" Parameter Fixed = core(|p| p.sweep.extra_hz); HZ; FREQ; "One more frequency inserted in order (0 = none)";
-    82 sweep_settle_cycles: Float64 "sweep.settle_cycles" Parameter Fixed = core(|p| p.sweep.settle_cycles); NONE; r(0.0, 1.0e4); "Settling before each record, in cycles (at least min_settle_s)";
+    82 sweep_settle_cycles: Float64 "sweep.settle_cycles" Parameter Fixed = core(|p| p.sweep.settle_cycles); NONE; r(0.0, 1.0e4); "Settling before each record, in cycles (at least min_settle_s); a frequency's first record then waits, half block by half block, until its response agrees with the previous half block's (the settling check, with precision_db > 0)";
     83 sweep_min_settle_s: Float64 "sweep.min_settle_s" Parameter Fixed = core(|p| p.sweep.min_settle_s); S; r(0.0, 1.0e4); "Shortest settling";
     84 sweep_measure_cycles: Float64 "sweep.measure_cycles" Parameter Fixed = core(|p| p.sweep.measure_cycles); NONE; r(1.0e-3, 1.0e4); "Measurement of each record, in cycles (at least min_measure_s)";
     85 sweep_min_measure_s: Float64 "sweep.min_measure_s" Parameter Fixed = core(|p| p.sweep.min_measure_s); S; r(0.0, 1.0e4); "Shortest measurement";
@@ -293,8 +293,8 @@ declare_variables! {
     90 sweep_prbs_degree: Int32 "sweep.prbs_degree" Parameter Fixed = core_count(|p| p.sweep.prbs_degree); NONE; r(2.0, 20.0); "PRBS: M-sequence degree (2 to 20; period 2^n - 1 chips)";
     91 sweep_prbs_divider: Int32 "sweep.prbs_divider" Parameter Fixed = core_count(|p| p.sweep.prbs_divider); NONE; r(1.0, 1.0e6); "PRBS: base ticks per chip";
     92 sweep_prbs_seconds: Float64 "sweep.prbs_seconds" Parameter Fixed = core(|p| p.sweep.prbs_seconds); S; r(1.0e-3, 1.0e4); "PRBS: measured duration";
-    93 sweep_precision_db: Float64 "sweep.precision_db" Parameter Fixed = core(|p| p.sweep.precision_db); DB; r(0.0, 100.0); "Stepped sine: lengthen a frequency's records by whole blocks so that the standard errors of its response G = Y/U, gain and phase (the phase's in the same relative size: 0.03 dB = 0.2 deg), predicted after the first block, are at most this (0 = fixed records)";
-    94 sweep_max_extensions: Int32 "sweep.max_extensions" Parameter Fixed = core_count(|p| p.sweep.max_extensions); NONE; r(0.0, 64.0); "At most so many extra measurement blocks per record (0 to 64)";
+    93 sweep_precision_db: Float64 "sweep.precision_db" Parameter Fixed = core(|p| p.sweep.precision_db); DB; r(0.0, 100.0); "Stepped sine: lengthen a frequency's records by half blocks so that the standard errors of its response G = Y/U, gain and phase (the phase's in the same relative size: 0.03 dB = 0.2 deg), predicted after the first block, are at most this, and settle each frequency until two half blocks agree within it (0 = fixed records, no settling check)";
+    94 sweep_max_extensions: Int32 "sweep.max_extensions" Parameter Fixed = core_count(|p| p.sweep.max_extensions); NONE; r(0.0, 64.0); "At most so many extra measurement blocks per record, and twice as many half blocks discarded while settling (0 to 64)";
 
     // Response-correction filter in front of the position loop (seed 001): `servo tune` writes it.
     95 corr_count: Int32 "corr.count" Parameter Fixed = Params::default().correction.count as i32; NONE; r(0.0, 8.0); "Sections in use (0 = no correction, up to 8)";
@@ -400,4 +400,6 @@ declare_variables! {
     // Anti-aliased acquisition for the identification (seed 001), appended likewise.
     185 electromagnetic_torque_mean: Float64 "electromagnetic_torque_mean" Output Continuous = 0.0; NM; ANY; "Mean of electromagnetic_torque over the last communication step (its base ticks' ends): an integrating acquisition, no aliasing from the loops' rates";
     186 load_acceleration_mean: Float64 "load_acceleration_mean" Output Continuous = 0.0; RAD_S2; ANY; "Mean of load_acceleration (the accelerometer, with its noise) over the last communication step, as electromagnetic_torque_mean";
+    // The sweep's settling check (seed 000, issue 15), appended likewise.
+    187 acq_half_block: Int32 "acq_half_block" Output Discrete = 0; NONE; ANY; "Half block of its frequency's first record the sample belongs to (the settling check; later samples keep the last index): the response is fitted to the samples from the frequency's last index minus one up, the earlier ones were taken before the loop settled";
 }

@@ -61,7 +61,7 @@ pub fn sample_rows(batches: &[SampleBatch]) -> Result<Vec<[f64; 7]>, FrameError>
                 s.phase as f64,
                 s.measuring as u8 as f64,
                 s.point as f64,
-                s.record as f64,
+                s.record() as f64,
             ]);
         }
     }

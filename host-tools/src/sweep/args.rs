@@ -37,14 +37,16 @@ pub struct SweepArgs {
     /// One more frequency (Hz) inserted in order; 0 for none
     #[arg(long, default_value_t = 2000.0)]
     pub extra: f64,
-    #[arg(long, default_value_t = 2.0)]
+    /// Settling before each record (cycles; the first record of a frequency then waits until
+    /// the response of successive half records agrees: the settling check)
+    #[arg(long, default_value_t = 1.0)]
     pub settle_cycles: f64,
-    #[arg(long, default_value_t = 4.0)]
+    #[arg(long, default_value_t = 3.0)]
     pub measure_cycles: f64,
     /// Shortest settling and measurement per record (s)
-    #[arg(long, default_value_t = 0.02)]
+    #[arg(long, default_value_t = 0.01)]
     pub min_settle: f64,
-    #[arg(long, default_value_t = 0.08)]
+    #[arg(long, default_value_t = 0.04)]
     pub min_measure: f64,
     /// Phase step 2π/shifts between repeats
     #[arg(long, default_value_t = 3)]
@@ -96,6 +98,19 @@ pub struct SweepArgs {
 /// 2 kHz, PRBS/H1 baseline, on-line vs stream, analytic model at low frequencies.
 #[derive(clap::Args)]
 pub struct SweepBenchArgs {
+    /// Only these plants of the grid (repeatable; 0 = the default axis, 1–4 the corners in
+    /// the printed order); the grid alone, without the comparisons (and exit 1 on a miss)
+    #[arg(long = "plant")]
+    pub plants: Vec<usize>,
+    /// Only these injection points (repeatable: velocity, torque, feedback); the grid alone
+    #[arg(long = "point")]
+    pub points: Vec<String>,
+    /// Only this current-sensor noise (A) of the grid (0 or the noisy rows' level)
+    #[arg(long)]
+    pub noise: Option<f64>,
+    /// Also print every frequency's gain and phase error of each selected row
+    #[arg(long)]
+    pub detail: bool,
     #[command(flatten)]
     pub common: Common,
 }

@@ -13,7 +13,7 @@
 //! - the analytic linear model of the loop at low frequencies against the oracle.
 //!
 //! The oracle ([`oracle_run`]) is the same loop measured with 8 kHz acquisition, records ten
-//! times longer, a 2^24-count encoder and no sensor noise.
+//! times longer, at least 0.5 s of settling, a 2^24-count encoder and no sensor noise.
 
 use servo_axis::variables::name;
 use std::collections::BTreeMap;
@@ -118,7 +118,54 @@ pub struct GridRow {
     pub phase_at_hz: f64,
     pub measurement_time_s: f64,
     pub met: bool,
+    /// Every compared frequency's signed gain (dB) and phase (deg) error.
+    pub per_frequency: Vec<FrequencyError>,
 }
+
+/// One frequency's error against the oracle.
+#[derive(Clone, Copy, Debug, Serialize)]
+pub struct FrequencyError {
+    pub frequency: f64,
+    pub gain_db: f64,
+    pub phase_deg: f64,
+}
+
+/// Which grid rows to run (empty: all).
+#[derive(Clone, Debug, Default)]
+pub struct GridSelection {
+    /// Indices into [`PLANTS`].
+    pub plants: Vec<usize>,
+    pub points: Vec<InjectionPoint>,
+    pub noise: Option<f64>,
+}
+
+impl GridSelection {
+    /// Refuses a plant index outside the grid and a noise level the grid does not have.
+    pub fn validate(&self) -> Result<()> {
+        if let Some(&i) = self.plants.iter().find(|&&i| i >= PLANTS.len()) {
+            return Err(anyhow!("plant {i} is not in the grid (0 to {})", PLANTS.len() - 1));
+        }
+        if let Some(n) = self.noise.filter(|n| !NOISE_LEVELS.contains(n)) {
+            return Err(anyhow!("noise {n} A is not in the grid ({NOISE_LEVELS:?})"));
+        }
+        Ok(())
+    }
+
+    fn plant(&self, i: usize) -> bool {
+        self.plants.is_empty() || self.plants.contains(&i)
+    }
+
+    fn point(&self, p: InjectionPoint) -> bool {
+        self.points.is_empty() || self.points.contains(&p)
+    }
+
+    fn noise(&self, n: f64) -> bool {
+        self.noise.is_none_or(|x| x == n)
+    }
+}
+
+/// Current-sensor noise levels of the grid (A).
+pub const NOISE_LEVELS: [f64; 2] = [0.0, DITHER_A];
 
 #[derive(Clone, Debug, Serialize)]
 pub struct MethodErrors {
@@ -143,8 +190,8 @@ pub struct SweepBench {
     pub stream_vs_online: (f64, f64),
     /// Analytic model against the oracle up to 30 Hz: largest dB, deg.
     pub analytic_low_frequency: (f64, f64),
-    /// The oracle's own residual error: against the same oracle with records twice as long
-    /// (default axis, every point; worst dB, deg).
+    /// The oracle's own residual error: against the same oracle with settling and records
+    /// twice as long (every plant and point; worst dB, deg).
     pub oracle_self_check: (f64, f64),
 }
 
@@ -221,18 +268,32 @@ fn our_run(point: InjectionPoint, amplitude: f32, parameters: BTreeMap<String, V
 }
 
 /// The grid rows of one plant and point (the oracle once, then each noise level).
-fn grid_rows(fmu: &Fmu, plant: &PlantCase, (point, amplitude): (InjectionPoint, f32)) -> Result<Vec<GridRow>> {
+fn grid_rows(
+    fmu: &Fmu,
+    plant: &PlantCase,
+    (point, amplitude): (InjectionPoint, f32),
+    selection: &GridSelection,
+) -> Result<Vec<GridRow>> {
     let base = plant.parameters();
     let oracle = online_results(&oracle_run(&our_run(point, amplitude, base.clone())).run(fmu, |_| {})?)?;
-    [0.0, DITHER_A]
+    NOISE_LEVELS
         .iter()
+        .filter(|&&noise| selection.noise(noise))
         .map(|&noise| {
             let run = our_run(point, amplitude, noise_parameters(&base, noise));
             let trace = run.run(fmu, |_| {})?;
             let ours = stream_results(&trace, &run.settings)?;
             let (gain_db, gain_at_hz, phase_deg, phase_at_hz) = worst(&ours, &oracle);
             let measurement_time_s = measured_time(&trace)?;
-            let compared = ours.iter().filter(|p| oracle.iter().any(|o| o.frequency == p.frequency)).count();
+            let per_frequency: Vec<FrequencyError> = ours
+                .iter()
+                .filter_map(|p| {
+                    let o = oracle.iter().find(|o| o.frequency == p.frequency)?;
+                    let (gain_db, phase_deg) = difference(p, o);
+                    Some(FrequencyError { frequency: p.frequency, gain_db, phase_deg })
+                })
+                .collect();
+            let compared = per_frequency.len();
             Ok(GridRow {
                 point: point_name(point).to_string(),
                 plant: plant.label(),
@@ -247,22 +308,35 @@ fn grid_rows(fmu: &Fmu, plant: &PlantCase, (point, amplitude): (InjectionPoint, 
                     && gain_db <= GOAL_DB
                     && phase_deg <= GOAL_DEG
                     && measurement_time_s <= GOAL_SECONDS,
+                per_frequency,
             })
         })
         .collect()
 }
 
+/// The selected rows of the grid (plant by plant, point by point, noise levels in order).
+pub fn grid(fmu: &Fmu, selection: &GridSelection, mut progress: impl FnMut(f64)) -> Result<Vec<GridRow>> {
+    selection.validate()?;
+    let jobs: Vec<(&PlantCase, (InjectionPoint, f32))> = PLANTS
+        .iter()
+        .enumerate()
+        .filter(|(i, _)| selection.plant(*i))
+        .flat_map(|(_, plant)| POINTS.iter().filter(|(p, _)| selection.point(*p)).map(move |&point| (plant, point)))
+        .collect();
+    let mut rows = Vec::new();
+    for (k, (plant, point)) in jobs.iter().enumerate() {
+        progress(k as f64 / jobs.len() as f64);
+        rows.extend(grid_rows(fmu, plant, *point, selection)?);
+    }
+    progress(1.0);
+    Ok(rows)
+}
+
 pub fn bench(fmu: &Fmu, mut progress: impl FnMut(f64)) -> Result<SweepBench> {
     let fs = control_core::Params::default().rates.current_loop_hz;
-    let jobs = PLANTS.len() * POINTS.len();
-    let mut grid = Vec::new();
-    for (i, plant) in PLANTS.iter().enumerate() {
-        for (j, &point) in POINTS.iter().enumerate() {
-            progress((i * POINTS.len() + j) as f64 / (jobs + 3) as f64);
-            grid.extend(grid_rows(fmu, plant, point)?);
-        }
-    }
-    progress(jobs as f64 / (jobs + 3) as f64);
+    let steps = (PLANTS.len() * POINTS.len()) as f64;
+    let grid = grid(fmu, &GridSelection::default(), |f| progress(f * steps / (steps + 3.0)))?;
+    let jobs = steps as usize;
 
     // The seed's comparison on the default axis, velocity command, with sensor noise.
     let ours_settings = SweepParams::default();
@@ -304,21 +378,26 @@ pub fn bench(fmu: &Fmu, mut progress: impl FnMut(f64)) -> Result<SweepBench> {
     let analytic_low_frequency = worst_up_to(&analytic, &oracle_points, 30.0);
     progress((jobs + 2) as f64 / (jobs + 3) as f64);
 
-    // The oracle against itself with records twice as long, every point of the default axis.
+    // The oracle against itself with settling and records twice as long, every point of
+    // every plant.
     let mut oracle_self_check = (0.0f64, 0.0f64);
-    for &(point, amplitude) in &POINTS {
-        let o = oracle_run(&our_run(point, amplitude, BTreeMap::new()));
-        let longer = SweepRun {
-            settings: SweepParams {
-                measure_cycles: 2.0 * o.settings.measure_cycles,
-                min_measure_s: 2.0 * o.settings.min_measure_s,
-                ..o.settings
-            },
-            ..o.clone()
-        };
-        let (a, b) = (online_results(&o.run(fmu, |_| {})?)?, online_results(&longer.run(fmu, |_| {})?)?);
-        let (g, _, p, _) = worst(&a, &b);
-        oracle_self_check = (oracle_self_check.0.max(g), oracle_self_check.1.max(p));
+    for plant in &PLANTS {
+        for &(point, amplitude) in &POINTS {
+            let o = oracle_run(&our_run(point, amplitude, plant.parameters()));
+            let longer = SweepRun {
+                settings: SweepParams {
+                    measure_cycles: 2.0 * o.settings.measure_cycles,
+                    min_measure_s: 2.0 * o.settings.min_measure_s,
+                    settle_cycles: 2.0 * o.settings.settle_cycles,
+                    min_settle_s: 2.0 * o.settings.min_settle_s,
+                    ..o.settings
+                },
+                ..o.clone()
+            };
+            let (a, b) = (online_results(&o.run(fmu, |_| {})?)?, online_results(&longer.run(fmu, |_| {})?)?);
+            let (g, _, p, _) = worst(&a, &b);
+            oracle_self_check = (oracle_self_check.0.max(g), oracle_self_check.1.max(p));
+        }
     }
     progress(1.0);
     Ok(SweepBench {

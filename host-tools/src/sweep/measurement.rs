@@ -108,19 +108,30 @@ impl SineFit {
 }
 
 /// The equivalent-time estimate from the acquisition stream: per frequency, a sine fitted at
-/// the excitation phase of every measured sample of every record (f64). Needs one acquisition
+/// the excitation phase of every measured sample of every record (f64) that the drive kept
+/// after its settling check (from the last half-block index minus one up). Needs one acquisition
 /// sample per communication step (acquisition divider = the position divider).
 pub fn stream_results(t: &Trace, settings: &SweepParams) -> Result<Vec<ResponsePoint>> {
-    let [point, measuring, u, y, phase, time] =
-        columns(t, ["acq_point", "acq_measuring", "acq_u", "acq_y", "acq_phase", "acq_time"])?;
+    let [point, measuring, u, y, phase, time, half_block] =
+        columns(t, ["acq_point", "acq_measuring", "acq_u", "acq_y", "acq_phase", "acq_time", "acq_half_block"])?;
+    // Each frequency's last half-block index: the samples before the one preceding it were
+    // taken before the loop settled (the drive discarded them).
+    let mut last_half: BTreeMap<i64, f64> = BTreeMap::new();
+    for i in 0..u.len() {
+        if measuring[i] != 0.0 {
+            let h = last_half.entry(point[i] as i64).or_insert(0.0);
+            *h = h.max(half_block[i]);
+        }
+    }
     let mut fits: BTreeMap<i64, SineFit> = BTreeMap::new();
     let mut last_time = f64::NEG_INFINITY;
     for i in 0..u.len() {
-        if measuring[i] == 0.0 || time[i] == last_time {
+        let k = point[i] as i64;
+        if measuring[i] == 0.0 || time[i] == last_time || half_block[i] + 1.0 < last_half[&k] {
             continue;
         }
         last_time = time[i];
-        fits.entry(point[i] as i64).or_default().add(u[i], y[i], phase[i]);
+        fits.entry(k).or_default().add(u[i], y[i], phase[i]);
     }
     let sign = if settings.point == InjectionPoint::VelocityFeedback { -1.0 } else { 1.0 };
     Ok(fits
