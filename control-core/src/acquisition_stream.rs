@@ -13,10 +13,11 @@ pub const CAPACITY: usize = 256;
 /// One frame's worth of samples.
 ///
 /// On the link (protocol version 5) a batch is `dropped`, then a sequence of its `count`
-/// samples only, each tick sent as the difference from the one before (the first from 0):
-/// 16 bytes a sample, about 2 an empty slot would cost nothing. Version 4 sent all 16 slots
-/// and whole ticks: at the link task's 2 ms poll a 4 kHz stream went out 8 samples a frame
-/// at 37 bytes each, more than a 921 600 Bd line carries.
+/// samples only, each tick sent as the difference from the one before (the first from 0),
+/// the record and the half block as two varints: about 17 bytes a sample, nothing for an
+/// empty slot. Version 4 sent all 16 slots and whole ticks: at the link task's 2 ms poll a
+/// 4 kHz stream went out 8 samples a frame at 37 bytes each, more than a 921 600 Bd line
+/// carries.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub struct SampleBatch {
     pub count: u8,
@@ -35,7 +36,9 @@ struct WireSample {
     phase: f32,
     measuring: bool,
     point: u32,
+    /// The two halves of [`AcquisitionSample::segment`], each a short varint.
     record: u32,
+    half_block: u32,
 }
 
 impl serde::Serialize for SampleBatch {
@@ -57,7 +60,8 @@ impl serde::Serialize for SampleBatch {
                         phase: x.phase,
                         measuring: x.measuring,
                         point: x.point,
-                        record: x.record,
+                        record: x.record(),
+                        half_block: x.half_block(),
                     };
                     seq.serialize_element(&w)?;
                 }
@@ -102,7 +106,7 @@ impl<'de> serde::Deserialize<'de> for SampleBatch {
                                 phase: w.phase,
                                 measuring: w.measuring,
                                 point: w.point,
-                                record: w.record,
+                                segment: AcquisitionSample::segment_of(w.record, w.half_block),
                             };
                             b.count += 1;
                         }

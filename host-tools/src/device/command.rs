@@ -59,8 +59,7 @@ fn device(args: &DeviceArgs) -> Result<bool> {
             expect_done(link.request(&Request::Stream { enabled: false })?, "Stream off")?;
             let batches = link.take_samples();
             let dropped = batches.last().map_or(0, |b| b.dropped);
-            let mut t =
-                Trace::new(["tick", "u", "y", "phase", "measuring", "point", "record"].map(String::from).to_vec());
+            let mut t = Trace::new(crate::device::frame_stream::SAMPLE_COLUMNS.map(String::from).to_vec());
             let rows = crate::device::frame_stream::sample_rows(&batches)
                 .map_err(|e| anyhow::anyhow!("corrupt sample batch from the drive: {e}"))?;
             for r in &rows {

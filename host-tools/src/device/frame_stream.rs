@@ -50,7 +50,10 @@ pub fn batch_samples(b: &SampleBatch) -> Result<&[control_core::phase_shifted_sw
 }
 
 /// Rows of `servo device stream`'s CSV: tick, u, y, phase, measuring, point, record.
-pub fn sample_rows(batches: &[SampleBatch]) -> Result<Vec<[f64; 7]>, FrameError> {
+/// The columns of [`sample_rows`].
+pub const SAMPLE_COLUMNS: [&str; 8] = ["tick", "u", "y", "phase", "measuring", "point", "record", "half_block"];
+
+pub fn sample_rows(batches: &[SampleBatch]) -> Result<Vec<[f64; 8]>, FrameError> {
     let mut rows = Vec::new();
     for b in batches {
         for s in batch_samples(b)? {
@@ -62,6 +65,7 @@ pub fn sample_rows(batches: &[SampleBatch]) -> Result<Vec<[f64; 7]>, FrameError>
                 s.measuring as u8 as f64,
                 s.point as f64,
                 s.record() as f64,
+                s.half_block() as f64,
             ]);
         }
     }

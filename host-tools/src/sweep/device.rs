@@ -15,7 +15,7 @@ use control_core::Commands;
 use serde::Serialize;
 
 use crate::analysis::response_point::ResponsePoint;
-use crate::device::frame_stream::sample_rows;
+use crate::device::frame_stream::{sample_rows, SAMPLE_COLUMNS};
 use crate::device::session::DriveSession;
 use crate::fmu::sweep_run::{SweepRun, START_AT};
 use crate::fmu::trace::Trace;
@@ -93,11 +93,9 @@ pub fn sweep_on_drive<T: crate::device::link::DrivePort>(
     let batches = session.take_samples();
     let dropped = batches.iter().map(|b| b.dropped).max().unwrap_or(0);
     let rows = sample_rows(&batches).map_err(|e| anyhow!("corrupt sample batch from the drive: {e}"))?;
-    let mut trace = Trace::new(
-        ["acq_time", "acq_u", "acq_y", "acq_phase", "acq_measuring", "acq_point", "acq_record"]
-            .map(String::from)
-            .to_vec(),
-    );
+    // The FMU's names for the stream's columns (`acq_time` in seconds where the drive sends ticks).
+    let mut trace =
+        Trace::new(SAMPLE_COLUMNS.map(|c| if c == "tick" { "acq_time".into() } else { format!("acq_{c}") }).to_vec());
     for r in &rows {
         let mut row = r.to_vec();
         row[0] /= session.tick_hz;

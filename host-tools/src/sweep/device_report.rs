@@ -136,7 +136,7 @@ fn save_partial<T: crate::device::link::DrivePort>(
     let batches = session.take_samples();
     let rows = crate::device::frame_stream::sample_rows(&batches).unwrap_or_default();
     let csv = out.join("sweep_partial.csv");
-    let mut t = Trace::new(["tick", "u", "y", "phase", "measuring", "point", "record"].map(String::from).to_vec());
+    let mut t = Trace::new(crate::device::frame_stream::SAMPLE_COLUMNS.map(String::from).to_vec());
     for r in &rows {
         t.rows.push(r);
     }
