@@ -8,3 +8,4 @@ pub mod link;
 pub mod session;
 pub mod telemetry_trace;
 pub mod timed_run;
+pub mod twin;

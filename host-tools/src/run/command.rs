@@ -101,16 +101,7 @@ fn run(args: &RunArgs) -> Result<bool> {
         if !common.json {
             println!("{} — {}", scenario.name, scenario.description);
             for c in &checks {
-                println!(
-                    "  [{}] {:<45} {:<16} observed {:>11.6} … {:<11.6} bounds {} … {}",
-                    if c.passed { "pass" } else { "FAIL" },
-                    c.description,
-                    c.signal,
-                    c.observed.0,
-                    c.observed.1,
-                    c.min.map_or("-inf".into(), |x| x.to_string()),
-                    c.max.map_or("+inf".into(), |x| x.to_string()),
-                );
+                crate::run::report::print_check(c);
             }
             if let Some(v) = &fmpy_verdict {
                 fmpy::print_verdict("fmpy cross-check", v);

@@ -11,23 +11,14 @@ use serde::Serialize;
 use crate::cli::progress_bar;
 use crate::device::link::DrivePort;
 use crate::device::session::DriveSession;
-use crate::device::telemetry_trace::difference;
 use crate::device::timed_run::SentAt;
+use crate::device::twin::{each_file, print_twin_lines, trace_differences, write_runs, TraceDifference};
 use crate::fmu::runner::{evaluate_checks, CheckResult, Fmu};
 use crate::fmu::scenario::Scenario;
-use crate::fmu::trace::Trace;
-use crate::plot::signals::plot_signals;
 use crate::run::device::scenario_on_drive;
 
 /// The traces compared with the twin.
 pub const COMPARED: [&str; 5] = ["motor_position", "velocity_estimate", "following_error", "iq", "torque_command_out"];
-
-#[derive(Clone, Debug, Serialize)]
-pub struct TraceDifference {
-    pub signal: String,
-    pub largest: f64,
-    pub rms: f64,
-}
 
 #[derive(Clone, Debug, Serialize)]
 pub struct DeviceScenarioReport {
@@ -50,27 +41,17 @@ pub fn run_on_device<T: DrivePort>(
     out: &Path,
     json: bool,
 ) -> Result<bool> {
-    let mut all_ok = true;
-    let mut reports = Vec::new();
-    for file in files {
+    let run_one = |file: &Path| -> Result<Option<DeviceScenarioReport>> {
         let scenario = Scenario::load(file)?;
         if let Some(why) = crate::run::device::not_for_a_drive(&scenario) {
             if !json {
                 println!("{}: skipped on the drive: {why}", scenario.name);
             }
-            continue;
+            return Ok(None);
         }
-        let r = one(fmu, (port, session), &scenario, out, json)?;
-        all_ok &= r.passed;
-        if !json {
-            print(&r);
-        }
-        reports.push(r);
-    }
-    if json {
-        println!("{}", serde_json::to_string_pretty(&reports)?);
-    }
-    Ok(all_ok)
+        one(fmu, (port, &mut *session), &scenario, out, json).map(Some)
+    };
+    each_file(files, json, run_one, |r| r.passed, print)
 }
 
 fn one<T: DrivePort>(
@@ -88,25 +69,9 @@ fn one<T: DrivePort>(
     let checks = evaluate_checks(&Scenario { checks: measurable, ..run.as_run.clone() }, &run.trace)?;
     let twin = fmu.run(&run.as_run, |_| {})?;
     let twin_passed = evaluate_checks(&run.as_run, &twin)?.iter().all(|c| c.passed);
-    let differences = COMPARED
-        .iter()
-        .filter_map(|n| {
-            difference(&run.trace, &twin, n).map(|(largest, rms)| TraceDifference {
-                signal: n.to_string(),
-                largest,
-                rms,
-            })
-        })
-        .collect();
-    std::fs::create_dir_all(out)?;
-    let csv = out.join(format!("{}.device.csv", scenario.name));
-    run.trace.write_csv(&csv)?;
-    let twin_csv = out.join(format!("{}.twin.csv", scenario.name));
-    twin.write_csv(&twin_csv)?;
-    let svg = out.join(format!("{}.svg", scenario.name));
+    let differences = trace_differences(&run.trace, &twin, &COMPARED);
     let signals: Vec<String> = COMPARED.iter().map(|s| s.to_string()).collect();
-    let traces: Vec<(&str, &Trace)> = vec![("drive", &run.trace), ("FMU twin", &twin)];
-    plot_signals(&svg, &format!("{} on the drive at {port}, and its twin", scenario.name), &traces, &signals)?;
+    let files = write_runs(out, (&scenario.name, port), (&run.trace, &twin), &signals)?;
     let mut r = DeviceScenarioReport {
         scenario: scenario.name.clone(),
         port: port.to_string(),
@@ -119,7 +84,7 @@ fn one<T: DrivePort>(
         events: run.sent,
         twin_passed,
         differences,
-        files: vec![csv, twin_csv, svg],
+        files,
     };
     let json = out.join(format!("{}.json", scenario.name));
     std::fs::write(&json, serde_json::to_string_pretty(&r)?)?;
@@ -130,28 +95,10 @@ fn one<T: DrivePort>(
 fn print(r: &DeviceScenarioReport) {
     println!("{} on the drive at {}", r.scenario, r.port);
     for c in &r.checks {
-        println!(
-            "  [{}] {:<45} {:<18} observed {:>11.6} … {:<11.6} bounds {} … {}",
-            if c.passed { "pass" } else { "FAIL" },
-            c.description,
-            c.signal,
-            c.observed.0,
-            c.observed.1,
-            c.min.map_or("-inf".into(), |x| x.to_string()),
-            c.max.map_or("+inf".into(), |x| x.to_string()),
-        );
+        crate::run::report::print_check(c);
     }
     for n in &r.not_measurable {
         println!("  [ -- ] not measurable on a drive: {n}");
     }
-    let events: Vec<String> =
-        r.events.iter().map(|k| format!("{:.4} → {:.4}…{:.4} s", k.planned, k.before, k.after)).collect();
-    println!("  events as planned → when the drive got them: {}", events.join(", "));
-    println!("  FMU twin (same events at the same times): checks {}", if r.twin_passed { "pass" } else { "FAIL" });
-    for d in &r.differences {
-        println!("  drive − twin {:<20} largest {:>10.4}  rms {:>10.4}", d.signal, d.largest, d.rms);
-    }
-    for f in &r.files {
-        println!("  → {}", f.display());
-    }
+    print_twin_lines(&r.events, r.twin_passed, &r.differences, &r.files);
 }

@@ -67,3 +67,17 @@ pub fn write_html(path: &Path, title: &str, preamble: &str, scenarios: &[Scenari
     std::fs::write(path, h)?;
     Ok(())
 }
+
+/// A check's line in a report.
+pub fn print_check(c: &crate::fmu::runner::CheckResult) {
+    println!(
+        "  [{}] {:<45} {:<18} observed {:>11.6} … {:<11.6} bounds {} … {}",
+        if c.passed { "pass" } else { "FAIL" },
+        c.description,
+        c.signal,
+        c.observed.0,
+        c.observed.1,
+        c.min.map_or("-inf".into(), |x| x.to_string()),
+        c.max.map_or("+inf".into(), |x| x.to_string()),
+    );
+}

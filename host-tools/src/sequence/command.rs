@@ -69,13 +69,7 @@ fn sequence(args: &SequenceArgs) -> Result<bool> {
         if !common.json {
             println!("{} — {}", s.name, s.description);
             for o in &outcomes {
-                println!(
-                    "  [{}] {:<52} {:<48} asked: {}",
-                    if o.passed { "pass" } else { "FAIL" },
-                    o.description,
-                    o.observed,
-                    o.bound
-                );
+                o.print();
             }
             if let Some(v) = &fmpy_verdict {
                 fmpy::print_verdict("fmpy cross-check", v);

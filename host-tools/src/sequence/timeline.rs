@@ -132,6 +132,19 @@ pub struct Outcome {
     pub bound: String,
 }
 
+impl Outcome {
+    /// Its line in a report.
+    pub fn print(&self) {
+        println!(
+            "  [{}] {:<52} {:<48} asked: {}",
+            if self.passed { "pass" } else { "FAIL" },
+            self.description,
+            self.observed,
+            self.bound
+        );
+    }
+}
+
 fn on_grid(t: f64, what: &str, stop: f64) -> Result<()> {
     let k = t / DEFAULT_STEP;
     if !(t.is_finite() && t >= 0.0 && t <= stop + 1e-12) || (k - k.round()).abs() > 1e-6 {

@@ -26,6 +26,23 @@ pub struct TwinPoint {
     pub difference_deg: f64,
 }
 
+impl TwinPoint {
+    /// Hz, the drive's dB, degrees and quality, the twin's dB and degrees, the differences.
+    pub fn values(&self) -> [f64; 8] {
+        let (d, t) = (&self.drive, &self.twin);
+        [
+            self.frequency,
+            d.gain_db,
+            d.phase_deg,
+            d.quality,
+            t.gain_db,
+            t.phase_deg,
+            self.difference_db,
+            self.difference_deg,
+        ]
+    }
+}
+
 #[derive(Clone, Debug, Serialize)]
 pub struct DeviceSweepReport {
     pub port: String,
@@ -89,16 +106,7 @@ pub fn run_on_device<T: crate::device::link::DrivePort>(
             .to_vec(),
     );
     for p in &points {
-        t.rows.push(vec![
-            p.frequency,
-            p.drive.gain_db,
-            p.drive.phase_deg,
-            p.drive.quality,
-            p.twin.gain_db,
-            p.twin.phase_deg,
-            p.difference_db,
-            p.difference_deg,
-        ]);
+        t.rows.push(p.values());
     }
     t.write_csv(&csv)?;
     let svg = out.join("bode.svg");
@@ -170,17 +178,8 @@ impl DeviceSweepReport {
             "Hz", "gain dB", "phase deg", "quality", "twin dB", "twin deg", "diff dB", "diff deg"
         );
         for p in &self.points {
-            println!(
-                "  {:>10.2} {:>10.3} {:>10.2} {:>8.4} {:>10.3} {:>10.2} {:>9.3} {:>9.2}",
-                p.frequency,
-                p.drive.gain_db,
-                p.drive.phase_deg,
-                p.drive.quality,
-                p.twin.gain_db,
-                p.twin.phase_deg,
-                p.difference_db,
-                p.difference_deg
-            );
+            let [f, g, ph, q, tg, tp, dg, dp] = p.values();
+            println!("  {f:>10.2} {g:>10.3} {ph:>10.2} {q:>8.4} {tg:>10.3} {tp:>10.2} {dg:>9.3} {dp:>9.2}");
         }
         println!(
             "  drive vs twin: largest difference {:.3} dB, {:.2} deg",
