@@ -104,3 +104,20 @@ fn a_corrupting_line_gives_a_clear_error_not_a_wrong_answer() {
     }
     assert!(errors > 0, "5 % of bytes corrupted and every answer got through?");
 }
+
+#[test]
+fn a_fault_during_a_sweep_stops_it_with_the_fault_named_and_the_samples_kept() {
+    let mut st = settings();
+    st.faults = vec![ScheduledFault { fault: BoardFault::Break, at: 1.5 }];
+    let mut s = session(VirtualDrive::power_on(&st, FileFlash::in_memory()).unwrap());
+    let run = crate::fmu::sweep_run::SweepRun {
+        settings: control_core::phase_shifted_sweep::SweepParams::default(),
+        parameters: Default::default(),
+        velocity: 50.0,
+    };
+    let e = crate::sweep::device::sweep_on_drive(&mut s, &run, |_| {}).unwrap_err().to_string();
+    assert!(e.contains("latched a fault during the sweep") && e.contains("hardware break input"), "{e}");
+    let kept = crate::device::frame_stream::sample_rows(&s.take_samples()).unwrap();
+    // About 1.4 s of a 4 kHz stream arrived before the fault.
+    assert!(kept.len() > 4_000, "{} samples kept", kept.len());
+}
