@@ -36,6 +36,11 @@ impl FrameAssembler {
             return None;
         }
         let len = core::mem::take(&mut self.len);
+        if len == 0 {
+            // An empty frame: a lone delimiter, which a host sends to end whatever partial
+            // frame a corrupted terminator left behind. Nothing to answer.
+            return None;
+        }
         if len > self.frame.len() {
             return Some(Err(FrameError::TooLong));
         }

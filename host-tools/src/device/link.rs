@@ -35,26 +35,56 @@ pub struct DeviceLink<T: Read + Write> {
     timeout: Duration,
     /// Bytes received from the drive so far.
     pub bytes_read: u64,
+    /// The last request failed (no answer, a corrupt frame): before the next one, end the
+    /// drive's partial frame and drop what is in flight.
+    resync: bool,
 }
 
 impl<T: Read + Write> DeviceLink<T> {
     pub fn new(port: T, timeout: Duration) -> Self {
-        Self { port, pending: FrameStream::default(), samples: Vec::new(), timeout, bytes_read: 0 }
+        Self { port, pending: FrameStream::default(), samples: Vec::new(), timeout, bytes_read: 0, resync: false }
     }
 
     /// Send one request and wait for its answer.
     pub fn request(&mut self, request: &Request) -> Result<Response> {
         let mut buf = vec![0u8; MAX_FRAME + 8];
         let n = encode(request, &mut buf).map_err(|e| anyhow::anyhow!("cannot encode the request: {e}"))?;
+        if std::mem::take(&mut self.resync) {
+            self.resynchronise()?;
+        }
         self.port.write_all(&buf[..n]).context("cannot write to the drive")?;
         self.port.flush().ok();
         let deadline = Instant::now() + self.timeout;
         loop {
-            match self.next_frame(deadline)? {
-                Response::Samples(b) => self.samples.push(b),
-                other => return Ok(other),
+            match self.next_frame(deadline) {
+                Ok(Response::Samples(b)) => self.samples.push(b),
+                Ok(other) => return Ok(other),
+                Err(e) => {
+                    self.resync = true;
+                    return Err(e);
+                }
             }
         }
+    }
+
+    /// After a failed request: a lone delimiter ends any partial frame the drive holds (a
+    /// corrupted terminator merges a request with the next; the drive ignores an empty
+    /// frame), then whatever arrives within a tenth of the timeout is dropped (an answer to
+    /// the failed request, a frame error for the merged bytes); sample batches are kept.
+    fn resynchronise(&mut self) -> Result<()> {
+        self.port.write_all(&[0]).context("cannot write to the drive")?;
+        self.port.flush().ok();
+        self.pending = FrameStream::default();
+        let until = Instant::now() + self.timeout / 10;
+        while Instant::now() < until {
+            match self.next_frame(until) {
+                Ok(Response::Samples(b)) => self.samples.push(b),
+                Ok(_) => {}
+                Err(_) if Instant::now() >= until => break,
+                Err(_) => {}
+            }
+        }
+        Ok(())
     }
 
     /// Let `d` pass (see [`DrivePort::pause`]).

@@ -59,11 +59,14 @@ impl<T: DrivePort> DriveSession<T> {
         }
     }
 
+    /// The drive's telemetry; asked once more after a failed answer (a corrupt frame, none
+    /// within the timeout: asking changes nothing in the drive).
     pub fn telemetry(&mut self) -> Result<Telemetry> {
-        match self.link.request(&Request::GetTelemetry)? {
+        let ask = |link: &mut DeviceLink<T>| match link.request(&Request::GetTelemetry)? {
             Response::Telemetry(t) => Ok(t),
             other => bail!("unexpected answer to a telemetry request: {other:?}"),
-        }
+        };
+        ask(&mut self.link).or_else(|_| ask(&mut self.link))
     }
 
     /// Torque mode at zero torque; refuses to go on with faults latched (they are the
