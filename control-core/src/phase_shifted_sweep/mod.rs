@@ -40,11 +40,11 @@
 //! for up to [`MAX_SWEEP_POINTS`] frequencies are kept. A PRBS mode (an M-sequence of configurable
 //! degree and chip rate: seed 001's identification excitation) feeds the same acquisition.
 //!
-//! One idea a file: [`settings`] (the parameters, their checks and errors), [`frequency_plan`]
-//! (the frequencies and the length of every record), [`sine_fit`] (the correlator sums and
-//! the response and its standard errors), [`settling_check`] and [`precision_control`]
-//! (when the measurement starts and how long the records run), [`prbs`] (the PRBS mode),
-//! [`acquisition`] (the samples the drive streams); this file holds the results and the
+//! One idea a file: `settings.rs` (the parameters, their checks and errors), `frequency_plan.rs`
+//! (the frequencies and the length of every record), `sine_fit.rs` (the correlator sums and
+//! the response and its standard errors), `settling_check.rs` and `precision_control.rs`
+//! (when the measurement starts and how long the records run), `prbs.rs` (the PRBS mode),
+//! `acquisition.rs` (the samples the drive streams); this file holds the results and the
 //! runner, [`PhaseShiftedSweep`], which steps through records and frequencies tick by tick.
 
 mod acquisition;
