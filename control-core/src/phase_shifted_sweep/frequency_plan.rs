@@ -1,0 +1,199 @@
+//! The frequency plan: the sweep's frequencies in ascending order (the extra one found in
+//! its place once, [`FrequencyPlan`]), the threshold from which records are phase shifted,
+//! and the length of every record and of the whole sweep.
+
+use super::{SweepParams, SweepSignal};
+
+/// Where the extra frequency sits among the planned ones, found once: both the count and the
+/// position take every base frequency (a power each, about 20 000 instructions for 128 points
+/// on a Cortex-M4), which the runner must not compute inside a control tick.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct FrequencyPlan {
+    /// Number of frequencies (with the extra one; at most `MAX_SWEEP_POINTS`).
+    pub count: u16,
+    /// Index of the extra frequency (`NO_EXTRA`: none, or it is one of the base frequencies).
+    pub extra_at: u16,
+}
+
+/// [`FrequencyPlan::extra_at`] when there is no extra frequency.
+pub const NO_EXTRA: u16 = u16::MAX;
+
+impl SweepParams {
+    /// Number of frequencies (with the extra one).
+    pub fn count(&self) -> usize {
+        let extra = self.extra_hz > 0.0 && !(0..self.points as usize).any(|i| self.base(i) == self.extra_hz);
+        self.points as usize + extra as usize
+    }
+
+    /// The count and the extra frequency's place (see [`FrequencyPlan`]).
+    /// Settings that passed [`Self::validate`] have at most `MAX_SWEEP_POINTS`; larger counts
+    /// saturate (a sweep is never built from them).
+    pub fn plan(&self) -> FrequencyPlan {
+        let count = u16::try_from(self.count()).unwrap_or(u16::MAX);
+        if count as u32 == self.points {
+            return FrequencyPlan { count, extra_at: NO_EXTRA };
+        }
+        let at = (0..self.points as usize).filter(|&j| self.base(j) < self.extra_hz).count();
+        FrequencyPlan { count, extra_at: u16::try_from(at).unwrap_or(NO_EXTRA - 1) }
+    }
+
+    fn base(&self, i: usize) -> f32 {
+        let x = i as f32 / (self.points - 1) as f32;
+        if self.logarithmic {
+            self.start_hz * libm::powf(self.stop_hz / self.start_hz, x)
+        } else {
+            self.start_hz + (self.stop_hz - self.start_hz) * x
+        }
+    }
+
+    /// The i-th frequency in ascending order.
+    pub fn frequency(&self, i: usize) -> f32 {
+        self.frequency_in(&self.plan(), i)
+    }
+
+    /// The i-th frequency of `plan` (this parameter set's [`Self::plan`]): one power at most.
+    pub fn frequency_in(&self, plan: &FrequencyPlan, i: usize) -> f32 {
+        if plan.extra_at == NO_EXTRA {
+            return self.base(i);
+        }
+        let at = plan.extra_at as usize;
+        match i.cmp(&at) {
+            core::cmp::Ordering::Less => self.base(i),
+            core::cmp::Ordering::Equal => self.extra_hz,
+            core::cmp::Ordering::Greater => self.base(i - 1),
+        }
+    }
+
+    /// Phase shifting from this frequency up.
+    pub fn threshold(&self, base_rate_hz: f32) -> f32 {
+        if self.threshold_hz > 0.0 {
+            self.threshold_hz
+        } else {
+            0.5 * base_rate_hz / self.acquisition_divider as f32
+        }
+    }
+
+    /// Records at frequency f.
+    pub fn records(&self, f: f32, base_rate_hz: f32) -> u32 {
+        if f >= self.threshold(base_rate_hz) {
+            self.repeats
+        } else {
+            1
+        }
+    }
+
+    /// Settling ticks (a whole number of acquisition periods) and measured samples of one
+    /// record at f.
+    pub fn record_length(&self, f: f32, base_rate_hz: f32) -> (u64, u64) {
+        let d = self.acquisition_divider as f32;
+        let settle = libm::ceilf(self.min_settle_s.max(self.settle_cycles / f) * base_rate_hz / d) as u64;
+        let samples = (libm::roundf(self.min_measure_s.max(self.measure_cycles / f) * base_rate_hz / d) as u64).max(1);
+        (settle.saturating_mul(self.acquisition_divider as u64), samples)
+    }
+
+    /// Base ticks from the start to the end of the sweep when no frequency is extended (the
+    /// sweep's length when `precision_db` is 0 or every point meets it at once).
+    pub fn total_ticks(&self, base_rate_hz: f32) -> u64 {
+        self.ticks_with_extensions(base_rate_hz, 0)
+    }
+
+    /// Base ticks of the sweep when every frequency takes all `max_extensions` blocks and
+    /// discards `2·max_extensions` half blocks while settling: the longest it can run.
+    pub fn max_total_ticks(&self, base_rate_hz: f32) -> u64 {
+        let extensions = if self.precision_db > 0.0 { self.max_extensions } else { 0 };
+        self.ticks_with_extensions(base_rate_hz, extensions)
+    }
+
+    /// `extensions` blocks per record, and as many blocks of half blocks discarded while the
+    /// first record settles (see `PhaseShiftedSweep::settled`).
+    fn ticks_with_extensions(&self, base_rate_hz: f32, extensions: u32) -> u64 {
+        let d = self.acquisition_divider as u64;
+        match self.signal {
+            SweepSignal::Prbs => {
+                self.prbs_settle_ticks(base_rate_hz).saturating_add(self.prbs_samples(base_rate_hz).saturating_mul(d))
+            }
+            SweepSignal::SteppedSine => (0..self.count())
+                .map(|i| {
+                    let f = self.frequency(i);
+                    let (settle, samples) = self.record_length(f, base_rate_hz);
+                    let added = (samples / 2).saturating_mul(2 * extensions as u64);
+                    let measure = samples.saturating_add(added).saturating_mul(d);
+                    let discarded = (samples / 2).saturating_mul(d).saturating_mul(2 * extensions as u64);
+                    (self.records(f, base_rate_hz) as u64)
+                        .saturating_mul(settle.saturating_add(measure))
+                        .saturating_add(discarded)
+                })
+                .fold(0u64, u64::saturating_add),
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_frequency_list_includes_the_extra_point_in_order() {
+        let p = SweepParams::default();
+        assert_eq!(p.count(), 41);
+        let f: [f32; 41] = core::array::from_fn(|i| p.frequency(i));
+        assert!(f.windows(2).all(|w| w[0] < w[1]));
+        assert!(f.contains(&2000.0) && (f[0] - 10.0).abs() < 1e-4 && (f[40] - 3000.0).abs() < 0.1);
+    }
+
+    #[test]
+    fn the_plan_found_once_gives_the_frequencies_of_a_sorted_list() {
+        // Reference: the base frequencies, the extra one added unless already there, sorted.
+        for (points, extra, logarithmic) in [
+            (41, 2000.0, true),
+            (41, 0.0, true),
+            (5, 10.0, true),
+            (5, 3000.0, true),
+            (9, 777.0, false),
+            (9, 1.0, false),
+        ] {
+            let p = SweepParams { points, extra_hz: extra, logarithmic, ..Default::default() };
+            let mut list: heapless_list::List = heapless_list::List::new();
+            for i in 0..points as usize {
+                let x = i as f32 / (points - 1) as f32;
+                list.push(if logarithmic {
+                    p.start_hz * libm::powf(p.stop_hz / p.start_hz, x)
+                } else {
+                    p.start_hz + (p.stop_hz - p.start_hz) * x
+                });
+            }
+            if extra > 0.0 && !list.as_slice().contains(&extra) {
+                list.push(extra);
+            }
+            list.sort();
+            let plan = p.plan();
+            assert_eq!(plan.count as usize, list.len, "{points} {extra}");
+            for (i, f) in list.as_slice().iter().enumerate() {
+                assert_eq!(p.frequency_in(&plan, i), *f, "{points} {extra} #{i}");
+            }
+        }
+    }
+
+    /// A fixed-capacity list for the test (the core has no allocator).
+    mod heapless_list {
+        pub struct List {
+            items: [f32; 64],
+            pub len: usize,
+        }
+        impl List {
+            pub fn new() -> Self {
+                Self { items: [0.0; 64], len: 0 }
+            }
+            pub fn push(&mut self, x: f32) {
+                self.items[self.len] = x;
+                self.len += 1;
+            }
+            pub fn as_slice(&self) -> &[f32] {
+                &self.items[..self.len]
+            }
+            pub fn sort(&mut self) {
+                self.items[..self.len].sort_unstable_by(f32::total_cmp);
+            }
+        }
+    }
+}

@@ -1,0 +1,513 @@
+//! Frequency-response measurement on the drive (seed 000): a stepped sine whose repeats are
+//! phase shifted, so the response stays measurable above the acquisition's Nyquist frequency.
+//!
+//! The loop runs faster than the acquisition. A sine of frequency f is injected at the loop
+//! rate; U and Y are acquired every `acquisition_divider` base ticks, each sample with the
+//! excitation's phase θ at that instant. The response is `G = Y/U`, the complex amplitudes
+//! of sines fitted to y and u at those phases: the phase, not the sample time, is the time
+//! base, so records with different initial phases add up as one equivalent-time record. At
+//! and above `threshold_hz` (default: the acquisition Nyquist frequency) each frequency is
+//! measured `repeats` times with initial phases `r·2π/shifts` (claims 5 and 6); below, once,
+//! unshifted. A single record sampled at exactly fs/2 sees the sine at one phase and its
+//! opposite only: cos θ and sin θ are collinear and the sine cannot be told apart from its
+//! phase. Records shifted by 2π/3 spread the phases over the circle.
+//!
+//! What U and Y are, per injection point (the sine s is added there):
+//! - velocity command: U = velocity reference + s, Y = velocity estimate → closed velocity
+//!   loop T = CP/(1 + CP);
+//! - torque command: U = torque command + s, Y = velocity estimate → plant P (torque to motor
+//!   velocity, measured inside the running loop);
+//! - velocity feedback (the seed's figure): the controller sees estimate + s; U = estimate + s,
+//!   Y = estimate → `−Y/U` is the open loop L = CP (the sign is applied in the result).
+//!
+//! Below the threshold an acquisition sample is the mean of u and of y over the loop ticks of
+//! its acquisition period (the same average on both cancels in Y/U; it keeps the encoder's
+//! differentiated quantisation noise from folding down to low frequencies); from the
+//! threshold up it is the instantaneous value, as equivalent-time sampling needs.
+//!
+//! The sine is phase continuous across frequencies (a new frequency starts at the phase the
+//! old one reached), so a step does not jolt the loop. The measurement starts when the loop
+//! has settled, judged from the response itself, not from a number of periods: the first
+//! record of a frequency is measured in half blocks, and the earlier of two half blocks is
+//! discarded while their responses disagree beyond the precision (or their residuals still
+//! decay; see [`PhaseShiftedSweep::settled`]). Each sample carries its half-block index, so
+//! that a host fitting the stream keeps the same samples. Precision control then lengthens a
+//! frequency's records by half blocks until the predicted standard errors of G, gain and
+//! phase, meet `precision_db` (see [`SineFitSums::response_error`]).
+//!
+//! The on-line correlator keeps the sums of a three-parameter sine fit per frequency (no
+//! sample buffers; see [`SineFitSums`]); results
+//! for up to [`MAX_SWEEP_POINTS`] frequencies are kept. A PRBS mode (an M-sequence of configurable
+//! degree and chip rate: seed 001's identification excitation) feeds the same acquisition.
+//!
+//! One idea a file: `settings.rs` (the parameters, their checks and errors), `frequency_plan.rs`
+//! (the frequencies and the length of every record), `sine_fit.rs` (the correlator sums and
+//! the response and its standard errors), `settling_check.rs` and `precision_control.rs`
+//! (when the measurement starts and how long the records run), `prbs.rs` (the PRBS mode),
+//! `acquisition.rs` (the samples the drive streams); this file holds the results and the
+//! runner, [`PhaseShiftedSweep`], which steps through records and frequencies tick by tick.
+
+mod acquisition;
+mod frequency_plan;
+mod prbs;
+mod precision_control;
+mod settings;
+mod settling_check;
+mod sine_fit;
+#[cfg(test)]
+mod tests;
+
+pub use acquisition::AcquisitionSample;
+pub use frequency_plan::{FrequencyPlan, NO_EXTRA};
+pub use settings::{SweepError, SweepParams, MAX_EXTENSIONS, MAX_SWEEP_DITHER};
+pub use sine_fit::ResponseError;
+
+use crate::excitation::{phase_angle, InjectionPoint, SineGenerator};
+use crate::m_sequence::MSequence;
+use crate::trigonometry::ReducedAngle;
+use crate::TAU;
+use settling_check::MIN_CHECKED_SAMPLES;
+use sine_fit::SineFitSums;
+
+pub const MAX_SWEEP_POINTS: usize = 128;
+
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+pub enum SweepSignal {
+    #[default]
+    SteppedSine,
+    /// Maximum-length binary sequence, ±amplitude.
+    Prbs,
+}
+
+impl SweepSignal {
+    /// The signal of a `sweep.signal` code: 0 stepped sine, 1 PRBS.
+    pub fn from_code(code: i32) -> Option<Self> {
+        match code {
+            0 => Some(Self::SteppedSine),
+            1 => Some(Self::Prbs),
+            _ => None,
+        }
+    }
+
+    /// The inverse of [`Self::from_code`].
+    pub fn code(self) -> i32 {
+        match self {
+            Self::SteppedSine => 0,
+            Self::Prbs => 1,
+        }
+    }
+}
+
+/// One measured frequency.
+#[derive(Clone, Copy, Debug, Default, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct SweepResult {
+    pub frequency: f32,
+    /// G = Y/U (−Y/U for feedback injection).
+    pub re: f32,
+    pub im: f32,
+    /// How well the samples' phases determine a sine, 0..1: 1 when they spread over the
+    /// circle, 0 when they sit at one phase and its opposite (a single record at exactly fs/2).
+    pub quality: f32,
+}
+
+impl SweepResult {
+    pub fn gain_db(&self) -> f32 {
+        20.0 * libm::log10f(libm::hypotf(self.re, self.im))
+    }
+    pub fn phase_deg(&self) -> f32 {
+        libm::atan2f(self.im, self.re) * (360.0 / TAU)
+    }
+}
+
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+pub enum SweepState {
+    #[default]
+    Idle,
+    Settling,
+    Measuring,
+    Done,
+}
+
+impl SweepState {
+    /// The state of a `sweep_state` output code: 0 idle, 1 settling, 2 measuring, 3 done.
+    pub fn from_code(code: i32) -> Option<Self> {
+        match code {
+            0 => Some(Self::Idle),
+            1 => Some(Self::Settling),
+            2 => Some(Self::Measuring),
+            3 => Some(Self::Done),
+            _ => None,
+        }
+    }
+
+    /// The inverse of [`Self::from_code`].
+    pub fn code(self) -> i32 {
+        match self {
+            Self::Idle => 0,
+            Self::Settling => 1,
+            Self::Measuring => 2,
+            Self::Done => 3,
+        }
+    }
+}
+
+#[derive(Clone, Copy, Debug, Default, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct SweepStatus {
+    pub state: SweepState,
+    pub point: u32,
+    pub record: u32,
+    pub frequency: f32,
+    pub done_points: u32,
+    pub last: SweepResult,
+    pub sample: AcquisitionSample,
+}
+
+/// Start of the dither's xorshift32 sequence (any non-zero value; the same for every sweep).
+const DITHER_SEED: u32 = 0x2545_F491;
+
+#[derive(Clone, Copy, Debug)]
+pub struct PhaseShiftedSweep {
+    params: SweepParams,
+    base_rate_hz: f32,
+    status: SweepStatus,
+    generator: SineGenerator,
+    /// Ticks left in the present stage after this one: `left + 1 + left_high·2³²` (see
+    /// [`Self::set_left`]; a 32-bit countdown on the tick, the Cortex-M4 has no 64-bit
+    /// arithmetic).
+    left: u32,
+    left_high: u32,
+    /// Half blocks (half a base measurement each) added to each record of the present frequency (see
+    /// `SweepParams::precision_db`), decided once the first record's base block is in (0
+    /// until then, and when none are needed).
+    extensions: u32,
+    acc: SineFitSums,
+    /// Settling check of the present frequency's first record (see [`Self::settled`]): the
+    /// sums at the start of the present half block, the response of the previous half block,
+    /// the half blocks discarded so far, and whether the check still runs.
+    half_start: SineFitSums,
+    previous_half: Option<((f32, f32), f32)>,
+    discarded_halves: u32,
+    checking_settling: bool,
+    /// Index of the present half block (see [`AcquisitionSample::half_block`]; at most
+    /// `1 + 2·MAX_EXTENSIONS`), and the samples' word of record and half block (found when
+    /// either changes, not on every sample: the Cortex-M4's tick budget).
+    half_block: u32,
+    segment: u32,
+    /// Sums of u and y over the loop ticks of the present acquisition period, and their count.
+    period_sums: (f32, f32, f32),
+    /// The present frequency's samples are period means (a stepped sine below the threshold).
+    averaging: bool,
+    /// xorshift32 state of the dither and the dither of the present tick (N·m).
+    dither_state: u32,
+    dither: f32,
+    /// The present frequency is dithered (`dither` > 0, at or above the threshold).
+    dithering: bool,
+    sequence: MSequence,
+    chip: f32,
+    /// The excitation value and phase (the generator's accumulator word, converted on
+    /// acquisition ticks only) of the present tick, and the phase reduced for its sine and
+    /// cosine (evaluated on acquisition ticks only).
+    value: f32,
+    phase_word: u32,
+    angle: ReducedAngle,
+    results: [SweepResult; MAX_SWEEP_POINTS],
+    /// The parameters' frequency plan, found when the sweep is built (outside the tick).
+    plan: FrequencyPlan,
+}
+
+impl PhaseShiftedSweep {
+    pub fn new(params: SweepParams, base_rate_hz: f32) -> Self {
+        Self {
+            plan: params.plan(),
+            params,
+            base_rate_hz,
+            status: SweepStatus::default(),
+            generator: SineGenerator::default(),
+            left: 0,
+            left_high: 0,
+            extensions: 0,
+            acc: SineFitSums::default(),
+            half_start: SineFitSums::default(),
+            previous_half: None,
+            discarded_halves: 0,
+            checking_settling: false,
+            half_block: 0,
+            segment: 0,
+            period_sums: (0.0, 0.0, 0.0),
+            averaging: false,
+            dither_state: DITHER_SEED,
+            dither: 0.0,
+            dithering: false,
+            // Validated with the parameters; the fallback only keeps this constructor total.
+            sequence: MSequence::new(params.prbs_degree).unwrap_or(MSequence::DEGREE_15),
+            chip: 0.0,
+            value: 0.0,
+            phase_word: 0,
+            angle: ReducedAngle::default(),
+            results: [SweepResult::default(); MAX_SWEEP_POINTS],
+        }
+    }
+
+    /// The dither to add to the torque command on this tick (0 when no stepped sine runs: it
+    /// is cleared when the sweep ends).
+    pub fn torque_dither(&self) -> f32 {
+        self.dither
+    }
+
+    pub fn params(&self) -> &SweepParams {
+        &self.params
+    }
+
+    pub fn status(&self) -> &SweepStatus {
+        &self.status
+    }
+
+    pub fn running(&self) -> bool {
+        matches!(self.status.state, SweepState::Settling | SweepState::Measuring)
+    }
+
+    /// Results measured so far, in frequency order.
+    pub fn results(&self) -> &[SweepResult] {
+        &self.results[..self.status.done_points as usize]
+    }
+
+    /// Start from the first frequency (validated settings; refused while running).
+    pub fn start(&mut self) -> Result<(), SweepError> {
+        if self.running() {
+            return Err(SweepError::Busy);
+        }
+        self.status = SweepStatus::default();
+        self.generator = SineGenerator::default();
+        self.sequence.restart();
+        self.dither_state = DITHER_SEED;
+        self.dither = 0.0;
+        self.begin_record(0, 0);
+        Ok(())
+    }
+
+    // Once per record or frequency: kept out of line so that the every-tick path stays small.
+    #[inline(never)]
+    fn begin_record(&mut self, point: u32, record: u32) {
+        let p = &self.params;
+        self.status.point = point;
+        self.status.record = record;
+        self.segment = AcquisitionSample::segment_of(record, 0);
+        self.status.state = SweepState::Settling;
+        if p.signal == SweepSignal::Prbs {
+            self.begin_prbs_record();
+            return;
+        }
+        let f = p.frequency_in(&self.plan, point as usize);
+        self.status.frequency = f;
+        self.averaging = f < p.threshold(self.base_rate_hz);
+        self.dithering = p.dither > 0.0 && !self.averaging;
+        // Phase continuous: the new frequency (or record) starts at the phase the sine has
+        // reached (0 at the start), so that the excitation does not jump: a restart at phase 0
+        // steps the input by up to its amplitude and rings the loop's lightly damped modes
+        // for many periods. A record after the first adds the shift 2π/shifts.
+        let shift = if record == 0 { 0.0 } else { TAU / p.shifts as f32 };
+        let initial = phase_angle(self.generator.phase_word()) + shift;
+        self.generator = SineGenerator::new(p.amplitude, f, self.base_rate_hz, initial);
+        let ticks = p.record_length(f, self.base_rate_hz).0;
+        if record == 0 {
+            self.acc = SineFitSums::default();
+            self.extensions = 0;
+            self.half_start = SineFitSums::default();
+            self.previous_half = None;
+            self.discarded_halves = 0;
+            self.half_block = 0;
+            self.checking_settling = p.precision_db > 0.0
+                && p.max_extensions > 0
+                && p.record_length(f, self.base_rate_hz).1 >= MIN_CHECKED_SAMPLES;
+        } else {
+            self.acc.break_record();
+        }
+        self.segment = AcquisitionSample::segment_of(record, self.half_block);
+        self.set_left(ticks);
+    }
+
+    /// Excitation for this base tick (call once per tick, before the loops): the value to
+    /// add at the injection point, or None when no sweep runs. `chip_due`: the tick is a
+    /// multiple of `prbs_divider` (the caller counts ticks; a 64-bit modulo is software on a
+    /// Cortex-M4). The phase's reduction is kept for the correlator on the same tick, which
+    /// evaluates the cosine only when it acquires (one reduction, no cosine on other ticks). Rotating them on between acquisition ticks instead
+    /// of evaluating every tick saved the Cortex-M4 about 20 instructions per tick, but changes
+    /// what the loop computes (the golden vectors and the drive's own results): not done.
+    pub fn excitation(&mut self, chip_due: bool) -> Option<(InjectionPoint, f32)> {
+        if !self.running() {
+            return None;
+        }
+        let p = &self.params;
+        match p.signal {
+            SweepSignal::SteppedSine => {
+                self.phase_word = self.generator.phase_word();
+                (self.value, self.angle) = self.generator.next_with_angle();
+                self.dither = if self.dithering {
+                    let mut x = self.dither_state;
+                    x ^= x << 13;
+                    x ^= x >> 17;
+                    x ^= x << 5;
+                    self.dither_state = x;
+                    if x & 0x8000_0000 != 0 {
+                        p.dither
+                    } else {
+                        -p.dither
+                    }
+                } else {
+                    0.0
+                };
+            }
+            SweepSignal::Prbs => self.prbs_excitation(chip_due),
+        }
+        Some((self.params.point, self.value))
+    }
+
+    /// End of a base tick: `u` and `y` as defined for the injection point. `loop_tick`: the
+    /// velocity loop ran on this tick (u and y are new); `acquire`: the tick is a multiple of
+    /// `acquisition_divider` (a loop tick too). A stepped sine's acquisition sample is the
+    /// mean of u and of y over the loop ticks of the acquisition period (for y, the velocity
+    /// estimate, that is the position's change over the period): the same average on both,
+    /// so it cancels in Y/U, and it keeps the encoder's quantisation noise, which the
+    /// estimate differentiates, out of the low frequencies where a single sample per period
+    /// would fold it. PRBS samples are the values at the acquisition tick. Advances the
+    /// schedule.
+    #[inline(always)]
+    pub fn end_tick(&mut self, tick: u64, loop_tick: bool, acquire: bool, u: f32, y: f32) {
+        if !self.running() {
+            return;
+        }
+        // One field, not the whole parameter set: this runs every tick while sweeping.
+        let signal = self.params.signal;
+        if loop_tick && self.averaging {
+            self.period_sums.0 += u;
+            self.period_sums.1 += y;
+            self.period_sums.2 += 1.0;
+        }
+        if acquire {
+            let (u, y) = match self.period_sums {
+                (su, sy, n) if self.averaging && n > 0.0 => (su / n, sy / n),
+                _ => (u, y),
+            };
+            self.period_sums = (0.0, 0.0, 0.0);
+            let measuring = self.status.state == SweepState::Measuring;
+            self.status.sample = AcquisitionSample {
+                tick,
+                u,
+                y,
+                phase: phase_angle(self.phase_word),
+                measuring,
+                point: self.status.point,
+                segment: self.segment,
+            };
+            if measuring && signal == SweepSignal::SteppedSine {
+                self.acc.add(u, y, self.angle.sin_cos());
+            }
+        }
+        if self.left == 0 {
+            self.next_stage();
+        } else {
+            self.left -= 1;
+        }
+    }
+
+    /// The present stage lasts `ticks` more ticks, this one included (at least this one).
+    fn set_left(&mut self, ticks: u64) {
+        let rest = ticks.max(1) - 1;
+        self.left = rest as u32;
+        self.left_high = (rest >> 32) as u32;
+    }
+
+    /// The present stage (settling, a half block, a block, a record) is over: the next one,
+    /// or the next frequency. Once per stage: kept out of line so that the every-tick path
+    /// stays small.
+    #[inline(never)]
+    fn next_stage(&mut self) {
+        if self.left_high > 0 {
+            // Another 2³² ticks of the same stage.
+            self.left_high -= 1;
+            self.left = u32::MAX;
+            return;
+        }
+        let (signal, divider) = (self.params.signal, self.params.acquisition_divider);
+        match self.status.state {
+            SweepState::Settling => {
+                let p = &self.params;
+                self.status.state = SweepState::Measuring;
+                let ticks = match signal {
+                    SweepSignal::Prbs => p.prbs_samples(self.base_rate_hz),
+                    // Later records take the blocks the first one was given.
+                    SweepSignal::SteppedSine => {
+                        let samples = p.record_length(self.status.frequency, self.base_rate_hz).1;
+                        if self.checking_settling {
+                            // The first record's base block in two halves (see `settled`).
+                            samples / 2
+                        } else {
+                            let extra = if self.status.record == 0 { 0 } else { self.extensions as u64 };
+                            samples.saturating_add(extra.saturating_mul(samples / 2))
+                        }
+                    }
+                }
+                .saturating_mul(divider as u64);
+                self.set_left(ticks);
+            }
+            SweepState::Measuring if signal == SweepSignal::Prbs => self.status.state = SweepState::Done,
+            SweepState::Measuring => {
+                let f = self.status.frequency;
+                let records = self.params.records(f, self.base_rate_hz);
+                // After the first record's base block: how many more blocks every record of
+                // this frequency takes (the same for all, so that the phase-shifted records
+                // stay balanced); the first one measures on at once, without settling. Its
+                // end comes back here only when blocks were added, with `extensions` > 0.
+                if self.status.record == 0 && self.extensions == 0 {
+                    if self.checking_settling {
+                        if let Some(samples) = self.settled() {
+                            self.set_left(samples.saturating_mul(divider as u64));
+                            return;
+                        }
+                    }
+                    self.extensions = self.halves_needed(records);
+                    if self.extensions > 0 {
+                        let ticks = (self.extensions as u64)
+                            .saturating_mul(self.params.record_length(f, self.base_rate_hz).1 / 2)
+                            .saturating_mul(divider as u64);
+                        self.set_left(ticks);
+                        return;
+                    }
+                }
+                if self.status.record + 1 < records {
+                    self.begin_record(self.status.point, self.status.record + 1);
+                    return;
+                }
+                self.finish_point();
+                let next = self.status.point + 1;
+                if next < self.plan.count as u32 {
+                    self.begin_record(next, 0);
+                } else {
+                    self.status.state = SweepState::Done;
+                    self.dither = 0.0;
+                }
+            }
+            _ => {}
+        }
+    }
+
+    // Once per record or frequency: kept out of line so that the every-tick path stays small.
+    #[inline(never)]
+    fn finish_point(&mut self) {
+        let ((u_re, u_im), (y_re, y_im), quality) = self.acc.solve();
+        let den = u_re * u_re + u_im * u_im;
+        let (mut re, mut im) = if den > 0.0 && quality > 0.0 {
+            ((y_re * u_re + y_im * u_im) / den, (y_im * u_re - y_re * u_im) / den)
+        } else {
+            (f32::NAN, f32::NAN)
+        };
+        if self.params.point == InjectionPoint::VelocityFeedback {
+            re = -re;
+            im = -im;
+        }
+        let r = SweepResult { frequency: self.status.frequency, re, im, quality };
+        self.results[self.status.point as usize] = r;
+        self.status.last = r;
+        self.status.done_points = self.status.point + 1;
+    }
+}

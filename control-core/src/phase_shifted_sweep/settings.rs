@@ -1,0 +1,276 @@
+//! The sweep's settings ([`SweepParams`]), their checks and the errors that name a refused
+//! value ([`SweepError`]).
+
+use core::fmt;
+
+use super::{SweepSignal, MAX_SWEEP_POINTS};
+use crate::excitation::InjectionPoint;
+use crate::m_sequence::MSequence;
+
+const MAX_SHIFTS: u32 = 16;
+/// Upper bound of `SweepParams::max_extensions`.
+pub const MAX_EXTENSIONS: u32 = 64;
+/// Upper bound of `SweepParams::dither` (N·m).
+pub const MAX_SWEEP_DITHER: f32 = 1000.0;
+
+#[derive(Clone, Copy, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct SweepParams {
+    pub point: InjectionPoint,
+    pub signal: SweepSignal,
+    /// Sine or PRBS amplitude (rad/s or Nm, as the point).
+    pub amplitude: f32,
+    pub start_hz: f32,
+    pub stop_hz: f32,
+    /// Frequencies between start and stop, both included (≥ 2).
+    pub points: u32,
+    pub logarithmic: bool,
+    /// One more frequency inserted in order (0: none), for example the acquisition Nyquist.
+    pub extra_hz: f32,
+    /// Settling before each record: the longer of so many cycles and `min_settle_s`.
+    pub settle_cycles: f32,
+    pub min_settle_s: f32,
+    /// Measurement of each record: the longer of so many cycles and `min_measure_s`.
+    pub measure_cycles: f32,
+    pub min_measure_s: f32,
+    /// Phase step 2π/shifts between repeats.
+    pub shifts: u32,
+    /// Records per frequency at and above the threshold.
+    pub repeats: u32,
+    /// Phase shifting from this frequency up (0: the acquisition Nyquist frequency).
+    pub threshold_hz: f32,
+    /// Base ticks per acquisition sample (a multiple of the velocity divider).
+    pub acquisition_divider: u32,
+    /// PRBS: M-sequence degree (period 2^n − 1 chips), base ticks per chip, and the measured
+    /// duration after `min_settle_s`.
+    pub prbs_degree: u32,
+    pub prbs_divider: u32,
+    pub prbs_seconds: f32,
+    /// Stepped sine: lengthen a frequency's records by whole blocks so that the standard
+    /// error of its gain (predicted from the fit's residual after the first block: mostly
+    /// encoder quantisation) is at most this (dB; 0: fixed records). At low-gain points (a
+    /// deep anti-resonance, the top of the sweep) the response is a few encoder counts and
+    /// the base record leaves about 0.1 dB of error whose size depends on the fine detail of
+    /// the motion; the well-measured points are not lengthened.
+    pub precision_db: f32,
+    /// At most so many extra blocks (each as long as one record's base measurement) per
+    /// record of a frequency, and at most twice as many half blocks discarded while its first
+    /// record settles.
+    pub max_extensions: u32,
+    /// Stepped sine: a pseudo-random ±dither (N·m) added to the torque command on every base
+    /// tick of the frequencies at and above the threshold (0: none). At constant speed and
+    /// without sensor noise the encoder's count pattern is periodic and can lock to the
+    /// excitation: at the top of the sweep, where the response is a few counts, a
+    /// quantisation error that longer records do not remove (0.24 dB at 3 kHz on the default
+    /// axis). A dither of a few milli-newton-metres moves the axis by enough counts to break
+    /// the lock; the fit sees it as noise. Below the threshold the samples are period means
+    /// (see [`PhaseShiftedSweep::end_tick`](super::PhaseShiftedSweep::end_tick)) and need none.
+    pub dither: f32,
+}
+
+impl Default for SweepParams {
+    /// Velocity-command injection, 10 Hz to 3 kHz in 40 log steps plus 2 kHz, 1 settle and
+    /// 3 measure cycles (at least 10 ms of settling and 40 ms of measurement), 3 records
+    /// shifted by 2π/3 from the acquisition Nyquist frequency up, acquisition every 4 ticks
+    /// (4 kHz at 16 kHz). The base records are short: the settling check lengthens the wait
+    /// where the loop rings (see `PhaseShiftedSweep::settled`), the precision control the
+    /// records where the response is noisy (near 3 kHz it is a few encoder counts per
+    /// velocity period).
+    fn default() -> Self {
+        Self {
+            point: InjectionPoint::VelocityCommand,
+            signal: SweepSignal::SteppedSine,
+            amplitude: 2.0,
+            start_hz: 10.0,
+            stop_hz: 3000.0,
+            points: 40,
+            logarithmic: true,
+            extra_hz: 2000.0,
+            settle_cycles: 1.0,
+            min_settle_s: 0.01,
+            measure_cycles: 3.0,
+            min_measure_s: 0.04,
+            shifts: 3,
+            repeats: 3,
+            threshold_hz: 0.0,
+            acquisition_divider: 4,
+            prbs_degree: 15,
+            prbs_divider: 1,
+            prbs_seconds: 5.0,
+            precision_db: 0.03,
+            max_extensions: 8,
+            dither: 0.003,
+        }
+    }
+}
+
+/// Why sweep settings or a start were refused.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum SweepError {
+    /// A value outside its range: the field and the value.
+    Setting { field: &'static str, value: f32 },
+    /// A value outside `[min, max]`.
+    Range { field: &'static str, value: f32, min: f32, max: f32 },
+    /// A frequency at or above the loop's Nyquist frequency, where the injected sine aliases.
+    AboveLoopNyquist { frequency: f32, nyquist: f32 },
+    /// More frequencies than the result table holds.
+    TooManyPoints(u32),
+    /// The acquisition divider is not a multiple of the velocity divider.
+    AcquisitionDivider { acquisition: u32, velocity: u32 },
+    /// Injection point off, or a velocity-loop point while the velocity loop does not run.
+    PointUnusable,
+    /// A sweep is already running.
+    Busy,
+}
+
+impl fmt::Display for SweepError {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match *self {
+            Self::Setting { field, value } => write!(f, "sweep {field} = {value} is out of range"),
+            Self::Range { field, value, min, max } => write!(f, "sweep {field} = {value} is outside [{min}, {max}]"),
+            Self::AboveLoopNyquist { frequency, nyquist } => {
+                write!(f, "sweep frequency {frequency} Hz is at or above the loop's Nyquist frequency {nyquist} Hz")
+            }
+            Self::TooManyPoints(n) => write!(f, "{n} sweep frequencies: at most {MAX_SWEEP_POINTS}"),
+            Self::AcquisitionDivider { acquisition, velocity } => write!(
+                f,
+                "acquisition every {acquisition} ticks is not a multiple of the velocity loop's {velocity} ticks"
+            ),
+            Self::PointUnusable => write!(
+                f,
+                "the sweep needs an injection point, and velocity-command or feedback injection needs the velocity loop (velocity, position or sequence mode)"
+            ),
+            Self::Busy => write!(f, "a sweep is already running"),
+        }
+    }
+}
+
+impl SweepParams {
+    pub fn validate(&self, base_rate_hz: f32, velocity_divider: u32) -> Result<(), SweepError> {
+        let finite_positive = |field, value: f32| {
+            if value.is_finite() && value > 0.0 {
+                Ok(())
+            } else {
+                Err(SweepError::Setting { field, value })
+            }
+        };
+        let finite_non_negative = |field, value: f32| {
+            if value.is_finite() && value >= 0.0 {
+                Ok(())
+            } else {
+                Err(SweepError::Setting { field, value })
+            }
+        };
+        finite_positive("amplitude", self.amplitude)?;
+        finite_positive("start_hz", self.start_hz)?;
+        finite_positive("stop_hz", self.stop_hz)?;
+        if self.stop_hz <= self.start_hz {
+            return Err(SweepError::Setting { field: "stop_hz (must exceed start_hz)", value: self.stop_hz });
+        }
+        finite_non_negative("extra_hz", self.extra_hz)?;
+        if self.points < 2 {
+            return Err(SweepError::Setting { field: "points", value: self.points as f32 });
+        }
+        if self.points as usize + 1 > MAX_SWEEP_POINTS {
+            return Err(SweepError::TooManyPoints(self.points));
+        }
+        finite_non_negative("settle_cycles", self.settle_cycles)?;
+        finite_non_negative("min_settle_s", self.min_settle_s)?;
+        finite_positive("measure_cycles", self.measure_cycles)?;
+        finite_non_negative("min_measure_s", self.min_measure_s)?;
+        if !(1..=MAX_SHIFTS).contains(&self.shifts) {
+            return Err(SweepError::Setting { field: "shifts", value: self.shifts as f32 });
+        }
+        if !(1..=MAX_SHIFTS).contains(&self.repeats) {
+            return Err(SweepError::Setting { field: "repeats", value: self.repeats as f32 });
+        }
+        finite_non_negative("threshold_hz", self.threshold_hz)?;
+        if self.acquisition_divider == 0 || !self.acquisition_divider.is_multiple_of(velocity_divider) {
+            return Err(SweepError::AcquisitionDivider {
+                acquisition: self.acquisition_divider,
+                velocity: velocity_divider,
+            });
+        }
+        if MSequence::new(self.prbs_degree).is_err() {
+            return Err(SweepError::Setting { field: "prbs_degree (2 to 20)", value: self.prbs_degree as f32 });
+        }
+        if self.prbs_divider == 0 {
+            return Err(SweepError::Setting { field: "prbs_divider", value: 0.0 });
+        }
+        finite_positive("prbs_seconds", self.prbs_seconds)?;
+        finite_non_negative("precision_db", self.precision_db)?;
+        finite_non_negative("dither", self.dither)?;
+        if self.max_extensions > MAX_EXTENSIONS {
+            return Err(SweepError::Setting {
+                field: "max_extensions (at most 64)",
+                value: self.max_extensions as f32,
+            });
+        }
+        // Bounds that keep every tick count far from overflow (`crate::ranges`): at most
+        // 10⁴ s or 10⁴ cycles from 1 mHz per record, 2·10¹² ticks at 200 kHz.
+        let range = |field, value: f32, min: f32, max: f32| {
+            if value >= min && value <= max {
+                Ok(())
+            } else {
+                Err(SweepError::Range { field, value, min, max })
+            }
+        };
+        use crate::ranges::{MAX_SWEEP_CYCLES, MAX_SWEEP_DIVIDER, MAX_SWEEP_SECONDS, MIN_SWEEP_HZ};
+        range("start_hz", self.start_hz, MIN_SWEEP_HZ, f32::MAX)?;
+        if self.extra_hz != 0.0 {
+            range("extra_hz (0 or above)", self.extra_hz, MIN_SWEEP_HZ, f32::MAX)?;
+        }
+        range("settle_cycles", self.settle_cycles, 0.0, MAX_SWEEP_CYCLES)?;
+        range("measure_cycles", self.measure_cycles, 0.0, MAX_SWEEP_CYCLES)?;
+        range("min_settle_s", self.min_settle_s, 0.0, MAX_SWEEP_SECONDS)?;
+        range("min_measure_s", self.min_measure_s, 0.0, MAX_SWEEP_SECONDS)?;
+        range("prbs_seconds", self.prbs_seconds, 0.0, MAX_SWEEP_SECONDS)?;
+        range("dither", self.dither, 0.0, MAX_SWEEP_DITHER)?;
+        range("acquisition_divider", self.acquisition_divider as f32, 1.0, MAX_SWEEP_DIVIDER as f32)?;
+        range("prbs_divider", self.prbs_divider as f32, 1.0, MAX_SWEEP_DIVIDER as f32)?;
+        // The sine is updated at the velocity-loop rate for velocity-loop points.
+        let loop_rate = if self.point == InjectionPoint::TorqueCommand {
+            base_rate_hz
+        } else {
+            base_rate_hz / velocity_divider as f32
+        };
+        let top = self.stop_hz.max(self.extra_hz);
+        if top >= 0.5 * loop_rate {
+            return Err(SweepError::AboveLoopNyquist { frequency: top, nyquist: 0.5 * loop_rate });
+        }
+        Ok(())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    const FS: f32 = 16_000.0;
+
+    #[test]
+    fn bad_settings_are_named() {
+        let v = |p: SweepParams| p.validate(FS, 2);
+        assert_eq!(
+            v(SweepParams { stop_hz: 4000.0, ..Default::default() }),
+            Err(SweepError::AboveLoopNyquist { frequency: 4000.0, nyquist: 4000.0 })
+        );
+        assert!(matches!(
+            v(SweepParams { amplitude: f32::NAN, ..Default::default() }),
+            Err(SweepError::Setting { field: "amplitude", .. })
+        ));
+        assert_eq!(
+            v(SweepParams { acquisition_divider: 3, ..Default::default() }),
+            Err(SweepError::AcquisitionDivider { acquisition: 3, velocity: 2 })
+        );
+        assert_eq!(v(SweepParams { points: 200, ..Default::default() }), Err(SweepError::TooManyPoints(200)));
+        assert!(matches!(
+            v(SweepParams { dither: f32::NAN, ..Default::default() }),
+            Err(SweepError::Setting { field: "dither", .. })
+        ));
+        assert!(matches!(
+            v(SweepParams { dither: 2000.0, ..Default::default() }),
+            Err(SweepError::Range { field: "dither", .. })
+        ));
+        assert_eq!(v(SweepParams::default()), Ok(()));
+    }
+}

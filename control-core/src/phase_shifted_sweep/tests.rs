@@ -1,0 +1,207 @@
+//! The runner measured end to end: known responses, noise and a ringing loop driven tick by
+//! tick as the axis drives the sweep.
+
+use super::*;
+
+#[test]
+fn sweep_codes_round_trip() {
+    for s in [SweepSignal::SteppedSine, SweepSignal::Prbs] {
+        assert_eq!(SweepSignal::from_code(s.code()), Some(s));
+    }
+    for s in [SweepState::Idle, SweepState::Settling, SweepState::Measuring, SweepState::Done] {
+        assert_eq!(SweepState::from_code(s.code()), Some(s));
+    }
+    assert_eq!(SweepState::Done.code(), 3);
+    assert_eq!(SweepSignal::from_code(2), None);
+    assert_eq!(SweepState::from_code(-1), None);
+}
+
+const FS: f32 = 16_000.0;
+
+/// Drive the sweep with a known linear response y = |G|·sin(θ + φ) (times A), u = the
+/// injected sine, sampled exactly as the axis would.
+fn measure(params: SweepParams, gain: f32, phase: f32) -> [SweepResult; 2] {
+    let mut s = PhaseShiftedSweep::new(params, FS);
+    s.start().unwrap();
+    let mut tick = 0u64;
+    while s.running() {
+        let (_, u) = s.excitation(tick.is_multiple_of(params.prbs_divider as u64)).unwrap();
+        let y = gain * params.amplitude * libm::sinf(phase_angle(s.phase_word) + phase);
+        s.end_tick(tick, tick.is_multiple_of(2), tick.is_multiple_of(params.acquisition_divider as u64), u, y);
+        tick += 1;
+    }
+    assert_eq!(tick, params.total_ticks(FS), "the schedule the host computes is the one the drive runs");
+    [s.results()[0], *s.results().last().unwrap()]
+}
+
+fn at(f: f32, shifts: u32, repeats: u32) -> SweepParams {
+    SweepParams {
+        start_hz: f,
+        stop_hz: f * 1.001,
+        points: 2,
+        extra_hz: 0.0,
+        shifts,
+        repeats,
+        threshold_hz: 1000.0,
+        ..Default::default()
+    }
+}
+
+#[test]
+fn phase_shifted_records_measure_exactly_at_the_acquisition_nyquist_frequency() {
+    // 2 kHz sampled at 4 kHz: one record sees the wave at two phases only.
+    let [shifted, _] = measure(at(2000.0, 3, 3), 0.5, -1.0);
+    assert!((shifted.gain_db() - 20.0 * libm::log10f(0.5)).abs() < 1e-3, "{shifted:?}");
+    assert!((shifted.phase_deg() + 1.0f32.to_degrees()).abs() < 0.05, "{shifted:?}");
+    assert!(shifted.quality > 0.99);
+    let [single, _] = measure(at(2000.0, 1, 1), 0.5, -1.0);
+    let gain_error = (single.gain_db() - 20.0 * libm::log10f(0.5)).abs();
+    let phase_error = (single.phase_deg() + 1.0f32.to_degrees()).abs();
+    assert!(gain_error > 3.0 || phase_error > 10.0 || !gain_error.is_finite(), "single phase must fail: {single:?}");
+}
+
+#[test]
+fn below_the_threshold_one_record_measures_exactly() {
+    let [r, _] = measure(at(123.0, 3, 3), 2.0, 0.7);
+    assert!(
+        (r.gain_db() - 20.0 * libm::log10f(2.0)).abs() < 1e-3 && (r.phase_deg() - 0.7f32.to_degrees()).abs() < 0.05,
+        "{r:?}"
+    );
+}
+
+#[test]
+fn below_the_threshold_a_sample_is_the_mean_over_the_loop_ticks_and_above_it_the_value() {
+    for (f, averaged) in [(123.0, true), (2500.0, false)] {
+        let p = at(f, 3, 3);
+        let mut s = PhaseShiftedSweep::new(p, FS);
+        s.start().unwrap();
+        let mut ys = [0.0f32; 4];
+        for tick in 0..400u64 {
+            let (_, u) = s.excitation(true).unwrap();
+            let y = (tick * tick % 97) as f32;
+            ys[(tick % 4) as usize] = y;
+            let acquire = tick % 4 == 3;
+            s.end_tick(tick, tick % 2 == 1, acquire, u, y);
+            if acquire && tick > 4 {
+                let expected = if averaged { 0.5 * (ys[1] + ys[3]) } else { y };
+                assert_eq!(s.status().sample.y, expected, "{f} Hz, tick {tick}");
+            }
+        }
+    }
+}
+
+/// Uniform in [−1, 1) from a xorshift32 state.
+fn uniform(state: &mut u32) -> f32 {
+    *state ^= *state << 13;
+    *state ^= *state >> 17;
+    *state ^= *state << 5;
+    (*state >> 8) as f32 / (1u32 << 24) as f32 * 2.0 - 1.0
+}
+
+/// A response of `gain` plus uniform noise of ±`noise` (a stand-in for encoder
+/// quantisation), two frequencies; returns (G of the first, ticks run).
+fn noisy(params: SweepParams, gain: f32, noise: f32, seed: u32) -> (SweepResult, u64) {
+    let mut s = PhaseShiftedSweep::new(params, FS);
+    s.start().unwrap();
+    let (mut tick, mut state) = (0u64, seed | 1);
+    while s.running() {
+        let (_, u) = s.excitation(true).unwrap();
+        let r = uniform(&mut state);
+        let y = 50.0 + gain * params.amplitude * libm::sinf(phase_angle(s.phase_word) + 0.3) + noise * r;
+        s.end_tick(tick, tick.is_multiple_of(2), tick.is_multiple_of(params.acquisition_divider as u64), u, y);
+        tick += 1;
+    }
+    (s.results()[0], tick)
+}
+
+/// A response of gain 1.5 and phase −0.4 rad plus a lightly damped ring at 52 Hz that
+/// starts with the sweep (30 % of the response, τ = 50 ms), as a loop's mode rings after
+/// a frequency step; the first frequency's result and the ticks run.
+fn ringing(params: SweepParams) -> (SweepResult, u64, u32) {
+    let mut s = PhaseShiftedSweep::new(params, FS);
+    s.start().unwrap();
+    let (mut tick, mut last_half) = (0u64, 0u32);
+    while s.running() {
+        let (_, u) = s.excitation(true).unwrap();
+        let t = tick as f32 / FS;
+        let ring = 0.3 * 1.5 * params.amplitude * libm::expf(-t / 0.05) * libm::sinf(TAU * 52.0 * t);
+        let y = 1.5 * params.amplitude * libm::sinf(phase_angle(s.phase_word) - 0.4) + ring;
+        s.end_tick(tick, tick.is_multiple_of(2), tick.is_multiple_of(params.acquisition_divider as u64), u, y);
+        if s.status().sample.point == 0 {
+            last_half = s.status().sample.half_block();
+        }
+        tick += 1;
+    }
+    (s.results()[0], tick, last_half)
+}
+
+#[test]
+fn a_ringing_loop_is_measured_once_it_has_settled() {
+    let p = SweepParams { start_hz: 50.0, stop_hz: 50.05, points: 2, extra_hz: 0.0, ..Default::default() };
+    let error = |r: SweepResult| (r.gain_db() - 20.0 * libm::log10f(1.5), r.phase_deg() + 0.4f32.to_degrees());
+    // Without the check (fixed records) the ring is in the record.
+    let (fixed, ticks, _) = ringing(SweepParams { precision_db: 0.0, ..p });
+    let (db, deg) = error(fixed);
+    assert_eq!(ticks, p.total_ticks(FS));
+    assert!(db.abs() > 0.3 || deg.abs() > 3.0, "{db} dB {deg} deg");
+    // With it, the half blocks measured while it rings are discarded.
+    let (checked, ticks, last_half) = ringing(p);
+    let (db, deg) = error(checked);
+    assert!(db.abs() < 0.03 && deg.abs() < 0.2, "{db} dB {deg} deg");
+    assert!(ticks > p.total_ticks(FS) && ticks <= p.max_total_ticks(FS), "{ticks}");
+    assert!(last_half >= 3, "{last_half} half blocks");
+}
+
+#[test]
+fn a_noisy_low_gain_point_is_lengthened_until_precise_and_a_clean_one_is_not() {
+    // Base records of 80 ms (not the defaults: the test is about the extension).
+    let p = SweepParams {
+        start_hz: 300.0,
+        stop_hz: 400.0,
+        points: 2,
+        extra_hz: 0.0,
+        min_measure_s: 0.08,
+        ..Default::default()
+    };
+    let off = SweepParams { precision_db: 0.0, ..p };
+    // A clean response: no extension, the schedule the host computes.
+    assert_eq!(noisy(p, 1.0, 0.0, 1).1, p.total_ticks(FS));
+    // Gain 0.06 (−24 dB) under noise ±0.04: 0.1 dB-class error in a base record.
+    let (mut before, mut after) = (0.0f32, 0.0f32);
+    for seed in 1..=12 {
+        let db = |r: SweepResult| (20.0 * libm::log10f(libm::hypotf(r.re, r.im) / 0.06)).abs();
+        let (r_off, t_off) = noisy(off, 0.06, 0.04, seed);
+        let (r_on, t_on) = noisy(p, 0.06, 0.04, seed);
+        assert_eq!(t_off, off.total_ticks(FS));
+        assert!(t_on > t_off && t_on <= p.max_total_ticks(FS), "{t_on} ticks vs {t_off}..{}", p.max_total_ticks(FS));
+        before = before.max(db(r_off));
+        after = after.max(db(r_on));
+    }
+    assert!(after < 0.5 * before, "worst error {after} dB with extensions vs {before} dB without");
+    // The standard errors the sweep computes are the spread it predicts, σ(f)·√(2/n)/A,
+    // with σ(f)² the noise's spectrum at the excitation: white noise, and differenced
+    // noise (the velocity estimate's quantisation), which is small at low frequencies.
+    let step = 0.731f32;
+    let n = 4000;
+    let variance = 0.04 * 0.04 / 3.0;
+    for (differenced, spectrum) in [(false, variance), (true, variance * 2.0 * (1.0 - libm::cosf(step)))] {
+        let mut fit = SineFitSums::default();
+        let (mut state, mut last) = (7u32, 0.0f32);
+        for k in 0..n {
+            let theta = k as f32 * step;
+            let r = 0.04 * uniform(&mut state);
+            let noise = if differenced { r - last } else { r };
+            last = r;
+            let (s, c) = libm::sincosf(theta);
+            fit.add(1.0 * s, 50.0 + 0.12 * s + noise, (s, c));
+        }
+        let predicted = libm::sqrtf(spectrum) * libm::sqrtf(2.0 / n as f32) / 0.12;
+        let got = fit.response_error(step).unwrap();
+        for (what, value) in [("gain", got.gain), ("phase", got.phase)] {
+            assert!(
+                (value / predicted - 1.0).abs() < 0.1,
+                "differenced {differenced}: {what} {value}, expected {predicted}"
+            );
+        }
+    }
+}
