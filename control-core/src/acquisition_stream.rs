@@ -13,7 +13,8 @@ pub const CAPACITY: usize = 256;
 /// One frame's worth of samples.
 ///
 /// On the link (protocol version 5) a batch is `dropped`, then a sequence of its `count`
-/// samples only, each tick sent as the difference from the one before (the first from 0),
+/// samples only, each tick sent as the (signed) difference from the one before (the first
+/// from 0),
 /// the record and the half block as two varints: about 17 bytes a sample, nothing for an
 /// empty slot. Version 4 sent all 16 slots and whole ticks: at the link task's 2 ms poll a
 /// 4 kHz stream went out 8 samples a frame at 37 bytes each, more than a 921 600 Bd line
@@ -29,8 +30,10 @@ pub struct SampleBatch {
 /// A sample as it crosses the link.
 #[derive(serde::Serialize, serde::Deserialize)]
 struct WireSample {
-    /// Ticks since the batch's previous sample (the first: since tick 0).
-    tick_step: u64,
+    /// Ticks since the batch's previous sample (the first: since tick 0); signed, so that a
+    /// batch that straddles a new axis (its ticks restart at 0 after `SetParams`) still goes
+    /// out whole.
+    tick_step: i64,
     u: f32,
     y: f32,
     phase: f32,
@@ -50,8 +53,8 @@ impl serde::Serialize for SampleBatch {
                 let mut seq = s.serialize_seq(Some(self.0.len()))?;
                 let mut previous = 0u64;
                 for x in self.0 {
-                    let tick_step =
-                        x.tick.checked_sub(previous).ok_or_else(|| S::Error::custom("ticks out of order"))?;
+                    // Two's complement: the step is exact for any two ticks below 2⁶³.
+                    let tick_step = x.tick.wrapping_sub(previous) as i64;
                     previous = x.tick;
                     let w = WireSample {
                         tick_step,
@@ -98,7 +101,9 @@ impl<'de> serde::Deserialize<'de> for SampleBatch {
                                 .samples
                                 .get_mut(b.count as usize)
                                 .ok_or_else(|| A::Error::invalid_length(BATCH + 1, &self))?;
-                            tick = tick.checked_add(w.tick_step).ok_or_else(|| A::Error::custom("tick overflow"))?;
+                            tick = tick
+                                .checked_add_signed(w.tick_step)
+                                .ok_or_else(|| A::Error::custom("tick out of range"))?;
                             *slot = AcquisitionSample {
                                 tick,
                                 u: w.u,

@@ -606,12 +606,18 @@ mod tests {
         let mut buf = [0u8; MAX_FRAME + 8];
         assert!(encode(&Response::Samples(b), &mut buf).is_err(), "a batch that claims 200 samples is not sent");
         b.count = 16;
+        // Ticks 4, 8, …: every sample encodes to the same length (a one-byte step).
         for (k, s) in b.samples.iter_mut().enumerate() {
-            s.tick = 1_000_000 + 4 * k as u64;
+            s.tick = 4 * (k as u64 + 1);
             s.u = k as f32;
         }
         let n = encode(&Response::Samples(b), &mut buf).unwrap();
         assert_eq!(decode_response(&mut buf[..n]), Ok(Response::Samples(b)));
+        // A batch whose ticks go back (one straddling a new axis) goes out whole.
+        let mut back = b;
+        back.samples[8].tick = 1;
+        let n = encode(&Response::Samples(back), &mut buf).unwrap();
+        assert_eq!(decode_response(&mut buf[..n]), Ok(Response::Samples(back)));
         // 17 samples under a valid CRC (a sequence length the drive never sends) do not decode.
         let mut payload = [0u8; 600];
         let body = postcard::to_slice(&Response::Samples(b), &mut payload).unwrap().len();
@@ -619,7 +625,8 @@ mod tests {
         assert_eq!(payload[2], 16);
         payload[2] = 17;
         let sample_bytes = (body - 3) / 16;
-        payload.copy_within(3..3 + sample_bytes, body);
+        assert_eq!((body - 3) % 16, 0, "samples of one length");
+        payload.copy_within(body - sample_bytes..body, body);
         let raw = &mut payload[..body + sample_bytes];
         let crc = crc32(raw).to_le_bytes();
         let mut framed = [0u8; 700];
@@ -628,6 +635,15 @@ mod tests {
         with_crc[raw.len()..raw.len() + 4].copy_from_slice(&crc);
         let m = cobs::encode(&with_crc[..raw.len() + 4], &mut framed);
         assert_eq!(decode_response(&mut framed[..m]), Err(FrameError::Message));
+        // The same bytes with the length left at 16 decode: it is the limit that refuses the
+        // frame above, not a truncated sample.
+        payload[2] = 16;
+        let raw = &payload[..body];
+        let crc = crc32(raw).to_le_bytes();
+        with_crc[..raw.len()].copy_from_slice(raw);
+        with_crc[raw.len()..raw.len() + 4].copy_from_slice(&crc);
+        let m = cobs::encode(&with_crc[..raw.len() + 4], &mut framed);
+        assert_eq!(decode_response(&mut framed[..m]), Ok(Response::Samples(b)));
     }
 
     #[test]

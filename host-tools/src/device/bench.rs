@@ -93,7 +93,7 @@ pub fn bench(fmu: &Fmu, baud: u32, mut progress: impl FnMut(f64)) -> Result<Vec<
             difference_db: db,
             difference_deg: deg,
             measurement_time_s: d.measurement_time_s,
-            met: d.dropped == GOAL_DROPPED && db <= GOAL_DB && deg <= GOAL_DEG,
+            met: d.dropped == GOAL_DROPPED && d.corrupt_frames == 0 && db <= GOAL_DB && deg <= GOAL_DEG,
         });
     }
     Ok(rows)

@@ -35,6 +35,9 @@ pub struct DeviceLink<T: Read + Write> {
     timeout: Duration,
     /// Bytes received from the drive so far.
     pub bytes_read: u64,
+    /// Frames from the drive that did not decode (corrupted on the line, or the tail of a
+    /// frame that was under way when the port was opened): skipped, counted.
+    pub corrupt_frames: u64,
     /// The last request failed (no answer, a corrupt frame): before the next one, end the
     /// drive's partial frame and drop what is in flight.
     resync: bool,
@@ -42,7 +45,15 @@ pub struct DeviceLink<T: Read + Write> {
 
 impl<T: Read + Write> DeviceLink<T> {
     pub fn new(port: T, timeout: Duration) -> Self {
-        Self { port, pending: FrameStream::default(), samples: Vec::new(), timeout, bytes_read: 0, resync: false }
+        Self {
+            port,
+            pending: FrameStream::default(),
+            samples: Vec::new(),
+            timeout,
+            bytes_read: 0,
+            corrupt_frames: 0,
+            resync: false,
+        }
     }
 
     /// Send one request and wait for its answer.
@@ -74,7 +85,6 @@ impl<T: Read + Write> DeviceLink<T> {
     fn resynchronise(&mut self) -> Result<()> {
         self.port.write_all(&[0]).context("cannot write to the drive")?;
         self.port.flush().ok();
-        self.pending = FrameStream::default();
         let until = Instant::now() + self.timeout / 10;
         while Instant::now() < until {
             match self.next_frame(until) {
@@ -124,17 +134,29 @@ impl<T: Read + Write> DeviceLink<T> {
         Ok(())
     }
 
-    /// The next complete frame, decoded.
+    /// The next complete frame that decodes; frames that do not are skipped and counted (the
+    /// answer may still follow: a streamed batch may be what the line corrupted).
     fn next_frame(&mut self, deadline: Instant) -> Result<Response> {
         let mut chunk = [0u8; 4096];
+        let mut skipped: Option<(u64, control_core::protocol::FrameError)> = None;
         loop {
             match self.pending.next_frame() {
                 Some(Ok(r)) => return Ok(r),
-                Some(Err(e)) => bail!("corrupt frame from the drive: {e}"),
+                Some(Err(e)) => {
+                    self.corrupt_frames += 1;
+                    skipped = Some((skipped.map_or(0, |(n, _)| n) + 1, e));
+                    continue;
+                }
                 None => {}
             }
             if Instant::now() >= deadline {
-                bail!("no answer from the drive within {:?}", self.timeout);
+                match skipped {
+                    Some((n, e)) => bail!(
+                        "no answer from the drive within {:?}: {n} corrupt frame(s) from the drive instead (last: {e})",
+                        self.timeout
+                    ),
+                    None => bail!("no answer from the drive within {:?}", self.timeout),
+                }
             }
             match self.port.read(&mut chunk) {
                 Ok(0) => bail!("the drive closed the link"),
@@ -294,8 +316,26 @@ mod tests {
         let mut link = DeviceLink::new(host, Duration::from_millis(200));
         let e = link.request(&Request::GetTelemetry).unwrap_err().to_string();
         assert!(e.contains("no answer"), "{e}");
+        // Garbage in flight after a failure is dropped by the resynchronisation (which ends
+        // with a lone delimiter to the drive); a garbled answer to a request is an error.
         drive.write_all(&[0x05, 0x11, 0x22, 0x33, 0x44, 0x00]).unwrap();
         let e = link.request(&Request::GetTelemetry).unwrap_err().to_string();
-        assert!(e.contains("corrupt frame"), "{e}");
+        assert!(e.contains("no answer"), "{e}");
+        let (host, mut drive) = UnixStream::pair().unwrap();
+        host.set_read_timeout(Some(Duration::from_millis(20))).unwrap();
+        let mut link = DeviceLink::new(host, Duration::from_millis(200));
+        drive.write_all(&[0x05, 0x11, 0x22, 0x33, 0x44, 0x00]).unwrap();
+        let e = link.request(&Request::GetTelemetry).unwrap_err().to_string();
+        assert!(e.contains("no answer") && e.contains("1 corrupt frame"), "{e}");
+        assert_eq!(link.corrupt_frames, 1);
+        // The next request first sends the lone delimiter: the drive reads the first request,
+        // an empty frame, then the second request.
+        let _ = link.request(&Request::GetTelemetry);
+        drive.set_read_timeout(Some(Duration::from_millis(20))).unwrap();
+        let mut got = [0u8; 64];
+        let n = drive.read(&mut got).unwrap();
+        let first = got.iter().position(|&b| b == 0).unwrap();
+        assert_eq!(got[first + 1], 0, "{:?}", &got[..n]);
+        assert_eq!(&got[..first], &got[first + 2..2 * first + 2], "the same request again");
     }
 }

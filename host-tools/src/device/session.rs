@@ -95,7 +95,10 @@ impl<T: DrivePort> DriveSession<T> {
     /// (`max_s` seconds of its ticks from now) and on a drive that stops ticking.
     pub fn wait_until(&mut self, max_s: f64, mut done: impl FnMut(&Telemetry) -> Result<bool>) -> Result<Telemetry> {
         let first = self.telemetry()?;
-        let limit = first.tick + (max_s * self.tick_hz).ceil() as u64;
+        if !(max_s.is_finite() && max_s > 0.0) {
+            bail!("a wait of {max_s} s is not a positive number of seconds");
+        }
+        let limit = first.tick.saturating_add((max_s * self.tick_hz).ceil() as u64);
         let (mut last_tick, mut moved) = (first.tick, Instant::now());
         let mut t = first;
         loop {
@@ -118,7 +121,7 @@ impl<T: DrivePort> DriveSession<T> {
     /// Let `seconds` of the drive's time pass.
     pub fn wait(&mut self, seconds: f64) -> Result<Telemetry> {
         let start = self.telemetry()?.tick;
-        let target = start + (seconds * self.tick_hz).round() as u64;
+        let target = start.saturating_add((seconds * self.tick_hz).round() as u64);
         self.wait_until(seconds * 2.0 + 0.1, |t| Ok(t.tick >= target))
     }
 

@@ -67,6 +67,9 @@ pub fn row(time: f64, t: &Telemetry, params: &Params, origin: i64) -> Vec<f64> {
 /// read at each of the drive's sample times (the twin's latest sample at or before it).
 pub fn difference(drive: &Trace, twin: &Trace, name: &str) -> Option<(f64, f64)> {
     let (dt, dv, tt, tv) = (drive.column("time")?, drive.column(name)?, twin.column("time")?, twin.column(name)?);
+    if tt.is_empty() {
+        return None;
+    }
     let (mut largest, mut squares, mut n) = (0.0f64, 0.0, 0usize);
     let mut j = 0;
     for (t, v) in dt.iter().zip(&dv) {

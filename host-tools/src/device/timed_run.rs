@@ -5,8 +5,10 @@
 //! Requests of one time go together (the FMU takes one time's inputs in one step), then one
 //! telemetry answer after them. They reach the drive a little after their time (a telemetry
 //! answer, then the requests, on the line: about 1.3–3 ms at 921 600 Bd, more on a busy
-//! host); a group's time as run is the telemetry just before it — the FMU's outputs at an
-//! input's time show the state before it acts — which the twin replays (a step early at most).
+//! host). The checks read the drive's trace with each group at the telemetry sample just
+//! before it (the FMU's outputs at an input's time show the state before it acts); the twin
+//! replays each group when the drive acted on it: the telemetry after it, less the bytes on
+//! the line between the two ([`SentAt::acted`]).
 
 use std::time::{Duration, Instant};
 
@@ -38,6 +40,23 @@ pub struct SentAt {
     pub planned: f64,
     pub before: f64,
     pub after: f64,
+}
+
+/// The time from a drive acting on a request to its tick in the telemetry asked after the
+/// answer: the answer (`Done`, 7 bytes) and the telemetry request (8 bytes) on the line.
+pub const AFTER_ACTING_S: f64 = 15.0 * 10.0 / 921_600.0;
+
+impl SentAt {
+    /// When the drive acted on the group (s): the telemetry after it less the bytes on the
+    /// line between the two; within [`Self::before`, `Self::after`].
+    pub fn acted(&self) -> f64 {
+        (self.after - AFTER_ACTING_S).max(self.before)
+    }
+}
+
+/// `time` on the FMU's communication grid (`step`), at or before it and not beyond `stop`.
+pub fn on_grid(time: f64, step: f64, stop: f64) -> f64 {
+    ((time / step).floor() * step).min(stop)
 }
 
 pub struct TimedRun {

@@ -16,7 +16,7 @@ use control_core::Commands;
 
 use crate::device::link::DrivePort;
 use crate::device::session::DriveSession;
-use crate::device::timed_run::{run_timed, SentAt, TimedRequests};
+use crate::device::timed_run::{on_grid, run_timed, SentAt, TimedRequests};
 use crate::fmu::configuration::configuration;
 use crate::fmu::scenario::{Scenario, Value, DEFAULT_STEP};
 use crate::fmu::trace::Trace;
@@ -29,8 +29,12 @@ pub const DRIVE_INPUTS: [&str; 6] =
 pub struct DeviceScenario {
     pub trace: Trace,
     pub sent: Vec<SentAt>,
-    /// The scenario with each event at the time the drive got it (on the FMU's step grid).
+    /// The scenario with each event at the telemetry sample just before the drive got it
+    /// (on the FMU's step grid): the checks read the drive's trace with it (the FMU's outputs
+    /// at an input's time show the state before the input acts).
     pub as_run: Scenario,
+    /// The scenario with each event when the drive acted on it: what the twin replays.
+    pub twin: Scenario,
 }
 
 /// Why a scenario cannot run on a drive (an input a drive does not have), if it cannot.
@@ -51,7 +55,10 @@ fn apply(c: &mut Commands, inputs: &std::collections::BTreeMap<String, Value>, o
     for (name, &v) in inputs {
         let x = v.as_f64();
         match name.as_str() {
-            "mode" => c.mode = Mode::from_code(x as i32).ok_or_else(|| anyhow!("mode {x} is not a mode code (0–3)"))?,
+            "mode" => {
+                let code = (x.fract() == 0.0 && x.abs() <= 3.0).then_some(x as i32);
+                c.mode = code.and_then(Mode::from_code).ok_or_else(|| anyhow!("mode {x} is not a mode code (0–3)"))?
+            }
             "position_command" => {
                 let counts = (x / std::f64::consts::TAU * cpr).round();
                 if !counts.is_finite() || counts.abs() > 2f64.powi(53) {
@@ -95,9 +102,10 @@ pub fn scenario_on_drive<T: DrivePort>(
     }
     let run = run_timed(session, (&params, origin), scenario.stop_time, &groups, |_| false, progress)?;
     session.rest()?;
-    let mut as_run = scenario.clone();
-    for (e, sent) in as_run.events.iter_mut().zip(&run.sent) {
-        e.time = (sent.before / DEFAULT_STEP).floor() * DEFAULT_STEP;
+    let (mut as_run, mut twin) = (scenario.clone(), scenario.clone());
+    for ((e, t), sent) in as_run.events.iter_mut().zip(&mut twin.events).zip(&run.sent) {
+        e.time = on_grid(sent.before, DEFAULT_STEP, scenario.stop_time);
+        t.time = on_grid(sent.acted(), DEFAULT_STEP, scenario.stop_time);
     }
-    Ok(DeviceScenario { trace: run.trace, sent: run.sent, as_run })
+    Ok(DeviceScenario { trace: run.trace, sent: run.sent, as_run, twin })
 }

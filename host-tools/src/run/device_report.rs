@@ -67,8 +67,8 @@ fn one<T: DrivePort>(
     let (measurable, other): (Vec<_>, Vec<_>) =
         run.as_run.checks.iter().cloned().partition(|c| run.trace.index(&c.signal).is_some());
     let checks = evaluate_checks(&Scenario { checks: measurable, ..run.as_run.clone() }, &run.trace)?;
-    let twin = fmu.run(&run.as_run, |_| {})?;
-    let twin_passed = evaluate_checks(&run.as_run, &twin)?.iter().all(|c| c.passed);
+    let twin = fmu.run(&run.twin, |_| {})?;
+    let twin_passed = evaluate_checks(&run.twin, &twin)?.iter().all(|c| c.passed);
     let differences = trace_differences(&run.trace, &twin, &COMPARED);
     let signals: Vec<String> = COMPARED.iter().map(|s| s.to_string()).collect();
     let files = write_runs(out, (&scenario.name, port), (&run.trace, &twin), &signals)?;

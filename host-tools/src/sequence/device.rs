@@ -14,7 +14,7 @@ use control_core::Commands;
 
 use crate::device::link::DrivePort;
 use crate::device::session::DriveSession;
-use crate::device::timed_run::{run_timed, SentAt, TimedRequests};
+use crate::device::timed_run::{on_grid, run_timed, SentAt, TimedRequests};
 use crate::fmu::configuration::configuration;
 use crate::fmu::scenario::DEFAULT_STEP;
 use crate::fmu::trace::Trace;
@@ -25,8 +25,11 @@ use crate::virtual_drive::simulator::power_stage_limits;
 pub struct DeviceTimeline {
     pub trace: Trace,
     pub keys: Vec<SentAt>,
-    /// The timeline with each key at the time the drive got it (on the FMU's step grid).
+    /// The timeline with each key at the telemetry sample just before the drive got it (on
+    /// the FMU's step grid): the expectations read the drive's trace with it.
     pub as_run: SequenceScenario,
+    /// The timeline with each key when the drive acted on it: what the twin replays.
+    pub twin: SequenceScenario,
 }
 
 fn event_request(e: &KeyEvent, counts_per_rev: f64, origin: i64) -> Result<SequenceEvent> {
@@ -77,9 +80,10 @@ pub fn timeline_on_drive<T: DrivePort>(
     let refused_key = |r: &Response| matches!(r, Response::Refused(RefusalReason::Sequence(_)));
     let run = run_timed(session, (&params, origin), s.stop_time, &groups, refused_key, progress)?;
     session.rest()?;
-    let mut as_run = s.clone();
+    let (mut as_run, mut twin) = (s.clone(), s.clone());
     for (&k, sent) in order.iter().zip(&run.sent) {
-        as_run.events[k].time = (sent.before / DEFAULT_STEP).floor() * DEFAULT_STEP;
+        as_run.events[k].time = on_grid(sent.before, DEFAULT_STEP, s.stop_time);
+        twin.events[k].time = on_grid(sent.acted(), DEFAULT_STEP, s.stop_time);
     }
-    Ok(DeviceTimeline { trace: run.trace, keys: run.sent, as_run })
+    Ok(DeviceTimeline { trace: run.trace, keys: run.sent, as_run, twin })
 }

@@ -56,8 +56,8 @@ fn one<T: DrivePort>(
     let run = timeline_on_drive(session, s, |f| pb.set_position((f * 1000.0) as u64))?;
     pb.finish_and_clear();
     let expectations = run.as_run.evaluate(&run.trace)?;
-    let twin = fmu.run(&run.as_run.to_scenario(), |_| {})?;
-    let twin_passed = run.as_run.evaluate(&twin)?.iter().all(|o| o.passed);
+    let twin = fmu.run(&run.twin.to_scenario(), |_| {})?;
+    let twin_passed = run.twin.evaluate(&twin)?.iter().all(|o| o.passed);
     let differences = trace_differences(&run.trace, &twin, &COMPARED);
     let files = write_runs(out, (&s.name, port), (&run.trace, &twin), &PLOT.map(String::from))?;
     let mut r = DeviceTimelineReport {

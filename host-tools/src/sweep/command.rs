@@ -216,6 +216,9 @@ impl SweepArgs {
         let common = &self.common;
         let fmu = Fmu::load(&common.fmu.clone().unwrap_or_else(default_fmu))?;
         let out = common.out.clone().unwrap_or_else(|| default_out("sweep"));
+        if self.target.device.is_some() && (self.oracle || self.reference.is_some()) {
+            bail!("--oracle and --reference are for a sweep on the FMU; with --device the FMU runs the drive's twin");
+        }
         if let Some(mut session) = self.target.session()? {
             let port = self.target.device.as_deref().unwrap_or_default();
             let pb = progress_bar("sweep", common.json);
@@ -229,7 +232,7 @@ impl SweepArgs {
             } else {
                 r.print();
             }
-            return Ok(r.drive.dropped == 0);
+            return Ok(r.passed);
         }
         let pb = progress_bar("sweep", common.json);
         let r = crate::sweep::report::run(

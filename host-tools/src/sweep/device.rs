@@ -35,6 +35,9 @@ pub struct DeviceSweep {
     pub samples: usize,
     /// Samples the drive could not send (its ring full: the link too slow).
     pub dropped: u32,
+    /// Frames that did not decode during the sweep (corrupted on the line: a sample batch or
+    /// an answer lost).
+    pub corrupt_frames: u64,
     /// Bytes a second received from the drive during the sweep (its time), and the line's
     /// capacity at the baud rate.
     pub link_bytes_per_s: f64,
@@ -59,7 +62,7 @@ pub fn sweep_on_drive<T: crate::device::link::DrivePort>(
     session.wait(START_AT)?;
     session.order(Request::Stream { enabled: true }, "streaming on")?;
     session.take_samples();
-    let bytes_before = session.link.bytes_read;
+    let (bytes_before, corrupt_before) = (session.link.bytes_read, session.link.corrupt_frames);
     session.order(Request::StartSweep, "the sweep's start")?;
     let start = session.telemetry()?.tick;
     let points = run.settings.points.max(1) as f64;
@@ -109,6 +112,7 @@ pub fn sweep_on_drive<T: crate::device::link::DrivePort>(
         online,
         samples: rows.len(),
         dropped,
+        corrupt_frames: session.link.corrupt_frames - corrupt_before,
         link_bytes_per_s: (session.link.bytes_read - bytes_before) as f64 / measurement_time_s.max(1e-9),
         trace,
     })

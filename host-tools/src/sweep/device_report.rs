@@ -51,29 +51,44 @@ pub struct DeviceSweepReport {
     pub points: Vec<TwinPoint>,
     /// Largest |drive − twin| over the points: (dB, degrees).
     pub largest_difference: (f64, f64),
+    /// Frequencies measured by only one of the two (Hz).
+    pub missing: Vec<f64>,
+    /// Every sample arrived (none dropped by the drive, no frame lost on the line), every
+    /// frequency is in both, and they agree within the goal (`device::bench::GOAL_DB`, `GOAL_DEG`).
+    pub passed: bool,
     /// The line's capacity at the baud rate (bytes/s), and the share the sweep used.
     pub line_capacity_bytes_per_s: f64,
     pub line_use: f64,
     pub files: Vec<PathBuf>,
 }
 
-/// The drive's sweep and its twin's, compared point by point.
+/// The drive's sweep and its twin's, compared at each frequency both measured; a frequency
+/// only one of them has makes the largest difference infinite (and is listed by `missing`).
 pub fn compare_with_twin(drive: &DeviceSweep, twin: &[ResponsePoint]) -> (Vec<TwinPoint>, (f64, f64)) {
+    let same = |a: f64, b: f64| (a - b).abs() <= 1e-6 * a.abs().max(b.abs());
     let mut largest = (0.0f64, 0.0f64);
     let points: Vec<TwinPoint> = drive
         .stream
         .iter()
-        .zip(twin)
-        .map(|(d, t)| {
+        .filter_map(|d| {
+            let t = twin.iter().find(|t| same(t.frequency, d.frequency))?;
             let (dg, dp) = difference(d, t);
             largest = (largest.0.max(dg.abs()), largest.1.max(dp.abs()));
-            TwinPoint { frequency: d.frequency, drive: *d, twin: *t, difference_db: dg, difference_deg: dp }
+            Some(TwinPoint { frequency: d.frequency, drive: *d, twin: *t, difference_db: dg, difference_deg: dp })
         })
         .collect();
-    if drive.stream.len() != twin.len() {
+    if points.len() != drive.stream.len() || points.len() != twin.len() {
         largest = (f64::INFINITY, f64::INFINITY);
     }
     (points, largest)
+}
+
+/// Frequencies one of the two sweeps has and the other has not.
+pub fn missing(drive: &DeviceSweep, twin: &[ResponsePoint]) -> Vec<f64> {
+    let has = |v: &[ResponsePoint], f: f64| v.iter().any(|p| (p.frequency - f).abs() <= 1e-6 * f.abs());
+    let mut m: Vec<f64> = drive.stream.iter().map(|p| p.frequency).filter(|&f| !has(twin, f)).collect();
+    m.extend(twin.iter().map(|p| p.frequency).filter(|&f| !has(&drive.stream, f)));
+    m
 }
 
 /// The twin: the same sweep on the FMU, its response from the stream as the drive's is.
@@ -118,13 +133,19 @@ pub fn run_on_device<T: crate::device::link::DrivePort>(
     )?;
     files.extend([csv, svg]);
     let capacity = session_capacity(session);
+    let passed = drive.dropped == 0
+        && drive.corrupt_frames == 0
+        && largest.0 <= crate::device::bench::GOAL_DB
+        && largest.1 <= crate::device::bench::GOAL_DEG;
     let report = DeviceSweepReport {
         port: port.to_string(),
         line_use: drive.link_bytes_per_s / capacity,
+        missing: missing(&drive, &twin),
         drive,
         twin_measurement_time_s: twin_time,
         points,
         largest_difference: largest,
+        passed,
         line_capacity_bytes_per_s: capacity,
         files: files.clone(),
     };
@@ -182,13 +203,22 @@ impl DeviceSweepReport {
             println!("  {f:>10.2} {g:>10.3} {ph:>10.2} {q:>8.4} {tg:>10.3} {tp:>10.2} {dg:>9.3} {dp:>9.2}");
         }
         println!(
-            "  drive vs twin: largest difference {:.3} dB, {:.2} deg",
-            self.largest_difference.0, self.largest_difference.1
+            "  drive vs twin: largest difference {:.3} dB, {:.2} deg (goal {} dB, {} deg){}",
+            self.largest_difference.0,
+            self.largest_difference.1,
+            crate::device::bench::GOAL_DB,
+            crate::device::bench::GOAL_DEG,
+            if self.missing.is_empty() {
+                String::new()
+            } else {
+                format!("; measured by one only: {:?} Hz", self.missing)
+            }
         );
         println!(
-            "  link: {} samples, {} dropped by the drive; {:.0} B/s of {:.0} B/s ({:.0} % of the line)",
+            "  link: {} samples, {} dropped by the drive, {} frame(s) lost on the line; {:.0} B/s of {:.0} B/s ({:.0} % of the line)",
             d.samples,
             d.dropped,
+            d.corrupt_frames,
             d.link_bytes_per_s,
             self.line_capacity_bytes_per_s,
             100.0 * self.line_use
