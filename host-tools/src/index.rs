@@ -28,6 +28,7 @@ impl IndexArgs {
             crate::ident::index::section(&root),
             crate::circle::index::section(&root),
             crate::accdec::index::section(&root),
+            crate::device::index::section(&root),
         ]
         .into_iter()
         .flatten()

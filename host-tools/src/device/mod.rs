@@ -4,6 +4,7 @@ pub mod args;
 pub mod bench;
 pub mod command;
 pub mod frame_stream;
+pub mod index;
 pub mod link;
 pub mod session;
 pub mod telemetry_trace;
