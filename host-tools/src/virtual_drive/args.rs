@@ -13,10 +13,10 @@ use crate::virtual_drive::faults::ScheduledFault;
 /// (and written to --port-file, linked at --link); every `servo device` action and every
 /// experiment with --device works on it as on a board.
 ///
-/// Examples:
-///   servo virtual-drive --link /tmp/servo-drive &
-///   servo device --port /tmp/servo-drive hello
-///   servo virtual-drive --speed max --fault break@2.5 --set plant.load_inertia=3e-4
+/// Example: `servo virtual-drive --link /tmp/servo-drive &`, then `servo device --port
+/// /tmp/servo-drive hello` or `servo sweep --device /tmp/servo-drive`.
+///
+/// Example: `servo virtual-drive --speed max --fault break@2.5 --set plant.load_inertia=3e-4`.
 #[derive(clap::Args)]
 pub struct VirtualDriveArgs {
     /// Pace: `realtime` (default), `max` (as fast as the machine runs: CI), or a factor (0.5: half speed)
