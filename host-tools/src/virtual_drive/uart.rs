@@ -49,8 +49,12 @@ pub struct Uart {
     bytes_per_second: f64,
     receive_credit: f64,
     transmit_credit: f64,
-    /// Bytes the drive wrote, not yet on the line.
+    /// The transmit buffer: bytes the drive wrote, not yet on the line (at most
+    /// [`TRANSMIT_BUFFER`]).
     transmit: VecDeque<u8>,
+    /// The rest of the frame the link task is writing (`write_all` waits for room in the
+    /// buffer byte by byte; meanwhile the task serves nothing else).
+    writing: VecDeque<u8>,
     corrupt_rate: f64,
     random: XorShift64Star,
     pub counters: LineCounters,
@@ -63,6 +67,7 @@ impl Uart {
             receive_credit: 0.0,
             transmit_credit: 0.0,
             transmit: VecDeque::new(),
+            writing: VecDeque::new(),
             corrupt_rate: line.corrupt_rate,
             random: XorShift64Star(line.seed.max(1)),
             counters: LineCounters::default(),
@@ -90,14 +95,23 @@ impl Uart {
         self.receive_credit = self.receive_credit.min(1.0);
     }
 
-    /// The drive may start writing a frame (its transmit buffer is not full).
+    /// The link task is free: the frame it wrote last is all in the transmit buffer.
     pub fn may_write(&self) -> bool {
-        self.transmit.len() < TRANSMIT_BUFFER
+        self.writing.is_empty()
     }
 
-    /// A frame from the drive, queued for the line.
+    /// A frame from the drive: into the transmit buffer as far as it has room, the rest as
+    /// room frees up.
     pub fn write(&mut self, bytes: &[u8]) {
-        self.transmit.extend(bytes);
+        self.writing.extend(bytes);
+        self.fill();
+    }
+
+    fn fill(&mut self) {
+        while self.transmit.len() < TRANSMIT_BUFFER {
+            let Some(b) = self.writing.pop_front() else { break };
+            self.transmit.push_back(b);
+        }
     }
 
     /// The bytes that leave the drive during `dt` seconds.
@@ -113,6 +127,7 @@ impl Uart {
             wire.from_drive.push_back(b);
         }
         self.transmit_credit = self.transmit_credit.min(1.0);
+        self.fill();
     }
 
     /// A number in [0, 1).
@@ -145,13 +160,20 @@ mod tests {
             uart.receive(&mut wire, 1.0 / 16_000.0, |_| got += 1);
         }
         assert!((got as f64 - 92_160.0).abs() <= 1.0, "{got} bytes in one second at 921 600 Bd");
-        // Send: the same rate out; the transmit buffer says when it is full.
+        // Send: the same rate out; a frame larger than the transmit buffer keeps the link task
+        // waiting until the buffer has taken all of it.
         uart.write(&[1; 2000]);
         assert!(!uart.may_write());
+        assert_eq!(uart.transmit.len(), TRANSMIT_BUFFER);
         for _ in 0..160 {
             uart.send(&mut wire, 1.0 / 16_000.0);
         }
         assert_eq!(wire.from_drive.len(), 921, "10 ms of line");
+        assert!(!uart.may_write(), "1 079 bytes sent or in the buffer, 921 still to write");
+        for _ in 0..160 {
+            uart.send(&mut wire, 1.0 / 16_000.0);
+        }
+        assert!(uart.may_write(), "the whole frame is in the buffer after 20 ms");
         // Corruption at 1 %: about 1 % of bytes differ, by one bit each.
         let mut noisy = Uart::new(LineSettings { baud: 921_600, corrupt_rate: 0.01, seed: 3 });
         let mut wire = Wire::default();
