@@ -10,6 +10,14 @@ use std::time::{Duration, Instant};
 
 use host_tools::paths::default_fmu as fmu_path;
 
+/// One virtual drive at a time: the real-time ones keep their pace better on a loaded
+/// two-core CI machine without a drive at `--speed max` beside them.
+static ONE_AT_A_TIME: std::sync::Mutex<()> = std::sync::Mutex::new(());
+
+fn one_at_a_time() -> std::sync::MutexGuard<'static, ()> {
+    ONE_AT_A_TIME.lock().unwrap_or_else(|e| e.into_inner())
+}
+
 fn servo() -> Command {
     let mut c = Command::new(env!("CARGO_BIN_EXE_servo"));
     c.current_dir(std::env::temp_dir());
@@ -86,6 +94,7 @@ fn json(o: &std::process::Output) -> serde_json::Value {
 
 #[test]
 fn a_sweep_over_the_virtual_drive_matches_its_twin_and_parameters_survive_a_restart() {
+    let _serial = one_at_a_time();
     let dir = tmp("sweep");
     let _ = std::fs::remove_file(dir.join("flash.bin"));
     let vd = VirtualDrive::start(&dir, "max", &[]);
@@ -128,6 +137,7 @@ fn a_sweep_over_the_virtual_drive_matches_its_twin_and_parameters_survive_a_rest
 
 #[test]
 fn faults_a_missing_device_and_a_dying_drive_end_in_clear_errors() {
+    let _serial = one_at_a_time();
     let dir = tmp("faults");
     // A break at 0.2 s: the sweep refuses to start and names the fault.
     let vd = VirtualDrive::start(&dir, "max", &["--fault", "break@0.2"]);
@@ -164,6 +174,7 @@ fn faults_a_missing_device_and_a_dying_drive_end_in_clear_errors() {
 /// expectation holds on the drive's telemetry and on the FMU twin replaying the keys.
 #[test]
 fn a_sequence_timeline_over_the_virtual_drive_meets_its_expectations_and_the_twin_too() {
+    let _serial = one_at_a_time();
     let dir = tmp("sequence");
     let vd = VirtualDrive::start(&dir, "realtime", &[]);
     let timeline = host_tools::paths::workspace_root().join("scenarios/sequences/stop_at_speed.toml");
@@ -193,6 +204,7 @@ fn a_sequence_timeline_over_the_virtual_drive_meets_its_expectations_and_the_twi
 /// the drive's telemetry; a scenario with an input a drive lacks is skipped with the reason.
 #[test]
 fn a_scenario_over_the_virtual_drive_passes_its_checks_and_the_twin_too() {
+    let _serial = one_at_a_time();
     let dir = tmp("run");
     let vd = VirtualDrive::start(&dir, "realtime", &[]);
     let root = host_tools::paths::workspace_root();
