@@ -43,3 +43,35 @@ impl Faults {
         NAMES.into_iter().filter(move |(b, _)| self.0 & b != 0).map(|(_, n)| n)
     }
 }
+
+/// The set bits' names joined by ", ", or "none": for logs and error messages.
+impl core::fmt::Display for Faults {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        if !self.any() {
+            return f.write_str("none");
+        }
+        for (k, name) in self.names().enumerate() {
+            if k > 0 {
+                f.write_str(", ")?;
+            }
+            f.write_str(name)?;
+        }
+        Ok(())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    extern crate std;
+    use super::*;
+    use std::string::ToString;
+
+    #[test]
+    fn shown_as_the_names_of_the_set_bits() {
+        assert_eq!(Faults::default().to_string(), "none");
+        let mut f = Faults::default();
+        f.latch(Faults::HARDWARE_BREAK);
+        f.latch(Faults::OVERCURRENT);
+        assert_eq!(f.to_string(), "overcurrent, hardware break input");
+    }
+}

@@ -13,7 +13,7 @@
 //!   before the trip is seen, and above the board's 15 A rms (21.2 A peak).
 
 use control_core::current_sensing::{SensingScales, OFFSET_WINDOW};
-use control_core::params::Limits;
+use control_core::params::{Limits, Params};
 
 pub const SHUNT_OHM: f32 = 0.010;
 /// Magnitude of the amplifier's gain; the sign is in [`SCALES`].
@@ -48,6 +48,12 @@ pub fn board_limits(given: Limits) -> Limits {
         bus_overvoltage: BUS_OVERVOLTAGE_V,
         ..given
     }
+}
+
+/// `p` with this board's limits: what the firmware installs as its defaults, and what the
+/// host gives a drive on this board (the virtual drive's too).
+pub fn with_board_limits(p: Params) -> Params {
+    Params { limits: board_limits(p.limits), ..p }
 }
 
 /// Ways a set of limits does not fit this board (bits of the result).

@@ -42,7 +42,6 @@
 //! until the save is over).
 
 use control_core::current_sensing::SensingScales;
-use control_core::Params;
 use drive_application::board::{FlashError, ParamFlash, PowerStage, Sample};
 use embassy_stm32::flash::{Blocking, Flash};
 use embassy_stm32::pac;
@@ -71,9 +70,7 @@ pub const TIM1_WORDS: Tim1Words = tim1_words::tim1_words(&IHM08M1);
 pub const SCALES: SensingScales = ratings::SCALES;
 
 /// The parameters with this board's protective limits (bus 10–50 V, 24 A).
-pub fn with_board_limits(p: Params) -> Params {
-    Params { limits: ratings::board_limits(p.limits), ..p }
-}
+pub use power_stage::ratings::with_board_limits;
 
 /// 170 MHz from the NUCLEO's 24 MHz crystal: 24 / 6 × 85 / 2, range-1 boost.
 pub fn clocks() -> embassy_stm32::Config {

@@ -77,7 +77,7 @@ impl<T: DrivePort> DriveSession<T> {
         if t.faults.any() {
             bail!(
                 "the drive has faults latched: {} (look at them, then `servo device --port … clear-faults`)",
-                t.faults.names().collect::<Vec<_>>().join(", ")
+                t.faults
             );
         }
         Ok(t)
@@ -120,9 +120,10 @@ impl<T: DrivePort> DriveSession<T> {
 
     /// Let `seconds` of the drive's time pass.
     pub fn wait(&mut self, seconds: f64) -> Result<Telemetry> {
-        let start = self.telemetry()?.tick;
-        let target = start.saturating_add((seconds * self.tick_hz).round() as u64);
-        self.wait_until(seconds * 2.0 + 0.1, |t| Ok(t.tick >= target))
+        let ticks = (seconds * self.tick_hz).round() as u64;
+        // From the first telemetry `wait_until` reads: no poll of its own.
+        let mut target = None;
+        self.wait_until(seconds * 2.0 + 0.1, |t| Ok(t.tick >= *target.get_or_insert(t.tick.saturating_add(ticks))))
     }
 
     pub fn take_samples(&mut self) -> Vec<SampleBatch> {

@@ -20,7 +20,7 @@ use crate::device::timed_run::{on_grid, run_timed, SentAt, TimedRequests};
 use crate::fmu::configuration::configuration;
 use crate::fmu::scenario::{Scenario, Value, DEFAULT_STEP};
 use crate::fmu::trace::Trace;
-use crate::virtual_drive::simulator::power_stage_limits;
+use power_stage::ratings::with_board_limits;
 
 /// The scenario inputs a drive takes.
 pub const DRIVE_INPUTS: [&str; 6] =
@@ -84,7 +84,7 @@ pub fn scenario_on_drive<T: DrivePort>(
     scenario: &Scenario,
     progress: impl FnMut(f64),
 ) -> Result<DeviceScenario> {
-    let params = power_stage_limits(configuration(&scenario.parameters)?.control);
+    let params = with_board_limits(configuration(&scenario.parameters)?.control);
     session.set_params(&params)?;
     let origin = session.telemetry()?.position;
     let cpr = params.encoder_counts_per_rev as f64;

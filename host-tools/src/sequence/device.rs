@@ -20,7 +20,7 @@ use crate::fmu::scenario::DEFAULT_STEP;
 use crate::fmu::trace::Trace;
 use crate::sequence::timeline::{KeyEvent, SequenceScenario};
 use crate::sequence::timeline_reference::PlainUnit;
-use crate::virtual_drive::simulator::power_stage_limits;
+use power_stage::ratings::with_board_limits;
 
 pub struct DeviceTimeline {
     pub trace: Trace,
@@ -56,7 +56,7 @@ pub fn timeline_on_drive<T: DrivePort>(
     s: &SequenceScenario,
     progress: impl FnMut(f64),
 ) -> Result<DeviceTimeline> {
-    let params = power_stage_limits(configuration(&s.parameters)?.control);
+    let params = with_board_limits(configuration(&s.parameters)?.control);
     session.set_params(&params)?;
     let origin = session.telemetry()?.position;
     let cpr = params.encoder_counts_per_rev as f64;

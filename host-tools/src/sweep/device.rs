@@ -20,7 +20,7 @@ use crate::device::session::DriveSession;
 use crate::fmu::sweep_run::{SweepRun, START_AT};
 use crate::fmu::trace::Trace;
 use crate::sweep::measurement::stream_results;
-use crate::virtual_drive::simulator::power_stage_limits;
+use power_stage::ratings::with_board_limits;
 
 /// What a sweep over the link brought back.
 #[derive(Clone, Debug, Serialize)]
@@ -55,7 +55,7 @@ pub fn sweep_on_drive<T: crate::device::link::DrivePort>(
     // The telemetry shares the drive's transmit line with the stream (about 75 kB/s of the
     // 92 kB/s at 921 600 Bd): poll it at 50 Hz, not faster.
     session.poll = session.poll.max(std::time::Duration::from_millis(20));
-    let params = power_stage_limits(run.drive_params()?);
+    let params = with_board_limits(run.drive_params()?);
     session.set_params(&params)?;
     let commands = Commands { mode: run.mode(), velocity: run.velocity as f32, ..Commands::default() };
     session.order(Request::SetCommands(commands), "the riding speed")?;
@@ -71,10 +71,7 @@ pub fn sweep_on_drive<T: crate::device::link::DrivePort>(
     let mut seen = 0;
     let end = session.wait_until(longest, |t| {
         if t.faults.any() {
-            return Err(anyhow!(
-                "the drive latched a fault during the sweep: {}",
-                t.faults.names().collect::<Vec<_>>().join(", ")
-            ));
+            return Err(anyhow!("the drive latched a fault during the sweep: {}", t.faults));
         }
         if t.sweep.done_points > seen {
             seen = t.sweep.done_points;

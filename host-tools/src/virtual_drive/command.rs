@@ -183,18 +183,10 @@ fn note_line(n: &TimedNote) -> String {
             "current offsets {:.1} {:.1} {:.1} counts, bus {bus_voltage:.2} V",
             offsets[0], offsets[1], offsets[2]
         ),
-        Note::FaultsChanged { faults } => format!("faults: {}", fault_names(faults)),
+        Note::FaultsChanged { faults } => format!("faults: {faults}"),
         Note::Alive { ticks, faults, bus_voltage } => {
-            format!("alive: {ticks} ticks, faults: {}, bus {bus_voltage:.2} V", fault_names(faults))
+            format!("alive: {ticks} ticks, faults: {faults}, bus {bus_voltage:.2} V")
         }
     };
     format!("[{:9.4} s] {what}", n.time)
-}
-
-fn fault_names(f: control_core::faults::Faults) -> String {
-    if f.any() {
-        f.names().collect::<Vec<_>>().join(", ")
-    } else {
-        "none".to_string()
-    }
 }

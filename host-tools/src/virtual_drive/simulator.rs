@@ -97,7 +97,7 @@ impl<F: ParamFlash> VirtualDrive<F> {
         // One drive per power-on, for the life of the process (the firmware's is a `static`):
         // a few tens of kilobytes.
         let drive: &'static Drive = Box::leak(Box::new(Drive::new()));
-        let defaults = power_stage_limits(settings.defaults);
+        let defaults = power_stage::ratings::with_board_limits(settings.defaults);
         let host = drive.install::<SimulatedBoard, F>(defaults, &mut flash).map_err(install_error)?;
         let mut faults = settings.faults.clone();
         faults.sort_by(|a, b| b.at.total_cmp(&a.at));
@@ -210,9 +210,4 @@ impl<F: ParamFlash> VirtualDrive<F> {
             }
         }
     }
-}
-
-/// The parameters with the IHM08M1's protective limits, as the firmware installs them.
-pub fn power_stage_limits(p: Params) -> Params {
-    Params { limits: power_stage::ratings::board_limits(p.limits), ..p }
 }

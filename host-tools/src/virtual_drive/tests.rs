@@ -41,7 +41,7 @@ fn calibrates_then_follows_a_velocity_command_like_the_fmu() {
 #[test]
 fn saved_parameters_survive_a_power_cycle_and_a_foreign_rate_is_refused() {
     let mut s = session(VirtualDrive::power_on(&settings(), FileFlash::in_memory()).unwrap());
-    let mut p = crate::virtual_drive::simulator::power_stage_limits(Params::default());
+    let mut p = power_stage::ratings::with_board_limits(Params::default());
     p.velocity.kp *= 1.25;
     s.set_params(&p).unwrap();
     s.order(Request::SaveParams, "save").unwrap();
