@@ -73,6 +73,33 @@ impl SineGenerator {
         self.phase
     }
 
+    /// Ticks until the phase is nearest a peak of the sine (π/2 or 3π/2), at most half a
+    /// period. A frequency changed there keeps both the value and the slope of the input
+    /// continuous (both sines are at ±amplitude with zero slope), which cancels, to first
+    /// order, the transient the change excites in every loop mode away from the excitation
+    /// (see `PhaseShiftedSweep`). 0 when the sine does not advance.
+    pub fn ticks_to_peak(&self) -> u32 {
+        if self.increment == 0 {
+            return 0;
+        }
+        const QUARTER: u32 = 1 << 30;
+        const HALF_TURN_MASK: u32 = (1 << 31) - 1;
+        let distance = QUARTER.wrapping_sub(self.phase) & HALF_TURN_MASK;
+        // The nearest tick: the distance in increments, rounded (u64: no overflow).
+        ((distance as u64 + (self.increment as u64 >> 1)) / self.increment as u64) as u32
+    }
+
+    /// The generator `ticks` samples on (the phase wraps as the accumulator does).
+    pub fn advanced(self, ticks: u64) -> Self {
+        let phase = self.phase.wrapping_add((self.increment as u64).wrapping_mul(ticks) as u32);
+        Self { phase, ..self }
+    }
+
+    /// The generator at the accumulator's word `phase`.
+    pub fn advanced_to(self, phase: u32) -> Self {
+        Self { phase, ..self }
+    }
+
     pub fn next_sample(&mut self) -> f32 {
         self.next_with_angle().0
     }
@@ -101,6 +128,26 @@ fn to_accumulator(turns: f64) -> u32 {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn the_phase_reaches_a_peak_after_ticks_to_peak() {
+        // Property: after the ticks it names, the sine is within half a tick's phase step of
+        // ±amplitude (the nearest tick to a peak), and no earlier tick is nearer.
+        for (f, start) in [(10.0, 0.0), (43.2, 1.0), (777.0, 2.5), (3000.0, 4.0), (18.0, 1.55)] {
+            let g = SineGenerator::new(1.0, f, 16_000.0, start);
+            let n = g.ticks_to_peak();
+            let step = TAU * f / 16_000.0;
+            assert!((n as f32) <= 0.5 * 16_000.0 / f + 1.0, "{f} {start}: {n} ticks is over half a period");
+            let mut h = g;
+            for _ in 0..n {
+                h.next_sample();
+            }
+            let phase = h.phase();
+            let off_peak = libm::fabsf(libm::cosf(phase));
+            assert!(off_peak <= libm::sinf(0.5 * step) + 1e-4, "{f} {start}: phase {phase} after {n} ticks");
+        }
+        assert_eq!(SineGenerator::new(1.0, 0.0, 16_000.0, 0.3).ticks_to_peak(), 0);
+    }
 
     #[test]
     fn sine_matches_the_analytic_wave_after_many_periods() {

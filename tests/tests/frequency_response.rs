@@ -13,7 +13,7 @@ use host_tools::sweep::bench::bench;
 
 #[test]
 fn phase_shifting_measures_every_injection_point_against_the_oracle_and_single_phase_does_not() {
-    let r = bench(&load_fmu(), |_| {}).unwrap();
+    let r = bench(&load_fmu(), 1, |_| {}).unwrap();
     // The default axis: every injection point, with and without sensor noise, within 0.1 dB,
     // 1 deg and 10 s of measurement against the oracle at every frequency.
     let default_rows: Vec<_> = r.grid.iter().filter(|row| row.plant.starts_with("default")).collect();

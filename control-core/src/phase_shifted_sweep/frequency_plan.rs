@@ -3,6 +3,8 @@
 //! and the length of every record and of the whole sweep.
 
 use super::{SweepParams, SweepSignal};
+use crate::excitation::{phase_angle, SineGenerator};
+use crate::TAU;
 
 /// Where the extra frequency sits among the planned ones, found once: both the count and the
 /// position take every base frequency (a power each, about 20 000 instructions for 128 points
@@ -112,18 +114,41 @@ impl SweepParams {
             SweepSignal::Prbs => {
                 self.prbs_settle_ticks(base_rate_hz).saturating_add(self.prbs_samples(base_rate_hz).saturating_mul(d))
             }
-            SweepSignal::SteppedSine => (0..self.count())
-                .map(|i| {
+            SweepSignal::SteppedSine => {
+                // The sine's phase is followed along the schedule as the runner builds each
+                // record's generator, so that the wait for the next frequency's peak (see
+                // `PhaseShiftedSweep::next_frequency`) is exact when nothing is extended;
+                // with extensions it is bounded by half a period.
+                let mut phase_word = 0u32;
+                let mut total = 0u64;
+                let count = self.count();
+                for i in 0..count {
                     let f = self.frequency(i);
                     let (settle, samples) = self.record_length(f, base_rate_hz);
                     let added = (samples / 2).saturating_mul(2 * extensions as u64);
                     let measure = samples.saturating_add(added).saturating_mul(d);
                     let discarded = (samples / 2).saturating_mul(d).saturating_mul(2 * extensions as u64);
-                    (self.records(f, base_rate_hz) as u64)
-                        .saturating_mul(settle.saturating_add(measure))
-                        .saturating_add(discarded)
-                })
-                .fold(0u64, u64::saturating_add),
+                    let mut generator = SineGenerator::default();
+                    for record in 0..self.records(f, base_rate_hz) {
+                        let shift = if record == 0 { 0.0 } else { TAU / self.shifts as f32 };
+                        let ticks =
+                            settle.saturating_add(measure).saturating_add(if record == 0 { discarded } else { 0 });
+                        generator = SineGenerator::new(1.0, f, base_rate_hz, phase_angle(phase_word) + shift);
+                        phase_word = generator.advanced(ticks).phase_word();
+                        total = total.saturating_add(ticks);
+                    }
+                    if i + 1 < count {
+                        let wait = if extensions == 0 {
+                            generator.advanced_to(phase_word).ticks_to_peak() as u64
+                        } else {
+                            libm::ceilf(0.5 * base_rate_hz / f) as u64 + 1
+                        };
+                        phase_word = generator.advanced_to(phase_word).advanced(wait).phase_word();
+                        total = total.saturating_add(wait);
+                    }
+                }
+                total
+            }
         }
     }
 }

@@ -1,6 +1,10 @@
 //! The on-line correlator: the sums of a three-parameter sine fit of u and y at the
 //! excitation's phases, the response `G = Y/U` they give and its standard errors.
 
+/// The smallest conditioning of the phases (1: spread over the circle, 0: one phase and its
+/// opposite) from which [`SineFitSums::response`] tells a response.
+pub(super) const MIN_TELLING_CONDITIONING: f32 = 0.05;
+
 /// Sums of a three-parameter sine fit (IEEE 1057 with known frequency) of u and y:
 /// `x ≈ x̄ + b·cos θ + c·sin θ`, the complex amplitude `X = b − j·c`. Unlike a plain
 /// correlation it leaks neither the constant speed the sweep rides on nor the image at
@@ -13,6 +17,7 @@
 /// residuals. The squares and the cross product of u and y, and those of their differences
 /// between consecutive samples of a record, give the noise of U and Y at the excitation
 /// frequency (see [`SineFitSums::response_error`]).
+
 #[derive(Clone, Copy, Debug, Default)]
 pub(super) struct SineFitSums {
     u0: f32,
@@ -131,11 +136,14 @@ impl SineFitSums {
         }
     }
 
-    /// `G = Y/U` of these sums (None when the phases or U cannot tell).
+    /// `G = Y/U` of these sums (None when the phases or U cannot tell). Phases that nearly
+    /// collapse to one value and its opposite (a half block near the acquisition Nyquist
+    /// frequency: conditioning below [`MIN_TELLING_CONDITIONING`]) tell nothing either: their
+    /// f32 fit is rounding, not response.
     pub(super) fn response(&self) -> Option<(f32, f32)> {
         let ((u_re, u_im), (y_re, y_im), quality) = self.solve();
         let den = u_re * u_re + u_im * u_im;
-        if den > 0.0 && quality > 0.0 {
+        if den > 0.0 && quality >= MIN_TELLING_CONDITIONING {
             Some(((y_re * u_re + y_im * u_im) / den, (y_im * u_re - y_re * u_im) / den))
         } else {
             None

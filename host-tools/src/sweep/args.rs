@@ -108,7 +108,11 @@ pub struct SweepBenchArgs {
     /// Only this current-sensor noise (A) of the grid (0 or the noisy rows' level)
     #[arg(long)]
     pub noise: Option<f64>,
-    /// Also print every frequency's gain and phase error of each selected row
+    /// Run each noisy row with noise seeds 1..=N and print its worst error and longest time
+    /// over them (a figure that holds on one noise realisation may not on the next)
+    #[arg(long, default_value_t = 1)]
+    pub seeds: u32,
+    /// Also print every frequency's gain and phase error and the time it took, for each selected row
     #[arg(long)]
     pub detail: bool,
     #[command(flatten)]

@@ -74,10 +74,15 @@ pub fn sweep_settings(args: &SweepArgs) -> Result<control_core::phase_shifted_sw
 impl SweepBenchArgs {
     pub fn run(&self) -> Result<bool> {
         if self.plants.is_empty() && self.points.is_empty() && self.noise.is_none() {
-            return bench_sweep(&self.common, self.detail);
+            return bench_sweep(&self.common, self.detail, self.seeds);
         }
         let points = self.points.iter().map(|p| injection_point(p).map(|(p, _)| p)).collect::<Result<Vec<_>>>()?;
-        let selection = crate::sweep::bench::GridSelection { plants: self.plants.clone(), points, noise: self.noise };
+        let selection = crate::sweep::bench::GridSelection {
+            plants: self.plants.clone(),
+            points,
+            noise: self.noise,
+            seeds: self.seeds,
+        };
         selection.validate()?;
         let fmu = Fmu::load(&self.common.fmu.clone().unwrap_or_else(default_fmu))?;
         let pb = progress_bar("sweep bench", self.common.json);
@@ -110,15 +115,16 @@ fn injection_point(word: &str) -> Result<(control_core::excitation::InjectionPoi
 /// The grid's table (and, with `detail`, every frequency's error under its row).
 fn print_grid(rows: &[crate::sweep::bench::GridRow], detail: bool) {
     println!(
-        "  {:<18} {:<28} {:>7} {:>9} {:>8} {:>9} {:>8} {:>9} {:>7}  goal",
-        "injection point", "plant", "noise A", "amplitude", "dB", "at Hz", "deg", "at Hz", "time s"
+        "  {:<18} {:<28} {:>7} {:>5} {:>9} {:>8} {:>9} {:>8} {:>9} {:>7}  goal",
+        "injection point", "plant", "noise A", "seeds", "amplitude", "dB", "at Hz", "deg", "at Hz", "time s"
     );
     for row in rows {
         println!(
-            "  {:<18} {:<28} {:>7} {:>9} {:>8.3} {:>9.1} {:>8.2} {:>9.1} {:>7.2}  {}",
+            "  {:<18} {:<28} {:>7} {:>5} {:>9} {:>8.3} {:>9.1} {:>8.2} {:>9.1} {:>7.2}  {}",
             row.point,
             row.plant,
             row.noise_a,
+            row.seeds,
             row.amplitude,
             row.gain_db,
             row.gain_at_hz,
@@ -129,7 +135,10 @@ fn print_grid(rows: &[crate::sweep::bench::GridRow], detail: bool) {
         );
         if detail {
             for e in &row.per_frequency {
-                println!("      {:>9.1} Hz {:>+8.3} dB {:>+8.2} deg", e.frequency, e.gain_db, e.phase_deg);
+                println!(
+                    "      {:>9.1} Hz {:>+8.3} dB {:>+8.2} deg {:>7.3} s",
+                    e.frequency, e.gain_db, e.phase_deg, e.seconds
+                );
             }
         }
     }
@@ -137,11 +146,11 @@ fn print_grid(rows: &[crate::sweep::bench::GridRow], detail: bool) {
     println!("  rows missing a goal: {missed} of {}", rows.len());
 }
 
-fn bench_sweep(common: &Common, detail: bool) -> Result<bool> {
+fn bench_sweep(common: &Common, detail: bool, seeds: u32) -> Result<bool> {
     use crate::sweep::bench::{GOAL_DB, GOAL_DEG, GOAL_SECONDS};
     let fmu = Fmu::load(&common.fmu.clone().unwrap_or_else(default_fmu))?;
     let pb = progress_bar("sweep bench", common.json);
-    let r = crate::sweep::bench::bench(&fmu, |f| pb.set_position((f * 1000.0) as u64))?;
+    let r = crate::sweep::bench::bench(&fmu, seeds, |f| pb.set_position((f * 1000.0) as u64))?;
     pb.finish_and_clear();
     let ok = r.goals_met();
     if common.json {

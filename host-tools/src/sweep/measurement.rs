@@ -25,6 +25,22 @@ pub fn measured_time(trace: &Trace) -> Result<f64> {
     Ok(done.0 - START_AT)
 }
 
+/// Simulated time each frequency took in `trace` (settling, discarded half blocks, records
+/// and their lengthening), in frequency order: from the previous completion (the sweep's
+/// start for the first) to its own.
+pub fn point_times(trace: &Trace) -> Result<Vec<f64>> {
+    let [time, done] = columns(trace, ["time", "sweep_done_points"])?;
+    let mut since = START_AT;
+    let mut out = Vec::new();
+    for i in 1..done.len() {
+        if done[i] > done[i - 1] {
+            out.push(time[i] - since);
+            since = time[i];
+        }
+    }
+    Ok(out)
+}
+
 fn columns<const N: usize>(t: &Trace, names: [&str; N]) -> Result<[Vec<f64>; N]> {
     let mut out: [Vec<f64>; N] = std::array::from_fn(|_| Vec::new());
     for (o, n) in out.iter_mut().zip(names) {
