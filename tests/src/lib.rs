@@ -44,32 +44,6 @@ pub fn frequency_response(u: &[f64], y: &[f64], f: f64, h: f64) -> (f64, f64) {
     ((gr * gr + gi * gi).sqrt(), gi.atan2(gr).to_degrees())
 }
 
-/// Complex number helpers for the analytic transfer functions.
-#[derive(Clone, Copy, Debug)]
-pub struct C(pub f64, pub f64);
-
-impl C {
-    pub fn mul(self, o: C) -> C {
-        C(self.0 * o.0 - self.1 * o.1, self.0 * o.1 + self.1 * o.0)
-    }
-    pub fn div(self, o: C) -> C {
-        let d = o.0 * o.0 + o.1 * o.1;
-        C((self.0 * o.0 + self.1 * o.1) / d, (self.1 * o.0 - self.0 * o.1) / d)
-    }
-    pub fn add(self, o: C) -> C {
-        C(self.0 + o.0, self.1 + o.1)
-    }
-    pub fn scale(self, k: f64) -> C {
-        C(self.0 * k, self.1 * k)
-    }
-    pub fn abs(self) -> f64 {
-        self.0.hypot(self.1)
-    }
-    pub fn arg_deg(self) -> f64 {
-        self.1.atan2(self.0).to_degrees()
-    }
-}
-
 /// Wrap a phase difference into (-180, 180].
 pub fn wrap_deg(x: f64) -> f64 {
     let mut y = x % 360.0;

@@ -11,8 +11,9 @@
 //! (f/f_tick)²: at the default 16 kHz it is 1.3 % (0.11 dB) at 1 kHz — a property of the
 //! sampled measurement, not of the plant — and at 64 kHz it is 16 times smaller.
 
-use cross_checks::{frequency_response, load_fmu, scenario_from_text, wrap_deg, C};
+use cross_checks::{frequency_response, load_fmu, scenario_from_text, wrap_deg};
 use host_tools::fmu::scenario::Scenario;
+use num_complex::Complex64;
 
 const TICK_HZ: f64 = 64_000.0;
 const H: f64 = 4.0 / TICK_HZ;
@@ -79,14 +80,17 @@ fn open_loop_torque_responses_match_the_two_inertia_model() {
         let (g_w, p_w) = frequency_response(&te, &wm, f, H);
         let (g_a, p_a) = frequency_response(&te, &al, f, H);
 
-        let s_ = C(0.0, std::f64::consts::TAU * f);
-        let d = s_.mul(s_).scale(jm * jl).add(s_.scale(c).add(C(k, 0.0)).scale(jm + jl));
-        let num_w = s_.mul(s_).scale(jl).add(s_.scale(c)).add(C(k, 0.0));
-        let gw = num_w.div(s_.mul(d));
-        let ga = s_.scale(c).add(C(k, 0.0)).div(d);
+        let s_ = Complex64::new(0.0, std::f64::consts::TAU * f);
+        let d = s_ * s_ * (jm * jl) + (s_ * c + k) * (jm + jl);
+        let num_w = s_ * s_ * jl + s_ * c + k;
+        let gw = num_w / (s_ * d);
+        let ga = (s_ * c + k) / d;
 
         let db = |a: f64, b: f64| 20.0 * (a / b).log10();
-        let e = [(db(g_w, gw.abs()), wrap_deg(p_w - gw.arg_deg())), (db(g_a, ga.abs()), wrap_deg(p_a - ga.arg_deg()))];
+        let e = [
+            (db(g_w, gw.norm()), wrap_deg(p_w - gw.arg().to_degrees())),
+            (db(g_a, ga.norm()), wrap_deg(p_a - ga.arg().to_degrees())),
+        ];
         eprintln!("{f:>7.1} Hz  ω_m/T: {:+.4} dB {:+.3}°   a_L/T: {:+.4} dB {:+.3}°", e[0].0, e[0].1, e[1].0, e[1].1);
         for (gdb, ph) in e {
             worst.0 = worst.0.max(gdb.abs());
@@ -123,14 +127,14 @@ fn an_absorber_on_the_load_puts_anti_resonance_zeros_into_torque_to_machine_end(
         let col = |name: &str| trace.column(name).unwrap()[n - take..].to_vec();
         let (te, al) = (col("electromagnetic_torque"), col("load_acceleration"));
         let (g_a, p_a) = frequency_response(&te, &al, f, H);
-        let s_ = C(0.0, std::f64::consts::TAU * f);
-        let za = s_.scale(ca).add(C(ka, 0.0));
-        let jl_eff = C(jl, 0.0).add(za.scale(ja).div(s_.mul(s_).scale(ja).add(za)));
-        let shaft = s_.scale(c).add(C(k, 0.0));
-        let d = s_.mul(s_).mul(jl_eff).scale(jm).add(shaft.mul(jl_eff.add(C(jm, 0.0))));
-        let ga = shaft.div(d);
-        let e = (20.0 * (g_a / ga.abs()).log10(), wrap_deg(p_a - ga.arg_deg()));
-        eprintln!("{f:>6.1} Hz  a_L/T: model {:+.2} dB, error {:+.4} dB {:+.3}°", 20.0 * ga.abs().log10(), e.0, e.1);
+        let s_ = Complex64::new(0.0, std::f64::consts::TAU * f);
+        let za = s_ * ca + ka;
+        let jl_eff = jl + za * ja / (s_ * s_ * ja + za);
+        let shaft = s_ * c + k;
+        let d = s_ * s_ * jl_eff * jm + shaft * (jl_eff + jm);
+        let ga = shaft / d;
+        let e = (20.0 * (g_a / ga.norm()).log10(), wrap_deg(p_a - ga.arg().to_degrees()));
+        eprintln!("{f:>6.1} Hz  a_L/T: model {:+.2} dB, error {:+.4} dB {:+.3}°", 20.0 * ga.norm().log10(), e.0, e.1);
         gains.push((f, 20.0 * g_a.log10()));
         worst = (worst.0.max(e.0.abs()), worst.1.max(e.1.abs()));
     }

@@ -34,9 +34,9 @@ fn corrected_axes_coincide_and_the_circle_gets_rounder() {
     for (i, a) in t.axes.iter().enumerate() {
         let other = t.axes.iter().find(|o| o.axis != a.axis).unwrap().response_model.as_ref().unwrap();
         for (&(f, b), &(_, c)) in t.before[i].iter().zip(&t.after[i]).filter(|(p, _)| p.0 <= 20.0) {
-            let r = c.div(b.mul(other.at(f)));
+            let r = c / (b * other.at(f));
             assert!(
-                (20.0 * r.abs().log10()).abs() < 0.01 && r.arg().to_degrees().abs() < 0.05,
+                (20.0 * r.norm().log10()).abs() < 0.01 && r.arg().to_degrees().abs() < 0.05,
                 "axis {} at {f} Hz: {:?}",
                 a.axis,
                 r

@@ -2,12 +2,12 @@
 
 use nalgebra::DMatrix;
 
-use crate::analysis::spectral::Complex;
+use num_complex::Complex64;
 
 /// Roots of a real polynomial `c[0] + c[1]·x + … + c[n]·x^n`: the eigenvalues of its
 /// companion matrix (nalgebra's real Schur decomposition, as numpy's `roots`). Leading zero
 /// coefficients are dropped (a lower degree); a zero polynomial has no roots.
-pub fn roots(c: &[f64]) -> Vec<Complex> {
+pub fn roots(c: &[f64]) -> Vec<Complex64> {
     let Some(top) = c.iter().rposition(|&x| x != 0.0) else { return Vec::new() };
     let n = top;
     if n == 0 {
@@ -24,14 +24,14 @@ pub fn roots(c: &[f64]) -> Vec<Complex> {
             0.0
         }
     });
-    companion.complex_eigenvalues().iter().map(|z| Complex::new(z.re, z.im)).collect()
+    companion.complex_eigenvalues().iter().copied().collect()
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
 
-    fn sorted(mut r: Vec<Complex>) -> Vec<Complex> {
+    fn sorted(mut r: Vec<Complex64>) -> Vec<Complex64> {
         r.sort_by(|a, b| a.re.total_cmp(&b.re).then(a.im.total_cmp(&b.im)));
         r
     }
@@ -40,10 +40,10 @@ mod tests {
     fn roots_of_a_known_cubic() {
         // (x − 2)(x² + 2x + 5): roots 2 and −1 ± 2j.
         let r = sorted(roots(&[-10.0, 1.0, 0.0, 1.0]));
-        let expect = [Complex::new(-1.0, -2.0), Complex::new(-1.0, 2.0), Complex::new(2.0, 0.0)];
+        let expect = [Complex64::new(-1.0, -2.0), Complex64::new(-1.0, 2.0), Complex64::new(2.0, 0.0)];
         assert_eq!(r.len(), 3);
         for (a, b) in r.iter().zip(expect) {
-            assert!(a.sub(b).abs() < 1e-9, "{a:?} vs {b:?}");
+            assert!((a - b).norm() < 1e-9, "{a:?} vs {b:?}");
         }
     }
 
@@ -75,7 +75,7 @@ mod tests {
     fn leading_zeros_lower_the_degree() {
         let r = roots(&[-6.0, 1.0, 0.0, 0.0]);
         assert_eq!(r.len(), 1);
-        assert!(r[0].sub(Complex::new(6.0, 0.0)).abs() < 1e-12);
+        assert!((r[0] - Complex64::new(6.0, 0.0)).norm() < 1e-12);
         assert!(roots(&[0.0, 0.0]).is_empty());
         assert!(roots(&[3.0]).is_empty());
     }

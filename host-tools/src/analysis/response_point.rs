@@ -3,7 +3,7 @@
 
 use serde::Serialize;
 
-use crate::analysis::spectral::Complex;
+use num_complex::Complex64;
 
 /// One frequency of a response.
 #[derive(Clone, Copy, Debug, Serialize, PartialEq)]
@@ -16,8 +16,8 @@ pub struct ResponsePoint {
 }
 
 impl ResponsePoint {
-    pub fn from_complex(frequency: f64, g: Complex, quality: f64) -> Self {
-        Self { frequency, gain_db: 20.0 * g.abs().log10(), phase_deg: g.arg().to_degrees(), quality }
+    pub fn from_complex(frequency: f64, g: Complex64, quality: f64) -> Self {
+        Self { frequency, gain_db: 20.0 * g.norm().log10(), phase_deg: g.arg().to_degrees(), quality }
     }
 }
 

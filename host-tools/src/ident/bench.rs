@@ -10,13 +10,13 @@ use anyhow::Result;
 use serde::Serialize;
 use servo_axis::plant::PlantParams;
 
-use crate::analysis::spectral::Complex;
 use crate::fmu::runner::Fmu;
 use crate::fmu::scenario::Value;
 use crate::ident::identification::{
     absorber_parameters, measure_records, true_anti_resonance, Factor, Measured, Notch,
 };
 use crate::ident::report::identify_axis;
+use num_complex::Complex64;
 
 /// Anti-resonances of the grid (Hz): 15–300 Hz, denser where the closed loop makes it hard.
 pub const GRID_HZ: [f64; 12] = [15.0, 20.0, 25.0, 30.0, 40.0, 50.0, 70.0, 100.0, 150.0, 200.0, 250.0, 300.0];
@@ -95,24 +95,23 @@ pub fn run_grid(fmu: &Fmu, out: &Path, mut progress: impl FnMut(f64)) -> Result<
 
 /// Torque → load acceleration of the plant (motor, shaft, load, absorber on the load; viscous
 /// friction; Coulomb friction is constant at the identification's speed), in closed form.
-pub fn analytic_response(p: &PlantParams, f: f64) -> Complex {
-    let s = Complex::new(0.0, std::f64::consts::TAU * f);
-    let c = |x: f64| Complex::new(x, 0.0);
-    let s2 = s.mul(s);
-    let shaft = c(p.shaft_stiffness).add(s.scale(p.shaft_damping));
-    let absorber = c(p.absorber_stiffness).add(s.scale(p.absorber_damping));
+pub fn analytic_response(p: &PlantParams, f: f64) -> Complex64 {
+    let s = Complex64::new(0.0, std::f64::consts::TAU * f);
+    let s2 = s * s;
+    let shaft = p.shaft_stiffness + s * p.shaft_damping;
+    let absorber = p.absorber_stiffness + s * p.absorber_damping;
     // The absorber seen from the load: Za·Ja·s²/(Ja·s² + Za) (nothing without one).
     let absorber_load = if p.absorber_inertia > 0.0 {
-        let ja = s2.scale(p.absorber_inertia);
-        absorber.mul(ja).div(ja.add(absorber))
+        let ja = s2 * p.absorber_inertia;
+        absorber * ja / (ja + absorber)
     } else {
-        c(0.0)
+        Complex64::new(0.0, 0.0)
     };
-    let motor = s2.scale(p.motor_inertia).add(s.scale(p.motor_viscous)).add(shaft);
-    let load = s2.scale(p.load_inertia).add(s.scale(p.load_viscous)).add(shaft).add(absorber_load);
+    let motor = s2 * p.motor_inertia + s * p.motor_viscous + shaft;
+    let load = s2 * p.load_inertia + s * p.load_viscous + shaft + absorber_load;
     // θL = T·Zs / (M·L − Zs²); a = s²·θL.
-    let theta = shaft.div(motor.mul(load).sub(shaft.mul(shaft)));
-    s2.mul(theta)
+    let theta = shaft / (motor * load - shaft * shaft);
+    s2 * theta
 }
 
 /// Largest relative error of a measured response against the analytic plant over `band`.
@@ -123,7 +122,7 @@ pub fn record_error(m: &Measured, plant: &PlantParams, band: (f64, f64)) -> f64 
         .filter(|(f, _)| **f >= band.0 && **f <= band.1)
         .map(|(&f, &h)| {
             let a = analytic_response(plant, f);
-            h.sub(a).abs() / a.abs()
+            (h - a).norm() / a.norm()
         })
         .fold(0.0, f64::max)
 }
@@ -178,11 +177,11 @@ mod tests {
             ..base
         };
         let rigid = 1.0 / (p.motor_inertia + p.load_inertia + ja);
-        assert!(analytic_response(&p, 40.0).abs() < 1e-3 * rigid, "{:?}", analytic_response(&p, 40.0));
+        assert!(analytic_response(&p, 40.0).norm() < 1e-3 * rigid, "{:?}", analytic_response(&p, 40.0));
         let low = analytic_response(&p, 0.01);
         assert!((low.re - rigid).abs() < 1e-3 * rigid && low.im.abs() < 1e-3 * rigid, "{low:?} vs {rigid}");
         // Without the absorber, the two-inertia resonance √(k(1/Jm + 1/JL)) is a pole.
         let wr = (base.shaft_stiffness * (1.0 / base.motor_inertia + 1.0 / base.load_inertia)).sqrt();
-        assert!(analytic_response(&base, wr / std::f64::consts::TAU).abs() > 1e9);
+        assert!(analytic_response(&base, wr / std::f64::consts::TAU).norm() > 1e9);
     }
 }

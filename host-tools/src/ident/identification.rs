@@ -34,11 +34,12 @@ use std::collections::BTreeMap;
 use anyhow::{anyhow, bail, Result};
 use control_core::excitation::InjectionPoint;
 use control_core::phase_shifted_sweep::{SweepParams, SweepSignal};
+use num_complex::Complex64;
 use serde::{Deserialize, Serialize};
 
 use crate::analysis::polynomial::roots;
 use crate::analysis::response_point::ResponsePoint;
-use crate::analysis::spectral::{dft_bin, Complex};
+use crate::analysis::spectral::dft_bin;
 use crate::fmu::configuration::configuration;
 use crate::fmu::runner::Fmu;
 use crate::fmu::scenario::Value;
@@ -95,9 +96,9 @@ pub struct Factor {
 }
 
 impl Factor {
-    pub fn at(&self, f: f64) -> Complex {
+    pub fn at(&self, f: f64) -> Complex64 {
         let x = f / self.hz;
-        Complex::new(1.0 - x * x, 2.0 * self.damping * x)
+        Complex64::new(1.0 - x * x, 2.0 * self.damping * x)
     }
 }
 
@@ -128,10 +129,10 @@ impl AxisModel {
         serde_json::from_str(&text).with_context(|| format!("{} is not a model file", path.display()))
     }
 
-    pub fn response(&self, f: f64) -> Complex {
-        let n = self.anti_resonance.map_or(Complex::new(1.0, 0.0), |z| z.at(f));
-        let p = self.resonance.map_or(Complex::new(1.0, 0.0), |z| z.at(f));
-        n.div(p).scale(self.gain)
+    pub fn response(&self, f: f64) -> Complex64 {
+        let n = self.anti_resonance.map_or(Complex64::new(1.0, 0.0), |z| z.at(f));
+        let p = self.resonance.map_or(Complex64::new(1.0, 0.0), |z| z.at(f));
+        n / p * self.gain
     }
 }
 
@@ -139,7 +140,8 @@ impl AxisModel {
 #[derive(Clone, Debug, Serialize)]
 pub struct Measured {
     pub frequencies: Vec<f64>,
-    pub response: Vec<Complex>,
+    #[serde(with = "crate::analysis::complex_json::vec")]
+    pub response: Vec<Complex64>,
     /// |U|² per frequency: the inverse variance of H under output noise (fit weights).
     pub input_power: Vec<f64>,
 }
@@ -232,7 +234,7 @@ pub fn measure_records(
     for k in k0.max(1)..=k1 {
         let uk = dft_bin(&u, k as f64);
         frequencies.push(k as f64 * df);
-        response.push(dft_bin(&y, k as f64).div(uk));
+        response.push(dft_bin(&y, k as f64) / uk);
         input_power.push(uk.norm_sqr());
     }
     Ok(Measured { frequencies, response, input_power })
@@ -287,7 +289,7 @@ impl Notch {
 
 /// Moving average of the gain (dB) over ±`SMOOTHING`·f, with the standard error of each mean.
 fn smoothed_db(m: &Measured) -> (Vec<f64>, Vec<f64>) {
-    let db: Vec<f64> = m.response.iter().map(|h| 20.0 * h.abs().log10()).collect();
+    let db: Vec<f64> = m.response.iter().map(|h| 20.0 * h.norm().log10()).collect();
     let n = db.len();
     let mut mean = Vec::with_capacity(n);
     let mut error = Vec::with_capacity(n);
@@ -359,9 +361,9 @@ fn least_squares(mut a: DMatrix<f64>, b: DVector<f64>) -> Result<(Vec<f64>, f64)
 }
 
 /// Polynomial in s = jx at x.
-fn poly_at(c: &[f64], x: f64) -> Complex {
-    let s = Complex::new(0.0, x);
-    c.iter().rev().fold(Complex::default(), |acc, &ci| acc.mul(s).add(Complex::new(ci, 0.0)))
+fn poly_at(c: &[f64], x: f64) -> Complex64 {
+    let s = Complex64::new(0.0, x);
+    c.iter().rev().fold(Complex64::default(), |acc, &ci| acc * s + ci)
 }
 
 /// A fitted rational model `B(s)/A(s)` (s normalised by `w0`), A(0) = 1.
@@ -376,9 +378,9 @@ pub struct RationalFit {
 }
 
 impl RationalFit {
-    pub fn at(&self, f: f64) -> Complex {
+    pub fn at(&self, f: f64) -> Complex64 {
         let x = std::f64::consts::TAU * f / self.w0;
-        poly_at(&self.numerator, x).div(poly_at(&self.denominator, x))
+        poly_at(&self.numerator, x) / poly_at(&self.denominator, x)
     }
 
     /// Complex-conjugate root pairs of a polynomial as factors (Hz, damping), and real roots
@@ -413,7 +415,7 @@ impl RationalFit {
 pub fn fit_rational(m: &Measured, band: (f64, f64), nb: usize, na: usize) -> Result<RationalFit> {
     let selected: Vec<usize> =
         (0..m.frequencies.len()).filter(|&i| m.frequencies[i] >= band.0 && m.frequencies[i] <= band.1).collect();
-    let pts: Vec<(f64, Complex)> = selected.iter().map(|&i| (m.frequencies[i], m.response[i])).collect();
+    let pts: Vec<(f64, Complex64)> = selected.iter().map(|&i| (m.frequencies[i], m.response[i])).collect();
     // Inverse-variance weights of H under accelerometer noise, normalised.
     let mean_power = selected.iter().map(|&i| m.input_power[i]).sum::<f64>() / selected.len().max(1) as f64;
     let confidence: Vec<f64> = selected.iter().map(|&i| m.input_power[i] / mean_power.max(1e-300)).collect();
@@ -447,7 +449,7 @@ pub fn fit_rational(m: &Measured, band: (f64, f64), nb: usize, na: usize) -> Res
             }
             for i in 1..=na {
                 let (pr, pi) = power(x, i);
-                let hp = h.mul(Complex::new(pr, pi));
+                let hp = h * Complex64::new(pr, pi);
                 a[(2 * r, nb + i)] = -sw * hp.re;
                 a[(2 * r + 1, nb + i)] = -sw * hp.im;
             }
@@ -466,7 +468,7 @@ pub fn fit_rational(m: &Measured, band: (f64, f64), nb: usize, na: usize) -> Res
     denominator.extend_from_slice(&theta[nb + 1..]);
     let mut fit = RationalFit { w0, numerator, denominator, fit_error: 0.0, condition };
     fit.fit_error =
-        (pts.iter().map(|(f, h)| (fit.at(*f).sub(*h).abs() / h.abs()).powi(2)).sum::<f64>() / pts.len() as f64).sqrt();
+        (pts.iter().map(|(f, h)| ((fit.at(*f) - *h).norm() / h.norm()).powi(2)).sum::<f64>() / pts.len() as f64).sqrt();
     Ok(fit)
 }
 
@@ -503,7 +505,7 @@ pub fn identify(axis: &str, m: &Measured) -> Result<Identified> {
     }
     let low_gain = {
         let n = (m.response.len() / 20).max(1);
-        m.response[..n].iter().map(|h| h.abs()).sum::<f64>() / n as f64
+        m.response[..n].iter().map(|h| h.norm()).sum::<f64>() / n as f64
     };
     let notch = deepest_notch(m);
     let Some(found) = notch.filter(Notch::is_clear) else {
@@ -588,8 +590,8 @@ mod tests {
         let response = frequencies
             .iter()
             .map(|&f| {
-                let real = Complex::new(1.0, f / real_zero_hz);
-                zero.at(f).mul(real).div(poles[0].at(f).mul(poles[1].at(f))).scale(4000.0)
+                let real = Complex64::new(1.0, f / real_zero_hz);
+                zero.at(f) * real / (poles[0].at(f) * poles[1].at(f)) * 4000.0
             })
             .collect();
         let input_power = vec![1.0; frequencies.len()];

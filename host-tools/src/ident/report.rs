@@ -36,7 +36,7 @@ pub struct IdentifiedAxis {
 fn write_measured(path: &Path, m: &Measured) -> Result<()> {
     let mut t = Trace::new(["frequency", "gain_db", "phase_deg", "re", "im"].map(String::from).to_vec());
     for (f, h) in m.frequencies.iter().zip(&m.response) {
-        t.rows.push(vec![*f, 20.0 * h.abs().log10(), h.arg().to_degrees(), h.re, h.im]);
+        t.rows.push(vec![*f, 20.0 * h.norm().log10(), h.arg().to_degrees(), h.re, h.im]);
     }
     t.write_csv(path)
 }

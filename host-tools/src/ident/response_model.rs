@@ -24,9 +24,9 @@
 use anyhow::{bail, Result};
 use serde::{Deserialize, Serialize};
 
-use crate::analysis::spectral::Complex;
 use crate::correction::Section;
 use crate::ident::identification::{fit_rational, Factor, Measured};
+use num_complex::Complex64;
 
 /// Fitted command → machine-end model of one axis.
 #[derive(Clone, Debug, Serialize, Deserialize, PartialEq)]
@@ -43,11 +43,11 @@ pub struct ResponseModel {
 }
 
 impl ResponseModel {
-    pub fn at(&self, f: f64) -> Complex {
-        let one = Complex::new(1.0, 0.0);
-        let n = self.zeros.iter().fold(one, |acc, z| acc.mul(z.at(f)));
-        let d = self.poles.iter().fold(one, |acc, p| acc.mul(p.at(f)));
-        n.div(d)
+    pub fn at(&self, f: f64) -> Complex64 {
+        let one = Complex64::new(1.0, 0.0);
+        let n = self.zeros.iter().fold(one, |acc, z| acc * z.at(f));
+        let d = self.poles.iter().fold(one, |acc, p| acc * p.at(f));
+        n / d
     }
 
     /// The model as correction sections: zeros paired with poles, the remaining poles alone.
@@ -97,7 +97,7 @@ fn as_factors(pairs: Vec<Factor>, mut real: Vec<f64>, what: &str, nyquist_hz: f6
 /// most `max_sections` second-order sections.
 pub fn fit(
     axis: &str,
-    points: &[(f64, Complex)],
+    points: &[(f64, Complex64)],
     band: (f64, f64),
     max_sections: usize,
     nyquist_hz: f64,
@@ -108,11 +108,11 @@ pub fn fit(
         input_power: vec![1.0; points.len()],
     };
     if let Some((f, _)) =
-        points.iter().find(|(f, h)| !(f.is_finite() && h.re.is_finite() && h.im.is_finite() && h.abs() > 0.0))
+        points.iter().find(|(f, h)| !(f.is_finite() && h.re.is_finite() && h.im.is_finite() && h.norm() > 0.0))
     {
         bail!("axis {axis}: the measured response at {f} Hz is not a finite, non-zero number: the axis did not follow its command");
     }
-    let in_band: Vec<&(f64, Complex)> = points.iter().filter(|(f, _)| *f >= band.0 && *f <= band.1).collect();
+    let in_band: Vec<&(f64, Complex64)> = points.iter().filter(|(f, _)| *f >= band.0 && *f <= band.1).collect();
     let mut best: Option<ResponseModel> = None;
     let mut refused = Vec::new();
     for (nb, na) in ORDERS {
@@ -132,7 +132,7 @@ pub fn fit(
             }
         };
         let mut model = ResponseModel { axis: axis.into(), zeros, poles, band, worst_error: 0.0 };
-        model.worst_error = in_band.iter().map(|(f, h)| model.at(*f).sub(*h).abs() / h.abs()).fold(0.0, f64::max);
+        model.worst_error = in_band.iter().map(|(f, h)| (model.at(*f) - *h).norm() / h.norm()).fold(0.0, f64::max);
         if best.as_ref().is_none_or(|b| model.worst_error < b.worst_error) {
             best = Some(model);
         }
@@ -160,7 +160,7 @@ mod tests {
             band: (1.0, 40.0),
             worst_error: 0.0,
         };
-        let points: Vec<(f64, Complex)> = (1..=40).map(|f| (f as f64, truth.at(f as f64))).collect();
+        let points: Vec<(f64, Complex64)> = (1..=40).map(|f| (f as f64, truth.at(f as f64))).collect();
         let m = fit("x", &points, (1.0, 40.0), 2, 2000.0).expect("fits");
         assert!(m.worst_error < 1e-6, "worst error {}", m.worst_error);
         for (a, b) in m.poles.iter().zip(&truth.poles) {
@@ -172,12 +172,12 @@ mod tests {
     fn a_response_with_a_right_half_plane_zero_is_refused_with_the_reason() {
         // (1 − s/a)/(1 + s/b)²: a non-minimum-phase zero no section can hold.
         let (a, b) = (std::f64::consts::TAU * 30.0, std::f64::consts::TAU * 20.0);
-        let points: Vec<(f64, Complex)> = (1..=40)
+        let points: Vec<(f64, Complex64)> = (1..=40)
             .map(|f| {
-                let s = Complex::new(0.0, std::f64::consts::TAU * f as f64);
-                let n = Complex::new(1.0, 0.0).sub(s.scale(1.0 / a));
-                let d = Complex::new(1.0, 0.0).add(s.scale(1.0 / b));
-                (f as f64, n.div(d.mul(d)))
+                let s = Complex64::new(0.0, std::f64::consts::TAU * f as f64);
+                let n = 1.0 - s * (1.0 / a);
+                let d = 1.0 + s * (1.0 / b);
+                (f as f64, n / (d * d))
             })
             .collect();
         let e = fit("y", &points, (1.0, 40.0), 1, 2000.0).unwrap_err().to_string();
@@ -186,7 +186,7 @@ mod tests {
 
     #[test]
     fn a_dead_axis_is_an_error_not_a_model() {
-        let points: Vec<(f64, Complex)> = (1..=40).map(|f| (f as f64, Complex::new(0.0, 0.0))).collect();
+        let points: Vec<(f64, Complex64)> = (1..=40).map(|f| (f as f64, Complex64::new(0.0, 0.0))).collect();
         let e = fit("z", &points, (1.0, 40.0), 2, 2000.0).unwrap_err().to_string();
         assert!(e.contains("did not follow"), "{e}");
     }

@@ -19,10 +19,11 @@ use servo_axis::variables::name;
 use std::collections::BTreeMap;
 
 use anyhow::{bail, Result};
+use num_complex::Complex64;
 use serde::Serialize;
 
 use crate::analysis::response_point::ResponsePoint;
-use crate::analysis::spectral::{dft_bin, Complex};
+use crate::analysis::spectral::dft_bin;
 use crate::correction::{drive_frame, validate, AxisCorrection, Section};
 use crate::fmu::configuration::configuration;
 use crate::fmu::runner::Fmu;
@@ -99,7 +100,7 @@ pub fn command_to_load(
     fmu: &Fmu,
     parameters: &BTreeMap<String, Value>,
     frequencies: &[u32],
-) -> Result<Vec<(f64, Complex)>> {
+) -> Result<Vec<(f64, Complex64)>> {
     let period = (1.0 / DEFAULT_STEP).round() as usize; // one second
     let command = multisine(frequencies, MULTISINE_AMPLITUDE, (1 + MEASURED_PERIODS) * period);
     let scenario = Scenario::streamed_position("command_to_load", parameters, &command);
@@ -127,7 +128,7 @@ pub fn command_to_load(
     let seconds = MEASURED_PERIODS as f64;
     Ok(frequencies
         .iter()
-        .map(|&f| (f as f64, dft_bin(&y, f as f64 * seconds).div(dft_bin(&u, f as f64 * seconds))))
+        .map(|&f| (f as f64, dft_bin(&y, f as f64 * seconds) / dft_bin(&u, f as f64 * seconds)))
         .collect())
 }
 
@@ -185,9 +186,9 @@ pub struct Tuning {
     pub axes: Vec<TunedAxis>,
     /// Measured command → machine-end responses before and after (per axis), if measured.
     #[serde(skip)]
-    pub before: Vec<Vec<(f64, Complex)>>,
+    pub before: Vec<Vec<(f64, Complex64)>>,
     #[serde(skip)]
-    pub after: Vec<Vec<(f64, Complex)>>,
+    pub after: Vec<Vec<(f64, Complex64)>>,
     /// Largest difference between axes up to the position-loop bandwidth (dB, degrees).
     pub spread_before: Option<(f64, f64)>,
     pub spread_after: Option<(f64, f64)>,
@@ -293,7 +294,7 @@ pub fn tune(
             progress(done / runs);
         }
     }
-    let upto = |r: &[Vec<(f64, Complex)>]| -> Vec<Vec<ResponsePoint>> {
+    let upto = |r: &[Vec<(f64, Complex64)>]| -> Vec<Vec<ResponsePoint>> {
         r.iter()
             .map(|v| {
                 v.iter()
@@ -359,7 +360,7 @@ pub fn write(t: &Tuning, out: &std::path::Path) -> Result<Vec<std::path::PathBuf
     if !t.after.is_empty() {
         let mut curves: Vec<(String, Vec<ResponsePoint>)> = Vec::new();
         let points =
-            |v: &[(f64, Complex)]| v.iter().map(|&(f, h)| ResponsePoint::from_complex(f, h, 1.0)).collect::<Vec<_>>();
+            |v: &[(f64, Complex64)]| v.iter().map(|&(f, h)| ResponsePoint::from_complex(f, h, 1.0)).collect::<Vec<_>>();
         for (a, (b, c)) in t.axes.iter().zip(t.before.iter().zip(&t.after)) {
             curves.push((format!("{} before", a.axis), points(b)));
             curves.push((format!("{} after", a.axis), points(c)));

@@ -21,10 +21,10 @@ use std::collections::BTreeMap;
 use anyhow::{anyhow, Result};
 use control_core::excitation::InjectionPoint;
 use control_core::phase_shifted_sweep::{SweepParams, SweepSignal};
+use num_complex::Complex64;
 use serde::Serialize;
 
 use crate::analysis::response_point::{difference, ResponsePoint};
-use crate::analysis::spectral::Complex;
 use crate::fmu::runner::Fmu;
 use crate::fmu::scenario::Value;
 use crate::fmu::sweep_run::SweepRun;
@@ -259,21 +259,21 @@ pub fn analytic_closed_loop(f: f64) -> ResponsePoint {
     let p = control_core::Params::default();
     let plant = servo_axis::plant::PlantParams::default();
     let w = std::f64::consts::TAU * f;
-    let s = Complex::new(0.0, w);
+    let s = Complex64::new(0.0, w);
     let (jm, jl, k, c) = (plant.motor_inertia, plant.load_inertia, plant.shaft_stiffness, plant.shaft_damping);
     let (bm, bl) = (plant.motor_viscous, plant.load_viscous);
     // Motor velocity / torque: (JL s + bl + (cs + k)/s) / ((Jm s + bm)(JL s + bl) + (Jm s + bm + JL s + bl)(cs + k)/s).
-    let spring = Complex::new(k, c * w).div(s);
-    let load = s.scale(jl).add(Complex::new(bl, 0.0));
-    let motor = s.scale(jm).add(Complex::new(bm, 0.0));
-    let plant_tf = load.add(spring).div(motor.mul(load).add(motor.add(load).mul(spring)));
-    let controller = Complex::new(p.velocity.kp as f64, 0.0).add(Complex::new(p.velocity.ki as f64, 0.0).div(s));
-    let delay = |t: f64| Complex::new((w * t).cos(), -(w * t).sin());
+    let spring = Complex64::new(k, c * w) / s;
+    let load = s * jl + bl;
+    let motor = s * jm + bm;
+    let plant_tf = (load + spring) / (motor * load + (motor + load) * spring);
+    let controller = p.velocity.kp as f64 + p.velocity.ki as f64 / s;
+    let delay = |t: f64| Complex64::new((w * t).cos(), -(w * t).sin());
     let tick = 1.0 / p.rates.current_loop_hz as f64;
     let feedback = delay(0.5 * p.rates.velocity_period() as f64);
-    let forward = controller.mul(plant_tf).mul(delay(1.5 * tick));
-    let loop_gain = forward.mul(feedback);
-    let t = loop_gain.div(Complex::new(1.0, 0.0).add(loop_gain));
+    let forward = controller * plant_tf * delay(1.5 * tick);
+    let loop_gain = forward * feedback;
+    let t = loop_gain / (1.0 + loop_gain);
     ResponsePoint::from_complex(f, t, 1.0)
 }
 

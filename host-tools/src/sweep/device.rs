@@ -78,7 +78,7 @@ pub fn sweep_on_drive<T: crate::device::link::DrivePort>(
             let l = t.sweep.last;
             online.push(ResponsePoint::from_complex(
                 l.frequency as f64,
-                crate::analysis::spectral::Complex::new(l.re as f64, l.im as f64),
+                num_complex::Complex64::new(l.re as f64, l.im as f64),
                 l.quality as f64,
             ));
             progress(seen as f64 / points);

@@ -7,10 +7,11 @@ use std::collections::BTreeMap;
 use anyhow::{anyhow, Result};
 use control_core::excitation::InjectionPoint;
 use control_core::phase_shifted_sweep::SweepParams;
+use num_complex::Complex64;
 use serde::Serialize;
 
 use crate::analysis::response_point::{difference, ResponsePoint};
-use crate::analysis::spectral::{welch_h1, Complex};
+use crate::analysis::spectral::welch_h1;
 use crate::fmu::sweep_run::{is_done, SweepRun, START_AT};
 use crate::fmu::trace::Trace;
 
@@ -105,7 +106,7 @@ impl SineFit {
         self.ys += y * s;
     }
 
-    fn solve(&self) -> (Complex, Complex, f64) {
+    fn solve(&self) -> (Complex64, Complex64, f64) {
         let n = self.n.max(1.0);
         let scc = self.cc - self.c * self.c / n;
         let sss = self.ss - self.s * self.s / n;
@@ -113,7 +114,7 @@ impl SineFit {
         let det = scc * sss - scs * scs;
         let amplitude = |x: f64, xc: f64, xs: f64| {
             let (pc, ps) = (xc - x * self.c / n, xs - x * self.s / n);
-            Complex::new((sss * pc - scs * ps) / det, -(scc * ps - scs * pc) / det)
+            Complex64::new((sss * pc - scs * ps) / det, -(scc * ps - scs * pc) / det)
         };
         (
             amplitude(self.u, self.uc, self.us),
@@ -154,7 +155,7 @@ pub fn stream_results(t: &Trace, settings: &SweepParams) -> Result<Vec<ResponseP
         .iter()
         .map(|(&k, fit)| {
             let (uu, yy, quality) = fit.solve();
-            let g = if quality > 0.0 { yy.div(uu).scale(sign) } else { Complex::new(f64::NAN, f64::NAN) };
+            let g = if quality > 0.0 { yy / uu * sign } else { Complex64::new(f64::NAN, f64::NAN) };
             ResponsePoint::from_complex(settings.frequency(k as usize) as f64, g, quality)
         })
         .collect())
@@ -190,10 +191,10 @@ pub fn prbs_results(t: &Trace, run: &SweepRun, frequencies: &[f64], segment: usi
         (0..m)
             .map(|i| {
                 let a = -std::f64::consts::TAU * f * i as f64 * loop_period;
-                Complex::new(a.cos(), a.sin())
+                Complex64::new(a.cos(), a.sin())
             })
-            .fold(Complex::default(), Complex::add)
-            .scale(1.0 / m as f64)
+            .sum::<Complex64>()
+            * (1.0 / m as f64)
     };
     Ok(frequencies
         .iter()
@@ -202,7 +203,7 @@ pub fn prbs_results(t: &Trace, run: &SweepRun, frequencies: &[f64], segment: usi
             let x = f / df;
             let k = (x.floor() as usize).min(h.len() - 2);
             let w = x - k as f64;
-            let g = h[k].scale(1.0 - w).add(h[k + 1].scale(w)).scale(sign).div(hold(f));
+            let g = (h[k] * (1.0 - w) + h[k + 1] * w) * sign / hold(f);
             ResponsePoint::from_complex(f, g, coherence[k] * (1.0 - w) + coherence[k + 1] * w)
         })
         .collect())
