@@ -25,7 +25,7 @@ pub struct SweepRun {
 }
 
 /// When the sweep starts (s): the axis is brought to its riding speed at 0 and rides steadily
-/// by then (a soft 5:1 axis takes about 0.4 s to settle within 0.1 rad/s at 20 rad/s); the
+/// by then (a soft 5:1 axis takes about 0.4 s to settle within 0.1 rad/s at 50 rad/s); the
 /// sweep's measurement time counts from here.
 pub const START_AT: f64 = 0.5;
 
