@@ -344,8 +344,14 @@ impl Axis {
     /// position mode.
     pub fn start_sweep(&mut self) -> Result<(), SweepError> {
         let point = self.params.sweep.point;
-        if point == InjectionPoint::PositionCommand && self.mode != Some(Mode::Position) {
-            return Err(SweepError::NeedsPositionMode);
+        if point == InjectionPoint::PositionCommand {
+            if self.mode != Some(Mode::Position) {
+                return Err(SweepError::NeedsPositionMode);
+            }
+            // The sine starts on the next position tick (the command path takes it there):
+            // the same samples of the same sine wherever the request falls between two.
+            let divider = self.settings.dividers[1];
+            return self.sweep.start_after((divider - self.phases[1]) % divider);
         }
         let velocity_loop = matches!(self.mode, Some(Mode::Velocity | Mode::Position | Mode::Sequence));
         if point == InjectionPoint::Off || (point != InjectionPoint::TorqueCommand && !velocity_loop) {
