@@ -170,9 +170,7 @@ fn a_pseudo_circle_over_the_virtual_drive_matches_its_twin() {
     }
     // A drive has no machine-end sensor: asking for it is refused before the port is opened.
     let o = output_within(
-        servo()
-            .args(["circle", "--single", "x", "--measure", "load", "--device", &vd.port, "--fmu"])
-            .arg(fmu_path()),
+        servo().args(["circle", "--single", "x", "--measure", "load", "--device", &vd.port, "--fmu"]).arg(fmu_path()),
         30,
     );
     assert_eq!(o.status.code(), Some(2));

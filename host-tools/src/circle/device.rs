@@ -215,7 +215,8 @@ pub fn run_on_device<T: DrivePort>(
     let difference_fb = difference(&on_drive.feedback, &twin.feedback);
     let rad_per_count = TAU / run.drive_params()?.encoder_counts_per_rev as f64;
     let goal = GOAL_COUNTS * rad_per_count;
-    let (drive_figures, twin_figures) = (figures("drive", &on_drive, request.radius), figures("FMU twin", &twin, request.radius));
+    let (drive_figures, twin_figures) =
+        (figures("drive", &on_drive, request.radius), figures("FMU twin", &twin, request.radius));
     let notes: Vec<String> = [&drive_figures, &twin_figures]
         .iter()
         .map(|r| {

@@ -59,7 +59,9 @@ pub fn sweep_on_drive<T: crate::device::link::DrivePort>(
     session.set_params(&params)?;
     let commands = match run.mode() {
         // A position-command sweep: the axis holds where it stands, the sine adds to that.
-        Mode::Position => Commands { mode: Mode::Position, position: session.telemetry()?.position, ..Commands::default() },
+        Mode::Position => {
+            Commands { mode: Mode::Position, position: session.telemetry()?.position, ..Commands::default() }
+        }
         mode => Commands { mode, velocity: run.velocity as f32, ..Commands::default() },
     };
     session.order(Request::SetCommands(commands), "the riding speed")?;
