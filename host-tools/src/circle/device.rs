@@ -31,6 +31,7 @@ use crate::fmu::scenario::DEFAULT_STEP;
 use crate::fmu::sweep_run::SweepRun;
 use crate::fmu::trace::Trace;
 use crate::sweep::device::sweep_on_drive;
+use crate::sweep::device_report::save_partial;
 
 /// Drive − twin for the feedback figures: the radial difference at matching angles (rad).
 #[derive(Clone, Copy, Debug, Serialize)]
@@ -68,8 +69,8 @@ pub struct DeviceCircleReport {
     pub feed: f64,
     pub frequency_hz: f64,
     pub samples_per_revolution: usize,
-    pub drive: CircleFigures,
-    pub twin: CircleFigures,
+    /// The drive's figures, then the twin's (as the FMU run's `runs`).
+    pub runs: Vec<CircleFigures>,
     /// Drive − twin, feedback figures.
     pub difference: FigureDifference,
     /// Drive − twin, command figures (the same sine: 0 unless a sample went missing).
@@ -200,7 +201,10 @@ pub fn run_on_device<T: DrivePort>(
     std::fs::create_dir_all(out)?;
     let run = pseudo_circle_sweep(request)?;
     let (_, _, n) = request.timing()?;
-    let drive = sweep_on_drive(session, &run, |f| progress("circle on the drive", f))?;
+    let drive = match sweep_on_drive(session, &run, |f| progress("circle on the drive", f)) {
+        Ok(d) => d,
+        Err(e) => return Err(save_partial(session, out, "pseudo_circle", e)),
+    };
     let twin_trace = run.run(fmu, |f| progress("twin on the FMU", f))?;
     let on_drive = pseudo_circle_of_samples(&drive.trace, request)?;
     let twin = pseudo_circle_of_samples(&twin_trace, request)?;
@@ -259,8 +263,7 @@ pub fn run_on_device<T: DrivePort>(
         feed: request.feed,
         frequency_hz: run.settings.start_hz as f64,
         samples_per_revolution: n,
-        drive: drive_figures,
-        twin: twin_figures,
+        runs: vec![drive_figures, twin_figures],
         difference: difference_fb,
         command_difference: difference(&on_drive.command, &twin.command),
         goal,
@@ -284,7 +287,7 @@ impl DeviceCircleReport {
             "servo circle on the drive at {} — single axis: radius {} rad, feed {} rad/s ({:.4} Hz), {} samples per revolution, {:.3} s of the drive's time",
             self.port, self.radius, self.feed, self.frequency_hz, self.samples_per_revolution, self.measurement_time_s
         );
-        for r in [&self.drive, &self.twin] {
+        for r in &self.runs {
             println!("  {}:", r.label);
             crate::circle::report::print_roundness("feedback", &r.feedback);
             if let Some(a) = &r.against_command {
