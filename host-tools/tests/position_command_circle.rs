@@ -77,6 +77,8 @@ fn the_position_command_point_is_refused_outside_position_mode() {
     use control_core::{Axis, Commands, Mode, Params};
     let mut p = Params::default();
     p.sweep.point = InjectionPoint::PositionCommand;
+    // Below the position loop's Nyquist frequency (2 kHz at the defaults).
+    (p.sweep.stop_hz, p.sweep.extra_hz) = (100.0, 0.0);
     let mut axis = Axis::new(p).unwrap();
     let inputs = control_core::AxisInputs { bus_voltage: 24.0, ..Default::default() };
     for mode in [Mode::Torque, Mode::Velocity] {
@@ -97,6 +99,8 @@ fn a_position_command_sweep_starts_its_sine_on_a_position_tick() {
     use control_core::{Axis, Commands, Mode, Params};
     let mut p = Params::default();
     p.sweep.point = InjectionPoint::PositionCommand;
+    // Below the position loop's Nyquist frequency (2 kHz at the defaults).
+    (p.sweep.stop_hz, p.sweep.extra_hz) = (100.0, 0.0);
     p.sweep.amplitude = 0.01;
     let divider = p.rates.position_divider as u64;
     let inputs = control_core::AxisInputs { bus_voltage: 24.0, ..Default::default() };

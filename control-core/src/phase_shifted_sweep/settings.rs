@@ -150,6 +150,11 @@ impl fmt::Display for SweepError {
 }
 
 impl SweepParams {
+    /// The highest frequency swept (stop_hz, or start_hz alone with one point, or extra_hz).
+    pub fn top_hz(&self) -> f32 {
+        if self.points > 1 { self.stop_hz } else { self.start_hz }.max(self.extra_hz)
+    }
+
     pub fn validate(&self, base_rate_hz: f32, velocity_divider: u32) -> Result<(), SweepError> {
         let finite_positive = |field, value: f32| {
             if value.is_finite() && value > 0.0 {
@@ -239,7 +244,7 @@ impl SweepParams {
         } else {
             base_rate_hz / velocity_divider as f32
         };
-        let top = if self.points > 1 { self.stop_hz } else { self.start_hz }.max(self.extra_hz);
+        let top = self.top_hz();
         if top >= 0.5 * loop_rate {
             return Err(SweepError::AboveLoopNyquist { frequency: top, nyquist: 0.5 * loop_rate });
         }
@@ -269,6 +274,15 @@ mod tests {
             Err(SweepError::AcquisitionDivider { acquisition: 3, velocity: 2 })
         );
         assert_eq!(v(SweepParams { points: 200, ..Default::default() }), Err(SweepError::TooManyPoints(200)));
+        // One point: start_hz alone (stop_hz unused), the only frequency of the plan.
+        let one = SweepParams { points: 1, start_hz: 20.0, stop_hz: 20.0, extra_hz: 0.0, ..Default::default() };
+        assert_eq!(v(one), Ok(()));
+        assert_eq!((one.count(), one.frequency(0)), (1, 20.0));
+        assert!(matches!(v(SweepParams { points: 0, ..one }), Err(SweepError::Setting { field: "points", .. })));
+        assert_eq!(
+            v(SweepParams { start_hz: 5000.0, ..one }),
+            Err(SweepError::AboveLoopNyquist { frequency: 5000.0, nyquist: 4000.0 })
+        );
         assert!(matches!(
             v(SweepParams { dither: f32::NAN, ..Default::default() }),
             Err(SweepError::Setting { field: "dither", .. })
