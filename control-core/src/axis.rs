@@ -213,6 +213,9 @@ pub struct Axis {
     torque_command: f32,
     /// Velocity-loop inputs of the last velocity tick: reference and feedback as used.
     velocity_loop_inputs: (f32, f32),
+    /// The position-command injection of the last position tick (encoder counts, as added to
+    /// the streamed position).
+    position_injection: i32,
     settings: TickSettings,
     mode: Option<Mode>,
     encoder: EncoderTracker,
@@ -253,6 +256,7 @@ impl Axis {
             friction: FrictionCompensation::new(&params.friction, params.rates.velocity_period()),
             sweep: PhaseShiftedSweep::new(params.sweep, params.rates.current_loop_hz),
             velocity_loop_inputs: (0.0, 0.0),
+            position_injection: 0,
             phases: [0; 4],
             encoder: EncoderTracker::new(counts_per_rev, params.motor.pole_pairs),
             excitation: None,
@@ -336,9 +340,19 @@ impl Axis {
     }
 
     /// Start the frequency-response sweep of `Params::sweep` (seed 000). Velocity-command and
-    /// feedback injection need the velocity loop running.
+    /// feedback injection need the velocity loop running, position-command injection the
+    /// position mode.
     pub fn start_sweep(&mut self) -> Result<(), SweepError> {
         let point = self.params.sweep.point;
+        if point == InjectionPoint::PositionCommand {
+            if self.mode != Some(Mode::Position) {
+                return Err(SweepError::NeedsPositionMode);
+            }
+            // The sine starts on the next position tick (the command path takes it there):
+            // the same samples of the same sine wherever the request falls between two.
+            let divider = self.settings.dividers[1];
+            return self.sweep.start_after((divider - self.phases[1]) % divider);
+        }
         let velocity_loop = matches!(self.mode, Some(Mode::Velocity | Mode::Position | Mode::Sequence));
         if point == InjectionPoint::Off || (point != InjectionPoint::TorqueCommand && !velocity_loop) {
             return Err(SweepError::PointUnusable);
@@ -406,7 +420,7 @@ impl Axis {
             }),
             Mode::Position => {
                 if due.position {
-                    self.position_tick(commands, &mut sensed);
+                    self.position_tick(commands, excitation, &mut sensed);
                 }
                 due.velocity.then(|| crate::counts_to_f32(self.command_path.pulses()))
             }
@@ -422,7 +436,7 @@ impl Axis {
         }
 
         // Inner loop: torque to current to PWM; then the record of the tick.
-        let inner = self.inner_loop(inputs, excitation, due, &mut sensed.faults);
+        let inner = self.inner_loop(inputs, commands, excitation, due, &mut sensed.faults);
         self.record(commands.mode, &sensed, &inner, due)
     }
 
@@ -499,21 +513,29 @@ impl Axis {
         }
     }
 
-    /// Position mode's position tick: the command path, then the position loop.
+    /// Position mode's position tick: the command path, then the position loop. A
+    /// position-command injection is added to the streamed position (in whole counts, through
+    /// the command path as any streamed command); a move or a jog takes none.
     #[inline(always)]
-    fn position_tick(&mut self, commands: &Commands, sensed: &mut Sensed) {
+    fn position_tick(&mut self, commands: &Commands, excitation: (InjectionPoint, f32), sensed: &mut Sensed) {
         let counts_per_tick = self.settings.counts_per_position_tick;
+        let mut streamed = commands.position;
         let motion = if commands.jog_velocity != 0.0 {
             Move::Jog(commands.jog_velocity * counts_per_tick)
         } else if commands.move_speed != 0.0 {
             Move::Absolute { target: commands.position, speed: commands.move_speed.abs() * counts_per_tick }
         } else {
+            if excitation.0 == InjectionPoint::PositionCommand {
+                // `as` saturates (one conversion instruction on the Cortex-M4's FPU).
+                self.position_injection = libm::roundf(excitation.1 / self.settings.rad_per_count) as i32;
+                streamed = streamed.saturating_add(self.position_injection as i64);
+            }
             Move::Stream
         };
         // A non-finite or out-of-range speed or position has latched a fault in sensing; it
         // must not reach the carry.
         let command = if sensed.speeds_in_range && position_in_range(commands) {
-            self.command_path.step(motion, commands.position)
+            self.command_path.step(motion, streamed)
         } else {
             self.command_path.position()
         };
@@ -559,6 +581,7 @@ impl Axis {
     fn inner_loop(
         &mut self,
         inputs: &AxisInputs,
+        commands: &Commands,
         excitation: (InjectionPoint, f32),
         due: Due,
         faults: &mut Faults,
@@ -568,13 +591,20 @@ impl Axis {
             torque += excitation.1;
         }
         torque += self.sweep.torque_dither();
-        // The sweep's U and Y (see `phase_shifted_sweep`): Y is always the velocity estimate.
-        let u = match excitation.0 {
-            InjectionPoint::VelocityCommand => self.velocity_loop_inputs.0,
-            InjectionPoint::VelocityFeedback => self.velocity_loop_inputs.1,
-            _ => torque,
+        // The sweep's U and Y (see `phase_shifted_sweep`): Y is the velocity estimate, but for
+        // a position-command injection, where U is the injection and Y the position, both
+        // counted from the streamed position (rad: full f32 resolution wherever the axis is).
+        let (u, y) = match excitation.0 {
+            InjectionPoint::VelocityCommand => (self.velocity_loop_inputs.0, self.velocity_estimate),
+            InjectionPoint::VelocityFeedback => (self.velocity_loop_inputs.1, self.velocity_estimate),
+            InjectionPoint::PositionCommand => {
+                let rad_per_count = self.settings.rad_per_count;
+                let moved = self.encoder.position().saturating_sub(commands.position);
+                (self.position_injection as f32 * rad_per_count, crate::counts_to_f32(moved) * rad_per_count)
+            }
+            _ => (torque, self.velocity_estimate),
         };
-        self.sweep.end_tick(self.tick, due.velocity, due.acquisition, u, self.velocity_estimate);
+        self.sweep.end_tick(self.tick, due.velocity, due.acquisition, u, y);
 
         let current_reference = self.current_loop.reference(torque);
         let theta_e = self.encoder.electrical_angle();

@@ -18,6 +18,10 @@ pub enum InjectionPoint {
     VelocityCommand,
     /// Added to the velocity feedback the velocity loop sees (rad/s): the open loop.
     VelocityFeedback,
+    /// Added to the streamed position command in front of the command path (rad of the
+    /// axis; position mode only): the closed position loop, for instance the single-axis
+    /// pseudo-circle of seed 002 with the sine generated in the drive.
+    PositionCommand,
 }
 
 impl InjectionPoint {
@@ -27,6 +31,7 @@ impl InjectionPoint {
             1 => Some(Self::TorqueCommand),
             2 => Some(Self::VelocityCommand),
             3 => Some(Self::VelocityFeedback),
+            4 => Some(Self::PositionCommand),
             _ => None,
         }
     }
@@ -38,6 +43,7 @@ impl InjectionPoint {
             Self::TorqueCommand => 1,
             Self::VelocityCommand => 2,
             Self::VelocityFeedback => 3,
+            Self::PositionCommand => 4,
         }
     }
 }

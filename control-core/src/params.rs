@@ -375,6 +375,19 @@ impl Params {
         self.sequence.validate().map_err(ParamError::Sequence)?;
         self.friction.validate().map_err(ParamError::Friction)?;
         self.sweep.validate(r.current_loop_hz, r.velocity_divider).map_err(ParamError::Sweep)?;
+        if self.sweep.point == crate::excitation::InjectionPoint::PositionCommand {
+            // Taken on position ticks, in whole counts of an i32 (`Axis::position_tick`).
+            let nyquist = 0.5 * r.current_loop_hz / r.position_divider as f32;
+            let top = self.sweep.top_hz();
+            if top >= nyquist {
+                return Err(ParamError::Sweep(SweepError::AboveLoopNyquist { frequency: top, nyquist }));
+            }
+            let (value, max) =
+                (self.sweep.amplitude, i32::MAX as f32 * crate::TAU / self.encoder_counts_per_rev as f32);
+            if value > max {
+                return Err(ParamError::Sweep(SweepError::Range { field: "amplitude", value, min: 0.0, max }));
+            }
+        }
         // The dither is added after the torque limit: one beyond the limit would be cut by the
         // current limit instead of injected as asked.
         if self.sweep.dither > v.torque_limit {
@@ -399,6 +412,24 @@ mod tests {
         let e = p.validate().unwrap_err();
         assert!(matches!(e, ParamError::Sweep(SweepError::Range { field: "dither", .. })), "{e:?}");
         assert_eq!(e.field(), "dither");
+    }
+
+    #[test]
+    fn a_position_command_sweep_stays_below_the_position_loop_nyquist_and_within_an_i32_of_counts() {
+        let mut p = Params::default();
+        p.sweep.point = crate::excitation::InjectionPoint::PositionCommand;
+        let nyquist = 0.5 * p.rates.current_loop_hz / p.rates.position_divider as f32;
+        // Below the velocity loop's Nyquist frequency (what the other points need), above the
+        // position loop's: refused, not aliased.
+        (p.sweep.stop_hz, p.sweep.extra_hz) = (1.5 * nyquist, 0.0);
+        let e = p.validate().unwrap_err();
+        assert!(matches!(e, ParamError::Sweep(SweepError::AboveLoopNyquist { .. })), "{e:?}");
+        p.sweep.stop_hz = 0.9 * nyquist;
+        assert_eq!(p.validate(), Ok(()));
+        // An amplitude beyond 2³¹ counts would saturate: refused, not cut.
+        p.sweep.amplitude = 1.01 * i32::MAX as f32 * crate::TAU / p.encoder_counts_per_rev as f32;
+        let e = p.validate().unwrap_err();
+        assert!(matches!(e, ParamError::Sweep(SweepError::Range { field: "amplitude", .. })), "{e:?}");
     }
 
     #[test]

@@ -186,7 +186,10 @@ impl fmt::Display for RefusalReason {
                 "parameters only while the axis stands still in torque mode at zero torque, with no fault latched (ClearFaults first) and no sweep running"
             ),
             Self::Sequence(r) => write!(f, "the stop sequence refused the event: {r}"),
-            Self::Sweep => write!(f, "the sweep cannot start (injection point, mode, or already running)"),
+            Self::Sweep => write!(
+                f,
+                "the sweep cannot start (injection point, mode: velocity-loop points need the velocity loop, the position-command point position mode; or already running)"
+            ),
             Self::Correction => write!(f, "invalid correction, or a command still in motion through the filter"),
             Self::NotFinite(q) => write!(f, "{} is not a finite number", q.name()),
             Self::OutOfRange(e) => write!(f, "{e}"),

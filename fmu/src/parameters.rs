@@ -170,7 +170,7 @@ fn sequence(v: &Values, counts_per_rev: u32) -> Result<SequenceParams, String> {
 
 fn sweep(v: &Values) -> Result<SweepParams, String> {
     let point = InjectionPoint::from_code(v.sweep_point).filter(|p| *p != InjectionPoint::Off).ok_or_else(|| {
-        format!("sweep.point must be 1 (torque), 2 (velocity command) or 3 (velocity feedback), got {}", v.sweep_point)
+        format!("sweep.point must be 1 (torque), 2 (velocity command), 3 (velocity feedback) or 4 (position command), got {}", v.sweep_point)
     })?;
     let signal = match SweepSignal::from_code(v.sweep_signal) {
         Some(signal) => signal,

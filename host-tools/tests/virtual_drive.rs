@@ -136,6 +136,48 @@ fn a_sweep_over_the_virtual_drive_matches_its_twin_and_parameters_survive_a_rest
 }
 
 #[test]
+fn a_pseudo_circle_over_the_virtual_drive_matches_its_twin() {
+    let _serial = one_at_a_time();
+    let dir = tmp("circle");
+    let vd = VirtualDrive::start(&dir, "max", &[]);
+    let count = std::f64::consts::TAU / control_core::Params::default().encoder_counts_per_rev as f64;
+    let o = output_within(
+        servo()
+            .args(["circle", "--single", "x", "--device", &vd.port, "--json", "--out"])
+            .arg(dir.join("out"))
+            .arg("--fmu")
+            .arg(fmu_path()),
+        120,
+    );
+    let r = &json(&o)["circle"];
+    assert_eq!(r["dropped"], 0, "samples dropped on the link");
+    assert_eq!(r["corrupt_frames"], 0);
+    // The same core on the same plant: the feedback figures agree within the goal (3 encoder
+    // counts: see `circle::device::GOAL_COUNTS`), and the friction's quadrant protrusions,
+    // which the figure is there to show, stand far above that on both.
+    let (largest, rms) = (r["difference"]["largest"].as_f64().unwrap(), r["difference"]["rms"].as_f64().unwrap());
+    assert!(largest <= host_tools::circle::device::GOAL_COUNTS * count, "drive vs twin {largest:e} rad");
+    assert!(rms <= count, "drive vs twin rms {rms:e} rad");
+    assert_eq!(r["passed"], true, "{r}");
+    // The sine starts on a position tick on both: the same command samples, the same figure.
+    assert_eq!(r["command_difference"]["largest"].as_f64(), Some(0.0), "{r}");
+    for run in r["runs"].as_array().unwrap() {
+        let p = run["feedback"]["max_protrusion"].as_f64().unwrap();
+        assert!(p > 50.0 * largest, "{}: protrusion {p:e} rad against a difference of {largest:e} rad", run["label"]);
+    }
+    for f in ["pseudo_circle.svg", "pseudo_circle.csv", "pseudo_circle_twin.csv", "pseudo_circle.json"] {
+        assert!(dir.join("out").join(f).exists(), "{f} missing");
+    }
+    // A drive has no machine-end sensor: asking for it is refused before the port is opened.
+    let o = output_within(
+        servo().args(["circle", "--single", "x", "--measure", "load", "--device", &vd.port, "--fmu"]).arg(fmu_path()),
+        30,
+    );
+    assert_eq!(o.status.code(), Some(2));
+    assert!(String::from_utf8_lossy(&o.stderr).contains("no machine-end sensor"));
+}
+
+#[test]
 fn faults_a_missing_device_and_a_dying_drive_end_in_clear_errors() {
     let _serial = one_at_a_time();
     let dir = tmp("faults");

@@ -40,6 +40,9 @@ impl SweepParams {
     }
 
     fn base(&self, i: usize) -> f32 {
+        if self.points <= 1 {
+            return self.start_hz;
+        }
         let x = i as f32 / (self.points - 1) as f32;
         if self.logarithmic {
             self.start_hz * libm::powf(self.stop_hz / self.start_hz, x)

@@ -17,11 +17,11 @@ pub const MAX_SWEEP_DITHER: f32 = 1000.0;
 pub struct SweepParams {
     pub point: InjectionPoint,
     pub signal: SweepSignal,
-    /// Sine or PRBS amplitude (rad/s or Nm, as the point).
+    /// Sine or PRBS amplitude (rad/s, Nm or rad, as the point).
     pub amplitude: f32,
     pub start_hz: f32,
     pub stop_hz: f32,
-    /// Frequencies between start and stop, both included (≥ 2).
+    /// Frequencies between start and stop, both included (1: start_hz alone).
     pub points: u32,
     pub logarithmic: bool,
     /// One more frequency inserted in order (0: none), for example the acquisition Nyquist.
@@ -118,6 +118,8 @@ pub enum SweepError {
     AcquisitionDivider { acquisition: u32, velocity: u32 },
     /// Injection point off, or a velocity-loop point while the velocity loop does not run.
     PointUnusable,
+    /// Position-command injection outside position mode.
+    NeedsPositionMode,
     /// A sweep is already running.
     Busy,
 }
@@ -139,12 +141,20 @@ impl fmt::Display for SweepError {
                 f,
                 "the sweep needs an injection point, and velocity-command or feedback injection needs the velocity loop (velocity, position or sequence mode)"
             ),
+            Self::NeedsPositionMode => {
+                write!(f, "position-command injection needs position mode (the drive holding or streaming a position)")
+            }
             Self::Busy => write!(f, "a sweep is already running"),
         }
     }
 }
 
 impl SweepParams {
+    /// The highest frequency swept (stop_hz, or start_hz alone with one point, or extra_hz).
+    pub fn top_hz(&self) -> f32 {
+        if self.points > 1 { self.stop_hz } else { self.start_hz }.max(self.extra_hz)
+    }
+
     pub fn validate(&self, base_rate_hz: f32, velocity_divider: u32) -> Result<(), SweepError> {
         let finite_positive = |field, value: f32| {
             if value.is_finite() && value > 0.0 {
@@ -163,11 +173,12 @@ impl SweepParams {
         finite_positive("amplitude", self.amplitude)?;
         finite_positive("start_hz", self.start_hz)?;
         finite_positive("stop_hz", self.stop_hz)?;
-        if self.stop_hz <= self.start_hz {
+        // One point measures start_hz alone (stop_hz unused).
+        if self.points > 1 && self.stop_hz <= self.start_hz {
             return Err(SweepError::Setting { field: "stop_hz (must exceed start_hz)", value: self.stop_hz });
         }
         finite_non_negative("extra_hz", self.extra_hz)?;
-        if self.points < 2 {
+        if self.points < 1 {
             return Err(SweepError::Setting { field: "points", value: self.points as f32 });
         }
         if self.points as usize + 1 > MAX_SWEEP_POINTS {
@@ -233,7 +244,7 @@ impl SweepParams {
         } else {
             base_rate_hz / velocity_divider as f32
         };
-        let top = self.stop_hz.max(self.extra_hz);
+        let top = self.top_hz();
         if top >= 0.5 * loop_rate {
             return Err(SweepError::AboveLoopNyquist { frequency: top, nyquist: 0.5 * loop_rate });
         }
@@ -263,6 +274,15 @@ mod tests {
             Err(SweepError::AcquisitionDivider { acquisition: 3, velocity: 2 })
         );
         assert_eq!(v(SweepParams { points: 200, ..Default::default() }), Err(SweepError::TooManyPoints(200)));
+        // One point: start_hz alone (stop_hz unused), the only frequency of the plan.
+        let one = SweepParams { points: 1, start_hz: 20.0, stop_hz: 20.0, extra_hz: 0.0, ..Default::default() };
+        assert_eq!(v(one), Ok(()));
+        assert_eq!((one.count(), one.frequency(0)), (1, 20.0));
+        assert!(matches!(v(SweepParams { points: 0, ..one }), Err(SweepError::Setting { field: "points", .. })));
+        assert_eq!(
+            v(SweepParams { start_hz: 5000.0, ..one }),
+            Err(SweepError::AboveLoopNyquist { frequency: 5000.0, nyquist: 4000.0 })
+        );
         assert!(matches!(
             v(SweepParams { dither: f32::NAN, ..Default::default() }),
             Err(SweepError::Setting { field: "dither", .. })

@@ -274,12 +274,12 @@ declare_variables! {
     73 seq_soft_limit_max: Float64 "seq.soft_limit_max" Parameter Fixed = soft_limit(|p| p.sequence.soft_limit_max); RAD; ANGLE; "Highest allowed target";
 
     // Frequency-response sweep (seed 000), started by `sweep_start`.
-    74 sweep_point: Int32 "sweep.point" Parameter Fixed = Params::default().sweep.point.code(); NONE; r(1.0, 3.0); "Injection point: 1 torque command, 2 velocity command, 3 velocity feedback (open loop)";
+    74 sweep_point: Int32 "sweep.point" Parameter Fixed = Params::default().sweep.point.code(); NONE; r(1.0, 4.0); "Injection point: 1 torque command, 2 velocity command, 3 velocity feedback (open loop), 4 position command (rad added to the streamed position_command, position mode only; acq_u the injection, acq_y the position, both from position_command)";
     75 sweep_signal: Int32 "sweep.signal" Parameter Fixed = Params::default().sweep.signal.code(); NONE; r(0.0, 1.0); "0 stepped sine (phase shifted above the threshold), 1 PRBS (broadband baseline)";
-    76 sweep_amplitude: Float64 "sweep.amplitude" Parameter Fixed = core(|p| p.sweep.amplitude); NONE; r(1.0e-9, 1.0e6); "Sine or PRBS amplitude (rad/s or N.m, as the point)";
+    76 sweep_amplitude: Float64 "sweep.amplitude" Parameter Fixed = core(|p| p.sweep.amplitude); NONE; r(1.0e-9, 1.0e6); "Sine or PRBS amplitude (rad/s, N.m or rad, as the point)";
     77 sweep_start_hz: Float64 "sweep.start_hz" Parameter Fixed = core(|p| p.sweep.start_hz); HZ; POS_FREQ; "First frequency (below stop_hz)";
     78 sweep_stop_hz: Float64 "sweep.stop_hz" Parameter Fixed = core(|p| p.sweep.stop_hz); HZ; POS_FREQ; "Last frequency";
-    79 sweep_points: Int32 "sweep.points" Parameter Fixed = core_count(|p| p.sweep.points); NONE; r(2.0, 127.0); "Frequencies from start to stop, both included";
+    79 sweep_points: Int32 "sweep.points" Parameter Fixed = core_count(|p| p.sweep.points); NONE; r(1.0, 127.0); "Frequencies from start to stop, both included (1: start_hz alone)";
     80 sweep_logarithmic: Int32 "sweep.logarithmic" Parameter Fixed = Params::default().sweep.logarithmic as i32; NONE; r(0.0, 1.0); "1 logarithmic, 0 linear spacing";
     81 sweep_extra_hz: Float64 "sweep.extra_hz" Parameter Fixed = core(|p| p.sweep.extra_hz); HZ; FREQ; "One more frequency inserted in order (0 = none)";
     82 sweep_settle_cycles: Float64 "sweep.settle_cycles" Parameter Fixed = core(|p| p.sweep.settle_cycles); NONE; r(0.0, 1.0e4); "Settling before each record, in cycles (at least min_settle_s); a frequency's first record then waits, half block by half block, until its response agrees with the previous half block's (the settling check, with precision_db > 0)";
@@ -382,7 +382,7 @@ declare_variables! {
     173 sweep_last_quality: Float64 "sweep_last_quality" Output Discrete = 0.0; NONE; ANY; "Its quality: fraction of U's AC power at the excitation frequency (0: no result, or none the excitation defines; gain and phase then read 0)";
     174 acq_time: Float64 "acq_time" Output Discrete = 0.0; S; ANY; "Time of the last acquisition sample (the base tick it was taken at)";
     175 acq_u: Float64 "acq_u" Output Discrete = 0.0; NONE; ANY; "Acquired U (see the README for what it is per injection point)";
-    176 acq_y: Float64 "acq_y" Output Discrete = 0.0; RAD_S; ANY; "Acquired Y (the velocity estimate)";
+    176 acq_y: Float64 "acq_y" Output Discrete = 0.0; RAD_S; ANY; "Acquired Y (the velocity estimate; the position in rad, from position_command, for a position-command injection)";
     177 acq_phase: Float64 "acq_phase" Output Discrete = 0.0; RAD; ANY; "Excitation phase at that sample";
     178 acq_measuring: Int32 "acq_measuring" Output Discrete = 0; NONE; ANY; "1 if the sample belongs to a measured record";
     179 acq_point: Int32 "acq_point" Output Discrete = 0; NONE; ANY; "Frequency index the sample belongs to";

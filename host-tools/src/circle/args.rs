@@ -13,7 +13,10 @@ use crate::cli::Common;
 /// R·sin ωt and its feedback is drawn against its own copy a quarter period later,
 /// (x(t), x(t − T/4)); the same construction on the command is the reference, and the
 /// feedback against the shifted command is drawn too. The first --lead-in revolutions
-/// settle the start; the last one is measured.
+/// settle the start; the last one is measured. --device PORT (with --single) runs the
+/// pseudo-circle on a drive, which generates the sine itself (a one-frequency sweep at its
+/// position-command injection point), and its FMU twin with the drive's parameters; the
+/// report gives the largest and rms difference of the two feedback figures.
 ///
 /// Figures: roundness (max − min radius), mean radius error, quadrant protrusion heights
 /// and angles (at the axis reversals 0°, 90°, 180°, 270°). --compare NAME=VALUE[,...]
@@ -42,9 +45,10 @@ pub struct CircleArgs {
     /// Revolutions before the measured one
     #[arg(long, default_value_t = 1)]
     pub lead_in: u32,
-    /// Position measured: load (machine end) or motor
-    #[arg(long, default_value = "load")]
-    pub measure: String,
+    /// Position measured: load (machine end; the default on the FMU) or motor (the only one
+    /// a drive has, and the default with --device)
+    #[arg(long)]
+    pub measure: Option<String>,
     /// FMU parameter for both axes, NAME=VALUE (repeatable)
     #[arg(long = "set")]
     pub set: Vec<String>,
@@ -64,6 +68,9 @@ pub struct CircleArgs {
     /// Single axis: also run through fmpy and demand the same feedback trace
     #[arg(long)]
     pub fmpy: bool,
+    /// --single only: the drive generates the sine (its sweep at the position-command point)
+    #[command(flatten)]
+    pub target: crate::device::args::TargetArgs,
     #[command(flatten)]
     pub common: Common,
 }

@@ -22,7 +22,7 @@ fn circle(args: &CircleArgs) -> Result<bool> {
         args.feed,
         args.cw,
         args.lead_in,
-        args.measure.as_str(),
+        args.measure.as_deref().unwrap_or(if args.target.device.is_some() { "motor" } else { "load" }),
         &args.set,
         &args.x_set,
         &args.y_set,
@@ -79,7 +79,32 @@ fn circle(args: &CircleArgs) -> Result<bool> {
     }
     let out = common.out.clone().unwrap_or_else(|| default_out("circle"));
     let fmu_path = common.fmu.clone().unwrap_or_else(default_fmu);
+    if args.target.device.is_some() {
+        if single.is_none() {
+            bail!("--device runs the single-axis pseudo-circle (add --single x): a drive is one axis");
+        }
+        if tuned.is_some() || !comparison.both.is_empty() || with_fmpy {
+            bail!("--compare, --tuned and --fmpy are for the FMU; with --device the FMU runs the drive's twin");
+        }
+        // Checked before the port is opened: a bad request touches no drive.
+        crate::circle::device::pseudo_circle_sweep(&request)?;
+    }
     let fmu = Fmu::load(&fmu_path)?;
+    if let Some(mut session) = args.target.session()? {
+        let port = args.target.device.as_deref().unwrap_or_default();
+        let pb = progress_bar("circle", common.json);
+        let r = crate::circle::device::run_on_device(&fmu, &request, (port, &mut session), &out, |label, f| {
+            pb.set_prefix(label.to_string());
+            pb.set_position((f * 1000.0) as u64)
+        })?;
+        pb.finish_and_clear();
+        if common.json {
+            println!("{}", serde_json::to_string_pretty(&serde_json::json!({ "circle": r }))?);
+        } else {
+            r.print();
+        }
+        return Ok(r.passed);
+    }
     if tuned.is_none() {
         labels.1 = comparison.both.iter().map(|(k, v)| format!("{k} = {}", v.as_f64())).collect::<Vec<_>>().join(", ");
     }

@@ -3,6 +3,7 @@
 pub mod args;
 pub mod bench;
 pub mod command;
+pub mod device;
 pub mod index;
 pub mod plot;
 pub mod report;

@@ -35,7 +35,8 @@ pub struct CircleReport {
     pub files: Vec<PathBuf>,
 }
 
-fn write_points(path: &Path, command: &Figure, feedback: &Figure) -> Result<()> {
+/// The points of a figure and its reference as CSV (index, both figures, polar form).
+pub fn write_points(path: &Path, command: &Figure, feedback: &Figure) -> Result<()> {
     let mut t = Trace::new(
         ["index", "command_x", "command_y", "feedback_x", "feedback_y", "angle_deg", "radius"]
             .map(String::from)
@@ -179,17 +180,9 @@ impl CircleReport {
         );
         for r in &self.runs {
             println!("  {}:", r.label);
-            let show = |name: &str, f: &Roundness| {
-                println!(
-                    "    {name:<34} roundness {:>10.3e} rad  mean radius error {:>+10.3e} rad  protrusions (deg: height) {}",
-                    f.roundness,
-                    f.mean_radius_error,
-                    f.protrusions.iter().map(|(a, h)| format!("{a:.1}°: {h:.2e}")).collect::<Vec<_>>().join(", ")
-                );
-            };
-            show("feedback", &r.feedback);
+            print_roundness("feedback", &r.feedback);
             if let Some(a) = &r.against_command {
-                show("feedback vs shifted command", a);
+                print_roundness("feedback vs shifted command", a);
             }
         }
         if let Some(ratio) = self.protrusion_ratio {
@@ -206,4 +199,14 @@ impl CircleReport {
             println!("  → {}", f.display());
         }
     }
+}
+
+/// One line of a report: a figure's roundness, mean radius error and protrusions.
+pub fn print_roundness(name: &str, f: &Roundness) {
+    println!(
+        "    {name:<34} roundness {:>10.3e} rad  mean radius error {:>+10.3e} rad  protrusions (deg: height) {}",
+        f.roundness,
+        f.mean_radius_error,
+        f.protrusions.iter().map(|(a, h)| format!("{a:.1}°: {h:.2e}")).collect::<Vec<_>>().join(", ")
+    );
 }

@@ -246,6 +246,12 @@ pub fn single_axis(fmu: &Fmu, r: &CircleRequest) -> Result<PseudoCircleRun> {
 /// Largest difference of two figures' radial errors at matching angles (rad): how far one
 /// figure departs from the other, point for point around the circle.
 pub fn radial_difference(a: &Figure, b: &Figure) -> f64 {
+    radial_differences(a, b).0
+}
+
+/// The largest and the rms difference of two figures' radii at matching angles (rad), over
+/// the points of `a` (the radius of `b` interpolated at each one's angle).
+pub fn radial_differences(a: &Figure, b: &Figure) -> (f64, f64) {
     let (pa, pb) = (a.polar(), b.polar());
     let mut sorted_b = pb.clone();
     sorted_b.sort_by(|x, y| x.0.total_cmp(&y.0));
@@ -263,7 +269,9 @@ pub fn radial_difference(a: &Figure, b: &Figure) -> f64 {
         let f = if a1 > a0 { (angle - a0) / (a1 - a0) } else { 0.0 };
         p0.1 + f * (p1.1 - p0.1)
     };
-    pa.iter().map(|(angle, r)| (r - at(*angle)).abs()).fold(0.0, f64::max)
+    let d: Vec<f64> = pa.iter().map(|(angle, r)| (r - at(*angle)).abs()).collect();
+    let rms = (d.iter().map(|x| x * x).sum::<f64>() / d.len().max(1) as f64).sqrt();
+    (d.iter().cloned().fold(0.0, f64::max), rms)
 }
 
 #[cfg(test)]
@@ -303,6 +311,8 @@ mod tests {
         let a = figure(|_| 1.0);
         let b = figure(|a| 1.0 + 2e-4 * a.cos());
         assert!((radial_difference(&a, &b) - 2e-4).abs() < 1e-9);
+        // rms of 2e-4·cos over a whole turn: 2e-4/√2.
+        assert!((radial_differences(&a, &b).1 - 2e-4 / 2f64.sqrt()).abs() < 1e-8);
         assert!(radial_difference(&a, &a) < 1e-12);
     }
 }

@@ -66,13 +66,14 @@ impl SweepRun {
         Ok(configuration(&parameters)?.control)
     }
 
-    /// The mode the sweep rides in: torque for a torque-command sweep standing still,
-    /// velocity otherwise.
+    /// The mode the sweep rides in: position (holding where the axis stands) for a
+    /// position-command sweep, torque for a torque-command sweep standing still, velocity
+    /// otherwise.
     pub fn mode(&self) -> Mode {
-        if self.settings.point == InjectionPoint::TorqueCommand && self.velocity == 0.0 {
-            Mode::Torque
-        } else {
-            Mode::Velocity
+        match self.settings.point {
+            InjectionPoint::PositionCommand => Mode::Position,
+            InjectionPoint::TorqueCommand if self.velocity == 0.0 => Mode::Torque,
+            _ => Mode::Velocity,
         }
     }
 
@@ -85,12 +86,17 @@ impl SweepRun {
         let stop =
             ((START_AT + self.max_measurement_time()?) / DEFAULT_STEP).ceil() * DEFAULT_STEP + 4.0 * DEFAULT_STEP;
         let mode = self.mode();
-        let start: BTreeMap<String, Value> = [
+        let mut start: BTreeMap<String, Value> = [
             ("mode".to_string(), Value::code(mode.code())),
             ("velocity_command".to_string(), Value::Float(self.velocity)),
         ]
         .into_iter()
         .collect();
+        if mode == Mode::Position {
+            // Holding the start (the sine adds to this streamed position).
+            start.insert("position_command".into(), Value::Float(0.0));
+            start.insert("move_speed".into(), Value::Float(0.0));
+        }
         Ok(Scenario {
             name: "sweep".into(),
             description: String::new(),

@@ -56,6 +56,7 @@ pub fn point_name(p: InjectionPoint) -> &'static str {
         InjectionPoint::VelocityCommand => "velocity command",
         InjectionPoint::TorqueCommand => "torque command",
         InjectionPoint::VelocityFeedback => "velocity feedback",
+        InjectionPoint::PositionCommand => "position command",
         InjectionPoint::Off => "off",
     }
 }

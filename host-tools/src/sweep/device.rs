@@ -11,7 +11,7 @@
 use anyhow::{anyhow, Result};
 use control_core::phase_shifted_sweep::SweepState;
 use control_core::protocol::Request;
-use control_core::Commands;
+use control_core::{Commands, Mode};
 use serde::Serialize;
 
 use crate::analysis::response_point::ResponsePoint;
@@ -57,7 +57,13 @@ pub fn sweep_on_drive<T: crate::device::link::DrivePort>(
     session.poll = session.poll.max(std::time::Duration::from_millis(20));
     let params = with_board_limits(run.drive_params()?);
     session.set_params(&params)?;
-    let commands = Commands { mode: run.mode(), velocity: run.velocity as f32, ..Commands::default() };
+    let commands = match run.mode() {
+        // A position-command sweep: the axis holds where it stands, the sine adds to that.
+        Mode::Position => {
+            Commands { mode: Mode::Position, position: session.telemetry()?.position, ..Commands::default() }
+        }
+        mode => Commands { mode, velocity: run.velocity as f32, ..Commands::default() },
+    };
     session.order(Request::SetCommands(commands), "the riding speed")?;
     session.wait(START_AT)?;
     session.order(Request::Stream { enabled: true }, "streaming on")?;

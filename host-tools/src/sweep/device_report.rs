@@ -108,7 +108,7 @@ pub fn run_on_device<T: crate::device::link::DrivePort>(
     std::fs::create_dir_all(out)?;
     let drive = match sweep_on_drive(session, run, |f| progress("sweep on the drive", f)) {
         Ok(d) => d,
-        Err(e) => return Err(save_partial(session, out, e)),
+        Err(e) => return Err(save_partial(session, out, "sweep", e)),
     };
     let mut files = vec![out.join("device_stream.csv")];
     drive.trace.write_csv(&files[0])?;
@@ -155,16 +155,17 @@ pub fn run_on_device<T: crate::device::link::DrivePort>(
     Ok(DeviceSweepReport { files, ..report })
 }
 
-/// The sweep stopped: what the drive streamed so far goes to `sweep_partial.csv`, marked
-/// incomplete in `sweep.json` with the reason; the error says where.
-fn save_partial<T: crate::device::link::DrivePort>(
+/// The sweep stopped: what the drive streamed so far goes to `<name>_partial.csv`, marked
+/// incomplete in `<name>.json` with the reason; the error says where.
+pub fn save_partial<T: crate::device::link::DrivePort>(
     session: &mut DriveSession<T>,
     out: &Path,
+    name: &str,
     e: anyhow::Error,
 ) -> anyhow::Error {
     let batches = session.take_samples();
     let rows = crate::device::frame_stream::sample_rows(&batches).unwrap_or_default();
-    let csv = out.join("sweep_partial.csv");
+    let csv = out.join(format!("{name}_partial.csv"));
     let mut t = Trace::new(crate::device::frame_stream::SAMPLE_COLUMNS.map(String::from).to_vec());
     for r in &rows {
         t.rows.push(r);
@@ -172,11 +173,12 @@ fn save_partial<T: crate::device::link::DrivePort>(
     let json =
         serde_json::json!({"complete": false, "reason": format!("{e:#}"), "samples": rows.len(), "partial": csv});
     let saved = t.write_csv(&csv).is_ok()
-        && std::fs::write(out.join("sweep.json"), serde_json::to_string_pretty(&json).unwrap_or_default()).is_ok();
+        && std::fs::write(out.join(format!("{name}.json")), serde_json::to_string_pretty(&json).unwrap_or_default())
+            .is_ok();
     if saved {
-        e.context(format!("sweep incomplete: {} samples saved in {}", rows.len(), csv.display()))
+        e.context(format!("{name} incomplete: {} samples saved in {}", rows.len(), csv.display()))
     } else {
-        e.context("sweep incomplete")
+        e.context(format!("{name} incomplete"))
     }
 }
 
