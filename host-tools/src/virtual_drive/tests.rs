@@ -108,7 +108,8 @@ fn a_corrupting_line_gives_a_clear_error_not_a_wrong_answer() {
 #[test]
 fn a_fault_during_a_sweep_stops_it_with_the_fault_named_and_the_samples_kept() {
     let mut st = settings();
-    st.faults = vec![ScheduledFault { fault: BoardFault::Break, at: 1.5 }];
+    // The sweep starts at START_AT (0.5 s): the break comes about 1.4 s into it.
+    st.faults = vec![ScheduledFault { fault: BoardFault::Break, at: crate::fmu::sweep_run::START_AT + 1.4 }];
     let mut s = session(VirtualDrive::power_on(&st, FileFlash::in_memory()).unwrap());
     let run = crate::fmu::sweep_run::SweepRun {
         settings: control_core::phase_shifted_sweep::SweepParams::default(),
