@@ -38,9 +38,23 @@ pub struct DeviceLink<T: Read + Write> {
     /// Frames from the drive that did not decode (corrupted on the line, or the tail of a
     /// frame that was under way when the port was opened): skipped, counted.
     pub corrupt_frames: u64,
+    /// Requests sent again after a lost request or answer (`device::answer`).
+    pub resent: u64,
+    /// Orders whose answer was lost and whose outcome was read from the drive's telemetry.
+    pub verified: u64,
     /// The last request failed (no answer, a corrupt frame): before the next one, end the
     /// drive's partial frame and drop what is in flight.
     resync: bool,
+}
+
+/// What a resynchronisation found in flight.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct Drained {
+    /// `FrameError` answers: the drive read a corrupt frame (a request whose end was lost
+    /// ends at the lone delimiter; a request split by a byte corrupted to zero is two).
+    pub frame_errors: u32,
+    /// Bytes received meanwhile.
+    pub bytes: u64,
 }
 
 impl<T: Read + Write> DeviceLink<T> {
@@ -52,15 +66,18 @@ impl<T: Read + Write> DeviceLink<T> {
             timeout,
             bytes_read: 0,
             corrupt_frames: 0,
+            resent: 0,
+            verified: 0,
             resync: false,
         }
     }
 
-    /// Send one request and wait for its answer.
+    /// Send one request and wait for its answer (once: `device::answer` sends again after a
+    /// lost request or answer).
     pub fn request(&mut self, request: &Request) -> Result<Response> {
         let mut buf = vec![0u8; MAX_FRAME + 8];
         let n = encode(request, &mut buf).map_err(|e| anyhow::anyhow!("cannot encode the request: {e}"))?;
-        if std::mem::take(&mut self.resync) {
+        if self.resync {
             self.resynchronise()?;
         }
         self.port.write_all(&buf[..n]).context("cannot write to the drive")?;
@@ -78,23 +95,39 @@ impl<T: Read + Write> DeviceLink<T> {
         }
     }
 
+    /// Before the next request, resynchronise (a request answered by `FrameError` may have
+    /// been cut in two by a byte corrupted to zero: the second half's answer is in flight).
+    pub fn resynchronise_before_next(&mut self) {
+        self.resync = true;
+    }
+
     /// After a failed request: a lone delimiter ends any partial frame the drive holds (a
     /// corrupted terminator merges a request with the next; the drive ignores an empty
     /// frame), then whatever arrives within a tenth of the timeout is dropped (an answer to
-    /// the failed request, a frame error for the merged bytes); sample batches are kept.
-    fn resynchronise(&mut self) -> Result<()> {
+    /// the failed request, a frame error for the merged bytes); sample batches are kept. The
+    /// bytes of a frame still without its end are dropped too (an answer whose delimiter
+    /// was corrupted would otherwise swallow the next one), counted as a corrupt frame.
+    pub fn resynchronise(&mut self) -> Result<Drained> {
+        self.resync = false;
+        let bytes_before = self.bytes_read;
+        let mut frame_errors = 0;
         self.port.write_all(&[0]).context("cannot write to the drive")?;
         self.port.flush().ok();
         let until = Instant::now() + self.timeout / 10;
         while Instant::now() < until {
             match self.next_frame(until) {
                 Ok(Response::Samples(b)) => self.samples.push(b),
+                Ok(Response::FrameError(_)) => frame_errors += 1,
                 Ok(_) => {}
                 Err(_) if Instant::now() >= until => break,
+                Err(e) if is_link_failure(&e) => return Err(e),
                 Err(_) => {}
             }
         }
-        Ok(())
+        if self.pending.discard() {
+            self.corrupt_frames += 1;
+        }
+        Ok(Drained { frame_errors, bytes: self.bytes_read - bytes_before })
     }
 
     /// Let `d` pass (see [`DrivePort::pause`]).
@@ -108,6 +141,11 @@ impl<T: Read + Write> DeviceLink<T> {
     /// The byte stream underneath.
     pub fn port(&self) -> &T {
         &self.port
+    }
+
+    /// The byte stream underneath.
+    pub fn port_mut(&mut self) -> &mut T {
+        &mut self.port
     }
 
     /// The byte stream underneath.
@@ -159,7 +197,7 @@ impl<T: Read + Write> DeviceLink<T> {
                 }
             }
             match self.port.read(&mut chunk) {
-                Ok(0) => bail!("the drive closed the link"),
+                Ok(0) => bail!(CLOSED),
                 Ok(n) => {
                     self.bytes_read += n as u64;
                     self.pending.push(&chunk[..n]);
@@ -174,6 +212,14 @@ impl<T: Read + Write> DeviceLink<T> {
         }
     }
 }
+
+/// The link itself failed (the drive closed it, the port cannot be read or written): sending
+/// again cannot help, unlike a lost answer.
+pub fn is_link_failure(e: &anyhow::Error) -> bool {
+    e.downcast_ref::<std::io::Error>().is_some() || e.to_string().contains(CLOSED)
+}
+
+const CLOSED: &str = "the drive closed the link";
 
 /// A `LoadCorrection` frame (`servo tune`'s `<axis>.corr.frame`), checked as the drive would
 /// check it (`CorrectionParams::validate` through `Axis::load_correction`) at the
