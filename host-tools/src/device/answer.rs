@@ -87,8 +87,17 @@ pub fn answer<T: Read + Write>(
     for copy in 0..=RESENDS {
         if copy > 0 {
             link.resent += 1;
+            link.by_request.entry(request_kind(request)).or_default().0 += 1;
         }
-        match attempt(link, request)? {
+        let a = attempt(link, request)?;
+        if std::env::var_os("SERVO_LINK_TRACE").is_some() {
+            match &a {
+                Attempt::Answer(_) => {}
+                Attempt::NotRead(e) => eprintln!("TRACE {} not read: {e}", request_kind(request)),
+                Attempt::Lost(w, h) => eprintln!("TRACE {} lost (heard {h}): {w}", request_kind(request)),
+            }
+        }
+        match a {
             Attempt::Answer(r) => return Ok(r),
             Attempt::NotRead(e) => {
                 silent_before = false;
@@ -105,6 +114,7 @@ pub fn answer<T: Read + Write>(
                 match verify(request, &b, &after) {
                     Verdict::Acted(r) => {
                         link.verified += 1;
+                        link.by_request.entry(request_kind(request)).or_default().1 += 1;
                         return Ok(r);
                     }
                     Verdict::SendAgain => before = Some(after),
@@ -117,6 +127,22 @@ pub fn answer<T: Read + Write>(
         }
     }
     Err(anyhow!("{name}: no answer after {} copies (last: {last})", RESENDS + 1))
+}
+
+/// The request's name in the protocol.
+pub fn request_kind(request: &Request) -> &'static str {
+    match request {
+        Request::Hello { .. } => "Hello",
+        Request::SetParams(_) => "SetParams",
+        Request::SetCommands(_) => "SetCommands",
+        Request::Sequence(_) => "Sequence",
+        Request::StartSweep => "StartSweep",
+        Request::LoadCorrection(_) => "LoadCorrection",
+        Request::ClearFaults => "ClearFaults",
+        Request::GetTelemetry => "GetTelemetry",
+        Request::Stream { .. } => "Stream",
+        Request::SaveParams => "SaveParams",
+    }
 }
 
 /// The request as the errors name it.

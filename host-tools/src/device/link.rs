@@ -42,6 +42,13 @@ pub struct DeviceLink<T: Read + Write> {
     pub resent: u64,
     /// Orders whose answer was lost and whose outcome was read from the drive's telemetry.
     pub verified: u64,
+    /// The same two by request (`device::answer::request_kind`): (sent again, judged).
+    pub by_request: std::collections::BTreeMap<&'static str, (u64, u64)>,
+    /// The drive was told to stream (its last `Stream` request was answered `Done`): a frame
+    /// that does not decode may be a sample batch. Otherwise the drive sends only answers,
+    /// and a corrupt frame while an answer is awaited is that answer, lost: no use waiting
+    /// out the timeout.
+    streaming: bool,
     /// The last request failed (no answer, a corrupt frame): before the next one, end the
     /// drive's partial frame and drop what is in flight.
     resync: bool,
@@ -68,6 +75,8 @@ impl<T: Read + Write> DeviceLink<T> {
             corrupt_frames: 0,
             resent: 0,
             verified: 0,
+            by_request: Default::default(),
+            streaming: false,
             resync: false,
         }
     }
@@ -84,9 +93,14 @@ impl<T: Read + Write> DeviceLink<T> {
         self.port.flush().ok();
         let deadline = Instant::now() + self.timeout;
         loop {
-            match self.next_frame(deadline) {
+            match self.next_frame(deadline, !self.streaming) {
                 Ok(Response::Samples(b)) => self.samples.push(b),
-                Ok(other) => return Ok(other),
+                Ok(other) => {
+                    if let (Request::Stream { enabled }, Response::Done) = (request, &other) {
+                        self.streaming = *enabled;
+                    }
+                    return Ok(other);
+                }
                 Err(e) => {
                     self.resync = true;
                     return Err(e);
@@ -103,7 +117,7 @@ impl<T: Read + Write> DeviceLink<T> {
 
     /// After a failed request: a lone delimiter ends any partial frame the drive holds (a
     /// corrupted terminator merges a request with the next; the drive ignores an empty
-    /// frame), then whatever arrives within a tenth of the timeout is dropped (an answer to
+    /// frame), then whatever arrives within a tenth of the timeout, at most [`DRAIN`], is dropped (an answer to
     /// the failed request, a frame error for the merged bytes); sample batches are kept. The
     /// bytes of a frame still without its end are dropped too (an answer whose delimiter
     /// was corrupted would otherwise swallow the next one), counted as a corrupt frame.
@@ -113,9 +127,9 @@ impl<T: Read + Write> DeviceLink<T> {
         let mut frame_errors = 0;
         self.port.write_all(&[0]).context("cannot write to the drive")?;
         self.port.flush().ok();
-        let until = Instant::now() + self.timeout / 10;
+        let until = Instant::now() + (self.timeout / 10).min(DRAIN);
         while Instant::now() < until {
-            match self.next_frame(until) {
+            match self.next_frame(until, false) {
                 Ok(Response::Samples(b)) => self.samples.push(b),
                 Ok(Response::FrameError(_)) => frame_errors += 1,
                 Ok(_) => {}
@@ -162,7 +176,7 @@ impl<T: Read + Write> DeviceLink<T> {
     pub fn listen(&mut self, duration: Duration) -> Result<()> {
         let until = Instant::now() + duration;
         while Instant::now() < until {
-            match self.next_frame(until) {
+            match self.next_frame(until, false) {
                 Ok(Response::Samples(b)) => self.samples.push(b),
                 Ok(other) => bail!("unasked frame from the drive: {other:?}"),
                 Err(_) if Instant::now() >= until => break,
@@ -173,8 +187,9 @@ impl<T: Read + Write> DeviceLink<T> {
     }
 
     /// The next complete frame that decodes; frames that do not are skipped and counted (the
-    /// answer may still follow: a streamed batch may be what the line corrupted).
-    fn next_frame(&mut self, deadline: Instant) -> Result<Response> {
+    /// answer may still follow: a streamed batch may be what the line corrupted), or, with
+    /// `answer_only` (the drive sends nothing but answers), end the wait as a lost answer.
+    fn next_frame(&mut self, deadline: Instant, answer_only: bool) -> Result<Response> {
         let mut chunk = [0u8; 4096];
         let mut skipped: Option<(u64, control_core::protocol::FrameError)> = None;
         loop {
@@ -182,6 +197,9 @@ impl<T: Read + Write> DeviceLink<T> {
                 Some(Ok(r)) => return Ok(r),
                 Some(Err(e)) => {
                     self.corrupt_frames += 1;
+                    if answer_only {
+                        bail!("the answer from the drive arrived corrupt ({e})");
+                    }
                     skipped = Some((skipped.map_or(0, |(n, _)| n) + 1, e));
                     continue;
                 }
@@ -212,6 +230,12 @@ impl<T: Read + Write> DeviceLink<T> {
         }
     }
 }
+
+/// The longest a resynchronisation waits for what is in flight: a drive answers within its
+/// link task's poll (2 ms on the G474) plus what its transmit buffer holds (1 KiB, 11 ms at
+/// 921 600 Bd). A frame error that comes later is taken for the next request's answer, which
+/// is then sent again after another resynchronisation (`device::answer`): slower, never wrong.
+pub const DRAIN: Duration = Duration::from_millis(50);
 
 /// The link itself failed (the drive closed it, the port cannot be read or written): sending
 /// again cannot help, unlike a lost answer.
@@ -372,7 +396,8 @@ mod tests {
         let mut link = DeviceLink::new(host, Duration::from_millis(200));
         drive.write_all(&[0x05, 0x11, 0x22, 0x33, 0x44, 0x00]).unwrap();
         let e = link.request(&Request::GetTelemetry).unwrap_err().to_string();
-        assert!(e.contains("no answer") && e.contains("1 corrupt frame"), "{e}");
+        // Not streaming: the drive sends only answers, so a corrupt frame is the answer, lost.
+        assert!(e.contains("arrived corrupt"), "{e}");
         assert_eq!(link.corrupt_frames, 1);
         // The next request first sends the lone delimiter: the drive reads the first request,
         // an empty frame, then the second request.

@@ -87,14 +87,27 @@ impl<T: DrivePort> DriveSession<T> {
     }
 
     /// What the line cost so far, if anything: corrupt frames skipped, requests sent again,
-    /// orders whose outcome was read from the telemetry.
+    /// orders whose outcome was read from the telemetry (each by request).
     pub fn line_summary(&self) -> Option<String> {
         let l = &self.link;
+        let each = |pick: fn(&(u64, u64)) -> u64| {
+            let v: Vec<String> =
+                l.by_request.iter().filter(|(_, n)| pick(n) > 0).map(|(k, n)| format!("{k} {}", pick(n))).collect();
+            if v.is_empty() {
+                String::new()
+            } else {
+                format!(" ({})", v.join(", "))
+            }
+        };
         (l.corrupt_frames + l.resent + l.verified > 0).then(|| {
             format!(
-                "link: {} corrupt frame(s) skipped, {} request(s) sent again, {} order(s) whose answer was lost \
-                 judged from the drive's telemetry",
-                l.corrupt_frames, l.resent, l.verified
+                "link: {} corrupt frame(s) skipped, {} request(s) sent again{}, {} order(s) whose answer was lost \
+                 judged from the drive's telemetry{}",
+                l.corrupt_frames,
+                l.resent,
+                each(|n| n.0),
+                l.verified,
+                each(|n| n.1)
             )
         })
     }
