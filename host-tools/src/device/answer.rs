@@ -12,7 +12,7 @@
 //!   just before it and just after ([`repeat::verify`]) — its answer as the drive gave it,
 //!   sent again, or an error that names it and says why it was not sent again.
 //!
-//! At most [`RESENDS`] times a request; a drive that sends nothing at all twice running (no
+//! At most [`RESENDS`] times a request (`SERVO_LINK_TRACE=1` prints each lost one on stderr); a drive that sends nothing at all twice running (no
 //! byte within the timeout, nor while draining) has stopped, and the link itself failing
 //! (closed, unreadable) is not retried: either is an error at once.
 
@@ -25,11 +25,14 @@ use control_core::protocol::{FrameError, Request, Response};
 use crate::device::link::{is_link_failure, DeviceLink};
 use crate::device::repeat::{repeat_of, verify, Repeat, Verdict};
 
-/// Copies of a request sent after the first, at most. A telemetry request and its answer are
-/// 114 bytes; with each byte corrupted with probability p each way, one is lost with about
-/// 114·p, and four in a row with (114·p)⁴: 1.7·10⁻⁸ at p = 10⁻³, where a sweep polls 500
-/// times.
-pub const RESENDS: u32 = 3;
+/// Copies of a request sent after the first, at most. With each byte corrupted with
+/// probability p each way, a request and its answer of n bytes in all are hit with about
+/// 1 − (1 − p)ⁿ; the parameter set (a few hundred bytes) is hit about half the time at
+/// p = 2·10⁻³ (measured: sent again 0–2 times a sweep), and eight copies all hit then happen
+/// at most once in 250 sweeps; a telemetry poll (114 bytes: about 1 in 5), once in 4·10⁵ polls.
+/// A copy the drive could not read costs one answer's time; a lost answer, the timeout while
+/// streaming (a corrupt frame may be a sample batch), else a corrupt frame's arrival.
+pub const RESENDS: u32 = 7;
 
 /// How an attempt ended.
 enum Attempt {
@@ -75,8 +78,9 @@ pub fn answer<T: Read + Write>(
     before: Option<Telemetry>,
 ) -> Result<Response> {
     let name = request_name(request);
-    let mut before = match repeat_of(request) {
-        Repeat::Harmless => None,
+    let repeat = repeat_of(request);
+    let mut before = match repeat {
+        Repeat::Harmless | Repeat::Once(_) => None,
         Repeat::Verify => Some(match before {
             Some(t) => t,
             None => telemetry(link)?,
@@ -109,6 +113,12 @@ pub fn answer<T: Read + Write>(
                 }
                 silent_before = !heard;
                 last = why;
+                if let Repeat::Once(reason) = repeat {
+                    bail!(
+                        "the answer to {name} was lost ({last}) and it was not sent again: {reason}; it may or may not \
+                         have been carried out"
+                    );
+                }
                 let Some(b) = before else { continue };
                 let after = telemetry(link)?;
                 match verify(request, &b, &after) {
@@ -319,8 +329,9 @@ mod tests {
     #[test]
     fn a_request_the_drive_could_not_read_is_sent_again_whatever_it_is() {
         for hit in [Hit::Request, Hit::RequestEnd] {
-            for order in [Request::StartSweep, Request::SaveParams] {
-                let mut l = link(&[(1, hit)]);
+            // The sweep's start is preceded by its baseline telemetry (request 0); a save is not.
+            for (order, k) in [(Request::StartSweep, 1), (Request::SaveParams, 0)] {
+                let mut l = link(&[(k, hit)]);
                 assert_eq!(answer(&mut l, &order, None).unwrap(), Response::Done);
                 assert_eq!(l.port().count(&order), 1, "carried out once");
                 assert_eq!((l.verified, l.resent), (0, 1));
@@ -330,7 +341,7 @@ mod tests {
 
     #[test]
     fn a_save_whose_answer_is_lost_is_not_sent_again_and_the_error_says_why() {
-        let mut l = link(&[(1, Hit::Answer)]);
+        let mut l = link(&[(0, Hit::Answer)]);
         let e = answer(&mut l, &Request::SaveParams, None).unwrap_err().to_string();
         assert!(e.contains("SaveParams") && e.contains("not sent again") && e.contains("flash record"), "{e}");
         assert_eq!(l.port().records, 1);

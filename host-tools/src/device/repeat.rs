@@ -5,8 +5,9 @@
 //! frame: it answers `FrameError` and does nothing) or its answer can be lost on the way back
 //! (the drive acted, the host does not know). After a lost answer the host sends a request
 //! again only if a second copy leaves the drive as one copy does ([`Repeat::Harmless`]);
-//! otherwise ([`Repeat::Verify`]) it first reads the drive's telemetry and sends again only if
-//! that shows the first copy did not act ([`verify`]). Every request is classified here, in
+//! otherwise it first reads the drive's telemetry and sends again only if that shows the
+//! first copy did not act ([`Repeat::Verify`], [`verify`]), or, where nothing the drive
+//! reports tells ([`Repeat::Once`]), fails and says why. Every request is classified here, in
 //! one `match` over the protocol's requests (a new request does not compile until it is).
 //!
 //! Harmless, checked against `control_core::protocol::handle` and the drive application's
@@ -33,7 +34,10 @@
 //!   refusal count (a timeline's expectations read it); a second `MoveTo` restarts the
 //!   positioning's completion; a second copy of a refused event counts twice.
 //! - `SaveParams`: a second copy writes another flash record (the next sequence number, the
-//!   other page erased).
+//!   other page erased), and nothing the drive reports changes with a save (the record's
+//!   number is in the handshake's answer only after a restart): never sent again after a
+//!   lost answer. Telling it would take a protocol change (the store's newest record number
+//!   in an answer, a new protocol version for the firmware and the host).
 
 use control_core::axis::Telemetry;
 use control_core::phase_shifted_sweep::SweepState;
@@ -47,7 +51,14 @@ pub enum Repeat {
     Harmless,
     /// Acts again: sent again only once the drive's telemetry shows the first did not act.
     Verify,
+    /// Acts again, and nothing the drive reports tells whether the first did: never sent
+    /// again after a lost answer (why: the reason given).
+    Once(&'static str),
 }
+
+/// Why a parameter save is not sent again.
+pub const SAVE_UNTOLD: &str = "nothing the drive reports tells whether the set was written (the record's number \
+     is in the handshake's answer only after a restart), and a second save writes another flash record";
 
 /// The classification (see the module's notes for each request).
 pub fn repeat_of(request: &Request) -> Repeat {
@@ -59,7 +70,8 @@ pub fn repeat_of(request: &Request) -> Repeat {
         | Request::ClearFaults
         | Request::GetTelemetry
         | Request::Stream { .. } => Repeat::Harmless,
-        Request::StartSweep | Request::Sequence(_) | Request::SaveParams => Repeat::Verify,
+        Request::StartSweep | Request::Sequence(_) => Repeat::Verify,
+        Request::SaveParams => Repeat::Once(SAVE_UNTOLD),
     }
 }
 
@@ -83,10 +95,7 @@ pub fn verify(request: &Request, before: &Telemetry, after: &Telemetry) -> Verdi
     match request {
         Request::StartSweep => start_sweep(before.sweep.state, after.sweep.state),
         Request::Sequence(e) => sequence_event(e, before, after),
-        Request::SaveParams => Verdict::Unknown(
-            "nothing the drive reports tells whether the set was written (the record's number is in the \
-             handshake's answer only after a restart), and a second save writes another flash record",
-        ),
+        Request::SaveParams => Verdict::Unknown(SAVE_UNTOLD),
         _ => Verdict::SendAgain,
     }
 }
@@ -181,7 +190,7 @@ mod tests {
             (Request::Stream { enabled: true }, Repeat::Harmless),
             (Request::StartSweep, Repeat::Verify),
             (Request::Sequence(SequenceEvent::RunOn), Repeat::Verify),
-            (Request::SaveParams, Repeat::Verify),
+            (Request::SaveParams, Repeat::Once(SAVE_UNTOLD)),
         ] {
             assert_eq!(repeat_of(&r), want, "{r:?}");
         }
