@@ -339,6 +339,18 @@ mod tests {
         }
     }
 
+    /// A request whose delimiter was lost, with a timeout longer than the nudge: the lone
+    /// delimiter sent after `NUDGE` ends it, the drive's `FrameError` comes back within the
+    /// request's own wait, and the copy sent again is carried out once.
+    #[test]
+    fn a_request_without_its_end_is_ended_by_a_nudge_before_the_timeout() {
+        let mut l = DeviceLink::new(ScriptedDrive::new(&[(0, Hit::RequestEnd)]), Duration::from_millis(1500));
+        let started = std::time::Instant::now();
+        assert_eq!(answer(&mut l, &Request::SaveParams, None).unwrap(), Response::Done);
+        assert!(started.elapsed() < Duration::from_millis(1000), "{:?}", started.elapsed());
+        assert_eq!((l.port().records, l.resent), (1, 1));
+    }
+
     #[test]
     fn a_save_whose_answer_is_lost_is_not_sent_again_and_the_error_says_why() {
         let mut l = link(&[(0, Hit::Answer)]);

@@ -21,6 +21,11 @@ impl FrameStream {
         self.pending.extend_from_slice(bytes);
     }
 
+    /// Bytes of a frame still without its end are waiting.
+    pub fn has_bytes(&self) -> bool {
+        !self.pending.is_empty()
+    }
+
     /// Drop the bytes of a frame still without its end; whether there were any.
     pub fn discard(&mut self) -> bool {
         let any = !self.pending.is_empty();

@@ -92,8 +92,22 @@ impl<T: Read + Write> DeviceLink<T> {
         self.port.write_all(&buf[..n]).context("cannot write to the drive")?;
         self.port.flush().ok();
         let deadline = Instant::now() + self.timeout;
+        let mut nudge = Some(Instant::now() + NUDGE);
         loop {
-            match self.next_frame(deadline, !self.streaming) {
+            // A request whose delimiter was corrupted waits in the drive for its end: a lone
+            // delimiter ends it (the drive answers `FrameError`), or is an empty frame the
+            // drive ignores if the request had ended.
+            let until = nudge.map_or(deadline, |n| n.min(deadline));
+            let frame = self.next_frame(until, !self.streaming);
+            if let (Err(e), Some(n)) = (&frame, nudge) {
+                if e.is::<NoAnswer>() && Instant::now() >= n && Instant::now() < deadline && !self.pending.has_bytes() {
+                    nudge = None;
+                    self.port.write_all(&[0]).context("cannot write to the drive")?;
+                    self.port.flush().ok();
+                    continue;
+                }
+            }
+            match frame {
                 Ok(Response::Samples(b)) => self.samples.push(b),
                 Ok(other) => {
                     if let (Request::Stream { enabled }, Response::Done) = (request, &other) {
@@ -192,6 +206,7 @@ impl<T: Read + Write> DeviceLink<T> {
     fn next_frame(&mut self, deadline: Instant, answer_only: bool) -> Result<Response> {
         let mut chunk = [0u8; 4096];
         let mut skipped: Option<(u64, control_core::protocol::FrameError)> = None;
+        let mut last_byte = Instant::now();
         loop {
             match self.pending.next_frame() {
                 Some(Ok(r)) => return Ok(r),
@@ -205,20 +220,27 @@ impl<T: Read + Write> DeviceLink<T> {
                 }
                 None => {}
             }
+            // An answer whose delimiter was corrupted never ends: with only answers coming,
+            // bytes that stopped arriving without one are that answer, lost.
+            if answer_only && last_byte.elapsed() >= DRAIN && self.pending.discard() {
+                self.corrupt_frames += 1;
+                bail!("the answer from the drive arrived without its end (its delimiter corrupted)");
+            }
             if Instant::now() >= deadline {
-                match skipped {
-                    Some((n, e)) => bail!(
+                return Err(anyhow::Error::new(NoAnswer(match skipped {
+                    Some((n, e)) => format!(
                         "no answer from the drive within {:?}: {n} corrupt frame(s) from the drive instead (last: {e})",
                         self.timeout
                     ),
-                    None => bail!("no answer from the drive within {:?}", self.timeout),
-                }
+                    None => format!("no answer from the drive within {:?}", self.timeout),
+                })));
             }
             match self.port.read(&mut chunk) {
                 Ok(0) => bail!(CLOSED),
                 Ok(n) => {
                     self.bytes_read += n as u64;
                     self.pending.push(&chunk[..n]);
+                    last_byte = Instant::now();
                 }
                 Err(e)
                     if matches!(
@@ -236,6 +258,22 @@ impl<T: Read + Write> DeviceLink<T> {
 /// 921 600 Bd). A frame error that comes later is taken for the next request's answer, which
 /// is then sent again after another resynchronisation (`device::answer`): slower, never wrong.
 pub const DRAIN: Duration = Duration::from_millis(50);
+
+/// Nothing that decodes arrived before the deadline.
+#[derive(Debug)]
+struct NoAnswer(String);
+
+impl std::fmt::Display for NoAnswer {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(&self.0)
+    }
+}
+
+impl std::error::Error for NoAnswer {}
+
+/// How long an answer is awaited before a lone delimiter is sent after the request (a drive
+/// answers within a few milliseconds, after at most its transmit buffer and stream ring).
+pub const NUDGE: Duration = Duration::from_millis(100);
 
 /// The link itself failed (the drive closed it, the port cannot be read or written): sending
 /// again cannot help, unlike a lost answer.
