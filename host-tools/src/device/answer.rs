@@ -93,7 +93,7 @@ pub fn answer<T: Read + Write>(
             link.resent += 1;
             link.by_request.entry(request_kind(request)).or_default().0 += 1;
         }
-        let a = attempt(link, request)?;
+        let a = attempt(link, request).map_err(|e| e.context(format!("{name} to the drive")))?;
         if std::env::var_os("SERVO_LINK_TRACE").is_some() {
             match &a {
                 Attempt::Answer(_) => {}
@@ -109,7 +109,7 @@ pub fn answer<T: Read + Write>(
             }
             Attempt::Lost(why, heard) => {
                 if !heard && silent_before {
-                    bail!("{why}, twice, and nothing at all from the drive meanwhile (is it still running?)");
+                    bail!("{name}: {why}, twice, and nothing at all from the drive meanwhile (is it still running?)");
                 }
                 silent_before = !heard;
                 last = why;

@@ -13,7 +13,7 @@ use control_core::axis::{Mode, Telemetry};
 use control_core::protocol::{ParamsOrigin, Request, Response, VERSION};
 use control_core::{Commands, Params};
 
-use crate::device::answer::{answer, request_name};
+use crate::device::answer::answer;
 use crate::device::link::{DeviceLink, DrivePort};
 
 /// A drive whose tick counter has not moved for this long has stopped.
@@ -65,7 +65,6 @@ impl<T: DrivePort> DriveSession<T> {
             return answer(&mut self.link, request, None);
         }
         answer(&mut self.link, request, self.fresh.take())
-            .map_err(|e| e.context(format!("{} to the drive", request_name(request))))
     }
 
     /// Send a request the drive must carry out (`Done`), or fail with its reason.
