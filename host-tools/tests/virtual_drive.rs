@@ -135,6 +135,58 @@ fn a_sweep_over_the_virtual_drive_matches_its_twin_and_parameters_survive_a_rest
     assert_eq!(json(&device(&vd.port, &["load-correction", file.to_str().unwrap()]))["done"], true);
 }
 
+/// The link's summary on stderr: (corrupt frames, requests sent again).
+fn line_costs(stderr: &str) -> (u64, u64) {
+    let Some(line) = stderr.lines().find(|l| l.starts_with("link: ")) else { return (0, 0) };
+    let n: Vec<u64> = line.split(|c: char| !c.is_ascii_digit()).filter_map(|w| w.parse().ok()).collect();
+    (n[0], n[1])
+}
+
+/// Issue 16 item 8: a line that corrupts 2 bytes in 1 000 each way (`--corrupt-rate 2e-3`,
+/// seed 3). Of a sweep's stream, about one sample batch (≈ 140 bytes) in five is lost; the
+/// drive vs twin difference stays within its goal (the fit loses samples, not its phase
+/// reference: worst 0.122 dB, 0.69° over seeds 1–6). The orders around it — the parameter
+/// set, a few hundred bytes, is hit about half the time — and its telemetry polls get hit
+/// (2–4 requests sent again a sweep over seeds 1–6, never none), and each is carried out once:
+/// the sweep completes. A save over that line writes one record: after a restart the drive
+/// loads record 1.
+#[test]
+fn a_sweep_and_a_save_over_a_corrupting_line_complete_and_act_once() {
+    let _serial = one_at_a_time();
+    let dir = tmp("corrupt");
+    let _ = std::fs::remove_file(dir.join("flash.bin"));
+    let vd = VirtualDrive::start(&dir, "max", &["--corrupt-rate", "2e-3", "--seed", "3"]);
+    let o = output_within(
+        servo()
+            .args(["sweep", "--device", &vd.port, "--json", "--out"])
+            .arg(dir.join("out"))
+            .arg("--fmu")
+            .arg(fmu_path()),
+        120,
+    );
+    let e = String::from_utf8_lossy(&o.stderr);
+    // Exit status 1: complete, but not every sample arrived (the report says how many frames
+    // were lost).
+    assert!(matches!(o.status.code(), Some(0 | 1)), "{e}");
+    let r: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+    assert_eq!(r["points"].as_array().unwrap().len(), 41);
+    let (db, deg) = (r["largest_difference"][0].as_f64().unwrap(), r["largest_difference"][1].as_f64().unwrap());
+    assert!(
+        db <= host_tools::device::bench::GOAL_DB && deg <= host_tools::device::bench::GOAL_DEG,
+        "drive vs twin {db} dB, {deg} deg over the corrupting line"
+    );
+    let (corrupt, resent) = line_costs(&e);
+    assert!(corrupt > 0 && resent > 0, "nothing on the line was hit: the test proves nothing ({e})");
+    // A save: done, or (its answer lost) an error saying it was not sent again; either way one record.
+    let o = device(&vd.port, &["save-params"]);
+    let e = String::from_utf8_lossy(&o.stderr);
+    assert!(o.status.success() || e.contains("not sent again"), "{e}");
+    drop(vd);
+    let vd = VirtualDrive::start(&dir, "max", &[]);
+    let hello = json(&device(&vd.port, &["hello"]));
+    assert!(hello["boot_params"].as_str().unwrap().contains("loaded from flash (record 1)"), "{hello}");
+}
+
 #[test]
 fn a_pseudo_circle_over_the_virtual_drive_matches_its_twin() {
     let _serial = one_at_a_time();

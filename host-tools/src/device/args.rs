@@ -65,6 +65,7 @@ impl TargetArgs {
         );
         let mut session = crate::device::session::DriveSession::open(link)?;
         session.baud = self.baud;
+        session.summary_on_drop = true;
         Ok(Some(session))
     }
 }

@@ -43,21 +43,21 @@ fn device(args: &DeviceArgs) -> Result<bool> {
         ),
     };
     let link = DeviceLink::new(open_serial(port, baud)?, std::time::Duration::from_millis(timeout_ms));
-    let session = crate::device::session::DriveSession::open(link)?;
+    let mut session = crate::device::session::DriveSession::open(link)?;
+    session.summary_on_drop = true;
     let boot_params = session.boot_params;
-    let mut link = session.link;
     let answer = match (what, request) {
         ("stream", _) => {
-            expect_done(link.request(&Request::Stream { enabled: true })?, "Stream")?;
+            session.order(Request::Stream { enabled: true }, "streaming on")?;
             let pb = progress_bar("streaming", common.json);
             let started = std::time::Instant::now();
             while started.elapsed().as_secs_f64() < seconds {
-                link.listen(std::time::Duration::from_millis(100))?;
+                session.link.listen(std::time::Duration::from_millis(100))?;
                 pb.set_position((started.elapsed().as_secs_f64() / seconds * 1000.0) as u64);
             }
             pb.finish_and_clear();
-            expect_done(link.request(&Request::Stream { enabled: false })?, "Stream off")?;
-            let batches = link.take_samples();
+            session.order(Request::Stream { enabled: false }, "streaming off")?;
+            let batches = session.take_samples();
             let dropped = batches.last().map_or(0, |b| b.dropped);
             let mut t = Trace::new(crate::device::frame_stream::SAMPLE_COLUMNS.map(String::from).to_vec());
             let rows = crate::device::frame_stream::sample_rows(&batches)
@@ -76,7 +76,7 @@ fn device(args: &DeviceArgs) -> Result<bool> {
             "version": control_core::protocol::VERSION,
             "boot_params": boot_params.to_string(),
         }),
-        (_, Some(r)) => match link.request(&r)? {
+        (_, Some(r)) => match session.answer(&r)? {
             Response::Telemetry(t) => serde_json::json!({"telemetry": format!("{t:?}")}),
             Response::Done => serde_json::json!({"done": true}),
             Response::Refused(why) => bail!("the drive refused the request: {why}"),
@@ -90,11 +90,4 @@ fn device(args: &DeviceArgs) -> Result<bool> {
         println!("servo device {port}: {what} → {answer}");
     }
     Ok(true)
-}
-
-fn expect_done(r: control_core::protocol::Response, what: &str) -> Result<()> {
-    match r {
-        control_core::protocol::Response::Done => Ok(()),
-        other => bail!("{what}: unexpected answer {other:?}"),
-    }
 }

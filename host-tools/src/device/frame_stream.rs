@@ -21,6 +21,18 @@ impl FrameStream {
         self.pending.extend_from_slice(bytes);
     }
 
+    /// Bytes of a frame still without its end are waiting.
+    pub fn has_bytes(&self) -> bool {
+        !self.pending.is_empty()
+    }
+
+    /// Drop the bytes of a frame still without its end; whether there were any.
+    pub fn discard(&mut self) -> bool {
+        let any = !self.pending.is_empty();
+        self.pending.clear();
+        any
+    }
+
     /// The next complete frame, decoded and checked: None until a delimiter arrives; a run
     /// of more than `MAX_FRAME` bytes without one is dropped and reported as too long.
     /// Empty frames (two delimiters in a row) are skipped.

@@ -38,9 +38,30 @@ pub struct DeviceLink<T: Read + Write> {
     /// Frames from the drive that did not decode (corrupted on the line, or the tail of a
     /// frame that was under way when the port was opened): skipped, counted.
     pub corrupt_frames: u64,
+    /// Requests sent again after a lost request or answer (`device::answer`).
+    pub resent: u64,
+    /// Orders whose answer was lost and whose outcome was read from the drive's telemetry.
+    pub verified: u64,
+    /// The same two by request (`device::answer::request_kind`): (sent again, judged).
+    pub by_request: std::collections::BTreeMap<&'static str, (u64, u64)>,
+    /// The drive was told to stream (its last `Stream` request was answered `Done`): a frame
+    /// that does not decode may be a sample batch. Otherwise the drive sends only answers,
+    /// and a corrupt frame while an answer is awaited is that answer, lost: no use waiting
+    /// out the timeout.
+    streaming: bool,
     /// The last request failed (no answer, a corrupt frame): before the next one, end the
     /// drive's partial frame and drop what is in flight.
     resync: bool,
+}
+
+/// What a resynchronisation found in flight.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct Drained {
+    /// `FrameError` answers: the drive read a corrupt frame (a request whose end was lost
+    /// ends at the lone delimiter; a request split by a byte corrupted to zero is two).
+    pub frame_errors: u32,
+    /// Bytes received meanwhile.
+    pub bytes: u64,
 }
 
 impl<T: Read + Write> DeviceLink<T> {
@@ -52,24 +73,48 @@ impl<T: Read + Write> DeviceLink<T> {
             timeout,
             bytes_read: 0,
             corrupt_frames: 0,
+            resent: 0,
+            verified: 0,
+            by_request: Default::default(),
+            streaming: false,
             resync: false,
         }
     }
 
-    /// Send one request and wait for its answer.
+    /// Send one request and wait for its answer (once: `device::answer` sends again after a
+    /// lost request or answer).
     pub fn request(&mut self, request: &Request) -> Result<Response> {
         let mut buf = vec![0u8; MAX_FRAME + 8];
         let n = encode(request, &mut buf).map_err(|e| anyhow::anyhow!("cannot encode the request: {e}"))?;
-        if std::mem::take(&mut self.resync) {
+        if self.resync {
             self.resynchronise()?;
         }
         self.port.write_all(&buf[..n]).context("cannot write to the drive")?;
         self.port.flush().ok();
         let deadline = Instant::now() + self.timeout;
+        let mut nudge = Some(Instant::now() + NUDGE);
         loop {
-            match self.next_frame(deadline) {
+            // A request whose delimiter was corrupted waits in the drive for its end: a lone
+            // delimiter ends it (the drive answers `FrameError`), or is an empty frame the
+            // drive ignores if the request had ended.
+            let until = nudge.map_or(deadline, |n| n.min(deadline));
+            let frame = self.next_frame(until, !self.streaming);
+            if let (Err(e), Some(n)) = (&frame, nudge) {
+                if e.is::<NoAnswer>() && Instant::now() >= n && Instant::now() < deadline && !self.pending.has_bytes() {
+                    nudge = None;
+                    self.port.write_all(&[0]).context("cannot write to the drive")?;
+                    self.port.flush().ok();
+                    continue;
+                }
+            }
+            match frame {
                 Ok(Response::Samples(b)) => self.samples.push(b),
-                Ok(other) => return Ok(other),
+                Ok(other) => {
+                    if let (Request::Stream { enabled }, Response::Done) = (request, &other) {
+                        self.streaming = *enabled;
+                    }
+                    return Ok(other);
+                }
                 Err(e) => {
                     self.resync = true;
                     return Err(e);
@@ -78,23 +123,39 @@ impl<T: Read + Write> DeviceLink<T> {
         }
     }
 
+    /// Before the next request, resynchronise (a request answered by `FrameError` may have
+    /// been cut in two by a byte corrupted to zero: the second half's answer is in flight).
+    pub fn resynchronise_before_next(&mut self) {
+        self.resync = true;
+    }
+
     /// After a failed request: a lone delimiter ends any partial frame the drive holds (a
     /// corrupted terminator merges a request with the next; the drive ignores an empty
-    /// frame), then whatever arrives within a tenth of the timeout is dropped (an answer to
-    /// the failed request, a frame error for the merged bytes); sample batches are kept.
-    fn resynchronise(&mut self) -> Result<()> {
+    /// frame), then whatever arrives within a tenth of the timeout, at most [`DRAIN`], is dropped (an answer to
+    /// the failed request, a frame error for the merged bytes); sample batches are kept. The
+    /// bytes of a frame still without its end are dropped too (an answer whose delimiter
+    /// was corrupted would otherwise swallow the next one), counted as a corrupt frame.
+    pub fn resynchronise(&mut self) -> Result<Drained> {
+        self.resync = false;
+        let bytes_before = self.bytes_read;
+        let mut frame_errors = 0;
         self.port.write_all(&[0]).context("cannot write to the drive")?;
         self.port.flush().ok();
-        let until = Instant::now() + self.timeout / 10;
+        let until = Instant::now() + (self.timeout / 10).min(DRAIN);
         while Instant::now() < until {
-            match self.next_frame(until) {
+            match self.next_frame(until, false) {
                 Ok(Response::Samples(b)) => self.samples.push(b),
+                Ok(Response::FrameError(_)) => frame_errors += 1,
                 Ok(_) => {}
                 Err(_) if Instant::now() >= until => break,
+                Err(e) if is_link_failure(&e) => return Err(e),
                 Err(_) => {}
             }
         }
-        Ok(())
+        if self.pending.discard() {
+            self.corrupt_frames += 1;
+        }
+        Ok(Drained { frame_errors, bytes: self.bytes_read - bytes_before })
     }
 
     /// Let `d` pass (see [`DrivePort::pause`]).
@@ -111,6 +172,11 @@ impl<T: Read + Write> DeviceLink<T> {
     }
 
     /// The byte stream underneath.
+    pub fn port_mut(&mut self) -> &mut T {
+        &mut self.port
+    }
+
+    /// The byte stream underneath.
     pub fn into_port(self) -> T {
         self.port
     }
@@ -124,7 +190,7 @@ impl<T: Read + Write> DeviceLink<T> {
     pub fn listen(&mut self, duration: Duration) -> Result<()> {
         let until = Instant::now() + duration;
         while Instant::now() < until {
-            match self.next_frame(until) {
+            match self.next_frame(until, false) {
                 Ok(Response::Samples(b)) => self.samples.push(b),
                 Ok(other) => bail!("unasked frame from the drive: {other:?}"),
                 Err(_) if Instant::now() >= until => break,
@@ -135,34 +201,46 @@ impl<T: Read + Write> DeviceLink<T> {
     }
 
     /// The next complete frame that decodes; frames that do not are skipped and counted (the
-    /// answer may still follow: a streamed batch may be what the line corrupted).
-    fn next_frame(&mut self, deadline: Instant) -> Result<Response> {
+    /// answer may still follow: a streamed batch may be what the line corrupted), or, with
+    /// `answer_only` (the drive sends nothing but answers), end the wait as a lost answer.
+    fn next_frame(&mut self, deadline: Instant, answer_only: bool) -> Result<Response> {
         let mut chunk = [0u8; 4096];
         let mut skipped: Option<(u64, control_core::protocol::FrameError)> = None;
+        let mut last_byte = Instant::now();
         loop {
             match self.pending.next_frame() {
                 Some(Ok(r)) => return Ok(r),
                 Some(Err(e)) => {
                     self.corrupt_frames += 1;
+                    if answer_only {
+                        bail!("the answer from the drive arrived corrupt ({e})");
+                    }
                     skipped = Some((skipped.map_or(0, |(n, _)| n) + 1, e));
                     continue;
                 }
                 None => {}
             }
+            // An answer whose delimiter was corrupted never ends: with only answers coming,
+            // bytes that stopped arriving without one are that answer, lost.
+            if answer_only && last_byte.elapsed() >= DRAIN && self.pending.discard() {
+                self.corrupt_frames += 1;
+                bail!("the answer from the drive arrived without its end (its delimiter corrupted)");
+            }
             if Instant::now() >= deadline {
-                match skipped {
-                    Some((n, e)) => bail!(
+                return Err(anyhow::Error::new(NoAnswer(match skipped {
+                    Some((n, e)) => format!(
                         "no answer from the drive within {:?}: {n} corrupt frame(s) from the drive instead (last: {e})",
                         self.timeout
                     ),
-                    None => bail!("no answer from the drive within {:?}", self.timeout),
-                }
+                    None => format!("no answer from the drive within {:?}", self.timeout),
+                })));
             }
             match self.port.read(&mut chunk) {
-                Ok(0) => bail!("the drive closed the link"),
+                Ok(0) => bail!(CLOSED),
                 Ok(n) => {
                     self.bytes_read += n as u64;
                     self.pending.push(&chunk[..n]);
+                    last_byte = Instant::now();
                 }
                 Err(e)
                     if matches!(
@@ -174,6 +252,36 @@ impl<T: Read + Write> DeviceLink<T> {
         }
     }
 }
+
+/// The longest a resynchronisation waits for what is in flight: a drive answers within its
+/// link task's poll (2 ms on the G474) plus what its transmit buffer holds (1 KiB, 11 ms at
+/// 921 600 Bd). A frame error that comes later is taken for the next request's answer, which
+/// is then sent again after another resynchronisation (`device::answer`): slower, never wrong.
+pub const DRAIN: Duration = Duration::from_millis(50);
+
+/// Nothing that decodes arrived before the deadline.
+#[derive(Debug)]
+struct NoAnswer(String);
+
+impl std::fmt::Display for NoAnswer {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(&self.0)
+    }
+}
+
+impl std::error::Error for NoAnswer {}
+
+/// How long an answer is awaited before a lone delimiter is sent after the request (a drive
+/// answers within a few milliseconds, after at most its transmit buffer and stream ring).
+pub const NUDGE: Duration = Duration::from_millis(100);
+
+/// The link itself failed (the drive closed it, the port cannot be read or written): sending
+/// again cannot help, unlike a lost answer.
+pub fn is_link_failure(e: &anyhow::Error) -> bool {
+    e.downcast_ref::<std::io::Error>().is_some() || e.to_string().contains(CLOSED)
+}
+
+const CLOSED: &str = "the drive closed the link";
 
 /// A `LoadCorrection` frame (`servo tune`'s `<axis>.corr.frame`), checked as the drive would
 /// check it (`CorrectionParams::validate` through `Axis::load_correction`) at the
@@ -326,7 +434,8 @@ mod tests {
         let mut link = DeviceLink::new(host, Duration::from_millis(200));
         drive.write_all(&[0x05, 0x11, 0x22, 0x33, 0x44, 0x00]).unwrap();
         let e = link.request(&Request::GetTelemetry).unwrap_err().to_string();
-        assert!(e.contains("no answer") && e.contains("1 corrupt frame"), "{e}");
+        // Not streaming: the drive sends only answers, so a corrupt frame is the answer, lost.
+        assert!(e.contains("arrived corrupt"), "{e}");
         assert_eq!(link.corrupt_frames, 1);
         // The next request first sends the lone delimiter: the drive reads the first request,
         // an empty frame, then the second request.

@@ -13,6 +13,7 @@ use control_core::axis::{Mode, Telemetry};
 use control_core::protocol::{ParamsOrigin, Request, Response, VERSION};
 use control_core::{Commands, Params};
 
+use crate::device::answer::answer;
 use crate::device::link::{DeviceLink, DrivePort};
 
 /// A drive whose tick counter has not moved for this long has stopped.
@@ -27,13 +28,19 @@ pub struct DriveSession<T: DrivePort> {
     pub poll: Duration,
     /// The link's baud rate (for the share of the line an experiment uses).
     pub baud: u32,
+    /// The telemetry read last, while no other request has been sent since (what an order
+    /// whose answer is lost is judged against: `device::answer`).
+    fresh: Option<Telemetry>,
+    /// When the session ends, say on stderr what the line cost (corrupt frames, requests sent
+    /// again, outcomes read from the telemetry), if anything.
+    pub summary_on_drop: bool,
 }
 
 impl<T: DrivePort> DriveSession<T> {
     /// The handshake: the drive speaks this protocol version (and says where its parameters
     /// came from).
     pub fn open(mut link: DeviceLink<T>) -> Result<Self> {
-        let boot_params = match link.request(&Request::Hello { version: VERSION })? {
+        let boot_params = match answer(&mut link, &Request::Hello { version: VERSION }, None)? {
             Response::Hello { version, boot_params } if version == VERSION => boot_params,
             Response::FrameError(e) => {
                 bail!("the drive refused the handshake: {e} (update the host tools or the firmware)")
@@ -46,12 +53,23 @@ impl<T: DrivePort> DriveSession<T> {
             tick_hz: Params::default().rates.current_loop_hz as f64,
             poll: Duration::from_millis(5),
             baud: 921_600,
+            fresh: None,
+            summary_on_drop: false,
         })
+    }
+
+    /// The drive's answer to `request`, sent again after a lost request or answer where that
+    /// is safe (`device::answer`).
+    pub fn answer(&mut self, request: &Request) -> Result<Response> {
+        if *request == Request::GetTelemetry {
+            return answer(&mut self.link, request, None);
+        }
+        answer(&mut self.link, request, self.fresh.take())
     }
 
     /// Send a request the drive must carry out (`Done`), or fail with its reason.
     pub fn order(&mut self, request: Request, what: &str) -> Result<()> {
-        match self.link.request(&request)? {
+        match self.answer(&request)? {
             Response::Done => Ok(()),
             Response::Refused(why) => bail!("the drive refused {what}: {why}"),
             Response::FrameError(e) => bail!("the drive could not read {what}: {e}"),
@@ -59,14 +77,38 @@ impl<T: DrivePort> DriveSession<T> {
         }
     }
 
-    /// The drive's telemetry; asked once more after a failed answer (a corrupt frame, none
-    /// within the timeout: asking changes nothing in the drive).
+    /// The drive's telemetry; asked again after a lost answer (asking changes nothing in the
+    /// drive).
     pub fn telemetry(&mut self) -> Result<Telemetry> {
-        let ask = |link: &mut DeviceLink<T>| match link.request(&Request::GetTelemetry)? {
-            Response::Telemetry(t) => Ok(t),
-            other => bail!("unexpected answer to a telemetry request: {other:?}"),
+        let t = crate::device::answer::telemetry(&mut self.link)?;
+        self.fresh = Some(t);
+        Ok(t)
+    }
+
+    /// What the line cost so far, if anything: corrupt frames skipped, requests sent again,
+    /// orders whose outcome was read from the telemetry (each by request).
+    pub fn line_summary(&self) -> Option<String> {
+        let l = &self.link;
+        let each = |pick: fn(&(u64, u64)) -> u64| {
+            let v: Vec<String> =
+                l.by_request.iter().filter(|(_, n)| pick(n) > 0).map(|(k, n)| format!("{k} {}", pick(n))).collect();
+            if v.is_empty() {
+                String::new()
+            } else {
+                format!(" ({})", v.join(", "))
+            }
         };
-        ask(&mut self.link).or_else(|_| ask(&mut self.link))
+        (l.corrupt_frames + l.resent + l.verified > 0).then(|| {
+            format!(
+                "link: {} corrupt frame(s) skipped, {} request(s) sent again{}, {} order(s) whose answer was lost \
+                 judged from the drive's telemetry{}",
+                l.corrupt_frames,
+                l.resent,
+                each(|n| n.0),
+                l.verified,
+                each(|n| n.1)
+            )
+        })
     }
 
     /// Torque mode at zero torque; refuses to go on with faults latched (they are the
@@ -128,5 +170,15 @@ impl<T: DrivePort> DriveSession<T> {
 
     pub fn take_samples(&mut self) -> Vec<SampleBatch> {
         self.link.take_samples()
+    }
+}
+
+impl<T: DrivePort> Drop for DriveSession<T> {
+    fn drop(&mut self) {
+        if self.summary_on_drop {
+            if let Some(s) = self.line_summary() {
+                eprintln!("{s}");
+            }
+        }
     }
 }

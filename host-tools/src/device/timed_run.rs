@@ -91,7 +91,7 @@ pub fn run_timed<T: DrivePort>(
         if due > 0 {
             for g in &groups[next..next + due] {
                 for r in &g.requests {
-                    match session.link.request(r)? {
+                    match session.answer(r)? {
                         Response::Done => {}
                         answer if accept(&answer) => {}
                         other => bail!("unexpected answer to {} at {} s: {other:?}", g.label, g.time),

@@ -52,7 +52,8 @@ fn saved_parameters_survive_a_power_cycle_and_a_foreign_rate_is_refused() {
         Response::Refused(why) => assert!(why.to_string().contains("16000 Hz"), "{why}"),
         r => panic!("{r:?}"),
     }
-    let flash = s.link.into_port().drive.power_off();
+    let off = VirtualDrive::power_on(&settings(), FileFlash::in_memory()).unwrap();
+    let flash = std::mem::replace(&mut s.link.port_mut().drive, off).power_off();
     let again = VirtualDrive::power_on(&settings(), flash).unwrap();
     assert_eq!(again.boot_params(), ParamsOrigin::Stored { sequence: 1 });
     assert_eq!(again.params().velocity.kp, p.velocity.kp);
