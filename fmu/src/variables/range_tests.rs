@@ -18,6 +18,9 @@ const COUPLED: &[(&str, &str, &str)] = &[
     ("sweep.stop_hz", "max", "Nyquist"),
     ("sweep.extra_hz", "max", "Nyquist"),
     ("excitation.frequency", "max", "half the loop rate"),
+    // The position-command point (the largest code) sweeps below the position loop's Nyquist
+    // frequency, 2 kHz at the defaults, under the default stop frequency of 3 kHz.
+    ("sweep.point", "max", "Nyquist"),
     // Loop rates that divide each other.
     ("ctrl.velocity_divider", "max", "whole multiple"),
     ("ctrl.position_divider", "min", "whole multiple"),
