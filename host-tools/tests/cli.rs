@@ -94,6 +94,27 @@ fn accdec_prints_the_seed_design_and_writes_its_files() {
     }
 }
 
+/// The cut-off sweep, as the demo runs it (the test above skips it): its table carries each
+/// resonance's residual vibration for both filters, every row as wide as the header.
+#[test]
+fn accdec_sweeps_the_cut_off_and_writes_the_residuals_of_each_resonance() {
+    let out = tmp("accdec_sweep");
+    let o = servo().args(["accdec", "--json"]).arg("--fmu").arg(fmu_path()).arg("--out").arg(&out).output().unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let csv = std::fs::read_to_string(out.join("sweep.csv")).unwrap();
+    let mut lines = csv.lines();
+    let header: Vec<&str> = lines.next().unwrap().split(',').collect();
+    for name in ["butterworth_residual_20hz", "moving_average_residual_20hz", "butterworth_residual_60hz"] {
+        assert!(header.contains(&name), "{name} missing from {header:?}");
+    }
+    let rows: Vec<&str> = lines.collect();
+    assert!(rows.len() >= 5, "{} cut-offs swept", rows.len());
+    for row in rows {
+        assert_eq!(row.split(',').count(), header.len(), "{row}");
+    }
+    assert!(out.join("sweep.svg").exists());
+}
+
 #[test]
 fn accdec_refuses_bad_designs_with_the_reason() {
     for (args, reason) in [

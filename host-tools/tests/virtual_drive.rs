@@ -92,6 +92,15 @@ fn json(o: &std::process::Output) -> serde_json::Value {
     serde_json::from_slice(&o.stdout).unwrap()
 }
 
+/// `servo sweep --device PORT --json` with its output in `dir/out` and the project's FMU as
+/// the twin, bounded to two minutes.
+fn sweep_over(port: &str, dir: &std::path::Path) -> std::process::Output {
+    output_within(
+        servo().args(["sweep", "--device", port, "--json", "--out"]).arg(dir.join("out")).arg("--fmu").arg(fmu_path()),
+        120,
+    )
+}
+
 #[test]
 fn a_sweep_over_the_virtual_drive_matches_its_twin_and_parameters_survive_a_restart() {
     let _serial = one_at_a_time();
@@ -100,14 +109,7 @@ fn a_sweep_over_the_virtual_drive_matches_its_twin_and_parameters_survive_a_rest
     let vd = VirtualDrive::start(&dir, "max", &[]);
     let hello = json(&device(&vd.port, &["hello"]));
     assert!(hello["boot_params"].as_str().unwrap().contains("nothing saved"), "{hello}");
-    let o = output_within(
-        servo()
-            .args(["sweep", "--device", &vd.port, "--json", "--out"])
-            .arg(dir.join("out"))
-            .arg("--fmu")
-            .arg(fmu_path()),
-        120,
-    );
+    let o = sweep_over(&vd.port, &dir);
     let r = json(&o);
     assert_eq!(r["drive"]["dropped"], 0, "samples dropped on the link");
     assert_eq!(r["points"].as_array().unwrap().len(), 41);
@@ -156,14 +158,7 @@ fn a_sweep_and_a_save_over_a_corrupting_line_complete_and_act_once() {
     let dir = tmp("corrupt");
     let _ = std::fs::remove_file(dir.join("flash.bin"));
     let vd = VirtualDrive::start(&dir, "max", &["--corrupt-rate", "2e-3", "--seed", "3"]);
-    let o = output_within(
-        servo()
-            .args(["sweep", "--device", &vd.port, "--json", "--out"])
-            .arg(dir.join("out"))
-            .arg("--fmu")
-            .arg(fmu_path()),
-        120,
-    );
+    let o = sweep_over(&vd.port, &dir);
     let e = String::from_utf8_lossy(&o.stderr);
     // Exit status 1: complete, but not every sample arrived (the report says how many frames
     // were lost).

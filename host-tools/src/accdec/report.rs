@@ -288,16 +288,17 @@ fn write_sweep(out: &Path, sweep: &[SweepPoint]) -> Result<Vec<PathBuf>> {
     .into_iter()
     .map(String::from)
     .collect::<Vec<_>>();
-    let mut bw = Trace::new(vec!["cutoff_hz".into(), "t99_ms".into(), "peak_jerk".into()]);
-    let mut ma = bw.clone();
+    // Every column is named before a trace is made: a trace's rows take its width then.
+    let mut one_filter: Vec<String> = vec!["cutoff_hz".into(), "t99_ms".into(), "peak_jerk".into()];
     if let Some(p) = sweep.first() {
         for (hz, _, _) in &p.residuals {
             columns.push(format!("butterworth_residual_{hz}hz"));
             columns.push(format!("moving_average_residual_{hz}hz"));
-            bw.columns.push(format!("residual_{hz}hz"));
-            ma.columns.push(format!("residual_{hz}hz"));
+            one_filter.push(format!("residual_{hz}hz"));
         }
     }
+    let mut bw = Trace::new(one_filter);
+    let mut ma = bw.clone();
     let mut all = Trace::new(columns);
     for p in sweep {
         let mut row = vec![
