@@ -48,9 +48,6 @@ fn label(x: f64) -> String {
     }
 }
 
-/// Text made safe for SVG.
-/// A line of text that fits `max_width` pixels: wider text (estimated at 0.6 em a character)
-/// is squeezed to that width (SVG `textLength`) instead of running off the canvas.
 /// The opening of a plot: the `<svg>` element of `width` × `height`, a white background and
 /// the title centred at `title_y` in `title_size`, shrunk to fit the width.
 pub(crate) fn svg_opening(width: f64, height: f64, title: &str, title_y: f64, title_size: f64) -> String {
@@ -60,6 +57,8 @@ pub(crate) fn svg_opening(width: f64, height: f64, title: &str, title_y: f64, ti
     )
 }
 
+/// A line of text that fits `max_width` pixels: wider text (estimated at 0.6 em a character)
+/// is squeezed to that width (SVG `textLength`) instead of running off the canvas.
 pub(crate) fn fitted_text(x: f64, y: f64, font_size: f64, anchor: &str, max_width: f64, text: &str) -> String {
     let estimated = 0.6 * font_size * text.chars().count() as f64;
     let fit = if estimated > max_width {
@@ -70,6 +69,7 @@ pub(crate) fn fitted_text(x: f64, y: f64, font_size: f64, anchor: &str, max_widt
     format!(r#"<text x="{x}" y="{y}" font-size="{font_size}" text-anchor="{anchor}"{fit}>{}</text>"#, escape(text))
 }
 
+/// Text made safe for SVG.
 pub(crate) fn escape(s: &str) -> String {
     s.replace('&', "&amp;").replace('<', "&lt;").replace('>', "&gt;")
 }
