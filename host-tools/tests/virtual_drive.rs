@@ -225,6 +225,68 @@ fn a_pseudo_circle_over_the_virtual_drive_matches_its_twin() {
 }
 
 #[test]
+fn tune_over_the_virtual_drive_loads_the_correction_and_both_circles_match_their_twins() {
+    let _serial = one_at_a_time();
+    let dir = tmp("tune");
+    let count = std::f64::consts::TAU / control_core::Params::default().encoder_counts_per_rev as f64;
+    let goal = host_tools::circle::device::GOAL_COUNTS * count;
+    let o = output_within(
+        servo()
+            .args(["ident", "--anti-resonance", "x=40,y=70", "--out"])
+            .arg(dir.join("ident"))
+            .arg("--fmu")
+            .arg(fmu_path()),
+        120,
+    );
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let models = [dir.join("ident/x.model.json"), dir.join("ident/y.model.json")];
+    let vd = VirtualDrive::start(&dir, "max", &[]);
+    let tune = |extra: &[&str]| {
+        output_within(
+            servo()
+                .args(["tune", "--device", &vd.port, "--json", "--model"])
+                .args(&models)
+                .args(extra)
+                .arg("--out")
+                .arg(dir.join("tune"))
+                .arg("--fmu")
+                .arg(fmu_path()),
+            180,
+        )
+    };
+    // An axis the models do not have is refused before the port is opened.
+    let o = tune(&["--axis", "z"]);
+    assert_eq!(o.status.code(), Some(2));
+    assert!(String::from_utf8_lossy(&o.stderr).contains("--axis z"), "{}", String::from_utf8_lossy(&o.stderr));
+    let r = json(&tune(&["--axis", "y"]));
+    let d = &r["device"];
+    assert_eq!(d["axis"], "y");
+    assert_eq!(d["correction_loaded"], true, "{d}");
+    for run in [&d["without"], &d["with"]] {
+        assert_eq!(run["dropped"], 0, "samples dropped on the link");
+        assert_eq!(run["corrupt_frames"], 0);
+        let largest = run["difference"]["largest"].as_f64().unwrap();
+        assert!(largest <= goal, "drive vs twin {largest:e} rad (goal {goal:e})");
+    }
+    assert_eq!(d["passed"], true, "{d}");
+    // The drive's correction is only the one loaded over the link (its parameters carry none):
+    // the correction moves both figures by far more than the goal, and the drive's as the
+    // twin's.
+    let (on_drive, on_twin) =
+        (d["change_on_drive"]["rms"].as_f64().unwrap(), d["change_on_twin"]["rms"].as_f64().unwrap());
+    assert!(on_twin > 20.0 * goal, "the correction moves the twin's figure by {on_twin:e} rad only");
+    assert!(
+        (on_drive - on_twin).abs() <= goal,
+        "the correction moves the drive's figure by {on_drive:e} rad, the twin's by {on_twin:e} rad"
+    );
+    // tune.json has the check as its "device" section.
+    let saved: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(dir.join("tune/tune.json")).unwrap()).unwrap();
+    assert_eq!(saved["device"]["axis"], "y");
+    assert!(dir.join("tune/device/with/pseudo_circle.svg").exists());
+}
+
+#[test]
 fn faults_a_missing_device_and_a_dying_drive_end_in_clear_errors() {
     let _serial = one_at_a_time();
     let dir = tmp("faults");

@@ -19,6 +19,8 @@ use std::path::{Path, PathBuf};
 use anyhow::{anyhow, bail, Result};
 use control_core::excitation::InjectionPoint;
 use control_core::phase_shifted_sweep::{SweepParams, SweepSignal};
+use control_core::protocol::Request;
+use control_core::response_correction::CorrectionParams;
 use serde::Serialize;
 
 use crate::circle::plot::plot_circle;
@@ -30,7 +32,7 @@ use crate::fmu::runner::Fmu;
 use crate::fmu::scenario::DEFAULT_STEP;
 use crate::fmu::sweep_run::SweepRun;
 use crate::fmu::trace::Trace;
-use crate::sweep::device::sweep_on_drive;
+use crate::sweep::device::sweep_on_drive_after;
 use crate::sweep::device_report::save_partial;
 
 /// Drive − twin for the feedback figures: the radial difference at matching angles (rad).
@@ -86,6 +88,9 @@ pub struct DeviceCircleReport {
     /// No sample dropped or lost, and the drive's figure within `goal` of the twin's.
     pub passed: bool,
     pub files: Vec<PathBuf>,
+    /// The feedback figures: the drive's, the twin's.
+    #[serde(skip)]
+    pub feedback: [Figure; 2],
 }
 
 /// The sweep that draws the pseudo-circle of `r` (X's parameters) on a drive or the FMU.
@@ -184,7 +189,8 @@ fn figures(label: &str, p: &SampledPseudoCircle, radius: f64) -> CircleFigures {
     }
 }
 
-fn difference(a: &Figure, b: &Figure) -> FigureDifference {
+/// `a` − `b`: the radial difference at matching angles.
+pub fn difference(a: &Figure, b: &Figure) -> FigureDifference {
     let (largest, rms) = radial_differences(a, b);
     FigureDifference { largest, rms }
 }
@@ -194,14 +200,37 @@ fn difference(a: &Figure, b: &Figure) -> FigureDifference {
 pub fn run_on_device<T: DrivePort>(
     fmu: &Fmu,
     request: &CircleRequest,
+    target: (&str, &mut DriveSession<T>),
+    out: &Path,
+    progress: impl FnMut(&str, f64),
+) -> Result<DeviceCircleReport> {
+    run_on_device_loading(fmu, request, target, None, out, progress)
+}
+
+/// As [`run_on_device`]; with `correction`, the drive gets the request's parameters without
+/// their `corr.*` ones, then the correction by `LoadCorrection` (refused: an error with the
+/// drive's reason), and the twin runs the request's parameters, `corr.*` included: the drive's
+/// correction is the one loaded over the link, and the twin says what it should do.
+pub fn run_on_device_loading<T: DrivePort>(
+    fmu: &Fmu,
+    request: &CircleRequest,
     (port, session): (&str, &mut DriveSession<T>),
+    correction: Option<&CorrectionParams>,
     out: &Path,
     mut progress: impl FnMut(&str, f64),
 ) -> Result<DeviceCircleReport> {
     std::fs::create_dir_all(out)?;
     let run = pseudo_circle_sweep(request)?;
     let (_, _, n) = request.timing()?;
-    let drive = match sweep_on_drive(session, &run, |f| progress("circle on the drive", f)) {
+    let mut drive_run = run.clone();
+    if correction.is_some() {
+        drive_run.parameters.retain(|k, _| !k.starts_with("corr."));
+    }
+    let load = |s: &mut DriveSession<T>| match correction {
+        Some(c) => s.order(Request::LoadCorrection(*c), "the correction (LoadCorrection)"),
+        None => Ok(()),
+    };
+    let drive = match sweep_on_drive_after(session, &drive_run, load, |f| progress("circle on the drive", f)) {
         Ok(d) => d,
         Err(e) => return Err(save_partial(session, out, "pseudo_circle", e)),
     };
@@ -274,6 +303,7 @@ pub fn run_on_device<T: DrivePort>(
         link_bytes_per_s: drive.link_bytes_per_s,
         passed,
         files: files.clone(),
+        feedback: [on_drive.feedback.clone(), twin.feedback.clone()],
     };
     let json = out.join("pseudo_circle.json");
     std::fs::write(&json, serde_json::to_string_pretty(&report)?)?;

@@ -72,6 +72,13 @@ pub struct IdentBenchArgs {
 /// the position-loop bandwidth before and after. The exit status is non-zero when the
 /// correction does not bring the axes closer.
 ///
+/// --device PORT: then loads one axis's correction (--axis, default the first model's) into
+/// the drive over its link (LoadCorrection, the <axis>.corr.frame) and checks it there: the
+/// single-axis pseudo-circle of the motor position (as `servo circle --single x --device`)
+/// without and with the correction, each beside its FMU twin (the drive's parameters, and the
+/// same corr.* parameters), in the table and in tune.json's "device" section. A drive has no
+/// machine-end sensor: the equalisation of the axes stays the FMU check's.
+///
 /// Example: servo ident --anti-resonance x=40,y=70 && servo tune --model out/ident/x.model.json out/ident/y.model.json
 #[derive(clap::Args)]
 pub struct TuneArgs {
@@ -84,6 +91,12 @@ pub struct TuneArgs {
     /// Skip the check runs on the FMU (the response method still measures once)
     #[arg(long)]
     pub no_check: bool,
+    /// With --device: the axis whose correction the drive gets (default: the first model's)
+    #[arg(long)]
+    pub axis: Option<String>,
+    /// Load the correction into this drive and check it there
+    #[command(flatten)]
+    pub target: crate::device::args::TargetArgs,
     #[command(flatten)]
     pub common: Common,
 }

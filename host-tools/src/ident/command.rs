@@ -353,29 +353,79 @@ fn tune(args: &TuneArgs) -> Result<bool> {
     let out = common.out.clone().unwrap_or_else(|| default_out("tune"));
     std::fs::create_dir_all(&out).with_context(|| format!("cannot create {}", out.display()))?;
     let models: Vec<AxisModel> = models.iter().map(|p| AxisModel::load(p)).collect::<Result<_>>()?;
+    if args.axis.is_some() && args.target.device.is_none() {
+        bail!("--axis chooses the axis a drive gets: add --device PORT");
+    }
+    if let Some(name) = &args.axis {
+        if !models.iter().any(|m| &m.axis == name) {
+            let names: Vec<&str> = models.iter().map(|m| m.axis.as_str()).collect();
+            bail!("--axis {name}: the models are of axes {} (one drive is one axis)", names.join(", "));
+        }
+    }
     let fmu = Fmu::load(&common.fmu.clone().unwrap_or_else(default_fmu))?;
     let pb = progress_bar("tune", common.json);
     let tuning =
         crate::ident::tuning::tune(&fmu, &models, method, !no_check, |x| pb.set_position((x * 1000.0) as u64))?;
     pb.finish_and_clear();
-    let files = crate::ident::tuning::write(&tuning, &out)?;
+    let mut files = crate::ident::tuning::write(&tuning, &out)?;
     let improved = match (tuning.spread_before, tuning.spread_after) {
         (Some(b), Some(a)) => a.0 < b.0 && a.1 < b.1,
         _ => true,
     };
+    let device = device_check(args, &fmu, &tuning, &out)?;
+    if let Some(d) = &device {
+        // tune.json gets the check over the drive as its "device" section.
+        let json = out.join("tune.json");
+        let mut saved = serde_json::to_value(&tuning)?;
+        saved["device"] = serde_json::to_value(d)?;
+        std::fs::write(&json, serde_json::to_string_pretty(&saved)?)?;
+        files.extend(d.without.files.iter().chain(&d.with.files).cloned());
+    }
+    let device_ok = device.as_ref().is_none_or(|d| d.passed);
     if common.json {
         println!(
             "{}",
-            serde_json::to_string_pretty(&serde_json::json!({"tuning": tuning, "files": files, "improved": improved}))?
+            serde_json::to_string_pretty(
+                &serde_json::json!({"tuning": tuning, "device": device, "files": files, "improved": improved})
+            )?
         );
-        return Ok(improved);
+        return Ok(improved && device_ok);
     }
     tuning.print();
-    for f in &files {
+    if let Some(d) = &device {
+        d.print();
+    }
+    for f in files.iter().filter(|f| f.parent() == Some(out.as_path())) {
         println!("  → {}", f.display());
     }
     if !improved {
         println!("  the correction does NOT bring the axes' responses closer");
     }
-    Ok(improved)
+    Ok(improved && device_ok)
+}
+
+/// With --device: the chosen axis's correction loaded into the drive and checked there.
+fn device_check(
+    args: &TuneArgs,
+    fmu: &Fmu,
+    tuning: &crate::ident::tuning::Tuning,
+    out: &std::path::Path,
+) -> Result<Option<crate::ident::device_check::TuneDeviceCheck>> {
+    use crate::ident::device_check::{check_on_device, check_request, tuned_axis};
+    let Some(port) = args.target.device.as_deref() else {
+        return Ok(None);
+    };
+    let axis = tuned_axis(tuning, args.axis.as_deref())?;
+    check_request(axis)?;
+    let Some(mut session) = args.target.session()? else {
+        return Ok(None);
+    };
+    let pb = progress_bar("tune on the drive", args.common.json);
+    let frame = out.join(format!("{}.corr.frame", axis.axis));
+    let check = check_on_device(fmu, axis, (port, &mut session), &frame, &out.join("device"), |label, f| {
+        pb.set_prefix(label.to_string());
+        pb.set_position((f * 1000.0) as u64)
+    })?;
+    pb.finish_and_clear();
+    Ok(Some(check))
 }

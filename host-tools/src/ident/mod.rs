@@ -3,6 +3,7 @@
 pub mod args;
 pub mod bench;
 pub mod command;
+pub mod device_check;
 pub mod identification;
 pub mod index;
 pub mod report;

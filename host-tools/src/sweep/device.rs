@@ -50,6 +50,18 @@ pub struct DeviceSweep {
 pub fn sweep_on_drive<T: crate::device::link::DrivePort>(
     session: &mut DriveSession<T>,
     run: &SweepRun,
+    progress: impl FnMut(f64),
+) -> Result<DeviceSweep> {
+    sweep_on_drive_after(session, run, |_| Ok(()), progress)
+}
+
+/// As [`sweep_on_drive`], with `after_params` given the session once the drive has the run's
+/// parameters and stands at rest (a `LoadCorrection`, for one: `SetParams` replaces the
+/// correction with the parameters').
+pub fn sweep_on_drive_after<T: crate::device::link::DrivePort>(
+    session: &mut DriveSession<T>,
+    run: &SweepRun,
+    after_params: impl FnOnce(&mut DriveSession<T>) -> Result<()>,
     mut progress: impl FnMut(f64),
 ) -> Result<DeviceSweep> {
     // The telemetry shares the drive's transmit line with the stream (about 75 kB/s of the
@@ -57,6 +69,7 @@ pub fn sweep_on_drive<T: crate::device::link::DrivePort>(
     session.poll = session.poll.max(std::time::Duration::from_millis(20));
     let params = with_board_limits(run.drive_params()?);
     session.set_params(&params)?;
+    after_params(session)?;
     let commands = match run.mode() {
         // A position-command sweep: the axis holds where it stands, the sine adds to that.
         Mode::Position => {
