@@ -101,11 +101,6 @@ impl SineGenerator {
         Self { phase, ..self }
     }
 
-    /// The generator at the accumulator's word `phase`.
-    pub fn advanced_to(self, phase: u32) -> Self {
-        Self { phase, ..self }
-    }
-
     pub fn next_sample(&mut self) -> f32 {
         self.next_with_angle().0
     }

@@ -122,7 +122,7 @@ impl SweepParams {
                 // record's generator, so that the wait for the next frequency's peak (see
                 // `PhaseShiftedSweep::next_frequency`) is exact when nothing is extended;
                 // with extensions it is bounded by half a period.
-                let mut phase_word = 0u32;
+                let mut generator = SineGenerator::default();
                 let mut total = 0u64;
                 let count = self.count();
                 for i in 0..count {
@@ -131,22 +131,21 @@ impl SweepParams {
                     let added = (samples / 2).saturating_mul(2 * extensions as u64);
                     let measure = samples.saturating_add(added).saturating_mul(d);
                     let discarded = (samples / 2).saturating_mul(d).saturating_mul(2 * extensions as u64);
-                    let mut generator = SineGenerator::default();
                     for record in 0..self.records(f, base_rate_hz) {
                         let shift = if record == 0 { 0.0 } else { TAU / self.shifts as f32 };
                         let ticks =
                             settle.saturating_add(measure).saturating_add(if record == 0 { discarded } else { 0 });
-                        generator = SineGenerator::new(1.0, f, base_rate_hz, phase_angle(phase_word) + shift);
-                        phase_word = generator.advanced(ticks).phase_word();
+                        let start = phase_angle(generator.phase_word()) + shift;
+                        generator = SineGenerator::new(1.0, f, base_rate_hz, start).advanced(ticks);
                         total = total.saturating_add(ticks);
                     }
                     if i + 1 < count {
                         let wait = if extensions == 0 {
-                            generator.advanced_to(phase_word).ticks_to_peak() as u64
+                            generator.ticks_to_peak() as u64
                         } else {
                             libm::ceilf(0.5 * base_rate_hz / f) as u64 + 1
                         };
-                        phase_word = generator.advanced_to(phase_word).advanced(wait).phase_word();
+                        generator = generator.advanced(wait);
                         total = total.saturating_add(wait);
                     }
                 }
