@@ -77,7 +77,14 @@ pub fn answer<T: Read + Write>(
     request: &Request,
     before: Option<Telemetry>,
 ) -> Result<Response> {
-    let name = request_name(request);
+    let (name, kind) = (request_name(request), request_kind(request));
+    let trace = std::env::var_os("SERVO_LINK_TRACE").is_some();
+    let not_sent_again = |last: &str, reason: &str| {
+        anyhow!(
+            "the answer to {name} was lost ({last}) and it was not sent again: {reason}; it may or may not have been \
+             carried out"
+        )
+    };
     let repeat = repeat_of(request);
     let mut before = match repeat {
         Repeat::Harmless | Repeat::Once(_) => None,
@@ -91,14 +98,14 @@ pub fn answer<T: Read + Write>(
     for copy in 0..=RESENDS {
         if copy > 0 {
             link.resent += 1;
-            link.by_request.entry(request_kind(request)).or_default().0 += 1;
+            link.by_request.entry(kind).or_default().0 += 1;
         }
         let a = attempt(link, request).map_err(|e| e.context(format!("{name} to the drive")))?;
-        if std::env::var_os("SERVO_LINK_TRACE").is_some() {
+        if trace {
             match &a {
                 Attempt::Answer(_) => {}
-                Attempt::NotRead(e) => eprintln!("TRACE {} not read: {e}", request_kind(request)),
-                Attempt::Lost(w, h) => eprintln!("TRACE {} lost (heard {h}): {w}", request_kind(request)),
+                Attempt::NotRead(e) => eprintln!("TRACE {kind} not read: {e}"),
+                Attempt::Lost(w, h) => eprintln!("TRACE {kind} lost (heard {h}): {w}"),
             }
         }
         match a {
@@ -114,24 +121,18 @@ pub fn answer<T: Read + Write>(
                 silent_before = !heard;
                 last = why;
                 if let Repeat::Once(reason) = repeat {
-                    bail!(
-                        "the answer to {name} was lost ({last}) and it was not sent again: {reason}; it may or may not \
-                         have been carried out"
-                    );
+                    return Err(not_sent_again(&last, reason));
                 }
                 let Some(b) = before else { continue };
                 let after = telemetry(link)?;
                 match verify(request, &b, &after) {
                     Verdict::Acted(r) => {
                         link.verified += 1;
-                        link.by_request.entry(request_kind(request)).or_default().1 += 1;
+                        link.by_request.entry(kind).or_default().1 += 1;
                         return Ok(r);
                     }
                     Verdict::SendAgain => before = Some(after),
-                    Verdict::Unknown(reason) => bail!(
-                        "the answer to {name} was lost ({last}) and it was not sent again: {reason}; it may or may not \
-                         have been carried out"
-                    ),
+                    Verdict::Unknown(reason) => return Err(not_sent_again(&last, reason)),
                 }
             }
         }

@@ -154,8 +154,7 @@ impl TuneDeviceCheck {
             "    {:<20} {:>14} {:>14} {:>14} {:>14} {:>16} {:>16}",
             "run", "drive round.", "twin round.", "drive mean r.", "twin mean r.", "drive−twin max", "drive−twin rms"
         );
-        for r in [&self.without, &self.with] {
-            let label = if std::ptr::eq(r, &self.without) { "without correction" } else { "with correction" };
+        for (label, r) in [("without correction", &self.without), ("with correction", &self.with)] {
             let (d, t) = (&r.runs[0].feedback, &r.runs[1].feedback);
             println!(
                 "    {label:<20} {:>14.3e} {:>14.3e} {:>+14.3e} {:>+14.3e} {:>10.3e} ({:.2}) {:>10.3e} ({:.2})",
