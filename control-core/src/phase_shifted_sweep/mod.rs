@@ -187,6 +187,11 @@ pub struct PhaseShiftedSweep {
     half_start: SineFitSums,
     previous_half: Option<((f32, f32), f32)>,
     discarded_halves: u32,
+    /// The last comparison's difference of the two half blocks' responses (see
+    /// [`Self::settled`]) and whether it was above the noise.
+    previous_difference: (f32, f32),
+    previous_above_noise: bool,
+    previous_excess: f32,
     checking_settling: bool,
     /// Index of the present half block (see [`AcquisitionSample::half_block`]; at most
     /// `1 + 2·MAX_EXTENSIONS`), and the samples' word of record and half block (found when
@@ -233,6 +238,9 @@ impl PhaseShiftedSweep {
             half_start: SineFitSums::default(),
             previous_half: None,
             discarded_halves: 0,
+            previous_difference: (0.0, 0.0),
+            previous_above_noise: false,
+            previous_excess: 0.0,
             checking_settling: false,
             half_block: 0,
             segment: 0,
@@ -340,6 +348,8 @@ impl PhaseShiftedSweep {
             self.half_start = SineFitSums::default();
             self.previous_half = None;
             self.discarded_halves = 0;
+            self.previous_above_noise = false;
+            self.previous_excess = 0.0;
             self.half_block = 0;
             self.checking_settling = p.precision_db > 0.0
                 && p.max_extensions > 0

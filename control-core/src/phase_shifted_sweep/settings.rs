@@ -87,7 +87,7 @@ impl Default for SweepParams {
             extra_hz: 2000.0,
             settle_cycles: 1.0,
             min_settle_s: 0.01,
-            measure_cycles: 3.0,
+            measure_cycles: 2.0,
             min_measure_s: 0.04,
             shifts: 3,
             repeats: 3,

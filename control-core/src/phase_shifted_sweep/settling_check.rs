@@ -8,6 +8,10 @@ use crate::TAU;
 /// `PhaseShiftedSweep::settled`).
 const SETTLING_NOISE_SIGMAS: f32 = 1.5;
 
+/// After a discarded half block, the previous comparison's difference was at most so many
+/// times its limit.
+const SETTLED_TREND: f32 = 2.0;
+
 /// Base blocks shorter than this (samples) are not checked for settling: a half block would
 /// be too short to fit a sine and estimate its noise.
 pub(super) const MIN_CHECKED_SAMPLES: u64 = 32;
@@ -64,7 +68,21 @@ impl PhaseShiftedSweep {
         let n = half.n;
         let ratio = libm::expf(6.0 / crate::square_root::sqrt(n));
         let decaying = spread0 > ratio * spread && spread0 * 0.5 * n > target * target;
-        if !(difference > target.max(noise) || decaying) || self.discarded_halves >= 2 * p.max_extensions {
+        // A transient seen above the noise in the previous comparison must, besides, have left
+        // the base block within the limit (see `tail_over_difference`), and the previous
+        // comparison must not have been far outside the limit: two half blocks can agree by
+        // chance while a larger ring, under noise, has not decayed.
+        let excess = difference / target.max(noise);
+        let settled = excess <= 1.0
+            && !decaying
+            && (self.discarded_halves == 0
+                || self.previous_excess <= SETTLED_TREND
+                    && (!self.previous_above_noise
+                        || excess * tail_over_difference((dre, dim), self.previous_difference) <= 1.0));
+        self.previous_difference = (dre, dim);
+        self.previous_above_noise = difference > noise;
+        self.previous_excess = excess;
+        if settled || self.discarded_halves >= 2 * p.max_extensions {
             self.checking_settling = false;
             return None;
         }
@@ -76,5 +94,48 @@ impl PhaseShiftedSweep {
         self.half_block = self.half_block.saturating_add(1);
         self.segment = AcquisitionSample::segment_of(self.status.record, self.half_block);
         Some((samples / 2).max(1))
+    }
+}
+
+/// What a decaying transient still leaves in the base block (the last two half blocks), over
+/// the last difference of half-block responses, if it decays as one mode: the differences
+/// then form a geometric sequence `d_k = d_{k−1}·q` (q complex: the mode beats against the
+/// excitation), the half blocks carry `d_k·q/(q − 1)` and `d_k/(q − 1)`, their mean
+/// `d_k·(1 + q)/(2(q − 1))`. A slow decay (q near 1) leaves several times the last
+/// difference: a ring at 52 Hz with τ = 50 ms, measured at 50 Hz in half blocks of 20 ms,
+/// leaves 2.5 times it. Infinite or NaN when the ratio tells no decay.
+fn tail_over_difference((dre, dim): (f32, f32), (pre, pim): (f32, f32)) -> f32 {
+    let den = pre * pre + pim * pim;
+    let (qre, qim) = ((dre * pre + dim * pim) / den, (dim * pre - dre * pim) / den);
+    let plus = (1.0 + qre) * (1.0 + qre) + qim * qim;
+    let minus = (1.0 - qre) * (1.0 - qre) + qim * qim;
+    0.5 * crate::square_root::sqrt(plus / minus)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::tail_over_difference;
+
+    /// Half-block responses `G + C·q^k` of one decaying mode: the function turns the last
+    /// difference into the bias the last two half blocks' mean still has.
+    #[test]
+    fn the_tail_of_a_geometric_transient_is_what_the_base_block_still_carries() {
+        let mul = |(a, b): (f32, f32), (c, d): (f32, f32)| (a * c - b * d, a * d + b * c);
+        for &(q, c) in &[((0.67, 0.0), (0.3, 0.1)), ((0.4, -0.45), (-0.2, 0.5)), ((-0.3, 0.6), (1.0, -1.0))] {
+            let g = (1.5, -0.4);
+            let mut power = (1.0, 0.0);
+            let mut halves = [(0.0, 0.0); 4];
+            for h in halves.iter_mut() {
+                let t = mul(c, power);
+                *h = (g.0 + t.0, g.1 + t.1);
+                power = mul(power, q);
+            }
+            let d = |k: usize| (halves[k].0 - halves[k - 1].0, halves[k].1 - halves[k - 1].1);
+            let bias = ((halves[2].0 + halves[3].0) / 2.0 - g.0, (halves[2].1 + halves[3].1) / 2.0 - g.1);
+            let last = d(3);
+            let predicted = tail_over_difference(last, d(2)) * libm::hypotf(last.0, last.1);
+            let actual = libm::hypotf(bias.0, bias.1);
+            assert!((predicted - actual).abs() < 1e-4 * actual.max(1e-3), "q {q:?}: {predicted} vs {actual}");
+        }
     }
 }

@@ -41,7 +41,7 @@ pub struct SweepArgs {
     /// the response of successive half records agrees: the settling check)
     #[arg(long, default_value_t = 1.0)]
     pub settle_cycles: f64,
-    #[arg(long, default_value_t = 3.0)]
+    #[arg(long, default_value_t = 2.0)]
     pub measure_cycles: f64,
     /// Shortest settling and measurement per record (s)
     #[arg(long, default_value_t = 0.01)]
