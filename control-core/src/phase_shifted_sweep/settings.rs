@@ -69,7 +69,7 @@ pub struct SweepParams {
 
 impl Default for SweepParams {
     /// Velocity-command injection, 10 Hz to 3 kHz in 40 log steps plus 2 kHz, 1 settle and
-    /// 3 measure cycles (at least 10 ms of settling and 40 ms of measurement), 3 records
+    /// 2 measure cycles (at least 10 ms of settling and 40 ms of measurement), 3 records
     /// shifted by 2π/3 from the acquisition Nyquist frequency up, acquisition every 4 ticks
     /// (4 kHz at 16 kHz). The base records are short: the settling check lengthens the wait
     /// where the loop rings (see `PhaseShiftedSweep::settled`), the precision control the
