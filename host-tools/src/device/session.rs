@@ -10,7 +10,7 @@ use std::time::{Duration, Instant};
 use anyhow::{bail, Result};
 use control_core::acquisition_stream::SampleBatch;
 use control_core::axis::{Mode, Telemetry};
-use control_core::protocol::{ParamsOrigin, Request, Response, VERSION};
+use control_core::protocol::{DriveTelemetry, ParamsOrigin, Request, Response, VERSION};
 use control_core::{Commands, Params};
 
 use crate::device::answer::answer;
@@ -30,7 +30,7 @@ pub struct DriveSession<T: DrivePort> {
     pub baud: u32,
     /// The telemetry read last, while no other request has been sent since (what an order
     /// whose answer is lost is judged against: `device::answer`).
-    fresh: Option<Telemetry>,
+    fresh: Option<DriveTelemetry>,
     /// When the session ends, say on stderr what the line cost (corrupt frames, requests sent
     /// again, outcomes read from the telemetry), if anything.
     pub summary_on_drop: bool,
@@ -77,12 +77,22 @@ impl<T: DrivePort> DriveSession<T> {
         }
     }
 
-    /// The drive's telemetry; asked again after a lost answer (asking changes nothing in the
+    /// Save the parameters in force to the drive's flash: the record's sequence number.
+    pub fn save_params(&mut self) -> Result<u32> {
+        match self.answer(&Request::SaveParams)? {
+            Response::Saved { sequence } => Ok(sequence),
+            Response::Refused(why) => bail!("the drive refused the parameter save: {why}"),
+            Response::FrameError(e) => bail!("the drive could not read the parameter save: {e}"),
+            other => bail!("unexpected answer to the parameter save: {other:?}"),
+        }
+    }
+
+    /// The axis's telemetry; asked again after a lost answer (asking changes nothing in the
     /// drive).
     pub fn telemetry(&mut self) -> Result<Telemetry> {
         let t = crate::device::answer::telemetry(&mut self.link)?;
         self.fresh = Some(t);
-        Ok(t)
+        Ok(t.axis)
     }
 
     /// What the line cost so far, if anything: corrupt frames skipped, requests sent again,

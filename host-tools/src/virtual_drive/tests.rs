@@ -44,7 +44,7 @@ fn saved_parameters_survive_a_power_cycle_and_a_foreign_rate_is_refused() {
     let mut p = power_stage::ratings::with_board_limits(Params::default());
     p.velocity.kp *= 1.25;
     s.set_params(&p).unwrap();
-    s.order(Request::SaveParams, "save").unwrap();
+    assert_eq!(s.save_params().unwrap(), 1);
     // Another current-loop rate than the board's PWM is refused, with the rate.
     let mut other = p;
     other.rates.current_loop_hz = 20_000.0;
