@@ -88,7 +88,12 @@ pub fn answer<T: Read + Write>(
         Repeat::Harmless => None,
         Repeat::Verify => Some(match before {
             Some(t) => t,
-            None => telemetry(link)?,
+            None => telemetry(link).map_err(|e| {
+                anyhow!(
+                    "{name} was not sent: the telemetry it would be judged against, should its answer be lost, could \
+                     not be read ({e:#})"
+                )
+            })?,
         }),
     };
     let mut silent_before = false;
@@ -397,6 +402,17 @@ mod tests {
             assert!(e.contains(w), "{w}: {e}");
         }
         assert_eq!((l.port().records, l.port().count(&Request::SaveParams)), (1, 1));
+    }
+
+    /// The telemetry before the save (its baseline) lost eight times running (requests 0–7):
+    /// the save is not sent, and the error says so.
+    #[test]
+    fn a_save_whose_baseline_telemetry_is_lost_is_not_sent_and_the_error_says_so() {
+        let script: Vec<(usize, Hit)> = (0..8).map(|k| (k, Hit::Answer)).collect();
+        let mut l = link(&script);
+        let e = format!("{:#}", answer(&mut l, &Request::SaveParams, None).unwrap_err());
+        assert!(e.contains("SaveParams) was not sent") && e.contains("no answer after 8 copies"), "{e}");
+        assert_eq!((l.port().records, l.port().count(&Request::SaveParams)), (0, 0));
     }
 
     #[test]
