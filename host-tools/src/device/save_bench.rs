@@ -220,4 +220,3 @@ impl SaveBenchArgs {
         Ok(ok)
     }
 }
-
