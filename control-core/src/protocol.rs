@@ -26,11 +26,14 @@ use crate::ranges::{check_position, Quantity, RangeError};
 use crate::response_correction::CorrectionParams;
 use crate::stop_sequence::{Refusal, SequenceEvent};
 
-/// Protocol version 5: parameters whose current-loop rate is not the board's PWM rate are
-/// refused with that rate (version 4: `SaveParams`, and the answer to `Hello` says where the
+/// Protocol version 6: `SaveParams` is answered with the sequence number of the record it
+/// wrote ([`Response::Saved`]), and the telemetry carries the newest record in the drive's
+/// flash ([`DriveTelemetry`]), so that a save whose answer is lost can be told from the
+/// telemetry (version 5: parameters whose current-loop rate is not the board's PWM rate are
+/// refused with that rate; version 4: `SaveParams`, and the answer to `Hello` says where the
 /// drive's parameters came from at boot; version 3: CRC-32C instead of CRC-16, trailing bytes
 /// refused, range refusals).
-pub const VERSION: u16 = 5;
+pub const VERSION: u16 = 6;
 /// Largest encoded frame, COBS body without its terminator (a full parameter set fits with
 /// room to spare).
 pub const MAX_FRAME: usize = 1024;
@@ -70,7 +73,19 @@ pub enum Request {
     },
     /// Write the parameters in force to the drive's flash, loaded at the next boot (only while
     /// the axis stands still in torque mode at zero torque: the gate drive is off meanwhile).
+    /// Answered with [`Response::Saved`].
     SaveParams,
+}
+
+/// The answer to `GetTelemetry`: the axis's telemetry, and what the drive's parameter store
+/// holds.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct DriveTelemetry {
+    pub axis: Telemetry,
+    /// The sequence number of the newest parameter record in the drive's flash: the one loaded
+    /// at boot, or the one `SaveParams` wrote last (each save writes the next number). `None`:
+    /// no record (nothing saved, only corrupt or foreign ones), or no parameter storage.
+    pub params_record: Option<u32>,
 }
 
 /// Where the parameters a drive booted with came from.
@@ -245,10 +260,15 @@ pub enum Response {
     },
     Done,
     Refused(RefusalReason),
-    Telemetry(Telemetry),
+    Telemetry(DriveTelemetry),
     FrameError(FrameError),
     /// Streamed acquisition samples (sent by the drive while streaming is on).
     Samples(SampleBatch),
+    /// `SaveParams` carried out: the sequence number of the record written (the telemetry's
+    /// `params_record` from now on).
+    Saved {
+        sequence: u32,
+    },
 }
 
 impl Response {
@@ -385,7 +405,7 @@ pub fn handle(axis: &mut Axis, commands: &mut Commands, stream: &mut Acquisition
             axis.clear_faults();
             Response::Done
         }
-        Request::GetTelemetry => Response::Telemetry(*axis.telemetry()),
+        Request::GetTelemetry => Response::Telemetry(DriveTelemetry { axis: *axis.telemetry(), params_record: None }),
         Request::Stream { enabled } => {
             stream.set_enabled(enabled);
             Response::Done
@@ -423,6 +443,27 @@ mod tests {
             Request::SaveParams,
         ] {
             assert_eq!(round_trip(r), r);
+        }
+    }
+
+    /// Version 6: the save's answer and the telemetry carry the record number through a frame,
+    /// and the core (no parameter storage) reports none.
+    #[test]
+    fn the_record_number_survives_a_frame_and_the_core_has_none() {
+        let mut axis = Axis::new(Params::default()).unwrap();
+        let (mut commands, mut stream) = (Commands::default(), AcquisitionStream::default());
+        let Response::Telemetry(t) = handle(&mut axis, &mut commands, &mut stream, Request::GetTelemetry) else {
+            panic!("no telemetry")
+        };
+        assert_eq!((t.axis, t.params_record), (*axis.telemetry(), None));
+        for r in [
+            Response::Saved { sequence: u32::MAX },
+            Response::Telemetry(DriveTelemetry { params_record: Some(7), ..t }),
+            Response::Telemetry(t),
+        ] {
+            let mut buf = [0u8; MAX_FRAME + 8];
+            let n = encode(&r, &mut buf).unwrap();
+            assert_eq!(decode_response(&mut buf[..n]), Ok(r));
         }
     }
 

@@ -33,7 +33,8 @@ use control_core::current_sensing::CurrentSensing;
 use control_core::faults::Faults;
 use control_core::params::{ParamError, Params};
 use control_core::protocol::{
-    handle, DefaultsReason, FieldName, FrameError, ParamsOrigin, RefusalReason, Request, Response, VERSION,
+    handle, DefaultsReason, DriveTelemetry, FieldName, FrameError, ParamsOrigin, RefusalReason, Request, Response,
+    VERSION,
 };
 use control_core::response_correction::ResponseCorrection;
 use control_core::{Axis, AxisInputs, Commands};
@@ -340,9 +341,10 @@ impl Host<'_> {
             Request::SetParams(p) => self.set_params(p),
             Request::LoadCorrection(c) => self.load_correction(&c),
             Request::SaveParams => self.save_params(flash),
-            // One copy of the telemetry inside the section; the answer is built outside.
+            // One copy of the telemetry inside the section; the answer is built outside, with the
+            // newest record of the parameter store (the link side's own state).
             Request::GetTelemetry => match self.drive.with(|_, axis| *axis.telemetry()) {
-                Some(t) => Response::Telemetry(t),
+                Some(axis) => Response::Telemetry(DriveTelemetry { axis, params_record: self.params_record() }),
                 None => Response::FrameError(FrameError::Message),
             },
             other => self
@@ -423,7 +425,7 @@ impl Host<'_> {
         let result = param_store::save(flash, &mut self.store, &self.params);
         self.drive.with(|s, _| s.storing = false);
         match result {
-            Ok(()) => Response::Done,
+            Ok(sequence) => Response::Saved { sequence },
             Err(e) => Response::Refused(RefusalReason::Storage(e)),
         }
     }
@@ -431,5 +433,11 @@ impl Host<'_> {
     /// The parameter store's state (which page holds the newest record).
     pub fn store(&self) -> StoreState {
         self.store
+    }
+
+    /// The sequence number of the newest record in flash (loaded at boot or written since),
+    /// as the telemetry reports it.
+    pub fn params_record(&self) -> Option<u32> {
+        self.store.newest.map(|(_, sequence)| sequence)
     }
 }

@@ -184,9 +184,9 @@ pub fn encode_record(params: &Params, sequence: u32, unit: usize, out: &mut [u8]
 }
 
 /// Save `params` as the newest record: erase the other page, write the body, then the head;
-/// read it back. On success `state` names the new record; on failure it is unchanged (the
-/// previous record stays the newest).
-pub fn save<F: ParamFlash>(flash: &mut F, state: &mut StoreState, params: &Params) -> Result<(), StorageError> {
+/// read it back. On success `state` names the new record (its sequence number is returned); on
+/// failure it is unchanged (the previous record stays the newest).
+pub fn save<F: ParamFlash>(flash: &mut F, state: &mut StoreState, params: &Params) -> Result<u32, StorageError> {
     let (page, sequence) = state.next();
     let mut record = [0xFFu8; RECORD_ROOM];
     // The head's first 8 bytes (magic, format, length) are the commit, written last: the
@@ -213,5 +213,5 @@ pub fn save<F: ParamFlash>(flash: &mut F, state: &mut StoreState, params: &Param
         }
     }
     state.newest = Some((page, sequence));
-    Ok(())
+    Ok(sequence)
 }

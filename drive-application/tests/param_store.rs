@@ -152,9 +152,25 @@ fn save_params_over_the_link_is_loaded_at_the_next_boot_and_refused_in_motion() 
         Response::Refused(control_core::protocol::RefusalReason::Busy)
     );
     assert_eq!(flash.pages, before);
+    let record = |host: &mut drive_application::Host<'_>, flash: &mut RamFlash| match host
+        .handle(Request::GetTelemetry, flash)
+    {
+        Response::Telemetry(t) => t.params_record,
+        other => panic!("{other:?}"),
+    };
+    assert_eq!(record(&mut host, &mut flash), None, "nothing saved yet, nor by the refused save");
     assert_eq!(host.handle(Request::SetCommands(Default::default()), &mut flash), Response::Done);
-    assert_eq!(host.handle(Request::SaveParams, &mut flash), Response::Done);
+    // Each save answers the record it wrote, and the telemetry reports it from then on.
+    assert_eq!(host.handle(Request::SaveParams, &mut flash), Response::Saved { sequence: 1 });
+    assert_eq!(record(&mut host, &mut flash), Some(1));
     assert_eq!(boot(&mut flash), (set(6), ParamsOrigin::Stored { sequence: 1 }));
+    assert_eq!(host.handle(Request::SaveParams, &mut flash), Response::Saved { sequence: 2 });
+    assert_eq!(record(&mut host, &mut flash), Some(2));
+    // After a restart, the record loaded.
+    let again = Box::leak(Box::new(Drive::new()));
+    let mut host = again.install::<RestingStage, _>(Params::default(), &mut flash).unwrap();
+    assert_eq!(host.boot_params(), ParamsOrigin::Stored { sequence: 2 });
+    assert_eq!(record(&mut host, &mut flash), Some(2));
 }
 
 #[test]

@@ -150,8 +150,8 @@ fn line_costs(stderr: &str) -> (u64, u64) {
 /// reference: worst 0.122 dB, 0.69° over seeds 1–6). The orders around it — the parameter
 /// set, a few hundred bytes, is hit about half the time — and its telemetry polls get hit
 /// (2–4 requests sent again a sweep over seeds 1–6, never none), and each is carried out once:
-/// the sweep completes. A save over that line writes one record: after a restart the drive
-/// loads record 1.
+/// the sweep completes. A save over that line succeeds and writes one record (a lost answer is
+/// told from the telemetry): after a restart the drive loads record 1.
 #[test]
 fn a_sweep_and_a_save_over_a_corrupting_line_complete_and_act_once() {
     let _serial = one_at_a_time();
@@ -172,14 +172,45 @@ fn a_sweep_and_a_save_over_a_corrupting_line_complete_and_act_once() {
     );
     let (corrupt, resent) = line_costs(&e);
     assert!(corrupt > 0 && resent > 0, "nothing on the line was hit: the test proves nothing ({e})");
-    // A save: done, or (its answer lost) an error saying it was not sent again; either way one record.
-    let o = device(&vd.port, &["save-params"]);
-    let e = String::from_utf8_lossy(&o.stderr);
-    assert!(o.status.success() || e.contains("not sent again"), "{e}");
+    // A save: done, with the record it wrote (its answer lost or not), and only that record.
+    assert_eq!(json(&device(&vd.port, &["save-params"]))["record"], 1);
     drop(vd);
+    assert_eq!(records_in(&dir.join("flash.bin")), [Some(1), None]);
     let vd = VirtualDrive::start(&dir, "max", &[]);
     let hello = json(&device(&vd.port, &["hello"]));
     assert!(hello["boot_params"].as_str().unwrap().contains("loaded from flash (record 1)"), "{hello}");
+}
+
+/// The sequence numbers of the records in a virtual drive's flash file, page by page (`None`:
+/// an erased page; anything else on a page fails the test).
+fn records_in(flash: &Path) -> [Option<u32>; 2] {
+    use drive_application::param_store::{read_page, PageContent};
+    let mut f = host_tools::virtual_drive::flash::FileFlash::open(flash).unwrap();
+    [0, 1].map(|page| match read_page(&mut f, page, None) {
+        PageContent::Record { sequence } => Some(sequence),
+        PageContent::Empty => None,
+        other => panic!("page {page}: {other:?}"),
+    })
+}
+
+/// Issue 16 item 8: a save whose answer the line loses. At `--corrupt-rate 5e-3` seed 34 the
+/// one byte the line corrupts on the way to a `servo device save-params` is in the save's
+/// answer (the summary on stderr says so, or the test proves nothing): the host reads the
+/// drive's newest record in the telemetry after it, takes the save as done without sending it
+/// again, and the flash holds exactly that one record. (The in-process tests hit the answer by
+/// design: `virtual_drive::tests`.)
+#[test]
+fn a_save_whose_answer_the_line_loses_succeeds_and_writes_one_record() {
+    let _serial = one_at_a_time();
+    let dir = tmp("lost-save");
+    let _ = std::fs::remove_file(dir.join("flash.bin"));
+    let vd = VirtualDrive::start(&dir, "max", &["--corrupt-rate", "5e-3", "--seed", "34"]);
+    let o = device(&vd.port, &["save-params"]);
+    let e = String::from_utf8_lossy(&o.stderr);
+    assert_eq!(json(&o)["record"], 1, "{e}");
+    assert!(e.contains("judged from the drive's telemetry (SaveParams 1)"), "the save's answer was not lost: {e}");
+    drop(vd);
+    assert_eq!(records_in(&dir.join("flash.bin")), [Some(1), None]);
 }
 
 #[test]

@@ -8,7 +8,7 @@ use std::time::Instant;
 use control_core::acquisition_stream::{AcquisitionStream, SampleBatch, BATCH};
 use control_core::phase_shifted_sweep::AcquisitionSample;
 use control_core::protocol::{
-    decode, encode, handle, DefaultsReason, ParamsOrigin, Request, Response, MAX_FRAME, VERSION,
+    decode, encode, handle, DefaultsReason, DriveTelemetry, ParamsOrigin, Request, Response, MAX_FRAME, VERSION,
 };
 use control_core::stop_sequence::SequenceEvent;
 use control_core::{Axis, AxisInputs, Commands, Mode, Params};
@@ -575,7 +575,10 @@ fn random_response(rng: &mut Rng, tick: &mut u64) -> Response {
             }
             Response::Samples(b)
         }
-        5 => Response::Telemetry(Default::default()),
+        5 => {
+            Response::Telemetry(DriveTelemetry { params_record: rng.bool().then(|| rng.u32(..)), ..Default::default() })
+        }
+        6 if rng.bool() => Response::Saved { sequence: rng.u32(..) },
         6 => Response::Done,
         _ => Response::Hello {
             version: VERSION,

@@ -19,8 +19,7 @@
 use std::io::{Read, Write};
 
 use anyhow::{anyhow, bail, Result};
-use control_core::axis::Telemetry;
-use control_core::protocol::{FrameError, Request, Response};
+use control_core::protocol::{DriveTelemetry, FrameError, Request, Response};
 
 use crate::device::link::{is_link_failure, DeviceLink};
 use crate::device::repeat::{repeat_of, verify, Repeat, Verdict};
@@ -63,7 +62,7 @@ fn attempt<T: Read + Write>(link: &mut DeviceLink<T>, request: &Request) -> Resu
 }
 
 /// The drive's telemetry, asked again after a lost answer.
-pub fn telemetry<T: Read + Write>(link: &mut DeviceLink<T>) -> Result<Telemetry> {
+pub fn telemetry<T: Read + Write>(link: &mut DeviceLink<T>) -> Result<DriveTelemetry> {
     match answer(link, &Request::GetTelemetry, None)? {
         Response::Telemetry(t) => Ok(t),
         other => bail!("unexpected answer to a telemetry request: {other:?}"),
@@ -75,7 +74,7 @@ pub fn telemetry<T: Read + Write>(link: &mut DeviceLink<T>) -> Result<Telemetry>
 pub fn answer<T: Read + Write>(
     link: &mut DeviceLink<T>,
     request: &Request,
-    before: Option<Telemetry>,
+    before: Option<DriveTelemetry>,
 ) -> Result<Response> {
     let (name, kind) = (request_name(request), request_kind(request));
     let trace = std::env::var_os("SERVO_LINK_TRACE").is_some();
@@ -85,12 +84,16 @@ pub fn answer<T: Read + Write>(
              carried out"
         )
     };
-    let repeat = repeat_of(request);
-    let mut before = match repeat {
-        Repeat::Harmless | Repeat::Once(_) => None,
+    let mut before = match repeat_of(request) {
+        Repeat::Harmless => None,
         Repeat::Verify => Some(match before {
             Some(t) => t,
-            None => telemetry(link)?,
+            None => telemetry(link).map_err(|e| {
+                anyhow!(
+                    "{name} was not sent: the telemetry it would be judged against, should its answer be lost, could \
+                     not be read ({e:#})"
+                )
+            })?,
         }),
     };
     let mut silent_before = false;
@@ -120,11 +123,10 @@ pub fn answer<T: Read + Write>(
                 }
                 silent_before = !heard;
                 last = why;
-                if let Repeat::Once(reason) = repeat {
-                    return Err(not_sent_again(&last, reason));
-                }
                 let Some(b) = before else { continue };
-                let after = telemetry(link)?;
+                let after = telemetry(link).map_err(|e| {
+                    not_sent_again(&last, &format!("the telemetry that would tell could not be read ({e:#})"))
+                })?;
                 match verify(request, &b, &after) {
                     Verdict::Acted(r) => {
                         link.verified += 1;
@@ -181,7 +183,7 @@ mod tests {
 
     use control_core::acquisition_stream::AcquisitionStream;
     use control_core::excitation::InjectionPoint;
-    use control_core::protocol::{decode, encode, handle, MAX_FRAME};
+    use control_core::protocol::{decode, encode, handle, RefusalReason, StorageError, MAX_FRAME};
     use control_core::stop_sequence::SequenceEvent;
     use control_core::{Axis, AxisInputs, Commands, Mode, Params};
 
@@ -213,6 +215,8 @@ mod tests {
         /// Requests carried out (answered with anything but `FrameError`), by kind.
         acted: Vec<Request>,
         records: u32,
+        /// Saves still to fail (the flash refuses them: nothing written).
+        flash_failures: u32,
     }
 
     impl ScriptedDrive {
@@ -229,6 +233,7 @@ mod tests {
                 script: script.to_vec(),
                 acted: Vec::new(),
                 records: 0,
+                flash_failures: 0,
             }
         }
 
@@ -252,10 +257,20 @@ mod tests {
                 frame[mid] ^= if frame[mid] == 0x01 { 0x02 } else { 0x01 };
             }
             let response = match decode::<Request>(&mut frame) {
+                Ok(Request::SaveParams) if self.flash_failures > 0 => {
+                    self.flash_failures -= 1;
+                    self.acted.push(Request::SaveParams);
+                    Response::Refused(RefusalReason::Storage(StorageError::Flash))
+                }
                 Ok(Request::SaveParams) => {
                     self.records += 1;
                     self.acted.push(Request::SaveParams);
-                    Response::Done
+                    Response::Saved { sequence: self.records }
+                }
+                Ok(Request::GetTelemetry) => {
+                    self.acted.push(Request::GetTelemetry);
+                    let params_record = (self.records > 0).then_some(self.records);
+                    Response::Telemetry(DriveTelemetry { axis: *self.axis.telemetry(), params_record })
                 }
                 Ok(r) => {
                     self.acted.push(r);
@@ -330,10 +345,12 @@ mod tests {
     #[test]
     fn a_request_the_drive_could_not_read_is_sent_again_whatever_it_is() {
         for hit in [Hit::Request, Hit::RequestEnd] {
-            // The sweep's start is preceded by its baseline telemetry (request 0); a save is not.
-            for (order, k) in [(Request::StartSweep, 1), (Request::SaveParams, 0)] {
-                let mut l = link(&[(k, hit)]);
-                assert_eq!(answer(&mut l, &order, None).unwrap(), Response::Done);
+            // Each order is preceded by its baseline telemetry (request 0).
+            for (order, done) in
+                [(Request::StartSweep, Response::Done), (Request::SaveParams, Response::Saved { sequence: 1 })]
+            {
+                let mut l = link(&[(1, hit)]);
+                assert_eq!(answer(&mut l, &order, None).unwrap(), done);
                 assert_eq!(l.port().count(&order), 1, "carried out once");
                 assert_eq!((l.verified, l.resent), (0, 1));
             }
@@ -345,19 +362,57 @@ mod tests {
     /// request's own wait, and the copy sent again is carried out once.
     #[test]
     fn a_request_without_its_end_is_ended_by_a_nudge_before_the_timeout() {
-        let mut l = DeviceLink::new(ScriptedDrive::new(&[(0, Hit::RequestEnd)]), Duration::from_millis(1500));
+        let mut l = DeviceLink::new(ScriptedDrive::new(&[(1, Hit::RequestEnd)]), Duration::from_millis(1500));
         let started = std::time::Instant::now();
-        assert_eq!(answer(&mut l, &Request::SaveParams, None).unwrap(), Response::Done);
+        assert_eq!(answer(&mut l, &Request::SaveParams, None).unwrap(), Response::Saved { sequence: 1 });
         assert!(started.elapsed() < Duration::from_millis(1000), "{:?}", started.elapsed());
         assert_eq!((l.port().records, l.resent), (1, 1));
     }
 
+    /// Request 0: the save's baseline telemetry; 1: the save; 2: the telemetry that tells.
     #[test]
-    fn a_save_whose_answer_is_lost_is_not_sent_again_and_the_error_says_why() {
-        let mut l = link(&[(0, Hit::Answer)]);
-        let e = answer(&mut l, &Request::SaveParams, None).unwrap_err().to_string();
-        assert!(e.contains("SaveParams") && e.contains("not sent again") && e.contains("flash record"), "{e}");
-        assert_eq!(l.port().records, 1);
+    fn a_save_whose_answer_is_lost_is_told_by_the_record_number_and_written_once() {
+        for hit in [Hit::Answer, Hit::AnswerEnd] {
+            // Written: its answer taken from the telemetry, not sent again.
+            let mut l = link(&[(1, hit)]);
+            assert_eq!(answer(&mut l, &Request::SaveParams, None).unwrap(), Response::Saved { sequence: 1 });
+            assert_eq!((l.port().records, l.port().count(&Request::SaveParams)), (1, 1));
+            assert_eq!((l.verified, l.resent), (1, 0));
+            // The next save (requests 3–5) writes the next record, its answer lost too.
+            l.port_mut().script.push((4, hit));
+            assert_eq!(answer(&mut l, &Request::SaveParams, None).unwrap(), Response::Saved { sequence: 2 });
+            assert_eq!((l.port().records, l.verified, l.resent), (2, 2, 0));
+            // Not written (the flash refused it, and the refusal was lost): sent again, written once.
+            let mut l = link(&[(1, hit)]);
+            l.port_mut().flash_failures = 1;
+            assert_eq!(answer(&mut l, &Request::SaveParams, None).unwrap(), Response::Saved { sequence: 1 });
+            assert_eq!((l.port().records, l.port().count(&Request::SaveParams)), (1, 2));
+            assert_eq!((l.verified, l.resent), (0, 1));
+        }
+    }
+
+    /// The telemetry after the lost answer is lost every time too (requests 2–9): an error that
+    /// names the save and says why it was not sent again; the one record stays the only one.
+    #[test]
+    fn a_save_whose_answer_and_telemetry_are_lost_is_an_error_that_says_why() {
+        let script: Vec<(usize, Hit)> = (1..=9).map(|k| (k, Hit::Answer)).collect();
+        let mut l = link(&script);
+        let e = format!("{:#}", answer(&mut l, &Request::SaveParams, None).unwrap_err());
+        for w in ["SaveParams", "not sent again", "telemetry that would tell could not be read", "may or may not"] {
+            assert!(e.contains(w), "{w}: {e}");
+        }
+        assert_eq!((l.port().records, l.port().count(&Request::SaveParams)), (1, 1));
+    }
+
+    /// The telemetry before the save (its baseline) lost eight times running (requests 0–7):
+    /// the save is not sent, and the error says so.
+    #[test]
+    fn a_save_whose_baseline_telemetry_is_lost_is_not_sent_and_the_error_says_so() {
+        let script: Vec<(usize, Hit)> = (0..8).map(|k| (k, Hit::Answer)).collect();
+        let mut l = link(&script);
+        let e = format!("{:#}", answer(&mut l, &Request::SaveParams, None).unwrap_err());
+        assert!(e.contains("SaveParams) was not sent") && e.contains("no answer after 8 copies"), "{e}");
+        assert_eq!((l.port().records, l.port().count(&Request::SaveParams)), (0, 0));
     }
 
     #[test]

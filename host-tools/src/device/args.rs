@@ -7,7 +7,8 @@ use crate::cli::Common;
 ///
 /// Actions: hello (version handshake; says where the drive's parameters came from at boot),
 /// telemetry (one record, printed as JSON), clear-faults, start-sweep, save-params (the
-/// parameters in force to the drive's flash, loaded at its next boot; at rest only),
+/// parameters in force to the drive's flash, loaded at its next boot; at rest only; prints the
+/// record's sequence number),
 /// load-correction FILE (an <axis>.corr.frame from
 /// `servo tune`, checked to be a correction request before it is sent), stream (turn
 /// acquisition streaming on for --seconds, write the samples to <out>/stream.csv, report

@@ -79,6 +79,7 @@ fn device(args: &DeviceArgs) -> Result<bool> {
         (_, Some(r)) => match session.answer(&r)? {
             Response::Telemetry(t) => serde_json::json!({"telemetry": format!("{t:?}")}),
             Response::Done => serde_json::json!({"done": true}),
+            Response::Saved { sequence } => serde_json::json!({"done": true, "record": sequence}),
             Response::Refused(why) => bail!("the drive refused the request: {why}"),
             Response::FrameError(e) => bail!("the drive could not read the request: {e}"),
             other => bail!("unexpected answer: {other:?}"),

@@ -8,6 +8,7 @@ pub mod frame_stream;
 pub mod index;
 pub mod link;
 pub mod repeat;
+pub mod save_bench;
 pub mod session;
 pub mod telemetry_trace;
 pub mod timed_run;

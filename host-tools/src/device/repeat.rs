@@ -6,9 +6,9 @@
 //! (the drive acted, the host does not know). After a lost answer the host sends a request
 //! again only if a second copy leaves the drive as one copy does ([`Repeat::Harmless`]);
 //! otherwise it first reads the drive's telemetry and sends again only if that shows the
-//! first copy did not act ([`Repeat::Verify`], [`verify`]), or, where nothing the drive
-//! reports tells ([`Repeat::Once`]), fails and says why. Every request is classified here, in
-//! one `match` over the protocol's requests (a new request does not compile until it is).
+//! first copy did not act ([`Repeat::Verify`], [`verify`]), and fails, saying why, where the
+//! telemetry cannot tell. Every request is classified here, in one `match` over the
+//! protocol's requests (a new request does not compile until it is).
 //!
 //! Harmless, checked against `control_core::protocol::handle` and the drive application's
 //! `Host::handle` (`drive-application/src/drive.rs`):
@@ -34,14 +34,15 @@
 //!   refusal count (a timeline's expectations read it); a second `MoveTo` restarts the
 //!   positioning's completion; a second copy of a refused event counts twice.
 //! - `SaveParams`: a second copy writes another flash record (the next sequence number, the
-//!   other page erased), and nothing the drive reports changes with a save (the record's
-//!   number is in the handshake's answer only after a restart): never sent again after a
-//!   lost answer. Telling it would take a protocol change (the store's newest record number
-//!   in an answer, a new protocol version for the firmware and the host).
+//!   other page erased). The telemetry carries the sequence number of the newest record in
+//!   the drive's flash (protocol version 6), and a save is the only thing that changes it:
+//!   the next number after it means the save wrote its record; the same number means it
+//!   wrote none (never read, or refused: a second copy is refused again, or writes the one
+//!   record).
 
 use control_core::axis::Telemetry;
 use control_core::phase_shifted_sweep::SweepState;
-use control_core::protocol::{RefusalReason, Request, Response};
+use control_core::protocol::{DriveTelemetry, RefusalReason, Request, Response};
 use control_core::stop_sequence::{SequenceEvent, SequenceState};
 
 /// What a second copy of a request does.
@@ -51,14 +52,7 @@ pub enum Repeat {
     Harmless,
     /// Acts again: sent again only once the drive's telemetry shows the first did not act.
     Verify,
-    /// Acts again, and nothing the drive reports tells whether the first did: never sent
-    /// again after a lost answer (why: the reason given).
-    Once(&'static str),
 }
-
-/// Why a parameter save is not sent again.
-pub const SAVE_UNTOLD: &str = "nothing the drive reports tells whether the set was written (the record's number \
-     is in the handshake's answer only after a restart), and a second save writes another flash record";
 
 /// The classification (see the module's notes for each request).
 pub fn repeat_of(request: &Request) -> Repeat {
@@ -70,8 +64,7 @@ pub fn repeat_of(request: &Request) -> Repeat {
         | Request::ClearFaults
         | Request::GetTelemetry
         | Request::Stream { .. } => Repeat::Harmless,
-        Request::StartSweep | Request::Sequence(_) => Repeat::Verify,
-        Request::SaveParams => Repeat::Once(SAVE_UNTOLD),
+        Request::StartSweep | Request::Sequence(_) | Request::SaveParams => Repeat::Verify,
     }
 }
 
@@ -88,15 +81,31 @@ pub enum Verdict {
 
 /// Whether `request` acted, from the drive's telemetry just `before` it was sent and just
 /// `after` its answer was lost.
-pub fn verify(request: &Request, before: &Telemetry, after: &Telemetry) -> Verdict {
+pub fn verify(request: &Request, before: &DriveTelemetry, after: &DriveTelemetry) -> Verdict {
+    // Only a save changes the newest record, whatever else happens meanwhile (faults too).
+    if *request == Request::SaveParams {
+        return save_params(before.params_record, after.params_record);
+    }
+    let (before, after) = (&before.axis, &after.axis);
     if after.faults.0 & !before.faults.0 != 0 {
         return Verdict::Unknown("a fault latched meanwhile, and a fault changes what the telemetry shows");
     }
     match request {
         Request::StartSweep => start_sweep(before.sweep.state, after.sweep.state),
         Request::Sequence(e) => sequence_event(e, before, after),
-        Request::SaveParams => Verdict::Unknown(SAVE_UNTOLD),
         _ => Verdict::SendAgain,
+    }
+}
+
+/// A save writes the record after the newest (the first is 1; the numbers wrap around); nothing
+/// else changes the newest record while the drive runs.
+fn save_params(before: Option<u32>, after: Option<u32>) -> Verdict {
+    let next = before.map_or(1, |s| s.wrapping_add(1));
+    match after {
+        Some(s) if s == next => Verdict::Acted(Response::Saved { sequence: s }),
+        a if a == before => Verdict::SendAgain,
+        None => Verdict::Unknown("the drive reports no parameter record any more (was it restarted?)"),
+        Some(_) => Verdict::Unknown("the drive's newest parameter record moved by more than one save"),
     }
 }
 
@@ -190,15 +199,15 @@ mod tests {
             (Request::Stream { enabled: true }, Repeat::Harmless),
             (Request::StartSweep, Repeat::Verify),
             (Request::Sequence(SequenceEvent::RunOn), Repeat::Verify),
-            (Request::SaveParams, Repeat::Once(SAVE_UNTOLD)),
+            (Request::SaveParams, Repeat::Verify),
         ] {
             assert_eq!(repeat_of(&r), want, "{r:?}");
         }
     }
 
-    fn with_sweep(s: SweepState) -> Telemetry {
-        let mut t = Telemetry::default();
-        t.sweep.state = s;
+    fn with_sweep(s: SweepState) -> DriveTelemetry {
+        let mut t = DriveTelemetry::default();
+        t.axis.sweep.state = s;
         t
     }
 
@@ -213,16 +222,16 @@ mod tests {
         assert_eq!(v(Settling, Measuring), Verdict::Acted(Response::Refused(RefusalReason::Sweep)));
         assert!(matches!(v(Done, Done), Verdict::Unknown(_)));
         let mut faulted = with_sweep(Idle);
-        faulted.faults.0 = 1;
+        faulted.axis.faults.0 = 1;
         assert!(matches!(verify(&Request::StartSweep, &with_sweep(Idle), &faulted), Verdict::Unknown(_)));
     }
 
     #[test]
     fn a_sequence_event_is_told_by_the_state_or_the_refusal_count() {
         let at = |state, refused| {
-            let mut t = Telemetry::default();
-            t.sequence.state = state;
-            t.sequence.refused = refused;
+            let mut t = DriveTelemetry::default();
+            t.axis.sequence.state = state;
+            t.axis.sequence.refused = refused;
             t
         };
         let on = Request::Sequence(SequenceEvent::RunOn);
@@ -230,7 +239,7 @@ mod tests {
         assert_eq!(verify(&on, &idle, &running), Verdict::Acted(Response::Done));
         assert_eq!(verify(&on, &idle, &idle), Verdict::SendAgain);
         let mut refused = at(SequenceState::Running, 1);
-        refused.sequence.last_refusal = Some(Refusal::AlreadyRunning);
+        refused.axis.sequence.last_refusal = Some(Refusal::AlreadyRunning);
         assert_eq!(
             verify(&on, &running, &refused),
             Verdict::Acted(Response::Refused(RefusalReason::Sequence(Refusal::AlreadyRunning)))
@@ -238,13 +247,41 @@ mod tests {
         let off = Request::Sequence(SequenceEvent::RunOff);
         assert_eq!(verify(&off, &running, &at(SequenceState::Decelerating, 0)), Verdict::Acted(Response::Done));
         let mut fine = at(SequenceState::FineAdjust, 0);
-        fine.sequence.target = 5;
+        fine.axis.sequence.target = 5;
         let mv = Request::Sequence(SequenceEvent::MoveTo(7));
         assert_eq!(verify(&mv, &fine, &fine), Verdict::SendAgain);
         let mut moved = fine;
-        moved.sequence.target = 7;
+        moved.axis.sequence.target = 7;
         assert_eq!(verify(&mv, &fine, &moved), Verdict::Acted(Response::Done));
         assert!(matches!(verify(&mv, &moved, &moved), Verdict::Unknown(_)));
-        assert!(matches!(verify(&Request::SaveParams, &idle, &idle), Verdict::Unknown(_)));
+    }
+
+    fn with_record(r: Option<u32>) -> DriveTelemetry {
+        DriveTelemetry { params_record: r, ..Default::default() }
+    }
+
+    /// A save is told by the newest record's number: the next one (written), the same (not
+    /// written: send again), anything else (the telemetry cannot tell).
+    #[test]
+    fn a_save_is_told_by_the_newest_record_number() {
+        let v = |b, a| verify(&Request::SaveParams, &with_record(b), &with_record(a));
+        // Written: the first record on an empty flash, the next one, across the wrap-around.
+        assert_eq!(v(None, Some(1)), Verdict::Acted(Response::Saved { sequence: 1 }));
+        assert_eq!(v(Some(41), Some(42)), Verdict::Acted(Response::Saved { sequence: 42 }));
+        assert_eq!(v(Some(u32::MAX), Some(0)), Verdict::Acted(Response::Saved { sequence: 0 }));
+        // Not written (not read, refused as busy, a flash error): send it again.
+        assert_eq!(v(None, None), Verdict::SendAgain);
+        assert_eq!(v(Some(41), Some(41)), Verdict::SendAgain);
+        // The telemetry cannot tell: two records written, a record number gone or gone back.
+        for (b, a) in [(Some(41), Some(43)), (Some(41), None), (Some(41), Some(40)), (None, Some(2))] {
+            assert!(matches!(v(b, a), Verdict::Unknown(_)), "{b:?} → {a:?}");
+        }
+        // A fault latched meanwhile does not touch the record: the save is still told.
+        let mut faulted = with_record(Some(2));
+        faulted.axis.faults.0 = 1;
+        assert_eq!(
+            verify(&Request::SaveParams, &with_record(Some(1)), &faulted),
+            Verdict::Acted(Response::Saved { sequence: 2 })
+        );
     }
 }

@@ -10,7 +10,7 @@ use std::time::{Duration, Instant};
 use anyhow::{bail, Result};
 use control_core::acquisition_stream::SampleBatch;
 use control_core::axis::{Mode, Telemetry};
-use control_core::protocol::{ParamsOrigin, Request, Response, VERSION};
+use control_core::protocol::{DriveTelemetry, FrameError, ParamsOrigin, Request, Response, VERSION};
 use control_core::{Commands, Params};
 
 use crate::device::answer::answer;
@@ -30,7 +30,7 @@ pub struct DriveSession<T: DrivePort> {
     pub baud: u32,
     /// The telemetry read last, while no other request has been sent since (what an order
     /// whose answer is lost is judged against: `device::answer`).
-    fresh: Option<Telemetry>,
+    fresh: Option<DriveTelemetry>,
     /// When the session ends, say on stderr what the line cost (corrupt frames, requests sent
     /// again, outcomes read from the telemetry), if anything.
     pub summary_on_drop: bool,
@@ -42,6 +42,10 @@ impl<T: DrivePort> DriveSession<T> {
     pub fn open(mut link: DeviceLink<T>) -> Result<Self> {
         let boot_params = match answer(&mut link, &Request::Hello { version: VERSION }, None)? {
             Response::Hello { version, boot_params } if version == VERSION => boot_params,
+            Response::FrameError(FrameError::Version { got }) => bail!(
+                "the drive refused the handshake: it does not speak protocol version {got}, this host's (update the \
+                 host tools or the firmware so that both speak the same version)"
+            ),
             Response::FrameError(e) => {
                 bail!("the drive refused the handshake: {e} (update the host tools or the firmware)")
             }
@@ -77,12 +81,22 @@ impl<T: DrivePort> DriveSession<T> {
         }
     }
 
-    /// The drive's telemetry; asked again after a lost answer (asking changes nothing in the
+    /// Save the parameters in force to the drive's flash: the record's sequence number.
+    pub fn save_params(&mut self) -> Result<u32> {
+        match self.answer(&Request::SaveParams)? {
+            Response::Saved { sequence } => Ok(sequence),
+            Response::Refused(why) => bail!("the drive refused the parameter save: {why}"),
+            Response::FrameError(e) => bail!("the drive could not read the parameter save: {e}"),
+            other => bail!("unexpected answer to the parameter save: {other:?}"),
+        }
+    }
+
+    /// The axis's telemetry; asked again after a lost answer (asking changes nothing in the
     /// drive).
     pub fn telemetry(&mut self) -> Result<Telemetry> {
         let t = crate::device::answer::telemetry(&mut self.link)?;
         self.fresh = Some(t);
-        Ok(t)
+        Ok(t.axis)
     }
 
     /// What the line cost so far, if anything: corrupt frames skipped, requests sent again,
@@ -180,5 +194,53 @@ impl<T: DrivePort> Drop for DriveSession<T> {
                 eprintln!("{s}");
             }
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use std::collections::VecDeque;
+    use std::io::{Read, Write};
+
+    /// A drive of another protocol version: it answers every frame as a drive answers a
+    /// handshake in a version it does not speak.
+    struct OtherVersion(VecDeque<u8>);
+
+    impl Read for OtherVersion {
+        fn read(&mut self, buf: &mut [u8]) -> std::io::Result<usize> {
+            if self.0.is_empty() {
+                return Err(std::io::ErrorKind::WouldBlock.into());
+            }
+            let n = buf.len().min(self.0.len());
+            for (d, s) in buf.iter_mut().zip(self.0.drain(..n)) {
+                *d = s;
+            }
+            Ok(n)
+        }
+    }
+
+    impl Write for OtherVersion {
+        fn write(&mut self, buf: &[u8]) -> std::io::Result<usize> {
+            for _ in buf.iter().filter(|&&b| b == 0) {
+                let mut out = [0u8; 32];
+                let refusal = Response::FrameError(FrameError::Version { got: VERSION });
+                let n = control_core::protocol::encode(&refusal, &mut out).unwrap();
+                self.0.extend(&out[..n]);
+            }
+            Ok(buf.len())
+        }
+        fn flush(&mut self) -> std::io::Result<()> {
+            Ok(())
+        }
+    }
+
+    impl DrivePort for OtherVersion {}
+
+    #[test]
+    fn a_drive_of_another_protocol_version_is_refused_with_the_version() {
+        let link = DeviceLink::new(OtherVersion(VecDeque::new()), Duration::from_millis(30));
+        let e = DriveSession::open(link).err().unwrap().to_string();
+        assert!(e.contains(&format!("does not speak protocol version {VERSION}")) && e.contains("update"), "{e}");
     }
 }

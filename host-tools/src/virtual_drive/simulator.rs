@@ -124,6 +124,11 @@ impl<F: ParamFlash> VirtualDrive<F> {
         self.flash
     }
 
+    /// The parameter flash, as it is now (to read what a save wrote).
+    pub fn flash_mut(&mut self) -> &mut F {
+        &mut self.flash
+    }
+
     pub fn boot_params(&self) -> ParamsOrigin {
         self.host.boot_params()
     }

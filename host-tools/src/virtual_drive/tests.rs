@@ -44,7 +44,7 @@ fn saved_parameters_survive_a_power_cycle_and_a_foreign_rate_is_refused() {
     let mut p = power_stage::ratings::with_board_limits(Params::default());
     p.velocity.kp *= 1.25;
     s.set_params(&p).unwrap();
-    s.order(Request::SaveParams, "save").unwrap();
+    assert_eq!(s.save_params().unwrap(), 1);
     // Another current-loop rate than the board's PWM is refused, with the rate.
     let mut other = p;
     other.rates.current_loop_hz = 20_000.0;
@@ -137,4 +137,109 @@ fn a_rarely_corrupted_line_loses_no_telemetry_poll() {
     assert!(line.corrupted > 0, "no byte was corrupted: the test proves nothing");
     // And the drive still answers its orders after resynchronising.
     s.order(Request::ClearFaults, "clear").unwrap();
+}
+
+/// The line between the host and an in-process drive, losing the answer to the first
+/// `SaveParams` the host sends: one bit flipped in its first byte, or its delimiter corrupted
+/// (the answer then runs into whatever comes next), as a corrupting line does.
+struct LosesSaveAnswer {
+    drive: InProcessDrive<FileFlash>,
+    /// Corrupt the answer's delimiter rather than its first byte.
+    at_the_end: bool,
+    /// Bytes of the frame the host is writing.
+    frame: Vec<u8>,
+    /// A save was sent and its answer is still to be hit.
+    armed: bool,
+    /// Answers hit.
+    lost: u32,
+}
+
+impl LosesSaveAnswer {
+    fn new(drive: VirtualDrive<FileFlash>, at_the_end: bool) -> Self {
+        Self { drive: InProcessDrive::new(drive), at_the_end, frame: Vec::new(), armed: false, lost: 0 }
+    }
+}
+
+impl std::io::Write for LosesSaveAnswer {
+    fn write(&mut self, buf: &[u8]) -> std::io::Result<usize> {
+        for &b in buf {
+            if b != 0 {
+                self.frame.push(b);
+                continue;
+            }
+            let mut frame = std::mem::take(&mut self.frame);
+            if self.lost == 0 && control_core::protocol::decode::<Request>(&mut frame) == Ok(Request::SaveParams) {
+                self.armed = true;
+            }
+        }
+        self.drive.write(buf)
+    }
+    fn flush(&mut self) -> std::io::Result<()> {
+        self.drive.flush()
+    }
+}
+
+impl std::io::Read for LosesSaveAnswer {
+    fn read(&mut self, buf: &mut [u8]) -> std::io::Result<usize> {
+        let n = self.drive.read(buf)?;
+        if self.armed && n > 0 {
+            let k = if self.at_the_end { buf[..n].iter().position(|&b| b == 0) } else { Some(0) };
+            if let Some(k) = k {
+                buf[k] = match buf[k] {
+                    0 => 0x55,
+                    0x01 => 0x03,
+                    b => b ^ 0x01,
+                };
+                (self.armed, self.lost) = (false, self.lost + 1);
+            }
+        }
+        Ok(n)
+    }
+}
+
+impl crate::device::link::DrivePort for LosesSaveAnswer {
+    fn pause(&mut self, d: Duration) {
+        self.drive.pause(d);
+    }
+}
+
+/// Issue 16 item 8: a save whose answer the line loses, on the firmware's application and its
+/// flash. Written: the host reads the new record's number in the telemetry, takes that as the
+/// answer and does not send the save again — the flash holds exactly one record. Not written
+/// (refused: the axis moves), its refusal lost: the telemetry shows no new record, the save is
+/// sent again and refused again, with the drive's reason.
+#[test]
+fn a_save_whose_answer_is_lost_is_told_from_the_telemetry_and_writes_one_record() {
+    use drive_application::param_store::{read_page, PageContent};
+    for at_the_end in [false, true] {
+        let drive = VirtualDrive::power_on(&settings(), FileFlash::in_memory()).unwrap();
+        let link = DeviceLink::new(LosesSaveAnswer::new(drive, at_the_end), Duration::from_millis(300));
+        let mut s = DriveSession::open(link).unwrap();
+        s.rest().unwrap();
+        assert_eq!(s.save_params().unwrap(), 1);
+        assert_eq!(s.link.port().lost, 1, "the save's answer was not hit: the test proves nothing");
+        assert_eq!((s.link.verified, s.link.resent), (1, 0), "judged from the telemetry, not sent again");
+        assert_eq!(s.link.by_request.get("SaveParams"), Some(&(0, 1)));
+        let flash = s.link.port_mut().drive.drive.flash_mut();
+        assert_eq!(read_page(flash, 0, None), PageContent::Record { sequence: 1 });
+        assert_eq!(read_page(flash, 1, None), PageContent::Empty, "a second record was written");
+        // The next save, answered, writes the next record (the store was left in step).
+        assert_eq!(s.save_params().unwrap(), 2);
+
+        // Not written: moving, the refusal lost, the save sent again and refused again.
+        let drive = VirtualDrive::power_on(&settings(), FileFlash::in_memory()).unwrap();
+        let link = DeviceLink::new(LosesSaveAnswer::new(drive, at_the_end), Duration::from_millis(300));
+        let mut s = DriveSession::open(link).unwrap();
+        s.rest().unwrap();
+        s.order(Request::SetCommands(Commands { mode: Mode::Velocity, velocity: 20.0, ..Commands::default() }), "v")
+            .unwrap();
+        let e = s.save_params().unwrap_err().to_string();
+        assert!(e.contains("refused the parameter save") && e.contains("stands still"), "{e}");
+        assert_eq!(s.link.port().lost, 1);
+        assert_eq!((s.link.verified, s.link.resent), (0, 1));
+        let flash = s.link.port_mut().drive.drive.flash_mut();
+        for page in 0..2 {
+            assert_eq!(read_page(flash, page, None), PageContent::Empty);
+        }
+    }
 }

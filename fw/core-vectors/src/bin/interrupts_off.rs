@@ -221,7 +221,7 @@ fn program() -> bool {
         let response = host.handle(request, flash);
         let held = take();
         let outcome = match response {
-            Response::Done | Response::Hello { .. } | Response::Telemetry(_) => "carried out",
+            Response::Done | Response::Hello { .. } | Response::Telemetry(_) | Response::Saved { .. } => "carried out",
             Response::Refused(_) => "refused",
             _ => "frame error",
         };

@@ -54,6 +54,7 @@ enum BenchCommand {
     FmiCampaign(bench::args::FmiCampaignArgs),
     FaultCampaign(bench::args::FaultCampaignArgs),
     Device(device::bench::DeviceBenchArgs),
+    Saves(device::save_bench::SaveBenchArgs),
     #[command(hide = true)]
     AccdecProbe(accdec::args::AccdecProbeArgs),
 }
@@ -84,6 +85,7 @@ fn main() -> ExitCode {
         Command::Bench(BenchCommand::FmiCampaign(args)) => args.run(),
         Command::Bench(BenchCommand::FaultCampaign(args)) => args.run(),
         Command::Bench(BenchCommand::Device(args)) => args.run(),
+        Command::Bench(BenchCommand::Saves(args)) => args.run(),
         Command::Bench(BenchCommand::AccdecProbe(args)) => args.run(),
     };
     match result {
