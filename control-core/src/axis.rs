@@ -10,7 +10,7 @@ use crate::excitation::{InjectionPoint, SineGenerator};
 use crate::faults::Faults;
 use crate::friction_compensation::FrictionCompensation;
 use crate::params::{Limits, ParamError, Params};
-use crate::phase_shifted_sweep::{PhaseShiftedSweep, SweepError, SweepStatus};
+use crate::phase_shifted_sweep::{PhaseShiftedSweep, SweepError, SweepMeasure, SweepStatus};
 use crate::position_loop::PositionLoop;
 use crate::ranges::{check_f32, check_position, Quantity, RangeError, MAX_SPEED};
 use crate::reference_frames::Dq;
@@ -65,6 +65,11 @@ pub struct AxisInputs {
     pub encoder_count: i32,
     /// DC-bus voltage (V).
     pub bus_voltage: f32,
+    /// Machine-end angular acceleration from a removable accelerometer (rad/s², 0 without
+    /// one): read only by a sweep with the machine-end acceleration measure (seed 001's
+    /// identification), never by the loops, so a missing or faulty instrument cannot move the
+    /// axis (a non-finite reading latches nothing; it reaches the host in the samples).
+    pub load_acceleration: f32,
 }
 
 /// Set-points; which one is used depends on `mode`.
@@ -141,6 +146,9 @@ struct TickSettings {
     /// Encoder counts per position tick at 1 rad/s (speeds to the interpolator's pulses).
     counts_per_position_tick: f32,
     limits: Limits,
+    /// The sweep relates the torque from the measured q current (this, N·m/A, times iq) to the
+    /// machine-end acceleration (`SweepMeasure::MachineAcceleration`); 0 when it does not.
+    measured_torque_constant: f32,
 }
 
 impl TickSettings {
@@ -156,6 +164,11 @@ impl TickSettings {
             velocity_period: p.rates.velocity_period(),
             counts_per_position_tick: p.counts_per_position_tick(),
             limits: p.limits,
+            measured_torque_constant: if p.sweep.measure == SweepMeasure::MachineAcceleration {
+                p.motor.torque_constant()
+            } else {
+                0.0
+            },
         }
     }
 }
@@ -604,7 +617,6 @@ impl Axis {
             }
             _ => (torque, self.velocity_estimate),
         };
-        self.sweep.end_tick(self.tick, due.velocity, due.acquisition, u, y);
 
         let current_reference = self.current_loop.reference(torque);
         let theta_e = self.encoder.electrical_angle();
@@ -622,6 +634,13 @@ impl Axis {
         if !(out.voltage.d.is_finite() && out.voltage.q.is_finite() && torque.is_finite()) {
             faults.latch(Faults::NOT_FINITE);
         }
+        // With the machine-end acceleration measure, U is the torque from this tick's measured
+        // q current and Y the accelerometer sampled with it, summed on every base tick (both
+        // are new on each). After the current loop, which measures the current: the sweep
+        // changes nothing the current loop reads.
+        let kt = self.settings.measured_torque_constant;
+        let (u, y, summed) = if kt != 0.0 { (kt * out.current.q, inputs.load_acceleration, true) } else { (u, y, due.velocity) };
+        self.sweep.end_tick(self.tick, summed, due.acquisition, u, y);
         InnerLoop { torque, current_reference, out }
     }
 
@@ -679,7 +698,7 @@ mod tests {
     use super::*;
 
     fn inputs() -> AxisInputs {
-        AxisInputs { phase_currents: [0.0, 0.0], encoder_count: 0, bus_voltage: 48.0 }
+        AxisInputs { phase_currents: [0.0, 0.0], encoder_count: 0, bus_voltage: 48.0, load_acceleration: 0.0 }
     }
 
     #[test]

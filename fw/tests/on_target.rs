@@ -74,10 +74,10 @@ mod tests {
     #[test]
     fn the_adcs_and_the_fail_safe_read_back_as_the_model_s_words(_b: &mut Board) {
         for (adc, seq, name) in
-            [(pac::ADC1, adc_words::ADC1_SEQUENCE, "ADC1"), (pac::ADC2, adc_words::ADC2_SEQUENCE, "ADC2")]
+            [(pac::ADC1, &adc_words::ADC1_SEQUENCE[..], "ADC1"), (pac::ADC2, &adc_words::ADC2_SEQUENCE[..], "ADC2")]
         {
-            defmt::assert_eq!(adc.jsqr().read().0, adc_words::jsqr(&seq), "{} JSQR", name);
-            defmt::assert_eq!(adc.smpr().read().0, adc_words::smpr1(&seq), "{} SMPR1", name);
+            defmt::assert_eq!(adc.jsqr().read().0, adc_words::jsqr(seq), "{} JSQR", name);
+            defmt::assert_eq!(adc.smpr().read().0, adc_words::smpr1(seq), "{} SMPR1", name);
             defmt::assert!(adc.cr().read().jadstart(), "{} injected conversions armed", name);
         }
         defmt::assert_eq!(pac::ADC12_COMMON.ccr().read().0 & (3 << 16), adc_words::COMMON_CCR, "ADC12 CKMODE");
