@@ -229,6 +229,8 @@ pub struct Axis {
     /// The position-command injection of the last position tick (encoder counts, as added to
     /// the streamed position).
     position_injection: i32,
+    /// The machine-end acceleration of the previous tick (rad/s²; see `inner_loop`).
+    last_acceleration: f32,
     settings: TickSettings,
     mode: Option<Mode>,
     encoder: EncoderTracker,
@@ -270,6 +272,7 @@ impl Axis {
             sweep: PhaseShiftedSweep::new(params.sweep, params.rates.current_loop_hz),
             velocity_loop_inputs: (0.0, 0.0),
             position_injection: 0,
+            last_acceleration: 0.0,
             phases: [0; 4],
             encoder: EncoderTracker::new(counts_per_rev, params.motor.pole_pairs),
             excitation: None,
@@ -615,8 +618,20 @@ impl Axis {
                 let moved = self.encoder.position().saturating_sub(commands.position);
                 (self.position_injection as f32 * rad_per_count, crate::counts_to_f32(moved) * rad_per_count)
             }
+            // The machine-end acceleration measure: the torque from the q current the current
+            // loop measured on the previous tick (its telemetry) and the accelerometer sampled
+            // with it (kept from that tick), summed on every base tick: both one tick late, so
+            // from the same instant (taken here, before the current loop, the tick was 19
+            // instructions longer with every feature on: `servo bench firmware`).
+            InjectionPoint::TorqueCommand if self.settings.measured_torque_constant != 0.0 => {
+                let acceleration = self.last_acceleration;
+                self.last_acceleration = inputs.load_acceleration;
+                (self.settings.measured_torque_constant * self.telemetry.current.q, acceleration)
+            }
             _ => (torque, self.velocity_estimate),
         };
+        let summed = due.velocity || self.settings.measured_torque_constant != 0.0;
+        self.sweep.end_tick(self.tick, summed, due.acquisition, u, y);
 
         let current_reference = self.current_loop.reference(torque);
         let theta_e = self.encoder.electrical_angle();
@@ -634,13 +649,6 @@ impl Axis {
         if !(out.voltage.d.is_finite() && out.voltage.q.is_finite() && torque.is_finite()) {
             faults.latch(Faults::NOT_FINITE);
         }
-        // With the machine-end acceleration measure, U is the torque from this tick's measured
-        // q current and Y the accelerometer sampled with it, summed on every base tick (both
-        // are new on each). After the current loop, which measures the current: the sweep
-        // changes nothing the current loop reads.
-        let kt = self.settings.measured_torque_constant;
-        let (u, y, summed) = if kt != 0.0 { (kt * out.current.q, inputs.load_acceleration, true) } else { (u, y, due.velocity) };
-        self.sweep.end_tick(self.tick, summed, due.acquisition, u, y);
         InnerLoop { torque, current_reference, out }
     }
 

@@ -1,7 +1,8 @@
 //! The sweep's machine-end acceleration measure (seed 001 over a drive): each acquisition
-//! sample's U is the mean of kt·iq (the q current the current loop measured on each tick of the
-//! acquisition period, as its telemetry records it) and Y the mean of the accelerometer inputs
-//! of the same ticks; the measure is refused where it makes no sense.
+//! sample's U is the mean of kt·iq (the q current the current loop measured on each of four
+//! ticks, as its telemetry records it) and Y the mean of the accelerometer inputs of the same
+//! ticks (the four before the acquisition tick: the axis takes both one tick late, from the
+//! same sampling instant); the measure is refused where it makes no sense.
 
 use control_core::excitation::InjectionPoint;
 use control_core::phase_shifted_sweep::{SweepError, SweepMeasure, SweepSignal};
@@ -42,26 +43,24 @@ fn u_is_the_mean_of_kt_iq_and_y_the_mean_acceleration_over_each_acquisition_peri
     axis.step(&inputs(0), &commands);
     axis.start_sweep().unwrap();
     // Per tick: kt·iq as the telemetry records the measured current, and the acceleration given.
-    let mut period: Vec<(f64, f64)> = Vec::new();
+    let mut ticks: Vec<(f64, f64)> = Vec::new();
     let mut compared = 0;
+    let d = params.sweep.acquisition_divider as usize;
     for k in 1..400 {
         let i = inputs(k);
         axis.step(&i, &commands);
         let t = axis.telemetry();
-        period.push(((kt * t.current.q) as f64, i.load_acceleration as f64));
-        if t.tick % params.sweep.acquisition_divider as u64 == 0 && axis.sweep().running() {
+        ticks.push(((kt * t.current.q) as f64, i.load_acceleration as f64));
+        // The first samples after the start hold fewer ticks.
+        if t.tick % d as u64 == 0 && axis.sweep().running() && ticks.len() > d + 1 {
             let s = t.sweep.sample;
             assert_eq!(s.tick, t.tick);
-            // The first sample after the start holds the ticks since the start only.
-            if period.len() == params.sweep.acquisition_divider as usize {
-                let n = period.len() as f64;
-                let u = period.iter().map(|p| p.0).sum::<f64>() / n;
-                let y = period.iter().map(|p| p.1).sum::<f64>() / n;
-                assert!((s.u as f64 - u).abs() <= 1e-5 * u.abs().max(1e-3), "tick {}: u {} vs kt·iq mean {u}", t.tick, s.u);
-                assert!((s.y as f64 - y).abs() <= 1e-5 * y.abs().max(1.0), "tick {}: y {} vs mean {y}", t.tick, s.y);
-                compared += 1;
-            }
-            period.clear();
+            let period = &ticks[ticks.len() - 1 - d..ticks.len() - 1];
+            let u = period.iter().map(|p| p.0).sum::<f64>() / d as f64;
+            let y = period.iter().map(|p| p.1).sum::<f64>() / d as f64;
+            assert!((s.u as f64 - u).abs() <= 1e-5 * u.abs().max(1e-3), "tick {}: u {} vs kt·iq mean {u}", t.tick, s.u);
+            assert!((s.y as f64 - y).abs() <= 1e-5 * y.abs().max(1.0), "tick {}: y {} vs mean {y}", t.tick, s.y);
+            compared += 1;
         }
     }
     assert!(compared > 50, "{compared} samples compared");
