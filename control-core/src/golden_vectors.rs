@@ -319,7 +319,12 @@ mod tests {
 
     #[test]
     fn a_tick_round_trips_and_bad_files_are_refused() {
-        let i = AxisInputs { phase_currents: [1.5, -0.25], encoder_count: -12345, bus_voltage: 48.0, load_acceleration: 0.0 };
+        let i = AxisInputs {
+            phase_currents: [1.5, -0.25],
+            encoder_count: -12345,
+            bus_voltage: 48.0,
+            load_acceleration: 0.0,
+        };
         let c = Commands {
             mode: Mode::Position,
             position: -1 << 40,

@@ -533,7 +533,8 @@ mod tests {
         assert!(text.contains("commands.jog_velocity") && text.contains("100000"), "{text}");
         assert_eq!(commands, Commands::default());
         // Stepped directly (the FMU's way in): a range fault, the command path holds still.
-        let inputs = crate::AxisInputs { phase_currents: [0.0; 2], encoder_count: 0, bus_voltage: 48.0, load_acceleration: 0.0 };
+        let inputs =
+            crate::AxisInputs { phase_currents: [0.0; 2], encoder_count: 0, bus_voltage: 48.0, load_acceleration: 0.0 };
         for _ in 0..64 {
             axis.step(&inputs, &c);
         }

@@ -20,7 +20,10 @@ pub fn accelerometer_scale(volts_per_count: f32, params: &AccelerometerParams) -
 
 #[derive(Clone, Copy, Debug, PartialEq)]
 enum Zero {
-    Calibrating { sum: u32, n: u32 },
+    Calibrating {
+        sum: u32,
+        n: u32,
+    },
     /// The zero (counts), or None: no sensor on the pin.
     Known(Option<f32>),
 }

@@ -106,7 +106,9 @@ pub fn simulation_config(v: &Values) -> Result<SimulationConfig, String> {
         sequence: sequence(v, counts)?,
         sweep: sweep(v)?,
         correction: correction(v)?,
-        accelerometer: control_core::accelerometer::AccelerometerParams { sensitivity: v.accelerometer_sensitivity as f32 },
+        accelerometer: control_core::accelerometer::AccelerometerParams {
+            sensitivity: v.accelerometer_sensitivity as f32,
+        },
     };
     Ok(SimulationConfig {
         control,
@@ -201,7 +203,10 @@ fn sweep(v: &Values) -> Result<SweepParams, String> {
         max_extensions: count("sweep.max_extensions", v.sweep_max_extensions)?,
         dither: v.sweep_dither as f32,
         measure: SweepMeasure::from_code(v.sweep_measure).ok_or_else(|| {
-            format!("sweep.measure must be 0 (the point's signals) or 1 (torque → machine-end acceleration), got {}", v.sweep_measure)
+            format!(
+                "sweep.measure must be 0 (the point's signals) or 1 (torque → machine-end acceleration), got {}",
+                v.sweep_measure
+            )
         })?,
     })
 }

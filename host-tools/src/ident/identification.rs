@@ -144,6 +144,9 @@ pub struct Measured {
     pub response: Vec<Complex64>,
     /// |U|² per frequency: the inverse variance of H under output noise (fit weights).
     pub input_power: Vec<f64>,
+    /// Standard error of each H (absolute), from the scatter of the averaged periods about
+    /// their mean (0 where unknown).
+    pub standard_error: Vec<f64>,
 }
 
 impl Measured {
@@ -577,7 +580,8 @@ mod tests {
             })
             .collect();
         let input_power = vec![1.0; frequencies.len()];
-        Measured { frequencies, response, input_power }
+        let standard_error = vec![0.0; frequencies.len()];
+        Measured { frequencies, response, input_power, standard_error }
     }
 
     #[test]

@@ -5,6 +5,7 @@ pub mod averaged_response;
 pub mod bench;
 pub mod command;
 pub mod device;
+pub mod device_bench;
 pub mod device_check;
 pub mod identification;
 pub mod index;
