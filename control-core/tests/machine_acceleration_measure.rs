@@ -52,7 +52,7 @@ fn u_is_the_mean_of_kt_iq_and_y_the_mean_acceleration_over_each_acquisition_peri
         let t = axis.telemetry();
         ticks.push(((kt * t.current.q) as f64, i.load_acceleration as f64));
         // The first samples after the start hold fewer ticks.
-        if t.tick % d as u64 == 0 && axis.sweep().running() && ticks.len() > d + 1 {
+        if t.tick.is_multiple_of(d as u64) && axis.sweep().running() && ticks.len() > d + 1 {
             let s = t.sweep.sample;
             assert_eq!(s.tick, t.tick);
             let period = &ticks[ticks.len() - 1 - d..ticks.len() - 1];
