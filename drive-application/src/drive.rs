@@ -264,6 +264,11 @@ impl Drive {
         self.with(|s, _| s.sensing.offsets().map(|o| (o, s.bus_voltage))).flatten()
     }
 
+    /// The accelerometer's zero (counts) once calibrated: `Some(None)` when no sensor was found.
+    pub fn accelerometer_zero(&self) -> Option<Option<f32>> {
+        self.with(|s, _| s.accelerometer.zero()).flatten()
+    }
+
     /// The bus voltage of the last tick (V).
     pub fn bus_voltage(&self) -> f32 {
         self.with(|s, _| s.bus_voltage).unwrap_or(0.0)

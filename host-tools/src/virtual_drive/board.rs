@@ -174,3 +174,36 @@ impl PowerStage for SimulatedBoard {
         self.watchdog_feeds += 1;
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use control_core::accelerometer::AccelerometerParams;
+    use control_core::current_sensing::CALIBRATION_SAMPLES;
+    use drive_application::accelerometer_input::AccelerometerInput;
+    use servo_axis::plant::PlantParams;
+
+    /// The plant's accelerometer reading through the simulated sensor and converter, and back
+    /// through the drive's input at the default sensitivity: the acceleration within half a
+    /// count (0.24 rad/s²), the zero found at rest.
+    #[test]
+    fn the_accelerometer_reads_the_plants_acceleration_through_the_converter() {
+        let mut board = SimulatedBoard::new(Plant::new(PlantParams::default()).unwrap());
+        let mut input =
+            AccelerometerInput::new(SCALES.full_scale, ACCELEROMETER_VOLTS_PER_COUNT, &AccelerometerParams::default());
+        for _ in 0..CALIBRATION_SAMPLES {
+            input.calibrate(board.take_sample().accelerometer);
+        }
+        let zero = input.zero().flatten().expect("a sensor at mid-scale");
+        assert!((zero as f64 - ACCELEROMETER_ZERO_VOLTS / ACCELEROMETER_VOLTS_PER_COUNT as f64).abs() <= 0.5);
+        let half_count = 0.5 * ACCELEROMETER_VOLTS_PER_COUNT as f64 / ACCELEROMETER_SENSITIVITY;
+        for a in [-400.0, -3.3, 0.1, 57.0, 500.0] {
+            board.plant.accelerometer = a;
+            let read = input.convert(board.take_sample().accelerometer) as f64;
+            assert!((read - a).abs() <= half_count + 1e-3, "{a} rad/s² read as {read}");
+        }
+        // Beyond the converter's range (±980 rad/s² about this zero) the count saturates.
+        board.plant.accelerometer = 5000.0;
+        assert_eq!(board.take_sample().accelerometer, SCALES.full_scale);
+    }
+}
