@@ -621,8 +621,8 @@ impl Axis {
             // The machine-end acceleration measure: the torque from the q current the current
             // loop measured on the previous tick (its telemetry) and the accelerometer sampled
             // with it (kept from that tick), summed on every base tick: both one tick late, so
-            // from the same instant (taken here, before the current loop, the tick was 19
-            // instructions longer with every feature on: `servo bench firmware`).
+            // from the same instant. (Taken after the current loop from this tick's current
+            // instead, the every-feature tick was 2 instructions longer: `servo bench firmware`.)
             InjectionPoint::TorqueCommand if self.settings.measured_torque_constant != 0.0 => {
                 let acceleration = self.last_acceleration;
                 self.last_acceleration = inputs.load_acceleration;
