@@ -12,7 +12,7 @@ pub const CAPACITY: usize = 256;
 
 /// One frame's worth of samples.
 ///
-/// On the link (protocol version 5) a batch is `dropped`, then a sequence of its `count`
+/// On the link (protocol version 5 and on) a batch is `dropped`, then a sequence of its `count`
 /// samples only, each tick sent as the (signed) difference from the one before (the first
 /// from 0),
 /// the record and the half block as two varints: about 17 bytes a sample, nothing for an

@@ -10,7 +10,7 @@ use crate::excitation::{InjectionPoint, SineGenerator};
 use crate::faults::Faults;
 use crate::friction_compensation::FrictionCompensation;
 use crate::params::{Limits, ParamError, Params};
-use crate::phase_shifted_sweep::{PhaseShiftedSweep, SweepError, SweepStatus};
+use crate::phase_shifted_sweep::{PhaseShiftedSweep, SweepError, SweepMeasure, SweepStatus};
 use crate::position_loop::PositionLoop;
 use crate::ranges::{check_f32, check_position, Quantity, RangeError, MAX_SPEED};
 use crate::reference_frames::Dq;
@@ -65,6 +65,11 @@ pub struct AxisInputs {
     pub encoder_count: i32,
     /// DC-bus voltage (V).
     pub bus_voltage: f32,
+    /// Machine-end angular acceleration from a removable accelerometer (rad/s², 0 without
+    /// one): read only by a sweep with the machine-end acceleration measure (seed 001's
+    /// identification), never by the loops, so a missing or faulty instrument cannot move the
+    /// axis (a non-finite reading latches nothing; it reaches the host in the samples).
+    pub load_acceleration: f32,
 }
 
 /// Set-points; which one is used depends on `mode`.
@@ -141,6 +146,9 @@ struct TickSettings {
     /// Encoder counts per position tick at 1 rad/s (speeds to the interpolator's pulses).
     counts_per_position_tick: f32,
     limits: Limits,
+    /// The sweep relates the torque from the measured q current (this, N·m/A, times iq) to the
+    /// machine-end acceleration (`SweepMeasure::MachineAcceleration`); 0 when it does not.
+    measured_torque_constant: f32,
 }
 
 impl TickSettings {
@@ -156,6 +164,11 @@ impl TickSettings {
             velocity_period: p.rates.velocity_period(),
             counts_per_position_tick: p.counts_per_position_tick(),
             limits: p.limits,
+            measured_torque_constant: if p.sweep.measure == SweepMeasure::MachineAcceleration {
+                p.motor.torque_constant()
+            } else {
+                0.0
+            },
         }
     }
 }
@@ -216,6 +229,8 @@ pub struct Axis {
     /// The position-command injection of the last position tick (encoder counts, as added to
     /// the streamed position).
     position_injection: i32,
+    /// The machine-end acceleration of the previous tick (rad/s²; see `inner_loop`).
+    last_acceleration: f32,
     settings: TickSettings,
     mode: Option<Mode>,
     encoder: EncoderTracker,
@@ -257,6 +272,7 @@ impl Axis {
             sweep: PhaseShiftedSweep::new(params.sweep, params.rates.current_loop_hz),
             velocity_loop_inputs: (0.0, 0.0),
             position_injection: 0,
+            last_acceleration: 0.0,
             phases: [0; 4],
             encoder: EncoderTracker::new(counts_per_rev, params.motor.pole_pairs),
             excitation: None,
@@ -602,9 +618,20 @@ impl Axis {
                 let moved = self.encoder.position().saturating_sub(commands.position);
                 (self.position_injection as f32 * rad_per_count, crate::counts_to_f32(moved) * rad_per_count)
             }
+            // The machine-end acceleration measure: the torque from the q current the current
+            // loop measured on the previous tick (its telemetry) and the accelerometer sampled
+            // with it (kept from that tick), summed on every base tick: both one tick late, so
+            // from the same instant. (Taken after the current loop from this tick's current
+            // instead, the every-feature tick was 2 instructions longer: `servo bench firmware`.)
+            InjectionPoint::TorqueCommand if self.settings.measured_torque_constant != 0.0 => {
+                let acceleration = self.last_acceleration;
+                self.last_acceleration = inputs.load_acceleration;
+                (self.settings.measured_torque_constant * self.telemetry.current.q, acceleration)
+            }
             _ => (torque, self.velocity_estimate),
         };
-        self.sweep.end_tick(self.tick, due.velocity, due.acquisition, u, y);
+        let summed = due.velocity || self.settings.measured_torque_constant != 0.0;
+        self.sweep.end_tick(self.tick, summed, due.acquisition, u, y);
 
         let current_reference = self.current_loop.reference(torque);
         let theta_e = self.encoder.electrical_angle();
@@ -679,7 +706,7 @@ mod tests {
     use super::*;
 
     fn inputs() -> AxisInputs {
-        AxisInputs { phase_currents: [0.0, 0.0], encoder_count: 0, bus_voltage: 48.0 }
+        AxisInputs { phase_currents: [0.0, 0.0], encoder_count: 0, bus_voltage: 48.0, load_acceleration: 0.0 }
     }
 
     #[test]

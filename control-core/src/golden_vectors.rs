@@ -240,6 +240,9 @@ fn replay_with(bytes: &[u8], work: Work) -> Result<(u64, u64), VectorError> {
                 phase_currents: [r.f32()?, r.f32()?],
                 encoder_count: i32::from_le_bytes(r.take()?),
                 bus_voltage: r.f32()?,
+                // Not recorded: no vector uses the machine-end acceleration measure (the loops
+                // never read it).
+                load_acceleration: 0.0,
             };
             let code = r.take::<1>()?[0];
             let mode = Mode::from_code(code as i32).ok_or(VectorError::Mode(code))?;
@@ -316,7 +319,12 @@ mod tests {
 
     #[test]
     fn a_tick_round_trips_and_bad_files_are_refused() {
-        let i = AxisInputs { phase_currents: [1.5, -0.25], encoder_count: -12345, bus_voltage: 48.0 };
+        let i = AxisInputs {
+            phase_currents: [1.5, -0.25],
+            encoder_count: -12345,
+            bus_voltage: 48.0,
+            load_acceleration: 0.0,
+        };
         let c = Commands {
             mode: Mode::Position,
             position: -1 << 40,
@@ -356,7 +364,7 @@ mod all_features_tests {
         let c = Commands { mode: Mode::Position, position: 1000, move_speed: 50.0, ..Default::default() };
         axis.apply_mode(&c);
         assert!(axis.start_sweep().is_ok());
-        let i = AxisInputs { phase_currents: [0.0, 0.0], encoder_count: 0, bus_voltage: 48.0 };
+        let i = AxisInputs { phase_currents: [0.0, 0.0], encoder_count: 0, bus_voltage: 48.0, load_acceleration: 0.0 };
         for _ in 0..1000 {
             axis.step(&i, &c);
         }

@@ -11,6 +11,7 @@
 #![forbid(unsafe_code)]
 
 pub mod acc_dec;
+pub mod accelerometer;
 pub mod acquisition_stream;
 pub mod axis;
 pub mod biquad;

@@ -6,6 +6,7 @@
 use core::fmt;
 
 use crate::acc_dec::{AccDecError, AccDecFilter, AccDecParams};
+use crate::accelerometer::{AccelerometerParams, MAX_SENSITIVITY, MIN_SENSITIVITY};
 use crate::friction_compensation::{FrictionCompensationError, FrictionCompensationParams};
 use crate::phase_shifted_sweep::{SweepError, SweepParams};
 use crate::response_correction::{CorrectionError, CorrectionParams};
@@ -132,6 +133,8 @@ pub struct Params {
     pub sweep: SweepParams,
     /// Response-correction filter in front of the position loop (seed 001).
     pub correction: CorrectionParams,
+    /// The removable machine-end accelerometer (seed 001's identification over a drive).
+    pub accelerometer: AccelerometerParams,
 }
 
 /// Why a parameter set was refused.
@@ -302,6 +305,7 @@ impl Default for Params {
             friction: FrictionCompensationParams::default(),
             sweep: SweepParams::default(),
             correction: CorrectionParams::default(),
+            accelerometer: AccelerometerParams::default(),
         }
     }
 }
@@ -395,6 +399,7 @@ impl Params {
             return Err(ParamError::Sweep(SweepError::Range { field: "dither", value, min: 0.0, max }));
         }
         self.correction.validate(r.position_period()).map_err(ParamError::Correction)?;
+        in_range("accelerometer.sensitivity", self.accelerometer.sensitivity, MIN_SENSITIVITY, MAX_SENSITIVITY)?;
         Ok(())
     }
 }

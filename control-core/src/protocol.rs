@@ -29,8 +29,10 @@ use crate::stop_sequence::{Refusal, SequenceEvent};
 /// Protocol version 6: `SaveParams` is answered with the sequence number of the record it
 /// wrote ([`Response::Saved`]), and the telemetry carries the newest record in the drive's
 /// flash ([`DriveTelemetry`]), so that a save whose answer is lost can be told from the
-/// telemetry (version 5: parameters whose current-loop rate is not the board's PWM rate are
-/// refused with that rate; version 4: `SaveParams`, and the answer to `Hello` says where the
+/// telemetry; the parameters carry the sweep's measure (`sweep.measure`) and the machine-end
+/// accelerometer's sensitivity, and the acquisition may relate the measured torque to the
+/// machine-end acceleration (version 5: parameters whose current-loop rate is not the
+/// board's PWM rate are refused with that rate; version 4: `SaveParams`, and the answer to `Hello` says where the
 /// drive's parameters came from at boot; version 3: CRC-32C instead of CRC-16, trailing bytes
 /// refused, range refusals).
 pub const VERSION: u16 = 6;
@@ -572,7 +574,8 @@ mod tests {
         assert!(text.contains("commands.jog_velocity") && text.contains("100000"), "{text}");
         assert_eq!(commands, Commands::default());
         // Stepped directly (the FMU's way in): a range fault, the command path holds still.
-        let inputs = crate::AxisInputs { phase_currents: [0.0; 2], encoder_count: 0, bus_voltage: 48.0 };
+        let inputs =
+            crate::AxisInputs { phase_currents: [0.0; 2], encoder_count: 0, bus_voltage: 48.0, load_acceleration: 0.0 };
         for _ in 0..64 {
             axis.step(&inputs, &c);
         }

@@ -1,7 +1,7 @@
 //! The board interface: what the application needs of the hardware, and nothing else.
 //!
 //! - [`PowerStage`], used by the control tick: the sample taken at the top of the PWM count
-//!   (three shunt counts, the bus voltage count), the encoder count, the break input, the
+//!   (three shunt counts, the bus voltage count, the accelerometer's count), the encoder count, the break input, the
 //!   shunt choice under the duties in force, the duties, the gate drive, the watchdog. The
 //!   tick is the call of [`crate::drive::Drive::tick`] itself: the board calls it from its
 //!   sampling interrupt (G474: ADC1's end of injected sequence).
@@ -16,17 +16,22 @@ use control_core::current_sensing::SensingScales;
 /// Shunt channels sampled per tick (U, V, W).
 pub const CURRENT_CHANNELS: usize = 3;
 
-/// One conversion of the sampling instant: shunt counts U, V, W and the bus voltage count.
+/// One conversion of the sampling instant: shunt counts U, V, W, the bus voltage count and
+/// the machine-end accelerometer's count (see `crate::accelerometer_input`).
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub struct Sample {
     pub shunts: [u16; CURRENT_CHANNELS],
     pub bus: u16,
+    pub accelerometer: u16,
 }
 
 /// The power stage and its sensors, as the control tick uses them.
 pub trait PowerStage {
     /// ADC counts to amperes and volts.
     const SCALES: SensingScales;
+    /// Volts per count of the accelerometer's input (the converter's reference over its
+    /// full scale).
+    const ACCELEROMETER_VOLTS_PER_COUNT: f32;
     /// The PWM rate, at which the board samples and calls the tick (Hz): the only
     /// current-loop rate the drive accepts.
     const TICK_HZ: f32;

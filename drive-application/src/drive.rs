@@ -1,10 +1,11 @@
 //! The state the control tick and the link share, and the two sides that use it.
 //!
 //! Per tick ([`Drive::tick`], in the sampling interrupt):
-//! 1. take the three sampled shunt currents and the bus voltage, the encoder count and the
-//!    break flag;
-//! 2. until the current offsets are calibrated (bridge off), feed the calibration instead;
-//!    implausible offsets latch a sensing fault and the bridge never comes on;
+//! 1. take the three sampled shunt currents, the bus voltage and the accelerometer, the
+//!    encoder count and the break flag;
+//! 2. until the current offsets are calibrated (bridge off), feed the calibration instead
+//!    (the accelerometer's zero with them); implausible current offsets latch a sensing fault
+//!    and the bridge never comes on;
 //! 3. of the three shunts, believe the two the board's shunt choice names under the duties
 //!    that were in force when they were sampled;
 //! 4. a break (the power stage's own overcurrent comparator) latches a core fault;
@@ -40,6 +41,7 @@ use control_core::response_correction::ResponseCorrection;
 use control_core::{Axis, AxisInputs, Commands};
 use critical_section::Mutex;
 
+use crate::accelerometer_input::{accelerometer_scale, AccelerometerInput};
 use crate::board::{ParamFlash, PowerStage, CURRENT_CHANNELS};
 use crate::link::FrameAssembler;
 use crate::param_store::{self, StoreState};
@@ -51,6 +53,8 @@ pub struct Shared {
     active: usize,
     pub commands: Commands,
     pub sensing: CurrentSensing<CURRENT_CHANNELS>,
+    /// The machine-end accelerometer's input (its scale follows the parameters in force).
+    pub accelerometer: AccelerometerInput,
     pub stream: AcquisitionStream,
     /// The duties written last tick: in force when this tick's currents were sampled.
     pub duties_in_force: [f32; 3],
@@ -151,8 +155,18 @@ impl Drive {
             }
         }
         let sensing = CurrentSensing::new(P::SCALES).map_err(|_| InstallError::Scales)?;
-        self.share(sensing);
-        Ok(Host { drive: self, params, boot_params, store, assembler: FrameAssembler::new(), board_hz })
+        let accelerometer =
+            AccelerometerInput::new(P::SCALES.full_scale, P::ACCELEROMETER_VOLTS_PER_COUNT, &params.accelerometer);
+        self.share(sensing, accelerometer);
+        Ok(Host {
+            drive: self,
+            params,
+            boot_params,
+            store,
+            assembler: FrameAssembler::new(),
+            board_hz,
+            accelerometer_volts_per_count: P::ACCELEROMETER_VOLTS_PER_COUNT,
+        })
     }
 
     /// The shared state, built in place inside the section (at boot, before the tick runs):
@@ -160,13 +174,14 @@ impl Drive {
     /// copy. Never inlined, so that `install`'s frame does not keep room for it while the axis
     /// is built.
     #[inline(never)]
-    fn share(&self, sensing: CurrentSensing<CURRENT_CHANNELS>) {
+    fn share(&self, sensing: CurrentSensing<CURRENT_CHANNELS>, accelerometer: AccelerometerInput) {
         critical_section::with(|cs| {
             let mut slot = self.shared.borrow_ref_mut(cs);
             slot.value.write(Shared {
                 active: 0,
                 commands: Commands::default(),
                 sensing,
+                accelerometer,
                 stream: AcquisitionStream::default(),
                 duties_in_force: [0.0; 3],
                 bus_voltage: 0.0,
@@ -215,6 +230,7 @@ impl Drive {
                 let Some((shunt_amps, bus_voltage)) = s.sensing.convert(sample.shunts, sample.bus) else {
                     // Calibrating with the bridge off; a failure latches a fault for good.
                     stage.set_outputs(false);
+                    s.accelerometer.calibrate(sample.accelerometer);
                     if s.sensing.calibrate(sample.shunts).is_err() {
                         axis.latch_fault(Faults::SENSING);
                     }
@@ -222,7 +238,8 @@ impl Drive {
                 };
                 s.bus_voltage = bus_voltage;
                 let phase_currents = stage.phase_currents(shunt_amps, s.duties_in_force);
-                let inputs = AxisInputs { phase_currents, encoder_count: count, bus_voltage };
+                let load_acceleration = s.accelerometer.convert(sample.accelerometer);
+                let inputs = AxisInputs { phase_currents, encoder_count: count, bus_voltage, load_acceleration };
                 let pwm = axis.step(&inputs, &s.commands);
                 stage.write_duties(pwm.duties);
                 stage.set_outputs(pwm.enabled && !s.storing);
@@ -246,6 +263,11 @@ impl Drive {
     /// The current offsets (counts) and the bus voltage, once calibrated.
     pub fn offsets(&self) -> Option<([f32; CURRENT_CHANNELS], f32)> {
         self.with(|s, _| s.sensing.offsets().map(|o| (o, s.bus_voltage))).flatten()
+    }
+
+    /// The accelerometer's zero (counts) once calibrated: `Some(None)` when no sensor was found.
+    pub fn accelerometer_zero(&self) -> Option<Option<f32>> {
+        self.with(|s, _| s.accelerometer.zero()).flatten()
     }
 
     /// The bus voltage of the last tick (V).
@@ -303,6 +325,8 @@ pub struct Host<'d> {
     assembler: FrameAssembler,
     /// The board's PWM rate: the only current-loop rate the drive accepts.
     board_hz: f32,
+    /// The board's accelerometer input: volts per count.
+    accelerometer_volts_per_count: f32,
 }
 
 impl Host<'_> {
@@ -368,6 +392,8 @@ impl Host<'_> {
             return Response::Refused(RefusalReason::LoopRate { board_hz: self.board_hz });
         }
         let spare = 1 - active;
+        // The accelerometer's scale for the new sensitivity, found here; stored with the swap.
+        let accelerometer_scale = accelerometer_scale(self.accelerometer_volts_per_count, &p.accelerometer);
         // SAFETY: the spare slot is not the active one, and only this `Host` (there is one)
         // changes which is active.
         let slot = unsafe { &mut *self.drive.axes[spare].get() };
@@ -380,6 +406,7 @@ impl Host<'_> {
                 let rest = at_rest(&s.commands, axis);
                 if rest {
                     s.active = spare;
+                    s.accelerometer.set_scale(accelerometer_scale);
                 }
                 rest
             })

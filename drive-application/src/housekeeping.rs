@@ -11,8 +11,9 @@ use crate::drive::Drive;
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub enum Note {
     /// The current offsets (counts, mid-scale 2047.5) and the bus voltage once calibrated: to
-    /// compare with a meter at the first power-up.
-    OffsetsCalibrated { offsets: [f32; CURRENT_CHANNELS], bus_voltage: f32 },
+    /// compare with a meter at the first power-up; with the machine-end accelerometer's zero
+    /// (counts; None: no sensor on its input).
+    OffsetsCalibrated { offsets: [f32; CURRENT_CHANNELS], bus_voltage: f32, accelerometer_zero: Option<f32> },
     /// The latched faults changed (PWM off until ClearFaults while any is set).
     FaultsChanged { faults: Faults },
     /// Once a second: the loop runs.
@@ -33,8 +34,10 @@ impl Housekeeping {
     /// One position tick with the faults the tick saw; `note` gets what happened.
     pub fn on_position_tick(&mut self, drive: &Drive, faults: Faults, mut note: impl FnMut(Note)) {
         if !self.offsets_logged {
-            if let Some((offsets, bus_voltage)) = drive.offsets() {
-                note(Note::OffsetsCalibrated { offsets, bus_voltage });
+            if let (Some((offsets, bus_voltage)), Some(accelerometer_zero)) =
+                (drive.offsets(), drive.accelerometer_zero())
+            {
+                note(Note::OffsetsCalibrated { offsets, bus_voltage, accelerometer_zero });
                 self.offsets_logged = true;
             }
         }

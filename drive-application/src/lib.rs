@@ -8,6 +8,8 @@
 //!   calibration, shunt choice, fault latch → gate drive off, `Axis::step`, streaming,
 //!   watchdog), and parameter and correction changes built outside the critical section and
 //!   swapped in (item 2);
+//! - [`accelerometer_input`]: the removable machine-end accelerometer's count to rad/s²
+//!   (its zero taken with the current offsets);
 //! - [`link`]: the host protocol's frames, byte by byte in, encoded frames out;
 //! - [`param_store`]: the parameter set in two alternating flash pages (item 3);
 //! - [`housekeeping`]: what the position tick reports (offsets, fault changes, heartbeat) as
@@ -20,6 +22,7 @@
 
 #![no_std]
 
+pub mod accelerometer_input;
 pub mod board;
 pub mod drive;
 pub mod housekeeping;

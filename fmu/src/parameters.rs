@@ -7,7 +7,7 @@ use control_core::friction_compensation::FrictionCompensationParams;
 use control_core::params::{
     CurrentLoopGains, Limits, MotorModel, PositionLoopGains, Rates, TorqueFilters, VelocityLoopGains,
 };
-use control_core::phase_shifted_sweep::{SweepParams, SweepSignal};
+use control_core::phase_shifted_sweep::{SweepMeasure, SweepParams, SweepSignal};
 use control_core::response_correction::{CorrectionParams, CorrectionSection, SecondOrder};
 use control_core::stop_sequence::SequenceParams;
 use control_core::Params;
@@ -106,6 +106,9 @@ pub fn simulation_config(v: &Values) -> Result<SimulationConfig, String> {
         sequence: sequence(v, counts)?,
         sweep: sweep(v)?,
         correction: correction(v)?,
+        accelerometer: control_core::accelerometer::AccelerometerParams {
+            sensitivity: v.accelerometer_sensitivity as f32,
+        },
     };
     Ok(SimulationConfig {
         control,
@@ -199,6 +202,12 @@ fn sweep(v: &Values) -> Result<SweepParams, String> {
         precision_db: v.sweep_precision_db as f32,
         max_extensions: count("sweep.max_extensions", v.sweep_max_extensions)?,
         dither: v.sweep_dither as f32,
+        measure: SweepMeasure::from_code(v.sweep_measure).ok_or_else(|| {
+            format!(
+                "sweep.measure must be 0 (the point's signals) or 1 (torque → machine-end acceleration), got {}",
+                v.sweep_measure
+            )
+        })?,
     })
 }
 
@@ -268,6 +277,7 @@ pub fn sweep_values(s: &SweepParams) -> Vec<(&'static str, Value)> {
         (name::sweep_precision_db, f(s.precision_db)),
         (name::sweep_max_extensions, i(s.max_extensions)),
         (name::sweep_dither, f(s.dither)),
+        (name::sweep_measure, Value::Int32(s.measure.code())),
     ]
 }
 

@@ -230,6 +230,9 @@ impl AxisSimulation {
             phase_currents: [m.phase_currents[0] as f32, m.phase_currents[1] as f32],
             encoder_count: m.encoder_count,
             bus_voltage: m.bus_voltage as f32,
+            // The plant's accelerometer (with its noise), read at the sampling instant as the
+            // currents: what a drive's accelerometer input gives the core.
+            load_acceleration: self.plant.accelerometer as f32,
         };
         fault(&mut inputs);
         let pwm = self.axis.step(&inputs, commands);

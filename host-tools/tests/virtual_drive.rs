@@ -414,3 +414,111 @@ fn a_scenario_over_the_virtual_drive_passes_its_checks_and_the_twin_too() {
     assert!(o.status.success());
     assert!(String::from_utf8_lossy(&o.stdout).contains("skipped on the drive: it sets `disturbance_torque`"));
 }
+
+/// The plant parameters of an absorber at `hz` with 5 % damping on the default load (its
+/// inertia the load's), as `--set` arguments for the virtual drive.
+fn absorber_settings(hz: f64) -> Vec<String> {
+    let load = servo_axis::plant::PlantParams::default().load_inertia;
+    let w = std::f64::consts::TAU * hz;
+    vec![
+        "--set".into(),
+        format!("plant.absorber_inertia={load}"),
+        "--set".into(),
+        format!("plant.absorber_stiffness={}", load * w * w),
+        "--set".into(),
+        format!("plant.absorber_damping={}", 2.0 * 0.05 * load * w),
+    ]
+}
+
+/// Seed 001 over the drive: the anti-resonance identified from the drive's measured torque
+/// and its accelerometer is the plant's (40 Hz, 5 % damping: √(k/J)/2π and c/(2√(kJ)) of the
+/// absorber the virtual drive simulates), and the FMU twin's.
+#[test]
+fn ident_over_the_virtual_drive_finds_the_plants_anti_resonance_and_matches_its_twin() {
+    use host_tools::ident::device::{GOAL_DAMPING, GOAL_HZ, GOAL_STANDARD_ERRORS};
+    let _serial = one_at_a_time();
+    let dir = tmp("ident");
+    let settings = absorber_settings(40.0);
+    let extra: Vec<&str> = settings.iter().map(String::as_str).collect();
+    let vd = VirtualDrive::start(&dir, "max", &extra);
+    let ident = |extra: &[&str]| {
+        output_within(
+            servo()
+                .args(["ident", "--device", &vd.port, "--axes", "x", "--anti-resonance", "x=40", "--out"])
+                .arg(dir.join("out"))
+                .arg("--fmu")
+                .arg(fmu_path())
+                .args(extra),
+            120,
+        )
+    };
+    // An axis that is not among --axes is refused before the port is opened.
+    let o = ident(&["--axis", "z"]);
+    assert_eq!(o.status.code(), Some(2));
+    assert!(String::from_utf8_lossy(&o.stderr).contains("--axis z"), "{}", String::from_utf8_lossy(&o.stderr));
+    // The report as ident.json has it (its --json output, a thousand points, is more than a
+    // pipe holds while `output_within` waits).
+    let o = ident(&[]);
+    assert!(o.status.success(), "{}{}", String::from_utf8_lossy(&o.stdout), String::from_utf8_lossy(&o.stderr));
+    let r: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(dir.join("out/ident.json")).unwrap()).unwrap();
+    let found = &r["drive"]["model"]["anti_resonance"];
+    let (hz, damping) = (found["hz"].as_f64().unwrap(), found["damping"].as_f64().unwrap());
+    assert!((hz - 40.0).abs() <= 0.005 * 40.0, "drive's anti-resonance {hz} Hz, the plant's 40 Hz");
+    assert!((damping - 0.05).abs() <= 0.05 * 0.05, "drive's damping {damping}, the plant's 0.05");
+    let twin = &r["twin"]["model"]["anti_resonance"];
+    let (twin_hz, twin_damping) = (twin["hz"].as_f64().unwrap(), twin["damping"].as_f64().unwrap());
+    assert!((hz - twin_hz).abs() <= GOAL_HZ * twin_hz, "drive {hz} Hz, twin {twin_hz} Hz");
+    assert!((damping - twin_damping).abs() <= GOAL_DAMPING * twin_damping, "drive {damping}, twin {twin_damping}");
+    let z = r["largest_standard_errors"].as_f64().unwrap();
+    assert!(z <= GOAL_STANDARD_ERRORS, "drive vs twin: {z} standard errors");
+    assert_eq!(r["link"]["dropped"], 0, "samples dropped on the link");
+    assert_eq!(r["link"]["corrupt_frames"], 0);
+    assert_eq!(r["passed"], true);
+    // The same files as the identification on the FMU, and the comparison.
+    for f in ["x.model.json", "x.measured.csv", "ident.svg", "ident.json", "x.twin.csv"] {
+        assert!(dir.join("out").join(f).exists(), "{f} missing");
+    }
+    let model = host_tools::ident::identification::AxisModel::load(&dir.join("out/x.model.json")).unwrap();
+    assert_eq!(model.anti_resonance.map(|z| z.hz), Some(hz));
+}
+
+/// A drive fault before the identification and a drive that dies during it: a clear error,
+/// exit status 2, the partial samples saved and marked incomplete, no hang.
+#[test]
+fn ident_over_a_faulted_or_dying_drive_ends_in_a_clear_error() {
+    let _serial = one_at_a_time();
+    let dir = tmp("ident-faults");
+    let vd = VirtualDrive::start(&dir, "max", &["--fault", "break@0.2"]);
+    std::thread::sleep(Duration::from_millis(300));
+    let ident = |port: &str| {
+        output_within(
+            servo().args(["ident", "--device", port, "--out"]).arg(dir.join("out")).arg("--fmu").arg(fmu_path()),
+            60,
+        )
+    };
+    let o = ident(&vd.port);
+    let e = String::from_utf8_lossy(&o.stderr);
+    assert_eq!(o.status.code(), Some(2), "{e}");
+    assert!(e.contains("hardware break input"), "{e}");
+    drop(vd);
+    // Real-time pace: the record takes 18 s of the drive's time; the drive dies after 1.5 s.
+    let vd = VirtualDrive::start(&dir, "realtime", &[]);
+    let port = vd.port.clone();
+    let started = Instant::now();
+    let killer = std::thread::spawn(move || {
+        let mut vd = vd;
+        std::thread::sleep(Duration::from_millis(1500));
+        vd.child.kill().unwrap();
+        vd
+    });
+    let o = ident(&port);
+    drop(killer.join().unwrap());
+    let e = String::from_utf8_lossy(&o.stderr);
+    assert_eq!(o.status.code(), Some(2), "{e}");
+    assert!(started.elapsed() < Duration::from_secs(15), "took {:?}", started.elapsed());
+    assert!(e.contains("ident incomplete"), "{e}");
+    let saved: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(dir.join("out/ident.json")).unwrap()).unwrap();
+    assert_eq!(saved["complete"], false, "{saved}");
+}

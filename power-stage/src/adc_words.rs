@@ -1,10 +1,23 @@
 //! The ADC words: all three shunts and the bus voltage in injected sequences of ADC1 and
 //! ADC2, started together by TIM1's TRGO2 (injected trigger 8 of ADC1/2, rising edge; RM0440).
 //!
-//! | ADC | rank 1 | rank 2 |
-//! |---|---|---|
-//! | ADC1 | phase U current (PA0, ADC12_IN1) | bus voltage (PA1, ADC12_IN2) |
-//! | ADC2 | phase V current (PC1, ADC12_IN7) | phase W current (PC0, ADC12_IN6) |
+//! | ADC | rank 1 | rank 2 | rank 3 |
+//! |---|---|---|---|
+//! | ADC1 | phase U current (PA0, ADC12_IN1) | bus voltage (PA1, ADC12_IN2) | accelerometer (PC3, ADC12_IN9) |
+//! | ADC2 | phase V current (PC1, ADC12_IN7) | phase W current (PC0, ADC12_IN6) | |
+//!
+//! The accelerometer (seed 001's removable measuring instrument, machine-end acceleration for
+//! the identification over a drive) is on PC3: the STM32G474's datasheet (DS12288, pin
+//! definitions) gives PC3 the additional function ADC12_IN9, a channel ADC1 converts in the
+//! same injected sequence as the phase currents, so it is sampled at the same trigger (the
+//! identification relates it to the measured current: no delay between the two but the
+//! ranks'); the NUCLEO-G474RE (UM2505, ST morpho connector) brings PC3 out on CN7 pin 37,
+//! not on an Arduino header, where the X-NUCLEO-IHM08M1 takes its signals (its phase
+//! currents, bus voltage and gate drive use PA0, PA1, PC0, PC1, PA6–PA10, PB0, PB1). Before
+//! wiring, check UM1996 (the IHM08M1's manual) that none of its solder-bridge options
+//! (BEMF or temperature sensing) is routed to PC3 on the board at hand. Rank 3 adds 25 ADC
+//! clocks (0.59 µs) to ADC1's sequence after the ranks the currents use: their sampling
+//! windows do not move, the end of sequence (the control interrupt) comes 0.59 µs later.
 //!
 //! Clock: synchronous HCLK/4 = 42.5 MHz (CKMODE = 3, ADC12_CCR), every channel sampled for
 //! 12.5 ADC clocks; a 12-bit conversion takes another 12.5. Rank 1 samples during the first
@@ -16,8 +29,10 @@ pub const PHASE_U: u8 = 1;
 pub const PHASE_V: u8 = 7;
 pub const PHASE_W: u8 = 6;
 pub const BUS: u8 = 2;
+/// The machine-end accelerometer (PC3, see the module's documentation).
+pub const ACCELEROMETER: u8 = 9;
 
-pub const ADC1_SEQUENCE: [u8; 2] = [PHASE_U, BUS];
+pub const ADC1_SEQUENCE: [u8; 3] = [PHASE_U, BUS, ACCELEROMETER];
 pub const ADC2_SEQUENCE: [u8; 2] = [PHASE_V, PHASE_W];
 
 /// Timer (HCLK) clocks per ADC clock.
@@ -76,14 +91,15 @@ mod tests {
 
     #[test]
     fn the_sequences_bit_by_bit() {
-        // JL = 1, JEXTSEL = 8, JEXTEN = 1, JSQ1 = 1, JSQ2 = 2.
-        assert_eq!(jsqr(&ADC1_SEQUENCE), 1 | 8 << 2 | 1 << 7 | 1 << 9 | 2 << 15);
+        // JL = 2, JEXTSEL = 8, JEXTEN = 1, JSQ1 = 1, JSQ2 = 2, JSQ3 = 9.
+        assert_eq!(jsqr(&ADC1_SEQUENCE), 2 | 8 << 2 | 1 << 7 | 1 << 9 | 2 << 15 | 9 << 21);
+        assert_eq!(smpr1(&ADC1_SEQUENCE), 0b010 << 3 | 0b010 << 6 | 0b010 << 27);
         assert_eq!(jsqr(&ADC2_SEQUENCE), 1 | 8 << 2 | 1 << 7 | 7 << 9 | 6 << 15);
         assert_eq!(smpr1(&ADC2_SEQUENCE), 0b010 << 21 | 0b010 << 18);
         assert_eq!(sampling_window(0), (0, 50));
         assert_eq!(sampling_window(1), (100, 150));
         // Each phase channel sits in exactly one slot of the two sequences.
-        let seqs = [ADC1_SEQUENCE, ADC2_SEQUENCE];
+        let seqs = [&ADC1_SEQUENCE[..], &ADC2_SEQUENCE[..]];
         for (phase, ch) in [PHASE_U, PHASE_V, PHASE_W].into_iter().enumerate() {
             let (adc, rank) = phase_slot(phase);
             assert_eq!(seqs[adc][rank], ch);

@@ -40,6 +40,10 @@ pub const SCALES: SensingScales = SensingScales {
     volts_per_count: VREF / FULL_SCALE as f32 * BUS_DIVIDER,
 };
 
+/// The machine-end accelerometer's input (`adc_words::ACCELEROMETER`): the sensor's output
+/// straight into the converter, 0 to VREF (a ratiometric sensor supplied from the same 3.3 V).
+pub const ACCELEROMETER_VOLTS_PER_COUNT: f32 = VREF / FULL_SCALE as f32;
+
 /// The limits of this board, the following error kept as given.
 pub fn board_limits(given: Limits) -> Limits {
     Limits {

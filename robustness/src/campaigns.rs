@@ -530,7 +530,12 @@ fn requests(fig: &mut Figures, rng: &mut Rng, started: Instant, seconds: f64) {
             // The loop runs on: sensors of an axis at rest (or an encoder jump now and then).
             for t in 0..ticks {
                 d.encoder = d.encoder.wrapping_add(if jump && t == 0 { i32::MAX / 3 } else { jitter });
-                let inputs = AxisInputs { phase_currents: [0.01, -0.02], encoder_count: d.encoder, bus_voltage: 48.0 };
+                let inputs = AxisInputs {
+                    phase_currents: [0.01, -0.02],
+                    encoder_count: d.encoder,
+                    bus_voltage: 48.0,
+                    load_acceleration: 0.0,
+                };
                 d.axis.step(&inputs, direct.as_ref().unwrap_or(&d.commands));
                 let _ = d.stream.take_batch();
             }

@@ -44,11 +44,13 @@
 //! (the frequencies and the length of every record), `sine_fit.rs` (the correlator sums and
 //! the response and its standard errors), `settling_check.rs` and `precision_control.rs`
 //! (when the measurement starts and how long the records run), `prbs.rs` (the PRBS mode),
-//! `acquisition.rs` (the samples the drive streams); this file holds the results and the
+//! `acquisition.rs` (the samples the drive streams), `measure.rs` (what U and Y are: the
+//! loop's signals, or the motor torque and the machine-end acceleration); this file holds the results and the
 //! runner, [`PhaseShiftedSweep`], which steps through records and frequencies tick by tick.
 
 mod acquisition;
 mod frequency_plan;
+mod measure;
 mod prbs;
 mod precision_control;
 mod settings;
@@ -59,6 +61,7 @@ mod tests;
 
 pub use acquisition::AcquisitionSample;
 pub use frequency_plan::{FrequencyPlan, NO_EXTRA};
+pub use measure::SweepMeasure;
 pub use settings::{SweepError, SweepParams, MAX_EXTENSIONS, MAX_SWEEP_DITHER};
 pub use sine_fit::ResponseError;
 
@@ -404,8 +407,9 @@ impl PhaseShiftedSweep {
     /// estimate, that is the position's change over the period): the same average on both,
     /// so it cancels in Y/U, and it keeps the encoder's quantisation noise, which the
     /// estimate differentiates, out of the low frequencies where a single sample per period
-    /// would fold it. PRBS samples are the values at the acquisition tick. Advances the
-    /// schedule.
+    /// would fold it. PRBS samples are the values at the acquisition tick, or period means
+    /// for the machine-end acceleration measure, whose caller passes every base tick as a
+    /// loop tick (its signals are sampled on every one). Advances the schedule.
     #[inline(always)]
     pub fn end_tick(&mut self, tick: u64, loop_tick: bool, acquire: bool, u: f32, y: f32) {
         if !self.running() {

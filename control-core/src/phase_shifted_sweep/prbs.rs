@@ -19,15 +19,17 @@ impl SweepParams {
 }
 
 impl PhaseShiftedSweep {
-    /// The PRBS record starts settling: no frequency, samples are values (not period means),
-    /// no dither.
+    /// The PRBS record starts settling: no frequency, no dither; samples are values, or period
+    /// means for the machine-end acceleration measure (whose signals are sampled every base
+    /// tick: a point sample would fold the loops' high-frequency torque onto the lowest
+    /// frequencies, see `SweepMeasure`).
     // Once per sweep, from `begin_record` (out of line).
     #[inline]
     pub(super) fn begin_prbs_record(&mut self) {
         let ticks = self.params.prbs_settle_ticks(self.base_rate_hz);
         self.set_left(ticks);
         self.status.frequency = 0.0;
-        self.averaging = false;
+        self.averaging = self.params.measure == super::SweepMeasure::MachineAcceleration;
         self.dithering = false;
     }
 

@@ -3,7 +3,7 @@
 
 use core::fmt;
 
-use super::{SweepSignal, MAX_SWEEP_POINTS};
+use super::{SweepMeasure, SweepSignal, MAX_SWEEP_POINTS};
 use crate::excitation::InjectionPoint;
 use crate::m_sequence::MSequence;
 
@@ -65,6 +65,10 @@ pub struct SweepParams {
     /// the lock; the fit sees it as noise. Below the threshold the samples are period means
     /// (see [`PhaseShiftedSweep::end_tick`](super::PhaseShiftedSweep::end_tick)) and need none.
     pub dither: f32,
+    /// What U and Y are: the loop's signals, or (torque-command injection only) the motor's
+    /// torque from the measured q current and the machine-end acceleration (see
+    /// [`SweepMeasure`]).
+    pub measure: SweepMeasure,
 }
 
 impl Default for SweepParams {
@@ -99,6 +103,7 @@ impl Default for SweepParams {
             precision_db: 0.03,
             max_extensions: 8,
             dither: 0.003,
+            measure: SweepMeasure::Loop,
         }
     }
 }
@@ -122,6 +127,9 @@ pub enum SweepError {
     NeedsPositionMode,
     /// A sweep is already running.
     Busy,
+    /// The machine-end acceleration measure with an injection point other than the torque
+    /// command (the point's own U would not be the torque the acceleration answers).
+    MeasureNeedsTorqueInjection,
 }
 
 impl fmt::Display for SweepError {
@@ -145,6 +153,10 @@ impl fmt::Display for SweepError {
                 write!(f, "position-command injection needs position mode (the drive holding or streaming a position)")
             }
             Self::Busy => write!(f, "a sweep is already running"),
+            Self::MeasureNeedsTorqueInjection => write!(
+                f,
+                "the machine-end acceleration measure (sweep.measure 1) needs torque-command injection (sweep.point 1)"
+            ),
         }
     }
 }
@@ -171,6 +183,9 @@ impl SweepParams {
             }
         };
         finite_positive("amplitude", self.amplitude)?;
+        if self.measure == SweepMeasure::MachineAcceleration && self.point != InjectionPoint::TorqueCommand {
+            return Err(SweepError::MeasureNeedsTorqueInjection);
+        }
         finite_positive("start_hz", self.start_hz)?;
         finite_positive("stop_hz", self.stop_hz)?;
         // One point measures start_hz alone (stop_hz unused).
@@ -292,5 +307,20 @@ mod tests {
             Err(SweepError::Range { field: "dither", .. })
         ));
         assert_eq!(v(SweepParams::default()), Ok(()));
+    }
+
+    #[test]
+    fn the_acceleration_measure_is_refused_without_torque_injection() {
+        let v = |p: SweepParams| p.validate(FS, 2);
+        let acceleration = SweepParams { measure: SweepMeasure::MachineAcceleration, ..Default::default() };
+        for point in [
+            InjectionPoint::Off,
+            InjectionPoint::VelocityCommand,
+            InjectionPoint::VelocityFeedback,
+            InjectionPoint::PositionCommand,
+        ] {
+            assert_eq!(v(SweepParams { point, ..acceleration }), Err(SweepError::MeasureNeedsTorqueInjection));
+        }
+        assert_eq!(v(SweepParams { point: InjectionPoint::TorqueCommand, ..acceleration }), Ok(()));
     }
 }

@@ -14,6 +14,7 @@
 //! | overcurrent comparator (break) | PA6 | TIM1 BKIN (AF6), active low |
 //! | phase U current / bus voltage | PA0 / PA1 | ADC1 IN1 / IN2 (injected ranks 1 / 2) |
 //! | phase V current / phase W current | PC1 / PC0 | ADC2 IN7 / IN6 (injected ranks 1 / 2) |
+//! | machine-end accelerometer (removable; seed 001) | PC3, morpho CN7 pin 37 | ADC1 IN9 (injected rank 3) |
 //! | encoder A / B | PA15 / PB3 | TIM2 quadrature (32-bit counter) |
 //! | host link | PA2 (TX) / PA3 (RX) | USART2, the ST-LINK virtual COM port |
 //!
@@ -182,12 +183,12 @@ fn gate_drive() {
     t.sr().write(|r| r.0 = 0); // a break flag from the pin's switch-over
 }
 
-/// ADC1 (phase U, bus) and ADC2 (phase V, phase W): injected sequences on TIM1_TRGO2, 12
+/// ADC1 (phase U, bus, accelerometer) and ADC2 (phase V, phase W): injected sequences on TIM1_TRGO2, 12
 /// bits, synchronous clock HCLK/4 = 42.5 MHz, 12.5-cycle sampling (`power_stage::adc_words`).
 fn adc_injected() {
     pac::RCC.ahb2enr().modify(|w| w.set_adc12en(true));
     pac::ADC12_COMMON.ccr().modify(|w| w.0 = (w.0 & !(3 << 16)) | adc_words::COMMON_CCR);
-    for (adc, sequence) in [(pac::ADC1, adc_words::ADC1_SEQUENCE), (pac::ADC2, adc_words::ADC2_SEQUENCE)] {
+    for (adc, sequence) in [(pac::ADC1, &adc_words::ADC1_SEQUENCE[..]), (pac::ADC2, &adc_words::ADC2_SEQUENCE[..])] {
         use pac::adc::vals::Adcaldif;
         adc.cr().modify(|w| {
             w.set_deeppwd(false);
@@ -203,19 +204,20 @@ fn adc_injected() {
         adc.isr().write(|w| w.set_adrdy(true));
         adc.cr().modify(|w| w.set_aden(true));
         while !adc.isr().read().adrdy() {}
-        adc.smpr().write(|w| w.0 = adc_words::smpr1(&sequence));
-        adc.jsqr().write(|w| w.0 = adc_words::jsqr(&sequence));
+        adc.smpr().write(|w| w.0 = adc_words::smpr1(sequence));
+        adc.jsqr().write(|w| w.0 = adc_words::jsqr(sequence));
         adc.cr().modify(|w| w.set_jadstart(true));
     }
     pac::ADC1.isr().write(|w| w.set_jeos(true));
     pac::ADC1.ier().modify(|w| w.set_jeosie(true));
 }
 
-/// One sample: the three shunt counts (U, V, W) and the bus voltage count. Acknowledges both
-/// ADCs' end of sequence; ADC2 was triggered with ADC1 and converts as many ranks, so it has
-/// finished too (waited for, a few clocks at most).
+/// One sample: the three shunt counts (U, V, W), the bus voltage count and the
+/// accelerometer's count (why PC3: `power_stage::adc_words`). Acknowledges both ADCs' end of
+/// sequence; ADC2 was triggered with ADC1 and converts fewer ranks, so it has finished too
+/// (waited for, a few clocks at most).
 #[inline(always)]
-pub fn take_sample() -> ([u16; 3], u16) {
+pub fn take_sample() -> Sample {
     let (a1, a2) = (pac::ADC1, pac::ADC2);
     let mut spins = 0;
     while !a2.isr().read().jeos() && spins < 64 {
@@ -223,7 +225,11 @@ pub fn take_sample() -> ([u16; 3], u16) {
     }
     a1.isr().write(|w| w.set_jeos(true));
     a2.isr().write(|w| w.set_jeos(true));
-    ([a1.jdr(0).read().jdata(), a2.jdr(0).read().jdata(), a2.jdr(1).read().jdata()], a1.jdr(1).read().jdata())
+    Sample {
+        shunts: [a1.jdr(0).read().jdata(), a2.jdr(0).read().jdata(), a2.jdr(1).read().jdata()],
+        bus: a1.jdr(1).read().jdata(),
+        accelerometer: a1.jdr(2).read().jdata(),
+    }
 }
 
 /// The encoder's 32-bit quadrature count.
@@ -294,10 +300,10 @@ pub struct Stage;
 impl PowerStage for Stage {
     const SCALES: SensingScales = SCALES;
     const TICK_HZ: f32 = power_stage::config::IHM08M1.pwm_hz as f32;
+    const ACCELEROMETER_VOLTS_PER_COUNT: f32 = ratings::ACCELEROMETER_VOLTS_PER_COUNT;
     #[inline(always)]
     fn take_sample(&mut self) -> Sample {
-        let (shunts, bus) = take_sample();
-        Sample { shunts, bus }
+        take_sample()
     }
     #[inline(always)]
     fn encoder_count(&mut self) -> i32 {

@@ -50,12 +50,13 @@ pub async fn position_tick_task() {
 
 fn log(note: Note) {
     match note {
-        Note::OffsetsCalibrated { offsets: o, bus_voltage } => defmt::info!(
-            "current offsets U {} V {} W {} counts (mid-scale 2047.5), bus {} V",
+        Note::OffsetsCalibrated { offsets: o, bus_voltage, accelerometer_zero } => defmt::info!(
+            "current offsets U {} V {} W {} counts (mid-scale 2047.5), bus {} V, accelerometer zero {} counts (None: not connected)",
             o[0],
             o[1],
             o[2],
-            bus_voltage
+            bus_voltage,
+            accelerometer_zero
         ),
         Note::FaultsChanged { faults } => {
             for name in faults.names() {

@@ -278,7 +278,8 @@ mod tests {
                 }
                 Err(e) => Response::FrameError(e),
             };
-            let inputs = AxisInputs { phase_currents: [0.0; 2], encoder_count: 0, bus_voltage: 48.0 };
+            let inputs =
+                AxisInputs { phase_currents: [0.0; 2], encoder_count: 0, bus_voltage: 48.0, load_acceleration: 0.0 };
             self.axis.step(&inputs, &self.commands);
             let mut out = vec![0u8; MAX_FRAME + 8];
             let n = encode(&response, &mut out).unwrap();

@@ -15,6 +15,19 @@ use crate::cli::Common;
 /// <axis>.model.json (editable), <axis>.measured.csv and ident.svg (measured response and
 /// model) into --out (default out/ident/). With --model FILE... it only re-plots edited
 /// models against the measurements saved next to them.
+///
+/// --device PORT: identify one axis (--axis, default the first of --axes) on a drive over its
+/// link instead. The drive needs the removable machine-end accelerometer on its accelerometer
+/// input (the G474 board: PC3, morpho CN7 pin 37; its sensitivity in V per rad/s² is the
+/// parameter accelerometer.sensitivity, --set AXIS:accelerometer.sensitivity=...). The drive
+/// runs the same M-sequence with U = kt·iq from its measured currents and Y = the
+/// accelerometer, streams the samples, and the host identifies them exactly as on the FMU
+/// (same files); the FMU runs the same sweep with the drive's parameters as its twin, and the
+/// report gives their difference per frequency point and in the identified anti-resonance
+/// (also in ident.json). Give the twin the plant the drive drives (--anti-resonance, --set).
+///
+/// Example: servo virtual-drive --speed max --set plant.absorber_inertia=1e-4 ... &
+///          servo ident --device /tmp/servo-drive --anti-resonance x=40
 #[derive(clap::Args)]
 pub struct IdentArgs {
     #[arg(long, value_delimiter = ',', default_value = "x,y")]
@@ -35,6 +48,12 @@ pub struct IdentArgs {
     /// Re-plot these (edited) model files instead of identifying
     #[arg(long, num_args = 1..)]
     pub model: Vec<PathBuf>,
+    /// With --device: the axis identified on the drive (default: the first of --axes)
+    #[arg(long)]
+    pub axis: Option<String>,
+    /// Identify on this drive (its accelerometer input) instead of the FMU
+    #[command(flatten)]
+    pub target: crate::device::args::TargetArgs,
     #[command(flatten)]
     pub common: Common,
 }

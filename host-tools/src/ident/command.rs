@@ -20,6 +20,16 @@ fn ident(args: &IdentArgs) -> Result<bool> {
         (&args.axes, &args.set, &args.anti_resonance, args.amplitude, args.snr_db, &args.model, &args.common);
     use crate::ident::report::{identify_axis, plot, replot};
     let out = common.out.clone().unwrap_or_else(|| default_out("ident"));
+    if args.target.device.is_some() {
+        if !model.is_empty() {
+            bail!("--model re-plots saved models; it takes no --device");
+        }
+        if snr_db.is_some() {
+            bail!("--snr-db sets the FMU's accelerometer noise; over a drive the noise is the drive's own (give the twin the same with --set AXIS:plant.acceleration_noise_std=...)");
+        }
+    } else if let Some(axis) = &args.axis {
+        bail!("--axis {axis} chooses the axis identified on a drive: it needs --device");
+    }
     if !model.is_empty() {
         let svg = replot(model, &out)?;
         println!("re-plotted {} model(s) → {}", model.len(), svg.display());
@@ -51,6 +61,9 @@ fn ident(args: &IdentArgs) -> Result<bool> {
         axis_parameters.extend(crate::ident::identification::absorber_parameters(hz, 0.05, load));
     }
     let fmu = Fmu::load(&common.fmu.clone().unwrap_or_else(default_fmu))?;
+    if args.target.device.is_some() {
+        return ident_on_device(args, &fmu, &parameters, &out);
+    }
     let pb = progress_bar("identification", common.json);
     let mut results = Vec::new();
     for (i, axis) in axes.iter().enumerate() {
@@ -131,6 +144,43 @@ fn ident(args: &IdentArgs) -> Result<bool> {
         println!("  {refused} axis/axes refused: no model written for them");
     }
     Ok(refused == 0)
+}
+
+/// `servo ident --device`: one axis on the drive, beside its FMU twin.
+fn ident_on_device(
+    args: &IdentArgs,
+    fmu: &Fmu,
+    parameters: &std::collections::BTreeMap<String, std::collections::BTreeMap<String, crate::fmu::scenario::Value>>,
+    out: &std::path::Path,
+) -> Result<bool> {
+    use crate::ident::device::{identify_on_device, DeviceIdentRequest};
+    let axis = args.axis.clone().unwrap_or_else(|| args.axes.first().cloned().unwrap_or_else(|| "x".into()));
+    let axis_parameters = parameters
+        .get(&axis)
+        .ok_or_else(|| anyhow::anyhow!("--axis {axis}: no such axis in --axes {}", args.axes.join(",")))?;
+    if !(args.amplitude.is_finite() && args.amplitude > 0.0) {
+        bail!("--amplitude must be a positive torque (N·m)");
+    }
+    // Checked before the port is opened: the run's parameters and the sweep's settings.
+    crate::ident::device::device_run(axis_parameters, args.amplitude)?.drive_params()?;
+    let port = args.target.device.as_deref().unwrap_or_default();
+    let Some(mut session) = args.target.session()? else {
+        return Ok(false);
+    };
+    let pb = progress_bar("identification", args.common.json);
+    let request = DeviceIdentRequest { axis: &axis, parameters: axis_parameters, amplitude: args.amplitude };
+    let r = identify_on_device(fmu, &request, (port, &mut session), out, |label, f| {
+        pb.set_prefix(label.to_string());
+        pb.set_position((f * 1000.0) as u64)
+    })?;
+    pb.finish_and_clear();
+    if args.common.json {
+        println!("{}", serde_json::to_string_pretty(&r)?);
+    } else {
+        r.print();
+    }
+    // As on the FMU: a refused fit is a failure; so is a drive that disagrees with its twin.
+    Ok(r.drive.refusal.is_none() && r.passed)
 }
 
 impl IdentBenchArgs {

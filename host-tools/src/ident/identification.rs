@@ -39,11 +39,11 @@ use serde::{Deserialize, Serialize};
 
 use crate::analysis::polynomial::roots;
 use crate::analysis::response_point::ResponsePoint;
-use crate::analysis::spectral::dft_bin;
 use crate::fmu::configuration::configuration;
 use crate::fmu::runner::Fmu;
 use crate::fmu::scenario::Value;
 use crate::fmu::sweep_run::SweepRun;
+use crate::ident::averaged_response::{averaged_response, Record};
 use nalgebra::{DMatrix, DVector};
 
 pub const DEGREE: u32 = 11;
@@ -144,6 +144,9 @@ pub struct Measured {
     pub response: Vec<Complex64>,
     /// |U|² per frequency: the inverse variance of H under output noise (fit weights).
     pub input_power: Vec<f64>,
+    /// Standard error of each H (absolute), from the scatter of the averaged periods about
+    /// their mean (0 where unknown).
+    pub standard_error: Vec<f64>,
 }
 
 impl Measured {
@@ -153,7 +156,7 @@ impl Measured {
 }
 
 /// The drive's M-sequence on the torque command for `seconds`, at constant speed.
-fn excitation(parameters: &BTreeMap<String, Value>, amplitude: f64, seconds: f64) -> SweepRun {
+pub fn excitation(parameters: &BTreeMap<String, Value>, amplitude: f64, seconds: f64) -> SweepRun {
     let settings = SweepParams {
         point: InjectionPoint::TorqueCommand,
         signal: SweepSignal::Prbs,
@@ -208,36 +211,18 @@ pub fn measure_records(
     if u_all.iter().any(|u| u.abs() >= 0.999 * torque_limit) {
         bail!("the torque command saturated at {torque_limit} N·m during the excitation: the data cannot be used (lower the amplitude)");
     }
-    // Rows following a measuring step; the last full period of them.
+    // Rows following a measuring step: one sample of each signal per acquisition period.
     let rows: Vec<usize> = (1..measuring.len()).filter(|&i| measuring[i] != 0.0).collect();
-    let n = (chips * (CHIP_DIVIDER / DIVIDER) as u64) as usize;
-    if rows.len() < n * periods {
-        bail!("{} samples recorded, {} needed ({periods} periods of the M-sequence)", rows.len(), n * periods);
-    }
-    let last = &rows[rows.len() - n * periods..];
-    let mut u = vec![0.0; n];
-    let mut y = vec![0.0; n];
-    for (j, &i) in last.iter().enumerate() {
-        u[j % n] += u_all[i] / periods as f64;
-        y[j % n] += y_all[i] / periods as f64;
-    }
-    let u_rms = (u.iter().map(|x| x * x).sum::<f64>() / n as f64).sqrt();
-    if u_rms < 1e-9 {
-        bail!("no excitation in the recorded torque command");
-    }
-    let fa = fs / DIVIDER as f64;
-    let df = fa / n as f64;
-    let (k0, k1) = ((f_min / df).ceil() as usize, (f_max / df).floor() as usize);
-    let mut frequencies = Vec::new();
-    let mut response = Vec::new();
-    let mut input_power = Vec::new();
-    for k in k0.max(1)..=k1 {
-        let uk = dft_bin(&u, k as f64);
-        frequencies.push(k as f64 * df);
-        response.push(dft_bin(&y, k as f64) / uk);
-        input_power.push(uk.norm_sqr());
-    }
-    Ok(Measured { frequencies, response, input_power })
+    let u: Vec<f64> = rows.iter().map(|&i| u_all[i]).collect();
+    let y: Vec<f64> = rows.iter().map(|&i| y_all[i]).collect();
+    let n = samples_per_period();
+    let record = Record { u: &u, y: &y, acquisition_hz: fs / DIVIDER as f64 };
+    averaged_response(&record, n, periods, (f_min, f_max))
+}
+
+/// Acquisition samples in one period of the M-sequence.
+pub fn samples_per_period() -> usize {
+    (((1u64 << DEGREE) - 1) * (CHIP_DIVIDER / DIVIDER) as u64) as usize
 }
 
 /// Noise-free run, to set the accelerometer noise for a signal-to-noise ratio.
@@ -595,7 +580,8 @@ mod tests {
             })
             .collect();
         let input_power = vec![1.0; frequencies.len()];
-        Measured { frequencies, response, input_power }
+        let standard_error = vec![0.0; frequencies.len()];
+        Measured { frequencies, response, input_power, standard_error }
     }
 
     #[test]

@@ -1,8 +1,11 @@
 //! Identification and correction (seed 001): `servo ident`, `servo tune`, `servo bench ident`.
 
 pub mod args;
+pub mod averaged_response;
 pub mod bench;
 pub mod command;
+pub mod device;
+pub mod device_bench;
 pub mod device_check;
 pub mod identification;
 pub mod index;

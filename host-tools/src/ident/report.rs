@@ -33,7 +33,8 @@ pub struct IdentifiedAxis {
     pub files: Vec<PathBuf>,
 }
 
-fn write_measured(path: &Path, m: &Measured) -> Result<()> {
+/// The measured response as CSV: frequency, gain (dB), phase (deg), real and imaginary parts.
+pub fn write_measured(path: &Path, m: &Measured) -> Result<()> {
     let mut t = Trace::new(["frequency", "gain_db", "phase_deg", "re", "im"].map(String::from).to_vec());
     for (f, h) in m.frequencies.iter().zip(&m.response) {
         t.rows.push(vec![*f, 20.0 * h.norm().log10(), h.arg().to_degrees(), h.re, h.im]);

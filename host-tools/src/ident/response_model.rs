@@ -106,6 +106,7 @@ pub fn fit(
         frequencies: points.iter().map(|p| p.0).collect(),
         response: points.iter().map(|p| p.1).collect(),
         input_power: vec![1.0; points.len()],
+        standard_error: vec![0.0; points.len()],
     };
     if let Some((f, _)) =
         points.iter().find(|(f, h)| !(f.is_finite() && h.re.is_finite() && h.im.is_finite() && h.norm() > 0.0))

@@ -9,7 +9,7 @@
 //! time, and by a drive that stops ticking); streaming off; the axis back at rest.
 
 use anyhow::{anyhow, Result};
-use control_core::phase_shifted_sweep::SweepState;
+use control_core::phase_shifted_sweep::{SweepSignal, SweepState};
 use control_core::protocol::Request;
 use control_core::{Commands, Mode};
 use serde::Serialize;
@@ -27,7 +27,7 @@ use power_stage::ratings::with_board_limits;
 pub struct DeviceSweep {
     /// The drive's time from `StartSweep` to done (s).
     pub measurement_time_s: f64,
-    /// Frequency response from the streamed samples.
+    /// Frequency response from the streamed samples (a stepped sine's; empty for a PRBS).
     pub stream: Vec<ResponsePoint>,
     /// The drive's on-line results as the telemetry polls caught them (a point finished and
     /// overwritten between two polls is missing here, not in `stream`).
@@ -86,6 +86,7 @@ pub fn sweep_on_drive_after<T: crate::device::link::DrivePort>(
     let start = session.telemetry()?.tick;
     let points = run.settings.points.max(1) as f64;
     let longest = run.max_measurement_time()? * 1.2 + 1.0;
+    let (session_hz, planned) = (session.tick_hz, run.measurement_time()?.max(1e-9));
     let mut online = Vec::new();
     let mut seen = 0;
     let end = session.wait_until(longest, |t| {
@@ -101,6 +102,9 @@ pub fn sweep_on_drive_after<T: crate::device::link::DrivePort>(
                 l.quality as f64,
             ));
             progress(seen as f64 / points);
+        }
+        if run.settings.signal == SweepSignal::Prbs {
+            progress((t.tick.saturating_sub(start) as f64 / session_hz / planned).min(1.0));
         }
         Ok(t.sweep.state == SweepState::Done)
     });
@@ -120,7 +124,12 @@ pub fn sweep_on_drive_after<T: crate::device::link::DrivePort>(
         row[0] /= session.tick_hz;
         trace.rows.push(row);
     }
-    let stream = stream_results(&trace, &run.settings)?;
+    // A stepped sine's response per frequency; a PRBS (the identification's) has none here:
+    // its caller analyses the samples.
+    let stream = match run.settings.signal {
+        SweepSignal::SteppedSine => stream_results(&trace, &run.settings)?,
+        SweepSignal::Prbs => Vec::new(),
+    };
     let measurement_time_s = (end.tick - start) as f64 / session.tick_hz;
     Ok(DeviceSweep {
         measurement_time_s,

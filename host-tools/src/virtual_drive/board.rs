@@ -7,6 +7,11 @@
 //!   the sampling instant (the phase with the largest duty) reads its offset: no current
 //!   flows through it then. The firmware's shunt choice picks the other two.
 //! - Bus voltage: the divider into the ADC, quantised.
+//! - Machine-end accelerometer (seed 001's removable instrument, on PC3 of the G474 board):
+//!   the plant's accelerometer reading (its load acceleration with the noise the FMU's plant
+//!   adds, `plant.acceleration_noise_std`) through a sensor of [`ACCELEROMETER_SENSITIVITY`]
+//!   about a zero of [`ACCELEROMETER_ZERO_VOLTS`] into the 12-bit converter, quantised (and
+//!   saturating at its rails, as the converter does).
 //! - Encoder: the plant's quadrature count.
 //! - Duties and gate drive: as the FMU applies them — sampled at the top of a PWM period, the
 //!   duties written in a tick are in force from the next period (one tick of delay), and the
@@ -17,7 +22,7 @@
 
 use control_core::current_sensing::SensingScales;
 use drive_application::board::{PowerStage, Sample, CURRENT_CHANNELS};
-use power_stage::ratings::SCALES;
+use power_stage::ratings::{ACCELEROMETER_VOLTS_PER_COUNT, SCALES};
 use power_stage::shunt_selection;
 use servo_axis::plant::{Plant, PlantInputs};
 
@@ -29,6 +34,13 @@ pub const TICK_HZ: f32 = power_stage::config::IHM08M1.pwm_hz as f32;
 /// Each amplifier's output at zero current (ADC counts; mid-scale 2047.5), as a board's
 /// resistor tolerances leave them.
 pub const SHUNT_OFFSETS: [f64; CURRENT_CHANNELS] = [2041.0, 2053.0, 2045.0];
+
+/// The simulated accelerometer's sensitivity (V per rad/s²): the drive's default, the sensor
+/// `control_core::accelerometer::DEFAULT_SENSITIVITY` describes.
+pub const ACCELEROMETER_SENSITIVITY: f64 = control_core::accelerometer::DEFAULT_SENSITIVITY as f64;
+/// Its output at rest (V): half the 3.3 V supply, off by a sensor's zero-g tolerance (so the
+/// drive's zero calibration has work to do).
+pub const ACCELEROMETER_ZERO_VOLTS: f64 = 1.62;
 
 pub struct SimulatedBoard {
     pub plant: Plant,
@@ -107,6 +119,7 @@ fn adc_count(volts_or_amps: f64, offset: f64, per_count: f32, full_scale: u16) -
 impl PowerStage for SimulatedBoard {
     const SCALES: SensingScales = SCALES;
     const TICK_HZ: f32 = TICK_HZ;
+    const ACCELEROMETER_VOLTS_PER_COUNT: f32 = ACCELEROMETER_VOLTS_PER_COUNT;
 
     fn take_sample(&mut self) -> Sample {
         let m = self.plant.measure();
@@ -120,7 +133,16 @@ impl PowerStage for SimulatedBoard {
             *s = adc_count(i, SHUNT_OFFSETS[k], SCALES.amps_per_count, SCALES.full_scale);
         }
         let bus = adc_count(m.bus_voltage, 0.0, SCALES.volts_per_count, SCALES.full_scale);
-        Sample { shunts, bus }
+        // Sampled at the same instant as the currents: the reading at the end of the last
+        // period, as the FMU gives the core (`servo_axis::simulation`).
+        let volts_per_count = ACCELEROMETER_VOLTS_PER_COUNT;
+        let accelerometer = adc_count(
+            self.plant.accelerometer * ACCELEROMETER_SENSITIVITY,
+            ACCELEROMETER_ZERO_VOLTS / volts_per_count as f64,
+            volts_per_count,
+            SCALES.full_scale,
+        );
+        Sample { shunts, bus, accelerometer }
     }
 
     fn encoder_count(&mut self) -> i32 {
@@ -150,5 +172,38 @@ impl PowerStage for SimulatedBoard {
 
     fn feed_watchdog(&mut self) {
         self.watchdog_feeds += 1;
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use control_core::accelerometer::AccelerometerParams;
+    use control_core::current_sensing::CALIBRATION_SAMPLES;
+    use drive_application::accelerometer_input::AccelerometerInput;
+    use servo_axis::plant::PlantParams;
+
+    /// The plant's accelerometer reading through the simulated sensor and converter, and back
+    /// through the drive's input at the default sensitivity: the acceleration within half a
+    /// count (0.24 rad/s²), the zero found at rest.
+    #[test]
+    fn the_accelerometer_reads_the_plants_acceleration_through_the_converter() {
+        let mut board = SimulatedBoard::new(Plant::new(PlantParams::default()).unwrap());
+        let mut input =
+            AccelerometerInput::new(SCALES.full_scale, ACCELEROMETER_VOLTS_PER_COUNT, &AccelerometerParams::default());
+        for _ in 0..CALIBRATION_SAMPLES {
+            input.calibrate(board.take_sample().accelerometer);
+        }
+        let zero = input.zero().flatten().expect("a sensor at mid-scale");
+        assert!((zero as f64 - ACCELEROMETER_ZERO_VOLTS / ACCELEROMETER_VOLTS_PER_COUNT as f64).abs() <= 0.5);
+        let half_count = 0.5 * ACCELEROMETER_VOLTS_PER_COUNT as f64 / ACCELEROMETER_SENSITIVITY;
+        for a in [-400.0, -3.3, 0.1, 57.0, 500.0] {
+            board.plant.accelerometer = a;
+            let read = input.convert(board.take_sample().accelerometer) as f64;
+            assert!((read - a).abs() <= half_count + 1e-3, "{a} rad/s² read as {read}");
+        }
+        // Beyond the converter's range (±980 rad/s² about this zero) the count saturates.
+        board.plant.accelerometer = 5000.0;
+        assert_eq!(board.take_sample().accelerometer, SCALES.full_scale);
     }
 }

@@ -179,9 +179,13 @@ fn announce(
 /// A housekeeping note as the firmware's log line, with its simulated time.
 fn note_line(n: &TimedNote) -> String {
     let what = match n.note {
-        Note::OffsetsCalibrated { offsets, bus_voltage } => format!(
-            "current offsets {:.1} {:.1} {:.1} counts, bus {bus_voltage:.2} V",
-            offsets[0], offsets[1], offsets[2]
+        Note::OffsetsCalibrated { offsets, bus_voltage, accelerometer_zero } => format!(
+            "current offsets {:.1} {:.1} {:.1} counts, bus {bus_voltage:.2} V, accelerometer {}",
+            offsets[0],
+            offsets[1],
+            offsets[2],
+            accelerometer_zero
+                .map_or("not connected (no zero near mid-scale)".to_string(), |z| format!("zero {z:.1} counts"))
         ),
         Note::FaultsChanged { faults } => format!("faults: {faults}"),
         Note::Alive { ticks, faults, bus_voltage } => {

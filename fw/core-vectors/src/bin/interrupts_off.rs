@@ -28,8 +28,9 @@ struct RestingStage;
 impl PowerStage for RestingStage {
     const SCALES: SensingScales = power_stage::ratings::SCALES;
     const TICK_HZ: f32 = power_stage::config::IHM08M1.pwm_hz as f32;
+    const ACCELEROMETER_VOLTS_PER_COUNT: f32 = power_stage::ratings::ACCELEROMETER_VOLTS_PER_COUNT;
     fn take_sample(&mut self) -> Sample {
-        Sample { shunts: [2048; 3], bus: 1365 }
+        Sample { shunts: [2048; 3], bus: 1365, accelerometer: 2048 }
     }
     fn encoder_count(&mut self) -> i32 {
         0
