@@ -59,6 +59,17 @@ impl VirtualDrive {
         let port = std::fs::read_to_string(&port_file).unwrap();
         Self { child, port }
     }
+
+    /// The drive killed after `ms` (a drive that dies mid-experiment), from another thread;
+    /// join it to get the drive back.
+    fn killed_after(self, ms: u64) -> std::thread::JoinHandle<Self> {
+        std::thread::spawn(move || {
+            let mut vd = self;
+            std::thread::sleep(Duration::from_millis(ms));
+            vd.child.kill().unwrap();
+            vd
+        })
+    }
 }
 
 impl Drop for VirtualDrive {
@@ -338,12 +349,7 @@ fn faults_a_missing_device_and_a_dying_drive_end_in_clear_errors() {
     let vd = VirtualDrive::start(&dir, "realtime", &[]);
     let port = vd.port.clone();
     let started = Instant::now();
-    let killer = std::thread::spawn(move || {
-        let mut vd = vd;
-        std::thread::sleep(Duration::from_millis(1500));
-        vd.child.kill().unwrap();
-        vd
-    });
+    let killer = vd.killed_after(1500);
     let o = output_within(servo().args(["sweep", "--device", &port, "--fmu"]).arg(fmu_path()), 30);
     drop(killer.join().unwrap());
     let e = String::from_utf8_lossy(&o.stderr);
@@ -506,12 +512,7 @@ fn ident_over_a_faulted_or_dying_drive_ends_in_a_clear_error() {
     let vd = VirtualDrive::start(&dir, "realtime", &[]);
     let port = vd.port.clone();
     let started = Instant::now();
-    let killer = std::thread::spawn(move || {
-        let mut vd = vd;
-        std::thread::sleep(Duration::from_millis(1500));
-        vd.child.kill().unwrap();
-        vd
-    });
+    let killer = vd.killed_after(1500);
     let o = ident(&port);
     drop(killer.join().unwrap());
     let e = String::from_utf8_lossy(&o.stderr);
