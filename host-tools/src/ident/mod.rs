@@ -7,6 +7,7 @@ pub mod command;
 pub mod device;
 pub mod device_bench;
 pub mod device_check;
+pub mod device_machine_end;
 pub mod identification;
 pub mod index;
 pub mod report;

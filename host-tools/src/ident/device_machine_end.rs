@@ -1,0 +1,459 @@
+//! The machine-end part of `servo tune --device`'s check: this axis's position command →
+//! machine-end position response on the drive, without and with the loaded correction, beside
+//! its FMU twin and against what the correction is meant to achieve.
+//!
+//! The drive measures it with its removable accelerometer: a stepped sine on the position
+//! command (`sweep.point` 4, through the command path and so through the correction) with the
+//! machine-end acceleration measure (`sweep.measure` 1): each acquisition sample is U = the
+//! injected position (rad) and Y = the accelerometer, both means over the acquisition period
+//! (the same mean on both cancels in Y/U). The host fits the streamed samples as any stepped
+//! sine (`sweep::measurement::stream_results`) and divides by −ω² (a sine's acceleration is
+//! −ω² times its position): the command → machine-end position response, what the FMU check
+//! measures from `load_position`.
+//!
+//! The target: the correction makes every axis's command → machine-end response alike, so
+//! this axis is compared, before and after, with the other axes' responses measured the same
+//! way on the FMU (the same sweep with each other axis's tuned parameters, without and with
+//! its own correction): the FMU check's comparison (`Tuning::spread_*`, from the multisine on
+//! `load_position`) at the sweep's frequencies. The same sweep, not the multisine's figures:
+//! the two measurements take the command at different instants (the multisine the streamed
+//! command at the communication step, the sweep the injection at the position tick), which
+//! shows as a delay of about 0.16 ms between them (0.3° at 5 Hz, 1.1° at 20 Hz) on the twin as
+//! on the drive.
+
+use std::collections::BTreeMap;
+use std::f64::consts::TAU;
+use std::path::Path;
+
+use anyhow::{bail, Result};
+use control_core::excitation::InjectionPoint;
+use control_core::phase_shifted_sweep::{SweepMeasure, SweepParams, SweepSignal};
+use control_core::protocol::Request;
+use control_core::response_correction::CorrectionParams;
+use serde::Serialize;
+
+use crate::analysis::response_point::{difference, ResponsePoint};
+use crate::device::link::DrivePort;
+use crate::device::session::DriveSession;
+use crate::fmu::runner::Fmu;
+use crate::fmu::scenario::Value;
+use crate::fmu::sweep_run::SweepRun;
+use crate::ident::tuning::Tuning;
+use crate::sweep::device::sweep_on_drive_after;
+use crate::sweep::device_report::save_partial;
+use crate::sweep::measurement::stream_results;
+
+/// Frequencies of the check: [`POINTS`] whole frequencies evenly spaced up to the top of the
+/// FMU check's multisine (twice the position-loop bandwidth; 5, 10, … 40 Hz at the defaults).
+pub const POINTS: u32 = 8;
+/// Sine amplitude on the position command (rad): at 5 Hz the machine end accelerates by
+/// 4.9 rad/s² (10 counts of the simulated accelerometer's 0.48 rad/s²), at 40 Hz by about
+/// 320 rad/s², a third of its ±980 rad/s² range, with the current far below its limit.
+pub const AMPLITUDE: f64 = 5.0e-3;
+/// Settling per frequency (s): the closed loop's lightly damped poles ring for about a second
+/// (the pseudo-circle's 30 revolutions at 20 Hz); then at least 1 s measured.
+pub const SETTLE_S: f32 = 1.5;
+pub const MEASURE_S: f32 = 1.0;
+
+/// The figure drive and twin must meet at every frequency, each run (dB, degrees). The same
+/// core measures the same plant on both; what separates them is the simulated board: the
+/// accelerometer's 12-bit quantisation (0.48 rad/s² a count, 10 counts of amplitude at the
+/// lowest frequency, so a few per cent a sample before the fit averages ~4000 samples), its
+/// noise when the plant is given one (`plant.acceleration_noise`), the encoder and current
+/// quantisation inside the loops, and the plant's own state (the drive's plant starts at its
+/// power-on, the twin's at the sweep's start). Measured on the virtual drive without
+/// accelerometer noise: at most 0.0016 dB and 0.012° (`servo tune --device`, both runs, y axis
+/// of the 40/70 Hz pair); the goal leaves room for an accelerometer noise of a few rad/s².
+pub const GOAL_DB: f64 = 0.05;
+pub const GOAL_DEG: f64 = 0.5;
+
+/// The sweep of the machine-end check with `parameters` (the axis's; the plant's are the
+/// twin's): position-command stepped sine, machine-end acceleration measure, a fixed schedule
+/// (no settling judged from the response, no lengthening: drive and twin take the same records).
+pub fn machine_end_sweep(parameters: &BTreeMap<String, Value>, top_hz: f64) -> Result<SweepRun> {
+    let run = SweepRun { settings: SweepParams::default(), parameters: parameters.clone(), velocity: 0.0 };
+    let step = (top_hz / POINTS as f64).round();
+    if step < 1.0 {
+        bail!("the FMU check's top frequency {top_hz} Hz is below {POINTS} Hz: no {POINTS} whole frequencies to check");
+    }
+    let settings = SweepParams {
+        point: InjectionPoint::PositionCommand,
+        measure: SweepMeasure::MachineAcceleration,
+        signal: SweepSignal::SteppedSine,
+        amplitude: AMPLITUDE as f32,
+        start_hz: step as f32,
+        stop_hz: (step * POINTS as f64) as f32,
+        points: POINTS,
+        logarithmic: false,
+        extra_hz: 0.0,
+        settle_cycles: 0.0,
+        min_settle_s: SETTLE_S,
+        measure_cycles: 1.0,
+        min_measure_s: MEASURE_S,
+        shifts: 1,
+        repeats: 1,
+        precision_db: 0.0,
+        max_extensions: 0,
+        dither: 0.0,
+        ..SweepParams::default()
+    };
+    let run = SweepRun { settings, ..run };
+    run.drive_params()?;
+    Ok(run)
+}
+
+/// A stepped sine's acceleration response (rad/s² per rad) as position (rad per rad).
+fn as_position(p: &ResponsePoint) -> ResponsePoint {
+    let w2 = (TAU * p.frequency).powi(2);
+    ResponsePoint {
+        gain_db: p.gain_db - 20.0 * w2.log10(),
+        phase_deg: (p.phase_deg + 360.0).rem_euclid(360.0) - 180.0,
+        ..*p
+    }
+}
+
+/// One run (without or with the correction) at one frequency.
+#[derive(Clone, Copy, Debug, Serialize)]
+pub struct MachineEndPoint {
+    pub frequency: f64,
+    /// Command → machine-end position (dB, degrees): the drive's, the twin's.
+    pub drive_db: f64,
+    pub drive_deg: f64,
+    pub twin_db: f64,
+    pub twin_deg: f64,
+    /// Drive − twin (dB, degrees).
+    pub difference_db: f64,
+    pub difference_deg: f64,
+    /// This axis's response as the FMU check measured it (the multisine on `load_position`,
+    /// without or with the correction; dB, degrees), when it ran. An independent measurement
+    /// of the same thing: the drive's gain agrees with it, its phase lags by the two
+    /// measurements' different instants of the command (about 0.16 ms, see the module).
+    pub multisine: Option<(f64, f64)>,
+    /// The drive's response against the other axes' (the same sweep on the FMU, without their
+    /// corrections for the uncorrected run, with them for the corrected one): the largest
+    /// |difference| over the other axes (dB, degrees); None when there is no other axis.
+    pub versus_other_axes: Option<(f64, f64)>,
+}
+
+/// What the drive measured of one run, and its twin.
+#[derive(Clone, Debug, Serialize)]
+pub struct MachineEndRun {
+    pub points: Vec<MachineEndPoint>,
+    /// Largest |drive − twin| over the points (dB, degrees).
+    pub largest_difference: (f64, f64),
+    /// Largest |drive − other axes| up to the position-loop bandwidth (the FMU check's spread
+    /// band; dB, degrees).
+    pub largest_versus_other_axes: Option<(f64, f64)>,
+    /// Largest drive − multisine (the FMU check's measurement of this axis) over the points:
+    /// gain |dB|, and the phase difference's range (degrees, least and most).
+    pub versus_multisine: Option<(f64, (f64, f64))>,
+    pub samples: usize,
+    pub dropped: u32,
+    pub corrupt_frames: u64,
+}
+
+/// The machine-end check of one axis.
+#[derive(Clone, Debug, Serialize)]
+pub struct MachineEndCheck {
+    pub amplitude: f64,
+    pub frequencies: Vec<f64>,
+    pub without: MachineEndRun,
+    pub with: MachineEndRun,
+    /// Drive vs twin goal (dB, degrees), see [`GOAL_DB`].
+    pub goal: (f64, f64),
+    /// Both runs within the goal of their twin, nothing dropped or lost.
+    pub matches_twin: bool,
+    /// The corrected response is closer to the other axes' than the uncorrected one (gain and
+    /// phase, up to the bandwidth), as the FMU check's `improved` (None: no other axis).
+    pub equalised: Option<bool>,
+    /// The FMU check's own figures for comparison: largest difference between all axes up to
+    /// the bandwidth, before and after (dB, degrees).
+    pub fmu_spread: Option<((f64, f64), (f64, f64))>,
+}
+
+/// The other axes' responses at the sweep's frequencies (position, as [`as_position`]), each
+/// run of the sweep on the FMU: without (`after` false) or with its own correction.
+fn other_axes(
+    fmu: &Fmu,
+    tuning: &Tuning,
+    axis: &str,
+    after: bool,
+    progress: &mut impl FnMut(&str, f64),
+) -> Result<Vec<Vec<ResponsePoint>>> {
+    let top_hz = (2.0 * tuning.position_bandwidth_hz).round();
+    let mut out = Vec::new();
+    for other in tuning.axes.iter().filter(|a| a.axis != axis) {
+        let mut parameters: BTreeMap<String, Value> = other
+            .fmu_parameters
+            .iter()
+            .filter(|(k, _)| !k.starts_with("corr."))
+            .map(|(k, v)| (k.clone(), Value::Float(*v)))
+            .collect();
+        if after {
+            parameters.extend(other.correction.parameters());
+        }
+        let run = machine_end_sweep(&parameters, top_hz)?;
+        let label = format!("axis {} on the FMU", other.axis);
+        let trace = run.run(fmu, |f| progress(&label, f))?;
+        if trace.column("faults").is_some_and(|f| f.iter().any(|&x| x != 0.0)) {
+            bail!("axis {} tripped during the machine-end sweep on the FMU", other.axis);
+        }
+        out.push(stream_results(&trace, &run.settings)?.iter().map(as_position).collect());
+    }
+    Ok(out)
+}
+
+/// This axis's response in the FMU check's multisine (`Tuning::before`, or `after` with the
+/// correction) at `f` Hz, if measured there.
+fn multisine(tuning: &Tuning, axis: &str, f: f64, after: bool) -> Option<(f64, f64)> {
+    let set = if after { &tuning.after } else { &tuning.before };
+    let i = tuning.axes.iter().position(|a| a.axis == axis)?;
+    let &(_, h) = set.get(i)?.iter().find(|p| (p.0 - f).abs() < 1e-3)?;
+    let p = ResponsePoint::from_complex(f, h, 1.0);
+    Some((p.gain_db, p.phase_deg))
+}
+
+fn run_of(
+    (drive, twin): (&[ResponsePoint], &[ResponsePoint]),
+    others: &[Vec<ResponsePoint>],
+    (tuning, axis, after): (&Tuning, &str, bool),
+    link: (usize, u32, u64),
+) -> Result<MachineEndRun> {
+    let bandwidth_hz = tuning.position_bandwidth_hz;
+    if drive.len() != twin.len() || others.iter().any(|o| o.len() != drive.len()) {
+        bail!("the drive measured {} frequencies, the twin {}: the sweeps do not match", drive.len(), twin.len());
+    }
+    let (mut largest, mut versus) = ((0.0f64, 0.0f64), None::<(f64, f64)>);
+    let points: Vec<MachineEndPoint> = drive
+        .iter()
+        .zip(twin)
+        .enumerate()
+        .map(|(i, (d, t))| {
+            let (d, t) = (as_position(d), as_position(t));
+            let (dd, dp) = difference(&d, &t);
+            largest = (largest.0.max(dd.abs()), largest.1.max(dp.abs()));
+            let versus_other_axes = (!others.is_empty()).then(|| {
+                others.iter().fold((0.0f64, 0.0f64), |w, o| {
+                    let (g, p) = difference(&d, &o[i]);
+                    (w.0.max(g.abs()), w.1.max(p.abs()))
+                })
+            });
+            if let Some(v) = versus_other_axes.filter(|_| d.frequency <= bandwidth_hz + 1e-3) {
+                let w = versus.unwrap_or((0.0, 0.0));
+                versus = Some((w.0.max(v.0), w.1.max(v.1)));
+            }
+            MachineEndPoint {
+                frequency: d.frequency,
+                drive_db: d.gain_db,
+                drive_deg: d.phase_deg,
+                twin_db: t.gain_db,
+                twin_deg: t.phase_deg,
+                difference_db: dd,
+                difference_deg: dp,
+                multisine: multisine(tuning, axis, d.frequency.round(), after),
+                versus_other_axes,
+            }
+        })
+        .collect();
+    let mut versus_multisine = None::<(f64, (f64, f64))>;
+    for p in &points {
+        if let Some((g, ph)) = p.multisine {
+            let (dg, dp) = difference(
+                &ResponsePoint { frequency: p.frequency, gain_db: p.drive_db, phase_deg: p.drive_deg, quality: 1.0 },
+                &ResponsePoint { frequency: p.frequency, gain_db: g, phase_deg: ph, quality: 1.0 },
+            );
+            let (wg, (lo, hi)) = versus_multisine.unwrap_or((0.0, (f64::INFINITY, f64::NEG_INFINITY)));
+            versus_multisine = Some((wg.max(dg.abs()), (lo.min(dp), hi.max(dp))));
+        }
+    }
+    Ok(MachineEndRun {
+        versus_multisine,
+        points,
+        largest_difference: largest,
+        largest_versus_other_axes: versus,
+        samples: link.0,
+        dropped: link.1,
+        corrupt_frames: link.2,
+    })
+}
+
+/// One run of the machine-end sweep on the drive (`correction` loaded after the parameters)
+/// and on the twin (`run`'s parameters, with the same correction among them when loaded).
+fn measure<T: DrivePort>(
+    fmu: &Fmu,
+    run: &SweepRun,
+    session: &mut DriveSession<T>,
+    correction: Option<&CorrectionParams>,
+    out: &Path,
+    mut progress: impl FnMut(&str, f64),
+) -> Result<(Vec<ResponsePoint>, Vec<ResponsePoint>, (usize, u32, u64))> {
+    std::fs::create_dir_all(out)?;
+    let mut drive_run = run.clone();
+    drive_run.parameters.retain(|k, _| !k.starts_with("corr."));
+    let load = |s: &mut DriveSession<T>| match correction {
+        Some(c) => s.order(Request::LoadCorrection(*c), "the correction (LoadCorrection)"),
+        None => Ok(()),
+    };
+    let drive = match sweep_on_drive_after(session, &drive_run, load, |f| progress("machine end on the drive", f)) {
+        Ok(d) => d,
+        Err(e) => return Err(save_partial(session, out, "machine_end", e)),
+    };
+    drive.trace.write_csv(&out.join("machine_end_samples.csv"))?;
+    let twin_trace = run.run(fmu, |f| progress("machine end on the twin", f))?;
+    if twin_trace.column("faults").is_some_and(|f| f.iter().any(|&x| x != 0.0)) {
+        bail!("the twin tripped during the machine-end sweep");
+    }
+    let twin = stream_results(&twin_trace, &run.settings)?;
+    Ok((drive.stream, twin, (drive.samples, drive.dropped, drive.corrupt_frames)))
+}
+
+/// What the machine-end check is given.
+pub struct MachineEndRequest<'a> {
+    pub tuning: &'a Tuning,
+    pub axis: &'a str,
+    /// The axis's parameters for the drive and the twin (its plant the twin's), no correction.
+    pub parameters: &'a BTreeMap<String, Value>,
+    /// The correction's `corr.*` parameters (the twin's) and the request the drive is sent.
+    pub correction: (BTreeMap<String, Value>, &'a CorrectionParams),
+}
+
+/// Measure the machine-end response on the drive behind `session` without and with the
+/// correction, beside the twin; files in `out` (`machine_end_without/`, `machine_end_with/`).
+pub fn check_machine_end<T: DrivePort>(
+    fmu: &Fmu,
+    request: &MachineEndRequest,
+    session: &mut DriveSession<T>,
+    out: &Path,
+    mut progress: impl FnMut(&str, f64),
+) -> Result<MachineEndCheck> {
+    let tuning = request.tuning;
+    let top_hz = (2.0 * tuning.position_bandwidth_hz).round();
+    let mut run = machine_end_sweep(request.parameters, top_hz)?;
+    let (d0, t0, l0) = measure(fmu, &run, session, None, &out.join("machine_end_without"), |l, f| {
+        progress(&format!("without correction: {l}"), f)
+    })?;
+    run.parameters.extend(request.correction.0.clone());
+    let (d1, t1, l1) =
+        measure(fmu, &run, session, Some(request.correction.1), &out.join("machine_end_with"), |l, f| {
+            progress(&format!("with correction: {l}"), f)
+        })?;
+    let others_before = other_axes(fmu, tuning, request.axis, false, &mut progress)?;
+    let others_after = other_axes(fmu, tuning, request.axis, true, &mut progress)?;
+    let without = run_of((&d0, &t0), &others_before, (tuning, request.axis, false), l0)?;
+    let with = run_of((&d1, &t1), &others_after, (tuning, request.axis, true), l1)?;
+    let within = |r: &MachineEndRun| {
+        r.dropped == 0
+            && r.corrupt_frames == 0
+            && r.largest_difference.0 <= GOAL_DB
+            && r.largest_difference.1 <= GOAL_DEG
+            && r.points.len() == POINTS as usize
+    };
+    let equalised =
+        without.largest_versus_other_axes.zip(with.largest_versus_other_axes).map(|(b, a)| a.0 < b.0 && a.1 < b.1);
+    Ok(MachineEndCheck {
+        amplitude: AMPLITUDE,
+        frequencies: without.points.iter().map(|p| p.frequency).collect(),
+        matches_twin: within(&without) && within(&with),
+        goal: (GOAL_DB, GOAL_DEG),
+        equalised,
+        fmu_spread: tuning.spread_before.zip(tuning.spread_after),
+        without,
+        with,
+    })
+}
+
+impl MachineEndCheck {
+    pub fn print(&self) {
+        println!(
+            "    machine end (accelerometer): position command → machine-end position, a {} rad sine at {} Hz, drive vs twin and vs the other axes (the same sweep on the FMU)",
+            self.amplitude,
+            self.frequencies.iter().map(|f| format!("{f:.0}")).collect::<Vec<_>>().join(", ")
+        );
+        println!(
+            "    {:>6} {:>20} {:>20} {:>20} {:>20} {:>18} {:>18}",
+            "Hz", "without: drive", "twin", "with: drive", "twin", "without vs others", "with vs others"
+        );
+        let v = |x: Option<(f64, f64)>| x.map_or("-".into(), |(g, p)| format!("{g:.3} dB {p:.2}°"));
+        for (a, b) in self.without.points.iter().zip(&self.with.points) {
+            println!(
+                "    {:>6.1} {:>10.3} dB {:>6.2}° {:>10.3} dB {:>6.2}° {:>10.3} dB {:>6.2}° {:>10.3} dB {:>6.2}° {:>18} {:>18}",
+                a.frequency,
+                a.drive_db,
+                a.drive_deg,
+                a.twin_db,
+                a.twin_deg,
+                b.drive_db,
+                b.drive_deg,
+                b.twin_db,
+                b.twin_deg,
+                v(a.versus_other_axes),
+                v(b.versus_other_axes)
+            );
+        }
+        for (label, r) in [("without correction", &self.without), ("with correction", &self.with)] {
+            println!(
+                "    {label}: drive − twin largest {:.4} dB, {:.3}° (goal {} dB, {}°); {} samples, {} dropped, {} frame(s) lost",
+                r.largest_difference.0,
+                r.largest_difference.1,
+                self.goal.0,
+                self.goal.1,
+                r.samples,
+                r.dropped,
+                r.corrupt_frames
+            );
+            if let Some((g, (lo, hi))) = r.versus_multisine {
+                println!(
+                    "      drive − the FMU check's multisine of this axis: gain within {g:.4} dB, phase {lo:+.2}° … {hi:+.2}° (the multisine takes the command at another instant)"
+                );
+            }
+        }
+        if let (Some(b), Some(a)) = (self.without.largest_versus_other_axes, self.with.largest_versus_other_axes) {
+            let fmu = self.fmu_spread.map_or(String::new(), |(fb, fa)| {
+                format!(
+                    " (the FMU check between all axes: {:.4} dB / {:.3}° before, {:.4} dB / {:.3}° after)",
+                    fb.0, fb.1, fa.0, fa.1
+                )
+            });
+            println!(
+                "    the drive's axis against the other axes up to the bandwidth: before {:.4} dB / {:.3}°, after {:.4} dB / {:.3}°{fmu}: {}",
+                b.0,
+                b.1,
+                a.0,
+                a.1,
+                if self.equalised == Some(true) { "closer" } else { "NOT closer" }
+            );
+        }
+        println!("    drive vs twin at the machine end: {}", if self.matches_twin { "met" } else { "NOT MET" });
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use num_complex::Complex64;
+
+    #[test]
+    fn an_acceleration_response_divided_by_minus_omega_squared_is_the_position_response() {
+        // x = e^{jωt}: a = −ω² x; a response of a/u = −ω²·H is H in position.
+        let h = Complex64::from_polar(0.8, -0.6);
+        for f in [5.0, 40.0] {
+            let w2 = (TAU * f) * (TAU * f);
+            let p = as_position(&ResponsePoint::from_complex(f, -w2 * h, 1.0));
+            let expected = ResponsePoint::from_complex(f, h, 1.0);
+            assert!((p.gain_db - expected.gain_db).abs() < 1e-9, "{p:?} vs {expected:?}");
+            assert!(difference(&p, &expected).1.abs() < 1e-9, "{p:?} vs {expected:?}");
+        }
+    }
+
+    #[test]
+    fn the_check_sweeps_whole_frequencies_up_to_the_fmu_checks_top() {
+        let run = machine_end_sweep(&BTreeMap::new(), 40.0).unwrap();
+        let s = &run.settings;
+        let f: Vec<f32> = (0..s.count()).map(|i| s.frequency(i)).collect();
+        assert_eq!(f.len(), POINTS as usize);
+        for (i, x) in f.iter().enumerate() {
+            assert!((x - 5.0 * (i + 1) as f32).abs() < 1e-4, "{f:?}");
+        }
+        assert!(machine_end_sweep(&BTreeMap::new(), 4.0).is_err());
+    }
+}
