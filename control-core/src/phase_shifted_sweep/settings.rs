@@ -65,9 +65,9 @@ pub struct SweepParams {
     /// the lock; the fit sees it as noise. Below the threshold the samples are period means
     /// (see [`PhaseShiftedSweep::end_tick`](super::PhaseShiftedSweep::end_tick)) and need none.
     pub dither: f32,
-    /// What U and Y are: the loop's signals, or (torque-command injection only) the motor's
-    /// torque from the measured q current and the machine-end acceleration (see
-    /// [`SweepMeasure`]).
+    /// What U and Y are: the loop's signals, or the machine-end acceleration against the
+    /// motor's torque from the measured q current (torque-command injection) or against the
+    /// injected position (position-command injection; see [`SweepMeasure`]).
     pub measure: SweepMeasure,
 }
 
