@@ -12,4 +12,5 @@ pub mod identification;
 pub mod index;
 pub mod report;
 pub mod response_model;
+pub mod tune_device_bench;
 pub mod tuning;
