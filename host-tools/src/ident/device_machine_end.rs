@@ -243,11 +243,11 @@ fn multisine(tuning: &Tuning, axis: &str, f: f64, after: bool) -> Option<(f64, f
 }
 
 fn run_of(
-    (drive, twin): (&[(ResponsePoint, f64)], &[(ResponsePoint, f64)]),
+    measured: &Measured,
     others: &[Vec<ResponsePoint>],
     (tuning, axis, after): (&Tuning, &str, bool),
-    link: (usize, u32, u64),
 ) -> Result<MachineEndRun> {
+    let (drive, twin, link) = (&measured.drive, &measured.twin, measured.link);
     let bandwidth_hz = tuning.position_bandwidth_hz;
     if drive.len() != twin.len() || others.iter().any(|o| o.len() != drive.len()) {
         bail!("the drive measured {} frequencies, the twin {}: the sweeps do not match", drive.len(), twin.len());
@@ -424,8 +424,8 @@ pub fn check_machine_end<T: DrivePort>(
     })?;
     let others_before = other_axes(fmu, tuning, request.axis, false, &mut progress)?;
     let others_after = other_axes(fmu, tuning, request.axis, true, &mut progress)?;
-    let without = run_of((&m0.drive, &m0.twin), &others_before, (tuning, request.axis, false), m0.link)?;
-    let with = run_of((&m1.drive, &m1.twin), &others_after, (tuning, request.axis, true), m1.link)?;
+    let without = run_of(&m0, &others_before, (tuning, request.axis, false))?;
+    let with = run_of(&m1, &others_after, (tuning, request.axis, true))?;
     let within = |r: &MachineEndRun| {
         r.dropped == 0
             && r.corrupt_frames == 0
