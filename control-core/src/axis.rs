@@ -146,8 +146,10 @@ struct TickSettings {
     /// Encoder counts per position tick at 1 rad/s (speeds to the interpolator's pulses).
     counts_per_position_tick: f32,
     limits: Limits,
-    /// The sweep relates the torque from the measured q current (this, N·m/A, times iq) to the
-    /// machine-end acceleration (`SweepMeasure::MachineAcceleration`); 0 when it does not.
+    /// The sweep measures the machine-end acceleration (`SweepMeasure::MachineAcceleration`):
+    /// with torque-command injection it relates the torque from the measured q current (this,
+    /// N·m/A, times iq) to it, with position-command injection the injection; 0 when it
+    /// measures the loop's signals (one field for both: the every-tick test stays one compare).
     measured_torque_constant: f32,
 }
 
@@ -615,8 +617,16 @@ impl Axis {
             InjectionPoint::VelocityFeedback => (self.velocity_loop_inputs.1, self.velocity_estimate),
             InjectionPoint::PositionCommand => {
                 let rad_per_count = self.settings.rad_per_count;
-                let moved = self.encoder.position().saturating_sub(commands.position);
-                (self.position_injection as f32 * rad_per_count, crate::counts_to_f32(moved) * rad_per_count)
+                let injected = self.position_injection as f32 * rad_per_count;
+                if self.settings.measured_torque_constant != 0.0 {
+                    // The machine-end acceleration measure: Y the accelerometer sampled with
+                    // this tick's encoder count, as the position Y below is (no delay between
+                    // the command and the reading beyond the loops').
+                    (injected, inputs.load_acceleration)
+                } else {
+                    let moved = self.encoder.position().saturating_sub(commands.position);
+                    (injected, crate::counts_to_f32(moved) * rad_per_count)
+                }
             }
             // The machine-end acceleration measure: the torque from the q current the current
             // loop measured on the previous tick (its telemetry) and the accelerometer sampled

@@ -89,16 +89,16 @@ fn the_loop_measure_ignores_the_accelerometer() {
 
 #[test]
 fn the_acceleration_measure_is_refused_with_another_injection_point() {
-    for point in [InjectionPoint::VelocityCommand, InjectionPoint::VelocityFeedback, InjectionPoint::PositionCommand] {
+    for point in [InjectionPoint::VelocityCommand, InjectionPoint::VelocityFeedback] {
         let mut p = identification_params();
         p.sweep.point = point;
         match Axis::new(p) {
-            Err(ParamError::Sweep(SweepError::MeasureNeedsTorqueInjection)) => {}
+            Err(ParamError::Sweep(SweepError::MeasureNeedsTorqueOrPositionInjection)) => {}
             other => panic!("{point:?}: {:?}", other.map(|_| ())),
         }
     }
     // Refusal names the field group and says why.
-    let e = ParamError::Sweep(SweepError::MeasureNeedsTorqueInjection);
+    let e = ParamError::Sweep(SweepError::MeasureNeedsTorqueOrPositionInjection);
     assert_eq!(e.field(), "sweep");
 }
 
@@ -110,4 +110,50 @@ fn the_accelerometer_sensitivity_is_validated() {
         let e = Axis::new(p).err().map(|e| e.field());
         assert_eq!(e, Some("accelerometer.sensitivity"), "{bad}");
     }
+}
+
+/// With position-command injection (`servo tune --device`'s machine-end check) U is the mean
+/// of the injected position (rad) and Y the mean of the accelerometer inputs of the same ticks,
+/// this tick's included: the acceleration is read with the encoder count, as the position
+/// measure reads the position (no tick of delay, unlike the torque measure's).
+#[test]
+fn with_position_injection_u_is_the_mean_injection_and_y_the_mean_acceleration_of_the_same_ticks() {
+    let mut params = Params::default();
+    params.sweep.point = InjectionPoint::PositionCommand;
+    params.sweep.measure = SweepMeasure::MachineAcceleration;
+    params.sweep.amplitude = 0.01;
+    params.sweep.start_hz = 20.0;
+    params.sweep.stop_hz = 30.0;
+    params.sweep.points = 2;
+    params.sweep.extra_hz = 0.0;
+    params.sweep.acquisition_divider = 4;
+    params.sweep.min_settle_s = 0.0;
+    let rad_per_count = core::f32::consts::TAU / params.encoder_counts_per_rev as f32;
+    let mut axis = Axis::new(params).unwrap();
+    let hold = 1000;
+    let commands = Commands { mode: Mode::Position, position: hold, ..Commands::default() };
+    let rest = AxisInputs { encoder_count: hold as i32, ..inputs(0) };
+    axis.step(&rest, &commands);
+    axis.start_sweep().unwrap();
+    let mut ticks: Vec<(f64, f64)> = Vec::new();
+    let (mut compared, mut moving) = (0, 0);
+    let d = params.sweep.acquisition_divider as usize;
+    for k in 1..4000 {
+        let i = AxisInputs { encoder_count: hold as i32, ..inputs(k) };
+        axis.step(&i, &commands);
+        let t = axis.telemetry();
+        // The command path (no acc/dec, no correction) passes the injected position through.
+        ticks.push(((t.position_command - hold) as f64 * rad_per_count as f64, i.load_acceleration as f64));
+        if t.tick.is_multiple_of(d as u64) && axis.sweep().running() && ticks.len() > d {
+            let s = t.sweep.sample;
+            let period = &ticks[ticks.len() - d..];
+            let u = period.iter().map(|p| p.0).sum::<f64>() / d as f64;
+            let y = period.iter().map(|p| p.1).sum::<f64>() / d as f64;
+            assert!((s.u as f64 - u).abs() <= 1e-5 * u.abs().max(1e-3), "tick {}: u {} vs mean {u}", t.tick, s.u);
+            assert!((s.y as f64 - y).abs() <= 1e-5 * y.abs().max(1.0), "tick {}: y {} vs mean {y}", t.tick, s.y);
+            compared += 1;
+            moving += (u.abs() > 1e-3) as usize;
+        }
+    }
+    assert!(compared > 500 && moving > 100, "{compared} samples compared, {moving} with the injection away from 0");
 }

@@ -1,5 +1,6 @@
-//! What the sweep's acquisition relates: the loop's own signals (seed 000), or the motor's
-//! torque and the machine-end acceleration (seed 001's identification over a drive).
+//! What the sweep's acquisition relates: the loop's own signals (seed 000), or the machine-end
+//! acceleration against the motor's torque (seed 001's identification over a drive) or against
+//! the position command (the check of its correction over a drive).
 
 /// The U and Y the acquisition records.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
@@ -12,7 +13,10 @@ pub enum SweepMeasure {
     /// mean over the base ticks of its acquisition period. Both are sampled at the same
     /// instant (the phase currents' and the accelerometer's conversions), so no delay lies
     /// between them; the torque is the motor's as the drive sees it, not the command (the
-    /// current loop's lag stays out of the ratio). Torque-command injection only.
+    /// current loop's lag stays out of the ratio). With position-command injection U is the
+    /// injected position (rad) instead, Y the acceleration read with this tick's encoder count
+    /// (`servo tune --device`'s machine-end check: command → machine-end position is Y/U
+    /// over −ω²). Refused with the other injection points.
     MachineAcceleration,
 }
 

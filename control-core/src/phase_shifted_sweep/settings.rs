@@ -65,9 +65,9 @@ pub struct SweepParams {
     /// the lock; the fit sees it as noise. Below the threshold the samples are period means
     /// (see [`PhaseShiftedSweep::end_tick`](super::PhaseShiftedSweep::end_tick)) and need none.
     pub dither: f32,
-    /// What U and Y are: the loop's signals, or (torque-command injection only) the motor's
-    /// torque from the measured q current and the machine-end acceleration (see
-    /// [`SweepMeasure`]).
+    /// What U and Y are: the loop's signals, or the machine-end acceleration against the
+    /// motor's torque from the measured q current (torque-command injection) or against the
+    /// injected position (position-command injection; see [`SweepMeasure`]).
     pub measure: SweepMeasure,
 }
 
@@ -127,9 +127,10 @@ pub enum SweepError {
     NeedsPositionMode,
     /// A sweep is already running.
     Busy,
-    /// The machine-end acceleration measure with an injection point other than the torque
-    /// command (the point's own U would not be the torque the acceleration answers).
-    MeasureNeedsTorqueInjection,
+    /// The machine-end acceleration measure with an injection point other than the torque or
+    /// the position command: the velocity loop's injections would relate the acceleration to a
+    /// velocity inside the loop, which no seed-001 figure is (and Off injects nothing).
+    MeasureNeedsTorqueOrPositionInjection,
 }
 
 impl fmt::Display for SweepError {
@@ -153,9 +154,9 @@ impl fmt::Display for SweepError {
                 write!(f, "position-command injection needs position mode (the drive holding or streaming a position)")
             }
             Self::Busy => write!(f, "a sweep is already running"),
-            Self::MeasureNeedsTorqueInjection => write!(
+            Self::MeasureNeedsTorqueOrPositionInjection => write!(
                 f,
-                "the machine-end acceleration measure (sweep.measure 1) needs torque-command injection (sweep.point 1)"
+                "the machine-end acceleration measure (sweep.measure 1) needs torque-command (sweep.point 1) or position-command (sweep.point 4) injection"
             ),
         }
     }
@@ -183,8 +184,10 @@ impl SweepParams {
             }
         };
         finite_positive("amplitude", self.amplitude)?;
-        if self.measure == SweepMeasure::MachineAcceleration && self.point != InjectionPoint::TorqueCommand {
-            return Err(SweepError::MeasureNeedsTorqueInjection);
+        if self.measure == SweepMeasure::MachineAcceleration
+            && !matches!(self.point, InjectionPoint::TorqueCommand | InjectionPoint::PositionCommand)
+        {
+            return Err(SweepError::MeasureNeedsTorqueOrPositionInjection);
         }
         finite_positive("start_hz", self.start_hz)?;
         finite_positive("stop_hz", self.stop_hz)?;
@@ -310,17 +313,16 @@ mod tests {
     }
 
     #[test]
-    fn the_acceleration_measure_is_refused_without_torque_injection() {
+    fn the_acceleration_measure_is_refused_without_torque_or_position_injection() {
         let v = |p: SweepParams| p.validate(FS, 2);
         let acceleration = SweepParams { measure: SweepMeasure::MachineAcceleration, ..Default::default() };
-        for point in [
-            InjectionPoint::Off,
-            InjectionPoint::VelocityCommand,
-            InjectionPoint::VelocityFeedback,
-            InjectionPoint::PositionCommand,
-        ] {
-            assert_eq!(v(SweepParams { point, ..acceleration }), Err(SweepError::MeasureNeedsTorqueInjection));
+        for point in [InjectionPoint::Off, InjectionPoint::VelocityCommand, InjectionPoint::VelocityFeedback] {
+            assert_eq!(
+                v(SweepParams { point, ..acceleration }),
+                Err(SweepError::MeasureNeedsTorqueOrPositionInjection)
+            );
         }
         assert_eq!(v(SweepParams { point: InjectionPoint::TorqueCommand, ..acceleration }), Ok(()));
+        assert_eq!(v(SweepParams { point: InjectionPoint::PositionCommand, ..acceleration }), Ok(()));
     }
 }

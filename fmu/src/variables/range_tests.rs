@@ -21,9 +21,9 @@ const COUPLED: &[(&str, &str, &str)] = &[
     // The position-command point (the largest code) sweeps below the position loop's Nyquist
     // frequency, 2 kHz at the defaults, under the default stop frequency of 3 kHz.
     ("sweep.point", "max", "Nyquist"),
-    // The machine-end acceleration measure needs torque-command injection (the default point
-    // is the velocity command).
-    ("sweep.measure", "max", "needs torque-command injection"),
+    // The machine-end acceleration measure needs torque- or position-command injection (the
+    // default point is the velocity command).
+    ("sweep.measure", "max", "needs torque-command (sweep.point 1) or position-command"),
     // Loop rates that divide each other.
     ("ctrl.velocity_divider", "max", "whole multiple"),
     ("ctrl.position_divider", "min", "whole multiple"),

@@ -466,13 +466,13 @@ fn device_check(
         return Ok(None);
     };
     let axis = tuned_axis(tuning, args.axis.as_deref())?;
-    check_request(axis)?;
+    check_request(tuning, axis)?;
     let Some(mut session) = args.target.session()? else {
         return Ok(None);
     };
     let pb = progress_bar("tune on the drive", args.common.json);
     let frame = out.join(format!("{}.corr.frame", axis.axis));
-    let check = check_on_device(fmu, axis, (port, &mut session), &frame, &out.join("device"), |label, f| {
+    let check = check_on_device(fmu, tuning, axis, (port, &mut session), &frame, &out.join("device"), |label, f| {
         pb.set_prefix(label.to_string());
         pb.set_position((f * 1000.0) as u64)
     })?;

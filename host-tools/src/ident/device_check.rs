@@ -1,14 +1,18 @@
 //! `servo tune --device PORT`: the correction of one axis loaded into a drive over its link
 //! (the `<axis>.corr.frame` `servo tune` wrote, sent as `servo device … load-correction` sends
-//! it) and checked there: the single-axis pseudo-circle (`circle::device`, motor position) run
-//! on the drive without the correction and with it, each beside its FMU twin (the drive's
-//! parameters, and for the second run the same `corr.*` parameters as `<axis>.corr.toml`).
+//! it) and checked there, without the correction and with it, each run beside its FMU twin
+//! (the drive's parameters with the tuned axis's plant, and for the second run the same
+//! `corr.*` parameters as `<axis>.corr.toml`):
+//! - the single-axis pseudo-circle (`circle::device`, motor position);
+//! - the command → machine-end position response at the FMU check's frequencies, measured with
+//!   the drive's machine-end accelerometer (`device_machine_end`), and compared with the other
+//!   axes' responses as the FMU check measured them, before and after.
 //!
 //! What it shows: the drive runs the correction it was sent, as the twin says it should (each
-//! run within `circle::device::GOAL_COUNTS` of its twin), and what the correction does to the
-//! motor's figure, on the drive and on the twin side by side. What it cannot show: that the
-//! axes' machine-end responses became alike — a drive reads its motor encoder only, and one
-//! drive is one axis.
+//! run within `circle::device::GOAL_COUNTS` of its twin on the motor, within
+//! `device_machine_end::GOAL_DB`/`GOAL_DEG` at the machine end), what the correction does to
+//! the motor's figure, and that it brings this axis's machine-end response to the other axes'
+//! (one drive is one axis: the others are the FMU check's).
 
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
@@ -23,6 +27,7 @@ use crate::device::session::DriveSession;
 use crate::fmu::circle::{CircleRequest, Direction, Measure};
 use crate::fmu::runner::Fmu;
 use crate::fmu::scenario::Value;
+use crate::ident::device_machine_end::{check_machine_end, MachineEndCheck, MachineEndRequest};
 use crate::ident::tuning::{TunedAxis, Tuning};
 
 /// The pseudo-circle of the check: the FMU check's circle (0.05 rad at 20 Hz, the
@@ -53,7 +58,10 @@ pub struct TuneDeviceCheck {
     pub mean_radius_change: (f64, f64),
     /// Drive vs twin goal (rad), each run: `GOAL_COUNTS` encoder counts.
     pub goal: f64,
-    /// Both runs within the goal of their twin, nothing dropped or lost.
+    /// The command → machine-end position response, without and with the correction.
+    pub machine_end: MachineEndCheck,
+    /// Every run within the goal of its twin, nothing dropped or lost, and (with the FMU
+    /// check) the corrected machine-end response closer to the other axes' than the uncorrected.
     pub passed: bool,
 }
 
@@ -68,15 +76,20 @@ pub fn tuned_axis<'a>(tuning: &'a Tuning, axis: Option<&str>) -> Result<&'a Tune
     })
 }
 
-/// The request of the check on `axis`: its parameters but the plant's (`plant.*` is the
-/// twin's picture of the machine; the drive has its own), no correction.
-fn circle_request(axis: &TunedAxis) -> CircleRequest {
-    let drive: BTreeMap<String, Value> = axis
-        .fmu_parameters
+/// The parameters of the check on `axis`, no correction: the drive takes their controller
+/// part; the twin all of them, its plant the tuned axis's (`plant.*`: the model the
+/// correction was made for; on a board, the user's picture of the machine).
+fn axis_parameters(axis: &TunedAxis) -> BTreeMap<String, Value> {
+    axis.fmu_parameters
         .iter()
-        .filter(|(k, _)| !k.starts_with("plant.") && !k.starts_with("corr."))
+        .filter(|(k, _)| !k.starts_with("corr."))
         .map(|(k, v)| (k.clone(), Value::Float(*v)))
-        .collect();
+        .collect()
+}
+
+/// The circle of the check on `axis`.
+fn circle_request(axis: &TunedAxis) -> CircleRequest {
+    let drive = axis_parameters(axis);
     CircleRequest {
         radius: RADIUS,
         feed: RADIUS * std::f64::consts::TAU * FREQUENCY_HZ,
@@ -88,15 +101,20 @@ fn circle_request(axis: &TunedAxis) -> CircleRequest {
     }
 }
 
-/// The check's request, refused before any drive is touched if the circle cannot run there.
-pub fn check_request(axis: &TunedAxis) -> Result<()> {
-    crate::circle::device::pseudo_circle_sweep(&circle_request(axis)).map(|_| ())
+/// The check's request, refused before any drive is touched if the circle or the machine-end
+/// sweep cannot run there.
+pub fn check_request(tuning: &Tuning, axis: &TunedAxis) -> Result<()> {
+    crate::circle::device::pseudo_circle_sweep(&circle_request(axis))?;
+    let top_hz = (2.0 * tuning.position_bandwidth_hz).round();
+    crate::ident::device_machine_end::machine_end_sweep(&axis_parameters(axis), top_hz).map(|_| ())
 }
 
 /// Load `axis`'s correction (`frame`) into the drive behind `session` and run the check;
-/// files in `out` (`without/`, `with/`: each run's points, samples, plot and JSON).
+/// files in `out` (`without/`, `with/`: each circle's points, samples, plot and JSON;
+/// `machine_end_without/`, `machine_end_with/`: the machine-end sweeps' samples).
 pub fn check_on_device<T: DrivePort>(
     fmu: &Fmu,
+    tuning: &Tuning,
     axis: &TunedAxis,
     (port, session): (&str, &mut DriveSession<T>),
     frame: &Path,
@@ -118,6 +136,15 @@ pub fn check_on_device<T: DrivePort>(
         run_on_device_loading(fmu, &request, (port, &mut *session), Some(&correction), &out.join("with"), |l, f| {
             progress(&format!("with correction: {l}"), f)
         })?;
+    let parameters = axis_parameters(axis);
+    let machine_end_request = MachineEndRequest {
+        tuning,
+        axis: &axis.axis,
+        parameters: &parameters,
+        correction: (axis.correction.parameters(), &correction),
+    };
+    let machine_end =
+        check_machine_end(fmu, &machine_end_request, session, out, |l, f| progress(&format!("machine end {l}"), f))?;
     let change = |i: usize| difference(&with.feedback[i], &without.feedback[i]);
     let mean_change = |i: usize| with.runs[i].feedback.mean_radius_error - without.runs[i].feedback.mean_radius_error;
     Ok(TuneDeviceCheck {
@@ -132,7 +159,8 @@ pub fn check_on_device<T: DrivePort>(
         change_on_twin: change(1),
         mean_radius_change: (mean_change(0), mean_change(1)),
         goal: with.goal,
-        passed: without.passed && with.passed,
+        passed: without.passed && with.passed && machine_end.matches_twin && machine_end.equalised != Some(false),
+        machine_end,
         without,
         with,
     })
@@ -186,9 +214,9 @@ impl TuneDeviceCheck {
             self.with.dropped,
             self.without.corrupt_frames,
             self.with.corrupt_frames,
-            if self.passed { "met" } else { "NOT MET" }
+            if self.without.passed && self.with.passed { "met" } else { "NOT MET" }
         );
-        println!("    (motor position only: a drive has no machine-end sensor, so the axes' equalisation is the FMU check's)");
+        self.machine_end.print();
         for f in self.without.files.iter().chain(&self.with.files) {
             println!("    → {}", f.display());
         }

@@ -87,6 +87,8 @@ struct SineFit {
     y: f64,
     yc: f64,
     ys: f64,
+    /// Σy², for the residual of the fit ([`SineFit::relative_standard_error`]).
+    yy: f64,
 }
 
 impl SineFit {
@@ -104,6 +106,25 @@ impl SineFit {
         self.y += y;
         self.yc += y * c;
         self.ys += y * s;
+        self.yy += y * y;
+    }
+
+    /// Standard error of Y's fitted complex amplitude relative to its size, from the residual
+    /// of y about the fitted sine (n − 3 degrees of freedom): the relative standard error of
+    /// Y/U when U is exact (an injected sine), the scatter of y (noise, quantisation) its source.
+    fn relative_standard_error(&self) -> f64 {
+        let n = self.n;
+        if n <= 3.0 {
+            return f64::INFINITY;
+        }
+        let scc = self.cc - self.c * self.c / n;
+        let sss = self.ss - self.s * self.s / n;
+        let scs = self.cs - self.c * self.s / n;
+        let det = scc * sss - scs * scs;
+        let (pc, ps) = (self.yc - self.y * self.c / n, self.ys - self.y * self.s / n);
+        let (a, b) = ((sss * pc - scs * ps) / det, (scc * ps - scs * pc) / det);
+        let residual = (self.yy - self.y * self.y / n - (a * pc + b * ps)).max(0.0) / (n - 3.0);
+        (residual * (sss + scc) / det).sqrt() / a.hypot(b)
     }
 
     fn solve(&self) -> (Complex64, Complex64, f64) {
@@ -129,6 +150,12 @@ impl SineFit {
 /// after its settling check (from the last half-block index minus one up). Needs one acquisition
 /// sample per communication step (acquisition divider = the position divider).
 pub fn stream_results(t: &Trace, settings: &SweepParams) -> Result<Vec<ResponsePoint>> {
+    Ok(stream_results_with_errors(t, settings)?.into_iter().map(|(p, _)| p).collect())
+}
+
+/// As [`stream_results`], each point with the relative standard error of its response from the
+/// scatter of y about the fitted sine (see `SineFit::relative_standard_error`).
+pub fn stream_results_with_errors(t: &Trace, settings: &SweepParams) -> Result<Vec<(ResponsePoint, f64)>> {
     let [point, measuring, u, y, phase, time, half_block] =
         columns(t, ["acq_point", "acq_measuring", "acq_u", "acq_y", "acq_phase", "acq_time", "acq_half_block"])?;
     // Each frequency's last half-block index: the samples before the one preceding it were
@@ -156,7 +183,10 @@ pub fn stream_results(t: &Trace, settings: &SweepParams) -> Result<Vec<ResponseP
         .map(|(&k, fit)| {
             let (uu, yy, quality) = fit.solve();
             let g = if quality > 0.0 { yy / uu * sign } else { Complex64::new(f64::NAN, f64::NAN) };
-            ResponsePoint::from_complex(settings.frequency(k as usize) as f64, g, quality)
+            (
+                ResponsePoint::from_complex(settings.frequency(k as usize) as f64, g, quality),
+                fit.relative_standard_error(),
+            )
         })
         .collect())
 }

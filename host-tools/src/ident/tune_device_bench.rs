@@ -1,0 +1,243 @@
+//! `servo bench tune-device`: `servo tune --device`'s check (the correction loaded into a
+//! drive, the pseudo-circle and the machine-end response without and with it, each beside
+//! its FMU twin) over the virtual drive in this process (deterministic, 921 600 Bd), for
+//! every axis of pairs of absorbers across the identification grid's range (15–300 Hz, 5 %
+//! damping, and a rigid axis), accelerometer noise off and on: the worst drive − twin
+//! figures against their goals, and how far the drive's machine-end response lies from the
+//! other axis's before and after the correction.
+
+use std::collections::BTreeMap;
+use std::path::Path;
+
+use anyhow::Result;
+use serde::Serialize;
+use servo_axis::plant::PlantParams;
+use servo_axis::variables::name;
+
+use crate::circle::device::GOAL_COUNTS;
+use crate::cli::{progress_bar, Common};
+use crate::device::link::DeviceLink;
+use crate::device::session::DriveSession;
+use crate::fmu::configuration::configuration;
+use crate::fmu::runner::Fmu;
+use crate::fmu::scenario::Value;
+use crate::ident::bench::DAMPING;
+use crate::ident::device_check::{check_on_device, TuneDeviceCheck};
+use crate::ident::device_machine_end::{GOAL_FLOOR, GOAL_STANDARD_ERRORS};
+use crate::ident::identification::{absorber_parameters, true_anti_resonance, AxisModel};
+use crate::ident::tuning::{tune, write, Method};
+use crate::paths::{default_fmu, default_out};
+use crate::virtual_drive::flash::FileFlash;
+use crate::virtual_drive::in_process::InProcessDrive;
+use crate::virtual_drive::simulator::{VirtualDrive, VirtualDriveSettings};
+use crate::virtual_drive::uart::LineSettings;
+
+/// Time the bench gives each answer (the drive runs in this process: generous).
+const ANSWER_TIMEOUT: std::time::Duration = std::time::Duration::from_secs(10);
+
+/// The pairs of axes (anti-resonance in Hz, None: rigid): the demo's 40/70 Hz, the ends of
+/// the identification grid, and a rigid axis beside a resonant one.
+pub const PAIRS: [(Option<f64>, Option<f64>); 5] = [
+    (Some(40.0), Some(70.0)),
+    (Some(15.0), Some(30.0)),
+    (Some(70.0), Some(150.0)),
+    (Some(150.0), Some(300.0)),
+    (Some(40.0), None),
+];
+/// Accelerometer noise of the "on" rows (rad/s² per 16 kHz tick, `plant.acceleration_noise_std`):
+/// 4 counts of the simulated accelerometer, the amplitude of the machine-end check's lowest
+/// frequency's acceleration.
+pub const NOISE_STD: f64 = 2.0;
+
+/// `servo tune --device`'s check over the virtual drive (in process, 921 600 Bd) for every
+/// axis of absorber pairs 15–300 Hz and a rigid axis, accelerometer noise off and on: drive
+/// vs twin on the motor's pseudo-circle and at the machine end, and the machine end against
+/// the other axis before and after the correction.
+#[derive(clap::Args)]
+pub struct TuneDeviceBenchArgs {
+    #[command(flatten)]
+    pub common: Common,
+}
+
+/// One axis's check.
+#[derive(Clone, Debug, Serialize)]
+pub struct TuneDeviceCase {
+    pub pair: (Option<f64>, Option<f64>),
+    pub axis: String,
+    pub noise_std: f64,
+    /// Pseudo-circle drive − twin, largest over both runs (encoder counts).
+    pub circle_counts: f64,
+    /// Machine end drive − twin, largest over both runs and frequencies (dB, degrees), and
+    /// relative (|ΔH|/|H|) and in standard errors.
+    pub machine_end: (f64, f64),
+    pub machine_end_relative: (f64, f64),
+    /// The sine's amplitude (rad: lowered from the default where the accelerometer would clip).
+    pub amplitude: f64,
+    /// Machine end against the other axis up to the bandwidth: before, after (dB, degrees).
+    pub versus_other: Option<((f64, f64), (f64, f64))>,
+    /// The FMU check's spread between the axes: before, after (dB, degrees).
+    pub fmu_spread: Option<((f64, f64), (f64, f64))>,
+    pub wall_time_s: f64,
+    pub report: TuneDeviceCheck,
+}
+
+fn model(axis: &str, hz: Option<f64>) -> AxisModel {
+    let load = PlantParams::default().load_inertia;
+    let parameters = hz.map(|h| absorber_parameters(h, DAMPING, load)).unwrap_or_default();
+    let fmu_parameters: BTreeMap<String, f64> = parameters.iter().map(|(k, v)| (k.clone(), v.as_f64())).collect();
+    let anti_resonance = hz.map(|_| {
+        let p = |n: &str| fmu_parameters[n];
+        true_anti_resonance(
+            p(name::plant_absorber_inertia),
+            p(name::plant_absorber_stiffness),
+            p(name::plant_absorber_damping),
+        )
+    });
+    AxisModel {
+        axis: axis.into(),
+        anti_resonance,
+        resonance: None,
+        gain: 1.0 / (PlantParams::default().motor_inertia + load),
+        band: (5.0, 500.0),
+        fit_error: 0.0,
+        fmu_parameters,
+    }
+}
+
+fn check_axis(
+    fmu: &Fmu,
+    tuning: &crate::ident::tuning::Tuning,
+    axis: &crate::ident::tuning::TunedAxis,
+    noise_std: f64,
+    out: &Path,
+) -> Result<TuneDeviceCheck> {
+    let mut parameters: BTreeMap<String, Value> =
+        axis.fmu_parameters.iter().map(|(k, v)| (k.clone(), Value::Float(*v))).collect();
+    parameters.insert(name::plant_acceleration_noise_std.into(), Value::Float(noise_std));
+    let c = configuration(&parameters)?;
+    let vd =
+        VirtualDriveSettings { defaults: c.control, plant: c.plant, line: LineSettings::default(), faults: vec![] };
+    let drive = VirtualDrive::power_on(&vd, FileFlash::in_memory())?;
+    let mut session = DriveSession::open(DeviceLink::new(InProcessDrive::new(drive), ANSWER_TIMEOUT))?;
+    session.baud = LineSettings::default().baud;
+    let frame = out.join(format!("{}.corr.frame", axis.axis));
+    let device = out.join(format!("device_{}_{}", axis.axis, if noise_std > 0.0 { "noise" } else { "clean" }));
+    check_on_device(fmu, tuning, axis, ("in-process virtual drive", &mut session), &frame, &device, |_, _| {})
+}
+
+pub fn bench(fmu: &Fmu, out: &Path, mut progress: impl FnMut(f64)) -> Result<Vec<TuneDeviceCase>> {
+    let count = std::f64::consts::TAU / control_core::Params::default().encoder_counts_per_rev as f64;
+    let mut cases = Vec::new();
+    let total = (PAIRS.len() * 4) as f64;
+    for &(x, y) in &PAIRS {
+        let label = |h: Option<f64>| h.map_or("rigid".into(), |h| format!("{h}"));
+        let dir = out.join(format!("{}_{}", label(x), label(y)));
+        let models = [model("x", x), model("y", y)];
+        let tuning = tune(fmu, &models, Method::Response, true, |_| {})?;
+        write(&tuning, &dir)?;
+        for axis in &tuning.axes {
+            for noise_std in [0.0, NOISE_STD] {
+                progress(cases.len() as f64 / total);
+                let started = std::time::Instant::now();
+                let r = check_axis(fmu, &tuning, axis, noise_std, &dir)?;
+                let m = &r.machine_end;
+                let largest = |a: (f64, f64), b: (f64, f64)| (a.0.max(b.0), a.1.max(b.1));
+                cases.push(TuneDeviceCase {
+                    pair: (x, y),
+                    axis: axis.axis.clone(),
+                    noise_std,
+                    circle_counts: r.without.difference.largest.max(r.with.difference.largest) / count,
+                    machine_end: largest(m.without.largest_difference, m.with.largest_difference),
+                    machine_end_relative: largest(
+                        (m.without.largest_relative_difference, m.without.largest_standard_errors),
+                        (m.with.largest_relative_difference, m.with.largest_standard_errors),
+                    ),
+                    amplitude: m.amplitude,
+                    versus_other: m.without.largest_versus_other_axes.zip(m.with.largest_versus_other_axes),
+                    fmu_spread: m.fmu_spread,
+                    wall_time_s: started.elapsed().as_secs_f64(),
+                    report: r,
+                });
+            }
+        }
+    }
+    Ok(cases)
+}
+
+impl TuneDeviceBenchArgs {
+    pub fn run(&self) -> Result<bool> {
+        let c = &self.common;
+        let fmu = Fmu::load(&c.fmu.clone().unwrap_or_else(default_fmu))?;
+        let out = c.out.clone().unwrap_or_else(|| default_out("bench/tune-device"));
+        let pb = progress_bar("tune-device bench", c.json);
+        let cases = bench(&fmu, &out, |f| pb.set_position((f * 1000.0) as u64))?;
+        pb.finish_and_clear();
+        let ok = cases.iter().all(|c| c.report.passed);
+        if c.json {
+            let j = serde_json::json!({"bench": "tune-device", "cases": cases, "passed": ok});
+            println!("{}", serde_json::to_string_pretty(&j)?);
+            return Ok(ok);
+        }
+        print(&cases);
+        println!("  goal on every row: {}", if ok { "met" } else { "NOT met" });
+        Ok(ok)
+    }
+}
+
+fn print(cases: &[TuneDeviceCase]) {
+    println!(
+        "servo bench tune-device — servo tune --device's check over the virtual drive (in process, 921 600 Bd), response method, absorber pairs (damping {DAMPING}) and a rigid axis, accelerometer noise off and {NOISE_STD} rad/s² a tick"
+    );
+    println!(
+        "  goals: drive − twin ≤ {GOAL_COUNTS} counts on the pseudo-circle; at the machine end |H_drive − H_twin| ≤ {} % of |H| + {GOAL_STANDARD_ERRORS} standard errors (every frequency, both runs); the machine end closer to the other axis with the correction than without (up to the bandwidth); 0 samples lost",
+        100.0 * GOAL_FLOOR
+    );
+    println!(
+        "  {:>12} {:>4} {:>6} {:>8} {:>7} {:>18} {:>14} {:>22} {:>22} {:>22} {:>6}  goal",
+        "pair Hz",
+        "axis",
+        "noise",
+        "circle",
+        "mrad",
+        "machine end",
+        "rel. % / σ",
+        "vs other: before",
+        "after",
+        "FMU check: after",
+        "wall s"
+    );
+    let h = |v: Option<f64>| v.map_or("rigid".to_string(), |x| format!("{x}"));
+    let pair = |v: Option<(f64, f64)>| v.map_or("-".to_string(), |(a, b)| format!("{a:.4} dB {b:.3}°"));
+    for c in cases {
+        println!(
+            "  {:>12} {:>4} {:>6} {:>8.2} {:>7.2} {:>18} {:>14} {:>22} {:>22} {:>22} {:>6.1}  {}",
+            format!("{}/{}", h(c.pair.0), h(c.pair.1)),
+            c.axis,
+            if c.noise_std > 0.0 { "on" } else { "off" },
+            c.circle_counts,
+            1e3 * c.amplitude,
+            pair(Some(c.machine_end)),
+            format!("{:.3}/{:.2}", 100.0 * c.machine_end_relative.0, c.machine_end_relative.1),
+            pair(c.versus_other.map(|v| v.0)),
+            pair(c.versus_other.map(|v| v.1)),
+            pair(c.fmu_spread.map(|v| v.1)),
+            c.wall_time_s,
+            if c.report.passed { "met" } else { "MISSED" }
+        );
+    }
+    for noisy in [false, true] {
+        let rows: Vec<&TuneDeviceCase> = cases.iter().filter(|c| (c.noise_std > 0.0) == noisy).collect();
+        let worst = |f: &dyn Fn(&TuneDeviceCase) -> f64| rows.iter().map(|c| f(c)).fold(0.0f64, f64::max);
+        println!(
+            "  worst, noise {}: circle drive − twin {:.2} counts; machine end drive − twin {:.4} dB, {:.3}°, {:.3} % of the response, {:.2} standard errors; after the correction vs the other axis {:.4} dB, {:.3}°",
+            if noisy { "on" } else { "off" },
+            worst(&|c| c.circle_counts),
+            worst(&|c| c.machine_end.0),
+            worst(&|c| c.machine_end.1),
+            100.0 * worst(&|c| c.machine_end_relative.0),
+            worst(&|c| c.machine_end_relative.1),
+            worst(&|c| c.versus_other.map_or(0.0, |v| v.1 .0)),
+            worst(&|c| c.versus_other.map_or(0.0, |v| v.1 .1)),
+        );
+    }
+}
