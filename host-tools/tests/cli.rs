@@ -169,7 +169,7 @@ fn circle_refuses_what_cannot_make_a_circle_test() {
         (vec!["--set", "plant.load_coulomb"], "NAME=VALUE"),
         // Over a drive: refused before any port is opened.
         (vec!["--device", "/dev/no-such-port"], "add --single x"),
-        (vec!["--single", "x", "--device", "/dev/no-such-port", "--measure", "load"], "no machine-end sensor"),
+        (vec!["--single", "x", "--device", "/dev/no-such-port", "--measure", "load"], "no machine-end position sensor"),
         (vec!["--single", "x", "--device", "/dev/no-such-port", "--compare", "ctrl.kp=1"], "are for the FMU"),
     ] {
         let o = servo()

@@ -257,13 +257,13 @@ fn a_pseudo_circle_over_the_virtual_drive_matches_its_twin() {
     for f in ["pseudo_circle.svg", "pseudo_circle.csv", "pseudo_circle_twin.csv", "pseudo_circle.json"] {
         assert!(dir.join("out").join(f).exists(), "{f} missing");
     }
-    // A drive has no machine-end sensor: asking for it is refused before the port is opened.
+    // A drive has no machine-end position sensor: asking for it is refused before the port is opened.
     let o = output_within(
         servo().args(["circle", "--single", "x", "--measure", "load", "--device", &vd.port, "--fmu"]).arg(fmu_path()),
         30,
     );
     assert_eq!(o.status.code(), Some(2));
-    assert!(String::from_utf8_lossy(&o.stderr).contains("no machine-end sensor"));
+    assert!(String::from_utf8_lossy(&o.stderr).contains("no machine-end position sensor"));
 }
 
 /// `servo tune --device` over a virtual drive whose plant is axis y's of the 40/70 Hz pair

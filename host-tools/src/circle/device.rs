@@ -97,7 +97,7 @@ pub struct DeviceCircleReport {
 pub fn pseudo_circle_sweep(r: &CircleRequest) -> Result<SweepRun> {
     if r.measure == Measure::Load {
         bail!(
-            "--measure load: a drive has no machine-end sensor (the IHM08M1 reads the motor's encoder only); the circle over a drive measures the motor position (--measure motor, the default with --device)"
+            "--measure load: a drive has no machine-end position sensor (its machine-end input is an accelerometer, which `servo ident --device` and `servo tune --device` use for responses, not a position a figure can be drawn from); the circle over a drive measures the motor position (--measure motor, the default with --device)"
         );
     }
     r.quarter()?;
