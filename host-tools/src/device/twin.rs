@@ -7,10 +7,46 @@ use std::path::{Path, PathBuf};
 use anyhow::Result;
 use serde::Serialize;
 
+use crate::analysis::response_point::ResponsePoint;
 use crate::device::telemetry_trace::difference;
 use crate::device::timed_run::SentAt;
 use crate::fmu::trace::Trace;
 use crate::plot::signals::plot_signals;
+
+/// One frequency point of a response measured on a drive and on its FMU twin (`servo ident
+/// --device`, the machine end of `servo tune --device`).
+#[derive(Clone, Copy, Debug, Serialize)]
+pub struct DriveTwinPoint {
+    pub frequency: f64,
+    pub drive_db: f64,
+    pub drive_deg: f64,
+    pub twin_db: f64,
+    pub twin_deg: f64,
+    /// Drive − twin (dB, degrees).
+    pub difference_db: f64,
+    pub difference_deg: f64,
+}
+
+impl DriveTwinPoint {
+    /// The drive's and the twin's point at `drive`'s frequency, and their difference as the
+    /// caller found it (infinite where the two grids do not match).
+    pub fn new(drive: &ResponsePoint, twin: &ResponsePoint, (difference_db, difference_deg): (f64, f64)) -> Self {
+        Self {
+            frequency: drive.frequency,
+            drive_db: drive.gain_db,
+            drive_deg: drive.phase_deg,
+            twin_db: twin.gain_db,
+            twin_deg: twin.phase_deg,
+            difference_db,
+            difference_deg,
+        }
+    }
+
+    /// The drive's point.
+    pub fn drive(&self) -> ResponsePoint {
+        ResponsePoint { frequency: self.frequency, gain_db: self.drive_db, phase_deg: self.drive_deg, quality: 1.0 }
+    }
+}
 
 #[derive(Clone, Debug, Serialize)]
 pub struct TraceDifference {

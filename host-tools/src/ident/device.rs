@@ -28,6 +28,7 @@ use serde::Serialize;
 use crate::analysis::response_point::{difference, ResponsePoint};
 use crate::device::link::DrivePort;
 use crate::device::session::DriveSession;
+use crate::device::twin::DriveTwinPoint;
 use crate::fmu::configuration::configuration;
 use crate::fmu::runner::Fmu;
 use crate::fmu::scenario::Value;
@@ -93,13 +94,8 @@ pub fn identify_run(axis: &str, measured: Measured, parameters: &BTreeMap<String
 /// One frequency point: the drive's response, the twin's, their difference.
 #[derive(Clone, Copy, Debug, Serialize)]
 pub struct PointDifference {
-    pub frequency: f64,
-    pub drive_db: f64,
-    pub drive_deg: f64,
-    pub twin_db: f64,
-    pub twin_deg: f64,
-    pub difference_db: f64,
-    pub difference_deg: f64,
+    #[serde(flatten)]
+    pub response: DriveTwinPoint,
     /// |H_drive − H_twin| over the standard error of that difference (both measurements'
     /// standard errors from their periods' scatter).
     pub standard_errors: f64,
@@ -200,16 +196,7 @@ pub fn compare(drive: &Measured, twin: &Measured) -> (Vec<PointDifference>, (f64
             let standard_errors = (hd - ht).norm() / ed.hypot(et);
             let (dg, dp) = if (f - ft).abs() <= 1e-9 * f { difference(&d, &t) } else { (f64::INFINITY, f64::INFINITY) };
             largest = (largest.0.max(dg.abs()), largest.1.max(dp.abs()), largest.2.max(standard_errors));
-            PointDifference {
-                frequency: f,
-                drive_db: d.gain_db,
-                drive_deg: d.phase_deg,
-                twin_db: t.gain_db,
-                twin_deg: t.phase_deg,
-                difference_db: dg,
-                difference_deg: dp,
-                standard_errors,
-            }
+            PointDifference { response: DriveTwinPoint::new(&d, &t, (dg, dp)), standard_errors }
         })
         .collect();
     if drive.frequencies.len() != twin.frequencies.len() {
@@ -348,13 +335,13 @@ fn write_files(r: &DeviceIdentification, out: &Path) -> Result<Vec<PathBuf>> {
     );
     for p in &r.points {
         t.rows.push(vec![
-            p.frequency,
-            p.drive_db,
-            p.drive_deg,
-            p.twin_db,
-            p.twin_deg,
-            p.difference_db,
-            p.difference_deg,
+            p.response.frequency,
+            p.response.drive_db,
+            p.response.drive_deg,
+            p.response.twin_db,
+            p.response.twin_deg,
+            p.response.difference_db,
+            p.response.difference_deg,
             p.standard_errors,
         ]);
     }

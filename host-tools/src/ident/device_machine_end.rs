@@ -38,6 +38,7 @@ use serde::Serialize;
 use crate::analysis::response_point::{difference, ResponsePoint};
 use crate::device::link::DrivePort;
 use crate::device::session::DriveSession;
+use crate::device::twin::DriveTwinPoint;
 use crate::fmu::runner::Fmu;
 use crate::fmu::scenario::Value;
 use crate::fmu::sweep_run::SweepRun;
@@ -128,15 +129,9 @@ fn as_position(p: &ResponsePoint) -> ResponsePoint {
 /// One run (without or with the correction) at one frequency.
 #[derive(Clone, Copy, Debug, Serialize)]
 pub struct MachineEndPoint {
-    pub frequency: f64,
-    /// Command → machine-end position (dB, degrees): the drive's, the twin's.
-    pub drive_db: f64,
-    pub drive_deg: f64,
-    pub twin_db: f64,
-    pub twin_deg: f64,
-    /// Drive − twin (dB, degrees).
-    pub difference_db: f64,
-    pub difference_deg: f64,
+    /// Command → machine-end position (dB, degrees): the drive's, the twin's, drive − twin.
+    #[serde(flatten)]
+    pub response: DriveTwinPoint,
     /// |H_drive − H_twin| / |H_twin|, and the relative standard error of that difference (both
     /// measurements' from their samples' scatter).
     pub relative_difference: f64,
@@ -275,13 +270,7 @@ fn run_of(
                 versus = Some((w.0.max(v.0), w.1.max(v.1)));
             }
             MachineEndPoint {
-                frequency: d.frequency,
-                drive_db: d.gain_db,
-                drive_deg: d.phase_deg,
-                twin_db: t.gain_db,
-                twin_deg: t.phase_deg,
-                difference_db: dd,
-                difference_deg: dp,
+                response: DriveTwinPoint::new(&d, &t, (dd, dp)),
                 relative_difference,
                 standard_error,
                 within_goal,
@@ -294,8 +283,8 @@ fn run_of(
     for p in &points {
         if let Some((g, ph)) = p.multisine {
             let (dg, dp) = difference(
-                &ResponsePoint { frequency: p.frequency, gain_db: p.drive_db, phase_deg: p.drive_deg, quality: 1.0 },
-                &ResponsePoint { frequency: p.frequency, gain_db: g, phase_deg: ph, quality: 1.0 },
+                &p.response.drive(),
+                &ResponsePoint { frequency: p.response.frequency, gain_db: g, phase_deg: ph, quality: 1.0 },
             );
             let (wg, (lo, hi)) = versus_multisine.unwrap_or((0.0, (f64::INFINITY, f64::NEG_INFINITY)));
             versus_multisine = Some((wg.max(dg.abs()), (lo.min(dp), hi.max(dp))));
@@ -445,7 +434,7 @@ pub fn check_machine_end<T: DrivePort>(
         amplitude: run.settings.amplitude as f64,
         accelerometer_range: range,
         twin_peak_acceleration: peak,
-        frequencies: without.points.iter().map(|p| p.frequency).collect(),
+        frequencies: without.points.iter().map(|p| p.response.frequency).collect(),
         matches_twin: within(&without) && within(&with),
         goal: (GOAL_FLOOR, GOAL_STANDARD_ERRORS),
         equalised,
@@ -470,15 +459,15 @@ impl MachineEndCheck {
         for (a, b) in self.without.points.iter().zip(&self.with.points) {
             println!(
                 "    {:>6.1} {:>10.3} dB {:>6.2}° {:>10.3} dB {:>6.2}° {:>10.3} dB {:>6.2}° {:>10.3} dB {:>6.2}° {:>18} {:>18}",
-                a.frequency,
-                a.drive_db,
-                a.drive_deg,
-                a.twin_db,
-                a.twin_deg,
-                b.drive_db,
-                b.drive_deg,
-                b.twin_db,
-                b.twin_deg,
+                a.response.frequency,
+                a.response.drive_db,
+                a.response.drive_deg,
+                a.response.twin_db,
+                a.response.twin_deg,
+                b.response.drive_db,
+                b.response.drive_deg,
+                b.response.twin_db,
+                b.response.twin_deg,
                 v(a.versus_other_axes),
                 v(b.versus_other_axes)
             );
