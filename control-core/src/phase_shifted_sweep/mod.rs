@@ -191,7 +191,7 @@ pub struct PhaseShiftedSweep {
     previous_half: Option<((f32, f32), f32)>,
     discarded_halves: u32,
     /// The last comparison's difference of the two half blocks' responses (see
-    /// [`Self::settled`]) and whether it was above the noise.
+    /// [`Self::settled`]), whether it was above the noise, and its size over its limit.
     previous_difference: (f32, f32),
     previous_above_noise: bool,
     previous_excess: f32,
