@@ -95,8 +95,11 @@ pub struct IdentBenchArgs {
 /// the drive over its link (LoadCorrection, the <axis>.corr.frame) and checks it there: the
 /// single-axis pseudo-circle of the motor position (as `servo circle --single x --device`)
 /// without and with the correction, each beside its FMU twin (the drive's parameters, and the
-/// same corr.* parameters), in the table and in tune.json's "device" section. A drive has no
-/// machine-end sensor: the equalisation of the axes stays the FMU check's.
+/// same corr.* parameters), and, over the drive's machine-end accelerometer, the axis's
+/// position command → machine-end response at 5–40 Hz without and with the correction, beside
+/// its twin (the tuned axis's plant) and against the other axes as the FMU measures them: in
+/// the table and in tune.json's "device" section. Start a virtual drive with the tuned axis's
+/// plant (--set plant.*), or the twin differs from it by its plant.
 ///
 /// Example: servo ident --anti-resonance x=40,y=70 && servo tune --model out/ident/x.model.json out/ident/y.model.json
 #[derive(clap::Args)]
