@@ -19,7 +19,6 @@ use std::path::{Path, PathBuf};
 use anyhow::{anyhow, bail, Result};
 use control_core::excitation::InjectionPoint;
 use control_core::phase_shifted_sweep::{SweepParams, SweepSignal};
-use control_core::protocol::Request;
 use control_core::response_correction::CorrectionParams;
 use serde::Serialize;
 
@@ -32,8 +31,7 @@ use crate::fmu::runner::Fmu;
 use crate::fmu::scenario::DEFAULT_STEP;
 use crate::fmu::sweep_run::SweepRun;
 use crate::fmu::trace::Trace;
-use crate::sweep::device::sweep_on_drive_after;
-use crate::sweep::device_report::save_partial;
+use crate::sweep::device::sweep_on_drive_loading;
 
 /// Drive − twin for the feedback figures: the radial difference at matching angles (rad).
 #[derive(Clone, Copy, Debug, Serialize)]
@@ -226,14 +224,9 @@ pub fn run_on_device_loading<T: DrivePort>(
     if correction.is_some() {
         drive_run.parameters.retain(|k, _| !k.starts_with("corr."));
     }
-    let load = |s: &mut DriveSession<T>| match correction {
-        Some(c) => s.order(Request::LoadCorrection(*c), "the correction (LoadCorrection)"),
-        None => Ok(()),
-    };
-    let drive = match sweep_on_drive_after(session, &drive_run, load, |f| progress("circle on the drive", f)) {
-        Ok(d) => d,
-        Err(e) => return Err(save_partial(session, out, "pseudo_circle", e)),
-    };
+    let drive = sweep_on_drive_loading(session, &drive_run, correction, (out, "pseudo_circle"), |f| {
+        progress("circle on the drive", f)
+    })?;
     let twin_trace = run.run(fmu, |f| progress("twin on the FMU", f))?;
     let on_drive = pseudo_circle_of_samples(&drive.trace, request)?;
     let twin = pseudo_circle_of_samples(&twin_trace, request)?;

@@ -30,7 +30,6 @@ use std::path::Path;
 use anyhow::{bail, Result};
 use control_core::excitation::InjectionPoint;
 use control_core::phase_shifted_sweep::{SweepMeasure, SweepParams, SweepSignal};
-use control_core::protocol::Request;
 use control_core::response_correction::CorrectionParams;
 use num_complex::Complex64;
 use serde::Serialize;
@@ -45,8 +44,7 @@ use crate::fmu::sweep_run::SweepRun;
 use crate::fmu::sweep_run::START_AT;
 use crate::fmu::trace::Trace;
 use crate::ident::tuning::Tuning;
-use crate::sweep::device::sweep_on_drive_after;
-use crate::sweep::device_report::save_partial;
+use crate::sweep::device::sweep_on_drive_loading;
 use crate::sweep::measurement::{stream_results, stream_results_with_errors};
 
 /// Frequencies of the check: [`POINTS`] whole frequencies evenly spaced up to the top of the
@@ -326,14 +324,9 @@ fn measure<T: DrivePort>(
     std::fs::create_dir_all(out)?;
     let mut drive_run = run.clone();
     drive_run.parameters.retain(|k, _| !k.starts_with("corr."));
-    let load = |s: &mut DriveSession<T>| match correction {
-        Some(c) => s.order(Request::LoadCorrection(*c), "the correction (LoadCorrection)"),
-        None => Ok(()),
-    };
-    let drive = match sweep_on_drive_after(session, &drive_run, load, |f| progress("machine end on the drive", f)) {
-        Ok(d) => d,
-        Err(e) => return Err(save_partial(session, out, "machine_end", e)),
-    };
+    let drive = sweep_on_drive_loading(session, &drive_run, correction, (out, "machine_end"), |f| {
+        progress("machine end on the drive", f)
+    })?;
     drive.trace.write_csv(&out.join("machine_end_samples.csv"))?;
     let twin_trace = twin_run(fmu, run, &mut progress)?;
     Ok(Measured {

@@ -8,9 +8,12 @@
 //! polled until the drive says done (bounded by the longest the sweep can take, in the drive's
 //! time, and by a drive that stops ticking); streaming off; the axis back at rest.
 
+use std::path::Path;
+
 use anyhow::{anyhow, Result};
 use control_core::phase_shifted_sweep::{SweepSignal, SweepState};
 use control_core::protocol::Request;
+use control_core::response_correction::CorrectionParams;
 use control_core::{Commands, Mode};
 use serde::Serialize;
 
@@ -19,6 +22,7 @@ use crate::device::frame_stream::{sample_rows, SAMPLE_COLUMNS};
 use crate::device::session::DriveSession;
 use crate::fmu::sweep_run::{SweepRun, START_AT};
 use crate::fmu::trace::Trace;
+use crate::sweep::device_report::save_partial;
 use crate::sweep::measurement::stream_results;
 use power_stage::ratings::with_board_limits;
 
@@ -53,6 +57,23 @@ pub fn sweep_on_drive<T: crate::device::link::DrivePort>(
     progress: impl FnMut(f64),
 ) -> Result<DeviceSweep> {
     sweep_on_drive_after(session, run, |_| Ok(()), progress)
+}
+
+/// As [`sweep_on_drive`], with `correction` (if any) loaded once the drive has the run's
+/// parameters (see [`sweep_on_drive_after`]); a failed run saves what the drive sent as
+/// `<out>/<name>_partial.csv` and returns the error that says so.
+pub fn sweep_on_drive_loading<T: crate::device::link::DrivePort>(
+    session: &mut DriveSession<T>,
+    run: &SweepRun,
+    correction: Option<&CorrectionParams>,
+    (out, name): (&Path, &str),
+    progress: impl FnMut(f64),
+) -> Result<DeviceSweep> {
+    let load = |s: &mut DriveSession<T>| match correction {
+        Some(c) => s.order(Request::LoadCorrection(*c), "the correction (LoadCorrection)"),
+        None => Ok(()),
+    };
+    sweep_on_drive_after(session, run, load, progress).map_err(|e| save_partial(session, out, name, e))
 }
 
 /// As [`sweep_on_drive`], with `after_params` given the session once the drive has the run's
