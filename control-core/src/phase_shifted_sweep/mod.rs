@@ -195,6 +195,8 @@ pub struct PhaseShiftedSweep {
     previous_difference: (f32, f32),
     previous_above_noise: bool,
     previous_excess: f32,
+    /// The previous comparison's `tail_over_difference` (0 when it had none).
+    previous_tail: f32,
     checking_settling: bool,
     /// Index of the present half block (see [`AcquisitionSample::half_block`]; at most
     /// `1 + 2·MAX_EXTENSIONS`), and the samples' word of record and half block (found when
@@ -244,6 +246,7 @@ impl PhaseShiftedSweep {
             previous_difference: (0.0, 0.0),
             previous_above_noise: false,
             previous_excess: 0.0,
+            previous_tail: 0.0,
             checking_settling: false,
             half_block: 0,
             segment: 0,
@@ -353,6 +356,7 @@ impl PhaseShiftedSweep {
             self.discarded_halves = 0;
             self.previous_above_noise = false;
             self.previous_excess = 0.0;
+            self.previous_tail = 0.0;
             self.half_block = 0;
             self.checking_settling = p.precision_db > 0.0
                 && p.max_extensions > 0
