@@ -17,6 +17,7 @@ fn axis(name: &str, hz: f64) -> AxisModel {
         gain: 4000.0,
         band: (1.0, 300.0),
         fit_error: 0.0,
+        anti_resonance_error: None,
         fmu_parameters: absorber_parameters(hz, 0.05, LOAD).into_iter().map(|(k, v)| (k, v.as_f64())).collect(),
     }
 }

@@ -18,8 +18,16 @@ use crate::ident::identification::{
 use crate::ident::report::identify_axis;
 use num_complex::Complex64;
 
-/// Anti-resonances of the grid (Hz): 15–300 Hz, denser where the closed loop makes it hard.
-pub const GRID_HZ: [f64; 12] = [15.0, 20.0, 25.0, 30.0, 40.0, 50.0, 70.0, 100.0, 150.0, 200.0, 250.0, 300.0];
+/// Anti-resonances of the grid (Hz): 15–300 Hz, denser where the closed loop makes it hard
+/// (low frequencies) and where the axis's own mode masks the absorber's zero (205–220 Hz:
+/// the plant's resonance lies within 2 % of it).
+pub const GRID_HZ: [f64; 16] =
+    [15.0, 20.0, 25.0, 30.0, 40.0, 50.0, 70.0, 100.0, 150.0, 200.0, 205.0, 210.0, 215.0, 220.0, 250.0, 300.0];
+/// An anti-resonance the plant itself shows less deeply than this (dB: the notch search's
+/// depth on the exact response, twice what the search needs) is masked by a resonance next
+/// to it; reporting it as not clear, undetermined or refused (with the reason) is then the
+/// right answer, and a value off by more than the goals is still a miss.
+pub const MASKED_NOTCH_DB: f64 = 2.0 * crate::ident::identification::MIN_DEPTH_DB;
 /// Noise seeds per anti-resonance.
 pub const SEEDS: u32 = 10;
 pub const SNR_DB: f64 = 20.0;
@@ -39,22 +47,36 @@ pub struct GridCase {
     pub found: Option<Factor>,
     pub notch: Option<Notch>,
     pub refusal: Option<String>,
+    /// Why a clear notch gave no anti-resonance (the measurement does not determine it).
+    pub undetermined: Option<String>,
+    /// Depth of the plant's own notch (the search on the exact response, dB).
+    pub plant_notch_db: f64,
     /// Relative errors (infinite when nothing was found).
     pub frequency_error: f64,
     pub damping_error: f64,
 }
 
 impl GridCase {
+    /// Found within the goals; or, where the plant masks its anti-resonance (see
+    /// [`MASKED_NOTCH_DB`]), reported without one and with the reason.
     pub fn passed(&self) -> bool {
-        self.frequency_error.abs() <= FREQUENCY_GOAL && self.damping_error.abs() <= DAMPING_GOAL
+        match self.found {
+            Some(_) => self.frequency_error.abs() <= FREQUENCY_GOAL && self.damping_error.abs() <= DAMPING_GOAL,
+            None => self.masked_by_plant(),
+        }
+    }
+
+    pub fn masked_by_plant(&self) -> bool {
+        self.plant_notch_db < MASKED_NOTCH_DB
     }
 
     /// What was found, for a table cell.
     pub fn outcome(&self) -> String {
-        match (&self.found, &self.refusal) {
-            (Some(_), _) => format!("{:+.2}/{:+.0}", self.frequency_error * 100.0, self.damping_error * 100.0),
-            (None, Some(_)) => "refused".into(),
-            (None, None) => "no notch".into(),
+        match (&self.found, &self.refusal, &self.undetermined) {
+            (Some(_), _, _) => format!("{:+.2}/{:+.0}", self.frequency_error * 100.0, self.damping_error * 100.0),
+            (None, Some(_), _) => "refused".into(),
+            (None, None, Some(_)) => "undeterm.".into(),
+            (None, None, None) => "no notch".into(),
         }
     }
 }
@@ -67,6 +89,7 @@ pub fn run_grid(fmu: &Fmu, out: &Path, mut progress: impl FnMut(f64)) -> Result<
     for (i, &hz) in GRID_HZ.iter().enumerate() {
         let w = std::f64::consts::TAU * hz;
         let truth = true_anti_resonance(load, load * w * w, 2.0 * DAMPING * load * w);
+        let plant_notch_db = plant_notch(hz).map_or(0.0, |n| n.depth_db);
         for seed in 1..=SEEDS {
             progress((i * SEEDS as usize + seed as usize - 1) as f64 / total as f64);
             let mut parameters = absorber_parameters(hz, DAMPING, load);
@@ -84,6 +107,8 @@ pub fn run_grid(fmu: &Fmu, out: &Path, mut progress: impl FnMut(f64)) -> Result<
                 found,
                 notch: r.notch,
                 refusal: r.refusal,
+                undetermined: r.undetermined,
+                plant_notch_db,
                 frequency_error,
                 damping_error,
             });
@@ -91,6 +116,32 @@ pub fn run_grid(fmu: &Fmu, out: &Path, mut progress: impl FnMut(f64)) -> Result<
     }
     progress(1.0);
     Ok(cases)
+}
+
+/// The notch search on the exact response of the bench's axis with a `hz` absorber, on the
+/// measurement's frequencies (how deep the plant itself shows its anti-resonance).
+pub fn plant_notch(hz: f64) -> Option<Notch> {
+    let load = PlantParams::default().load_inertia;
+    let w = std::f64::consts::TAU * hz;
+    let plant = PlantParams {
+        absorber_inertia: load,
+        absorber_stiffness: load * w * w,
+        absorber_damping: 2.0 * DAMPING * load * w,
+        ..PlantParams::default()
+    };
+    let rate = control_core::Params::default().rates.current_loop_hz as f64 / crate::ident::identification::DIVIDER as f64;
+    let df = rate / crate::ident::identification::samples_per_period() as f64;
+    let (lo, hi) = crate::ident::report::BAND;
+    let frequencies: Vec<f64> =
+        (1..).map(|k| k as f64 * df).skip_while(|&f| f < lo).take_while(|&f| f <= hi).collect();
+    let response: Vec<Complex64> = frequencies.iter().map(|&f| analytic_response(&plant, f)).collect();
+    let n = frequencies.len();
+    crate::ident::identification::deepest_notch(&Measured {
+        frequencies,
+        response,
+        input_power: vec![1.0; n],
+        standard_error: vec![0.0; n],
+    })
 }
 
 /// Torque → load acceleration of the plant (motor, shaft, load, absorber on the load; viscous

@@ -118,10 +118,12 @@ fn ident(args: &IdentArgs) -> Result<bool> {
             (_, Some(why)) => println!("  {}: REFUSED: {why}; {notch}{noise}", r.axis),
             (Some(m), None) => match (m.anti_resonance, m.resonance) {
                 (Some(z), p) => println!(
-                    "  {}: anti-resonance {:.3} Hz, damping {:.4}; resonance {}; gain {:.4e}; fit band {:.1}–{:.1} Hz, rms fit error {:.1} %; {notch}{noise}",
+                    "  {}: anti-resonance {:.3} Hz{}, damping {:.4}{}; resonance {}; gain {:.4e}; fit band {:.1}–{:.1} Hz, rms fit error {:.1} %; {notch}{noise}",
                     m.axis,
                     z.hz,
+                    m.anti_resonance_error.map_or(String::new(), |e| format!(" ± {:.2} %", e.frequency * 100.0)),
                     z.damping,
+                    m.anti_resonance_error.map_or(String::new(), |e| format!(" ± {:.0} %", e.damping * 100.0)),
                     p.map_or("-".into(), |p| format!("{:.2} Hz, damping {:.4}", p.hz, p.damping)),
                     m.gain,
                     m.band.0,
@@ -129,8 +131,10 @@ fn ident(args: &IdentArgs) -> Result<bool> {
                     m.fit_error * 100.0,
                 ),
                 (None, _) => println!(
-                    "  {}: no clear anti-resonance (rigid axis, N = 1): {notch}; gain {:.4e}{noise}",
-                    m.axis, m.gain
+                    "  {}: no clear anti-resonance (rigid axis, N = 1): {}; gain {:.4e}{noise}",
+                    m.axis,
+                    r.undetermined.as_deref().unwrap_or(&notch),
+                    m.gain
                 ),
             },
             (None, None) => {}
@@ -348,11 +352,16 @@ fn print_grid(grid: &[crate::ident::bench::GridCase], record: &crate::ident::ben
     let mut hz: Vec<f64> = grid.iter().map(|c| c.hz).collect();
     hz.dedup();
     for f in &hz {
-        let cells: Vec<String> = grid.iter().filter(|c| c.hz == *f).map(|c| format!("{:>11}", c.outcome())).collect();
-        println!("  {f:>6.1} Hz {}", cells.join(""));
+        let row: Vec<&crate::ident::bench::GridCase> = grid.iter().filter(|c| c.hz == *f).collect();
+        let cells: Vec<String> = row.iter().map(|c| format!("{:>11}", c.outcome())).collect();
+        let masked = row.first().filter(|c| c.masked_by_plant()).map_or(String::new(), |c| {
+            format!("   (masked: the plant's notch {:.1} dB)", c.plant_notch_db)
+        });
+        println!("  {f:>6.1} Hz {}{masked}", cells.join(""));
     }
+    // Over the anti-resonances found (a case without one has no error to rank).
     let worst = |key: fn(&crate::ident::bench::GridCase) -> f64| {
-        grid.iter().max_by(|a, b| key(a).abs().total_cmp(&key(b).abs()))
+        grid.iter().filter(|c| c.found.is_some()).max_by(|a, b| key(a).abs().total_cmp(&key(b).abs()))
     };
     let describe = |c: Option<&crate::ident::bench::GridCase>, v: fn(&crate::ident::bench::GridCase) -> f64| {
         c.map_or("-".to_string(), |c| {
@@ -372,8 +381,22 @@ fn print_grid(grid: &[crate::ident::bench::GridCase], record: &crate::ident::ben
         "  worst damping error over the grid:   {} (goal 20 %)",
         describe(worst(|c| c.damping_error), |c| c.damping_error)
     );
+    let masked: Vec<&crate::ident::bench::GridCase> = grid.iter().filter(|c| c.masked_by_plant()).collect();
+    if !masked.is_empty() {
+        let count = |p: fn(&crate::ident::bench::GridCase) -> bool| masked.iter().filter(|c| p(c)).count();
+        println!(
+            "  where a resonance masks the anti-resonance (the plant's own notch under {} dB; {} identifications): {} found within the goals, {} off, {} undetermined (the refits' spread), {} refused, {} without a clear notch",
+            crate::ident::bench::MASKED_NOTCH_DB,
+            masked.len(),
+            count(|c| c.found.is_some() && c.passed()),
+            count(|c| c.found.is_some() && !c.passed()),
+            count(|c| c.undetermined.is_some()),
+            count(|c| c.refusal.is_some()),
+            count(|c| c.found.is_none() && c.refusal.is_none() && c.undetermined.is_none()),
+        );
+    }
     let missed = grid.iter().filter(|c| !c.passed()).count();
-    println!("  identifications missing a goal: {missed} of {}", grid.len());
+    println!("  identifications missing a goal: {missed} of {} (found off the goals, or none found where the plant shows its notch)", grid.len());
     println!(
         "  the record against the analytic plant, noise-free, {} Hz absorber (largest relative error; point samples / means over each acquisition period):",
         record.hz

@@ -74,6 +74,8 @@ pub struct IdentifiedRun {
     pub notch: Option<Notch>,
     /// Why the fit was refused (no model then).
     pub refusal: Option<String>,
+    /// Why a clear notch gave no anti-resonance (see `Identified::undetermined`).
+    pub undetermined: Option<String>,
 }
 
 /// Identify `m` as the FMU path does; a refused fit is kept with its reason.
@@ -82,11 +84,17 @@ pub fn identify_run(axis: &str, measured: Measured, parameters: &BTreeMap<String
         Ok(i) => {
             let mut model = i.model;
             model.fmu_parameters = parameters.iter().map(|(k, v)| (k.clone(), v.as_f64())).collect();
-            Ok(IdentifiedRun { measured, model: Some(model), notch: i.notch, refusal: None })
+            Ok(IdentifiedRun { measured, model: Some(model), notch: i.notch, refusal: None, undetermined: i.undetermined })
         }
         Err(e) => {
             let refused = e.downcast_ref::<FitRefused>().cloned().ok_or(e)?;
-            Ok(IdentifiedRun { measured, model: None, notch: Some(refused.notch), refusal: Some(refused.reason) })
+            Ok(IdentifiedRun {
+                measured,
+                model: None,
+                notch: Some(refused.notch),
+                refusal: Some(refused.reason),
+                undetermined: None,
+            })
         }
     }
 }
@@ -389,7 +397,11 @@ impl DeviceIdentification {
                         m.gain,
                         m.fit_error * 100.0
                     ),
-                    None => println!("  {label}: no clear anti-resonance (rigid axis, N = 1): {notch}; gain {:.4e}", m.gain),
+                    None => println!(
+                        "  {label}: no clear anti-resonance (rigid axis, N = 1): {}; gain {:.4e}",
+                        r.undetermined.as_deref().unwrap_or(&notch),
+                        m.gain
+                    ),
                 },
                 (None, None) => {}
             }

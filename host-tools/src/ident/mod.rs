@@ -8,6 +8,7 @@ pub mod device;
 pub mod device_bench;
 pub mod device_check;
 pub mod device_machine_end;
+pub mod anti_resonance_error;
 pub mod identification;
 pub mod index;
 pub mod report;

@@ -27,6 +27,9 @@ pub struct IdentifiedAxis {
     pub notch: Option<Notch>,
     /// Why the fitted model was refused.
     pub refusal: Option<String>,
+    /// Why a clear notch gave no anti-resonance: the measurement does not determine its zero
+    /// pair (see `Identified::undetermined`).
+    pub undetermined: Option<String>,
     /// Accelerometer noise used (rad/s², standard deviation) and the resulting SNR.
     pub noise_std: f64,
     pub snr_db: Option<f64>,
@@ -91,6 +94,7 @@ pub fn identify_axis(
                 model: None,
                 notch: Some(refused.notch),
                 refusal: Some(refused.reason),
+                undetermined: None,
                 noise_std,
                 snr_db,
                 files: vec![measured_path],
@@ -106,6 +110,7 @@ pub fn identify_axis(
         model: Some(model),
         notch: identified.notch,
         refusal: None,
+        undetermined: identified.undetermined,
         noise_std,
         snr_db,
         files: vec![model_path, measured_path],

@@ -100,6 +100,7 @@ fn model(axis: &str, hz: Option<f64>) -> AxisModel {
         gain: 1.0 / (PlantParams::default().motor_inertia + load),
         band: (5.0, 500.0),
         fit_error: 0.0,
+        anti_resonance_error: None,
         fmu_parameters,
     }
 }
