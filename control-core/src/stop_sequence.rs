@@ -301,8 +301,10 @@ pub struct StopSequence {
     start: i64,
     /// Position and speed at the last step (for events between steps).
     position: i64,
-    /// Position ticks the axis has been in position without completion raised.
+    /// Position ticks the axis has been in position without completion raised, and its
+    /// deviation on the first of them (counts).
     in_position_ticks: u32,
+    hold_start_deviation: i64,
     /// From acceptance until the speed reference stops ramping: the integrator's
     /// deceleration torque is still to be released.
     releasing: bool,
@@ -324,6 +326,7 @@ impl StopSequence {
             start: 0,
             position: 0,
             in_position_ticks: 0,
+            hold_start_deviation: 0,
             releasing: false,
             release: false,
         }
@@ -444,9 +447,13 @@ impl StopSequence {
     ///
     /// **Completion.** In position = |deviation| ≤ `completion_counts` and |speed| ≤
     /// `zero_speed`. Completion is raised after the axis has been in position for
-    /// `completion_hold` without a break; once raised it drops only when |deviation| >
-    /// `completion_counts + completion_hysteresis`, on a new target, or on leaving position
-    /// control.
+    /// `completion_hold` without a break *and at rest over it*: its deviation changed by at
+    /// most `completion_hysteresis` from the hold's first tick to its last (the motion
+    /// completion tolerates once raised). An axis still creeping through a wide window
+    /// (friction after the release: 3 000 counts/s crossed a 60-count window in exactly the
+    /// 20 ms hold, was raised and then left by 86 counts) starts a new hold instead. Once
+    /// raised it drops only when |deviation| > `completion_counts + completion_hysteresis`,
+    /// on a new target, or on leaving position control.
     pub fn step(&mut self, position: i64, speed: f32) -> f32 {
         use SequenceState::*;
         self.position = position;
@@ -496,8 +503,19 @@ impl StopSequence {
                     self.in_position_ticks = 0;
                 }
             } else if magnitude <= p.completion_counts as u64 && speed.abs() <= p.zero_speed {
+                if self.in_position_ticks == 0 {
+                    self.hold_start_deviation = s.deviation;
+                }
                 self.in_position_ticks = self.in_position_ticks.saturating_add(1);
-                s.complete = self.in_position_ticks as f32 * self.period >= self.hold;
+                if self.in_position_ticks as f32 * self.period >= self.hold {
+                    if s.deviation.abs_diff(self.hold_start_deviation) <= p.completion_hysteresis as u64 {
+                        s.complete = true;
+                    } else {
+                        // Still moving through the window: a new hold starts on this tick.
+                        self.in_position_ticks = 1;
+                        self.hold_start_deviation = s.deviation;
+                    }
+                }
             } else {
                 self.in_position_ticks = 0;
             }
@@ -652,6 +670,42 @@ mod tests {
         // Back in position: the hold starts again.
         seq.step(0, 0.0);
         assert!(!seq.status().complete);
+    }
+
+    /// An axis creeping through a wide window (width 30 counts, hysteresis 24) at a speed
+    /// that crosses it in exactly the hold is not complete: the hold's drift (60 counts) is
+    /// more than completion tolerates once raised. It is raised once, after the axis has come
+    /// to rest inside, and the creep that carried it 56 counts beyond the width no longer
+    /// toggles it (the case `servo bench sequence` found at 10 rad/s, level 5, width 30).
+    #[test]
+    fn completion_is_not_raised_while_the_axis_creeps_through_the_window() {
+        let p = SequenceParams { completion_counts: 30, ..Default::default() };
+        let hold_ticks = (p.completion_hold / DT).round() as i64;
+        let mut seq = StopSequence::new(&p, CPR, DT);
+        seq.enter(0, 0.0, 0);
+        seq.event(SequenceEvent::Stop).unwrap();
+        seq.step(-200, 0.0);
+        let target = seq.status().target;
+        // From +30 through the window to −30 and on to −86: one window (60 counts) per hold.
+        let counts_per_tick = 60.0 / hold_ticks as f64;
+        let deviation_at = |k: i64| 30 - (k as f64 * counts_per_tick).round() as i64;
+        let (mut k, mut raised, mut was) = (0i64, 0u32, false);
+        while deviation_at(k) >= -86 {
+            seq.step(target - deviation_at(k), 0.01);
+            let c = seq.status().complete;
+            raised += (c && !was) as u32;
+            was = c;
+            k += 1;
+        }
+        assert_eq!(raised, 0, "raised while creeping");
+        // At rest inside the window: raised once, at the end of a hold.
+        for _ in 0..2 * hold_ticks {
+            seq.step(target - 20, 0.0);
+            let c = seq.status().complete;
+            raised += (c && !was) as u32;
+            was = c;
+        }
+        assert_eq!((raised, was), (1, true));
     }
 
     #[test]

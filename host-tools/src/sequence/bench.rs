@@ -85,9 +85,11 @@ pub struct GridFigures {
     pub holds: bool,
 }
 
-pub const GRID_SPEEDS: [f64; 3] = [10.0, 50.0, 200.0];
-pub const GRID_ZERO_SPEEDS: [f64; 3] = [0.5, 2.0, 20.0];
-pub const GRID_WIDTHS: [u32; 3] = [1, 8, 100];
+/// The grid: ends and interior of the ranges users set (the interior is where a 30–60-count
+/// width met a creeping axis: see `StopSequence::step`'s completion).
+pub const GRID_SPEEDS: [f64; 7] = [10.0, 17.0, 25.0, 50.0, 100.0, 150.0, 200.0];
+pub const GRID_ZERO_SPEEDS: [f64; 7] = [0.5, 1.0, 2.0, 5.0, 10.0, 15.0, 20.0];
+pub const GRID_WIDTHS: [u32; 6] = [1, 3, 8, 30, 60, 100];
 /// Bound of the swing after acceptance: `SWING_BOUND_FACTOR` × the stopping distance
 /// v²/(2a) of the speed v measured at acceptance, plus `SWING_FLOOR_COUNTS` (the motion while
 /// the velocity loop lets go of the deceleration torque and the compliant shaft gives back
