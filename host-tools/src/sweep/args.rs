@@ -115,6 +115,12 @@ pub struct SweepBenchArgs {
     /// Also print every frequency's gain and phase error and the time it took, for each selected row
     #[arg(long)]
     pub detail: bool,
+    /// The interior grid instead of the shipped one: inertia ratios 0.2, 0.5, 1, 2, 3, 5 ×
+    /// shaft resonances 50, 70, 100, 150, 250, 500 Hz (36 plants, each point and noise level;
+    /// about two minutes per noise seed); prints a summary per point and noise level and the
+    /// rows that miss a goal (all rows with --detail)
+    #[arg(long)]
+    pub interior: bool,
     #[command(flatten)]
     pub common: Common,
 }

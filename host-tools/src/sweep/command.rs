@@ -73,7 +73,7 @@ pub fn sweep_settings(args: &SweepArgs) -> Result<control_core::phase_shifted_sw
 
 impl SweepBenchArgs {
     pub fn run(&self) -> Result<bool> {
-        if self.plants.is_empty() && self.points.is_empty() && self.noise.is_none() {
+        if self.plants.is_empty() && self.points.is_empty() && self.noise.is_none() && !self.interior {
             return bench_sweep(&self.common, self.detail, self.seeds);
         }
         let points = self.points.iter().map(|p| injection_point(p).map(|(p, _)| p)).collect::<Result<Vec<_>>>()?;
@@ -82,6 +82,7 @@ impl SweepBenchArgs {
             points,
             noise: self.noise,
             seeds: self.seeds,
+            interior: self.interior,
         };
         selection.validate()?;
         let fmu = Fmu::load(&self.common.fmu.clone().unwrap_or_else(default_fmu))?;
@@ -94,6 +95,8 @@ impl SweepBenchArgs {
                 "{}",
                 serde_json::to_string_pretty(&serde_json::json!({"bench": "sweep", "grid": rows, "passed": ok}))?
             );
+        } else if self.interior && !self.detail {
+            print_summary(&rows);
         } else {
             print_grid(&rows, self.detail);
         }
@@ -110,6 +113,53 @@ fn injection_point(word: &str) -> Result<(control_core::excitation::InjectionPoi
         "feedback" => (InjectionPoint::VelocityFeedback, 2.0),
         other => bail!("--point must be velocity, torque or feedback (got `{other}`)"),
     })
+}
+
+/// The interior grid in brief: per injection point and noise level the rows that meet every
+/// goal and the worst gain error, phase error and time with their plants; then the rows that
+/// miss a goal.
+fn print_summary(rows: &[crate::sweep::bench::GridRow]) {
+    use crate::sweep::bench::GridRow;
+    println!(
+        "servo bench sweep --interior — {} rows (36 plants: inertia ratio 0.2–5 × shaft resonance 50–500 Hz; each point, with and without current-sensor noise); goal <= 0.1 dB, <= 1 deg, <= 10 s",
+        rows.len()
+    );
+    println!(
+        "  {:<18} {:>7} {:>9}   {:<30} {:<30} {:<30}",
+        "injection point", "noise A", "rows met", "worst dB (plant)", "worst deg (plant)", "longest s (plant)"
+    );
+    // Point and noise level, in the order the grid first has them.
+    let mut keys: Vec<(String, u64)> = Vec::new();
+    for key in rows.iter().map(|r| (r.point.clone(), r.noise_a.to_bits())) {
+        if !keys.contains(&key) {
+            keys.push(key);
+        }
+    }
+    for (point, noise) in keys {
+        let group: Vec<&GridRow> = rows.iter().filter(|r| r.point == point && r.noise_a.to_bits() == noise).collect();
+        let worst = |key: fn(&GridRow) -> f64| group.iter().copied().max_by(|a, b| key(a).total_cmp(&key(b)));
+        let cell = |r: Option<&GridRow>, v: fn(&GridRow) -> f64, digits: usize| {
+            r.map_or("-".into(), |r| format!("{:.digits$} ({})", v(r), r.plant.replace("J_L/J_M ", "")))
+        };
+        println!(
+            "  {:<18} {:>7} {:>4} / {:<3}   {:<30} {:<30} {:<30}",
+            point,
+            f64::from_bits(noise),
+            group.iter().filter(|r| r.met).count(),
+            group.len(),
+            cell(worst(|r| r.gain_db), |r| r.gain_db, 3),
+            cell(worst(|r| r.phase_deg), |r| r.phase_deg, 2),
+            cell(worst(|r| r.measurement_time_s), |r| r.measurement_time_s, 2),
+        );
+    }
+    let missed: Vec<&GridRow> = rows.iter().filter(|r| !r.met).collect();
+    println!("  rows missing a goal: {} of {}", missed.len(), rows.len());
+    for r in missed {
+        println!(
+            "    {:<18} {:<24} noise {:<5} seeds {:<3} {:.3} dB at {:.1} Hz, {:.2} deg at {:.1} Hz, {:.2} s",
+            r.point, r.plant, r.noise_a, r.seeds, r.gain_db, r.gain_at_hz, r.phase_deg, r.phase_at_hz, r.measurement_time_s
+        );
+    }
 }
 
 /// The grid's table (and, with `detail`, every frequency's error under its row).
