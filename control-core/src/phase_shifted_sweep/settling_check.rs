@@ -73,14 +73,14 @@ impl PhaseShiftedSweep {
         // comparison must not have been far outside the limit: two half blocks can agree by
         // chance while a larger ring, under noise, has not decayed.
         let excess = difference / target.max(noise);
-        let tail = if self.discarded_halves == 0 { 0.0 } else { tail_over_difference((dre, dim), self.previous_difference) };
+        let tail =
+            if self.discarded_halves == 0 { 0.0 } else { tail_over_difference((dre, dim), self.previous_difference) };
         // The larger of this and the previous ratio's tail (NaN, no decay told, stays NaN).
         let worst_tail = if tail <= self.previous_tail { self.previous_tail } else { tail };
         let settled = excess <= 1.0
             && !decaying
             && (self.discarded_halves == 0
-                || self.previous_excess <= SETTLED_TREND
-                    && (!self.previous_above_noise || excess * worst_tail <= 1.0));
+                || self.previous_excess <= SETTLED_TREND && (!self.previous_above_noise || excess * worst_tail <= 1.0));
         self.previous_tail = tail;
         self.previous_difference = (dre, dim);
         self.previous_above_noise = difference > noise;

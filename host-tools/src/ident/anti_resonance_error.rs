@@ -47,7 +47,12 @@ fn normal(rng: &mut XorShift64Star) -> f64 {
 /// relative differences from `zero`. None when the measurement has no scatter (an exact
 /// response); [`FactorError::UNDETERMINED`] when fewer than half of the refits give a zero
 /// pair.
-pub fn anti_resonance_error(m: &Measured, band: (f64, f64), (nb, na): (usize, usize), zero: Factor) -> Option<FactorError> {
+pub fn anti_resonance_error(
+    m: &Measured,
+    band: (f64, f64),
+    (nb, na): (usize, usize),
+    zero: Factor,
+) -> Option<FactorError> {
     if !m.standard_error.iter().any(|&e| e > 0.0) {
         return None;
     }

@@ -354,9 +354,10 @@ fn print_grid(grid: &[crate::ident::bench::GridCase], record: &crate::ident::ben
     for f in &hz {
         let row: Vec<&crate::ident::bench::GridCase> = grid.iter().filter(|c| c.hz == *f).collect();
         let cells: Vec<String> = row.iter().map(|c| format!("{:>11}", c.outcome())).collect();
-        let masked = row.first().filter(|c| c.masked_by_plant()).map_or(String::new(), |c| {
-            format!("   (masked: the plant's notch {:.1} dB)", c.plant_notch_db)
-        });
+        let masked = row
+            .first()
+            .filter(|c| c.masked_by_plant())
+            .map_or(String::new(), |c| format!("   (masked: the plant's notch {:.1} dB)", c.plant_notch_db));
         println!("  {f:>6.1} Hz {}{masked}", cells.join(""));
     }
     // Over the anti-resonances found (a case without one has no error to rank).

@@ -84,7 +84,13 @@ pub fn identify_run(axis: &str, measured: Measured, parameters: &BTreeMap<String
         Ok(i) => {
             let mut model = i.model;
             model.fmu_parameters = parameters.iter().map(|(k, v)| (k.clone(), v.as_f64())).collect();
-            Ok(IdentifiedRun { measured, model: Some(model), notch: i.notch, refusal: None, undetermined: i.undetermined })
+            Ok(IdentifiedRun {
+                measured,
+                model: Some(model),
+                notch: i.notch,
+                refusal: None,
+                undetermined: i.undetermined,
+            })
         }
         Err(e) => {
             let refused = e.downcast_ref::<FitRefused>().cloned().ok_or(e)?;

@@ -556,9 +556,9 @@ pub fn identify(axis: &str, m: &Measured) -> Result<Identified> {
     let error = anti_resonance_error(m, band, orders, zero);
     if let Some(e) = error.filter(|e| !(e.frequency <= MAX_FREQUENCY_ERROR && e.damping <= MAX_DAMPING_ERROR)) {
         let nearest = poles.iter().min_by(|a, b| (a.hz / zero.hz - 1.0).abs().total_cmp(&(b.hz / zero.hz - 1.0).abs()));
-        let masking = nearest
-            .filter(|p| (p.hz / zero.hz - 1.0).abs() < NOTCH_SPAN - 1.0)
-            .map_or(String::new(), |p| format!("; the fitted resonance at {:.1} Hz ({:+.1} %) masks it", p.hz, (p.hz / zero.hz - 1.0) * 100.0));
+        let masking = nearest.filter(|p| (p.hz / zero.hz - 1.0).abs() < NOTCH_SPAN - 1.0).map_or(String::new(), |p| {
+            format!("; the fitted resonance at {:.1} Hz ({:+.1} %) masks it", p.hz, (p.hz / zero.hz - 1.0) * 100.0)
+        });
         return Ok(rigid(Some(format!(
             "the measurement does not determine the notch's zero pair: {:.1} Hz ± {:.2} %, damping {:.4} ± {:.0} % (standard errors of {RESAMPLES} refits under the measured scatter; kept up to {:.2} % and {:.0} %){masking}",
             zero.hz,

@@ -1,5 +1,6 @@
 //! Identification and correction (seed 001): `servo ident`, `servo tune`, `servo bench ident`.
 
+pub mod anti_resonance_error;
 pub mod args;
 pub mod averaged_response;
 pub mod bench;
@@ -8,7 +9,6 @@ pub mod device;
 pub mod device_bench;
 pub mod device_check;
 pub mod device_machine_end;
-pub mod anti_resonance_error;
 pub mod identification;
 pub mod index;
 pub mod report;

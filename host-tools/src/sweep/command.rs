@@ -157,7 +157,15 @@ fn print_summary(rows: &[crate::sweep::bench::GridRow]) {
     for r in missed {
         println!(
             "    {:<18} {:<24} noise {:<5} seeds {:<3} {:.3} dB at {:.1} Hz, {:.2} deg at {:.1} Hz, {:.2} s",
-            r.point, r.plant, r.noise_a, r.seeds, r.gain_db, r.gain_at_hz, r.phase_deg, r.phase_at_hz, r.measurement_time_s
+            r.point,
+            r.plant,
+            r.noise_a,
+            r.seeds,
+            r.gain_db,
+            r.gain_at_hz,
+            r.phase_deg,
+            r.phase_at_hz,
+            r.measurement_time_s
         );
     }
 }
