@@ -118,17 +118,22 @@ pub fn run_grid(fmu: &Fmu, out: &Path, mut progress: impl FnMut(f64)) -> Result<
     Ok(cases)
 }
 
-/// The notch search on the exact response of the bench's axis with a `hz` absorber, on the
-/// measurement's frequencies (how deep the plant itself shows its anti-resonance).
-pub fn plant_notch(hz: f64) -> Option<Notch> {
+/// The bench's axis with an absorber at `hz` ([`DAMPING`], inertia equal to the load's).
+fn axis_with_absorber(hz: f64) -> PlantParams {
     let load = PlantParams::default().load_inertia;
     let w = std::f64::consts::TAU * hz;
-    let plant = PlantParams {
+    PlantParams {
         absorber_inertia: load,
         absorber_stiffness: load * w * w,
         absorber_damping: 2.0 * DAMPING * load * w,
         ..PlantParams::default()
-    };
+    }
+}
+
+/// The notch search on the exact response of the bench's axis with a `hz` absorber, on the
+/// measurement's frequencies (how deep the plant itself shows its anti-resonance).
+pub fn plant_notch(hz: f64) -> Option<Notch> {
+    let plant = axis_with_absorber(hz);
     let rate =
         control_core::Params::default().rates.current_loop_hz as f64 / crate::ident::identification::DIVIDER as f64;
     let df = rate / crate::ident::identification::samples_per_period() as f64;
@@ -189,13 +194,7 @@ pub struct RecordCheck {
 pub fn record_check(fmu: &Fmu, hz: f64, bands: &[(f64, f64)]) -> Result<RecordCheck> {
     let load = PlantParams::default().load_inertia;
     let parameters: BTreeMap<String, Value> = absorber_parameters(hz, DAMPING, load);
-    let w = std::f64::consts::TAU * hz;
-    let plant = PlantParams {
-        absorber_inertia: load,
-        absorber_stiffness: load * w * w,
-        absorber_damping: 2.0 * DAMPING * load * w,
-        ..PlantParams::default()
-    };
+    let plant = axis_with_absorber(hz);
     let span = (bands.iter().map(|b| b.0).fold(f64::INFINITY, f64::min), bands.iter().map(|b| b.1).fold(0.0, f64::max));
     let point = measure_records(fmu, &parameters, AMPLITUDE, span, ("electromagnetic_torque", "load_acceleration"))?;
     let mean = measure_records(
