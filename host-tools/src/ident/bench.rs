@@ -118,6 +118,12 @@ pub fn run_grid(fmu: &Fmu, out: &Path, mut progress: impl FnMut(f64)) -> Result<
     Ok(cases)
 }
 
+/// Whether the bench's axis with a `hz` absorber masks its anti-resonance: the plant's own
+/// notch is under [`MASKED_NOTCH_DB`].
+pub fn masked_by_plant(hz: f64) -> bool {
+    plant_notch(hz).is_none_or(|n| n.depth_db < MASKED_NOTCH_DB)
+}
+
 /// The bench's axis with an absorber at `hz` ([`DAMPING`], inertia equal to the load's).
 fn axis_with_absorber(hz: f64) -> PlantParams {
     let load = PlantParams::default().load_inertia;
