@@ -75,7 +75,9 @@ impl PhaseShiftedSweep {
         let excess = difference / target.max(noise);
         let tail =
             if self.discarded_halves == 0 { 0.0 } else { tail_over_difference((dre, dim), self.previous_difference) };
-        // The larger of this and the previous ratio's tail (NaN, no decay told, stays NaN).
+        // The larger of this and the previous ratio's tail: one ratio spoiled by a second mode
+        // or by noise under-estimates it. A NaN of this ratio (no decay told) stays NaN and
+        // refuses; the previous one's is passed over.
         let worst_tail = if tail <= self.previous_tail { self.previous_tail } else { tail };
         let settled = excess <= 1.0
             && !decaying
