@@ -31,6 +31,10 @@ use crate::TAU;
 pub const MAX_GAINS: usize = 8;
 /// Longest completion hold time (s).
 pub const MAX_COMPLETION_HOLD: f32 = 10.0;
+/// An axis at rest may still move this many counts over a completion hold (the encoder's
+/// count flickering at an edge, a count of noise): completion's rest condition allows at
+/// least this drift whatever the hysteresis.
+pub const REST_DITHER_COUNTS: u64 = 2;
 
 #[derive(Clone, Copy, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct SequenceParams {
@@ -448,8 +452,8 @@ impl StopSequence {
     /// **Completion.** In position = |deviation| ≤ `completion_counts` and |speed| ≤
     /// `zero_speed`. Completion is raised after the axis has been in position for
     /// `completion_hold` without a break *and at rest over it*: its deviation changed by at
-    /// most `completion_hysteresis` from the hold's first tick to its last (the motion
-    /// completion tolerates once raised). An axis still creeping through a wide window
+    /// most `completion_hysteresis` (at least [`REST_DITHER_COUNTS`]) from the hold's first
+    /// tick to its last (the motion completion tolerates once raised). An axis still creeping through a wide window
     /// (friction after the release: 3 000 counts/s crossed a 60-count window in exactly the
     /// 20 ms hold, was raised and then left by 86 counts) starts a new hold instead. Once
     /// raised it drops only when |deviation| > `completion_counts + completion_hysteresis`,
@@ -508,7 +512,10 @@ impl StopSequence {
                 }
                 self.in_position_ticks = self.in_position_ticks.saturating_add(1);
                 if self.in_position_ticks as f32 * self.period >= self.hold {
-                    if s.deviation.abs_diff(self.hold_start_deviation) <= p.completion_hysteresis as u64 {
+                    // At least the count an axis at rest dithers by, with any hysteresis (0
+                    // included, where a one-count dither would otherwise restart every hold).
+                    let rest = (p.completion_hysteresis as u64).max(REST_DITHER_COUNTS);
+                    if s.deviation.abs_diff(self.hold_start_deviation) <= rest {
                         s.complete = true;
                     } else {
                         // Still moving through the window: a new hold starts on this tick.
@@ -706,6 +713,33 @@ mod tests {
             was = c;
         }
         assert_eq!((raised, was), (1, true));
+    }
+
+    /// With no hysteresis an axis at rest that flickers by a count every tick is still
+    /// complete after one hold (the rest condition allows the dither).
+    #[test]
+    fn a_dithering_axis_completes_without_hysteresis() {
+        let p = SequenceParams { completion_hysteresis: 0, ..Default::default() };
+        let hold_ticks = (p.completion_hold / DT).round() as usize;
+        // Both phases of the flicker against the hold's ends.
+        for phase in 0..2 {
+            let mut seq = StopSequence::new(&p, CPR, DT);
+            seq.enter(0, 0.0, 0);
+            seq.event(SequenceEvent::Stop).unwrap();
+            seq.step(0, 0.0);
+            let target = seq.status().target;
+            let mut first = None;
+            for k in 0..4 * hold_ticks {
+                seq.step(target - ((k + phase) % 2) as i64, 0.0);
+                if seq.status().complete && first.is_none() {
+                    first = Some(k);
+                }
+            }
+            assert!(
+                first.is_some_and(|k| k < hold_ticks + 2),
+                "phase {phase}: raised at {first:?} (hold {hold_ticks})"
+            );
+        }
     }
 
     #[test]

@@ -366,10 +366,11 @@ fn tune_over_the_virtual_drive_loads_the_correction_and_both_circles_match_their
                 (f(p, "drive_db") - multisine[0].as_f64().unwrap(), f(p, "drive_deg") - multisine[1].as_f64().unwrap());
             let delay_ms = -deg / (360.0 * hz) * 1e3;
             assert!(db.abs() <= 0.02, "{hz} Hz: drive vs the multisine {db} dB ({p})");
-            // The drive's own phase error: half the variance of the drive − twin difference's
-            // (relative, so radians), as a delay at this frequency. At 5 Hz the
-            // accelerometer's quantisation leaves about 0.7° (0.4 ms); at 40 Hz 0.01 ms.
-            let sigma_ms = (se / std::f64::consts::SQRT_2).to_degrees() / (360.0 * hz) * 1e3;
+            // The drive's own phase error (radians, relative): the difference's standard error
+            // is the drive's and the twin's totals combined, each the sum of its real and
+            // imaginary variances, so one component of one side is half of it. At 5 Hz the
+            // accelerometer's quantisation leaves about 0.5° (0.3 ms); at 40 Hz 0.01 ms.
+            let sigma_ms = (se / 2.0).to_degrees() / (360.0 * hz) * 1e3;
             assert!(
                 (0.1 - 3.0 * sigma_ms..=0.2 + 3.0 * sigma_ms).contains(&delay_ms),
                 "{hz} Hz: drive lags the multisine by {delay_ms} ms (± {sigma_ms}) ({p})"

@@ -391,7 +391,7 @@ declare_variables! {
 
     // Stop sequence completion signal (seed 004), added after the first release: appended so
     // that every earlier value reference stays.
-    182 seq_completion_hold: Float64 "seq.completion_hold" Parameter Fixed = core(|p| p.sequence.completion_hold); S; r(0.0, 10.0); "Completion is raised after |deviation| <= seq.completion_counts and |speed| <= seq.zero_speed held this long, the deviation moving by at most seq.completion_hysteresis over it";
+    182 seq_completion_hold: Float64 "seq.completion_hold" Parameter Fixed = core(|p| p.sequence.completion_hold); S; r(0.0, 10.0); "Completion is raised after |deviation| <= seq.completion_counts and |speed| <= seq.zero_speed held this long, the deviation moving by at most seq.completion_hysteresis (at least 2 counts) over it";
     183 seq_completion_hysteresis: Int32 "seq.completion_hysteresis" Parameter Fixed = core_count(|p| p.sequence.completion_hysteresis); NONE; r(0.0, 1.0e9); "Once raised, completion drops only when |deviation| > seq.completion_counts + this many counts (or on a new target)";
 
     // Frequency-response dither (seed 000, issue 15), appended so that every earlier value

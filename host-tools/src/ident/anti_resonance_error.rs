@@ -45,8 +45,9 @@ fn normal(rng: &mut XorShift64Star) -> f64 {
 /// (`nb`, `na`): [`RESAMPLES`] refits of the response plus complex normal noise of each
 /// frequency's standard error, the zero pair nearest `zero` taken from each, the RMS of their
 /// relative differences from `zero`. None when the measurement has no scatter (an exact
-/// response); [`FactorError::UNDETERMINED`] when fewer than half of the refits give a zero
-/// pair.
+/// response); [`FactorError::UNDETERMINED`] when more than a quarter of the refits fail or
+/// give no complex zero pair within the notch's surroundings (the spread of the others would
+/// flatter the measurement).
 pub fn anti_resonance_error(
     m: &Measured,
     band: (f64, f64),
@@ -72,14 +73,18 @@ pub fn anti_resonance_error(
         let perturbed = Measured { response, ..m.clone() };
         let Ok(fit) = fit_rational(&perturbed, band, nb, na) else { continue };
         let (zeros, _) = fit.zeros();
-        let Some(z) = zeros.iter().min_by(|a, b| (a.hz - zero.hz).abs().total_cmp(&(b.hz - zero.hz).abs())) else {
+        let Some(z) = zeros
+            .iter()
+            .filter(|z| (z.hz / zero.hz - 1.0).abs() <= crate::ident::identification::NOTCH_SPAN - 1.0)
+            .min_by(|a, b| (a.hz - zero.hz).abs().total_cmp(&(b.hz - zero.hz).abs()))
+        else {
             continue;
         };
         squares.0 += (z.hz / zero.hz - 1.0).powi(2);
         squares.1 += (z.damping / zero.damping - 1.0).powi(2);
         refits += 1;
     }
-    if refits < RESAMPLES / 2 {
+    if 4 * refits < 3 * RESAMPLES {
         return Some(FactorError::UNDETERMINED);
     }
     let n = refits as f64;

