@@ -519,3 +519,28 @@ pub fn bench(fmu: &Fmu, seeds: u32, mut progress: impl FnMut(f64)) -> Result<Swe
         oracle_self_check,
     })
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The interior grid holds every ratio × resonance once, the corners of the shipped grid
+    /// among them, and a selection that names shipped plants with it is refused.
+    #[test]
+    fn the_interior_grid_covers_the_ranges_and_is_not_mixed_with_plant_indices() {
+        let plants = interior_plants();
+        assert_eq!(plants.len(), INTERIOR_RATIOS.len() * INTERIOR_RESONANCES_HZ.len());
+        for corner in PLANTS.iter().filter(|p| p.resonance_hz.is_some()) {
+            assert!(
+                plants.iter().any(|p| p.inertia_ratio == corner.inertia_ratio && p.resonance_hz == corner.resonance_hz),
+                "{corner:?}"
+            );
+        }
+        let mixed = GridSelection { interior: true, plants: vec![1], ..GridSelection::default() };
+        assert!(mixed.validate().unwrap_err().to_string().contains("--interior"));
+        assert!(GridSelection { interior: true, ..GridSelection::default() }.validate().is_ok());
+        // A load of half the motor's inertia gets the finer sub-steps the FMU needs for it.
+        let half = PlantCase { inertia_ratio: 0.5, resonance_hz: Some(100.0) }.parameters();
+        assert!(matches!(half.get(name::plant_substeps), Some(Value::Int(8))), "{half:?}");
+    }
+}
