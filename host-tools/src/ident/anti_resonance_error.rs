@@ -12,7 +12,7 @@
 use num_complex::Complex64;
 use serde::{Deserialize, Serialize};
 
-use crate::ident::identification::{fit_rational, Factor, Measured};
+use crate::ident::identification::{fit_rational, within_notch_surroundings, Factor, Measured};
 use crate::random::XorShift64Star;
 
 /// Refits per identification.
@@ -75,7 +75,7 @@ pub fn anti_resonance_error(
         let (zeros, _) = fit.zeros();
         let Some(z) = zeros
             .iter()
-            .filter(|z| (z.hz / zero.hz - 1.0).abs() <= crate::ident::identification::NOTCH_SPAN - 1.0)
+            .filter(|z| within_notch_surroundings(z.hz, zero.hz))
             .min_by(|a, b| (a.hz - zero.hz).abs().total_cmp(&(b.hz - zero.hz).abs()))
         else {
             continue;

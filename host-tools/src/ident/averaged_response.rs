@@ -19,6 +19,12 @@ pub struct Record<'a> {
     pub acquisition_hz: f64,
 }
 
+/// The DFT bins of a period (bin spacing `df`, Hz) from `f_min` to `f_max`, both included
+/// where they fall on a bin, the mean (bin 0) left out.
+pub fn bins(df: f64, (f_min, f_max): (f64, f64)) -> std::ops::RangeInclusive<usize> {
+    ((f_min / df).ceil() as usize).max(1)..=(f_max / df).floor() as usize
+}
+
 /// The response between `band.0` and `band.1` (Hz) from the last `periods` periods of
 /// `samples_per_period` samples each.
 pub fn averaged_response(
@@ -51,13 +57,12 @@ pub fn averaged_response(
         bail!("no excitation in the recorded torque");
     }
     let df = record.acquisition_hz / n as f64;
-    let (k0, k1) = ((f_min / df).ceil() as usize, (f_max / df).floor() as usize);
     let spectra = period_spectra(&u_all[start..], &y_all[start..], n);
     let mut frequencies = Vec::new();
     let mut response = Vec::new();
     let mut input_power = Vec::new();
     let mut standard_error = Vec::new();
-    for k in k0.max(1)..=k1 {
+    for k in bins(df, (f_min, f_max)) {
         let uk = dft_bin(&u, k as f64);
         let h = dft_bin(&y, k as f64) / uk;
         frequencies.push(k as f64 * df);

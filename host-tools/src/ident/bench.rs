@@ -145,7 +145,7 @@ pub fn plant_notch(hz: f64) -> Option<Notch> {
         control_core::Params::default().rates.current_loop_hz as f64 / crate::ident::identification::DIVIDER as f64;
     let df = rate / crate::ident::identification::samples_per_period() as f64;
     let (lo, hi) = crate::ident::report::BAND;
-    let frequencies: Vec<f64> = (1..).map(|k| k as f64 * df).skip_while(|&f| f < lo).take_while(|&f| f <= hi).collect();
+    let frequencies: Vec<f64> = crate::ident::averaged_response::bins(df, (lo, hi)).map(|k| k as f64 * df).collect();
     let response: Vec<Complex64> = frequencies.iter().map(|&f| analytic_response(&plant, f)).collect();
     let n = frequencies.len();
     crate::ident::identification::deepest_notch(&Measured {

@@ -248,6 +248,12 @@ pub fn acceleration_rms(fmu: &Fmu, parameters: &BTreeMap<String, Value>, amplitu
 pub const NOTCH_SPAN: f64 = 1.15;
 /// Half-width of the moving average, relative to the frequency (at least one bin each side).
 pub const SMOOTHING: f64 = 0.03;
+/// Whether `hz` lies within a notch's surroundings (±(`NOTCH_SPAN` − 1)) of `centre`: where a
+/// zero pair can explain the notch.
+pub fn within_notch_surroundings(hz: f64, centre: f64) -> bool {
+    (hz / centre - 1.0).abs() <= NOTCH_SPAN - 1.0
+}
+
 /// A notch is clear from this depth (dB) and this confidence (depth over its standard error).
 pub const MIN_DEPTH_DB: f64 = 2.5;
 pub const MIN_CONFIDENCE: f64 = 4.0;
@@ -555,7 +561,7 @@ pub fn identify(axis: &str, m: &Measured) -> Result<Identified> {
         .min_by(|a, b| (a.hz - f).abs().total_cmp(&(b.hz - f).abs()))
         .ok_or_else(|| refuse(format!("the fitted model has no complex zero pair near {f:.1} Hz")))?;
     // A zero pair outside the notch's surroundings does not explain it.
-    if !((zero.hz / f - 1.0).abs() <= NOTCH_SPAN - 1.0) {
+    if !within_notch_surroundings(zero.hz, f) {
         return Err(refuse(format!(
             "the fitted model's zero pair nearest the notch is at {:.1} Hz, {:+.0} % from it (outside ±{:.0} %): the model does not explain the notch",
             zero.hz,
@@ -579,7 +585,7 @@ pub fn identify(axis: &str, m: &Measured) -> Result<Identified> {
     let error = anti_resonance_error(m, band, orders, zero);
     if let Some(e) = error.filter(|e| !determined(e, zero.damping)) {
         let nearest = poles.iter().min_by(|a, b| (a.hz / zero.hz - 1.0).abs().total_cmp(&(b.hz / zero.hz - 1.0).abs()));
-        let masking = nearest.filter(|p| (p.hz / zero.hz - 1.0).abs() < NOTCH_SPAN - 1.0).map_or(String::new(), |p| {
+        let masking = nearest.filter(|p| within_notch_surroundings(p.hz, zero.hz)).map_or(String::new(), |p| {
             format!("; the fitted resonance at {:.1} Hz ({:+.1} %) masks it", p.hz, (p.hz / zero.hz - 1.0) * 100.0)
         });
         if !e.frequency.is_finite() {
