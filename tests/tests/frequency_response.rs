@@ -33,8 +33,10 @@ fn phase_shifting_measures_every_injection_point_against_the_oracle_and_single_p
     // The bench reports a miss as a miss.
     assert_eq!(r.goals_met(), r.grid.iter().all(|row| row.met));
     // The oracle's own error, over every plant and point against itself with settling and
-    // records twice as long, is far below the goal.
-    assert!(r.oracle_self_check.0 <= 0.03 && r.oracle_self_check.1 <= 0.2, "{:?}", r.oracle_self_check);
+    // records twice as long at a riding speed 1 % higher, is far below the goal: a tenth of
+    // it in gain. Undithered at the top, its encoder pattern locked to the excitation
+    // (0.020 dB / 0.14 deg).
+    assert!(r.oracle_self_check.0 <= 0.012 && r.oracle_self_check.1 <= 0.08, "{:?}", r.oracle_self_check);
     // The drive's f32 correlator and the host's f64 fit of the same samples agree.
     assert!(r.stream_vs_online.0 <= 0.01 && r.stream_vs_online.1 <= 0.1, "{:?}", r.stream_vs_online);
     // At exactly 2 kHz a single phase sees the sine at one phase and its opposite.

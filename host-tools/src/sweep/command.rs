@@ -228,7 +228,7 @@ fn bench_sweep(common: &Common, detail: bool, seeds: u32) -> Result<bool> {
     );
     print_grid(&r.grid, detail);
     println!(
-        "  the oracle against itself with settling and records twice as long (every plant and point): {:.4} dB, {:.3} deg",
+        "  the oracle against itself with settling and records twice as long, riding 1 % faster (every plant and point): {:.4} dB, {:.3} deg",
         r.oracle_self_check.0, r.oracle_self_check.1
     );
     println!("  default axis, velocity command, current-sensor noise {} A:", crate::sweep::bench::DITHER_A);
