@@ -226,6 +226,9 @@ pub struct Axis {
     velocity_estimate: f32,
     velocity_reference: f32,
     torque_command: f32,
+    /// The voltage circle limited the current loop's output on a tick since the last
+    /// acquisition tick: the sweep's flag of a result not measured in the linear loop.
+    output_limited: bool,
     /// Velocity-loop inputs of the last velocity tick: reference and feedback as used.
     velocity_loop_inputs: (f32, f32),
     /// The position-command injection of the last position tick (encoder counts, as added to
@@ -284,6 +287,7 @@ impl Axis {
             velocity_estimate: 0.0,
             velocity_reference: 0.0,
             torque_command: 0.0,
+            output_limited: false,
             telemetry: Telemetry::default(),
         })
     }
@@ -641,7 +645,14 @@ impl Axis {
             _ => (torque, self.velocity_estimate),
         };
         let summed = due.velocity || self.settings.measured_torque_constant != 0.0;
-        self.sweep.end_tick(self.tick, summed, due.acquisition, u, y);
+        // Whether the voltage circle limited the current loop's output on a tick of the
+        // acquisition period that ends here (the ticks before this one; see
+        // `PhaseShiftedSweep::end_tick`).
+        let limited = self.output_limited && due.acquisition;
+        if due.acquisition {
+            self.output_limited = false;
+        }
+        self.sweep.end_tick(self.tick, summed, due.acquisition, u, y, limited);
 
         let current_reference = self.current_loop.reference(torque);
         let theta_e = self.encoder.electrical_angle();
@@ -659,6 +670,11 @@ impl Axis {
         if !(out.voltage.d.is_finite() && out.voltage.q.is_finite() && torque.is_finite()) {
             faults.latch(Faults::NOT_FINITE);
         }
+        // What the current loop asked for was cut by the voltage circle. (The current and
+        // torque limits are not watched here: each cost the Cortex-M4 about 20 instructions
+        // per tick, past the budget; a torque-command amplitude that reaches the torque limit
+        // is refused instead, `Params::validate`.)
+        self.output_limited |= out.saturated;
         InnerLoop { torque, current_reference, out }
     }
 

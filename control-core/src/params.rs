@@ -398,6 +398,14 @@ impl Params {
             let (value, max) = (self.sweep.dither, v.torque_limit);
             return Err(ParamError::Sweep(SweepError::Range { field: "dither", value, min: 0.0, max }));
         }
+        // Likewise a torque-command excitation whose peak with the dither reaches the torque
+        // limit: the limit would cut it, and the measured response would not be the loop's.
+        if self.sweep.point == crate::excitation::InjectionPoint::TorqueCommand
+            && self.sweep.amplitude + self.sweep.dither >= v.torque_limit
+        {
+            let (value, max) = (self.sweep.amplitude, v.torque_limit - self.sweep.dither);
+            return Err(ParamError::Sweep(SweepError::Range { field: "amplitude", value, min: 0.0, max }));
+        }
         self.correction.validate(r.position_period()).map_err(ParamError::Correction)?;
         in_range("accelerometer.sensitivity", self.accelerometer.sensitivity, MIN_SENSITIVITY, MAX_SENSITIVITY)?;
         Ok(())
@@ -417,6 +425,22 @@ mod tests {
         let e = p.validate().unwrap_err();
         assert!(matches!(e, ParamError::Sweep(SweepError::Range { field: "dither", .. })), "{e:?}");
         assert_eq!(e.field(), "dither");
+    }
+
+    #[test]
+    fn a_torque_command_sweep_whose_peak_reaches_the_torque_limit_is_refused_not_cut() {
+        let mut p = Params::default();
+        p.sweep.point = crate::excitation::InjectionPoint::TorqueCommand;
+        p.sweep.amplitude = 0.99 * (p.velocity.torque_limit - p.sweep.dither);
+        assert_eq!(p.validate(), Ok(()));
+        // The default amplitude (2, for the velocity points' rad/s) is the default torque limit.
+        p.sweep.amplitude = p.velocity.torque_limit - p.sweep.dither;
+        let e = p.validate().unwrap_err();
+        assert!(matches!(e, ParamError::Sweep(SweepError::Range { field: "amplitude", .. })), "{e:?}");
+        // The velocity points' amplitude is a speed: not held against the torque limit.
+        p.sweep.point = crate::excitation::InjectionPoint::VelocityCommand;
+        p.sweep.amplitude = 2.0 * p.velocity.torque_limit;
+        assert_eq!(p.validate(), Ok(()));
     }
 
     #[test]

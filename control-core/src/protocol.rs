@@ -712,6 +712,7 @@ mod tests {
         // A torque-command sweep at rest: torque mode, zero set-point.
         let mut p = Params::default();
         p.sweep.point = crate::excitation::InjectionPoint::TorqueCommand;
+        p.sweep.amplitude = 0.2;
         let mut axis = Axis::new(p).unwrap();
         axis.start_sweep().unwrap();
         assert_eq!(

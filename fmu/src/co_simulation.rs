@@ -377,6 +377,7 @@ impl AxisModel {
         o.sweep_frequency = w.frequency as f64;
         o.sweep_done_points = w.done_points as i32;
         o.sweep_last_frequency = w.last.frequency as f64;
+        o.sweep_last_limited = w.last_limited as f64;
         // A logarithm and an arctangent: only when the result they come from changes.
         let key = (w.last.re.to_bits(), w.last.im.to_bits());
         if s.reported_sweep_result != Some(key) {

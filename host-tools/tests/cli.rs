@@ -216,6 +216,8 @@ fn sweep_refuses_bad_settings_with_the_reason() {
         (vec!["--start", "100", "--stop", "50"], "stop_hz"),
         (vec!["--amplitude=-1"], "amplitude"),
         (vec!["--acquisition-divider", "8"], "once per communication step"),
+        // A torque-command sine whose peak reaches the torque limit (2 N·m) would be cut.
+        (vec!["--point", "torque", "--amplitude", "2"], "sweep amplitude = 2 is outside [0, 1.997]"),
     ] {
         let o = servo()
             .arg("sweep")
@@ -249,6 +251,41 @@ fn sweep_writes_csv_bode_and_json() {
     for f in ["sweep.csv", "bode.svg", "sweep.json"] {
         assert!(out.join(f).exists(), "{f} missing");
     }
+}
+
+/// Riding at 200 rad/s, the back-EMF leaves the 48 V bus too little voltage for 0.2 N·m at
+/// the top of the sweep: the results measured while the voltage circle cut the output are
+/// named in a warning, in the JSON and in the CSV's share column, and the low ones are not.
+#[test]
+fn sweep_names_the_results_measured_with_the_output_limited() {
+    let out = tmp("sweep-limited");
+    let o = servo()
+        .args(["sweep", "--point", "torque", "--velocity", "200", "--start", "100", "--stop", "3000", "--points", "6"])
+        .arg("--fmu")
+        .arg(fmu_path())
+        .arg("--out")
+        .arg(&out)
+        .output()
+        .unwrap();
+    let text = String::from_utf8_lossy(&o.stdout);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    assert!(text.contains("WARNING: the drive's output was limited"), "{text}");
+    let r: serde_json::Value = serde_json::from_slice(&std::fs::read(out.join("sweep.json")).unwrap()).unwrap();
+    let limited: Vec<f64> = r["limited_hz"].as_array().unwrap().iter().map(|v| v.as_f64().unwrap()).collect();
+    assert!(limited.contains(&3000.0) && !limited.iter().any(|&f| f < 1000.0), "{limited:?}");
+    let csv = std::fs::read_to_string(out.join("sweep.csv")).unwrap();
+    assert!(csv.lines().next().unwrap().ends_with(",limited_share"), "{csv}");
+    // At 50 rad/s and 0.1 N·m nothing is limited: no warning, nothing named.
+    let o = servo()
+        .args(["sweep", "--point", "torque", "--amplitude", "0.1", "--start", "100", "--stop", "3000", "--points", "6"])
+        .arg("--fmu")
+        .arg(fmu_path())
+        .arg("--out")
+        .arg(&out)
+        .output()
+        .unwrap();
+    let text = String::from_utf8_lossy(&o.stdout);
+    assert!(o.status.success() && !text.contains("WARNING"), "{text}");
 }
 
 #[test]

@@ -37,6 +37,14 @@ fn phase_shifting_measures_every_injection_point_against_the_oracle_and_single_p
     // it in gain. Undithered at the top, its encoder pattern locked to the excitation
     // (0.020 dB / 0.14 deg).
     assert!(r.oracle_self_check.0 <= 0.012 && r.oracle_self_check.1 <= 0.08, "{:?}", r.oracle_self_check);
+    // Riding at 100 and 200 rad/s the bus runs out of voltage at the top: every result off the
+    // goals is flagged as measured with the output limited, and the flags catch real errors.
+    for c in &r.limit_detection {
+        assert!(c.met, "{c:?}");
+    }
+    let fastest: Vec<_> = r.limit_detection.iter().filter(|c| c.riding_rad_s == 200.0).collect();
+    assert!(fastest.iter().all(|c| c.flagged_hz.contains(&3000.0)), "{fastest:?}");
+    assert!(fastest.iter().all(|c| c.flagged.0 > 0.1 || c.flagged.1 > 1.0), "{fastest:?}");
     // The drive's f32 correlator and the host's f64 fit of the same samples agree.
     assert!(r.stream_vs_online.0 <= 0.01 && r.stream_vs_online.1 <= 0.1, "{:?}", r.stream_vs_online);
     // At exactly 2 kHz a single phase sees the sine at one phase and its opposite.

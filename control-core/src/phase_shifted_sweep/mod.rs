@@ -162,6 +162,12 @@ pub struct SweepStatus {
     pub frequency: f32,
     pub done_points: u32,
     pub last: SweepResult,
+    /// The share (0..1) of `last`'s samples whose acquisition period saw the drive's output
+    /// limited (the voltage circle; see [`PhaseShiftedSweep::end_tick`]). Above 0 the loop was
+    /// not linear for part of the measurement and `last` can be off by tenths of a decibel
+    /// and degrees (how much depends on how deep the circle cut, which the share does not
+    /// tell).
+    pub last_limited: f32,
     pub sample: AcquisitionSample,
 }
 
@@ -414,8 +420,16 @@ impl PhaseShiftedSweep {
     /// would fold it. PRBS samples are the values at the acquisition tick, or period means
     /// for the machine-end acceleration measure, whose caller passes every base tick as a
     /// loop tick (its signals are sampled on every one). Advances the schedule.
+    ///
+    /// `limited` (read on acquisition ticks): the drive's output was limited on a tick of the
+    /// acquisition period (the voltage circle cut what the current loop asked for; the axis
+    /// keeps the flag between acquisition ticks). The loop is then not linear and a response
+    /// measured meanwhile is not its frequency response (at 200 rad/s on the default axis,
+    /// 0.2 N·m at 2–3 kHz needs more voltage than the 48 V bus leaves beside the back-EMF:
+    /// 0.3–0.6 dB and 2–4° off). A result's share of such samples is
+    /// [`SweepStatus::last_limited`].
     #[inline(always)]
-    pub fn end_tick(&mut self, tick: u64, loop_tick: bool, acquire: bool, u: f32, y: f32) {
+    pub fn end_tick(&mut self, tick: u64, loop_tick: bool, acquire: bool, u: f32, y: f32, limited: bool) {
         if !self.running() {
             return;
         }
@@ -444,6 +458,7 @@ impl PhaseShiftedSweep {
             };
             if measuring && signal == SweepSignal::SteppedSine {
                 self.acc.add(u, y, self.angle.sin_cos());
+                self.acc.limited += limited as u32;
             }
         }
         if self.left == 0 {
@@ -576,6 +591,7 @@ impl PhaseShiftedSweep {
         let r = SweepResult { frequency: self.status.frequency, re, im, quality };
         self.results[self.status.point as usize] = r;
         self.status.last = r;
+        self.status.last_limited = if self.acc.n > 0.0 { self.acc.limited as f32 / self.acc.n } else { 0.0 };
         self.status.done_points = self.status.point + 1;
     }
 }

@@ -50,6 +50,9 @@ pub(super) struct SineFitSums {
     first_cc: f32,
     first_ss: f32,
     first_cs: f32,
+    /// Samples whose acquisition period saw the drive's output limited (see
+    /// [`PhaseShiftedSweep::end_tick`](super::PhaseShiftedSweep::end_tick)).
+    pub(super) limited: u32,
 }
 
 /// Standard errors of a measured response `G = Y/U`, relative to |G|: the gain's (radial) and
@@ -132,6 +135,7 @@ impl SineFitSums {
             first_cc: self.first_cc - earlier.first_cc,
             first_ss: self.first_ss - earlier.first_ss,
             first_cs: self.first_cs - earlier.first_cs,
+            limited: self.limited - earlier.limited,
             ..*self
         }
     }

@@ -27,7 +27,7 @@ fn measure(params: SweepParams, gain: f32, phase: f32) -> [SweepResult; 2] {
     while s.running() {
         let (_, u) = s.excitation(tick.is_multiple_of(params.prbs_divider as u64)).unwrap();
         let y = gain * params.amplitude * libm::sinf(phase_angle(s.phase_word) + phase);
-        s.end_tick(tick, tick.is_multiple_of(2), tick.is_multiple_of(params.acquisition_divider as u64), u, y);
+        s.end_tick(tick, tick.is_multiple_of(2), tick.is_multiple_of(params.acquisition_divider as u64), u, y, false);
         tick += 1;
     }
     assert_eq!(tick, params.total_ticks(FS), "the schedule the host computes is the one the drive runs");
@@ -81,7 +81,7 @@ fn below_the_threshold_a_sample_is_the_mean_over_the_loop_ticks_and_above_it_the
             let y = (tick * tick % 97) as f32;
             ys[(tick % 4) as usize] = y;
             let acquire = tick % 4 == 3;
-            s.end_tick(tick, tick % 2 == 1, acquire, u, y);
+            s.end_tick(tick, tick % 2 == 1, acquire, u, y, false);
             if acquire && tick > 4 {
                 let expected = if averaged { 0.5 * (ys[1] + ys[3]) } else { y };
                 assert_eq!(s.status().sample.y, expected, "{f} Hz, tick {tick}");
@@ -108,7 +108,7 @@ fn noisy(params: SweepParams, gain: f32, noise: f32, seed: u32) -> (SweepResult,
         let (_, u) = s.excitation(true).unwrap();
         let r = uniform(&mut state);
         let y = 50.0 + gain * params.amplitude * libm::sinf(phase_angle(s.phase_word) + 0.3) + noise * r;
-        s.end_tick(tick, tick.is_multiple_of(2), tick.is_multiple_of(params.acquisition_divider as u64), u, y);
+        s.end_tick(tick, tick.is_multiple_of(2), tick.is_multiple_of(params.acquisition_divider as u64), u, y, false);
         tick += 1;
     }
     (s.results()[0], tick)
@@ -126,7 +126,7 @@ fn ringing(params: SweepParams) -> (SweepResult, u64, u32) {
         let t = tick as f32 / FS;
         let ring = 0.3 * 1.5 * params.amplitude * libm::expf(-t / 0.05) * libm::sinf(TAU * 52.0 * t);
         let y = 1.5 * params.amplitude * libm::sinf(phase_angle(s.phase_word) - 0.4) + ring;
-        s.end_tick(tick, tick.is_multiple_of(2), tick.is_multiple_of(params.acquisition_divider as u64), u, y);
+        s.end_tick(tick, tick.is_multiple_of(2), tick.is_multiple_of(params.acquisition_divider as u64), u, y, false);
         if s.status().sample.point == 0 {
             last_half = s.status().sample.half_block();
         }
@@ -203,5 +203,48 @@ fn a_noisy_low_gain_point_is_lengthened_until_precise_and_a_clean_one_is_not() {
                 "differenced {differenced}: {what} {value}, expected {predicted}"
             );
         }
+    }
+}
+
+/// Every frequency's result with its count of limited samples, for a response that a limit
+/// clips at `clip` (y = u cut to ±clip, the tick flagged when cut) while `flag_when` holds.
+fn measure_clipped(params: SweepParams, clip: f32, flag_when: impl Fn(SweepState) -> bool) -> [(f32, f32, f32); 3] {
+    let mut s = PhaseShiftedSweep::new(params, FS);
+    s.start().unwrap();
+    let (mut tick, mut limited, mut seen, mut out) = (0u64, false, 0, [(0.0, 0.0, 0.0); 3]);
+    while s.running() {
+        let (_, u) = s.excitation(true).unwrap();
+        let y = u.clamp(-clip, clip);
+        // The axis passes the previous tick's flag (the telemetry's) on this tick.
+        s.end_tick(tick, tick.is_multiple_of(2), tick.is_multiple_of(params.acquisition_divider as u64), u, y, limited);
+        limited = y != u && flag_when(s.status().state);
+        if s.status().done_points > seen {
+            out[seen as usize] = (s.status().last.frequency, s.status().last_limited, s.status().last.gain_db());
+            seen = s.status().done_points;
+        }
+        tick += 1;
+    }
+    out
+}
+
+#[test]
+fn a_result_measured_while_the_output_was_limited_says_so() {
+    let params = SweepParams { start_hz: 100.0, stop_hz: 2500.0, points: 3, extra_hz: 0.0, ..Default::default() };
+    // Cut at 80 % of the amplitude: the clipped sine's fundamental is not the loop's (about
+    // -1 dB here), and every frequency's result counts the samples taken while it was cut.
+    let clipped = measure_clipped(params, 0.8 * params.amplitude, |_| true);
+    assert_eq!(clipped.map(|c| c.0 as u32), [100, 500, 2500]);
+    for &(f, limited, gain_db) in &clipped {
+        assert!(limited > 0.2 && limited < 0.8, "{f} Hz: {limited} of the samples limited");
+        assert!(gain_db < -0.5, "{f} Hz: clipped, {gain_db} dB");
+    }
+    // Never cut: no result counts a limited sample, and the gain is 0 dB.
+    for (f, limited, gain_db) in measure_clipped(params, 2.0 * params.amplitude, |_| true) {
+        assert_eq!(limited, 0.0, "{f} Hz");
+        assert!(gain_db.abs() < 1e-3, "{f} Hz: {gain_db} dB");
+    }
+    // Cut only while the sweep settles (before the samples that count): not counted.
+    for (f, limited, _) in measure_clipped(params, 0.8 * params.amplitude, |s| s == SweepState::Settling) {
+        assert_eq!(limited, 0.0, "{f} Hz: limited while settling only");
     }
 }

@@ -36,6 +36,9 @@ pub struct DeviceSweep {
     /// The drive's on-line results as the telemetry polls caught them (a point finished and
     /// overwritten between two polls is missing here, not in `stream`).
     pub online: Vec<ResponsePoint>,
+    /// Frequencies whose on-line result the drive measured while its output was limited (the
+    /// voltage circle cut what the current loop asked for): not the loop's response there.
+    pub limited_hz: Vec<f64>,
     pub samples: usize,
     /// Samples the drive could not send (its ring full: the link too slow).
     pub dropped: u32,
@@ -109,6 +112,7 @@ pub fn sweep_on_drive_after<T: crate::device::link::DrivePort>(
     let longest = run.max_measurement_time()? * 1.2 + 1.0;
     let (session_hz, planned) = (session.tick_hz, run.measurement_time()?.max(1e-9));
     let mut online = Vec::new();
+    let mut limited_hz = Vec::new();
     let mut seen = 0;
     let end = session.wait_until(longest, |t| {
         if t.faults.any() {
@@ -117,6 +121,9 @@ pub fn sweep_on_drive_after<T: crate::device::link::DrivePort>(
         if t.sweep.done_points > seen {
             seen = t.sweep.done_points;
             let l = t.sweep.last;
+            if t.sweep.last_limited > 0.0 {
+                limited_hz.push(l.frequency as f64);
+            }
             online.push(ResponsePoint::from_complex(
                 l.frequency as f64,
                 num_complex::Complex64::new(l.re as f64, l.im as f64),
@@ -156,6 +163,7 @@ pub fn sweep_on_drive_after<T: crate::device::link::DrivePort>(
         measurement_time_s,
         stream,
         online,
+        limited_hz,
         samples: rows.len(),
         dropped,
         corrupt_frames: session.link.corrupt_frames - corrupt_before,

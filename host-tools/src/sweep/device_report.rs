@@ -216,6 +216,9 @@ impl DeviceSweepReport {
                 format!("; measured by one only: {:?} Hz", self.missing)
             }
         );
+        if !d.limited_hz.is_empty() {
+            println!("  WARNING: {}", crate::sweep::measurement::limited_warning(&d.limited_hz));
+        }
         println!(
             "  link: {} samples, {} dropped by the drive, {} frame(s) lost on the line; {:.0} B/s of {:.0} B/s ({:.0} % of the line)",
             d.samples,

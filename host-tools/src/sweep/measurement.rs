@@ -71,6 +71,47 @@ pub fn online_results(t: &Trace) -> Result<Vec<ResponsePoint>> {
     Ok(out)
 }
 
+/// The frequencies whose on-line result the drive measured with its output limited on any
+/// of the samples (`sweep_last_limited`, the share, above 0 at the result's completion: the
+/// voltage circle cut what the current loop asked for, and the loop was not linear). No
+/// share is small enough to pass over: the error grows with how deep the circle cuts, not
+/// with how often, and at the top of the sweep, where the response is a count or two, a
+/// little goes a long way (`servo bench sweep`'s riding speeds, with sensor noise: 3.8 % of
+/// the samples at 3 kHz left the result 0.16 dB and 2.4° off, while 16 % at 2 kHz on the
+/// torque command left another within 0.01 dB). Empty for an FMU without that output.
+pub fn limited_frequencies(t: &Trace) -> Vec<f64> {
+    limited_shares(t).into_iter().filter(|&(_, share)| share > 0.0).map(|(f, _)| f).collect()
+}
+
+/// Every on-line result's frequency and the share of its samples measured with the drive's
+/// output limited (`sweep_last_limited`, 0 for an FMU without that output), in order.
+pub fn limited_shares(t: &Trace) -> Vec<(f64, f64)> {
+    let (Some(done), Some(f)) = (t.column("sweep_done_points"), t.column("sweep_last_frequency")) else {
+        return Vec::new();
+    };
+    let limited = t.column("sweep_last_limited").unwrap_or_else(|| vec![0.0; done.len()]);
+    (1..done.len()).filter(|&i| done[i] > done[i - 1]).map(|i| (f[i], limited[i])).collect()
+}
+
+/// How a list of frequencies flagged as limited reads in a sentence: "2239.2, 2591.8 and
+/// 3000.0 Hz".
+pub fn frequency_list(hz: &[f64]) -> String {
+    let words: Vec<String> = hz.iter().map(|f| format!("{f:.1}")).collect();
+    match words.split_last() {
+        None => String::new(),
+        Some((last, [])) => format!("{last} Hz"),
+        Some((last, rest)) => format!("{} and {last} Hz", rest.join(", ")),
+    }
+}
+
+/// What a user reads when results were measured with the output limited.
+pub fn limited_warning(hz: &[f64]) -> String {
+    format!(
+        "the drive's output was limited (the voltage circle cut what the current loop asked for) while it measured {}: the loop was not linear there, and the result can be off by tenths of a decibel and degrees. Lower --amplitude, ride slower (the back-EMF takes voltage: --velocity), or give the drive a higher bus voltage",
+        frequency_list(hz)
+    )
+}
+
 /// Three-parameter sine fit (known phase) in f64: complex amplitudes of u and y and the
 /// conditioning of the phases, as the drive computes them in f32.
 #[derive(Clone, Copy, Debug, Default)]

@@ -6,5 +6,6 @@ pub mod command;
 pub mod device;
 pub mod device_report;
 pub mod index;
+pub mod limit_detection;
 pub mod measurement;
 pub mod report;

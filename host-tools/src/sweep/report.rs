@@ -15,7 +15,9 @@ use crate::fmu::scenario::Value;
 use crate::fmu::sweep_run::SweepRun;
 use crate::fmu::trace::Trace;
 use crate::plot::bode::plot_bode;
-use crate::sweep::measurement::{errors, measured_time, online_results, stream_results, ErrorSummary};
+use crate::sweep::measurement::{
+    errors, limited_shares, limited_warning, measured_time, online_results, stream_results, ErrorSummary,
+};
 
 /// Encoder of the oracle (counts per revolution; the FMU's finest, 16 times the default 2^20).
 pub const ORACLE_ENCODER: i64 = 1 << 24;
@@ -80,6 +82,11 @@ pub struct SweepReport {
     pub online: Vec<ResponsePoint>,
     /// Largest |stream − on-line| difference: (dB, degrees).
     pub stream_vs_online: (f64, f64),
+    /// Frequencies the drive measured while its output was limited (see
+    /// [`crate::sweep::measurement::limited_frequencies`]): the loop was not linear there.
+    pub limited_hz: Vec<f64>,
+    /// Each on-line result's share of samples measured with the output limited (0..1).
+    pub limited_share: Vec<f64>,
     pub oracle: Option<Vec<ResponsePoint>>,
     pub errors_vs_oracle: Option<ErrorSummary>,
     pub files: Vec<PathBuf>,
@@ -125,15 +132,28 @@ pub fn run(
             (g.max(dg.abs()), p.max(dp.abs()))
         }
     });
+    // Each result's share of samples measured with the output limited (0 where none).
+    let limited = limited_shares(&trace);
+    let share_at = |f: f64| limited.iter().find(|&&(g, _)| g == f).map_or(0.0, |&(_, share)| share);
     let mut files = Vec::new();
     let csv = out.join("sweep.csv");
     let mut t = Trace::new(
-        ["frequency", "gain_db", "phase_deg", "quality", "online_gain_db", "online_phase_deg", "online_quality"]
-            .map(String::from)
-            .to_vec(),
+        [
+            "frequency",
+            "gain_db",
+            "phase_deg",
+            "quality",
+            "online_gain_db",
+            "online_phase_deg",
+            "online_quality",
+            "limited_share",
+        ]
+        .map(String::from)
+        .to_vec(),
     );
     for (a, b) in stream.iter().zip(&online) {
-        t.rows.push(vec![a.frequency, a.gain_db, a.phase_deg, a.quality, b.gain_db, b.phase_deg, b.quality]);
+        let share = share_at(b.frequency);
+        t.rows.push(vec![a.frequency, a.gain_db, a.phase_deg, a.quality, b.gain_db, b.phase_deg, b.quality, share]);
     }
     t.write_csv(&csv)?;
     let trace_csv = out.join("sweep_trace.csv");
@@ -173,6 +193,7 @@ pub fn run(
         Some((acquisition_hz / 2.0, "acquisition Nyquist")),
     )?;
     files.push(svg);
+    let limited_share = online.iter().map(|p| share_at(p.frequency)).collect();
     let report = SweepReport {
         measurement_time_s: measurement_time,
         acquisition_hz,
@@ -180,6 +201,8 @@ pub fn run(
         stream,
         online,
         stream_vs_online: agreement,
+        limited_hz: limited.iter().filter(|&&(_, share)| share > 0.0).map(|&(f, _)| f).collect(),
+        limited_share,
         oracle,
         errors_vs_oracle,
         files: files.clone(),
@@ -199,19 +222,28 @@ impl SweepReport {
             self.threshold_hz
         );
         println!(
-            "  {:>10} {:>10} {:>10} {:>8} {:>12} {:>12}",
-            "Hz", "gain dB", "phase deg", "quality", "online dB", "online deg"
+            "  {:>10} {:>10} {:>10} {:>8} {:>12} {:>12} {:>10}",
+            "Hz", "gain dB", "phase deg", "quality", "online dB", "online deg", "limited %"
         );
-        for (a, b) in self.stream.iter().zip(&self.online) {
+        for ((a, b), share) in self.stream.iter().zip(&self.online).zip(&self.limited_share) {
             println!(
-                "  {:>10.2} {:>10.3} {:>10.2} {:>8.4} {:>12.3} {:>12.2}",
-                a.frequency, a.gain_db, a.phase_deg, a.quality, b.gain_db, b.phase_deg
+                "  {:>10.2} {:>10.3} {:>10.2} {:>8.4} {:>12.3} {:>12.2} {:>10}",
+                a.frequency,
+                a.gain_db,
+                a.phase_deg,
+                a.quality,
+                b.gain_db,
+                b.phase_deg,
+                if *share > 0.0 { format!("{:.1}", 100.0 * share) } else { String::new() }
             );
         }
         println!(
             "  stream vs on-line correlator: largest difference {:.2e} dB, {:.2e} deg",
             self.stream_vs_online.0, self.stream_vs_online.1
         );
+        if !self.limited_hz.is_empty() {
+            println!("  WARNING: {}", limited_warning(&self.limited_hz));
+        }
         if let Some(e) = &self.errors_vs_oracle {
             println!(
                 "  against the oracle: below {} Hz max {:.3} dB / {:.2} deg; from {} Hz up max {:.3} dB / {:.2} deg",
