@@ -398,12 +398,17 @@ impl Params {
             let (value, max) = (self.sweep.dither, v.torque_limit);
             return Err(ParamError::Sweep(SweepError::Range { field: "dither", value, min: 0.0, max }));
         }
-        // Likewise a torque-command excitation whose peak with the dither reaches the torque
-        // limit: the limit would cut it, and the measured response would not be the loop's.
+        // Likewise a torque-command excitation whose own peak with the dither reaches the
+        // current limit's torque (kt·max_current: the injection is added after the torque
+        // limit, the current reference's clamp cuts it): the measured response would not be
+        // the loop's. The torque the loop commands beside it (a riding speed's friction, a
+        // torque set-point) is not known here; the voltage circle is watched while it runs
+        // (`SweepStatus::last_limited`).
+        let peak_torque = self.motor.torque_constant() * self.current.max_current;
         if self.sweep.point == crate::excitation::InjectionPoint::TorqueCommand
-            && self.sweep.amplitude + self.sweep.dither >= v.torque_limit
+            && self.sweep.amplitude + self.sweep.dither >= peak_torque
         {
-            let (value, max) = (self.sweep.amplitude, v.torque_limit - self.sweep.dither);
+            let (value, max) = (self.sweep.amplitude, peak_torque - self.sweep.dither);
             return Err(ParamError::Sweep(SweepError::Range { field: "amplitude", value, min: 0.0, max }));
         }
         self.correction.validate(r.position_period()).map_err(ParamError::Correction)?;
@@ -428,13 +433,25 @@ mod tests {
     }
 
     #[test]
-    fn a_torque_command_sweep_whose_peak_reaches_the_torque_limit_is_refused_not_cut() {
+    fn a_torque_command_sweep_whose_peak_reaches_the_current_limit_is_refused_not_cut() {
         let mut p = Params::default();
         p.sweep.point = crate::excitation::InjectionPoint::TorqueCommand;
-        p.sweep.amplitude = 0.99 * (p.velocity.torque_limit - p.sweep.dither);
+        let peak = p.motor.torque_constant() * p.current.max_current;
+        p.sweep.amplitude = 0.99 * (peak - p.sweep.dither);
         assert_eq!(p.validate(), Ok(()));
-        // The default amplitude (2, for the velocity points' rad/s) is the default torque limit.
-        p.sweep.amplitude = p.velocity.torque_limit - p.sweep.dither;
+        // The default amplitude (2, for the velocity points' rad/s) is the default axis's
+        // current-limit torque (0.1 N·m/A × 20 A).
+        p.sweep.amplitude = peak - p.sweep.dither;
+        let e = p.validate().unwrap_err();
+        assert!(matches!(e, ParamError::Sweep(SweepError::Range { field: "amplitude", .. })), "{e:?}");
+        // The current limit is what cuts the injection, not the velocity loop's torque limit
+        // (the injection is added after it): a lower torque limit refuses nothing more, a
+        // lower current limit does.
+        p.sweep.amplitude = 1.5;
+        p.velocity.torque_limit = 1.0;
+        assert_eq!(p.validate(), Ok(()));
+        p.velocity.torque_limit = 2.0;
+        p.current.max_current = 10.0;
         let e = p.validate().unwrap_err();
         assert!(matches!(e, ParamError::Sweep(SweepError::Range { field: "amplitude", .. })), "{e:?}");
         // The velocity points' amplitude is a speed: not held against the torque limit.

@@ -26,7 +26,9 @@ use crate::ranges::{check_position, Quantity, RangeError};
 use crate::response_correction::CorrectionParams;
 use crate::stop_sequence::{Refusal, SequenceEvent};
 
-/// Protocol version 6: `SaveParams` is answered with the sequence number of the record it
+/// Protocol version 7: the telemetry's sweep status carries the share of the last result's
+/// samples measured with the output limited (`SweepStatus::last_limited`). Version 6:
+/// `SaveParams` is answered with the sequence number of the record it
 /// wrote ([`Response::Saved`]), and the telemetry carries the newest record in the drive's
 /// flash ([`DriveTelemetry`]), so that a save whose answer is lost can be told from the
 /// telemetry; the parameters carry the sweep's measure (`sweep.measure`) and the machine-end
@@ -35,7 +37,7 @@ use crate::stop_sequence::{Refusal, SequenceEvent};
 /// board's PWM rate are refused with that rate; version 4: `SaveParams`, and the answer to `Hello` says where the
 /// drive's parameters came from at boot; version 3: CRC-32C instead of CRC-16, trailing bytes
 /// refused, range refusals).
-pub const VERSION: u16 = 6;
+pub const VERSION: u16 = 7;
 /// Largest encoded frame, COBS body without its terminator (a full parameter set fits with
 /// room to spare).
 pub const MAX_FRAME: usize = 1024;

@@ -163,7 +163,8 @@ pub struct SweepStatus {
     pub done_points: u32,
     pub last: SweepResult,
     /// The share (0..1) of `last`'s samples whose acquisition period saw the drive's output
-    /// limited (the voltage circle; see [`PhaseShiftedSweep::end_tick`]). Above 0 the loop was
+    /// limited (the voltage circle; see [`PhaseShiftedSweep::end_tick`]; a stepped sine's
+    /// results only: the PRBS mode has none, its caller checks its own data). Above 0 the loop was
     /// not linear for part of the measurement and `last` can be off by tenths of a decibel
     /// and degrees (how much depends on how deep the circle cut, which the share does not
     /// tell).

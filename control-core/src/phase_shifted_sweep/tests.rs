@@ -248,3 +248,46 @@ fn a_result_measured_while_the_output_was_limited_says_so() {
         assert_eq!(limited, 0.0, "{f} Hz: limited while settling only");
     }
 }
+
+/// The ringing response of [`ringing`], with the output flagged as limited on every tick of
+/// the first frequency's half block `flagged_half` (its first record); the share of limited
+/// samples its result reports and the last half block it measured.
+fn ringing_limited(params: SweepParams, flagged_half: u32) -> (f32, u32) {
+    let mut s = PhaseShiftedSweep::new(params, FS);
+    s.start().unwrap();
+    let (mut tick, mut limited, mut share, mut last_half) = (0u64, false, None, 0u32);
+    while s.running() {
+        let (_, u) = s.excitation(true).unwrap();
+        let t = tick as f32 / FS;
+        let ring = 0.3 * 1.5 * params.amplitude * libm::expf(-t / 0.05) * libm::sinf(TAU * 52.0 * t);
+        let y = 1.5 * params.amplitude * libm::sinf(phase_angle(s.phase_word) - 0.4) + ring;
+        s.end_tick(tick, tick.is_multiple_of(2), tick.is_multiple_of(params.acquisition_divider as u64), u, y, limited);
+        let sample = s.status().sample;
+        limited = s.status().state == SweepState::Measuring
+            && sample.point == 0
+            && sample.record() == 0
+            && sample.half_block() == flagged_half;
+        if sample.point == 0 {
+            last_half = sample.half_block();
+        }
+        if s.status().done_points == 1 && share.is_none() {
+            share = Some(s.status().last_limited);
+        }
+        tick += 1;
+    }
+    (share.unwrap(), last_half)
+}
+
+#[test]
+fn limited_samples_of_a_discarded_half_block_leave_with_it() {
+    let p = SweepParams { start_hz: 50.0, stop_hz: 50.05, points: 2, extra_hz: 0.0, ..Default::default() };
+    // The ring makes the settling check discard the first half blocks: the limited samples of
+    // the first one are not in the result.
+    let (share, last_half) = ringing_limited(p, 0);
+    assert!(last_half >= 3, "{last_half}");
+    assert_eq!(share, 0.0);
+    // Those of the last half block are: it is half of the base block the result keeps (the
+    // flag reaches the sample after the tick, so one sample of it falls outside).
+    let (share, _) = ringing_limited(p, last_half);
+    assert!(share > 0.4 && share <= 0.5, "{share}");
+}

@@ -21,6 +21,9 @@ const COUPLED: &[(&str, &str, &str)] = &[
     // The position-command point (the largest code) sweeps below the position loop's Nyquist
     // frequency, 2 kHz at the defaults, under the default stop frequency of 3 kHz.
     ("sweep.point", "max", "Nyquist"),
+    // The torque-command point (the smallest code) with the default amplitude, 2 (rad/s for the
+    // velocity points): a 2 N·m sine reaches the current limit, refused by the amplitude.
+    ("sweep.point", "min", "amplitude"),
     // The machine-end acceleration measure needs torque- or position-command injection (the
     // default point is the velocity command).
     ("sweep.measure", "max", "needs torque-command (sweep.point 1) or position-command"),

@@ -276,7 +276,7 @@ declare_variables! {
     // Frequency-response sweep (seed 000), started by `sweep_start`.
     74 sweep_point: Int32 "sweep.point" Parameter Fixed = Params::default().sweep.point.code(); NONE; r(1.0, 4.0); "Injection point: 1 torque command, 2 velocity command, 3 velocity feedback (open loop), 4 position command (rad added to the streamed position_command, position mode only; acq_u the injection, acq_y the position, both from position_command)";
     75 sweep_signal: Int32 "sweep.signal" Parameter Fixed = Params::default().sweep.signal.code(); NONE; r(0.0, 1.0); "0 stepped sine (phase shifted above the threshold), 1 PRBS (broadband baseline)";
-    76 sweep_amplitude: Float64 "sweep.amplitude" Parameter Fixed = core(|p| p.sweep.amplitude); NONE; r(1.0e-9, 1.0e6); "Sine or PRBS amplitude (rad/s, N.m or rad, as the point)";
+    76 sweep_amplitude: Float64 "sweep.amplitude" Parameter Fixed = core(|p| p.sweep.amplitude); NONE; r(1.0e-9, 1.0e6); "Sine or PRBS amplitude (rad/s, N.m or rad, as the point; the default 2 is for the velocity points). On the torque command its peak with sweep.dither must stay below the current limit's torque (kt*ctrl.max_current, 2 N.m on the default axis), or the parameters are refused";
     77 sweep_start_hz: Float64 "sweep.start_hz" Parameter Fixed = core(|p| p.sweep.start_hz); HZ; POS_FREQ; "First frequency (below stop_hz)";
     78 sweep_stop_hz: Float64 "sweep.stop_hz" Parameter Fixed = core(|p| p.sweep.stop_hz); HZ; POS_FREQ; "Last frequency";
     79 sweep_points: Int32 "sweep.points" Parameter Fixed = core_count(|p| p.sweep.points); NONE; r(1.0, 127.0); "Frequencies from start to stop, both included (1: start_hz alone)";

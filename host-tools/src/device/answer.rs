@@ -223,6 +223,7 @@ mod tests {
         fn new(script: &[(usize, Hit)]) -> Self {
             let mut p = Params::default();
             p.sweep.point = InjectionPoint::TorqueCommand;
+            p.sweep.amplitude = 0.2;
             Self {
                 axis: Axis::new(p).unwrap(),
                 commands: Commands::default(),

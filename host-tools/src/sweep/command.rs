@@ -292,10 +292,15 @@ fn print_limit_detection(cases: &[crate::sweep::limit_detection::LimitCase]) {
         "injection point", "amplitude", "rad/s", "flagged", "unflagged dB / deg", "flagged dB / deg"
     );
     for c in cases {
-        let flagged = match (c.flagged_hz.first(), c.flagged_hz.last()) {
+        let mut flagged = match (c.flagged_hz.first(), c.flagged_hz.last()) {
             (Some(a), Some(b)) => format!("{} from {a:.0} to {b:.0} Hz", c.flagged_hz.len()),
             _ => "none".to_string(),
         };
+        // Where only the oracle was limited, nothing is compared: say how many.
+        let oracle_only = c.oracle_flagged_hz.iter().filter(|f| !c.flagged_hz.contains(f)).count();
+        if oracle_only > 0 {
+            flagged.push_str(&format!(" (+{oracle_only} oracle's)"));
+        }
         println!(
             "  {:<18} {:>9} {:>8}  {:<30} {:>9.3} / {:>6.2} {:>9.3} / {:>6.2}  {}",
             c.point,

@@ -39,6 +39,9 @@ pub struct DeviceSweep {
     /// Frequencies whose on-line result the drive measured while its output was limited (the
     /// voltage circle cut what the current loop asked for): not the loop's response there.
     pub limited_hz: Vec<f64>,
+    /// Results finished between two telemetry polls: whether their output was limited is not
+    /// known (the telemetry carries the last result's share only).
+    pub limited_unknown: usize,
     pub samples: usize,
     /// Samples the drive could not send (its ring full: the link too slow).
     pub dropped: u32,
@@ -113,12 +116,14 @@ pub fn sweep_on_drive_after<T: crate::device::link::DrivePort>(
     let (session_hz, planned) = (session.tick_hz, run.measurement_time()?.max(1e-9));
     let mut online = Vec::new();
     let mut limited_hz = Vec::new();
+    let mut limited_unknown = 0;
     let mut seen = 0;
     let end = session.wait_until(longest, |t| {
         if t.faults.any() {
             return Err(anyhow!("the drive latched a fault during the sweep: {}", t.faults));
         }
         if t.sweep.done_points > seen {
+            limited_unknown += (t.sweep.done_points - seen - 1) as usize;
             seen = t.sweep.done_points;
             let l = t.sweep.last;
             if t.sweep.last_limited > 0.0 {
@@ -164,6 +169,7 @@ pub fn sweep_on_drive_after<T: crate::device::link::DrivePort>(
         stream,
         online,
         limited_hz,
+        limited_unknown,
         samples: rows.len(),
         dropped,
         corrupt_frames: session.link.corrupt_frames - corrupt_before,

@@ -219,6 +219,12 @@ impl DeviceSweepReport {
         if !d.limited_hz.is_empty() {
             println!("  WARNING: {}", crate::sweep::measurement::limited_warning(&d.limited_hz));
         }
+        if d.limited_unknown > 0 {
+            println!(
+                "  {} result(s) finished between two telemetry polls: whether the output was limited there is not known",
+                d.limited_unknown
+            );
+        }
         println!(
             "  link: {} samples, {} dropped by the drive, {} frame(s) lost on the line; {:.0} B/s of {:.0} B/s ({:.0} % of the line)",
             d.samples,

@@ -87,6 +87,8 @@ pub struct SweepReport {
     pub limited_hz: Vec<f64>,
     /// Each on-line result's share of samples measured with the output limited (0..1).
     pub limited_share: Vec<f64>,
+    /// The FMU reports the share (`sweep_last_limited`; an older build does not).
+    pub limited_known: bool,
     pub oracle: Option<Vec<ResponsePoint>>,
     pub errors_vs_oracle: Option<ErrorSummary>,
     pub files: Vec<PathBuf>,
@@ -132,9 +134,10 @@ pub fn run(
             (g.max(dg.abs()), p.max(dp.abs()))
         }
     });
-    // Each result's share of samples measured with the output limited (0 where none).
+    // Each result's share of samples measured with the output limited (0 where none), in the
+    // on-line results' order (both are read at each completion).
     let limited = limited_shares(&trace);
-    let share_at = |f: f64| limited.iter().find(|&&(g, _)| g == f).map_or(0.0, |&(_, share)| share);
+    let limited_known = trace.column("sweep_last_limited").is_some();
     let mut files = Vec::new();
     let csv = out.join("sweep.csv");
     let mut t = Trace::new(
@@ -151,8 +154,7 @@ pub fn run(
         .map(String::from)
         .to_vec(),
     );
-    for (a, b) in stream.iter().zip(&online) {
-        let share = share_at(b.frequency);
+    for ((a, b), &(_, share)) in stream.iter().zip(&online).zip(&limited) {
         t.rows.push(vec![a.frequency, a.gain_db, a.phase_deg, a.quality, b.gain_db, b.phase_deg, b.quality, share]);
     }
     t.write_csv(&csv)?;
@@ -186,14 +188,21 @@ pub fn run(
     curves.push(("equivalent time (acquisition stream)", &stream));
     curves.push(("on-line correlator (drive)", &online));
     let svg = out.join("bode.svg");
+    // Where the drive's output was limited, the plot says so in its title.
+    let limited_note = match (limited.iter().find(|l| l.1 > 0.0), limited.iter().rev().find(|l| l.1 > 0.0)) {
+        (Some(a), Some(b)) => format!(" — output LIMITED at {:.0}–{:.0} Hz: not the linear loop there", a.0, b.0),
+        _ => String::new(),
+    };
     plot_bode(
         &svg,
-        &format!("Frequency response, {measurement_time:.2} s of measurement, acquisition {acquisition_hz} Hz"),
+        &format!(
+            "Frequency response, {measurement_time:.2} s of measurement, acquisition {acquisition_hz} Hz{limited_note}"
+        ),
         &curves,
         Some((acquisition_hz / 2.0, "acquisition Nyquist")),
     )?;
     files.push(svg);
-    let limited_share = online.iter().map(|p| share_at(p.frequency)).collect();
+    let limited_share = limited.iter().map(|&(_, share)| share).collect();
     let report = SweepReport {
         measurement_time_s: measurement_time,
         acquisition_hz,
@@ -203,6 +212,7 @@ pub fn run(
         stream_vs_online: agreement,
         limited_hz: limited.iter().filter(|&&(_, share)| share > 0.0).map(|&(f, _)| f).collect(),
         limited_share,
+        limited_known,
         oracle,
         errors_vs_oracle,
         files: files.clone(),
@@ -243,6 +253,11 @@ impl SweepReport {
         );
         if !self.limited_hz.is_empty() {
             println!("  WARNING: {}", limited_warning(&self.limited_hz));
+        }
+        if !self.limited_known {
+            println!(
+                "  this FMU does not report whether the drive's output was limited (no sweep_last_limited output)"
+            );
         }
         if let Some(e) = &self.errors_vs_oracle {
             println!(
