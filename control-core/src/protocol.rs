@@ -753,8 +753,8 @@ mod tests {
             Response::Refused(RefusalReason::Sequence(Refusal::NotInSequenceMode))
         );
         assert_eq!(
-            handle(&mut axis, &mut commands, &mut stream, Request::Hello { version: 7 }),
-            Response::FrameError(FrameError::Version { got: 7 })
+            handle(&mut axis, &mut commands, &mut stream, Request::Hello { version: VERSION + 1 }),
+            Response::FrameError(FrameError::Version { got: VERSION + 1 })
         );
         assert_eq!(
             handle(&mut axis, &mut commands, &mut stream, Request::Hello { version: VERSION }),
