@@ -217,7 +217,7 @@ fn sweep_refuses_bad_settings_with_the_reason() {
         (vec!["--amplitude=-1"], "amplitude"),
         (vec!["--acquisition-divider", "8"], "once per communication step"),
         // A torque-command sine whose peak reaches the torque limit (2 N·m) would be cut.
-        (vec!["--point", "torque", "--amplitude", "2"], "sweep amplitude = 2 is outside [0, 1.997]"),
+        (vec!["--point", "torque", "--amplitude", "2"], "sweep amplitude = 2 is outside [0, 1.997"),
     ] {
         let o = servo()
             .arg("sweep")
