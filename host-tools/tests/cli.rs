@@ -259,16 +259,21 @@ fn sweep_writes_csv_bode_and_json() {
 #[test]
 fn sweep_names_the_results_measured_with_the_output_limited() {
     let out = tmp("sweep-limited");
-    let o = servo()
-        .args(["sweep", "--point", "torque", "--velocity", "200", "--start", "100", "--stop", "3000", "--points", "6"])
-        .arg("--fmu")
-        .arg(fmu_path())
-        .arg("--out")
-        .arg(&out)
-        .output()
-        .unwrap();
-    let text = String::from_utf8_lossy(&o.stdout);
-    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    // A torque-command sweep of 100 Hz to 3 kHz (6 points and 2 kHz) with `args`: exit 0, stdout.
+    let torque_sweep = |args: &[&str]| {
+        let o = servo()
+            .args(["sweep", "--point", "torque", "--start", "100", "--stop", "3000", "--points", "6"])
+            .args(args)
+            .arg("--fmu")
+            .arg(fmu_path())
+            .arg("--out")
+            .arg(&out)
+            .output()
+            .unwrap();
+        assert!(o.status.success(), "{args:?}: {}", String::from_utf8_lossy(&o.stderr));
+        String::from_utf8_lossy(&o.stdout).into_owned()
+    };
+    let text = torque_sweep(&["--velocity", "200"]);
     assert!(text.contains("WARNING: the drive's output was limited"), "{text}");
     let r: serde_json::Value = serde_json::from_slice(&std::fs::read(out.join("sweep.json")).unwrap()).unwrap();
     let limited: Vec<f64> = r["limited_hz"].as_array().unwrap().iter().map(|v| v.as_f64().unwrap()).collect();
@@ -276,16 +281,10 @@ fn sweep_names_the_results_measured_with_the_output_limited() {
     let csv = std::fs::read_to_string(out.join("sweep.csv")).unwrap();
     assert!(csv.lines().next().unwrap().ends_with(",limited_share"), "{csv}");
     // At 50 rad/s and 0.1 N·m nothing is limited: no warning, nothing named.
-    let o = servo()
-        .args(["sweep", "--point", "torque", "--amplitude", "0.1", "--start", "100", "--stop", "3000", "--points", "6"])
-        .arg("--fmu")
-        .arg(fmu_path())
-        .arg("--out")
-        .arg(&out)
-        .output()
-        .unwrap();
-    let text = String::from_utf8_lossy(&o.stdout);
-    assert!(o.status.success() && !text.contains("WARNING"), "{text}");
+    let text = torque_sweep(&["--amplitude", "0.1"]);
+    assert!(!text.contains("WARNING"), "{text}");
+    let r: serde_json::Value = serde_json::from_slice(&std::fs::read(out.join("sweep.json")).unwrap()).unwrap();
+    assert!(r["limited_hz"].as_array().unwrap().is_empty(), "{r}");
 }
 
 #[test]

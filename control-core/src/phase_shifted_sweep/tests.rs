@@ -116,16 +116,21 @@ fn noisy(params: SweepParams, gain: f32, noise: f32, seed: u32) -> (SweepResult,
 
 /// A response of gain 1.5 and phase −0.4 rad plus a lightly damped ring at 52 Hz that
 /// starts with the sweep (30 % of the response, τ = 50 ms), as a loop's mode rings after
-/// a frequency step; the first frequency's result and the ticks run.
+/// a frequency step: y on `tick`.
+fn ringing_response(s: &PhaseShiftedSweep, tick: u64) -> f32 {
+    let (t, amplitude) = (tick as f32 / FS, s.params.amplitude);
+    let ring = 0.3 * 1.5 * amplitude * libm::expf(-t / 0.05) * libm::sinf(TAU * 52.0 * t);
+    1.5 * amplitude * libm::sinf(phase_angle(s.phase_word) - 0.4) + ring
+}
+
+/// The sweep on [`ringing_response`]: the first frequency's result and the ticks run.
 fn ringing(params: SweepParams) -> (SweepResult, u64, u32) {
     let mut s = PhaseShiftedSweep::new(params, FS);
     s.start().unwrap();
     let (mut tick, mut last_half) = (0u64, 0u32);
     while s.running() {
         let (_, u) = s.excitation(true).unwrap();
-        let t = tick as f32 / FS;
-        let ring = 0.3 * 1.5 * params.amplitude * libm::expf(-t / 0.05) * libm::sinf(TAU * 52.0 * t);
-        let y = 1.5 * params.amplitude * libm::sinf(phase_angle(s.phase_word) - 0.4) + ring;
+        let y = ringing_response(&s, tick);
         s.end_tick(tick, tick.is_multiple_of(2), tick.is_multiple_of(params.acquisition_divider as u64), u, y, false);
         if s.status().sample.point == 0 {
             last_half = s.status().sample.half_block();
@@ -249,7 +254,7 @@ fn a_result_measured_while_the_output_was_limited_says_so() {
     }
 }
 
-/// The ringing response of [`ringing`], with the output flagged as limited on every tick of
+/// The sweep on [`ringing_response`], with the output flagged as limited on every tick of
 /// the first frequency's half block `flagged_half` (its first record); the share of limited
 /// samples its result reports and the last half block it measured.
 fn ringing_limited(params: SweepParams, flagged_half: u32) -> (f32, u32) {
@@ -258,9 +263,7 @@ fn ringing_limited(params: SweepParams, flagged_half: u32) -> (f32, u32) {
     let (mut tick, mut limited, mut share, mut last_half) = (0u64, false, None, 0u32);
     while s.running() {
         let (_, u) = s.excitation(true).unwrap();
-        let t = tick as f32 / FS;
-        let ring = 0.3 * 1.5 * params.amplitude * libm::expf(-t / 0.05) * libm::sinf(TAU * 52.0 * t);
-        let y = 1.5 * params.amplitude * libm::sinf(phase_angle(s.phase_word) - 0.4) + ring;
+        let y = ringing_response(&s, tick);
         s.end_tick(tick, tick.is_multiple_of(2), tick.is_multiple_of(params.acquisition_divider as u64), u, y, limited);
         let sample = s.status().sample;
         limited = s.status().state == SweepState::Measuring
