@@ -672,8 +672,8 @@ impl Axis {
         }
         // What the current loop asked for was cut by the voltage circle. (The current and
         // torque limits are not watched here: each cost the Cortex-M4 about 20 instructions
-        // per tick, past the budget; a torque-command amplitude that reaches the torque limit
-        // is refused instead, `Params::validate`.)
+        // per tick, past the budget; a torque-command amplitude whose own peak reaches the
+        // current limit's torque is refused instead, `Params::validate`.)
         self.output_limited |= out.saturated;
         InnerLoop { torque, current_reference, out }
     }

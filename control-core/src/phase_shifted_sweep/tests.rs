@@ -211,7 +211,7 @@ fn a_noisy_low_gain_point_is_lengthened_until_precise_and_a_clean_one_is_not() {
     }
 }
 
-/// Every frequency's result with its count of limited samples, for a response that a limit
+/// Every frequency's result with its share of limited samples, for a response that a limit
 /// clips at `clip` (y = u cut to ±clip, the tick flagged when cut) while `flag_when` holds.
 fn measure_clipped(params: SweepParams, clip: f32, flag_when: impl Fn(SweepState) -> bool) -> [(f32, f32, f32); 3] {
     let mut s = PhaseShiftedSweep::new(params, FS);
@@ -220,7 +220,7 @@ fn measure_clipped(params: SweepParams, clip: f32, flag_when: impl Fn(SweepState
     while s.running() {
         let (_, u) = s.excitation(true).unwrap();
         let y = u.clamp(-clip, clip);
-        // The axis passes the previous tick's flag (the telemetry's) on this tick.
+        // The axis passes the flag of the ticks before this one (here the previous tick's).
         s.end_tick(tick, tick.is_multiple_of(2), tick.is_multiple_of(params.acquisition_divider as u64), u, y, limited);
         limited = y != u && flag_when(s.status().state);
         if s.status().done_points > seen {
