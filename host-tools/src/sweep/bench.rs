@@ -262,7 +262,7 @@ fn unmeasured(points: &[ResponsePoint]) -> Vec<f64> {
 }
 
 /// Worst |gain| and |phase| differences over all frequencies, with where they are.
-fn worst(a: &[ResponsePoint], reference: &[ResponsePoint]) -> (f64, f64, f64, f64) {
+pub(crate) fn worst(a: &[ResponsePoint], reference: &[ResponsePoint]) -> (f64, f64, f64, f64) {
     let mut w = (0.0f64, f64::NAN, 0.0f64, f64::NAN);
     for p in a {
         let Some(r) = reference.iter().find(|r| (r.frequency - p.frequency).abs() <= 1e-6 * p.frequency) else {

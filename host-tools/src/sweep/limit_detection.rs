@@ -11,10 +11,10 @@ use anyhow::Result;
 use control_core::phase_shifted_sweep::SweepParams;
 use serde::Serialize;
 
-use crate::analysis::response_point::{difference, ResponsePoint};
+use crate::analysis::response_point::ResponsePoint;
 use crate::fmu::runner::Fmu;
 use crate::fmu::sweep_run::SweepRun;
-use crate::sweep::bench::{point_name, GOAL_DB, GOAL_DEG, POINTS};
+use crate::sweep::bench::{point_name, worst, GOAL_DB, GOAL_DEG, POINTS};
 use crate::sweep::measurement::{limited_frequencies, online_results, stream_results};
 use crate::sweep::report::oracle_run;
 
@@ -55,19 +55,17 @@ pub fn limit_cases(fmu: &Fmu) -> Result<Vec<LimitCase>> {
             let oracle_trace = oracle_run(&run)?.run(fmu, |_| {})?;
             let oracle = online_results(&oracle_trace)?;
             let (flagged_hz, oracle_flagged_hz) = (limited_frequencies(&trace), limited_frequencies(&oracle_trace));
-            let (mut unflagged, mut flagged) = ((0.0f64, 0.0f64), (0.0f64, 0.0f64));
-            for p in &ours {
-                let Some(o) = oracle.iter().find(|o| o.frequency == p.frequency) else { continue };
-                let (g, ph) = difference(p, o);
-                let worst = if flagged_hz.contains(&p.frequency) {
-                    &mut flagged
-                } else if oracle_flagged_hz.contains(&p.frequency) {
-                    continue;
-                } else {
-                    &mut unflagged
-                };
-                *worst = (worst.0.max(g.abs()), worst.1.max(ph.abs()));
-            }
+            // Our flagged results, and the others but where only the oracle was limited (the
+            // reference is not the linear loop's there: nothing to compare).
+            let (flagged_points, others): (Vec<ResponsePoint>, Vec<ResponsePoint>) =
+                ours.iter().partition(|p| flagged_hz.contains(&p.frequency));
+            let unflagged_points: Vec<ResponsePoint> =
+                others.into_iter().filter(|p| !oracle_flagged_hz.contains(&p.frequency)).collect();
+            let worst_of = |points: &[ResponsePoint]| {
+                let (g, _, p, _) = worst(points, &oracle);
+                (g, p)
+            };
+            let (unflagged, flagged) = (worst_of(&unflagged_points), worst_of(&flagged_points));
             let met = unflagged.0 <= GOAL_DB && unflagged.1 <= GOAL_DEG && all_finite(&ours, &flagged_hz);
             cases.push(LimitCase {
                 point: point_name(point).to_string(),

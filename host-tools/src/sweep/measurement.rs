@@ -80,7 +80,12 @@ pub fn online_results(t: &Trace) -> Result<Vec<ResponsePoint>> {
 /// the samples at 3 kHz left the result 0.16 dB and 2.4° off, while 16 % at 2 kHz on the
 /// torque command left another within 0.01 dB). Empty for an FMU without that output.
 pub fn limited_frequencies(t: &Trace) -> Vec<f64> {
-    limited_shares(t).into_iter().filter(|&(_, share)| share > 0.0).map(|(f, _)| f).collect()
+    flagged(&limited_shares(t))
+}
+
+/// The frequencies of [`limited_shares`] with any limited sample.
+pub fn flagged(shares: &[(f64, f64)]) -> Vec<f64> {
+    shares.iter().filter(|&&(_, share)| share > 0.0).map(|&(f, _)| f).collect()
 }
 
 /// Every on-line result's frequency and the share of its samples measured with the drive's

@@ -16,7 +16,7 @@ use crate::fmu::sweep_run::SweepRun;
 use crate::fmu::trace::Trace;
 use crate::plot::bode::plot_bode;
 use crate::sweep::measurement::{
-    errors, limited_shares, limited_warning, measured_time, online_results, stream_results, ErrorSummary,
+    errors, flagged, limited_shares, limited_warning, measured_time, online_results, stream_results, ErrorSummary,
 };
 
 /// Encoder of the oracle (counts per revolution; the FMU's finest, 16 times the default 2^20).
@@ -137,6 +137,7 @@ pub fn run(
     // Each result's share of samples measured with the output limited (0 where none), in the
     // on-line results' order (both are read at each completion).
     let limited = limited_shares(&trace);
+    let limited_hz = flagged(&limited);
     let limited_known = trace.column("sweep_last_limited").is_some();
     let mut files = Vec::new();
     let csv = out.join("sweep.csv");
@@ -189,8 +190,8 @@ pub fn run(
     curves.push(("on-line correlator (drive)", &online));
     let svg = out.join("bode.svg");
     // Where the drive's output was limited, the plot says so in its title.
-    let limited_note = match (limited.iter().find(|l| l.1 > 0.0), limited.iter().rev().find(|l| l.1 > 0.0)) {
-        (Some(a), Some(b)) => format!(" — output LIMITED at {:.0}–{:.0} Hz: not the linear loop there", a.0, b.0),
+    let limited_note = match (limited_hz.first(), limited_hz.last()) {
+        (Some(a), Some(b)) => format!(" — output LIMITED at {a:.0}–{b:.0} Hz: not the linear loop there"),
         _ => String::new(),
     };
     plot_bode(
@@ -210,7 +211,7 @@ pub fn run(
         stream,
         online,
         stream_vs_online: agreement,
-        limited_hz: limited.iter().filter(|&&(_, share)| share > 0.0).map(|&(f, _)| f).collect(),
+        limited_hz,
         limited_share,
         limited_known,
         oracle,
