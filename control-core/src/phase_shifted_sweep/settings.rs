@@ -29,7 +29,9 @@ pub struct SweepParams {
     /// Settling before each record: the longer of so many cycles and `min_settle_s`.
     pub settle_cycles: f32,
     pub min_settle_s: f32,
-    /// Measurement of each record: the longer of so many cycles and `min_measure_s`.
+    /// Measurement of each record: the longer of so many cycles and `min_measure_s` (half of
+    /// it below half the threshold while precision control runs: see
+    /// [`SweepParams::record_length`]).
     pub measure_cycles: f32,
     pub min_measure_s: f32,
     /// Phase step 2π/shifts between repeats.
@@ -73,7 +75,8 @@ pub struct SweepParams {
 
 impl Default for SweepParams {
     /// Velocity-command injection, 10 Hz to 3 kHz in 40 log steps plus 2 kHz, 1 settle and
-    /// 2 measure cycles (at least 10 ms of settling and 40 ms of measurement), 3 records
+    /// 2 measure cycles (at least 10 ms of settling, and 40 ms of measurement from 1 kHz up,
+    /// 20 ms below: see [`SweepParams::record_length`]), 3 records
     /// shifted by 2π/3 from the acquisition Nyquist frequency up, acquisition every 4 ticks
     /// (4 kHz at 16 kHz). The base records are short: the settling check lengthens the wait
     /// where the loop rings (see `PhaseShiftedSweep::settled`), the precision control the

@@ -159,13 +159,16 @@ fn a_ringing_loop_is_measured_once_it_has_settled() {
 
 #[test]
 fn a_noisy_low_gain_point_is_lengthened_until_precise_and_a_clean_one_is_not() {
-    // Base records of 80 ms (not the defaults: the test is about the extension).
+    // Base records of 80 ms (not the defaults: the test is about the extension; the threshold
+    // at 500 Hz keeps both frequencies below it, single records, and at or above half of it,
+    // where the shortest measurement is the full `min_measure_s`).
     let p = SweepParams {
         start_hz: 300.0,
         stop_hz: 400.0,
         points: 2,
         extra_hz: 0.0,
         min_measure_s: 0.08,
+        threshold_hz: 500.0,
         ..Default::default()
     };
     let off = SweepParams { precision_db: 0.0, ..p };
@@ -293,4 +296,35 @@ fn limited_samples_of_a_discarded_half_block_leave_with_it() {
     // flag reaches the sample after the tick, so one sample of it falls outside).
     let (share, _) = ringing_limited(p, last_half);
     assert!(share > 0.4 && share <= 0.5, "{share}");
+}
+
+/// The shortest measurement is halved below half the threshold while precision control runs
+/// (the well-measured middle of the sweep), kept from there up (the top, where the first base
+/// block decides the records' length), and kept everywhere for fixed records; a record of
+/// several cycles is unaffected; the halved block still leaves the settling check half
+/// blocks long enough to run.
+#[test]
+fn the_middle_of_the_sweep_measures_half_the_shortest_block_and_the_top_all_of_it() {
+    let p = SweepParams::default();
+    let acquisition_hz = FS / p.acquisition_divider as f32;
+    let threshold = p.threshold(FS);
+    assert_eq!(threshold, 2000.0);
+    let samples = |p: &SweepParams, f: f32| p.record_length(f, FS).1;
+    let full = (p.min_measure_s * acquisition_hz) as u64;
+    for f in [100.0, 500.0, 999.0] {
+        assert_eq!(samples(&p, f), full / 2, "{f} Hz");
+        assert!(samples(&p, f) >= MIN_CHECKED_SAMPLES, "the settling check still runs at {f} Hz");
+    }
+    for f in [1000.0, 1500.0, 2000.0, 3000.0] {
+        assert_eq!(samples(&p, f), full, "{f} Hz");
+    }
+    // Cycles decide at low frequencies, as before.
+    assert_eq!(samples(&p, 10.0), (p.measure_cycles / 10.0 * acquisition_hz) as u64);
+    for fixed in [SweepParams { precision_db: 0.0, ..p }, SweepParams { max_extensions: 0, ..p }] {
+        assert_eq!(samples(&fixed, 500.0), full, "fixed records keep min_measure_s");
+    }
+    // The threshold moves the boundary with it.
+    let moved = SweepParams { threshold_hz: 600.0, ..p };
+    assert_eq!(samples(&moved, 299.0), full / 2);
+    assert_eq!(samples(&moved, 300.0), full);
 }

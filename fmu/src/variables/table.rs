@@ -285,7 +285,7 @@ declare_variables! {
     82 sweep_settle_cycles: Float64 "sweep.settle_cycles" Parameter Fixed = core(|p| p.sweep.settle_cycles); NONE; r(0.0, 1.0e4); "Settling before each record, in cycles (at least min_settle_s); a frequency's first record then waits, half block by half block, until its response agrees with the previous half block's (the settling check, with precision_db > 0)";
     83 sweep_min_settle_s: Float64 "sweep.min_settle_s" Parameter Fixed = core(|p| p.sweep.min_settle_s); S; r(0.0, 1.0e4); "Shortest settling";
     84 sweep_measure_cycles: Float64 "sweep.measure_cycles" Parameter Fixed = core(|p| p.sweep.measure_cycles); NONE; r(1.0e-3, 1.0e4); "Measurement of each record, in cycles (at least min_measure_s)";
-    85 sweep_min_measure_s: Float64 "sweep.min_measure_s" Parameter Fixed = core(|p| p.sweep.min_measure_s); S; r(0.0, 1.0e4); "Shortest measurement";
+    85 sweep_min_measure_s: Float64 "sweep.min_measure_s" Parameter Fixed = core(|p| p.sweep.min_measure_s); S; r(0.0, 1.0e4); "Shortest measurement of a record (half of it below half the phase-shifting threshold while precision control runs: there the response is many encoder counts)";
     86 sweep_shifts: Int32 "sweep.shifts" Parameter Fixed = core_count(|p| p.sweep.shifts); NONE; r(1.0, 16.0); "Phase step 2*pi/shifts between the repeats of one frequency";
     87 sweep_repeats: Int32 "sweep.repeats" Parameter Fixed = core_count(|p| p.sweep.repeats); NONE; r(1.0, 16.0); "Records per frequency at and above the threshold";
     88 sweep_threshold_hz: Float64 "sweep.threshold_hz" Parameter Fixed = core(|p| p.sweep.threshold_hz); HZ; FREQ; "Phase shifting from this frequency up (0 = the acquisition Nyquist frequency)";

@@ -43,9 +43,12 @@ pub struct SweepArgs {
     pub settle_cycles: f64,
     #[arg(long, default_value_t = 2.0)]
     pub measure_cycles: f64,
-    /// Shortest settling and measurement per record (s)
+    /// Shortest settling per record (s)
     #[arg(long, default_value_t = 0.01)]
     pub min_settle: f64,
+    /// Shortest measurement per record (s); half of it below half the threshold while the
+    /// precision control runs (there the response is many encoder counts and the shorter block
+    /// halves the settling check's steps; from there up the full block carries the accuracy)
     #[arg(long, default_value_t = 0.04)]
     pub min_measure: f64,
     /// Phase step 2π/shifts between repeats
