@@ -15,8 +15,8 @@ pub const CAPACITY: usize = 256;
 /// On the link (protocol version 5 and on) a batch is `dropped`, then a sequence of its `count`
 /// samples only, each tick sent as the (signed) difference from the one before (the first
 /// from 0),
-/// the record and the half block as two varints: about 17 bytes a sample, nothing for an
-/// empty slot. Version 4 sent all 16 slots and whole ticks: at the link task's 2 ms poll a
+/// the record and the half block as two varints, `measuring` and (version 8) `limited` as
+/// two bits of one byte: about 17 bytes a sample, nothing for an empty slot. Version 4 sent all 16 slots and whole ticks: at the link task's 2 ms poll a
 /// 4 kHz stream went out 8 samples a frame at 37 bytes each, more than a 921 600 Bd line
 /// carries.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
@@ -26,6 +26,12 @@ pub struct SampleBatch {
     /// Samples dropped since streaming was switched on (link too slow).
     pub dropped: u32,
 }
+
+/// Flag bits of a sample on the link: it belongs to a measured record; the drive's output
+/// was limited during its acquisition period (see [`AcquisitionSample::limited`]). Other
+/// bits are refused.
+pub const SAMPLE_MEASURING: u8 = 1;
+pub const SAMPLE_LIMITED: u8 = 2;
 
 /// A sample as it crosses the link.
 #[derive(serde::Serialize, serde::Deserialize)]
@@ -37,7 +43,9 @@ struct WireSample {
     u: f32,
     y: f32,
     phase: f32,
-    measuring: bool,
+    /// [`SAMPLE_MEASURING`] and [`SAMPLE_LIMITED`]: one byte, as the `measuring` flag alone
+    /// took up to version 7 (the stream's size on the line is unchanged).
+    flags: u8,
     point: u32,
     /// The two halves of [`AcquisitionSample::segment`], each a short varint.
     record: u32,
@@ -61,7 +69,8 @@ impl serde::Serialize for SampleBatch {
                         u: x.u,
                         y: x.y,
                         phase: x.phase,
-                        measuring: x.measuring,
+                        flags: if x.measuring { SAMPLE_MEASURING } else { 0 }
+                            | if x.limited { SAMPLE_LIMITED } else { 0 },
                         point: x.point,
                         record: x.record(),
                         half_block: x.half_block(),
@@ -104,12 +113,16 @@ impl<'de> serde::Deserialize<'de> for SampleBatch {
                             tick = tick
                                 .checked_add_signed(w.tick_step)
                                 .ok_or_else(|| A::Error::custom("tick out of range"))?;
+                            if w.flags & !(SAMPLE_MEASURING | SAMPLE_LIMITED) != 0 {
+                                return Err(A::Error::custom("unknown sample flags"));
+                            }
                             *slot = AcquisitionSample {
                                 tick,
                                 u: w.u,
                                 y: w.y,
                                 phase: w.phase,
-                                measuring: w.measuring,
+                                measuring: w.flags & SAMPLE_MEASURING != 0,
+                                limited: w.flags & SAMPLE_LIMITED != 0,
                                 point: w.point,
                                 segment: AcquisitionSample::segment_of(w.record, w.half_block),
                             };

@@ -26,7 +26,10 @@ use crate::ranges::{check_position, Quantity, RangeError};
 use crate::response_correction::CorrectionParams;
 use crate::stop_sequence::{Refusal, SequenceEvent};
 
-/// Protocol version 7: the telemetry's sweep status carries the share of the last result's
+/// Protocol version 8: each streamed acquisition sample says whether the drive's output was
+/// limited during its acquisition period (a flag bit beside `measuring`, the same byte on the
+/// line: see [`crate::acquisition_stream::SAMPLE_LIMITED`]), so that the host counts every
+/// result's share from the stream. Version 7: the telemetry's sweep status carries the share of the last result's
 /// samples measured with the output limited (`SweepStatus::last_limited`). Version 6:
 /// `SaveParams` is answered with the sequence number of the record it
 /// wrote ([`Response::Saved`]), and the telemetry carries the newest record in the drive's
@@ -37,7 +40,7 @@ use crate::stop_sequence::{Refusal, SequenceEvent};
 /// board's PWM rate are refused with that rate; version 4: `SaveParams`, and the answer to `Hello` says where the
 /// drive's parameters came from at boot; version 3: CRC-32C instead of CRC-16, trailing bytes
 /// refused, range refusals).
-pub const VERSION: u16 = 7;
+pub const VERSION: u16 = 8;
 /// Largest encoded frame, COBS body without its terminator (a full parameter set fits with
 /// room to spare).
 pub const MAX_FRAME: usize = 1024;
@@ -762,6 +765,40 @@ mod tests {
         );
     }
 
+    /// `measuring` and `limited` cross the link as two bits of one byte, in every combination,
+    /// at the size one flag took; a byte with another bit set is a corrupt frame, not a sample.
+    #[test]
+    fn a_samples_flags_cross_the_link_in_one_byte_and_unknown_bits_are_refused() {
+        let mut b = SampleBatch { count: 4, ..Default::default() };
+        for (k, s) in b.samples[..4].iter_mut().enumerate() {
+            s.tick = 4 * (k as u64 + 1);
+            s.measuring = k & 1 != 0;
+            s.limited = k & 2 != 0;
+        }
+        let mut buf = [0u8; MAX_FRAME + 8];
+        let n = encode(&Response::Samples(b), &mut buf).unwrap();
+        assert_eq!(decode_response(&mut buf[..n]), Ok(Response::Samples(b)));
+        let mut payload = [0u8; 200];
+        let body = postcard::to_slice(&Response::Samples(b), &mut payload).unwrap().len();
+        let plain = SampleBatch { samples: [Default::default(); BATCH], ..b };
+        let plain_body = postcard::to_slice(&Response::Samples(plain), &mut [0u8; 200]).unwrap().len();
+        assert_eq!(body, plain_body, "the flags cost no byte");
+        // The variant tag, `dropped`, the length; then each sample: tick step, u, y, phase
+        // (4 bytes each), the flags byte.
+        let flags_at = 3 + 1 + 12;
+        assert_eq!(payload[flags_at], 0);
+        for bad in [4u8, 0x80, 0xFF] {
+            payload[flags_at] = bad;
+            let raw = &payload[..body];
+            let mut with_crc = [0u8; 260];
+            with_crc[..body].copy_from_slice(raw);
+            with_crc[body..body + 4].copy_from_slice(&crc32(raw).to_le_bytes());
+            let mut framed = [0u8; 300];
+            let m = cobs::encode(&with_crc[..body + 4], &mut framed);
+            assert_eq!(decode_response(&mut framed[..m]), Err(FrameError::Message), "flags {bad:#x}");
+        }
+    }
+
     #[test]
     fn streaming_is_switched_over_the_link_and_batches_fit_a_frame() {
         let mut axis = Axis::new(Params::default()).unwrap();
@@ -776,6 +813,7 @@ mod tests {
                 y: -2.5,
                 phase: 3.0,
                 measuring: true,
+                limited: t % 3 == 0,
                 point: 7,
                 segment: crate::phase_shifted_sweep::AcquisitionSample::segment_of(2, 3),
             });

@@ -401,6 +401,7 @@ impl AxisModel {
         o.acq_point = w.sample.point as i32;
         o.acq_record = w.sample.record() as i32;
         o.acq_half_block = w.sample.half_block() as i32;
+        o.acq_limited = w.sample.limited as i32;
         o.faults = t.faults.0 as i32;
     }
 }

@@ -280,6 +280,26 @@ fn sweep_names_the_results_measured_with_the_output_limited() {
     assert!(limited.contains(&3000.0) && !limited.iter().any(|&f| f < 1000.0), "{limited:?}");
     let csv = std::fs::read_to_string(out.join("sweep.csv")).unwrap();
     assert!(csv.lines().next().unwrap().ends_with(",limited_share"), "{csv}");
+    // Every result's share, as the drive counted it on-line (`sweep_last_limited`, in the
+    // JSON), is the share the host counts from the stream's per-sample flags (`acq_limited`)
+    // over the samples the fit keeps: what a sweep over a drive's link relies on.
+    let trace = host_tools::fmu::trace::Trace::read_csv(&out.join("sweep_trace.csv")).unwrap();
+    let settings = control_core::phase_shifted_sweep::SweepParams {
+        start_hz: 100.0,
+        stop_hz: 3000.0,
+        points: 6,
+        ..Default::default()
+    };
+    let streamed = host_tools::sweep::measurement::stream_limited_shares(&trace, &settings).unwrap().unwrap();
+    let online: Vec<f64> = r["limited_share"].as_array().unwrap().iter().map(|v| v.as_f64().unwrap()).collect();
+    let online_hz: Vec<f64> =
+        r["online"].as_array().unwrap().iter().map(|p| p["frequency"].as_f64().unwrap()).collect();
+    assert_eq!(streamed.len(), online.len());
+    for ((&(f, share), &drive), &drive_hz) in streamed.iter().zip(&online).zip(&online_hz) {
+        assert!((f - drive_hz).abs() < 1e-3 * f, "{f} Hz vs {drive_hz} Hz");
+        assert!((share - drive).abs() < 1e-6, "{f} Hz: stream share {share}, drive's {drive}");
+    }
+    assert!(streamed.iter().any(|&(_, share)| share > 0.0) && streamed.iter().any(|&(_, share)| share == 0.0));
     // At 50 rad/s and 0.1 N·m nothing is limited: no warning, nothing named.
     let text = torque_sweep(&["--amplitude", "0.1"]);
     assert!(!text.contains("WARNING"), "{text}");

@@ -225,6 +225,47 @@ fn a_save_whose_answer_the_line_loses_succeeds_and_writes_one_record() {
     assert_eq!(records_in(&dir.join("flash.bin")), [Some(1), None]);
 }
 
+/// Riding at 200 rad/s the back-EMF leaves too little of the bus for 0.2 N·m at the top of a
+/// torque-command sweep: the stream's per-sample flags give every result its share of limited
+/// samples, also those that finish between two telemetry polls (most do, the drive being
+/// simulated faster than real time), and name each limited one.
+#[test]
+fn a_sweep_over_the_virtual_drive_names_every_result_measured_with_the_output_limited() {
+    let _serial = one_at_a_time();
+    let dir = tmp("sweep-limited");
+    let vd = VirtualDrive::start(&dir, "max", &[]);
+    let o = output_within(
+        servo()
+            .args(["sweep", "--device", &vd.port, "--json", "--point", "torque", "--amplitude", "0.2"])
+            .args(["--velocity", "200", "--start", "100", "--stop", "3000", "--points", "6", "--out"])
+            .arg(dir.join("out"))
+            .arg("--fmu")
+            .arg(fmu_path()),
+        120,
+    );
+    // Limited results differ from the twin's beyond the goal: exit 1, not an error (2).
+    assert!(matches!(o.status.code(), Some(0 | 1)), "{}", String::from_utf8_lossy(&o.stderr));
+    let r: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+    let d = &r["drive"];
+    assert_eq!(d["dropped"], 0, "samples dropped on the link");
+    let shares: Vec<(f64, f64)> = d["limited_share"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|p| (p[0].as_f64().unwrap(), p[1].as_f64().unwrap()))
+        .collect();
+    assert_eq!(shares.len(), 7, "every result of 6 points and 2 kHz has its share: {shares:?}");
+    let named: Vec<f64> = d["limited_hz"].as_array().unwrap().iter().map(|v| v.as_f64().unwrap()).collect();
+    for &(f, share) in &shares {
+        assert!((0.0..=1.0).contains(&share), "{f} Hz: {share}");
+        assert_eq!(share > 0.0, named.contains(&f), "{f} Hz share {share}, named {named:?}");
+    }
+    assert!(named.contains(&3000.0) && !named.iter().any(|&f| f < 1000.0), "{named:?}");
+    // The table's rows carry the same shares.
+    let csv = std::fs::read_to_string(dir.join("out").join("sweep.csv")).unwrap();
+    assert!(csv.lines().next().unwrap().ends_with(",limited_share"), "{csv}");
+}
+
 #[test]
 fn a_pseudo_circle_over_the_virtual_drive_matches_its_twin() {
     let _serial = one_at_a_time();

@@ -573,6 +573,7 @@ fn random_response(rng: &mut Rng, tick: &mut u64) -> Response {
                     y: rng.f32(),
                     phase: rng.f32() * std::f32::consts::TAU,
                     measuring: rng.bool(),
+                    limited: rng.bool(),
                     point: rng.u32(0..128),
                     segment: AcquisitionSample::segment_of(rng.u32(0..16), rng.u32(0..32)),
                 };

@@ -12,6 +12,11 @@ pub struct AcquisitionSample {
     pub phase: f32,
     /// The sample belongs to a measured record.
     pub measuring: bool,
+    /// The drive's output was limited on a tick of this sample's acquisition period (the
+    /// voltage circle cut what the current loop asked for; see
+    /// [`PhaseShiftedSweep::end_tick`](super::PhaseShiftedSweep::end_tick)): a host fitting
+    /// the stream counts each result's share of them itself, as the drive's correlator does.
+    pub limited: bool,
     pub point: u32,
     /// The record (phase-shifted repeat, low 16 bits) and the half block (high 16 bits) the
     /// sample belongs to: see [`Self::record`] and [`Self::half_block`]. One word, as the

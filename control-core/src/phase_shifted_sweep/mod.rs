@@ -454,6 +454,7 @@ impl PhaseShiftedSweep {
                 y,
                 phase: phase_angle(self.phase_word),
                 measuring,
+                limited,
                 point: self.status.point,
                 segment: self.segment,
             };

@@ -224,7 +224,12 @@ fn measure_clipped(params: SweepParams, clip: f32, flag_when: impl Fn(SweepState
         let (_, u) = s.excitation(true).unwrap();
         let y = u.clamp(-clip, clip);
         // The axis passes the flag of the ticks before this one (here the previous tick's).
-        s.end_tick(tick, tick.is_multiple_of(2), tick.is_multiple_of(params.acquisition_divider as u64), u, y, limited);
+        let acquire = tick.is_multiple_of(params.acquisition_divider as u64);
+        s.end_tick(tick, tick.is_multiple_of(2), acquire, u, y, limited);
+        if acquire {
+            // The streamed sample carries the flag its acquisition period saw.
+            assert_eq!((s.status().sample.tick, s.status().sample.limited), (tick, limited));
+        }
         limited = y != u && flag_when(s.status().state);
         if s.status().done_points > seen {
             out[seen as usize] = (s.status().last.frequency, s.status().last_limited, s.status().last.gain_db());

@@ -61,11 +61,13 @@ pub fn batch_samples(b: &SampleBatch) -> Result<&[control_core::phase_shifted_sw
     b.samples.get(..b.count as usize).ok_or(FrameError::Count { got: b.count as u32, max: b.samples.len() as u32 })
 }
 
-/// Rows of `servo device stream`'s CSV: tick, u, y, phase, measuring, point, record.
+/// Rows of `servo device stream`'s CSV: tick, u, y, phase, measuring, point, record, half
+/// block, limited (the drive's output was limited in the sample's acquisition period).
 /// The columns of [`sample_rows`].
-pub const SAMPLE_COLUMNS: [&str; 8] = ["tick", "u", "y", "phase", "measuring", "point", "record", "half_block"];
+pub const SAMPLE_COLUMNS: [&str; 9] =
+    ["tick", "u", "y", "phase", "measuring", "point", "record", "half_block", "limited"];
 
-pub fn sample_rows(batches: &[SampleBatch]) -> Result<Vec<[f64; 8]>, FrameError> {
+pub fn sample_rows(batches: &[SampleBatch]) -> Result<Vec<[f64; 9]>, FrameError> {
     let mut rows = Vec::new();
     for b in batches {
         for s in batch_samples(b)? {
@@ -78,6 +80,7 @@ pub fn sample_rows(batches: &[SampleBatch]) -> Result<Vec<[f64; 8]>, FrameError>
                 s.point as f64,
                 s.record() as f64,
                 s.half_block() as f64,
+                s.limited as u8 as f64,
             ]);
         }
     }

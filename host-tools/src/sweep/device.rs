@@ -23,7 +23,7 @@ use crate::device::session::DriveSession;
 use crate::fmu::sweep_run::{SweepRun, START_AT};
 use crate::fmu::trace::Trace;
 use crate::sweep::device_report::save_partial;
-use crate::sweep::measurement::stream_results;
+use crate::sweep::measurement::{flagged, stream_limited_shares, stream_results};
 use power_stage::ratings::with_board_limits;
 
 /// What a sweep over the link brought back.
@@ -36,12 +36,14 @@ pub struct DeviceSweep {
     /// The drive's on-line results as the telemetry polls caught them (a point finished and
     /// overwritten between two polls is missing here, not in `stream`).
     pub online: Vec<ResponsePoint>,
-    /// Frequencies whose on-line result the drive measured while its output was limited (the
-    /// voltage circle cut what the current loop asked for): not the loop's response there.
+    /// Frequencies the drive measured while its output was limited (the voltage circle cut
+    /// what the current loop asked for): not the loop's response there. From the stream's
+    /// flags (every result, protocol version 8), and any result the telemetry caught with a
+    /// share above 0 (a limited sample the link dropped).
     pub limited_hz: Vec<f64>,
-    /// Results finished between two telemetry polls: whether their output was limited is not
-    /// known (the telemetry carries the last result's share only).
-    pub limited_unknown: usize,
+    /// Each streamed result's share of limited samples (frequency, share; the samples its
+    /// fit keeps, counted as the drive counts them).
+    pub limited_share: Vec<(f64, f64)>,
     pub samples: usize,
     /// Samples the drive could not send (its ring full: the link too slow).
     pub dropped: u32,
@@ -115,19 +117,17 @@ pub fn sweep_on_drive_after<T: crate::device::link::DrivePort>(
     let longest = run.max_measurement_time()? * 1.2 + 1.0;
     let (session_hz, planned) = (session.tick_hz, run.measurement_time()?.max(1e-9));
     let mut online = Vec::new();
-    let mut limited_hz = Vec::new();
-    let mut limited_unknown = 0;
+    let mut telemetry_limited_hz = Vec::new();
     let mut seen = 0;
     let end = session.wait_until(longest, |t| {
         if t.faults.any() {
             return Err(anyhow!("the drive latched a fault during the sweep: {}", t.faults));
         }
         if t.sweep.done_points > seen {
-            limited_unknown += (t.sweep.done_points - seen - 1) as usize;
             seen = t.sweep.done_points;
             let l = t.sweep.last;
             if t.sweep.last_limited > 0.0 {
-                limited_hz.push(l.frequency as f64);
+                telemetry_limited_hz.push(l.frequency as f64);
             }
             online.push(ResponsePoint::from_complex(
                 l.frequency as f64,
@@ -159,17 +159,26 @@ pub fn sweep_on_drive_after<T: crate::device::link::DrivePort>(
     }
     // A stepped sine's response per frequency; a PRBS (the identification's) has none here:
     // its caller analyses the samples.
-    let stream = match run.settings.signal {
-        SweepSignal::SteppedSine => stream_results(&trace, &run.settings)?,
-        SweepSignal::Prbs => Vec::new(),
+    let (stream, limited_share) = match run.settings.signal {
+        SweepSignal::SteppedSine => {
+            (stream_results(&trace, &run.settings)?, stream_limited_shares(&trace, &run.settings)?.unwrap_or_default())
+        }
+        SweepSignal::Prbs => (Vec::new(), Vec::new()),
     };
+    let mut limited_hz = flagged(&limited_share);
+    for f in telemetry_limited_hz {
+        if !limited_hz.iter().any(|&g| (g - f).abs() <= 1e-6 * f) {
+            limited_hz.push(f);
+        }
+    }
+    limited_hz.sort_by(f64::total_cmp);
     let measurement_time_s = (end.tick - start) as f64 / session.tick_hz;
     Ok(DeviceSweep {
         measurement_time_s,
         stream,
         online,
         limited_hz,
-        limited_unknown,
+        limited_share,
         samples: rows.len(),
         dropped,
         corrupt_frames: session.link.corrupt_frames - corrupt_before,

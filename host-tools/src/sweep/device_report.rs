@@ -24,11 +24,15 @@ pub struct TwinPoint {
     pub twin: ResponsePoint,
     pub difference_db: f64,
     pub difference_deg: f64,
+    /// Share of the drive's samples at this frequency acquired with its output limited (0..1,
+    /// from the stream's flags).
+    pub limited_share: f64,
 }
 
 impl TwinPoint {
-    /// Hz, the drive's dB, degrees and quality, the twin's dB and degrees, the differences.
-    pub fn values(&self) -> [f64; 8] {
+    /// Hz, the drive's dB, degrees and quality, the twin's dB and degrees, the differences,
+    /// the drive's limited share.
+    pub fn values(&self) -> [f64; 9] {
         let (d, t) = (&self.drive, &self.twin);
         [
             self.frequency,
@@ -39,6 +43,7 @@ impl TwinPoint {
             t.phase_deg,
             self.difference_db,
             self.difference_deg,
+            self.limited_share,
         ]
     }
 }
@@ -74,7 +79,16 @@ pub fn compare_with_twin(drive: &DeviceSweep, twin: &[ResponsePoint]) -> (Vec<Tw
             let t = twin.iter().find(|t| same(t.frequency, d.frequency))?;
             let (dg, dp) = difference(d, t);
             largest = (largest.0.max(dg.abs()), largest.1.max(dp.abs()));
-            Some(TwinPoint { frequency: d.frequency, drive: *d, twin: *t, difference_db: dg, difference_deg: dp })
+            let limited_share =
+                drive.limited_share.iter().find(|&&(f, _)| same(f, d.frequency)).map_or(0.0, |&(_, share)| share);
+            Some(TwinPoint {
+                frequency: d.frequency,
+                drive: *d,
+                twin: *t,
+                difference_db: dg,
+                difference_deg: dp,
+                limited_share,
+            })
         })
         .collect();
     if points.len() != drive.stream.len() || points.len() != twin.len() {
@@ -116,9 +130,19 @@ pub fn run_on_device<T: crate::device::link::DrivePort>(
     let (points, largest) = compare_with_twin(&drive, &twin);
     let csv = out.join("sweep.csv");
     let mut t = Trace::new(
-        ["frequency", "gain_db", "phase_deg", "quality", "twin_gain_db", "twin_phase_deg", "diff_db", "diff_deg"]
-            .map(String::from)
-            .to_vec(),
+        [
+            "frequency",
+            "gain_db",
+            "phase_deg",
+            "quality",
+            "twin_gain_db",
+            "twin_phase_deg",
+            "diff_db",
+            "diff_deg",
+            "limited_share",
+        ]
+        .map(String::from)
+        .to_vec(),
     );
     for p in &points {
         t.rows.push(p.values());
@@ -197,12 +221,15 @@ impl DeviceSweepReport {
             self.twin_measurement_time_s
         );
         println!(
-            "  {:>10} {:>10} {:>10} {:>8} {:>10} {:>10} {:>9} {:>9}",
-            "Hz", "gain dB", "phase deg", "quality", "twin dB", "twin deg", "diff dB", "diff deg"
+            "  {:>10} {:>10} {:>10} {:>8} {:>10} {:>10} {:>9} {:>9} {:>9}",
+            "Hz", "gain dB", "phase deg", "quality", "twin dB", "twin deg", "diff dB", "diff deg", "limited %"
         );
         for p in &self.points {
-            let [f, g, ph, q, tg, tp, dg, dp] = p.values();
-            println!("  {f:>10.2} {g:>10.3} {ph:>10.2} {q:>8.4} {tg:>10.3} {tp:>10.2} {dg:>9.3} {dp:>9.2}");
+            let [f, g, ph, q, tg, tp, dg, dp, l] = p.values();
+            let limited = if l > 0.0 { format!("{:.1}", 100.0 * l) } else { String::new() };
+            println!(
+                "  {f:>10.2} {g:>10.3} {ph:>10.2} {q:>8.4} {tg:>10.3} {tp:>10.2} {dg:>9.3} {dp:>9.2} {limited:>9}"
+            );
         }
         println!(
             "  drive vs twin: largest difference {:.3} dB, {:.2} deg (goal {} dB, {} deg){}",
@@ -218,12 +245,6 @@ impl DeviceSweepReport {
         );
         if !d.limited_hz.is_empty() {
             println!("  WARNING: {}", crate::sweep::measurement::limited_warning(&d.limited_hz));
-        }
-        if d.limited_unknown > 0 {
-            println!(
-                "  {} result(s) finished between two telemetry polls: whether the output was limited there is not known",
-                d.limited_unknown
-            );
         }
         println!(
             "  link: {} samples, {} dropped by the drive, {} frame(s) lost on the line; {:.0} B/s of {:.0} B/s ({:.0} % of the line)",

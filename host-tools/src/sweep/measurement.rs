@@ -202,31 +202,15 @@ pub fn stream_results(t: &Trace, settings: &SweepParams) -> Result<Vec<ResponseP
 /// As [`stream_results`], each point with the relative standard error of its response from the
 /// scatter of y about the fitted sine (see `SineFit::relative_standard_error`).
 pub fn stream_results_with_errors(t: &Trace, settings: &SweepParams) -> Result<Vec<(ResponsePoint, f64)>> {
-    let [point, measuring, u, y, phase, time, half_block] =
-        columns(t, ["acq_point", "acq_measuring", "acq_u", "acq_y", "acq_phase", "acq_time", "acq_half_block"])?;
-    // Each frequency's last half-block index: the samples before the one preceding it were
-    // taken before the loop settled (the drive discarded them).
-    let mut last_half: BTreeMap<i64, f64> = BTreeMap::new();
-    for i in 0..u.len() {
-        if measuring[i] != 0.0 {
-            let h = last_half.entry(point[i] as i64).or_insert(0.0);
-            *h = h.max(half_block[i]);
-        }
-    }
-    let mut fits: BTreeMap<i64, SineFit> = BTreeMap::new();
-    let mut last_time = f64::NEG_INFINITY;
-    for i in 0..u.len() {
-        let k = point[i] as i64;
-        if measuring[i] == 0.0 || time[i] == last_time || half_block[i] + 1.0 < last_half[&k] {
-            continue;
-        }
-        last_time = time[i];
-        fits.entry(k).or_default().add(u[i], y[i], phase[i]);
-    }
+    let [u, y, phase] = columns(t, ["acq_u", "acq_y", "acq_phase"])?;
     let sign = if settings.point == InjectionPoint::VelocityFeedback { -1.0 } else { 1.0 };
-    Ok(fits
+    Ok(kept_samples(t)?
         .iter()
-        .map(|(&k, fit)| {
+        .map(|(&k, rows)| {
+            let mut fit = SineFit::default();
+            for &i in rows {
+                fit.add(u[i], y[i], phase[i]);
+            }
             let (uu, yy, quality) = fit.solve();
             let g = if quality > 0.0 { yy / uu * sign } else { Complex64::new(f64::NAN, f64::NAN) };
             (
@@ -235,6 +219,50 @@ pub fn stream_results_with_errors(t: &Trace, settings: &SweepParams) -> Result<V
             )
         })
         .collect())
+}
+
+/// Each frequency's share of the samples its fit keeps (see [`stream_results`]) that the
+/// drive acquired with its output limited (`acq_limited`), counted from the stream: the same
+/// samples and the same count as the drive's own `sweep_last_limited`, for every result, also
+/// those a telemetry poll missed. None for a stream without the flag (an FMU or a drive
+/// from before it).
+pub fn stream_limited_shares(t: &Trace, settings: &SweepParams) -> Result<Option<Vec<(f64, f64)>>> {
+    let Some(limited) = t.column("acq_limited") else { return Ok(None) };
+    Ok(Some(
+        kept_samples(t)?
+            .iter()
+            .map(|(&k, rows)| {
+                let count = rows.iter().filter(|&&i| limited[i] != 0.0).count();
+                (settings.frequency(k as usize) as f64, count as f64 / rows.len().max(1) as f64)
+            })
+            .collect(),
+    ))
+}
+
+/// The rows of the samples the drive's fit keeps, by frequency index: measured, one per
+/// acquisition time, and from the frequency's last half-block index minus one up (the
+/// earlier ones were taken before the loop settled; the drive discarded them).
+fn kept_samples(t: &Trace) -> Result<BTreeMap<i64, Vec<usize>>> {
+    let [point, measuring, time, half_block] =
+        columns(t, ["acq_point", "acq_measuring", "acq_time", "acq_half_block"])?;
+    let mut last_half: BTreeMap<i64, f64> = BTreeMap::new();
+    for i in 0..point.len() {
+        if measuring[i] != 0.0 {
+            let h = last_half.entry(point[i] as i64).or_insert(0.0);
+            *h = h.max(half_block[i]);
+        }
+    }
+    let mut kept: BTreeMap<i64, Vec<usize>> = BTreeMap::new();
+    let mut last_time = f64::NEG_INFINITY;
+    for i in 0..point.len() {
+        let k = point[i] as i64;
+        if measuring[i] == 0.0 || time[i] == last_time || half_block[i] + 1.0 < last_half[&k] {
+            continue;
+        }
+        last_time = time[i];
+        kept.entry(k).or_default().push(i);
+    }
+    Ok(kept)
 }
 
 /// H1 = S_uy / S_uu (Welch, Hann windows, 50 % overlap) of a PRBS run's acquisition stream,
