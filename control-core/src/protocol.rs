@@ -772,21 +772,23 @@ mod tests {
         let mut b = SampleBatch { count: 4, ..Default::default() };
         for (k, s) in b.samples[..4].iter_mut().enumerate() {
             s.tick = 4 * (k as u64 + 1);
-            s.measuring = k & 1 != 0;
-            s.limited = k & 2 != 0;
+            s.u = 1.5;
+            s.measuring = k & 1 == 0;
+            s.limited = k & 2 == 0;
         }
         let mut buf = [0u8; MAX_FRAME + 8];
         let n = encode(&Response::Samples(b), &mut buf).unwrap();
         assert_eq!(decode_response(&mut buf[..n]), Ok(Response::Samples(b)));
         let mut payload = [0u8; 200];
         let body = postcard::to_slice(&Response::Samples(b), &mut payload).unwrap().len();
-        let plain = SampleBatch { samples: [Default::default(); BATCH], ..b };
-        let plain_body = postcard::to_slice(&Response::Samples(plain), &mut [0u8; 200]).unwrap().len();
-        assert_eq!(body, plain_body, "the flags cost no byte");
         // The variant tag, `dropped`, the length; then each sample: tick step, u, y, phase
-        // (4 bytes each), the flags byte.
+        // (4 bytes each), the flags byte, point, record, half block (one byte each here): 17
+        // bytes, as version 7's sample with `measuring` alone.
+        assert_eq!(body, 3 + 4 * 17);
         let flags_at = 3 + 1 + 12;
-        assert_eq!(payload[flags_at], 0);
+        use crate::acquisition_stream::{SAMPLE_LIMITED, SAMPLE_MEASURING};
+        assert_eq!(payload[flags_at], SAMPLE_MEASURING | SAMPLE_LIMITED, "sample 0 has both");
+        assert_eq!(payload[flags_at + 17], SAMPLE_LIMITED, "sample 1 is limited only");
         for bad in [4u8, 0x80, 0xFF] {
             payload[flags_at] = bad;
             let raw = &payload[..body];

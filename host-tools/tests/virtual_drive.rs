@@ -248,12 +248,15 @@ fn a_sweep_over_the_virtual_drive_names_every_result_measured_with_the_output_li
     let r: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
     let d = &r["drive"];
     assert_eq!(d["dropped"], 0, "samples dropped on the link");
-    let shares: Vec<(f64, f64)> = d["limited_share"]
+    // Paired by index with the stream's results.
+    let shares: Vec<(f64, f64)> = d["stream"]
         .as_array()
         .unwrap()
         .iter()
-        .map(|p| (p[0].as_f64().unwrap(), p[1].as_f64().unwrap()))
+        .zip(d["limited_share"].as_array().unwrap())
+        .map(|(p, share)| (p["frequency"].as_f64().unwrap(), share.as_f64().unwrap()))
         .collect();
+    assert_eq!(d["limited_share"].as_array().unwrap().len(), d["stream"].as_array().unwrap().len());
     assert_eq!(shares.len(), 7, "every result of 6 points and 2 kHz has its share: {shares:?}");
     let named: Vec<f64> = d["limited_hz"].as_array().unwrap().iter().map(|v| v.as_f64().unwrap()).collect();
     for &(f, share) in &shares {

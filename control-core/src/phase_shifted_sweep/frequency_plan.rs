@@ -2,6 +2,7 @@
 //! its place once, [`FrequencyPlan`]), the threshold from which records are phase shifted,
 //! and the length of every record and of the whole sweep.
 
+use super::settling_check::MIN_CHECKED_SAMPLES;
 use super::{SweepParams, SweepSignal};
 use crate::excitation::{phase_angle, SineGenerator};
 use crate::TAU;
@@ -94,18 +95,36 @@ impl SweepParams {
     pub fn record_length(&self, f: f32, base_rate_hz: f32) -> (u64, u64) {
         let d = self.acquisition_divider as f32;
         let settle = libm::ceilf(self.min_settle_s.max(self.settle_cycles / f) * base_rate_hz / d) as u64;
-        let min_measure = self.min_measure_at(f, base_rate_hz);
-        let samples = (libm::roundf(min_measure.max(self.measure_cycles / f) * base_rate_hz / d) as u64).max(1);
+        let samples = self.block_samples(f, base_rate_hz, self.min_measure_at(f, base_rate_hz));
         (settle.saturating_mul(self.acquisition_divider as u64), samples)
     }
 
+    /// Samples of a record's base block at f when its shortest measurement is `min_measure`.
+    fn block_samples(&self, f: f32, base_rate_hz: f32, min_measure: f32) -> u64 {
+        let d = self.acquisition_divider as f32;
+        (libm::roundf(min_measure.max(self.measure_cycles / f) * base_rate_hz / d) as u64).max(1)
+    }
+
+    /// The most half blocks (of the record's own base block, see [`Self::record_length`]) that
+    /// precision control adds to each record at f, and that the settling check discards:
+    /// `2·max_extensions` half blocks of the block `min_measure_s` gives, the same time where
+    /// the block is halved (twice as many of them then).
+    pub fn half_block_cap(&self, f: f32, base_rate_hz: f32) -> u32 {
+        let samples = self.record_length(f, base_rate_hz).1;
+        let full = self.block_samples(f, base_rate_hz, self.min_measure_s);
+        ((2 * self.max_extensions as u64).saturating_mul(full) / samples).min(u32::MAX as u64) as u32
+    }
+
     /// The shortest measurement of a record at f: `min_measure_s`, and half of it below half
-    /// the threshold while precision control runs (`precision_db` and `max_extensions` > 0).
+    /// the threshold while precision control runs (`precision_db` and `max_extensions` > 0),
+    /// unless that half would leave the settling check fewer than
+    /// [`MIN_CHECKED_SAMPLES`](super::settling_check::MIN_CHECKED_SAMPLES) samples.
     ///
-    /// Down there the response is many encoder counts: the base block already meets the
-    /// precision, and a shorter one halves both the base measurement and the steps in which
-    /// the settling check waits for the loop (its half blocks keep at least 40 samples at the
-    /// default 4 kHz acquisition). From half the threshold up the response falls to a few
+    /// Down there the response is usually many encoder counts (a low-gain point, an
+    /// anti-resonance, is lengthened by the precision control as before, up to the same time:
+    /// see [`Self::half_block_cap`]), and a shorter block halves both the base measurement and
+    /// the steps in which the settling check waits for the loop (its half blocks keep 40
+    /// samples at the defaults). From half the threshold up the response falls to a few
     /// counts, and the full block carries the accuracy: precision control predicts the error
     /// from the first base block, and at the acquisition Nyquist frequency, where a single
     /// record's phases collapse to two and tell no error, the records are not lengthened at
@@ -115,8 +134,10 @@ impl SweepParams {
     /// threshold the top keeps 0.027 dB, and the longest row takes 9.7 s instead of 10.1 s.
     /// Fixed records (an oracle's) keep their length.
     fn min_measure_at(&self, f: f32, base_rate_hz: f32) -> f32 {
-        if self.precision_db > 0.0 && self.max_extensions > 0 && f < 0.5 * self.threshold(base_rate_hz) {
-            0.5 * self.min_measure_s
+        let half = 0.5 * self.min_measure_s;
+        let checked = half * base_rate_hz / self.acquisition_divider as f32 >= MIN_CHECKED_SAMPLES as f32;
+        if self.precision_db > 0.0 && self.max_extensions > 0 && checked && f < 0.5 * self.threshold(base_rate_hz) {
+            half
         } else {
             self.min_measure_s
         }
@@ -125,19 +146,20 @@ impl SweepParams {
     /// Base ticks from the start to the end of the sweep when no frequency is extended (the
     /// sweep's length when `precision_db` is 0 or every point meets it at once).
     pub fn total_ticks(&self, base_rate_hz: f32) -> u64 {
-        self.ticks_with_extensions(base_rate_hz, 0)
+        self.ticks_with_extensions(base_rate_hz, false)
     }
 
-    /// Base ticks of the sweep when every frequency takes all `max_extensions` blocks and
-    /// discards `2·max_extensions` half blocks while settling: the longest it can run.
+    /// Base ticks of the sweep when every frequency's records take all the half blocks they
+    /// can ([`Self::half_block_cap`]) and its first record discards as many while settling:
+    /// the longest it can run.
     pub fn max_total_ticks(&self, base_rate_hz: f32) -> u64 {
-        let extensions = if self.precision_db > 0.0 { self.max_extensions } else { 0 };
-        self.ticks_with_extensions(base_rate_hz, extensions)
+        self.ticks_with_extensions(base_rate_hz, self.precision_db > 0.0)
     }
 
-    /// `extensions` blocks per record, and as many blocks of half blocks discarded while the
-    /// first record settles (see `PhaseShiftedSweep::settled`).
-    fn ticks_with_extensions(&self, base_rate_hz: f32, extensions: u32) -> u64 {
+    /// With `longest`, every record lengthened by its cap of half blocks and as many half
+    /// blocks discarded while the first record settles (see `PhaseShiftedSweep::settled`);
+    /// without, none.
+    fn ticks_with_extensions(&self, base_rate_hz: f32, longest: bool) -> u64 {
         let d = self.acquisition_divider as u64;
         match self.signal {
             SweepSignal::Prbs => {
@@ -154,9 +176,10 @@ impl SweepParams {
                 for i in 0..count {
                     let f = self.frequency(i);
                     let (settle, samples) = self.record_length(f, base_rate_hz);
-                    let added = (samples / 2).saturating_mul(2 * extensions as u64);
+                    let halves = if longest { self.half_block_cap(f, base_rate_hz) as u64 } else { 0 };
+                    let added = (samples / 2).saturating_mul(halves);
                     let measure = samples.saturating_add(added).saturating_mul(d);
-                    let discarded = (samples / 2).saturating_mul(d).saturating_mul(2 * extensions as u64);
+                    let discarded = (samples / 2).saturating_mul(d).saturating_mul(halves);
                     for record in 0..self.records(f, base_rate_hz) {
                         let shift = if record == 0 { 0.0 } else { TAU / self.shifts as f32 };
                         let ticks =
@@ -166,7 +189,7 @@ impl SweepParams {
                         total = total.saturating_add(ticks);
                     }
                     if i + 1 < count {
-                        let wait = if extensions == 0 {
+                        let wait = if !longest {
                             generator.ticks_to_peak() as u64
                         } else {
                             libm::ceilf(0.5 * base_rate_hz / f) as u64 + 1

@@ -5,8 +5,10 @@ use super::PhaseShiftedSweep;
 use crate::TAU;
 
 impl PhaseShiftedSweep {
-    /// Extra half blocks per record (at most `2·max_extensions`) for the standard errors of the response, gain's and phase's,
-    /// to reach `precision_db` (the phase's: the same relative size, `precision_db·ln10/20`
+    /// Extra half blocks per record (at most
+    /// [`SweepParams::half_block_cap`](super::SweepParams::half_block_cap): `2·max_extensions`
+    /// of the full block) for the standard errors of the response, gain's and phase's, to reach
+    /// `precision_db` (the phase's: the same relative size, `precision_db·ln10/20`
     /// rad, 0.2° at 0.03 dB) over all `records`, predicted from the first base block (error ∝
     /// 1/√samples).
     // Once per record or frequency: kept out of line so that the every-tick path stays small.
@@ -23,11 +25,12 @@ impl PhaseShiftedSweep {
         let ratio = error.gain.max(error.phase) / target;
         // Half blocks per record (the base block is two).
         let halves = libm::ceilf(2.0 * ratio * ratio / records as f32);
+        let cap = p.half_block_cap(self.status.frequency, self.base_rate_hz);
         // Compared as floats: a huge ratio must not wrap in the conversion.
         if halves <= 2.0 {
             0
-        } else if halves > (2 * p.max_extensions + 2) as f32 {
-            2 * p.max_extensions
+        } else if halves > (cap + 2) as f32 {
+            cap
         } else {
             halves as u32 - 2
         }

@@ -54,9 +54,10 @@ pub struct SweepParams {
     /// the base record leaves about 0.1 dB of error whose size depends on the fine detail of
     /// the motion; the well-measured points are not lengthened.
     pub precision_db: f32,
-    /// At most so many extra blocks (each as long as one record's base measurement) per
-    /// record of a frequency, and at most twice as many half blocks discarded while its first
-    /// record settles.
+    /// At most so many extra blocks (each as long as one record's base measurement with the
+    /// full `min_measure_s`) per record of a frequency, and at most twice as many half blocks
+    /// discarded while its first record settles; where the base block is halved the cap stays
+    /// the same in time (twice as many half blocks: see [`SweepParams::half_block_cap`]).
     pub max_extensions: u32,
     /// Stepped sine: a pseudo-random ±dither (N·m) added to the torque command on every base
     /// tick of the frequencies at and above the threshold (0: none). At constant speed and
@@ -75,8 +76,8 @@ pub struct SweepParams {
 
 impl Default for SweepParams {
     /// Velocity-command injection, 10 Hz to 3 kHz in 40 log steps plus 2 kHz, 1 settle and
-    /// 2 measure cycles (at least 10 ms of settling, and 40 ms of measurement from 1 kHz up,
-    /// 20 ms below: see [`SweepParams::record_length`]), 3 records
+    /// 2 measure cycles (at least 10 ms of settling, and 40 ms of measurement from half the
+    /// threshold up, 1 kHz at 16 kHz, 20 ms below: see [`SweepParams::record_length`]), 3 records
     /// shifted by 2π/3 from the acquisition Nyquist frequency up, acquisition every 4 ticks
     /// (4 kHz at 16 kHz). The base records are short: the settling check lengthens the wait
     /// where the loop rings (see `PhaseShiftedSweep::settled`), the precision control the

@@ -28,7 +28,8 @@ impl PhaseShiftedSweep {
     /// gain and phase together) or three standard deviations of the difference under the
     /// measured noise, whichever is larger. When they differ, the earlier half block is
     /// discarded and the last one is compared with a new one; the kept data is always the last
-    /// two half blocks, one base block. At most `2·max_extensions` half blocks are discarded.
+    /// two half blocks, one base block. At most `SweepParams::half_block_cap` half blocks are
+    /// discarded (`2·max_extensions` of the full block).
     // Once per half block: kept out of line so that the every-tick path stays small.
     #[inline(never)]
     pub(super) fn settled(&mut self) -> Option<u64> {
@@ -49,8 +50,13 @@ impl PhaseShiftedSweep {
             self.previous_half = this;
             self.half_start = self.acc;
             self.checking_settling = first && this.is_some();
-            self.half_block = 1;
-            self.segment = AcquisitionSample::segment_of(self.status.record, 1);
+            if first {
+                self.half_block = 1;
+                self.segment = AcquisitionSample::segment_of(self.status.record, 1);
+            }
+            // Else the check ends on a half block that tells nothing: the base block is the
+            // last two (indices k − 1 and k) and the samples after it keep index k, so that a
+            // host fitting from the last index minus one up keeps what the drive keeps.
             return first.then_some(samples - samples / 2);
         };
         let target = p.precision_db * (core::f32::consts::LN_10 / 20.0);
@@ -87,7 +93,7 @@ impl PhaseShiftedSweep {
         self.previous_difference = (dre, dim);
         self.previous_above_noise = difference > noise;
         self.previous_excess = excess;
-        if settled || self.discarded_halves >= 2 * p.max_extensions {
+        if settled || self.discarded_halves >= p.half_block_cap(self.status.frequency, self.base_rate_hz) {
             self.checking_settling = false;
             return None;
         }

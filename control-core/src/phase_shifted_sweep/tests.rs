@@ -332,4 +332,62 @@ fn the_middle_of_the_sweep_measures_half_the_shortest_block_and_the_top_all_of_i
     let moved = SweepParams { threshold_hz: 600.0, ..p };
     assert_eq!(samples(&moved, 299.0), full / 2);
     assert_eq!(samples(&moved, 300.0), full);
+    // The caps of precision control and settling check stay in time: twice as many of the
+    // halved block's half blocks.
+    let cap = 2 * p.max_extensions as u64;
+    assert_eq!(p.half_block_cap(500.0, FS) as u64, 2 * cap);
+    assert_eq!(p.half_block_cap(1500.0, FS) as u64, cap);
+    for f in [57.8, 66.9, 103.8, 500.0, 1500.0, 3000.0] {
+        let capped = p.half_block_cap(f, FS) as u64 * (samples(&p, f) / 2);
+        assert!(capped <= cap * full / 2 && capped + samples(&p, f) > cap * full / 2, "{f} Hz: {capped} samples");
+    }
+    // A block that halving would leave too short for the settling check is not halved (12
+    // ticks per sample: 27 samples in 20 ms).
+    let coarse = SweepParams { acquisition_divider: 12, ..p };
+    assert_eq!(samples(&coarse, 500.0), samples(&SweepParams { precision_db: 0.0, ..coarse }, 500.0));
+    assert!(samples(&coarse, 500.0) >= MIN_CHECKED_SAMPLES);
+}
+
+/// The samples a host keeps by their labels (measured, half-block index at least the last
+/// one minus one) are the samples the drive's correlator holds, also when the settling check
+/// ends on a half block that tells nothing after discarding some (here u is not a number in
+/// half block 3 of a ringing loop: a stand-in for a half block whose phases or amplitudes tell
+/// no response, which a real signal reaches only in corner cases). Before, that half block's successors
+/// were labelled 1 and a host dropped them.
+#[test]
+fn the_samples_a_host_keeps_by_their_labels_are_the_drives() {
+    for silent_half in [None, Some(3u32)] {
+        // Three phase-shifted records (the threshold below 50 Hz): samples follow the first
+        // record's base block.
+        let p = SweepParams {
+            start_hz: 50.0,
+            stop_hz: 50.0,
+            points: 1,
+            extra_hz: 0.0,
+            threshold_hz: 40.0,
+            ..Default::default()
+        };
+        let mut s = PhaseShiftedSweep::new(p, FS);
+        s.start().unwrap();
+        // Measured samples per half-block index.
+        let (mut tick, mut samples) = (0u64, [0u32; 300]);
+        while s.running() {
+            let (_, u) = s.excitation(true).unwrap();
+            let in_silent = silent_half == Some(s.status().sample.half_block()) && s.status().sample.measuring;
+            let (u, y) = if in_silent { (f32::NAN, 50.0) } else { (u, ringing_response(&s, tick)) };
+            let acquire = tick.is_multiple_of(p.acquisition_divider as u64);
+            s.end_tick(tick, tick.is_multiple_of(2), acquire, u, y, false);
+            if acquire && s.status().sample.measuring {
+                samples[s.status().sample.half_block() as usize] += 1;
+            }
+            tick += 1;
+        }
+        let last = samples.iter().rposition(|&n| n > 0).unwrap();
+        let kept: u32 = samples[last - 1..].iter().sum();
+        assert!(last >= 3, "{silent_half:?}: the ring is discarded first ({last})");
+        if silent_half.is_some() {
+            assert_eq!(last, 3, "the check ends on the half block that tells nothing");
+        }
+        assert_eq!(kept as f32, s.acc.n, "{silent_half:?}: host {kept} samples, drive {}", s.acc.n);
+    }
 }

@@ -47,8 +47,9 @@ pub struct SweepArgs {
     #[arg(long, default_value_t = 0.01)]
     pub min_settle: f64,
     /// Shortest measurement per record (s); half of it below half the threshold while the
-    /// precision control runs (there the response is many encoder counts and the shorter block
-    /// halves the settling check's steps; from there up the full block carries the accuracy)
+    /// precision control runs (there the response is usually many encoder counts and the
+    /// shorter block halves the settling check's steps; the caps of --max-extensions stay the
+    /// same in time; from half the threshold up the full block carries the accuracy)
     #[arg(long, default_value_t = 0.04)]
     pub min_measure: f64,
     /// Phase step 2π/shifts between repeats
@@ -74,7 +75,8 @@ pub struct SweepArgs {
     /// none): breaks the lock of the encoder's count pattern to the excitation
     #[arg(long, default_value_t = 0.003)]
     pub dither: f64,
-    /// At most so many extra blocks (each one record's base measurement) per record
+    /// At most so many extra blocks (each one record's base measurement with the full
+    /// --min-measure) per record, and twice as many half blocks discarded while settling
     #[arg(long, default_value_t = 8)]
     pub max_extensions: u32,
     /// Constant speed the sweep rides on (rad/s; keeps friction on one side)

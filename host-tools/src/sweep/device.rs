@@ -37,13 +37,15 @@ pub struct DeviceSweep {
     /// overwritten between two polls is missing here, not in `stream`).
     pub online: Vec<ResponsePoint>,
     /// Frequencies the drive measured while its output was limited (the voltage circle cut
-    /// what the current loop asked for): not the loop's response there. From the stream's
-    /// flags (every result, protocol version 8), and any result the telemetry caught with a
-    /// share above 0 (a limited sample the link dropped).
+    /// what the current loop asked for): not the loop's response there. Those of
+    /// `limited_share` above 0.
     pub limited_hz: Vec<f64>,
-    /// Each streamed result's share of limited samples (frequency, share; the samples its
-    /// fit keeps, counted as the drive counts them).
-    pub limited_share: Vec<(f64, f64)>,
+    /// Each result of `stream`'s share of samples acquired with the output limited (paired by
+    /// index, as `servo sweep`'s JSON pairs its shares with its results): counted from the
+    /// stream's flags over the samples its fit keeps, as the drive counts them (every result,
+    /// protocol version 8), or the drive's own share where the telemetry caught the result
+    /// and it is larger (a limited sample the link lost).
+    pub limited_share: Vec<f64>,
     pub samples: usize,
     /// Samples the drive could not send (its ring full: the link too slow).
     pub dropped: u32,
@@ -117,7 +119,7 @@ pub fn sweep_on_drive_after<T: crate::device::link::DrivePort>(
     let longest = run.max_measurement_time()? * 1.2 + 1.0;
     let (session_hz, planned) = (session.tick_hz, run.measurement_time()?.max(1e-9));
     let mut online = Vec::new();
-    let mut telemetry_limited_hz = Vec::new();
+    let mut telemetry_shares = Vec::new();
     let mut seen = 0;
     let end = session.wait_until(longest, |t| {
         if t.faults.any() {
@@ -126,9 +128,7 @@ pub fn sweep_on_drive_after<T: crate::device::link::DrivePort>(
         if t.sweep.done_points > seen {
             seen = t.sweep.done_points;
             let l = t.sweep.last;
-            if t.sweep.last_limited > 0.0 {
-                telemetry_limited_hz.push(l.frequency as f64);
-            }
+            telemetry_shares.push((l.frequency as f64, t.sweep.last_limited as f64));
             online.push(ResponsePoint::from_complex(
                 l.frequency as f64,
                 num_complex::Complex64::new(l.re as f64, l.im as f64),
@@ -159,19 +159,21 @@ pub fn sweep_on_drive_after<T: crate::device::link::DrivePort>(
     }
     // A stepped sine's response per frequency; a PRBS (the identification's) has none here:
     // its caller analyses the samples.
-    let (stream, limited_share) = match run.settings.signal {
+    let (stream, streamed_shares) = match run.settings.signal {
         SweepSignal::SteppedSine => {
             (stream_results(&trace, &run.settings)?, stream_limited_shares(&trace, &run.settings)?.unwrap_or_default())
         }
         SweepSignal::Prbs => (Vec::new(), Vec::new()),
     };
-    let mut limited_hz = flagged(&limited_share);
-    for f in telemetry_limited_hz {
-        if !limited_hz.iter().any(|&g| (g - f).abs() <= 1e-6 * f) {
-            limited_hz.push(f);
-        }
-    }
-    limited_hz.sort_by(f64::total_cmp);
+    let shares: Vec<(f64, f64)> = streamed_shares
+        .iter()
+        .map(|&(f, share)| {
+            let caught = telemetry_shares.iter().filter(|&&(g, _)| (g - f).abs() <= 1e-6 * f).map(|&(_, s)| s);
+            (f, caught.fold(share, f64::max))
+        })
+        .collect();
+    let limited_hz = flagged(&shares);
+    let limited_share = shares.iter().map(|&(_, share)| share).collect();
     let measurement_time_s = (end.tick - start) as f64 / session.tick_hz;
     Ok(DeviceSweep {
         measurement_time_s,

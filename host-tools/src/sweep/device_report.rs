@@ -79,8 +79,12 @@ pub fn compare_with_twin(drive: &DeviceSweep, twin: &[ResponsePoint]) -> (Vec<Tw
             let t = twin.iter().find(|t| same(t.frequency, d.frequency))?;
             let (dg, dp) = difference(d, t);
             largest = (largest.0.max(dg.abs()), largest.1.max(dp.abs()));
-            let limited_share =
-                drive.limited_share.iter().find(|&&(f, _)| same(f, d.frequency)).map_or(0.0, |&(_, share)| share);
+            let limited_share = drive
+                .stream
+                .iter()
+                .zip(&drive.limited_share)
+                .find(|(p, _)| same(p.frequency, d.frequency))
+                .map_or(0.0, |(_, &share)| share);
             Some(TwinPoint {
                 frequency: d.frequency,
                 drive: *d,

@@ -342,3 +342,48 @@ pub fn errors(a: &[ResponsePoint], reference: &[ResponsePoint], split_hz: f64) -
     }
     s
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A stream as the drive labels it: point 0 settles after discarding half blocks 0 and 1
+    /// (limited while they ran), keeps 2 and 3 (two of their twenty samples limited, one row
+    /// repeated at the same time as a trace at a finer step repeats it), and a limited sample
+    /// outside the measurement; point 1 keeps its base block, none limited. The shares count
+    /// the kept samples only, each once: 2/20 and 0, in point order with their frequencies.
+    #[test]
+    fn a_results_limited_share_counts_the_samples_its_fit_keeps_once() {
+        let mut t = Trace::new(
+            ["acq_time", "acq_point", "acq_measuring", "acq_half_block", "acq_limited", "acq_u", "acq_y", "acq_phase"]
+                .map(String::from)
+                .to_vec(),
+        );
+        let mut time = 0.0;
+        let mut row = |t: &mut Trace, point: f64, measuring: f64, half: f64, limited: f64| {
+            time += 1.0;
+            t.rows.push([time, point, measuring, half, limited, 1.0, 1.0, time]);
+        };
+        row(&mut t, 0.0, 0.0, 0.0, 1.0);
+        for half in 0..4 {
+            for k in 0..10 {
+                let limited = half < 2 || (half == 3 && k < 2);
+                row(&mut t, 0.0, 1.0, half as f64, limited as u8 as f64);
+            }
+        }
+        let last = t.rows.iter().last().unwrap().to_vec();
+        t.rows.push(last);
+        for half in 0..2 {
+            for _ in 0..10 {
+                row(&mut t, 1.0, 1.0, half as f64, 0.0);
+            }
+        }
+        let settings = SweepParams { start_hz: 100.0, stop_hz: 200.0, points: 2, extra_hz: 0.0, ..Default::default() };
+        let shares = stream_limited_shares(&t, &settings).unwrap().unwrap();
+        assert_eq!(shares, vec![(100.0, 0.1), (200.0, 0.0)]);
+        // A stream without the flag (an older FMU or drive) has no shares to tell.
+        let mut old = t.clone();
+        old.columns[4] = "something_else".into();
+        assert_eq!(stream_limited_shares(&old, &settings).unwrap(), None);
+    }
+}
