@@ -560,6 +560,9 @@ fn requests(fig: &mut Figures, rng: &mut Rng, started: Instant, seconds: f64) {
     }
 }
 
+/// Where a sample batch's count sits in its postcard payload (see `stream`).
+const SAMPLE_COUNT_AT: usize = 2;
+
 /// A stream of the drive's responses: sample batches (counts 0 to 16, sometimes absurd
 /// under a valid CRC), telemetry and answers.
 fn random_response(rng: &mut Rng, tick: &mut u64) -> Response {
@@ -613,9 +616,10 @@ fn stream(fig: &mut Figures, rng: &mut Rng, started: Instant, seconds: f64) {
                 0 | 1 => {
                     let mut p = postcard::to_allocvec(&r).unwrap();
                     if let Response::Samples(_) = r {
-                        // The count is the second byte (variant 5, then the count).
-                        if rng.bool() && p.len() > 1 {
-                            p[1] = rng.u8(17..=255);
+                        // The samples' count is the third byte: the variant (5), `dropped` (one
+                        // byte below 128), then the count, a one-byte varint up to 127.
+                        if rng.bool() && p.len() > 2 {
+                            p[SAMPLE_COUNT_AT] = rng.u8(17..=127);
                         } else {
                             mutate_payload(rng, &mut p);
                         }
@@ -687,6 +691,25 @@ mod tests {
             // Compared as bytes: a NaN set-point is not equal to itself.
             let back = decode::<Request>(&mut f.clone()).unwrap();
             assert_eq!(postcard::to_allocvec(&back).unwrap(), p);
+        }
+    }
+
+    /// The stream campaign's count mutation hits the count: a batch whose count byte says 17
+    /// to 127 under a valid CRC is refused, the same batch as sent decodes.
+    #[test]
+    fn the_count_mutation_reaches_the_samples_count() {
+        let mut rng = Rng::with_seed(3);
+        let mut tick = 0;
+        let mut tried = 0;
+        while tried < 200 {
+            let r = random_response(&mut rng, &mut tick);
+            let Response::Samples(b) = r else { continue };
+            tried += 1;
+            let mut p = postcard::to_allocvec(&r).unwrap();
+            assert_eq!(p[SAMPLE_COUNT_AT], b.count, "{p:?}");
+            assert!(decode::<Response>(&mut frame_of_payload(&p).unwrap()).is_ok());
+            p[SAMPLE_COUNT_AT] = rng.u8(17..=127);
+            assert!(decode::<Response>(&mut frame_of_payload(&p).unwrap()).is_err(), "{p:?}");
         }
     }
 
