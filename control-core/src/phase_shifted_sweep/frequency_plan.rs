@@ -176,6 +176,8 @@ impl SweepParams {
                 for i in 0..count {
                     let f = self.frequency(i);
                     let (settle, samples) = self.record_length(f, base_rate_hz);
+                    // A stage lasts at least one tick (see `PhaseShiftedSweep::set_left`).
+                    let settle = settle.max(1);
                     let halves = if longest { self.half_block_cap(f, base_rate_hz) as u64 } else { 0 };
                     let added = (samples / 2).saturating_mul(halves);
                     let measure = samples.saturating_add(added).saturating_mul(d);

@@ -206,7 +206,7 @@ pub struct PhaseShiftedSweep {
     previous_tail: f32,
     checking_settling: bool,
     /// Index of the present half block (see [`AcquisitionSample::half_block`]; at most
-    /// `1 + 2·MAX_EXTENSIONS`), and the samples' word of record and half block (found when
+    /// `1 +` [`SweepParams::half_block_cap`], below `1 + 4·MAX_EXTENSIONS`), and the samples' word of record and half block (found when
     /// either changes, not on every sample: the Cortex-M4's tick budget).
     half_block: u32,
     segment: u32,

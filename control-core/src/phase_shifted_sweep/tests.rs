@@ -391,3 +391,25 @@ fn the_samples_a_host_keeps_by_their_labels_are_the_drives() {
         assert_eq!(kept as f32, s.acc.n, "{silent_half:?}: host {kept} samples, drive {}", s.acc.n);
     }
 }
+
+/// The schedule the host computes holds at its corners: no settling at all (each stage still
+/// takes a tick) is run exactly; a halved block (500 Hz) lengthened to its cap by a response
+/// lost in noise stays within the longest sweep, and takes the cap's time, as long as the
+/// full block's `2·max_extensions` half blocks.
+#[test]
+fn the_host_s_schedule_holds_without_settling_and_at_a_halved_blocks_cap() {
+    let unsettled = SweepParams { settle_cycles: 0.0, min_settle_s: 0.0, ..at(300.0, 3, 3) };
+    let [r, _] = measure(unsettled, 0.5, -1.0);
+    assert!((r.gain_db() - 20.0 * libm::log10f(0.5)).abs() < 1e-3, "{r:?}");
+    let p = SweepParams { start_hz: 500.0, stop_hz: 600.0, points: 2, extra_hz: 0.0, ..Default::default() };
+    let (settle, samples) = p.record_length(500.0, FS);
+    assert_eq!(samples, 80, "a halved block");
+    let (_, ticks) = noisy(p, 0.001, 0.5, 3);
+    assert!(ticks <= p.max_total_ticks(FS), "{ticks} > {}", p.max_total_ticks(FS));
+    // The first frequency at its cap: base block and cap half blocks, in time the full
+    // block's cap (2·max_extensions half blocks of 160 samples).
+    let full_cap = 2 * p.max_extensions as u64 * 80;
+    let capped = (samples + p.half_block_cap(500.0, FS) as u64 * (samples / 2)) * p.acquisition_divider as u64;
+    assert_eq!(capped - samples * p.acquisition_divider as u64, full_cap * p.acquisition_divider as u64);
+    assert!(ticks > settle + capped, "{ticks} ticks: the first frequency ran to its cap");
+}

@@ -94,6 +94,25 @@ pub fn interior_plants() -> Vec<PlantCase> {
         .collect()
 }
 
+/// `n` plants drawn with `seed`, inertia ratio and shaft resonance each log-uniform over the
+/// ranges users work in (0.2–5, 50–500 Hz), rounded to three significant digits so that a
+/// printed plant can be run again by hand (`servo sweep --set plant.…`).
+pub fn random_plants(n: u32, seed: u64) -> Vec<PlantCase> {
+    let mut rng = crate::random::XorShift64Star(seed.wrapping_mul(0x9E37_79B9_7F4A_7C15) | 1);
+    let mut log_uniform = |lo: f64, hi: f64| {
+        let u = (rng.next() >> 11) as f64 / (1u64 << 53) as f64;
+        let x = (lo.ln() + u * (hi.ln() - lo.ln())).exp();
+        let scale = 10f64.powi(2 - x.log10().floor() as i32);
+        (x * scale).round() / scale
+    };
+    (0..n)
+        .map(|_| {
+            let inertia_ratio = log_uniform(0.2, 5.0);
+            PlantCase { inertia_ratio, resonance_hz: Some(log_uniform(50.0, 500.0)) }
+        })
+        .collect()
+}
+
 impl PlantCase {
     /// The FMU parameters: load inertia = ratio × motor inertia; shaft stiffness for the
     /// resonance `f_r = √(k·(1/J_M + 1/J_L))/2π` and damping for 5 % at the anti-resonance
@@ -111,8 +130,8 @@ impl PlantCase {
             p.insert(name::plant_shaft_damping.to_string(), Value::Float(2.0 * 0.05 * (k * jl).sqrt()));
         }
         // (A load of half the motor's inertia already needs them: its friction's rate is
-        // 1.6e4 1/s, the FMU refuses h·rate ≥ 0.5.)
-        if self.inertia_ratio <= 0.5 {
+        // 1.6e4 1/s, the FMU refuses h·rate ≥ 0.5; one of 0.6 still has 1.3e4 1/s.)
+        if self.inertia_ratio < 1.0 {
             p.insert(name::plant_substeps.to_string(), Value::Int(8));
         }
         p
@@ -175,19 +194,28 @@ pub struct GridSelection {
     /// The interior grid's plants ([`interior_plants`]) instead of [`PLANTS`] (`plants` must
     /// then be empty).
     pub interior: bool,
+    /// So many plants drawn at random in the ranges ([`random_plants`], with this seed)
+    /// instead of [`PLANTS`]: cases the project does not ship.
+    pub random: Option<(u32, u64)>,
 }
 
 impl Default for GridSelection {
     fn default() -> Self {
-        Self { plants: Vec::new(), points: Vec::new(), noise: None, seeds: 1, interior: false }
+        Self { plants: Vec::new(), points: Vec::new(), noise: None, seeds: 1, interior: false, random: None }
     }
 }
 
 impl GridSelection {
     /// Refuses a plant index outside the grid and a noise level the grid does not have.
     pub fn validate(&self) -> Result<()> {
-        if self.interior && !self.plants.is_empty() {
-            return Err(anyhow!("--interior runs its own plants: leave out --plant"));
+        if (self.interior || self.random.is_some()) && !self.plants.is_empty() {
+            return Err(anyhow!("--interior and --random run their own plants: leave out --plant"));
+        }
+        if self.interior && self.random.is_some() {
+            return Err(anyhow!("--interior and --random are two different sets of plants: choose one"));
+        }
+        if let Some((n, _)) = self.random.filter(|&(n, _)| !(1..=MAX_RANDOM_PLANTS).contains(&n)) {
+            return Err(anyhow!("--random {n} is outside 1 to {MAX_RANDOM_PLANTS}"));
         }
         if let Some(&i) = self.plants.iter().find(|&&i| i >= PLANTS.len()) {
             return Err(anyhow!("plant {i} is not in the grid (0 to {})", PLANTS.len() - 1));
@@ -216,6 +244,8 @@ impl GridSelection {
 
 /// Most noise seeds a noisy row can be run with.
 pub const MAX_SEEDS: u32 = 100;
+/// Most random plants (`--random`).
+pub const MAX_RANDOM_PLANTS: u32 = 1000;
 
 /// Current-sensor noise levels of the grid (A).
 pub const NOISE_LEVELS: [f64; 2] = [0.0, DITHER_A];
@@ -433,7 +463,11 @@ impl GridRow {
 /// The selected rows of the grid (plant by plant, point by point, noise levels in order).
 pub fn grid(fmu: &Fmu, selection: &GridSelection, mut progress: impl FnMut(f64)) -> Result<Vec<GridRow>> {
     selection.validate()?;
-    let plants: Vec<PlantCase> = if selection.interior { interior_plants() } else { PLANTS.to_vec() };
+    let plants: Vec<PlantCase> = match (selection.interior, selection.random) {
+        (true, _) => interior_plants(),
+        (false, Some((n, seed))) => random_plants(n, seed),
+        (false, None) => PLANTS.to_vec(),
+    };
     let jobs: Vec<(&PlantCase, (InjectionPoint, f32))> = plants
         .iter()
         .enumerate()
@@ -571,5 +605,33 @@ mod tests {
         // A load of half the motor's inertia gets the finer sub-steps the FMU needs for it.
         let half = PlantCase { inertia_ratio: 0.5, resonance_hz: Some(100.0) }.parameters();
         assert!(matches!(half.get(name::plant_substeps), Some(Value::Int(8))), "{half:?}");
+    }
+
+    /// Random plants stay in the ranges, spread over them (both halves of each log range hit),
+    /// are the same for the same seed and differ for another; a draw is refused with plant
+    /// indices, with the interior grid, or when empty.
+    #[test]
+    fn random_plants_cover_the_ranges_and_a_seed_names_a_draw() {
+        let plants = random_plants(200, 7);
+        assert!(plants.iter().all(|p| (0.2..=5.0).contains(&p.inertia_ratio)), "{plants:?}");
+        let resonances: Vec<f64> = plants.iter().map(|p| p.resonance_hz.unwrap()).collect();
+        assert!(resonances.iter().all(|f| (50.0..=500.0).contains(f)), "{resonances:?}");
+        let (low_ratio, low_f) = (
+            plants.iter().filter(|p| p.inertia_ratio < 1.0).count(),
+            resonances.iter().filter(|&&f| f < 158.1).count(),
+        );
+        assert!((70..=130).contains(&low_ratio) && (70..=130).contains(&low_f), "{low_ratio} {low_f}");
+        assert_eq!(random_plants(5, 7).iter().map(|p| p.label()).collect::<Vec<_>>(), {
+            plants[..5].iter().map(|p| p.label()).collect::<Vec<_>>()
+        });
+        assert_ne!(random_plants(5, 8)[0].label(), plants[0].label());
+        let with = |random| GridSelection { random, ..GridSelection::default() };
+        assert!(with(Some((0, 1))).validate().is_err());
+        assert!(GridSelection { plants: vec![0], ..with(Some((3, 1))) }.validate().is_err());
+        assert!(GridSelection { interior: true, ..with(Some((3, 1))) }.validate().is_err());
+        assert!(with(Some((3, 1))).validate().is_ok());
+        // Every drawn load lighter than the motor gets the finer sub-steps (0.6: 1.3e4 1/s).
+        let light = PlantCase { inertia_ratio: 0.6, resonance_hz: Some(100.0) }.parameters();
+        assert!(matches!(light.get(name::plant_substeps), Some(Value::Int(8))), "{light:?}");
     }
 }

@@ -73,7 +73,13 @@ pub fn sweep_settings(args: &SweepArgs) -> Result<control_core::phase_shifted_sw
 
 impl SweepBenchArgs {
     pub fn run(&self) -> Result<bool> {
-        if self.plants.is_empty() && self.points.is_empty() && self.noise.is_none() && !self.interior {
+        let random = self.random.map(|n| (n, self.plant_seed));
+        if self.plants.is_empty()
+            && self.points.is_empty()
+            && self.noise.is_none()
+            && !self.interior
+            && random.is_none()
+        {
             return bench_sweep(&self.common, self.detail, self.seeds);
         }
         let points = self.points.iter().map(|p| injection_point(p).map(|(p, _)| p)).collect::<Result<Vec<_>>>()?;
@@ -83,6 +89,7 @@ impl SweepBenchArgs {
             noise: self.noise,
             seeds: self.seeds,
             interior: self.interior,
+            random,
         };
         selection.validate()?;
         let fmu = Fmu::load(&self.common.fmu.clone().unwrap_or_else(default_fmu))?;
@@ -95,8 +102,15 @@ impl SweepBenchArgs {
                 "{}",
                 serde_json::to_string_pretty(&serde_json::json!({"bench": "sweep", "grid": rows, "passed": ok}))?
             );
-        } else if self.interior && !self.detail {
-            print_summary(&rows);
+        } else if (self.interior || random.is_some()) && !self.detail {
+            let plants = match random {
+                Some((n, seed)) => format!(
+                    "{n} plants drawn with seed {seed}: inertia ratio log-uniform in 0.2–5 × shaft resonance log-uniform in 50–500 Hz"
+                ),
+                None => "36 plants: inertia ratio 0.2–5 × shaft resonance 50–500 Hz".to_string(),
+            };
+            let flag = if random.is_some() { "--random" } else { "--interior" };
+            print_summary(&rows, flag, &plants);
         } else {
             print_grid(&rows, self.detail);
         }
@@ -118,10 +132,10 @@ fn injection_point(word: &str) -> Result<(control_core::excitation::InjectionPoi
 /// The interior grid in brief: per injection point and noise level the rows that meet every
 /// goal and the worst gain error, phase error and time with their plants; then the rows that
 /// miss a goal.
-fn print_summary(rows: &[crate::sweep::bench::GridRow]) {
+fn print_summary(rows: &[crate::sweep::bench::GridRow], flag: &str, plants: &str) {
     use crate::sweep::bench::GridRow;
     println!(
-        "servo bench sweep --interior — {} rows (36 plants: inertia ratio 0.2–5 × shaft resonance 50–500 Hz; each point, with and without current-sensor noise); goal <= 0.1 dB, <= 1 deg, <= 10 s",
+        "servo bench sweep {flag} — {} rows ({plants}; each point, with and without current-sensor noise); goal <= 0.1 dB, <= 1 deg, <= 10 s",
         rows.len()
     );
     println!(

@@ -38,10 +38,10 @@ pub struct DeviceSweep {
     pub online: Vec<ResponsePoint>,
     /// Frequencies the drive measured while its output was limited (the voltage circle cut
     /// what the current loop asked for): not the loop's response there. Those of
-    /// `limited_share` above 0.
+    /// `limited_share` above 0, and any the telemetry caught limited that the stream lacks.
     pub limited_hz: Vec<f64>,
     /// Each result of `stream`'s share of samples acquired with the output limited (paired by
-    /// index, as `servo sweep`'s JSON pairs its shares with its results): counted from the
+    /// index with `stream`): counted from the
     /// stream's flags over the samples its fit keeps, as the drive counts them (every result,
     /// protocol version 8), or the drive's own share where the telemetry caught the result
     /// and it is larger (a limited sample the link lost).
@@ -172,7 +172,15 @@ pub fn sweep_on_drive_after<T: crate::device::link::DrivePort>(
             (f, caught.fold(share, f64::max))
         })
         .collect();
-    let limited_hz = flagged(&shares);
+    let mut limited_hz = flagged(&shares);
+    // A result the drive said was limited but whose samples the stream lacks (lost on the
+    // line) is named all the same.
+    for &(f, share) in &telemetry_shares {
+        if share > 0.0 && !shares.iter().any(|&(g, _)| (g - f).abs() <= 1e-6 * f) {
+            limited_hz.push(f);
+        }
+    }
+    limited_hz.sort_by(f64::total_cmp);
     let limited_share = shares.iter().map(|&(_, share)| share).collect();
     let measurement_time_s = (end.tick - start) as f64 / session.tick_hz;
     Ok(DeviceSweep {
