@@ -16,9 +16,9 @@ pub const CAPACITY: usize = 256;
 /// samples only, each tick sent as the (signed) difference from the one before (the first
 /// from 0),
 /// the record and the half block as two varints, `measuring` and (version 8) `limited` as
-/// two bits of one byte: about 17 bytes a sample, nothing for an empty slot. Version 4 sent all 16 slots and whole ticks: at the link task's 2 ms poll a
-/// 4 kHz stream went out 8 samples a frame at 37 bytes each, more than a 921 600 Bd line
-/// carries.
+/// two bits of one byte: about 17 bytes a sample, nothing for an empty slot. Version 4 sent
+/// all 16 slots and whole ticks: at the link task's 2 ms poll a 4 kHz stream went out 8
+/// samples a frame at 37 bytes each, more than a 921 600 Bd line carries.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub struct SampleBatch {
     pub count: u8,

@@ -30,8 +30,9 @@ use crate::stop_sequence::{Refusal, SequenceEvent};
 /// limited during its acquisition period (a flag bit beside `measuring`, the same byte on the
 /// line: see [`crate::acquisition_stream::SAMPLE_LIMITED`]), so that the host counts every
 /// result's share from the stream; the telemetry's copy of the last sample (serde's derived
-/// encoding) grows by that flag's byte. Version 7: the telemetry's sweep status carries the share of the last result's
-/// samples measured with the output limited (`SweepStatus::last_limited`). Version 6:
+/// encoding) grows by that flag's byte. Version 7: the telemetry's sweep status carries the
+/// share of the last result's samples measured with the output limited
+/// (`SweepStatus::last_limited`). Version 6:
 /// `SaveParams` is answered with the sequence number of the record it
 /// wrote ([`Response::Saved`]), and the telemetry carries the newest record in the drive's
 /// flash ([`DriveTelemetry`]), so that a save whose answer is lost can be told from the

@@ -206,8 +206,9 @@ pub struct PhaseShiftedSweep {
     previous_tail: f32,
     checking_settling: bool,
     /// Index of the present half block (see [`AcquisitionSample::half_block`]; at most
-    /// `1 +` [`SweepParams::half_block_cap`], below `1 + 4·MAX_EXTENSIONS`), and the samples' word of record and half block (found when
-    /// either changes, not on every sample: the Cortex-M4's tick budget).
+    /// `1 +` [`SweepParams::half_block_cap`], below `1 + 4·MAX_EXTENSIONS`), and the samples'
+    /// word of record and half block (found when either changes, not on every sample: the
+    /// Cortex-M4's tick budget).
     half_block: u32,
     segment: u32,
     /// Sums of u and y over the loop ticks of the present acquisition period, and their count.

@@ -352,8 +352,8 @@ fn the_middle_of_the_sweep_measures_half_the_shortest_block_and_the_top_all_of_i
 /// one minus one) are the samples the drive's correlator holds, also when the settling check
 /// ends on a half block that tells nothing after discarding some (here u is not a number in
 /// half block 3 of a ringing loop: a stand-in for a half block whose phases or amplitudes tell
-/// no response, which a real signal reaches only in corner cases). Before, that half block's successors
-/// were labelled 1 and a host dropped them.
+/// no response, which a real signal reaches only in corner cases). Before, that half block's
+/// successors were labelled 1 and a host dropped them.
 #[test]
 fn the_samples_a_host_keeps_by_their_labels_are_the_drives() {
     for silent_half in [None, Some(3u32)] {
