@@ -469,3 +469,36 @@ fn index_gathers_the_experiments_into_one_page() {
     let page = std::fs::read_to_string(root.join("index.html")).unwrap();
     assert!(page.contains("1 of 2 checks"), "{page}");
 }
+
+/// `servo bench sweep --random`: plants drawn in the ranges, the same for the same seed (the
+/// JSON names them), run against their oracles; refused with a plant index or with
+/// --interior, before any FMU runs.
+#[test]
+fn bench_sweep_runs_random_plants_named_by_their_seed() {
+    let run = |seed: &str| {
+        let o = servo()
+            .args(["bench", "sweep", "--random", "2", "--plant-seed", seed, "--point", "velocity", "--noise", "0"])
+            .arg("--json")
+            .arg("--fmu")
+            .arg(fmu_path())
+            .output()
+            .unwrap();
+        assert!(matches!(o.status.code(), Some(0 | 1)), "{}", String::from_utf8_lossy(&o.stderr));
+        let r: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+        let rows = r["grid"].as_array().unwrap().clone();
+        assert_eq!(rows.len(), 2, "{r}");
+        for row in &rows {
+            assert!(row["measurement_time_s"].as_f64().unwrap() > 1.0, "{row}");
+            assert!(row["gain_db"].as_f64().unwrap().is_finite(), "{row}");
+        }
+        rows.iter().map(|row| row["plant"].as_str().unwrap().to_string()).collect::<Vec<_>>()
+    };
+    let (a, b, c) = (run("5"), run("5"), run("6"));
+    assert_eq!(a, b, "a seed names a draw");
+    assert_ne!(a, c);
+    for bad in [&["--plant", "0"][..], &["--interior"][..]] {
+        let o = servo().args(["bench", "sweep", "--random", "2"]).args(bad).output().unwrap();
+        assert_eq!(o.status.code(), Some(2), "{bad:?}");
+        assert!(String::from_utf8_lossy(&o.stderr).contains("--random"), "{bad:?}");
+    }
+}
