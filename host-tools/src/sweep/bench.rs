@@ -25,7 +25,7 @@ use control_core::phase_shifted_sweep::{SweepParams, SweepSignal};
 use num_complex::Complex64;
 use serde::Serialize;
 
-use crate::analysis::response_point::{difference, ResponsePoint};
+use crate::analysis::response_point::{difference, same_frequency, ResponsePoint};
 use crate::fmu::runner::Fmu;
 use crate::fmu::scenario::Value;
 use crate::fmu::sweep_run::SweepRun;
@@ -295,7 +295,7 @@ fn unmeasured(points: &[ResponsePoint]) -> Vec<f64> {
 pub(crate) fn worst(a: &[ResponsePoint], reference: &[ResponsePoint]) -> (f64, f64, f64, f64) {
     let mut w = (0.0f64, f64::NAN, 0.0f64, f64::NAN);
     for p in a {
-        let Some(r) = reference.iter().find(|r| (r.frequency - p.frequency).abs() <= 1e-6 * p.frequency) else {
+        let Some(r) = reference.iter().find(|r| same_frequency(r.frequency, p.frequency)) else {
             continue;
         };
         let (dg, dp) = difference(p, r);

@@ -17,7 +17,7 @@ use control_core::response_correction::CorrectionParams;
 use control_core::{Commands, Mode};
 use serde::Serialize;
 
-use crate::analysis::response_point::ResponsePoint;
+use crate::analysis::response_point::{same_frequency, ResponsePoint};
 use crate::device::frame_stream::{sample_rows, SAMPLE_COLUMNS};
 use crate::device::session::DriveSession;
 use crate::fmu::sweep_run::{SweepRun, START_AT};
@@ -168,7 +168,7 @@ pub fn sweep_on_drive_after<T: crate::device::link::DrivePort>(
     let shares: Vec<(f64, f64)> = streamed_shares
         .iter()
         .map(|&(f, share)| {
-            let caught = telemetry_shares.iter().filter(|&&(g, _)| (g - f).abs() <= 1e-6 * f).map(|&(_, s)| s);
+            let caught = telemetry_shares.iter().filter(|&&(g, _)| same_frequency(g, f)).map(|&(_, s)| s);
             (f, caught.fold(share, f64::max))
         })
         .collect();
@@ -176,7 +176,7 @@ pub fn sweep_on_drive_after<T: crate::device::link::DrivePort>(
     // A result the drive said was limited but whose samples the stream lacks (lost on the
     // line) is named all the same.
     for &(f, share) in &telemetry_shares {
-        if share > 0.0 && !shares.iter().any(|&(g, _)| (g - f).abs() <= 1e-6 * f) {
+        if share > 0.0 && !shares.iter().any(|&(g, _)| same_frequency(g, f)) {
             limited_hz.push(f);
         }
     }

@@ -7,7 +7,7 @@ use std::path::{Path, PathBuf};
 use anyhow::Result;
 use serde::Serialize;
 
-use crate::analysis::response_point::{difference, ResponsePoint};
+use crate::analysis::response_point::{difference, same_frequency, ResponsePoint};
 use crate::device::session::DriveSession;
 use crate::fmu::runner::Fmu;
 use crate::fmu::sweep_run::SweepRun;
@@ -70,20 +70,19 @@ pub struct DeviceSweepReport {
 /// The drive's sweep and its twin's, compared at each frequency both measured; a frequency
 /// only one of them has makes the largest difference infinite (and is listed by `missing`).
 pub fn compare_with_twin(drive: &DeviceSweep, twin: &[ResponsePoint]) -> (Vec<TwinPoint>, (f64, f64)) {
-    let same = |a: f64, b: f64| (a - b).abs() <= 1e-6 * a.abs().max(b.abs());
     let mut largest = (0.0f64, 0.0f64);
     let points: Vec<TwinPoint> = drive
         .stream
         .iter()
         .filter_map(|d| {
-            let t = twin.iter().find(|t| same(t.frequency, d.frequency))?;
+            let t = twin.iter().find(|t| same_frequency(t.frequency, d.frequency))?;
             let (dg, dp) = difference(d, t);
             largest = (largest.0.max(dg.abs()), largest.1.max(dp.abs()));
             let limited_share = drive
                 .stream
                 .iter()
                 .zip(&drive.limited_share)
-                .find(|(p, _)| same(p.frequency, d.frequency))
+                .find(|(p, _)| same_frequency(p.frequency, d.frequency))
                 .map_or(0.0, |(_, &share)| share);
             Some(TwinPoint {
                 frequency: d.frequency,
@@ -103,7 +102,7 @@ pub fn compare_with_twin(drive: &DeviceSweep, twin: &[ResponsePoint]) -> (Vec<Tw
 
 /// Frequencies one of the two sweeps has and the other has not.
 pub fn missing(drive: &DeviceSweep, twin: &[ResponsePoint]) -> Vec<f64> {
-    let has = |v: &[ResponsePoint], f: f64| v.iter().any(|p| (p.frequency - f).abs() <= 1e-6 * f.abs());
+    let has = |v: &[ResponsePoint], f: f64| v.iter().any(|p| same_frequency(p.frequency, f));
     let mut m: Vec<f64> = drive.stream.iter().map(|p| p.frequency).filter(|&f| !has(twin, f)).collect();
     m.extend(twin.iter().map(|p| p.frequency).filter(|&f| !has(&drive.stream, f)));
     m

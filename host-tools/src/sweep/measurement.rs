@@ -10,7 +10,7 @@ use control_core::phase_shifted_sweep::SweepParams;
 use num_complex::Complex64;
 use serde::Serialize;
 
-use crate::analysis::response_point::{difference, ResponsePoint};
+use crate::analysis::response_point::{difference, same_frequency, ResponsePoint};
 use crate::analysis::spectral::welch_h1;
 use crate::fmu::sweep_run::{is_done, SweepRun, START_AT};
 use crate::fmu::trace::Trace;
@@ -327,7 +327,7 @@ pub struct ErrorSummary {
 pub fn errors(a: &[ResponsePoint], reference: &[ResponsePoint], split_hz: f64) -> ErrorSummary {
     let mut s = ErrorSummary::default();
     for p in a {
-        let Some(r) = reference.iter().find(|r| (r.frequency - p.frequency).abs() <= 1e-6 * p.frequency) else {
+        let Some(r) = reference.iter().find(|r| same_frequency(r.frequency, p.frequency)) else {
             continue;
         };
         let (dg, dp) = difference(p, r);
