@@ -1,35 +1,15 @@
 //! The `servo` binary as a user runs it: exit codes, outputs, error messages.
 
-use std::process::Command;
+mod common;
 
+use common::{servo, tmp, OnTheFmu};
 use host_tools::paths::{default_fmu as fmu_path, workspace_root};
-
-fn servo() -> Command {
-    let mut c = Command::new(env!("CARGO_BIN_EXE_servo"));
-    c.current_dir(std::env::temp_dir());
-    c
-}
-
-fn tmp(name: &str) -> std::path::PathBuf {
-    let d = std::env::temp_dir().join(format!("servo-cli-{}-{name}", std::process::id()));
-    std::fs::create_dir_all(&d).unwrap();
-    d
-}
 
 #[test]
 fn run_writes_csv_plot_json_and_report() {
     let out = tmp("run");
     let scenario = workspace_root().join("scenarios/position_step.toml");
-    let o = servo()
-        .arg("run")
-        .arg(&scenario)
-        .arg("--fmu")
-        .arg(fmu_path())
-        .arg("--out")
-        .arg(&out)
-        .arg("--json")
-        .output()
-        .unwrap();
+    let o = servo().arg("run").arg(&scenario).on_fmu(&out).arg("--json").output().unwrap();
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
     let summary: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
     assert_eq!(summary[0]["passed"], true);
@@ -47,7 +27,7 @@ fn a_failing_check_gives_exit_status_1() {
         "name='strict'\nstop_time=0.01\n[[events]]\ntime=0.0\nmode=1\nvelocity_command=10.0\n[[checks]]\nsignal='motor_velocity'\nat=0.01\nmin=1000.0\n",
     )
     .unwrap();
-    let o = servo().arg("run").arg(&s).arg("--fmu").arg(fmu_path()).arg("--out").arg(&out).output().unwrap();
+    let o = servo().arg("run").arg(&s).on_fmu(&out).output().unwrap();
     assert_eq!(o.status.code(), Some(1), "{}", String::from_utf8_lossy(&o.stdout));
 }
 
@@ -56,13 +36,13 @@ fn bad_input_gets_a_clear_error() {
     let out = tmp("bad");
     let s = out.join("bad.toml");
     std::fs::write(&s, "name='bad'\nstop_time=0.01\n[parameters]\n\"ctrl.velocity_kp\" = -1.0\n").unwrap();
-    let o = servo().arg("run").arg(&s).arg("--fmu").arg(fmu_path()).arg("--out").arg(&out).output().unwrap();
+    let o = servo().arg("run").arg(&s).on_fmu(&out).output().unwrap();
     assert_eq!(o.status.code(), Some(2));
     let err = String::from_utf8_lossy(&o.stderr);
     assert!(err.contains("ctrl.velocity_kp") && err.contains("outside its range"), "stderr: {err}");
 
     std::fs::write(&s, "name='bad'\nstop_time=0.01\n[[events]]\ntime=0.0\nnot_an_input=1.0\n").unwrap();
-    let o = servo().arg("run").arg(&s).arg("--fmu").arg(fmu_path()).arg("--out").arg(&out).output().unwrap();
+    let o = servo().arg("run").arg(&s).on_fmu(&out).output().unwrap();
     assert!(String::from_utf8_lossy(&o.stderr).contains("not_an_input"));
 
     let o = servo().arg("run").arg(&s).arg("--fmu").arg("/nonexistent.fmu").output().unwrap();
@@ -74,10 +54,7 @@ fn accdec_prints_the_seed_design_and_writes_its_files() {
     let out = tmp("accdec");
     let o = servo()
         .args(["accdec", "--cutoff", "1000", "--order", "3", "--sample-period", "0.0005", "--no-sweep", "--json"])
-        .arg("--fmu")
-        .arg(fmu_path())
-        .arg("--out")
-        .arg(&out)
+        .on_fmu(&out)
         .output()
         .unwrap();
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
@@ -99,7 +76,7 @@ fn accdec_prints_the_seed_design_and_writes_its_files() {
 #[test]
 fn accdec_sweeps_the_cut_off_and_writes_the_residuals_of_each_resonance() {
     let out = tmp("accdec_sweep");
-    let o = servo().args(["accdec", "--json"]).arg("--fmu").arg(fmu_path()).arg("--out").arg(&out).output().unwrap();
+    let o = servo().args(["accdec", "--json"]).on_fmu(&out).output().unwrap();
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
     let csv = std::fs::read_to_string(out.join("sweep.csv")).unwrap();
     let mut lines = csv.lines();
@@ -148,13 +125,13 @@ fn sequence_reports_failed_expectations_and_refuses_malformed_timelines() {
         "name='strict'\nstop_time=0.2\n[[events]]\ntime=0.0\nevent='run'\n[[expect]]\nstate='servo_lock'\nat=0.1\n",
     )
     .unwrap();
-    let o = servo().arg("sequence").arg(&strict).arg("--fmu").arg(fmu_path()).arg("--out").arg(&out).output().unwrap();
+    let o = servo().arg("sequence").arg(&strict).on_fmu(&out).output().unwrap();
     assert_eq!(o.status.code(), Some(1), "{}", String::from_utf8_lossy(&o.stdout));
     assert!(String::from_utf8_lossy(&o.stdout).contains("[FAIL] state servo_lock"));
     assert!(out.join("strict.svg").exists() && out.join("strict.csv").exists() && out.join("strict.json").exists());
     let bad = out.join("bad.toml");
     std::fs::write(&bad, "name='bad'\nstop_time=0.2\n[[events]]\ntime=0.0\nevent='move'\n").unwrap();
-    let o = servo().arg("sequence").arg(&bad).arg("--fmu").arg(fmu_path()).arg("--out").arg(&out).output().unwrap();
+    let o = servo().arg("sequence").arg(&bad).on_fmu(&out).output().unwrap();
     assert_eq!(o.status.code(), Some(2));
     assert!(String::from_utf8_lossy(&o.stderr).contains("needs `target`"));
 }
@@ -172,15 +149,7 @@ fn circle_refuses_what_cannot_make_a_circle_test() {
         (vec!["--single", "x", "--device", "/dev/no-such-port", "--measure", "load"], "no machine-end position sensor"),
         (vec!["--single", "x", "--device", "/dev/no-such-port", "--compare", "ctrl.kp=1"], "are for the FMU"),
     ] {
-        let o = servo()
-            .arg("circle")
-            .args(&args)
-            .arg("--fmu")
-            .arg(fmu_path())
-            .arg("--out")
-            .arg(tmp("circle-bad"))
-            .output()
-            .unwrap();
+        let o = servo().arg("circle").args(&args).on_fmu(tmp("circle-bad")).output().unwrap();
         let err = String::from_utf8_lossy(&o.stderr);
         assert_eq!(o.status.code(), Some(2), "{args:?}: {err}");
         assert!(err.contains(reason), "{args:?}: {err}");
@@ -192,10 +161,7 @@ fn circle_writes_plot_points_and_figures() {
     let out = tmp("circle");
     let o = servo()
         .args(["circle", "--json", "--compare", "ctrl.friction_comp_amplitude=0.06"])
-        .arg("--fmu")
-        .arg(fmu_path())
-        .arg("--out")
-        .arg(&out)
+        .on_fmu(&out)
         .output()
         .unwrap();
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
@@ -219,15 +185,7 @@ fn sweep_refuses_bad_settings_with_the_reason() {
         // A torque-command sine whose peak reaches the torque limit (2 N·m) would be cut.
         (vec!["--point", "torque", "--amplitude", "2"], "sweep amplitude = 2 is outside [0, 1.997"),
     ] {
-        let o = servo()
-            .arg("sweep")
-            .args(&args)
-            .arg("--fmu")
-            .arg(fmu_path())
-            .arg("--out")
-            .arg(tmp("sweep-bad"))
-            .output()
-            .unwrap();
+        let o = servo().arg("sweep").args(&args).on_fmu(tmp("sweep-bad")).output().unwrap();
         let err = String::from_utf8_lossy(&o.stderr);
         assert_eq!(o.status.code(), Some(2), "{args:?}: {err}");
         assert!(err.contains(reason), "{args:?}: {err}");
@@ -239,10 +197,7 @@ fn sweep_writes_csv_bode_and_json() {
     let out = tmp("sweep");
     let o = servo()
         .args(["sweep", "--json", "--start", "100", "--stop", "3000", "--points", "6"])
-        .arg("--fmu")
-        .arg(fmu_path())
-        .arg("--out")
-        .arg(&out)
+        .on_fmu(&out)
         .output()
         .unwrap();
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
@@ -264,10 +219,7 @@ fn sweep_names_the_results_measured_with_the_output_limited() {
         let o = servo()
             .args(["sweep", "--point", "torque", "--start", "100", "--stop", "3000", "--points", "6"])
             .args(args)
-            .arg("--fmu")
-            .arg(fmu_path())
-            .arg("--out")
-            .arg(&out)
+            .on_fmu(&out)
             .output()
             .unwrap();
         assert!(o.status.success(), "{args:?}: {}", String::from_utf8_lossy(&o.stderr));
@@ -310,14 +262,7 @@ fn sweep_names_the_results_measured_with_the_output_limited() {
 #[test]
 fn ident_writes_models_and_refuses_unusable_models() {
     let out = tmp("ident");
-    let o = servo()
-        .args(["ident", "--anti-resonance", "x=40,y=70", "--json"])
-        .arg("--fmu")
-        .arg(fmu_path())
-        .arg("--out")
-        .arg(&out)
-        .output()
-        .unwrap();
+    let o = servo().args(["ident", "--anti-resonance", "x=40,y=70", "--json"]).on_fmu(&out).output().unwrap();
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
     for f in ["x.model.json", "y.model.json", "x.measured.csv", "ident.svg"] {
         assert!(out.join(f).exists(), "{f} missing");
@@ -332,14 +277,7 @@ fn ident_writes_models_and_refuses_unusable_models() {
     let o = servo().arg("ident").arg("--model").arg(out.join("y.model.json")).arg("--out").arg(&out).output().unwrap();
     assert_eq!(o.status.code(), Some(2));
     assert!(String::from_utf8_lossy(&o.stderr).contains("right half plane"));
-    let o = servo()
-        .args(["ident", "--anti-resonance", "q=40"])
-        .arg("--fmu")
-        .arg(fmu_path())
-        .arg("--out")
-        .arg(&out)
-        .output()
-        .unwrap();
+    let o = servo().args(["ident", "--anti-resonance", "q=40"]).on_fmu(&out).output().unwrap();
     assert_eq!(o.status.code(), Some(2));
     assert!(String::from_utf8_lossy(&o.stderr).contains("no axis `q`"));
 }
@@ -347,28 +285,13 @@ fn ident_writes_models_and_refuses_unusable_models() {
 #[test]
 fn tune_writes_each_axis_correction_and_refuses_unusable_models() {
     let out = tmp("tune");
-    let o = servo()
-        .args(["ident", "--anti-resonance", "x=40,y=70"])
-        .arg("--fmu")
-        .arg(fmu_path())
-        .arg("--out")
-        .arg(&out)
-        .output()
-        .unwrap();
+    let o = servo().args(["ident", "--anti-resonance", "x=40,y=70"]).on_fmu(&out).output().unwrap();
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
     let (x, y) = (out.join("x.model.json"), out.join("y.model.json"));
     // The seed as written: x carries y's numerator (70 Hz) and y carries x's (40 Hz), each
     // over the same F.
-    let o = servo()
-        .args(["tune", "--method", "zeros", "--json", "--model"])
-        .arg(&x)
-        .arg(&y)
-        .arg("--fmu")
-        .arg(fmu_path())
-        .arg("--out")
-        .arg(&out)
-        .output()
-        .unwrap();
+    let o =
+        servo().args(["tune", "--method", "zeros", "--json", "--model"]).arg(&x).arg(&y).on_fmu(&out).output().unwrap();
     let r: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
     let zero = |axis: usize| r["tuning"]["axes"][axis]["correction"]["sections"][0]["zeros"][0].as_f64().unwrap();
     assert!((zero(0) - 70.0).abs() < 1.0 && (zero(1) - 40.0).abs() < 1.0, "{r}");
@@ -379,16 +302,7 @@ fn tune_writes_each_axis_correction_and_refuses_unusable_models() {
     assert!(!o.status.success());
 
     // The default (measured models) does, and the circle of the tuned axes gets rounder.
-    let o = servo()
-        .args(["tune", "--json", "--model"])
-        .arg(&x)
-        .arg(&y)
-        .arg("--fmu")
-        .arg(fmu_path())
-        .arg("--out")
-        .arg(&out)
-        .output()
-        .unwrap();
+    let o = servo().args(["tune", "--json", "--model"]).arg(&x).arg(&y).on_fmu(&out).output().unwrap();
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
     let r: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
     let (before, after) =
@@ -398,10 +312,7 @@ fn tune_writes_each_axis_correction_and_refuses_unusable_models() {
     let o = servo()
         .args(["circle", "--json", "--radius", "0.05", "--feed", "6.283185307179586", "--lead-in", "30", "--tuned"])
         .arg(&out)
-        .arg("--fmu")
-        .arg(fmu_path())
-        .arg("--out")
-        .arg(&circle)
+        .on_fmu(&circle)
         .output()
         .unwrap();
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
@@ -442,15 +353,7 @@ fn index_gathers_the_experiments_into_one_page() {
     assert_eq!(empty.status.code(), Some(2), "an empty folder has nothing to gather");
     assert!(String::from_utf8_lossy(&empty.stderr).contains("no experiment results"));
     let passing = workspace_root().join("scenarios/position_step.toml");
-    let o = servo()
-        .arg("run")
-        .arg(&passing)
-        .arg("--fmu")
-        .arg(fmu_path())
-        .arg("--out")
-        .arg(root.join("run"))
-        .output()
-        .unwrap();
+    let o = servo().arg("run").arg(&passing).on_fmu(root.join("run")).output().unwrap();
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
     let o = servo().arg("index").arg("--out").arg(&root).output().unwrap();
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
@@ -463,7 +366,7 @@ fn index_gathers_the_experiments_into_one_page() {
         "name='strict'\nstop_time=0.01\n[[events]]\ntime=0.0\nmode=1\nvelocity_command=10.0\n[[checks]]\nsignal='motor_velocity'\nat=0.01\nmin=1000.0\n",
     )
     .unwrap();
-    servo().arg("run").arg(&strict).arg("--fmu").arg(fmu_path()).arg("--out").arg(root.join("run")).output().unwrap();
+    servo().arg("run").arg(&strict).on_fmu(root.join("run")).output().unwrap();
     let o = servo().arg("index").arg("--out").arg(&root).output().unwrap();
     assert_eq!(o.status.code(), Some(1));
     let page = std::fs::read_to_string(root.join("index.html")).unwrap();

@@ -4,10 +4,13 @@
 //! it, a correction loaded; and what goes wrong (faults, no device, a drive that dies) ends
 //! in a clear error and an exit status, never a hang.
 
-use std::path::{Path, PathBuf};
+use std::path::Path;
 use std::process::{Child, Command, Stdio};
 use std::time::{Duration, Instant};
 
+mod common;
+
+use common::{servo, tmp, OnTheFmu};
 use host_tools::paths::default_fmu as fmu_path;
 
 /// One virtual drive at a time: the real-time ones keep their pace better on a loaded
@@ -16,18 +19,6 @@ static ONE_AT_A_TIME: std::sync::Mutex<()> = std::sync::Mutex::new(());
 
 fn one_at_a_time() -> std::sync::MutexGuard<'static, ()> {
     ONE_AT_A_TIME.lock().unwrap_or_else(|e| e.into_inner())
-}
-
-fn servo() -> Command {
-    let mut c = Command::new(env!("CARGO_BIN_EXE_servo"));
-    c.current_dir(std::env::temp_dir());
-    c
-}
-
-fn tmp(name: &str) -> PathBuf {
-    let d = std::env::temp_dir().join(format!("servo-vd-{}-{name}", std::process::id()));
-    std::fs::create_dir_all(&d).unwrap();
-    d
 }
 
 /// A running virtual drive and its port; killed when dropped.
@@ -106,10 +97,7 @@ fn json(o: &std::process::Output) -> serde_json::Value {
 /// `servo sweep --device PORT --json` with its output in `dir/out` and the project's FMU as
 /// the twin, bounded to two minutes.
 fn sweep_over(port: &str, dir: &std::path::Path) -> std::process::Output {
-    output_within(
-        servo().args(["sweep", "--device", port, "--json", "--out"]).arg(dir.join("out")).arg("--fmu").arg(fmu_path()),
-        120,
-    )
+    output_within(servo().args(["sweep", "--device", port, "--json"]).on_fmu(dir.join("out")), 120)
 }
 
 #[test]
@@ -237,10 +225,8 @@ fn a_sweep_over_the_virtual_drive_names_every_result_measured_with_the_output_li
     let o = output_within(
         servo()
             .args(["sweep", "--device", &vd.port, "--json", "--point", "torque", "--amplitude", "0.2"])
-            .args(["--velocity", "200", "--start", "100", "--stop", "3000", "--points", "6", "--out"])
-            .arg(dir.join("out"))
-            .arg("--fmu")
-            .arg(fmu_path()),
+            .args(["--velocity", "200", "--start", "100", "--stop", "3000", "--points", "6"])
+            .on_fmu(dir.join("out")),
         120,
     );
     // Limited results differ from the twin's beyond the goal: exit 1, not an error (2).
@@ -276,11 +262,7 @@ fn a_pseudo_circle_over_the_virtual_drive_matches_its_twin() {
     let vd = VirtualDrive::start(&dir, "max", &[]);
     let count = std::f64::consts::TAU / control_core::Params::default().encoder_counts_per_rev as f64;
     let o = output_within(
-        servo()
-            .args(["circle", "--single", "x", "--device", &vd.port, "--json", "--out"])
-            .arg(dir.join("out"))
-            .arg("--fmu")
-            .arg(fmu_path()),
+        servo().args(["circle", "--single", "x", "--device", &vd.port, "--json"]).on_fmu(dir.join("out")),
         120,
     );
     let r = &json(&o)["circle"];
@@ -322,14 +304,7 @@ fn tune_over_the_virtual_drive_loads_the_correction_and_both_circles_match_their
     let dir = tmp("tune");
     let count = std::f64::consts::TAU / control_core::Params::default().encoder_counts_per_rev as f64;
     let goal = host_tools::circle::device::GOAL_COUNTS * count;
-    let o = output_within(
-        servo()
-            .args(["ident", "--anti-resonance", "x=40,y=70", "--out"])
-            .arg(dir.join("ident"))
-            .arg("--fmu")
-            .arg(fmu_path()),
-        120,
-    );
+    let o = output_within(servo().args(["ident", "--anti-resonance", "x=40,y=70"]).on_fmu(dir.join("ident")), 120);
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
     let models = [dir.join("ident/x.model.json"), dir.join("ident/y.model.json")];
     // The drive's machine is the tuned axis's (the twin's plant is the model's).
@@ -352,10 +327,7 @@ fn tune_over_the_virtual_drive_loads_the_correction_and_both_circles_match_their
                 .args(["tune", "--device", &vd.port, "--json", "--model"])
                 .args(&models)
                 .args(extra)
-                .arg("--out")
-                .arg(dir.join("tune"))
-                .arg("--fmu")
-                .arg(fmu_path()),
+                .on_fmu(dir.join("tune")),
             180,
         )
     };
@@ -484,12 +456,7 @@ fn a_sequence_timeline_over_the_virtual_drive_meets_its_expectations_and_the_twi
     let vd = VirtualDrive::start(&dir, "realtime", &[]);
     let timeline = host_tools::paths::workspace_root().join("scenarios/sequences/stop_at_speed.toml");
     let o = output_within(
-        servo()
-            .args(["sequence", "--device", &vd.port, "--json", "--out"])
-            .arg(dir.join("out"))
-            .arg("--fmu")
-            .arg(fmu_path())
-            .arg(&timeline),
+        servo().args(["sequence", "--device", &vd.port, "--json"]).on_fmu(dir.join("out")).arg(&timeline),
         60,
     );
     let r = json(&o);
@@ -515,10 +482,8 @@ fn a_scenario_over_the_virtual_drive_passes_its_checks_and_the_twin_too() {
     let root = host_tools::paths::workspace_root();
     let o = output_within(
         servo()
-            .args(["run", "--device", &vd.port, "--json", "--out"])
-            .arg(dir.join("out"))
-            .arg("--fmu")
-            .arg(fmu_path())
+            .args(["run", "--device", &vd.port, "--json"])
+            .on_fmu(dir.join("out"))
             .arg(root.join("scenarios/position_step.toml")),
         60,
     );
@@ -567,10 +532,8 @@ fn ident_over_the_virtual_drive_finds_the_plants_anti_resonance_and_matches_its_
     let ident = |extra: &[&str]| {
         output_within(
             servo()
-                .args(["ident", "--device", &vd.port, "--axes", "x", "--anti-resonance", "x=40", "--out"])
-                .arg(dir.join("out"))
-                .arg("--fmu")
-                .arg(fmu_path())
+                .args(["ident", "--device", &vd.port, "--axes", "x", "--anti-resonance", "x=40"])
+                .on_fmu(dir.join("out"))
                 .args(extra),
             120,
         )
@@ -614,12 +577,7 @@ fn ident_over_a_faulted_or_dying_drive_ends_in_a_clear_error() {
     let dir = tmp("ident-faults");
     let vd = VirtualDrive::start(&dir, "max", &["--fault", "break@0.2"]);
     std::thread::sleep(Duration::from_millis(300));
-    let ident = |port: &str| {
-        output_within(
-            servo().args(["ident", "--device", port, "--out"]).arg(dir.join("out")).arg("--fmu").arg(fmu_path()),
-            60,
-        )
-    };
+    let ident = |port: &str| output_within(servo().args(["ident", "--device", port]).on_fmu(dir.join("out")), 60);
     let o = ident(&vd.port);
     let e = String::from_utf8_lossy(&o.stderr);
     assert_eq!(o.status.code(), Some(2), "{e}");
