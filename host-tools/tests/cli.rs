@@ -184,12 +184,138 @@ fn sweep_refuses_bad_settings_with_the_reason() {
         (vec!["--acquisition-divider", "8"], "once per communication step"),
         // A torque-command sine whose peak reaches the torque limit (2 N·m) would be cut.
         (vec!["--point", "torque", "--amplitude", "2"], "sweep amplitude = 2 is outside [0, 1.997"),
+        // Beyond the largest speed set-point the loop takes.
+        (vec!["--amplitude", "1e6"], "sweep amplitude = 1000000 is outside [0, 100000]"),
+        // The command's options set the sweep: a --set sweep.… would be overwritten silently.
+        (
+            vec!["--set", "sweep.start_hz=100"],
+            "--set sweep.start_hz: the sweep's settings come from this command's options",
+        ),
+        (vec!["--points", "128"], "sweep points = 128: at most 127"),
+        (vec!["--device", "/dev/no-such-port", "--baud", "0"], "a baud rate is a whole number from 1 200"),
+        (vec!["--reference", "/nonexistent/reference.csv"], "/nonexistent/reference.csv"),
     ] {
         let o = servo().arg("sweep").args(&args).on_fmu(tmp("sweep-bad")).output().unwrap();
         let err = String::from_utf8_lossy(&o.stderr);
         assert_eq!(o.status.code(), Some(2), "{args:?}: {err}");
         assert!(err.contains(reason), "{args:?}: {err}");
     }
+}
+
+/// A reference curve must be one: rows, positive frequencies, finite values (a negative
+/// frequency once put NaN into the Bode plot with exit status 0).
+#[test]
+fn sweep_refuses_a_reference_that_is_not_a_curve() {
+    let dir = tmp("sweep-reference");
+    let reference = dir.join("reference.csv");
+    for (text, reason) in [
+        ("frequency,gain_db,phase_deg\n", "the reference has no rows"),
+        ("frequency,gain_db,phase_deg\n10,0,0\n-5,1,1\n", "line 3: frequency -5 is not a positive number"),
+        ("frequency,gain_db,phase_deg\n10,NaN,0\n", "line 2: gain_db NaN and phase_deg 0 must be finite"),
+        ("frequency,gain\n10,0\n", "needs the columns frequency, gain_db, phase_deg"),
+    ] {
+        std::fs::write(&reference, text).unwrap();
+        let o = servo().args(["sweep", "--points", "2", "--reference"]).arg(&reference).on_fmu(&dir).output().unwrap();
+        let err = String::from_utf8_lossy(&o.stderr);
+        assert_eq!(o.status.code(), Some(2), "{text}: {err}");
+        assert!(err.contains(reason), "{text}: {err}");
+    }
+}
+
+/// What a sweep on the FMU cannot measure makes it fail with the reason, never a NaN or a
+/// -inf presented as a result with exit status 0: a drive that faults (its bridge off from
+/// there on), a frequency a single unshifted record sees at one phase and its opposite only.
+#[test]
+fn sweep_fails_with_the_reason_where_it_measured_nothing() {
+    let out = tmp("sweep-nothing");
+    let sweep = |args: &[&str]| {
+        let o = servo()
+            .args(["sweep", "--json", "--start", "1000", "--stop", "3000", "--points", "2"])
+            .args(args)
+            .on_fmu(&out)
+            .output()
+            .unwrap();
+        let r: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+        (o.status.code(), r)
+    };
+    // An overcurrent trip level under the current limit: the drive latches at once.
+    let (code, r) = sweep(&["--set", "ctrl.overcurrent=3", "--set", "ctrl.max_current=2.9"]);
+    assert_eq!(code, Some(1), "{r}");
+    assert_eq!(r["fault"]["names"], "overcurrent", "{r}");
+    let text = servo()
+        .args(["sweep", "--start", "1000", "--stop", "3000", "--points", "2"])
+        .args(["--set", "ctrl.overcurrent=3", "--set", "ctrl.max_current=2.9"])
+        .on_fmu(&out)
+        .output()
+        .unwrap();
+    assert!(String::from_utf8_lossy(&text.stdout).contains("FAILED: the drive latched a fault"));
+    // One record at 2 kHz, half the 4 kHz acquisition rate: phases 0 and π only.
+    let (code, r) = sweep(&["--repeats", "1", "--shifts", "1"]);
+    assert_eq!(code, Some(1), "{r}");
+    assert_eq!(r["unmeasured_hz"], serde_json::json!([2000.0]), "{r}");
+    assert_eq!(r["fault"], serde_json::Value::Null);
+    // The same with phase shifting (the default) measures every frequency.
+    let (code, r) = sweep(&[]);
+    assert_eq!(code, Some(0), "{r}");
+    assert_eq!(r["unmeasured_hz"], serde_json::json!([]), "{r}");
+}
+
+/// At a 32 kHz loop the communication step follows the rate (one acquisition sample per
+/// step): the host's estimate from the stream keeps every sample and agrees with the drive's.
+/// With the 250 µs step of 16 kHz it kept every other one: 2 kHz had only two phases (no
+/// result) and 3 kHz was 0.14 dB off the drive's own result.
+#[test]
+fn sweep_streams_every_sample_at_another_loop_rate() {
+    let out = tmp("sweep-32k");
+    let o = servo()
+        .args(["sweep", "--json", "--start", "1000", "--stop", "3000", "--points", "3"])
+        .args(["--set", "ctrl.current_loop_hz=32000"])
+        .on_fmu(&out)
+        .output()
+        .unwrap();
+    let r: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+    assert_eq!(o.status.code(), Some(0), "{r}");
+    assert!(r["stream_vs_online"][0].as_f64().unwrap() < 1e-3, "{r}");
+    assert_eq!(r["stream"].as_array().unwrap().len(), 4, "{r}");
+}
+
+/// A velocity-command amplitude that pins the torque at the drive's limit: the results are
+/// named (the drive's own flag is the voltage circle's only), and a small one names none.
+#[test]
+fn sweep_names_the_results_measured_at_the_torque_limit() {
+    let out = tmp("sweep-torque-limit");
+    let run = |amplitude: &str| {
+        let o = servo()
+            .args(["sweep", "--start", "10", "--stop", "100", "--points", "3", "--amplitude", amplitude])
+            .on_fmu(&out)
+            .output()
+            .unwrap();
+        assert_eq!(o.status.code(), Some(0), "{}", String::from_utf8_lossy(&o.stderr));
+        let r: serde_json::Value = serde_json::from_slice(&std::fs::read(out.join("sweep.json")).unwrap()).unwrap();
+        (String::from_utf8_lossy(&o.stdout).into_owned(), r)
+    };
+    let (text, r) = run("100");
+    assert!(text.contains("WARNING: the torque command reached the drive's limit"), "{text}");
+    assert!(!r["torque_limited_hz"].as_array().unwrap().is_empty(), "{r}");
+    let csv = std::fs::read_to_string(out.join("sweep.csv")).unwrap();
+    assert!(csv.lines().next().unwrap().ends_with(",torque_limited_share"), "{csv}");
+    let (text, r) = run("2");
+    assert!(!text.contains("torque command reached"), "{text}");
+    assert_eq!(r["torque_limited_hz"], serde_json::json!([]), "{r}");
+}
+
+/// Without --extra, 2 kHz joins a sweep only where it lies in the range.
+#[test]
+fn sweep_adds_the_default_extra_frequency_only_inside_its_range() {
+    let out = tmp("sweep-extra");
+    let points = |args: &[&str]| {
+        let o = servo().args(["sweep", "--json", "--points", "3"]).args(args).on_fmu(&out).output().unwrap();
+        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+        let r: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+        r["stream"].as_array().unwrap().iter().map(|p| p["frequency"].as_f64().unwrap()).collect::<Vec<_>>()
+    };
+    assert_eq!(points(&["--stop", "100"]).len(), 3);
+    assert!(points(&["--start", "1000", "--stop", "3000"]).contains(&2000.0));
 }
 
 #[test]
@@ -231,7 +357,7 @@ fn sweep_names_the_results_measured_with_the_output_limited() {
     let limited: Vec<f64> = r["limited_hz"].as_array().unwrap().iter().map(|v| v.as_f64().unwrap()).collect();
     assert!(limited.contains(&3000.0) && !limited.iter().any(|&f| f < 1000.0), "{limited:?}");
     let csv = std::fs::read_to_string(out.join("sweep.csv")).unwrap();
-    assert!(csv.lines().next().unwrap().ends_with(",limited_share"), "{csv}");
+    assert!(csv.lines().next().unwrap().contains(",limited_share,"), "{csv}");
     // Every result's share, as the drive counted it on-line (`sweep_last_limited`, in the
     // JSON), is the share the host counts from the stream's per-sample flags (`acq_limited`)
     // over the samples the fit keeps: what a sweep over a drive's link relies on.

@@ -145,7 +145,11 @@ impl fmt::Display for SweepError {
             Self::AboveLoopNyquist { frequency, nyquist } => {
                 write!(f, "sweep frequency {frequency} Hz is at or above the loop's Nyquist frequency {nyquist} Hz")
             }
-            Self::TooManyPoints(n) => write!(f, "{n} sweep frequencies: at most {MAX_SWEEP_POINTS}"),
+            Self::TooManyPoints(n) => write!(
+                f,
+                "sweep points = {n}: at most {} (the result table holds {MAX_SWEEP_POINTS}, one of them for the extra frequency)",
+                MAX_SWEEP_POINTS - 1
+            ),
             Self::AcquisitionDivider { acquisition, velocity } => write!(
                 f,
                 "acquisition every {acquisition} ticks is not a multiple of the velocity loop's {velocity} ticks"
@@ -188,6 +192,16 @@ impl SweepParams {
             }
         };
         finite_positive("amplitude", self.amplitude)?;
+        // A velocity sine beyond the largest speed set-point, or a torque sine beyond the
+        // largest torque set-point, is not a command the loop takes (`crate::ranges`).
+        let max_amplitude = match self.point {
+            InjectionPoint::VelocityCommand | InjectionPoint::VelocityFeedback => crate::ranges::MAX_SPEED,
+            InjectionPoint::TorqueCommand => crate::ranges::MAX_TORQUE,
+            _ => f32::INFINITY,
+        };
+        if self.amplitude > max_amplitude {
+            return Err(SweepError::Range { field: "amplitude", value: self.amplitude, min: 0.0, max: max_amplitude });
+        }
         if self.measure == SweepMeasure::MachineAcceleration
             && !matches!(self.point, InjectionPoint::TorqueCommand | InjectionPoint::PositionCommand)
         {
@@ -291,6 +305,10 @@ mod tests {
             v(SweepParams { amplitude: f32::NAN, ..Default::default() }),
             Err(SweepError::Setting { field: "amplitude", .. })
         ));
+        assert_eq!(
+            v(SweepParams { amplitude: 1e6, ..Default::default() }),
+            Err(SweepError::Range { field: "amplitude", value: 1e6, min: 0.0, max: crate::ranges::MAX_SPEED })
+        );
         assert_eq!(
             v(SweepParams { acquisition_divider: 3, ..Default::default() }),
             Err(SweepError::AcquisitionDivider { acquisition: 3, velocity: 2 })

@@ -63,9 +63,11 @@ impl Range {
     }
 }
 
-/// A number as people write it: 1e-9 rather than 0.000000001, 16777216 as it is.
+/// A number as people write it: 1e-9 rather than 0.000000001, 16777216 as it is, 1e300 rather
+/// than its 301 digits.
 pub fn readable(x: f64) -> String {
-    if x != 0.0 && (x.abs() < 1e-3 || (x.abs() >= 1e7 && x.fract() == 0.0 && x.abs() % 1e6 == 0.0)) {
+    let a = x.abs();
+    if x != 0.0 && (!(1e-3..1e15).contains(&a) || (a >= 1e7 && x.fract() == 0.0 && a % 1e6 == 0.0)) {
         format!("{x:e}")
     } else {
         format!("{x}")
@@ -155,6 +157,13 @@ pub fn from_f32(x: f32) -> f64 {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn numbers_in_messages_read_as_people_write_them() {
+        for (x, text) in [(1e-9, "1e-9"), (16777216.0, "16777216"), (2e7, "2e7"), (1e300, "1e300"), (-0.5, "-0.5")] {
+            assert_eq!(readable(x), text);
+        }
+    }
 
     #[test]
     fn value_references_are_the_row_indices_and_names_are_unique() {

@@ -21,7 +21,7 @@ pub struct DeviceArgs {
     #[arg(long)]
     pub port: String,
     /// Baud rate (the firmware's USART2 runs at 921600)
-    #[arg(long, default_value_t = 921_600)]
+    #[arg(long, default_value_t = 921_600, value_parser = crate::device::link::baud_rate)]
     pub baud: u32,
     /// How long to wait for each answer (ms)
     #[arg(long, default_value_t = 500)]
@@ -45,7 +45,7 @@ pub struct TargetArgs {
     #[arg(long, value_name = "PORT")]
     pub device: Option<String>,
     /// Baud rate of the drive's link (the firmware's USART2: 921600)
-    #[arg(long, default_value_t = 921_600)]
+    #[arg(long, default_value_t = 921_600, value_parser = crate::device::link::baud_rate)]
     pub baud: u32,
     /// How long to wait for each answer of the drive (ms)
     #[arg(long, default_value_t = 2000)]

@@ -51,7 +51,7 @@ pub struct LinkRow {
 #[derive(clap::Args)]
 pub struct DeviceBenchArgs {
     /// Baud rate of the simulated line
-    #[arg(long, default_value_t = 921_600)]
+    #[arg(long, default_value_t = 921_600, value_parser = crate::device::link::baud_rate)]
     pub baud: u32,
     #[command(flatten)]
     pub common: Common,

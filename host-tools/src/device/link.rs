@@ -299,6 +299,17 @@ pub fn correction_request(frame: &mut [u8]) -> Result<Request> {
 }
 
 /// Open the drive's serial port (8N1, no flow control).
+/// The baud rates a serial link takes (a clap value parser for every `--baud`): 1 200 to
+/// 12 000 000, the range of USB serial adapters; 0 or a stray digit would open a port that
+/// moves nothing.
+pub fn baud_rate(text: &str) -> std::result::Result<u32, String> {
+    const RANGE: std::ops::RangeInclusive<u32> = 1_200..=12_000_000;
+    match text.parse::<u32>() {
+        Ok(baud) if RANGE.contains(&baud) => Ok(baud),
+        _ => Err(format!("a baud rate is a whole number from 1 200 to 12 000 000 (got `{text}`)")),
+    }
+}
+
 pub fn open_serial(path: &str, baud: u32) -> Result<Box<dyn serialport::SerialPort>> {
     let port = serialport::new(path, baud).timeout(Duration::from_millis(50)).open().with_context(|| {
         format!("cannot open the serial port {path} (is the board attached, or the virtual drive running, and may you use the port?)")
@@ -311,6 +322,15 @@ pub fn open_serial(path: &str, baud: u32) -> Result<Box<dyn serialport::SerialPo
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn a_baud_rate_is_refused_outside_what_a_link_takes() {
+        assert_eq!(baud_rate("921600"), Ok(921_600));
+        assert_eq!(baud_rate("1200"), Ok(1_200));
+        for bad in ["0", "1199", "12000001", "-1", "9600.5", "fast"] {
+            assert!(baud_rate(bad).unwrap_err().contains(&format!("`{bad}`")), "{bad}");
+        }
+    }
     use control_core::acquisition_stream::AcquisitionStream;
     use control_core::phase_shifted_sweep::AcquisitionSample;
     use control_core::protocol::{decode, handle};

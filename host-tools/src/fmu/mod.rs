@@ -3,6 +3,7 @@
 pub mod assignment;
 pub mod circle;
 pub mod configuration;
+pub mod drive_faults;
 pub mod fmpy;
 pub mod log;
 pub mod runner;

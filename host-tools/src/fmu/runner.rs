@@ -128,7 +128,7 @@ impl Fmu {
             (Kind::Boolean, Value::Bool(b)) => inst.set_boolean(&[var.vr], &[b]),
             (kind, v) => bail!("{} is {kind:?}; {v:?} is not a value of that type", var.name),
         };
-        r.map(|_| ()).map_err(|_| anyhow!("the FMU refused {} = {value:?}: {}", var.name, crate::fmu::log::reasons()))
+        r.map(|_| ()).map_err(|_| anyhow!("the FMU refused {} = {value}: {}", var.name, crate::fmu::log::reasons()))
     }
 
     /// The outputs `names` (the scenario's `record` list), or every output when it is empty.

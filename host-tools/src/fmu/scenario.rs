@@ -41,6 +41,17 @@ pub enum Value {
     Float(f64),
 }
 
+/// As a user writes it: `-1`, `1e300`, `true`.
+impl std::fmt::Display for Value {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match *self {
+            Value::Bool(b) => write!(f, "{b}"),
+            Value::Int(i) => write!(f, "{i}"),
+            Value::Float(x) => f.write_str(&servo_axis::variables::readable(x)),
+        }
+    }
+}
+
 impl From<servo_axis::variables::Value> for Value {
     fn from(v: servo_axis::variables::Value) -> Self {
         match v {

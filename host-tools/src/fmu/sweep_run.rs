@@ -11,7 +11,7 @@ use control_core::phase_shifted_sweep::{SweepParams, SweepState};
 
 use crate::fmu::configuration::configuration;
 use crate::fmu::runner::Fmu;
-use crate::fmu::scenario::{Event, Scenario, Value, DEFAULT_STEP};
+use crate::fmu::scenario::{Event, Scenario, Value};
 use crate::fmu::trace::Trace;
 
 /// A sweep as run: the FMU parameters, the settings and where it starts.
@@ -82,9 +82,13 @@ impl SweepRun {
         self.settings.validate(rates.current_loop_hz, rates.velocity_divider).map_err(|e| anyhow!("{e}"))?;
         let mut parameters = self.parameters.clone();
         parameters.extend(sweep_parameters(&self.settings));
+        // One communication step per position-loop period, as a drive's link streams: the
+        // stream then carries every acquisition sample (acquisition divider = position
+        // divider) at any loop rate. (A fixed 250 µs step at a 32 kHz loop kept every other
+        // sample: the host's estimate lost half its samples and, at 2 kHz, all but two phases.)
+        let step = rates.position_divider as f64 / rates.current_loop_hz as f64;
         // Long enough for the longest sweep; `run` stops when it is done.
-        let stop =
-            ((START_AT + self.max_measurement_time()?) / DEFAULT_STEP).ceil() * DEFAULT_STEP + 4.0 * DEFAULT_STEP;
+        let stop = ((START_AT + self.max_measurement_time()?) / step).ceil() * step + 4.0 * step;
         let mode = self.mode();
         let mut start: BTreeMap<String, Value> = [
             ("mode".to_string(), Value::code(mode.code())),
@@ -101,7 +105,7 @@ impl SweepRun {
             name: "sweep".into(),
             description: String::new(),
             stop_time: stop,
-            step: Some(DEFAULT_STEP),
+            step: Some(step),
             parameters,
             events: vec![
                 Event { time: 0.0, inputs: start },
@@ -130,7 +134,10 @@ impl SweepRun {
         )?;
         progress(1.0);
         if !t.rows.last().is_some_and(|r| is_done(r[state])) {
-            bail!("the sweep did not finish within the simulated time");
+            match crate::fmu::drive_faults::first_fault(&t) {
+                Some(fault) => bail!("the sweep did not finish: {}", fault.sentence()),
+                None => bail!("the sweep did not finish within the simulated time"),
+            }
         }
         Ok(t)
     }

@@ -34,9 +34,10 @@ pub struct SweepArgs {
     pub points: u32,
     #[arg(long)]
     pub linear: bool,
-    /// One more frequency (Hz) inserted in order; 0 for none
-    #[arg(long, default_value_t = 2000.0)]
-    pub extra: f64,
+    /// One more frequency (Hz) inserted in order; 0 for none. Default: 2000 Hz (the default
+    /// acquisition Nyquist frequency) when it lies between --start and --stop, else none
+    #[arg(long)]
+    pub extra: Option<f64>,
     /// Settling before each record (cycles; the first record of a frequency then waits until
     /// the response of successive half records agrees: the settling check)
     #[arg(long, default_value_t = 1.0)]

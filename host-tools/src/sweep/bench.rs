@@ -31,7 +31,8 @@ use crate::fmu::scenario::Value;
 use crate::fmu::sweep_run::SweepRun;
 use crate::sweep::limit_detection::{limit_cases, LimitCase};
 use crate::sweep::measurement::{
-    errors, limited_frequencies, measured_time, online_results, point_times, prbs_results, stream_results, ErrorSummary,
+    errors, limited_frequencies, measured_time, online_results, point_times, prbs_results, stream_results, unmeasured,
+    ErrorSummary,
 };
 use crate::sweep::report::oracle_run;
 
@@ -285,10 +286,6 @@ impl SweepBench {
     pub fn goals_met(&self) -> bool {
         self.grid.iter().all(|r| r.met) && self.limit_detection.iter().all(|c| c.met)
     }
-}
-
-fn unmeasured(points: &[ResponsePoint]) -> Vec<f64> {
-    points.iter().filter(|p| !(p.gain_db.is_finite() && p.phase_deg.is_finite())).map(|p| p.frequency).collect()
 }
 
 /// Worst |gain| and |phase| differences over all frequencies, with where they are.

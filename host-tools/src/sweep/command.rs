@@ -7,6 +7,11 @@ use crate::fmu::runner::Fmu;
 use crate::paths::{default_fmu, default_out};
 use crate::sweep::args::{SweepArgs, SweepBenchArgs};
 
+/// The extra frequency a sweep gets when --extra is not given and it lies in the sweep's
+/// range: the acquisition Nyquist frequency of the default rates (16 kHz, acquisition every 4
+/// ticks), where phase shifting starts.
+const DEFAULT_EXTRA_HZ: f64 = 2000.0;
+
 /// Sweep settings from the command line.
 pub fn sweep_settings(args: &SweepArgs) -> Result<control_core::phase_shifted_sweep::SweepParams> {
     let (
@@ -47,6 +52,8 @@ pub fn sweep_settings(args: &SweepArgs) -> Result<control_core::phase_shifted_sw
         args.max_extensions,
     );
     let (point, default_amplitude) = injection_point(point)?;
+    // One point measures --start alone.
+    let top = if points > 1 { stop } else { start };
     Ok(control_core::phase_shifted_sweep::SweepParams {
         point,
         signal: control_core::phase_shifted_sweep::SweepSignal::SteppedSine,
@@ -55,7 +62,8 @@ pub fn sweep_settings(args: &SweepArgs) -> Result<control_core::phase_shifted_sw
         stop_hz: stop as f32,
         points,
         logarithmic: !linear,
-        extra_hz: extra as f32,
+        extra_hz: extra.unwrap_or(if (start..=top).contains(&DEFAULT_EXTRA_HZ) { DEFAULT_EXTRA_HZ } else { 0.0 })
+            as f32,
         settle_cycles: settle_cycles as f32,
         min_settle_s: min_settle as f32,
         measure_cycles: measure_cycles as f32,
@@ -334,6 +342,13 @@ impl SweepArgs {
     pub fn run(&self) -> Result<bool> {
         let settings = sweep_settings(self)?;
         let parameters = crate::fmu::assignment::axis_parameters(&self.set, &[])?;
+        // The sweep's settings come from this command's options: a `--set sweep.…` would be
+        // overwritten by them without a word.
+        if let Some(name) = parameters.keys().find(|name| name.starts_with("sweep.")) {
+            bail!(
+                "--set {name}: the sweep's settings come from this command's options (see `servo sweep --help`: --start, --stop, --points, --amplitude, ...), not from --set"
+            );
+        }
         let run = crate::fmu::sweep_run::SweepRun { settings, parameters, velocity: self.velocity };
         let reference = match &self.reference {
             Some(p) => Some((p.display().to_string(), crate::sweep::report::read_reference(p)?)),
@@ -378,9 +393,6 @@ impl SweepArgs {
         } else {
             r.print();
         }
-        // The drive's correlator and the host's equivalent-time estimate must agree. Results
-        // measured with the output limited are reported (a warning, and `limited_hz` in the
-        // JSON), not refused: how far off they are depends on how deep the limit cut.
-        Ok(r.stream_vs_online.0 <= 0.01 && r.stream_vs_online.1 <= 0.1)
+        Ok(r.passed())
     }
 }

@@ -122,7 +122,7 @@ pub fn run_on_device<T: crate::device::link::DrivePort>(
     out: &Path,
     mut progress: impl FnMut(&str, f64),
 ) -> Result<DeviceSweepReport> {
-    std::fs::create_dir_all(out)?;
+    crate::paths::create_out_dir(out)?;
     let drive = match sweep_on_drive(session, run, |f| progress("sweep on the drive", f)) {
         Ok(d) => d,
         Err(e) => return Err(save_partial(session, out, "sweep", e)),

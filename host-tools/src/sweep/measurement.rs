@@ -314,14 +314,17 @@ pub fn prbs_results(t: &Trace, run: &SweepRun, frequencies: &[f64], segment: usi
 }
 
 /// Errors of `a` against a reference at the same frequencies, split at `split_hz`:
-/// (max |gain| dB, max |phase| deg) below and at-or-above.
+/// (max |gain| dB, max |phase| deg) below and at-or-above; results either side cannot measure
+/// ([`unmeasurable`]) are left out (a caller names them).
 #[derive(Clone, Copy, Debug, Default, Serialize)]
 pub struct ErrorSummary {
     pub below_gain_db: f64,
     pub below_phase_deg: f64,
     pub above_gain_db: f64,
     pub above_phase_deg: f64,
+    /// Results compared (both measurable), and of those at or above the split.
     pub points_compared: usize,
+    pub points_above: usize,
 }
 
 pub fn errors(a: &[ResponsePoint], reference: &[ResponsePoint], split_hz: f64) -> ErrorSummary {
@@ -330,6 +333,9 @@ pub fn errors(a: &[ResponsePoint], reference: &[ResponsePoint], split_hz: f64) -
         let Some(r) = reference.iter().find(|r| same_frequency(r.frequency, p.frequency)) else {
             continue;
         };
+        if unmeasurable(p) || unmeasurable(r) {
+            continue;
+        }
         let (dg, dp) = difference(p, r);
         s.points_compared += 1;
         if p.frequency < split_hz {
@@ -338,9 +344,22 @@ pub fn errors(a: &[ResponsePoint], reference: &[ResponsePoint], split_hz: f64) -
         } else {
             s.above_gain_db = s.above_gain_db.max(dg.abs());
             s.above_phase_deg = s.above_phase_deg.max(dp.abs());
+            s.points_above += 1;
         }
     }
     s
+}
+
+/// A result that tells no response: a non-finite gain or phase, or phases that cannot tell a
+/// sine (quality under 0.01: a single record at a multiple of half the acquisition rate,
+/// where every sample sits at one phase or its opposite).
+pub fn unmeasurable(p: &ResponsePoint) -> bool {
+    !(p.gain_db.is_finite() && p.phase_deg.is_finite() && p.quality >= 0.01)
+}
+
+/// The frequencies of the [`unmeasurable`] results.
+pub fn unmeasured(points: &[ResponsePoint]) -> Vec<f64> {
+    points.iter().filter(|p| unmeasurable(p)).map(|p| p.frequency).collect()
 }
 
 #[cfg(test)]

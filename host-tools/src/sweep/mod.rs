@@ -9,3 +9,4 @@ pub mod index;
 pub mod limit_detection;
 pub mod measurement;
 pub mod report;
+pub mod torque_limit;

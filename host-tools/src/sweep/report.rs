@@ -10,14 +10,17 @@ use control_core::phase_shifted_sweep::SweepParams;
 use serde::Serialize;
 
 use crate::analysis::response_point::{difference, ResponsePoint};
+use crate::fmu::drive_faults::{first_fault, FaultEvent};
 use crate::fmu::runner::Fmu;
 use crate::fmu::scenario::Value;
 use crate::fmu::sweep_run::SweepRun;
 use crate::fmu::trace::Trace;
 use crate::plot::bode::plot_bode;
 use crate::sweep::measurement::{
-    errors, flagged, limited_shares, limited_warning, measured_time, online_results, stream_results, ErrorSummary,
+    errors, flagged, frequency_list, limited_shares, limited_warning, measured_time, online_results, stream_results,
+    unmeasurable, unmeasured, ErrorSummary,
 };
+use crate::sweep::torque_limit::{torque_limited_shares, TorqueLimits};
 
 /// Encoder of the oracle (counts per revolution; the FMU's finest, 16 times the default 2^20).
 pub const ORACLE_ENCODER: i64 = 1 << 24;
@@ -73,6 +76,10 @@ pub fn oracle_run(run: &SweepRun) -> Result<SweepRun> {
     Ok(SweepRun { settings: oracle_settings(&run.settings, base_rate_hz), parameters, velocity: run.velocity })
 }
 
+/// Largest difference between the drive's on-line results and the host's estimate from the
+/// stream that a sweep accepts (dB, degrees): the same samples, fitted in f32 and in f64.
+pub const AGREEMENT_LIMIT: (f64, f64) = (0.01, 0.1);
+
 #[derive(Clone, Debug, Serialize)]
 pub struct SweepReport {
     pub measurement_time_s: f64,
@@ -89,6 +96,21 @@ pub struct SweepReport {
     pub limited_share: Vec<f64>,
     /// The FMU reports the share (`sweep_last_limited`; an older build does not).
     pub limited_known: bool,
+    /// Frequencies measured with the torque command at the velocity loop's torque limit or
+    /// the current limit on any sample (see [`crate::sweep::torque_limit`]), and every
+    /// result's share of such samples (0..1).
+    pub torque_limited_hz: Vec<f64>,
+    pub torque_limited_share: Vec<f64>,
+    /// The torque (N·m) from which a sample counts as at a limit (the lower clamp).
+    pub torque_limit_nm: f64,
+    /// Frequencies with no measurable result (see [`crate::sweep::measurement::unmeasurable`]),
+    /// from the stream or the drive.
+    pub unmeasured_hz: Vec<f64>,
+    /// The first fault the drive latched during the run, if any: the results from there on
+    /// are not the loop's response.
+    pub fault: Option<FaultEvent>,
+    /// Largest stream vs on-line difference allowed: (dB, degrees).
+    pub agreement_limit: (f64, f64),
     pub oracle: Option<Vec<ResponsePoint>>,
     pub errors_vs_oracle: Option<ErrorSummary>,
     pub files: Vec<PathBuf>,
@@ -99,6 +121,19 @@ pub fn read_reference(path: &Path) -> Result<Vec<ResponsePoint>> {
     let (Some(f), Some(g), Some(p)) = (t.column("frequency"), t.column("gain_db"), t.column("phase_deg")) else {
         bail!("{}: a reference needs the columns frequency, gain_db, phase_deg", path.display());
     };
+    if f.is_empty() {
+        bail!("{}: the reference has no rows", path.display());
+    }
+    for i in 0..f.len() {
+        // Rows are counted as a user sees them in the file: the header is line 1.
+        let line = i + 2;
+        if !(f[i].is_finite() && f[i] > 0.0) {
+            bail!("{} line {line}: frequency {} is not a positive number (Hz)", path.display(), f[i]);
+        }
+        if !(g[i].is_finite() && p[i].is_finite()) {
+            bail!("{} line {line}: gain_db {} and phase_deg {} must be finite numbers", path.display(), g[i], p[i]);
+        }
+    }
     Ok((0..f.len()).map(|i| ResponsePoint { frequency: f[i], gain_db: g[i], phase_deg: p[i], quality: 1.0 }).collect())
 }
 
@@ -110,7 +145,7 @@ pub fn run(
     out: &Path,
     mut progress: impl FnMut(&str, f64),
 ) -> Result<SweepReport> {
-    std::fs::create_dir_all(out)?;
+    crate::paths::create_out_dir(out)?;
     let rates = sweep.rates()?;
     let (fs, pdiv) = (rates.current_loop_hz, rates.position_divider);
     sweep.scenario()?; // refuses invalid settings with the drive's reason first
@@ -128,8 +163,8 @@ pub fn run(
     }
     let agreement = stream.iter().zip(&online).fold((0.0f64, 0.0f64), |(g, p), (a, b)| {
         let (dg, dp) = difference(a, b);
-        if a.quality < 0.01 {
-            (g, p) // nothing measurable there (a single record at fs/2): both are noise
+        if unmeasurable(a) || unmeasurable(b) {
+            (g, p) // nothing measurable there (named in `unmeasured_hz`): both are noise
         } else {
             (g.max(dg.abs()), p.max(dp.abs()))
         }
@@ -139,6 +174,22 @@ pub fn run(
     let limited = limited_shares(&trace);
     let limited_hz = flagged(&limited);
     let limited_known = trace.column("sweep_last_limited").is_some();
+    let limits = TorqueLimits::of(&sweep.drive_params()?, &sweep.settings);
+    let torque_limited = torque_limited_shares(&trace, &sweep.settings, &limits)?;
+    let torque_limited_share: Vec<f64> = online
+        .iter()
+        .map(|p| torque_limited.iter().find(|(f, _)| *f == p.frequency).map_or(0.0, |&(_, share)| share))
+        .collect();
+    let torque_limited_hz: Vec<f64> =
+        online.iter().zip(&torque_limited_share).filter(|(_, &share)| share > 0.0).map(|(p, _)| p.frequency).collect();
+    let mut unmeasured_hz = unmeasured(&stream);
+    for f in unmeasured(&online) {
+        if !unmeasured_hz.contains(&f) {
+            unmeasured_hz.push(f);
+        }
+    }
+    unmeasured_hz.sort_by(f64::total_cmp);
+    let fault = first_fault(&trace);
     let mut files = Vec::new();
     let csv = out.join("sweep.csv");
     let mut t = Trace::new(
@@ -151,12 +202,23 @@ pub fn run(
             "online_phase_deg",
             "online_quality",
             "limited_share",
+            "torque_limited_share",
         ]
         .map(String::from)
         .to_vec(),
     );
-    for ((a, b), &(_, share)) in stream.iter().zip(&online).zip(&limited) {
-        t.rows.push(vec![a.frequency, a.gain_db, a.phase_deg, a.quality, b.gain_db, b.phase_deg, b.quality, share]);
+    for (((a, b), &(_, share)), &torque_share) in stream.iter().zip(&online).zip(&limited).zip(&torque_limited_share) {
+        t.rows.push(vec![
+            a.frequency,
+            a.gain_db,
+            a.phase_deg,
+            a.quality,
+            b.gain_db,
+            b.phase_deg,
+            b.quality,
+            share,
+            torque_share,
+        ]);
     }
     t.write_csv(&csv)?;
     let trace_csv = out.join("sweep_trace.csv");
@@ -190,14 +252,17 @@ pub fn run(
     curves.push(("on-line correlator (drive)", &online));
     let svg = out.join("bode.svg");
     // Where the drive's output was limited, the plot says so in its title.
-    let limited_note = match (limited_hz.first(), limited_hz.last()) {
+    let mut any_limited: Vec<f64> = limited_hz.iter().chain(&torque_limited_hz).copied().collect();
+    any_limited.sort_by(f64::total_cmp);
+    let limited_note = match (any_limited.first(), any_limited.last()) {
         (Some(a), Some(b)) => format!(" — output LIMITED at {a:.0}–{b:.0} Hz: not the linear loop there"),
         _ => String::new(),
     };
+    let fault_note = fault.as_ref().map_or(String::new(), |e| format!(" — FAULT at {:.3} s ({})", e.time_s, e.names));
     plot_bode(
         &svg,
         &format!(
-            "Frequency response, {measurement_time:.2} s of measurement, acquisition {acquisition_hz} Hz{limited_note}"
+            "Frequency response, {measurement_time:.2} s of measurement, acquisition {acquisition_hz} Hz{limited_note}{fault_note}"
         ),
         &curves,
         Some((acquisition_hz / 2.0, "acquisition Nyquist")),
@@ -214,6 +279,12 @@ pub fn run(
         limited_hz,
         limited_share,
         limited_known,
+        torque_limited_hz,
+        torque_limited_share,
+        torque_limit_nm: limits.lowest(),
+        unmeasured_hz,
+        fault,
+        agreement_limit: AGREEMENT_LIMIT,
         oracle,
         errors_vs_oracle,
         files: files.clone(),
@@ -224,6 +295,18 @@ pub fn run(
 }
 
 impl SweepReport {
+    /// Every check inside the sweep passed: no fault, a result at every frequency, and the
+    /// drive's on-line results agree with the stream's within [`AGREEMENT_LIMIT`]. (Results
+    /// measured at a limit are warned about, not failed: how far off they are depends on how
+    /// deep the limit cut.)
+    pub fn passed(&self) -> bool {
+        self.fault.is_none() && self.unmeasured_hz.is_empty() && self.agrees()
+    }
+
+    fn agrees(&self) -> bool {
+        self.stream_vs_online.0 <= self.agreement_limit.0 && self.stream_vs_online.1 <= self.agreement_limit.1
+    }
+
     pub fn print(&self) {
         println!(
             "servo sweep — {} frequencies, {:.3} s of measurement, acquisition {} Hz, phase shifting from {} Hz",
@@ -233,27 +316,55 @@ impl SweepReport {
             self.threshold_hz
         );
         println!(
-            "  {:>10} {:>10} {:>10} {:>8} {:>12} {:>12} {:>10}",
-            "Hz", "gain dB", "phase deg", "quality", "online dB", "online deg", "limited %"
+            "  {:>10} {:>10} {:>10} {:>8} {:>12} {:>12} {:>10} {:>12}",
+            "Hz", "gain dB", "phase deg", "quality", "online dB", "online deg", "limited %", "torque lim %"
         );
-        for ((a, b), share) in self.stream.iter().zip(&self.online).zip(&self.limited_share) {
+        let percent = |share: f64| if share > 0.0 { format!("{:.1}", 100.0 * share) } else { String::new() };
+        for (((a, b), &share), &torque_share) in
+            self.stream.iter().zip(&self.online).zip(&self.limited_share).zip(&self.torque_limited_share)
+        {
             println!(
-                "  {:>10.2} {:>10.3} {:>10.2} {:>8.4} {:>12.3} {:>12.2} {:>10}",
+                "  {:>10.2} {:>10.3} {:>10.2} {:>8.4} {:>12.3} {:>12.2} {:>10} {:>12}",
                 a.frequency,
                 a.gain_db,
                 a.phase_deg,
                 a.quality,
                 b.gain_db,
                 b.phase_deg,
-                if *share > 0.0 { format!("{:.1}", 100.0 * share) } else { String::new() }
+                percent(share),
+                percent(torque_share)
             );
         }
         println!(
             "  stream vs on-line correlator: largest difference {:.2e} dB, {:.2e} deg",
             self.stream_vs_online.0, self.stream_vs_online.1
         );
+        if !self.agrees() {
+            println!(
+                "  FAILED: the drive's on-line results and the host's estimate from the same samples differ by more than {} dB / {} deg: the stream lost or mislabelled samples",
+                self.agreement_limit.0, self.agreement_limit.1
+            );
+        }
+        if let Some(e) = &self.fault {
+            println!("  FAILED: {}", e.sentence());
+        }
+        if !self.unmeasured_hz.is_empty() {
+            let why = if self.fault.is_some() {
+                "the drive's bridge was off after the fault"
+            } else {
+                "the samples' phases cannot tell a sine there (one record at a multiple of half the acquisition rate sees the sine at one phase and its opposite only: keep --repeats and --shifts at 2 or more there, or move the frequency)"
+            };
+            println!("  FAILED: no measurable result at {}: {why}", frequency_list(&self.unmeasured_hz));
+        }
         if !self.limited_hz.is_empty() {
             println!("  WARNING: {}", limited_warning(&self.limited_hz));
+        }
+        if !self.torque_limited_hz.is_empty() {
+            println!(
+                "  WARNING: the torque command reached the drive's limit ({:.3} N·m: the velocity loop's torque limit or the current limit) while it measured {}: the loop was not linear there, and the result can be off by decibels. Lower --amplitude",
+                self.torque_limit_nm,
+                frequency_list(&self.torque_limited_hz)
+            );
         }
         if !self.limited_known {
             println!(
@@ -261,14 +372,20 @@ impl SweepReport {
             );
         }
         if let Some(e) = &self.errors_vs_oracle {
+            let below = e.points_compared - e.points_above;
+            let side = |n: usize, gain: f64, phase: f64| {
+                if n == 0 {
+                    "no frequency".to_string()
+                } else {
+                    format!("max {gain:.3} dB / {phase:.2} deg over {n}")
+                }
+            };
             println!(
-                "  against the oracle: below {} Hz max {:.3} dB / {:.2} deg; from {} Hz up max {:.3} dB / {:.2} deg",
+                "  against the oracle: below {} Hz {}; from {} Hz up {}",
                 self.threshold_hz,
-                e.below_gain_db,
-                e.below_phase_deg,
+                side(below, e.below_gain_db, e.below_phase_deg),
                 self.threshold_hz,
-                e.above_gain_db,
-                e.above_phase_deg
+                side(e.points_above, e.above_gain_db, e.above_phase_deg)
             );
         }
         for f in &self.files {

@@ -27,7 +27,7 @@ pub struct VirtualDriveArgs {
     #[arg(long = "set")]
     pub set: Vec<String>,
     /// Baud rate of the simulated line (10 bits a byte)
-    #[arg(long, default_value_t = 921_600)]
+    #[arg(long, default_value_t = 921_600, value_parser = crate::device::link::baud_rate)]
     pub baud: u32,
     /// The drive's parameter flash (two 2 KiB pages), kept across restarts (default: out/virtual-drive/flash.bin)
     #[arg(long)]

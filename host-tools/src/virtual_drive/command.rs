@@ -56,9 +56,6 @@ impl VirtualDriveArgs {
         if !(self.corrupt_rate.is_finite() && (0.0..=0.1).contains(&self.corrupt_rate)) {
             bail!("--corrupt-rate is a probability from 0 to 0.1 (got {})", self.corrupt_rate);
         }
-        if !(1_200..=12_000_000).contains(&self.baud) {
-            bail!("--baud must be between 1 200 and 12 000 000 (got {})", self.baud);
-        }
         if let Some(s) = self.seconds {
             if !(s.is_finite() && s > 0.0) {
                 bail!("--seconds must be a positive number (got {s})");
