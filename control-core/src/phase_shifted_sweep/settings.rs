@@ -60,13 +60,14 @@ pub struct SweepParams {
     /// the same in time (twice as many half blocks: see [`SweepParams::half_block_cap`]).
     pub max_extensions: u32,
     /// Stepped sine: a pseudo-random ±dither (N·m) added to the torque command on every base
-    /// tick of the frequencies at and above the threshold (0: none). At constant speed and
+    /// tick of the frequencies at and above the threshold, or 2 kHz where the threshold is
+    /// higher (a faster loop; see `DITHER_FROM_HZ`), (0: none). At constant speed and
     /// without sensor noise the encoder's count pattern is periodic and can lock to the
     /// excitation: at the top of the sweep, where the response is a few counts, a
     /// quantisation error that longer records do not remove (0.24 dB at 3 kHz on the default
     /// axis). A dither of a few milli-newton-metres moves the axis by enough counts to break
-    /// the lock; the fit sees it as noise. Below the threshold the samples are period means
-    /// (see [`PhaseShiftedSweep::end_tick`](super::PhaseShiftedSweep::end_tick)) and need none.
+    /// the lock; the fit sees it as noise. Lower down the responses are large and the
+    /// dither's own noise would cost more than it breaks.
     pub dither: f32,
     /// What U and Y are: the loop's signals, or the machine-end acceleration against the
     /// motor's torque from the measured q current (torque-command injection) or against the

@@ -396,7 +396,7 @@ declare_variables! {
 
     // Frequency-response dither (seed 000, issue 15), appended so that every earlier value
     // reference stays.
-    184 sweep_dither: Float64 "sweep.dither" Parameter Fixed = core(|p| p.sweep.dither); NM; r(0.0, 1000.0); "Stepped sine: pseudo-random +/- dither added to the torque command every tick at and above the threshold, to break the lock of the encoder count pattern to the excitation (0 = none)";
+    184 sweep_dither: Float64 "sweep.dither" Parameter Fixed = core(|p| p.sweep.dither); NM; r(0.0, 1000.0); "Stepped sine: pseudo-random +/- dither added to the torque command every tick at and above the threshold (or 2 kHz where the threshold is higher), to break the lock of the encoder count pattern to the excitation (0 = none)";
     // Anti-aliased acquisition for the identification (seed 001), appended likewise.
     185 electromagnetic_torque_mean: Float64 "electromagnetic_torque_mean" Output Continuous = 0.0; NM; ANY; "Mean of electromagnetic_torque over the last communication step (its base ticks' ends): an integrating acquisition, no aliasing from the loops' rates";
     186 load_acceleration_mean: Float64 "load_acceleration_mean" Output Continuous = 0.0; RAD_S2; ANY; "Mean of load_acceleration (the accelerometer, with its noise) over the last communication step, as electromagnetic_torque_mean";

@@ -72,8 +72,9 @@ pub struct SweepArgs {
     /// anti-resonance, the top of the sweep) need it; the others keep their base length
     #[arg(long, default_value_t = 0.03)]
     pub precision_db: f64,
-    /// Pseudo-random ±dither on the torque command at and above the threshold (N·m; 0 =
-    /// none): breaks the lock of the encoder's count pattern to the excitation
+    /// Pseudo-random ±dither on the torque command at and above the threshold, or 2 kHz where
+    /// the threshold is higher (N·m; 0 = none): breaks the lock of the encoder's count pattern
+    /// to the excitation
     #[arg(long, default_value_t = 0.003)]
     pub dither: f64,
     /// At most so many extra blocks (each one record's base measurement with the full
