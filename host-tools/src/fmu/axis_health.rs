@@ -74,7 +74,7 @@ mod tests {
     fn trace(rows: &[[f64; 3]]) -> Trace {
         let mut t = Trace::new(["time", "torque_command_out", "faults"].map(String::from).to_vec());
         for r in rows {
-            t.rows.push(r.to_vec());
+            t.rows.push(r);
         }
         t
     }
