@@ -173,6 +173,157 @@ fn circle_writes_plot_points_and_figures() {
     }
 }
 
+/// A folder that does not exist yet, for a command that must write nothing.
+fn untouched(name: &str) -> std::path::PathBuf {
+    let out = tmp(name).join("out");
+    let _ = std::fs::remove_dir_all(&out);
+    out
+}
+
+#[test]
+fn circle_refuses_runs_too_long_to_hold_up_front_naming_the_option_and_the_limit() {
+    for (args, named) in [
+        (vec!["--radius", "1e6"], "--radius 1000000 rad"),
+        (vec!["--radius", "1e12"], "--radius 1000000000000 rad"),
+        (vec!["--lead-in", "100000"], "--lead-in 100000"),
+        (vec!["--lead-in", "125"], "--lead-in 125"),
+        (vec!["--single", "x", "--lead-in", "125"], "--lead-in 125"),
+    ] {
+        let out = untouched("circle-too-long");
+        let o = servo().arg("circle").args(&args).on_fmu(&out).output().unwrap();
+        let err = String::from_utf8_lossy(&o.stderr);
+        assert_eq!(o.status.code(), Some(2), "{args:?}: {err}");
+        let limit = err.contains("at most 500000 samples") || err.contains("limit of 500000");
+        assert!(err.contains(named) && limit, "{args:?}: {err}");
+        assert!(!out.exists(), "{args:?}: wrote {}", out.display());
+    }
+}
+
+#[test]
+fn circle_checks_every_parameter_of_both_runs_before_running_any() {
+    for (args, named) in [
+        (vec!["--compare", "ctrl.friction_comp_amplitude=-1"], "ctrl.friction_comp_amplitude = -1 N.m is outside"),
+        (vec!["--y-set", "ctrl.kp=-3"], "axis y"),
+        (vec!["--set", "position_command=1"], "not a parameter"),
+        (vec!["--compare", "ctrl.no_such_gain=1"], "no variable `ctrl.no_such_gain`"),
+    ] {
+        let out = untouched("circle-bad-parameters");
+        let o = servo().arg("circle").args(&args).on_fmu(&out).output().unwrap();
+        let err = String::from_utf8_lossy(&o.stderr);
+        assert_eq!(o.status.code(), Some(2), "{args:?}: {err}");
+        assert!(err.contains(named), "{args:?}: {err}");
+        assert!(!out.exists(), "{args:?}: wrote {}", out.display());
+    }
+}
+
+/// Rows `rows` of a trace CSV's column `name`.
+fn csv_column(path: &std::path::Path, name: &str, rows: std::ops::Range<usize>) -> Vec<f64> {
+    let t = host_tools::fmu::trace::Trace::read_csv(path).unwrap();
+    t.column(name).unwrap()[rows].to_vec()
+}
+
+#[test]
+fn circle_fails_when_a_drive_trips_naming_the_fault_and_when() {
+    // 20 revolutions per second on 1 rad: the axes cannot follow, and trip on their following error.
+    let out = tmp("circle-trip");
+    let args = ["circle", "--radius", "1", "--feed", "125.66370614359172"];
+    let o = servo().args(args).arg("--json").on_fmu(&out).output().unwrap();
+    assert_eq!(o.status.code(), Some(1), "{}", String::from_utf8_lossy(&o.stderr));
+    let r: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+    let c = &r["circle"];
+    assert_eq!(c["passed"], false, "{c}");
+    assert!(c["runs"][0]["feedback"].is_null(), "figures of a tripped run: {c}");
+    // The trip as the traces show it: the first row with a fault latched, its time.
+    for (i, axis) in ["x", "y"].iter().enumerate() {
+        let trace = out.join(format!("circle_{axis}_trace.csv"));
+        let (faults, time) = (csv_column(&trace, "faults", 0..401), csv_column(&trace, "time", 0..401));
+        let first = faults.iter().position(|&f| f != 0.0).expect("tripped");
+        let trip = &c["runs"][0]["axes"][i]["trip"];
+        assert_eq!(trip["time_s"].as_f64(), Some(time[first]), "{trip}");
+        assert_eq!(trip["bits"].as_f64(), Some(faults[first]), "{trip}");
+        let said = c["failures"][i].as_str().unwrap();
+        assert!(said.contains(&format!("axis {axis} tripped at t = {:.4} s", time[first])), "{said}");
+        assert!(said.contains("following error"), "{said}");
+    }
+    let o = servo().args(args).on_fmu(&out).output().unwrap();
+    assert_eq!(o.status.code(), Some(1));
+    let text = String::from_utf8_lossy(&o.stdout);
+    assert!(text.contains("FAILED: axis x tripped") && text.contains("no figures"), "{text}");
+    assert!(["-inf", "inf,", "NaN"].iter().all(|bad| !text.contains(bad)), "{text}");
+}
+
+#[test]
+fn circle_warns_when_the_torque_command_sits_at_its_limit_with_its_share() {
+    // 10 revolutions per second: the start from rest at full feed takes the full 2 N·m on X,
+    // the measured revolution none. With 0.05 N·m of torque at 1 revolution per second, the
+    // measured revolution reaches the limit too.
+    for (args, limit, in_measured) in
+        [(vec!["--feed", "62.83185307179586"], 2.0, false), (vec!["--set", "ctrl.torque_limit=0.05"], 0.05, true)]
+    {
+        let out = tmp("circle-torque-limited");
+        let o = servo().arg("circle").args(&args).arg("--json").on_fmu(&out).output().unwrap();
+        assert!(o.status.success(), "{args:?}: {}", String::from_utf8_lossy(&o.stderr));
+        let r: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+        let c = &r["circle"];
+        let n = c["samples_per_revolution"].as_u64().unwrap() as usize;
+        let x = &c["runs"][0]["axes"][0];
+        assert_eq!(x["torque_limit_nm"].as_f64(), Some(limit), "{x}");
+        // The counts as the trace has them: |torque command| at the limit (f32), over the run
+        // (rows 1..=2n: one lead-in revolution) and over the measured revolution.
+        let torque = csv_column(&out.join("circle_x_trace.csv"), "torque_command_out", 0..2 * n + 1);
+        let at_limit = |rows: std::ops::Range<usize>| rows.filter(|&k| torque[k].abs() >= limit as f32 as f64).count();
+        let (run, measured) = (at_limit(1..2 * n + 1), at_limit(n + 1..2 * n + 1));
+        assert!(run > 0 && (measured > 0) == in_measured, "{args:?}: {run} {measured}");
+        assert_eq!(x["torque_limited_run"]["limited"].as_u64(), Some(run as u64), "{x}");
+        assert_eq!(x["torque_limited_measured"]["limited"].as_u64(), Some(measured as u64), "{x}");
+        let share = x["torque_limited_run"]["share"].as_f64().unwrap();
+        assert!((share - run as f64 / (2 * n) as f64).abs() < 1e-12, "{x}");
+        let warning = c["warnings"][0].as_str().unwrap();
+        assert!(warning.contains(&format!("axis x's torque command sat at its {limit} N·m limit")), "{warning}");
+        assert_eq!(warning.contains("not the linear loop's"), in_measured, "{warning}");
+        let o = servo().arg("circle").args(&args).on_fmu(&out).output().unwrap();
+        let text = String::from_utf8_lossy(&o.stdout);
+        assert!(text.contains(&format!("WARNING: {warning}")), "{text}");
+    }
+}
+
+/// A `servo tune` output directory with these axes (FMU parameters, correction sections).
+fn tuned_dir(name: &str, x: serde_json::Value, y: serde_json::Value) -> std::path::PathBuf {
+    let dir = tmp(name);
+    let json = serde_json::json!({"axes": [x, y]});
+    std::fs::write(dir.join("tune.json"), serde_json::to_string(&json).unwrap()).unwrap();
+    dir
+}
+
+#[test]
+fn circle_tuned_says_how_many_times_rounder_and_fails_when_the_correction_makes_it_worse() {
+    // A 5 Hz low-pass pole pair lags an axis 16° at 1 Hz. Lagging X alone draws an ellipse;
+    // lagging both draws a circle again.
+    let lag = serde_json::json!([{"zeros": null, "pole_hz": 5.0, "pole_damping": 0.7}]);
+    let lagged = serde_json::json!({"corr.count": 1, "corr.pole_hz_1": 5.0, "corr.pole_damping_1": 0.7});
+    let axis = |name: &str, fmu: &serde_json::Value, sections: &serde_json::Value| serde_json::json!({"axis": name, "fmu_parameters": fmu, "correction": {"axis": name, "sections": sections}});
+    let none = serde_json::json!({});
+    let worse = tuned_dir("tuned-worse", axis("x", &none, &lag), axis("y", &none, &serde_json::json!([])));
+    let better = tuned_dir("tuned-better", axis("x", &lagged, &lag), axis("y", &none, &lag));
+    for (dir, rounder) in [(worse, false), (better, true)] {
+        let out = tmp("circle-tuned");
+        let o = servo().arg("circle").arg("--json").arg("--tuned").arg(&dir).on_fmu(&out).output().unwrap();
+        assert_eq!(o.status.code(), Some(if rounder { 0 } else { 1 }), "{}", String::from_utf8_lossy(&o.stderr));
+        let r: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+        let c = &r["circle"];
+        let roundness = |i: usize| c["runs"][i]["feedback"]["roundness"].as_f64().unwrap();
+        let ratio = roundness(1) / roundness(0);
+        assert_eq!(c["roundness_ratio"].as_f64(), Some(ratio), "{c}");
+        assert_eq!(c["improved"], rounder, "{c}");
+        assert!(if rounder { ratio < 0.1 } else { ratio > 10.0 }, "{c}");
+        let o = servo().arg("circle").arg("--tuned").arg(&dir).on_fmu(&out).output().unwrap();
+        let text = String::from_utf8_lossy(&o.stdout);
+        let words = if rounder { format!("{:.2}× smaller", 1.0 / ratio) } else { format!("{ratio:.2}× larger") };
+        assert!(text.contains(&format!("roundness, second run / first: {ratio:.4} ({words})")), "{text}");
+        assert_eq!(text.contains("FAILED: the correction does NOT make the circle rounder"), !rounder, "{text}");
+    }
+}
+
 #[test]
 fn sweep_refuses_bad_settings_with_the_reason() {
     for (args, reason) in [

@@ -11,7 +11,7 @@
 use servo_axis::variables::name;
 use std::collections::BTreeMap;
 
-use anyhow::Result;
+use anyhow::{anyhow, Result};
 use serde::Serialize;
 
 use crate::fmu::circle::{radial_difference, single_axis, two_axis, CircleRequest, Direction, Measure};
@@ -63,12 +63,16 @@ pub fn bench(fmu: &Fmu) -> Result<CircleBench> {
     let circle = two_axis(fmu, &r)?;
     let d = radial_difference(&pseudo.feedback, &circle.feedback)
         .max(radial_difference(&circle.feedback, &pseudo.feedback));
+    let largest = |f: &crate::fmu::circle::Roundness, what: &str| {
+        f.max_protrusion.ok_or_else(|| anyhow!("the protrusions with compensation {what}: {}", f.max_protrusion_text()))
+    };
+    let (protrusion_off, protrusion_on) = (largest(&off, "off")?, largest(&on, "on")?);
     Ok(CircleBench {
         radius: r.radius,
         feed: r.feed,
-        protrusion_off: off.max_protrusion,
-        protrusion_on: on.max_protrusion,
-        protrusion_ratio: on.max_protrusion / off.max_protrusion,
+        protrusion_off,
+        protrusion_on,
+        protrusion_ratio: protrusion_on / protrusion_off,
         roundness_off: off.roundness,
         roundness_on: on.roundness,
         pseudo_vs_two_axis: d,

@@ -54,6 +54,7 @@ fn circle(args: &CircleArgs) -> Result<bool> {
         comparison.x = x_corr;
         comparison.y = y_corr;
         comparison.shape_only = true;
+        comparison.must_be_rounder = true;
         labels = ("without correction".into(), "with correction".into());
     }
     let (x_parameters, y_parameters) = match single.as_deref() {
@@ -112,7 +113,7 @@ fn circle(args: &CircleArgs) -> Result<bool> {
     pb.set_position(100);
     let (report, pseudo) = run(&fmu, &request, single.is_some(), &comparison, (&labels.0, &labels.1), &out)?;
     pb.finish_and_clear();
-    let mut ok = true;
+    let mut ok = report.passed;
     let mut fmpy_note = None;
     if with_fmpy {
         let Some((_, first)) = pseudo.first() else {

@@ -23,10 +23,9 @@ use control_core::response_correction::CorrectionParams;
 use serde::Serialize;
 
 use crate::circle::plot::plot_circle;
-use crate::circle::report::CircleFigures;
 use crate::device::link::DrivePort;
 use crate::device::session::DriveSession;
-use crate::fmu::circle::{radial_differences, CircleRequest, Figure, Measure};
+use crate::fmu::circle::{radial_differences, CircleRequest, Figure, Measure, Roundness};
 use crate::fmu::runner::Fmu;
 use crate::fmu::scenario::DEFAULT_STEP;
 use crate::fmu::sweep_run::SweepRun;
@@ -70,7 +69,7 @@ pub struct DeviceCircleReport {
     pub frequency_hz: f64,
     pub samples_per_revolution: usize,
     /// The drive's figures, then the twin's (as the FMU run's `runs`).
-    pub runs: Vec<CircleFigures>,
+    pub runs: Vec<SampledFigures>,
     /// Drive − twin, feedback figures.
     pub difference: FigureDifference,
     /// Drive − twin, command figures (the same sine: 0 unless a sample went missing).
@@ -179,8 +178,17 @@ pub fn pseudo_circle_of_samples(samples: &Trace, r: &CircleRequest) -> Result<Sa
     Ok(SampledPseudoCircle { command: figure(&u, &u), feedback: figure(&y, &y), against_command: figure(&y, &u) })
 }
 
-fn figures(label: &str, p: &SampledPseudoCircle, radius: f64) -> CircleFigures {
-    CircleFigures {
+/// The figures of one pseudo-circle over a drive or of its twin (as an FMU run's
+/// `CircleFigures`; a drive's samples say nothing of trips or limits, the run's `passed` does).
+#[derive(Clone, Debug, Serialize)]
+pub struct SampledFigures {
+    pub label: String,
+    pub feedback: Roundness,
+    pub against_command: Option<Roundness>,
+}
+
+fn figures(label: &str, p: &SampledPseudoCircle, radius: f64) -> SampledFigures {
+    SampledFigures {
         label: label.into(),
         feedback: p.feedback.roundness(radius),
         against_command: Some(p.against_command.roundness(radius)),
@@ -245,12 +253,7 @@ pub fn run_on_device_loading<T: DrivePort>(
         (figures("drive", &on_drive, request.radius), figures("FMU twin", &twin, request.radius));
     let notes: Vec<String> = [&drive_figures, &twin_figures]
         .iter()
-        .map(|r| {
-            format!(
-                "{}: roundness {:.3e} rad, mean radius error {:+.3e} rad, largest quadrant protrusion {:.3e} rad",
-                r.label, r.feedback.roundness, r.feedback.mean_radius_error, r.feedback.max_protrusion
-            )
-        })
+        .map(|r| r.feedback.summary(&r.label))
         .chain([format!(
             "drive − twin: largest radial difference {:.3e} rad, rms {:.3e} rad ({:.2} / {:.2} encoder counts)",
             difference_fb.largest,

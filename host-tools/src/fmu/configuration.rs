@@ -9,7 +9,7 @@ use std::collections::BTreeMap;
 use anyhow::{anyhow, bail, Result};
 use servo_axis::parameters::simulation_config;
 use servo_axis::simulation::SimulationConfig;
-use servo_axis::variables::{by_name, check, Kind, Value as FmuValue, Values};
+use servo_axis::variables::{by_name, check, Causality, Kind, Value as FmuValue, Values};
 
 use crate::fmu::scenario::Value;
 
@@ -34,6 +34,10 @@ pub fn configuration(parameters: &BTreeMap<String, Value>) -> Result<SimulationC
     let mut values = Values::start();
     for (name, &value) in parameters {
         let d = by_name(name).ok_or_else(|| anyhow!("the FMU has no variable `{name}`"))?;
+        // As the runner refuses it: a run sets parameters, not inputs or outputs.
+        if d.causality != Causality::Parameter {
+            bail!("`{name}` is not a parameter of the FMU (it is {:?})", d.causality);
+        }
         let v = fmu_value(name, d.kind, value)?;
         check(d, v).map_err(|e| anyhow!("{e}"))?;
         values.set(d.vr, v).map_err(|e| anyhow!("{e}"))?;
@@ -67,5 +71,7 @@ mod tests {
         assert!(one("ctrl.no_such_thing", Value::Int(1)).is_err());
         assert!(one("ctrl.current_loop_hz", Value::Float(-5.0)).is_err());
         assert!(one("plant.pole_pairs", Value::Float(2.5)).is_err());
+        // An input is set by events, not as a parameter (the runner refuses it too).
+        assert!(one("position_command", Value::Float(0.0)).unwrap_err().to_string().contains("not a parameter"));
     }
 }

@@ -1,6 +1,7 @@
 //! Running the FMU: the runner (fmi crate), scenarios, traces, the FMU's log, the circle path.
 
 pub mod assignment;
+pub mod axis_health;
 pub mod circle;
 pub mod configuration;
 pub mod drive_faults;
