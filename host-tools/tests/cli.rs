@@ -392,7 +392,7 @@ fn sweep_fails_with_the_reason_where_it_measured_nothing() {
     // An overcurrent trip level under the current limit: the drive latches at once.
     let (code, r) = sweep(&["--set", "ctrl.overcurrent=3", "--set", "ctrl.max_current=2.9"]);
     assert_eq!(code, Some(1), "{r}");
-    assert_eq!(r["fault"]["names"], "overcurrent", "{r}");
+    assert_eq!(r["fault"]["faults"], "overcurrent", "{r}");
     let text = servo()
         .args(["sweep", "--start", "1000", "--stop", "3000", "--points", "2"])
         .args(["--set", "ctrl.overcurrent=3", "--set", "ctrl.max_current=2.9"])

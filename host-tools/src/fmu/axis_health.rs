@@ -25,6 +25,16 @@ pub struct Trip {
     pub bits: u32,
 }
 
+impl Trip {
+    /// What a user reads: what happened, and what it means for a run's results.
+    pub fn sentence(&self) -> String {
+        format!(
+            "the drive latched a fault at t = {:.4} s ({}) and switched its bridge off: nothing measured from there on is the loop's response",
+            self.time_s, self.faults
+        )
+    }
+}
+
 /// The first recorded step of `trace` with a fault latched (its `faults` output), if any.
 pub fn first_trip(trace: &Trace) -> Result<Option<Trip>> {
     let (time, faults) = (column(trace, "time")?, column(trace, "faults")?);
@@ -84,6 +94,7 @@ mod tests {
         let t = trace(&[[0.0, 0.0, 0.0], [0.1, 1.0, 0.0], [0.2, 2.0, 8.0], [0.3, 0.0, 9.0]]);
         let trip = first_trip(&t).unwrap().unwrap();
         assert_eq!(trip, Trip { time_s: 0.2, faults: "following error".into(), bits: Faults::FOLLOWING_ERROR });
+        assert!(trip.sentence().contains("at t = 0.2000 s (following error)"), "{}", trip.sentence());
         assert_eq!(first_trip(&trace(&[[0.0, 0.0, 0.0], [0.1, 1.0, 0.0]])).unwrap(), None);
     }
 

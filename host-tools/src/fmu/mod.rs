@@ -4,7 +4,6 @@ pub mod assignment;
 pub mod axis_health;
 pub mod circle;
 pub mod configuration;
-pub mod drive_faults;
 pub mod fmpy;
 pub mod log;
 pub mod runner;

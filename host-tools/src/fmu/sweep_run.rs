@@ -134,7 +134,7 @@ impl SweepRun {
         )?;
         progress(1.0);
         if !t.rows.last().is_some_and(|r| is_done(r[state])) {
-            match crate::fmu::drive_faults::first_fault(&t) {
+            match crate::fmu::axis_health::first_trip(&t)? {
                 Some(fault) => bail!("the sweep did not finish: {}", fault.sentence()),
                 None => bail!("the sweep did not finish within the simulated time"),
             }

@@ -10,7 +10,7 @@ use control_core::phase_shifted_sweep::SweepParams;
 use serde::Serialize;
 
 use crate::analysis::response_point::{difference, ResponsePoint};
-use crate::fmu::drive_faults::{first_fault, FaultEvent};
+use crate::fmu::axis_health::{first_trip, Trip};
 use crate::fmu::runner::Fmu;
 use crate::fmu::scenario::Value;
 use crate::fmu::sweep_run::SweepRun;
@@ -108,7 +108,7 @@ pub struct SweepReport {
     pub unmeasured_hz: Vec<f64>,
     /// The first fault the drive latched during the run, if any: the results from there on
     /// are not the loop's response.
-    pub fault: Option<FaultEvent>,
+    pub fault: Option<Trip>,
     /// Largest stream vs on-line difference allowed: (dB, degrees).
     pub agreement_limit: (f64, f64),
     pub oracle: Option<Vec<ResponsePoint>>,
@@ -189,7 +189,7 @@ pub fn run(
         }
     }
     unmeasured_hz.sort_by(f64::total_cmp);
-    let fault = first_fault(&trace);
+    let fault = first_trip(&trace)?;
     let mut files = Vec::new();
     let csv = out.join("sweep.csv");
     let mut t = Trace::new(
@@ -258,7 +258,7 @@ pub fn run(
         (Some(a), Some(b)) => format!(" — output LIMITED at {a:.0}–{b:.0} Hz: not the linear loop there"),
         _ => String::new(),
     };
-    let fault_note = fault.as_ref().map_or(String::new(), |e| format!(" — FAULT at {:.3} s ({})", e.time_s, e.names));
+    let fault_note = fault.as_ref().map_or(String::new(), |e| format!(" — FAULT at {:.3} s ({})", e.time_s, e.faults));
     plot_bode(
         &svg,
         &format!(
