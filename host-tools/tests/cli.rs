@@ -343,6 +343,8 @@ fn sweep_refuses_bad_settings_with_the_reason() {
             "--set sweep.start_hz: the sweep's settings come from this command's options",
         ),
         (vec!["--points", "128"], "sweep points = 128: at most 127"),
+        // Two cycles and no shortest measurement: seven samples at 1.08 kHz, three at 3 kHz.
+        (vec!["--min-measure", "0"], "would hold 7 acquisition samples"),
         (vec!["--device", "/dev/no-such-port", "--baud", "0"], "a baud rate is a whole number from 1 200"),
         (vec!["--reference", "/nonexistent/reference.csv"], "/nonexistent/reference.csv"),
     ] {

@@ -10,6 +10,12 @@ use crate::m_sequence::MSequence;
 const MAX_SHIFTS: u32 = 16;
 /// Upper bound of `SweepParams::max_extensions`.
 pub const MAX_EXTENSIONS: u32 = 64;
+/// Fewest acquisition samples a stepped sine's record may hold: the three-parameter fit and
+/// its noise estimate (`SineFitSums::response_error`) need eight; fewer, and precision control
+/// cannot tell how far off the result is (with `min_measure_s` 0 a record at 3 kHz held three
+/// samples and came out 3.8 dB off).
+pub const MIN_RECORD_SAMPLES: u64 = 8;
+
 /// Upper bound of `SweepParams::dither` (N·m).
 pub const MAX_SWEEP_DITHER: f32 = 1000.0;
 
@@ -132,6 +138,9 @@ pub enum SweepError {
     NeedsPositionMode,
     /// A sweep is already running.
     Busy,
+    /// A stepped sine's record at `frequency` would hold fewer than [`MIN_RECORD_SAMPLES`]
+    /// acquisition samples.
+    RecordTooShort { frequency: f32, samples: u32 },
     /// The machine-end acceleration measure with an injection point other than the torque or
     /// the position command: the velocity loop's injections would relate the acceleration to a
     /// velocity inside the loop, which no seed-001 figure is (and Off injects nothing).
@@ -163,6 +172,10 @@ impl fmt::Display for SweepError {
                 write!(f, "position-command injection needs position mode (the drive holding or streaming a position)")
             }
             Self::Busy => write!(f, "a sweep is already running"),
+            Self::RecordTooShort { frequency, samples } => write!(
+                f,
+                "a record at {frequency} Hz would hold {samples} acquisition samples; a sine fit and its noise estimate need at least {MIN_RECORD_SAMPLES}: lengthen min_measure_s (--min-measure) or measure_cycles (--measure-cycles)"
+            ),
             Self::MeasureNeedsTorqueOrPositionInjection => write!(
                 f,
                 "the machine-end acceleration measure (sweep.measure 1) needs torque-command (sweep.point 1) or position-command (sweep.point 4) injection"
@@ -285,6 +298,16 @@ impl SweepParams {
         if top >= 0.5 * loop_rate {
             return Err(SweepError::AboveLoopNyquist { frequency: top, nyquist: 0.5 * loop_rate });
         }
+        if self.signal == SweepSignal::SteppedSine {
+            let plan = self.plan();
+            for i in 0..plan.count as usize {
+                let frequency = self.frequency_in(&plan, i);
+                let samples = self.record_length(frequency, base_rate_hz).1;
+                if samples < MIN_RECORD_SAMPLES {
+                    return Err(SweepError::RecordTooShort { frequency, samples: samples as u32 });
+                }
+            }
+        }
         Ok(())
     }
 }
@@ -310,6 +333,13 @@ mod tests {
             v(SweepParams { amplitude: 1e6, ..Default::default() }),
             Err(SweepError::Range { field: "amplitude", value: 1e6, min: 0.0, max: crate::ranges::MAX_SPEED })
         );
+        // Two cycles without a shortest measurement: from about 1.1 kHz up fewer than eight
+        // samples at 4 kHz (the first such frequency of the default plan is named).
+        assert!(matches!(
+            v(SweepParams { min_measure_s: 0.0, ..Default::default() }),
+            Err(SweepError::RecordTooShort { frequency, samples: 7 }) if (frequency - 1077.73).abs() < 0.01
+        ));
+        assert_eq!(v(SweepParams { min_measure_s: 0.0, measure_cycles: 8.0, ..Default::default() }), Ok(()));
         assert_eq!(
             v(SweepParams { acquisition_divider: 3, ..Default::default() }),
             Err(SweepError::AcquisitionDivider { acquisition: 3, velocity: 2 })
