@@ -405,3 +405,71 @@ fn bench_sweep_runs_random_plants_named_by_their_seed() {
         assert!(String::from_utf8_lossy(&o.stderr).contains("--random"), "{bad:?}");
     }
 }
+
+/// A stop time whose trace would not fit memory (4·10¹² steps here) is refused when the file
+/// is loaded, naming stop_time and the limit: not an allocation failure (rc 134) after the
+/// FMU started.
+#[test]
+fn run_and_sequence_refuse_a_stop_time_whose_trace_would_not_fit_memory() {
+    let out = tmp("huge_stop_time");
+    let scenario = out.join("huge.toml");
+    std::fs::write(&scenario, "name='huge'\nstop_time=1e9\n[[events]]\ntime=0.0\nmode=1\n").unwrap();
+    let timeline = out.join("huge_timeline.toml");
+    std::fs::write(&timeline, "name='huge_timeline'\nstop_time=1e9\n[[events]]\ntime=0.0\nevent='run'\n").unwrap();
+    for (command, file) in [("run", &scenario), ("sequence", &timeline)] {
+        let o = servo().arg(command).arg(file).on_fmu(&out).output().unwrap();
+        let err = String::from_utf8_lossy(&o.stderr);
+        assert_eq!(o.status.code(), Some(2), "{command}: {err}");
+        assert!(err.contains("stop_time = 1000000000 s") && err.contains("1 GiB"), "{command}: {err}");
+        assert!(err.contains("at most stop_time = 762.6"), "{command}: {err}");
+    }
+    // A tiny step is the same explosion, refused the same way.
+    std::fs::write(&scenario, "name='huge'\nstop_time=0.3\nstep=1e-12\n[[events]]\ntime=0.0\nmode=1\n").unwrap();
+    let o = servo().arg("run").arg(&scenario).on_fmu(&out).output().unwrap();
+    assert_eq!(o.status.code(), Some(2), "{}", String::from_utf8_lossy(&o.stderr));
+    std::fs::remove_dir_all(&out).ok();
+}
+
+/// A check past the stop time is refused when the scenario is loaded, naming the check and
+/// both times (it was judged on the last sample and passed, its window shown as [7, 7]).
+#[test]
+fn run_refuses_a_check_past_the_stop_time() {
+    let out = tmp("late_check");
+    let text = std::fs::read_to_string(workspace_root().join("scenarios/position_step.toml")).unwrap();
+    let late = text.replacen("at = 0.3", "at = 7.0", 1);
+    assert_ne!(late, text);
+    let scenario = out.join("late.toml");
+    std::fs::write(&scenario, late).unwrap();
+    let o = servo().arg("run").arg(&scenario).on_fmu(&out).output().unwrap();
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert_eq!(o.status.code(), Some(2), "{err}");
+    assert!(err.contains("check 1 on motor_position") && err.contains("at = 7 s"), "{err}");
+    assert!(err.contains("stop_time = 0.3 s"), "{err}");
+    assert!(!out.join("position_step.json").exists(), "nothing was run");
+    std::fs::remove_dir_all(&out).ok();
+}
+
+/// Unknown signals, bounds no value meets and negative counts are refused when the timeline
+/// is loaded (exit 2, nothing run), not failed after the run (exit 1).
+#[test]
+fn sequence_refuses_unknown_signals_reversed_bounds_and_negative_counts_at_load() {
+    let out = tmp("sequence_load");
+    let timeline = out.join("t.toml");
+    for (expect, named) in [
+        ("signal='motor_speed'\nat=0.1\nmax=1.0", "signal = \"motor_speed\""),
+        ("signal='motor_velocity'\nat=0.1\nmin=2.0\nmax=1.0", "min = 2 is above max = 1"),
+        ("refused=-1\nat=0.1", "refused = -1"),
+    ] {
+        std::fs::write(
+            &timeline,
+            format!("name='t'\nstop_time=0.2\n[[events]]\ntime=0.0\nevent='run'\n[[expect]]\n{expect}\n"),
+        )
+        .unwrap();
+        let o = servo().arg("sequence").arg(&timeline).on_fmu(&out).output().unwrap();
+        let err = String::from_utf8_lossy(&o.stderr);
+        assert_eq!(o.status.code(), Some(2), "{expect}: {err}");
+        assert!(err.contains(named) && err.contains("is invalid"), "{expect}: {err}");
+        assert!(!out.join("t.csv").exists(), "{expect}: nothing was run");
+    }
+    std::fs::remove_dir_all(&out).ok();
+}

@@ -3,7 +3,8 @@
 //! ```toml
 //! name = "position_step"
 //! description = "1 rad position step on the default axis"
-//! stop_time = 0.3          # s, a whole number of steps
+//! stop_time = 0.3          # s, a whole number of steps; the trace it implies must fit
+//!                          # `trace_budget::MAX_TRACE_BYTES` (1 GiB)
 //! step = 0.00025           # s, optional: communication step (default: position-loop period)
 //!
 //! [parameters]             # FMU parameters by name
@@ -20,7 +21,7 @@
 //!
 //! [[checks]]               # evaluated on the result; a failed check makes `servo` exit 1
 //! signal = "motor_position"
-//! at = 0.3                 # or `from`/`to` for a window
+//! at = 0.3                 # or `from`/`to` for a window, inside [0, stop_time]
 //! min = 0.99
 //! max = 1.01
 //! ```
@@ -28,9 +29,11 @@
 use std::collections::BTreeMap;
 use std::path::Path;
 
-use anyhow::{bail, Context, Result};
+use anyhow::{anyhow, bail, Context, Result};
 use control_core::axis::Mode;
 use serde::Deserialize;
+
+use crate::fmu::trace_budget::{check_trace_size, fmu_output_count};
 
 /// Value of a parameter or an input: a number, an integer or a boolean.
 #[derive(Clone, Copy, Debug, PartialEq, Deserialize)]
@@ -140,6 +143,8 @@ impl Scenario {
         if !(self.stop_time.is_finite() && self.stop_time > 0.0) {
             bail!("stop_time must be a positive number of seconds (got {})", self.stop_time);
         }
+        check_trace_size(self.stop_time, h, self.trace_columns())
+            .map_err(|e| anyhow!("{e} (record fewer outputs with `record`, or take a longer `step`)"))?;
         let n = self.stop_time / h;
         if (n - n.round()).abs() > 1e-6 {
             bail!("stop_time {} s is not a whole number of steps of {h} s", self.stop_time);
@@ -179,7 +184,7 @@ impl Scenario {
         if let Some(p) = self.plot.iter().find(|p| !self.record.is_empty() && !self.record.contains(p)) {
             bail!("plot lists {p}, which is not recorded: add it to `record`");
         }
-        for c in &self.checks {
+        for (i, c) in self.checks.iter().enumerate() {
             if !self.record.is_empty() && !self.record.contains(&c.signal) {
                 bail!("check on {} needs it recorded: add it to `record`", c.signal);
             }
@@ -188,6 +193,48 @@ impl Scenario {
             }
             if c.min.is_none() && c.max.is_none() {
                 bail!("check on {} needs `min` and/or `max`", c.signal);
+            }
+            self.check_times_and_bounds(i, c)?;
+        }
+        Ok(())
+    }
+
+    /// Columns of the run's trace: time and the recorded outputs (every output of the FMU
+    /// when `record` is empty).
+    pub fn trace_columns(&self) -> usize {
+        1 + if self.record.is_empty() { fmu_output_count() } else { self.record.len() }
+    }
+
+    /// A check's times lie in the run, its window is not reversed and its bounds are numbers
+    /// that some value satisfies: a check is judged on samples the run has, never on the
+    /// nearest end of it.
+    fn check_times_and_bounds(&self, index: usize, c: &Check) -> Result<()> {
+        let name = match &c.description {
+            Some(d) => format!("check {} on {} ({d})", index + 1, c.signal),
+            None => format!("check {} on {}", index + 1, c.signal),
+        };
+        for (field, t) in [("at", c.at), ("from", c.from), ("to", c.to)] {
+            let Some(t) = t else { continue };
+            if !t.is_finite() {
+                bail!("{name}: {field} = {t} is not a time");
+            }
+            if t < 0.0 || t > self.stop_time + 1e-9 {
+                bail!("{name}: {field} = {t} s is outside the run [0, stop_time = {} s]", self.stop_time);
+            }
+        }
+        if let (Some(from), Some(to)) = (c.from, c.to) {
+            if from > to {
+                bail!("{name}: from = {from} s is after to = {to} s");
+            }
+        }
+        for (field, b) in [("min", c.min), ("max", c.max)] {
+            if b.is_some_and(f64::is_nan) {
+                bail!("{name}: {field} is not a number");
+            }
+        }
+        if let (Some(lo), Some(hi)) = (c.min, c.max) {
+            if lo > hi {
+                bail!("{name}: min = {lo} is above max = {hi}: no value passes");
             }
         }
         Ok(())
@@ -325,6 +372,40 @@ mod tests {
         assert!(parse("name='x'\nstop_time=0.01\nrecord=['iq']\n[[checks]]\nsignal='iq'\nat=0.01\nmax=1.0\n").is_ok());
         let e = parse("name='x'\nstop_time=0.01\nrecord=['iq']\nplot=['iq','id']\n").unwrap_err();
         assert!(e.to_string().contains("plot lists id"), "{e}");
+    }
+
+    #[test]
+    fn refuses_a_run_whose_trace_would_not_fit_memory_naming_stop_time_and_the_limit() {
+        let e = format!("{:#}", parse("name='x'\nstop_time=1e9\n").unwrap_err());
+        assert!(
+            e.contains("stop_time = 1000000000 s") && e.contains("1 GiB") && e.contains("at most stop_time"),
+            "{e}"
+        );
+        // A tiny step is the same explosion.
+        let e = format!("{:#}", parse("name='x'\nstop_time=0.3\nstep=1e-12\n").unwrap_err());
+        assert!(e.contains("step = 0.000000000001 s") && e.contains("1 GiB"), "{e}");
+        // Recording fewer outputs makes room for a longer run: 1000 s of 3 columns is 96 MB.
+        assert!(parse("name='x'\nstop_time=1000.0\n").is_err());
+        assert!(parse("name='x'\nstop_time=1000.0\nrecord=['iq','id']\n").is_ok());
+    }
+
+    #[test]
+    fn refuses_checks_outside_the_run_or_that_nothing_passes() {
+        let with_check = |c: &str| parse(&format!("name='x'\nstop_time=0.3\n[[checks]]\nsignal='iq'\n{c}\n"));
+        for (check, reason) in [
+            ("at=7.0\nmax=1.0", "at = 7 s is outside the run [0, stop_time = 0.3 s]"),
+            ("at=-0.1\nmax=1.0", "at = -0.1 s is outside the run"),
+            ("from=0.0\nto=0.5\nmax=1.0", "to = 0.5 s is outside the run"),
+            ("from=0.2\nto=0.1\nmax=1.0", "from = 0.2 s is after to = 0.1 s"),
+            ("at=0.1\nmin=2.0\nmax=1.0", "min = 2 is above max = 1"),
+            ("at=nan\nmax=1.0", "at = NaN is not a time"),
+            ("at=0.1\nmax=nan", "max is not a number"),
+        ] {
+            let e = format!("{:#}", with_check(check).unwrap_err());
+            assert!(e.contains("check 1 on iq") && e.contains(reason), "{check}: {e}");
+        }
+        assert!(with_check("at=0.3\nmin=1.0\nmax=1.0").is_ok());
+        assert!(with_check("from=0.0\nto=0.3\nmax=1.0").is_ok());
     }
 
     #[test]
