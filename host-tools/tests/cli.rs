@@ -473,3 +473,43 @@ fn sequence_refuses_unknown_signals_reversed_bounds_and_negative_counts_at_load(
     }
     std::fs::remove_dir_all(&out).ok();
 }
+
+/// A lowered loop rate (8 kHz, in the documented 1–200 kHz) in a scenario that never sweeps:
+/// it runs with the default sweep settings (3 kHz, which only a sweep uses); the step must be
+/// whole position-loop periods and the refusal at load says so; a sweep start it cannot run
+/// is refused with the reason, shown in the report, and nothing else changes.
+#[test]
+fn a_lowered_loop_rate_runs_without_touching_the_sweep_settings() {
+    let out = tmp("lowered_rate");
+    let text = std::fs::read_to_string(workspace_root().join("scenarios/position_step.toml")).unwrap();
+    // The table goes in front of the first array of tables (after `plot`, a top-level key).
+    let lowered = text.replacen("\n[[events]]", "\n[parameters]\n\"ctrl.current_loop_hz\" = 8000.0\n\n[[events]]", 1);
+    assert_ne!(lowered, text);
+    let scenario = out.join("lowered.toml");
+    std::fs::write(&scenario, &lowered).unwrap();
+    let o = servo().arg("run").arg(&scenario).on_fmu(&out).output().unwrap();
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert_eq!(o.status.code(), Some(2), "{err}");
+    assert!(err.contains("step = 0.00025 s (the default") && err.contains("set `step` to a multiple"), "{err}");
+    assert!(err.contains("position-loop period 0.0005 s"), "{err}");
+
+    let with_step = lowered.replacen("stop_time = 0.3\n", "stop_time = 0.3\nstep = 0.0005\n", 1);
+    std::fs::write(&scenario, &with_step).unwrap();
+    let o = servo().arg("run").arg(&scenario).on_fmu(&out).arg("--json").output().unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let summary: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+    assert_eq!(summary[0]["passed"], true, "{summary}");
+    assert_eq!(summary[0]["fmu_warnings"].as_array().map(Vec::len), Some(0), "{summary}");
+
+    let sweeping = format!(
+        "{with_step}\n[[events]]\ntime = 0.1\nmode = 1\nsweep_start = 1\n\n[[checks]]\nsignal = \"sweep_state\"\nfrom = 0.1\nto = 0.3\nmax = 0\n"
+    );
+    std::fs::write(&scenario, &sweeping).unwrap();
+    let o = servo().arg("run").arg(&scenario).on_fmu(&out).output().unwrap();
+    let stdout = String::from_utf8_lossy(&o.stdout);
+    assert!(
+        stdout.contains("FMU: sweep_start refused at t = 0.1 s: sweep stop_hz = 3000 Hz is at or above the Nyquist frequency 2000 Hz"),
+        "{stdout}"
+    );
+    std::fs::remove_dir_all(&out).ok();
+}

@@ -118,6 +118,40 @@ pub struct Scenario {
 /// Default communication step: the position-loop period of the default parameters.
 pub const DEFAULT_STEP: f64 = 4.0 / 16_000.0;
 
+/// A parameter's value in `parameters`, or the FMU's start value (NaN for an unknown name).
+pub fn parameter_or_start(parameters: &BTreeMap<String, Value>, name: &str) -> f64 {
+    match parameters.get(name) {
+        Some(v) => v.as_f64(),
+        None => servo_axis::variables::by_name(name)
+            .and_then(|d| servo_axis::variables::Values::start().get(d.vr))
+            .map_or(f64::NAN, |v| Value::from(v).as_f64()),
+    }
+}
+
+/// The FMU takes communication steps of whole position-loop periods
+/// (`ctrl.position_divider / ctrl.current_loop_hz`): a step that is not (the default 0.25 ms
+/// once the rate is lowered, say) is refused when the file is loaded, saying which period and
+/// what to set, rather than by the FMU's first `do_step`. `default` says the step was not
+/// written in the file. Rates the FMU itself refuses are left to it.
+pub fn check_step_fits_position_loop(step: f64, default: bool, parameters: &BTreeMap<String, Value>) -> Result<()> {
+    let rate = parameter_or_start(parameters, "ctrl.current_loop_hz");
+    let divider = parameter_or_start(parameters, "ctrl.position_divider");
+    if !(rate.is_finite() && rate > 0.0 && divider.is_finite() && divider >= 1.0) {
+        return Ok(());
+    }
+    let period = divider / rate;
+    let periods = (step / period).round();
+    if periods < 1.0 || (step - periods * period).abs() > 1e-9 * period.max(step) {
+        let which = if default { " (the default: the position-loop period at 16 kHz)" } else { "" };
+        bail!(
+            "step = {step} s{which} is not a whole multiple of the position-loop period {period} s \
+             (ctrl.position_divider {divider} / ctrl.current_loop_hz {rate} Hz): set `step` to a multiple of it, \
+             e.g. step = {period}"
+        );
+    }
+    Ok(())
+}
+
 impl Scenario {
     pub fn load(path: &Path) -> Result<Self> {
         let text = std::fs::read_to_string(path).with_context(|| format!("cannot read scenario {}", path.display()))?;
@@ -143,6 +177,7 @@ impl Scenario {
         if !(self.stop_time.is_finite() && self.stop_time > 0.0) {
             bail!("stop_time must be a positive number of seconds (got {})", self.stop_time);
         }
+        check_step_fits_position_loop(h, self.step.is_none(), &self.parameters)?;
         check_trace_size(self.stop_time, h, self.trace_columns())
             .map_err(|e| anyhow!("{e} (record fewer outputs with `record`, or take a longer `step`)"))?;
         let n = self.stop_time / h;
@@ -387,6 +422,25 @@ mod tests {
         // Recording fewer outputs makes room for a longer run: 1000 s of 3 columns is 96 MB.
         assert!(parse("name='x'\nstop_time=1000.0\n").is_err());
         assert!(parse("name='x'\nstop_time=1000.0\nrecord=['iq','id']\n").is_ok());
+    }
+
+    #[test]
+    fn a_step_off_the_position_loop_period_is_refused_at_load_saying_what_to_set() {
+        let lowered = "name='x'\nstop_time=0.01\n[parameters]\n'ctrl.current_loop_hz'=8000.0\n";
+        let e = format!("{:#}", parse(lowered).unwrap_err());
+        assert!(
+            e.contains("step = 0.00025 s (the default")
+                && e.contains("position-loop period 0.0005 s")
+                && e.contains("step = 0.0005"),
+            "{e}"
+        );
+        assert!(parse(&format!("{lowered}step=0.0005\n")).is_ok());
+        assert!(parse(&format!("{lowered}step=0.001\n")).is_ok());
+        let e = format!("{:#}", parse(&format!("{lowered}step=0.00075\n")).unwrap_err());
+        assert!(e.contains("step = 0.00075 s is not a whole multiple"), "{e}");
+        // A higher rate: the default step is 8 periods at 32 kHz, and a divider the same way.
+        assert!(parse("name='x'\nstop_time=0.01\n[parameters]\n'ctrl.current_loop_hz'=32000.0\n").is_ok());
+        assert!(parse("name='x'\nstop_time=0.01\n[parameters]\n'ctrl.position_divider'=8\n").is_err());
     }
 
     #[test]

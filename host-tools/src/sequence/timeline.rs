@@ -168,6 +168,8 @@ impl SequenceScenario {
         if !(self.stop_time.is_finite() && self.stop_time > 0.0) {
             bail!("stop_time must be a positive number of seconds");
         }
+        crate::fmu::scenario::check_step_fits_position_loop(DEFAULT_STEP, true, &self.parameters)
+            .context("a timeline runs at the default step")?;
         // The run records every output of the FMU at the default step.
         check_trace_size(self.stop_time, DEFAULT_STEP, 1 + fmu_output_count())
             .map_err(|e| anyhow!("{e} (a timeline records every output at the {DEFAULT_STEP} s step)"))?;
