@@ -416,9 +416,19 @@ mod tests {
             e.contains("stop_time = 1000000000 s") && e.contains("1 GiB") && e.contains("at most stop_time"),
             "{e}"
         );
-        // A tiny step is the same explosion.
+        // A tiny step is refused (shorter than the position-loop period), and at the fastest
+        // rate (200 kHz, every tick a position tick: 5 µs steps) the memory names the limit.
         let e = format!("{:#}", parse("name='x'\nstop_time=0.3\nstep=1e-12\n").unwrap_err());
-        assert!(e.contains("step = 0.000000000001 s") && e.contains("1 GiB"), "{e}");
+        assert!(e.contains("step = 0.000000000001 s"), "{e}");
+        let fastest = |stop: f64| {
+            parse(&format!(
+                "name='x'\nstop_time={stop:?}\nstep=5e-6\n[parameters]\n'ctrl.current_loop_hz'=200000.0\n\
+                 'ctrl.velocity_divider'=1\n'ctrl.position_divider'=1\n"
+            ))
+        };
+        assert!(fastest(10.0).is_ok());
+        let e = format!("{:#}", fastest(100.0).unwrap_err());
+        assert!(e.contains("step = 0.000005 s") && e.contains("1 GiB"), "{e}");
         // Recording fewer outputs makes room for a longer run: 1000 s of 3 columns is 96 MB.
         assert!(parse("name='x'\nstop_time=1000.0\n").is_err());
         assert!(parse("name='x'\nstop_time=1000.0\nrecord=['iq','id']\n").is_ok());
@@ -426,17 +436,18 @@ mod tests {
 
     #[test]
     fn a_step_off_the_position_loop_period_is_refused_at_load_saying_what_to_set() {
-        let lowered = "name='x'\nstop_time=0.01\n[parameters]\n'ctrl.current_loop_hz'=8000.0\n";
-        let e = format!("{:#}", parse(lowered).unwrap_err());
+        let lowered =
+            |step: &str| format!("name='x'\nstop_time=0.01\n{step}\n[parameters]\n'ctrl.current_loop_hz'=8000.0\n");
+        let e = format!("{:#}", parse(&lowered("")).unwrap_err());
         assert!(
             e.contains("step = 0.00025 s (the default")
                 && e.contains("position-loop period 0.0005 s")
                 && e.contains("step = 0.0005"),
             "{e}"
         );
-        assert!(parse(&format!("{lowered}step=0.0005\n")).is_ok());
-        assert!(parse(&format!("{lowered}step=0.001\n")).is_ok());
-        let e = format!("{:#}", parse(&format!("{lowered}step=0.00075\n")).unwrap_err());
+        assert!(parse(&lowered("step=0.0005")).is_ok());
+        assert!(parse(&lowered("step=0.001")).is_ok());
+        let e = format!("{:#}", parse(&lowered("step=0.00075")).unwrap_err());
         assert!(e.contains("step = 0.00075 s is not a whole multiple"), "{e}");
         // A higher rate: the default step is 8 periods at 32 kHz, and a divider the same way.
         assert!(parse("name='x'\nstop_time=0.01\n[parameters]\n'ctrl.current_loop_hz'=32000.0\n").is_ok());
