@@ -332,10 +332,12 @@ pub fn evaluate_checks(scenario: &Scenario, trace: &Trace) -> Result<Vec<CheckRe
             window: (from, to),
             not_evaluated: None,
         };
-        // Judged only where the trace has samples: a window past its end (or before its
-        // start) fails with the reason, never on the nearest sample.
+        // Judged only where the trace has samples: a window that ends past its end, or before
+        // its first sample, fails with the reason, never on the nearest sample. (A window from
+        // 0 on a drive's telemetry, whose first sample comes one telemetry period after the
+        // start, is judged on the samples it holds.)
         let (first, last) = (time.first().copied().unwrap_or(f64::NAN), time.last().copied().unwrap_or(f64::NAN));
-        if !(from >= first - 0.5 * h && to <= last + 0.5 * h) {
+        if !(to >= first - 0.5 * h && to <= last + 0.5 * h) {
             result.not_evaluated = Some(format!("the trace covers [{first}, {last}] s, not [{from}, {to}] s"));
             results.push(result);
             continue;
@@ -365,11 +367,11 @@ mod tests {
     use super::*;
     use crate::fmu::scenario::Check;
 
-    /// A drive's telemetry: samples every 0.7 ms (off the 0.25 ms grid) from 0 to 0.3007 s,
-    /// the value equal to the sample's time.
-    fn drive_trace() -> Trace {
+    /// A drive's telemetry: samples every 0.7 ms (off the 0.25 ms grid) from sample `first`
+    /// (at `first`·0.7 ms) to 0.3010 s, the value equal to the sample's time.
+    fn drive_trace(first: usize) -> Trace {
         let mut t = Trace::new(vec!["time".into(), "iq".into()]);
-        for k in 0..=430 {
+        for k in first..=430 {
             let time = k as f64 * 0.7e-3;
             t.rows.push([time, time]);
         }
@@ -386,18 +388,22 @@ mod tests {
             max: Some(1.0),
             description: None,
         };
-        let s = Scenario {
+        let s = Scenario { checks: vec![c], ..scenario() };
+        evaluate_checks(&s, &drive_trace(0)).unwrap().remove(0)
+    }
+
+    fn scenario() -> Scenario {
+        Scenario {
             name: "x".into(),
             description: String::new(),
             stop_time: 0.3,
             step: None,
             parameters: Default::default(),
             events: vec![],
-            checks: vec![c],
+            checks: vec![],
             plot: vec![],
             record: vec![],
-        };
-        evaluate_checks(&s, &drive_trace()).unwrap().remove(0)
+        }
     }
 
     #[test]
@@ -414,5 +420,24 @@ mod tests {
         assert!(!r.passed && r.not_evaluated.is_some(), "{r:?}");
         let r = check(None, Some((0.1, 0.3)));
         assert!(r.passed && r.not_evaluated.is_none(), "{r:?}");
+        // A drive's first sample comes after the start: a window from 0 is judged on the
+        // samples it holds; a moment before the first sample is not evaluated.
+        let trace = drive_trace(3);
+        let s = |at: Option<f64>, window: Option<(f64, f64)>| Scenario {
+            checks: vec![Check {
+                signal: "iq".into(),
+                at,
+                from: window.map(|w| w.0),
+                to: window.map(|w| w.1),
+                min: None,
+                max: Some(1.0),
+                description: None,
+            }],
+            ..scenario()
+        };
+        let r = evaluate_checks(&s(None, Some((0.0, 0.3))), &trace).unwrap().remove(0);
+        assert!(r.passed && r.observed.0 == 3.0 * 0.7e-3, "{r:?}");
+        let r = evaluate_checks(&s(Some(0.001), None), &trace).unwrap().remove(0);
+        assert!(!r.passed && r.not_evaluated.is_some(), "{r:?}");
     }
 }
