@@ -237,7 +237,11 @@ impl Fmu {
         let mut columns = vec!["time".to_string()];
         columns.extend(outputs.iter().map(|v| v.name.clone()));
         let mut trace = Trace::new(columns);
-        trace.rows.reserve_exact(if keep_rows { n + 1 } else { 1 });
+        // Reserved up to the trace budget: a scenario built in code (a sweep's longest
+        // schedule, say, which `run_until` usually ends early) cannot abort on an allocation
+        // of memory its run never fills; files are refused beyond it when loaded.
+        let budget_rows = (crate::fmu::trace_budget::MAX_TRACE_BYTES / (8.0 * (outputs.len() + 1) as f64)) as usize;
+        trace.rows.reserve_exact(if keep_rows { (n + 1).min(budget_rows) } else { 1 });
         // Outputs are read in one call per type, then put back in column order.
         let of_kind = |kind: Kind| -> (Vec<usize>, Vec<u32>) {
             outputs.iter().enumerate().filter(|(_, v)| v.kind == kind).map(|(i, v)| (i, v.vr)).unzip()
