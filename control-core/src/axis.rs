@@ -364,7 +364,12 @@ impl Axis {
     /// Start the frequency-response sweep of `Params::sweep` (seed 000). Velocity-command and
     /// feedback injection need the velocity loop running, position-command injection the
     /// position mode.
+    ///
+    /// The settings are held against the axis's rates and limits here
+    /// ([`Params::validate_sweep`]): a sweep that would alias or be cut is refused with the
+    /// reason and nothing changes, while an axis that never sweeps runs whatever its rate.
     pub fn start_sweep(&mut self) -> Result<(), SweepError> {
+        self.params.validate_sweep()?;
         let point = self.params.sweep.point;
         if point == InjectionPoint::PositionCommand {
             if self.mode != Some(Mode::Position) {

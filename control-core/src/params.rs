@@ -226,6 +226,7 @@ impl ParamError {
             Self::Friction(F::Decay(_)) => "friction.decay",
             Self::Sweep(crate::phase_shifted_sweep::SweepError::Setting { field, .. }) => field,
             Self::Sweep(crate::phase_shifted_sweep::SweepError::Range { field, .. }) => field,
+            Self::Sweep(crate::phase_shifted_sweep::SweepError::AboveLoopNyquist { field, .. }) => field,
             Self::Sweep(_) => "sweep",
             Self::Correction(C::Count(_)) => "correction.count",
             Self::Correction(C::Frequency { .. }) => "correction frequency",
@@ -378,25 +379,39 @@ impl Params {
         AccDecFilter::new(&self.acc_dec, r.position_period()).map_err(ParamError::AccDec)?;
         self.sequence.validate().map_err(ParamError::Sequence)?;
         self.friction.validate().map_err(ParamError::Friction)?;
-        self.sweep.validate(r.current_loop_hz, r.velocity_divider).map_err(ParamError::Sweep)?;
+        // The sweep's settings on their own; held against the rates and the limits when a
+        // sweep starts (`validate_sweep`): an axis that never sweeps runs at a lowered rate
+        // with the default sweep settings.
+        self.sweep.validate_settings(r.velocity_divider).map_err(ParamError::Sweep)?;
+        self.correction.validate(r.position_period()).map_err(ParamError::Correction)?;
+        in_range("accelerometer.sensitivity", self.accelerometer.sensitivity, MIN_SENSITIVITY, MAX_SENSITIVITY)?;
+        Ok(())
+    }
+
+    /// The sweep's settings against the rates and limits of these (validated) parameters: what
+    /// [`crate::axis::Axis::start_sweep`] checks before a sweep starts (and a drive when it is
+    /// given parameters: its rate is its board's, so a sweep that cannot run there is refused
+    /// by name at once). Every frequency below the Nyquist frequency of the loop it is
+    /// injected into, a position-command amplitude within an i32 of counts, and no injection
+    /// the torque or current limit would cut.
+    pub fn validate_sweep(&self) -> Result<(), SweepError> {
+        let r = &self.rates;
+        self.sweep.validate(r.current_loop_hz, r.velocity_divider)?;
         if self.sweep.point == crate::excitation::InjectionPoint::PositionCommand {
             // Taken on position ticks, in whole counts of an i32 (`Axis::position_tick`).
             let nyquist = 0.5 * r.current_loop_hz / r.position_divider as f32;
-            let top = self.sweep.top_hz();
-            if top >= nyquist {
-                return Err(ParamError::Sweep(SweepError::AboveLoopNyquist { frequency: top, nyquist }));
-            }
+            self.sweep.below_nyquist(nyquist, "current_loop_hz / position_divider")?;
             let (value, max) =
                 (self.sweep.amplitude, i32::MAX as f32 * crate::TAU / self.encoder_counts_per_rev as f32);
             if value > max {
-                return Err(ParamError::Sweep(SweepError::Range { field: "amplitude", value, min: 0.0, max }));
+                return Err(SweepError::Range { field: "amplitude", value, min: 0.0, max });
             }
         }
         // The dither is added after the torque limit: one beyond the limit would be cut by the
         // current limit instead of injected as asked.
-        if self.sweep.dither > v.torque_limit {
-            let (value, max) = (self.sweep.dither, v.torque_limit);
-            return Err(ParamError::Sweep(SweepError::Range { field: "dither", value, min: 0.0, max }));
+        if self.sweep.dither > self.velocity.torque_limit {
+            let (value, max) = (self.sweep.dither, self.velocity.torque_limit);
+            return Err(SweepError::Range { field: "dither", value, min: 0.0, max });
         }
         // Likewise a torque-command excitation whose own peak with the dither reaches the
         // current limit's torque (kt·max_current: the injection is added after the torque
@@ -409,11 +424,17 @@ impl Params {
             && self.sweep.amplitude + self.sweep.dither >= peak_torque
         {
             let (value, max) = (self.sweep.amplitude, peak_torque - self.sweep.dither);
-            return Err(ParamError::Sweep(SweepError::Range { field: "amplitude", value, min: 0.0, max }));
+            return Err(SweepError::Range { field: "amplitude", value, min: 0.0, max });
         }
-        self.correction.validate(r.position_period()).map_err(ParamError::Correction)?;
-        in_range("accelerometer.sensitivity", self.accelerometer.sensitivity, MIN_SENSITIVITY, MAX_SENSITIVITY)?;
         Ok(())
+    }
+
+    /// [`Params::validate`] and [`Params::validate_sweep`]: what a drive accepts (its loop
+    /// rate is fixed by its board, so a sweep its parameters cannot run is refused when they
+    /// are given, by name, rather than at the start).
+    pub fn validate_for_drive(&self) -> Result<(), ParamError> {
+        self.validate()?;
+        self.validate_sweep().map_err(ParamError::Sweep)
     }
 }
 
@@ -425,11 +446,46 @@ mod tests {
     fn a_sweep_dither_beyond_the_torque_limit_is_refused_not_cut() {
         let mut p = Params::default();
         p.sweep.dither = p.velocity.torque_limit;
-        assert_eq!(p.validate(), Ok(()));
+        assert_eq!(p.validate_for_drive(), Ok(()));
         p.sweep.dither = p.velocity.torque_limit * 1.5;
-        let e = p.validate().unwrap_err();
+        let e = p.validate_for_drive().unwrap_err();
         assert!(matches!(e, ParamError::Sweep(SweepError::Range { field: "dither", .. })), "{e:?}");
         assert_eq!(e.field(), "dither");
+        // The axis itself runs (held against the limit when a sweep starts).
+        assert_eq!(p.validate(), Ok(()));
+    }
+
+    /// A lowered loop rate with the default sweep settings (3 kHz, above the velocity loop's
+    /// Nyquist frequency of 2 kHz at 8 kHz): the axis builds and runs; the sweep is refused
+    /// when it starts, naming the field, the frequency and the loop.
+    #[test]
+    fn a_lowered_rate_builds_the_axis_and_refuses_only_the_sweep_it_cannot_run() {
+        extern crate std;
+        let mut p = Params::default();
+        p.rates.current_loop_hz = 8000.0;
+        assert_eq!(p.validate(), Ok(()));
+        let e = p.validate_sweep().unwrap_err();
+        assert_eq!(
+            e,
+            SweepError::AboveLoopNyquist {
+                field: "stop_hz",
+                frequency: 3000.0,
+                nyquist: 2000.0,
+                rate: "current_loop_hz / velocity_divider"
+            }
+        );
+        assert_eq!(
+            std::format!("{e}"),
+            "sweep stop_hz = 3000 Hz is at or above the Nyquist frequency 2000 Hz of the loop it is injected into (half of current_loop_hz / velocity_divider)"
+        );
+        assert_eq!(ParamError::Sweep(e).field(), "stop_hz");
+        // A drive, whose rate is its board's, refuses such parameters at once, by name.
+        assert_eq!(p.validate_for_drive().map_err(|e| e.field()), Err("stop_hz"));
+        // Below the lowered Nyquist frequency, extra_hz is the highest and named.
+        p.sweep.stop_hz = 1500.0;
+        assert!(matches!(p.validate_sweep(), Err(SweepError::AboveLoopNyquist { field: "extra_hz", .. })));
+        p.sweep.extra_hz = 0.0;
+        assert_eq!(p.validate_for_drive(), Ok(()));
     }
 
     #[test]
@@ -438,26 +494,26 @@ mod tests {
         p.sweep.point = crate::excitation::InjectionPoint::TorqueCommand;
         let peak = p.motor.torque_constant() * p.current.max_current;
         p.sweep.amplitude = 0.99 * (peak - p.sweep.dither);
-        assert_eq!(p.validate(), Ok(()));
+        assert_eq!(p.validate_for_drive(), Ok(()));
         // The default amplitude (2, for the velocity points' rad/s) is the default axis's
         // current-limit torque (0.1 N·m/A × 20 A).
         p.sweep.amplitude = peak - p.sweep.dither;
-        let e = p.validate().unwrap_err();
+        let e = p.validate_for_drive().unwrap_err();
         assert!(matches!(e, ParamError::Sweep(SweepError::Range { field: "amplitude", .. })), "{e:?}");
         // The current limit is what cuts the injection, not the velocity loop's torque limit
         // (the injection is added after it): a lower torque limit refuses nothing more, a
         // lower current limit does.
         p.sweep.amplitude = 1.5;
         p.velocity.torque_limit = 1.0;
-        assert_eq!(p.validate(), Ok(()));
+        assert_eq!(p.validate_for_drive(), Ok(()));
         p.velocity.torque_limit = 2.0;
         p.current.max_current = 10.0;
-        let e = p.validate().unwrap_err();
+        let e = p.validate_for_drive().unwrap_err();
         assert!(matches!(e, ParamError::Sweep(SweepError::Range { field: "amplitude", .. })), "{e:?}");
         // The velocity points' amplitude is a speed: not held against the torque limit.
         p.sweep.point = crate::excitation::InjectionPoint::VelocityCommand;
         p.sweep.amplitude = 2.0 * p.velocity.torque_limit;
-        assert_eq!(p.validate(), Ok(()));
+        assert_eq!(p.validate_for_drive(), Ok(()));
     }
 
     #[test]
@@ -468,19 +524,19 @@ mod tests {
         // Below the velocity loop's Nyquist frequency (what the other points need), above the
         // position loop's: refused, not aliased.
         (p.sweep.stop_hz, p.sweep.extra_hz) = (1.5 * nyquist, 0.0);
-        let e = p.validate().unwrap_err();
+        let e = p.validate_for_drive().unwrap_err();
         assert!(matches!(e, ParamError::Sweep(SweepError::AboveLoopNyquist { .. })), "{e:?}");
         p.sweep.stop_hz = 0.9 * nyquist;
-        assert_eq!(p.validate(), Ok(()));
+        assert_eq!(p.validate_for_drive(), Ok(()));
         // An amplitude beyond 2³¹ counts would saturate: refused, not cut.
         p.sweep.amplitude = 1.01 * i32::MAX as f32 * crate::TAU / p.encoder_counts_per_rev as f32;
-        let e = p.validate().unwrap_err();
+        let e = p.validate_for_drive().unwrap_err();
         assert!(matches!(e, ParamError::Sweep(SweepError::Range { field: "amplitude", .. })), "{e:?}");
     }
 
     #[test]
     fn defaults_are_valid() {
-        assert_eq!(Params::default().validate(), Ok(()));
+        assert_eq!(Params::default().validate_for_drive(), Ok(()));
     }
 
     #[test]

@@ -371,7 +371,8 @@ pub fn handle(axis: &mut Axis, commands: &mut Commands, stream: &mut Acquisition
             if !parameters_may_change(commands, axis) {
                 return refused(RefusalReason::Busy);
             }
-            match Axis::new(p) {
+            // A drive's rate is its board's: a sweep its parameters cannot run is refused now.
+            match p.validate_for_drive().and_then(|()| Axis::new(p)) {
                 Ok(new) => {
                     *axis = new;
                     Response::Done

@@ -400,6 +400,11 @@ impl Host<'_> {
         if let Err(field) = build_axis(slot, p) {
             return Response::Refused(RefusalReason::InvalidParams(FieldName::new(field)));
         }
+        // The board's rate is fixed: a sweep these parameters cannot run is refused now, by
+        // name (an axis that is only built checks it when the sweep starts).
+        if let Err(e) = p.validate_sweep() {
+            return Response::Refused(RefusalReason::InvalidParams(FieldName::new(ParamError::Sweep(e).field())));
+        }
         let swapped = self
             .drive
             .with(|s, axis| {

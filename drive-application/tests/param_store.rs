@@ -188,6 +188,16 @@ fn refused_parameter_changes_leave_the_axis_in_force() {
     );
     assert_eq!(drive.with(|_, axis| *axis.params()).unwrap(), set(2), "the axis in force is unchanged");
     assert_eq!(*host.params(), set(2));
+    // A sweep the board's rate cannot run (5 kHz above the velocity loop's 4 kHz Nyquist
+    // frequency at 16 kHz): the axis would build, the drive refuses the set by the field now.
+    let mut aliasing = set(5);
+    aliasing.sweep.stop_hz = 5000.0;
+    assert_eq!(Params::validate(&aliasing), Ok(()));
+    assert_eq!(
+        host.handle(Request::SetParams(aliasing), &mut flash),
+        Response::Refused(control_core::protocol::RefusalReason::InvalidParams(FieldName::new("stop_hz")))
+    );
+    assert_eq!(drive.with(|_, axis| *axis.params()).unwrap(), set(2), "the axis in force is unchanged");
     // Moving: refused as busy, nothing swapped.
     let moving = control_core::Commands { mode: control_core::Mode::Velocity, velocity: 10.0, ..Default::default() };
     assert_eq!(host.handle(Request::SetCommands(moving), &mut flash), Response::Done);

@@ -30,7 +30,7 @@ struct SequenceInputsSeen {
 #[derive(Clone, Debug)]
 pub struct ModelState {
     pub values: Values,
-    sim: Option<AxisSimulation>,
+    pub(crate) sim: Option<AxisSimulation>,
     /// Model time of tick 0 (the importer's start time).
     start_time: f64,
     last_fault_reset: bool,

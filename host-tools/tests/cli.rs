@@ -687,3 +687,111 @@ fn bench_sweep_runs_random_plants_named_by_their_seed() {
         assert!(String::from_utf8_lossy(&o.stderr).contains("--random"), "{bad:?}");
     }
 }
+
+/// A stop time whose trace would not fit memory (4·10¹² steps here) is refused when the file
+/// is loaded, naming stop_time and the limit: not an allocation failure (rc 134) after the
+/// FMU started.
+#[test]
+fn run_and_sequence_refuse_a_stop_time_whose_trace_would_not_fit_memory() {
+    let out = tmp("huge_stop_time");
+    let scenario = out.join("huge.toml");
+    std::fs::write(&scenario, "name='huge'\nstop_time=1e9\n[[events]]\ntime=0.0\nmode=1\n").unwrap();
+    let timeline = out.join("huge_timeline.toml");
+    std::fs::write(&timeline, "name='huge_timeline'\nstop_time=1e9\n[[events]]\ntime=0.0\nevent='run'\n").unwrap();
+    for (command, file) in [("run", &scenario), ("sequence", &timeline)] {
+        let o = servo().arg(command).arg(file).on_fmu(&out).output().unwrap();
+        let err = String::from_utf8_lossy(&o.stderr);
+        assert_eq!(o.status.code(), Some(2), "{command}: {err}");
+        assert!(err.contains("stop_time = 1000000000 s") && err.contains("1 GiB"), "{command}: {err}");
+        assert!(err.contains("at most stop_time = 762.6"), "{command}: {err}");
+    }
+    // A tiny step is the same explosion, refused the same way.
+    std::fs::write(&scenario, "name='huge'\nstop_time=0.3\nstep=1e-12\n[[events]]\ntime=0.0\nmode=1\n").unwrap();
+    let o = servo().arg("run").arg(&scenario).on_fmu(&out).output().unwrap();
+    assert_eq!(o.status.code(), Some(2), "{}", String::from_utf8_lossy(&o.stderr));
+    std::fs::remove_dir_all(&out).ok();
+}
+
+/// A check past the stop time is refused when the scenario is loaded, naming the check and
+/// both times (it was judged on the last sample and passed, its window shown as [7, 7]).
+#[test]
+fn run_refuses_a_check_past_the_stop_time() {
+    let out = tmp("late_check");
+    let text = std::fs::read_to_string(workspace_root().join("scenarios/position_step.toml")).unwrap();
+    let late = text.replacen("at = 0.3", "at = 7.0", 1);
+    assert_ne!(late, text);
+    let scenario = out.join("late.toml");
+    std::fs::write(&scenario, late).unwrap();
+    let o = servo().arg("run").arg(&scenario).on_fmu(&out).output().unwrap();
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert_eq!(o.status.code(), Some(2), "{err}");
+    assert!(err.contains("check 1 on motor_position") && err.contains("at = 7 s"), "{err}");
+    assert!(err.contains("stop_time = 0.3 s"), "{err}");
+    assert!(!out.join("position_step.json").exists(), "nothing was run");
+    std::fs::remove_dir_all(&out).ok();
+}
+
+/// Unknown signals, bounds no value meets and negative counts are refused when the timeline
+/// is loaded (exit 2, nothing run), not failed after the run (exit 1).
+#[test]
+fn sequence_refuses_unknown_signals_reversed_bounds_and_negative_counts_at_load() {
+    let out = tmp("sequence_load");
+    let timeline = out.join("t.toml");
+    for (expect, named) in [
+        ("signal='motor_speed'\nat=0.1\nmax=1.0", "signal = \"motor_speed\""),
+        ("signal='motor_velocity'\nat=0.1\nmin=2.0\nmax=1.0", "min = 2 is above max = 1"),
+        ("refused=-1\nat=0.1", "refused = -1"),
+    ] {
+        std::fs::write(
+            &timeline,
+            format!("name='t'\nstop_time=0.2\n[[events]]\ntime=0.0\nevent='run'\n[[expect]]\n{expect}\n"),
+        )
+        .unwrap();
+        let o = servo().arg("sequence").arg(&timeline).on_fmu(&out).output().unwrap();
+        let err = String::from_utf8_lossy(&o.stderr);
+        assert_eq!(o.status.code(), Some(2), "{expect}: {err}");
+        assert!(err.contains(named) && err.contains("is invalid"), "{expect}: {err}");
+        assert!(!out.join("t.csv").exists(), "{expect}: nothing was run");
+    }
+    std::fs::remove_dir_all(&out).ok();
+}
+
+/// A lowered loop rate (8 kHz, in the documented 1–200 kHz) in a scenario that never sweeps:
+/// it runs with the default sweep settings (3 kHz, which only a sweep uses); the step must be
+/// whole position-loop periods and the refusal at load says so; a sweep start it cannot run
+/// is refused with the reason, shown in the report, and nothing else changes.
+#[test]
+fn a_lowered_loop_rate_runs_without_touching_the_sweep_settings() {
+    let out = tmp("lowered_rate");
+    let text = std::fs::read_to_string(workspace_root().join("scenarios/position_step.toml")).unwrap();
+    // The table goes in front of the first array of tables (after `plot`, a top-level key).
+    let lowered = text.replacen("\n[[events]]", "\n[parameters]\n\"ctrl.current_loop_hz\" = 8000.0\n\n[[events]]", 1);
+    assert_ne!(lowered, text);
+    let scenario = out.join("lowered.toml");
+    std::fs::write(&scenario, &lowered).unwrap();
+    let o = servo().arg("run").arg(&scenario).on_fmu(&out).output().unwrap();
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert_eq!(o.status.code(), Some(2), "{err}");
+    assert!(err.contains("step = 0.00025 s (the default") && err.contains("set `step` to a multiple"), "{err}");
+    assert!(err.contains("position-loop period 0.0005 s"), "{err}");
+
+    let with_step = lowered.replacen("stop_time = 0.3\n", "stop_time = 0.3\nstep = 0.0005\n", 1);
+    std::fs::write(&scenario, &with_step).unwrap();
+    let o = servo().arg("run").arg(&scenario).on_fmu(&out).arg("--json").output().unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let summary: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+    assert_eq!(summary[0]["passed"], true, "{summary}");
+    assert_eq!(summary[0]["fmu_warnings"].as_array().map(Vec::len), Some(0), "{summary}");
+
+    let sweeping = format!(
+        "{with_step}\n[[events]]\ntime = 0.1\nmode = 1\nsweep_start = 1\n\n[[checks]]\nsignal = \"sweep_state\"\nfrom = 0.1\nto = 0.3\nmax = 0\n"
+    );
+    std::fs::write(&scenario, &sweeping).unwrap();
+    let o = servo().arg("run").arg(&scenario).on_fmu(&out).output().unwrap();
+    let stdout = String::from_utf8_lossy(&o.stdout);
+    assert!(
+        stdout.contains("FMU: sweep_start refused at t = 0.1 s: sweep stop_hz = 3000 Hz is at or above the Nyquist frequency 2000 Hz"),
+        "{stdout}"
+    );
+    std::fs::remove_dir_all(&out).ok();
+}

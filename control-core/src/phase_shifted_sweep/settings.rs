@@ -126,8 +126,10 @@ pub enum SweepError {
     Setting { field: &'static str, value: f32 },
     /// A value outside `[min, max]`.
     Range { field: &'static str, value: f32, min: f32, max: f32 },
-    /// A frequency at or above the loop's Nyquist frequency, where the injected sine aliases.
-    AboveLoopNyquist { frequency: f32, nyquist: f32 },
+    /// A frequency at or above the Nyquist frequency of the loop the sine is injected into,
+    /// where it aliases: the field that sets it (`stop_hz`, `start_hz` or `extra_hz`), and
+    /// the loop's rate as parameters (`rate`).
+    AboveLoopNyquist { field: &'static str, frequency: f32, nyquist: f32, rate: &'static str },
     /// More frequencies than the result table holds.
     TooManyPoints(u32),
     /// The acquisition divider is not a multiple of the velocity divider.
@@ -152,9 +154,10 @@ impl fmt::Display for SweepError {
         match *self {
             Self::Setting { field, value } => write!(f, "sweep {field} = {value} is out of range"),
             Self::Range { field, value, min, max } => write!(f, "sweep {field} = {value} is outside [{min}, {max}]"),
-            Self::AboveLoopNyquist { frequency, nyquist } => {
-                write!(f, "sweep frequency {frequency} Hz is at or above the loop's Nyquist frequency {nyquist} Hz")
-            }
+            Self::AboveLoopNyquist { field, frequency, nyquist, rate } => write!(
+                f,
+                "sweep {field} = {frequency} Hz is at or above the Nyquist frequency {nyquist} Hz of the loop it is injected into (half of {rate})"
+            ),
             Self::TooManyPoints(n) => write!(
                 f,
                 "sweep points = {n}: at most {} (the result table holds {MAX_SWEEP_POINTS}, one of them for the extra frequency)",
@@ -187,10 +190,66 @@ impl fmt::Display for SweepError {
 impl SweepParams {
     /// The highest frequency swept (stop_hz, or start_hz alone with one point, or extra_hz).
     pub fn top_hz(&self) -> f32 {
-        if self.points > 1 { self.stop_hz } else { self.start_hz }.max(self.extra_hz)
+        self.top().1
     }
 
+    /// The field that sets the highest frequency swept, and that frequency.
+    fn top(&self) -> (&'static str, f32) {
+        let (field, hz) = if self.points > 1 { ("stop_hz", self.stop_hz) } else { ("start_hz", self.start_hz) };
+        if self.extra_hz > hz {
+            ("extra_hz", self.extra_hz)
+        } else {
+            (field, hz)
+        }
+    }
+
+    /// Refuse a highest frequency at or above `nyquist`, the Nyquist frequency of the loop
+    /// whose rate `rate` names.
+    pub(crate) fn below_nyquist(&self, nyquist: f32, rate: &'static str) -> Result<(), SweepError> {
+        let (field, frequency) = self.top();
+        if frequency >= nyquist {
+            return Err(SweepError::AboveLoopNyquist { field, frequency, nyquist, rate });
+        }
+        Ok(())
+    }
+
+    /// The settings and the loop rates they are injected at: [`SweepParams::validate_settings`]
+    /// and every frequency below the Nyquist frequency of its loop (the velocity loop's, the
+    /// base rate's for torque-command injection). What a sweep start needs (with the checks
+    /// against the axis's other parameters in [`crate::Params::validate_sweep`]).
     pub fn validate(&self, base_rate_hz: f32, velocity_divider: u32) -> Result<(), SweepError> {
+        self.validate_settings(velocity_divider)?;
+        // The sine is updated at the velocity-loop rate for velocity-loop points.
+        if self.point == InjectionPoint::TorqueCommand {
+            self.below_nyquist(0.5 * base_rate_hz, "current_loop_hz")?;
+        } else {
+            self.below_nyquist(0.5 * base_rate_hz / velocity_divider as f32, "current_loop_hz / velocity_divider")?;
+        }
+        self.records_long_enough(base_rate_hz)
+    }
+
+    /// Every record of a stepped sine holds at least [`MIN_RECORD_SAMPLES`] acquisition samples
+    /// at this base rate.
+    fn records_long_enough(&self, base_rate_hz: f32) -> Result<(), SweepError> {
+        if self.signal == SweepSignal::SteppedSine {
+            let plan = self.plan();
+            for i in 0..plan.count as usize {
+                let frequency = self.frequency_in(&plan, i);
+                let samples = self.record_length(frequency, base_rate_hz).1;
+                if samples < MIN_RECORD_SAMPLES {
+                    return Err(SweepError::RecordTooShort { frequency, samples: samples as u32 });
+                }
+            }
+        }
+        Ok(())
+    }
+
+    /// The settings on their own (each value in its range, the acquisition on velocity-loop
+    /// ticks), whatever the loop rates: what an axis needs to be built, sweep or not. The
+    /// frequencies are held against the rates when a sweep starts ([`SweepParams::validate`]):
+    /// an axis whose rate was lowered runs with the default sweep settings as long as it does
+    /// not sweep.
+    pub fn validate_settings(&self, velocity_divider: u32) -> Result<(), SweepError> {
         let finite_positive = |field, value: f32| {
             if value.is_finite() && value > 0.0 {
                 Ok(())
@@ -288,26 +347,6 @@ impl SweepParams {
         range("dither", self.dither, 0.0, MAX_SWEEP_DITHER)?;
         range("acquisition_divider", self.acquisition_divider as f32, 1.0, MAX_SWEEP_DIVIDER as f32)?;
         range("prbs_divider", self.prbs_divider as f32, 1.0, MAX_SWEEP_DIVIDER as f32)?;
-        // The sine is updated at the velocity-loop rate for velocity-loop points.
-        let loop_rate = if self.point == InjectionPoint::TorqueCommand {
-            base_rate_hz
-        } else {
-            base_rate_hz / velocity_divider as f32
-        };
-        let top = self.top_hz();
-        if top >= 0.5 * loop_rate {
-            return Err(SweepError::AboveLoopNyquist { frequency: top, nyquist: 0.5 * loop_rate });
-        }
-        if self.signal == SweepSignal::SteppedSine {
-            let plan = self.plan();
-            for i in 0..plan.count as usize {
-                let frequency = self.frequency_in(&plan, i);
-                let samples = self.record_length(frequency, base_rate_hz).1;
-                if samples < MIN_RECORD_SAMPLES {
-                    return Err(SweepError::RecordTooShort { frequency, samples: samples as u32 });
-                }
-            }
-        }
         Ok(())
     }
 }
@@ -323,7 +362,12 @@ mod tests {
         let v = |p: SweepParams| p.validate(FS, 2);
         assert_eq!(
             v(SweepParams { stop_hz: 4000.0, ..Default::default() }),
-            Err(SweepError::AboveLoopNyquist { frequency: 4000.0, nyquist: 4000.0 })
+            Err(SweepError::AboveLoopNyquist {
+                field: "stop_hz",
+                frequency: 4000.0,
+                nyquist: 4000.0,
+                rate: "current_loop_hz / velocity_divider"
+            })
         );
         assert!(matches!(
             v(SweepParams { amplitude: f32::NAN, ..Default::default() }),
@@ -352,7 +396,12 @@ mod tests {
         assert!(matches!(v(SweepParams { points: 0, ..one }), Err(SweepError::Setting { field: "points", .. })));
         assert_eq!(
             v(SweepParams { start_hz: 5000.0, ..one }),
-            Err(SweepError::AboveLoopNyquist { frequency: 5000.0, nyquist: 4000.0 })
+            Err(SweepError::AboveLoopNyquist {
+                field: "start_hz",
+                frequency: 5000.0,
+                nyquist: 4000.0,
+                rate: "current_loop_hz / velocity_divider"
+            })
         );
         assert!(matches!(
             v(SweepParams { dither: f32::NAN, ..Default::default() }),

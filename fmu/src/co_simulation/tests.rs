@@ -144,6 +144,38 @@ fn a_sweep_start_the_mode_cannot_take_is_a_logged_refusal() {
     assert_eq!(m.values().sweep_state, 1, "settling after a start in velocity mode");
 }
 
+/// A lowered loop rate (in its documented range) with the default sweep settings: the FMU
+/// initialises and runs; a sweep start is refused with the reason (3 kHz above the velocity
+/// loop's 2 kHz Nyquist frequency at 8 kHz), nothing else changes, and a sweep that fits the
+/// rate starts.
+#[test]
+fn a_lowered_rate_runs_with_the_default_sweep_settings_and_refuses_only_their_start() {
+    let lowered = || {
+        let mut m = AxisModel::new();
+        set(&mut m, "ctrl.current_loop_hz", Value::Float64(8000.0)).unwrap();
+        m
+    };
+    let mut m = lowered();
+    m.initialize().unwrap();
+    set(&mut m, "mode", Value::Int32(1)).unwrap();
+    set(&mut m, "sweep_start", Value::Int32(1)).unwrap();
+    m.do_step(0.0, 0.0005).unwrap();
+    assert_eq!(m.values().sweep_state, 0);
+    assert!(
+        m.refusals.iter().any(|r| r.contains("sweep_start refused") && r.contains("sweep stop_hz = 3000 Hz")),
+        "{:?}",
+        m.refusals
+    );
+    let mut m = lowered();
+    set(&mut m, "sweep.stop_hz", Value::Float64(1500.0)).unwrap();
+    set(&mut m, "sweep.extra_hz", Value::Float64(0.0)).unwrap();
+    m.initialize().unwrap();
+    set(&mut m, "mode", Value::Int32(1)).unwrap();
+    set(&mut m, "sweep_start", Value::Int32(1)).unwrap();
+    m.do_step(0.0, 0.0005).unwrap();
+    assert_eq!(m.values().sweep_state, 1, "settling: {:?}", m.refusals);
+}
+
 #[test]
 fn no_output_is_infinite_or_nan_after_initialisation() {
     let m = initialized();

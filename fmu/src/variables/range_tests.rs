@@ -1,7 +1,10 @@
 //! Every declared min and max is what the FMU accepts and refuses: a value just outside is
 //! refused with the variable's name, the bound itself is accepted — by the range check and by
 //! the whole validation, except where a rule between two values decides (listed below, each
-//! with the rule the refusal must name).
+//! with the rule the refusal must name). Rules that only a sweep needs (its frequencies
+//! against the loop rates, its injection against the limits) decide when the sweep starts,
+//! not at initialisation: an axis that never sweeps runs (listed apart, with the reason the
+//! start must give).
 
 use crate::co_simulation::AxisModel;
 use crate::variables::{Causality, Kind, Value, DECLARATIONS};
@@ -9,21 +12,15 @@ use crate::variables::{Causality, Kind, Value, DECLARATIONS};
 /// Bounds that the core's or the plant's rules between values refuse with the other values
 /// at their defaults: (variable, which bound, a word the refusal must contain).
 const COUPLED: &[(&str, &str, &str)] = &[
+    // The slowest loop rate: the plant's explicit friction term against its sub-step (the
+    // default sweep's frequencies are held against the rate only when a sweep starts).
+    ("ctrl.current_loop_hz", "min", "too fast for a sub-step"),
     // Frequencies below the Nyquist frequency of the loop that uses them.
-    ("ctrl.current_loop_hz", "min", "Nyquist"),
     ("ctrl.position_divider", "max", "Nyquist"),
     ("ctrl.low_pass_hz", "max", "Nyquist"),
     ("ctrl.notch_hz", "max", "Nyquist"),
     ("accdec.cutoff_hz", "max", "Nyquist"),
-    ("sweep.stop_hz", "max", "Nyquist"),
-    ("sweep.extra_hz", "max", "Nyquist"),
     ("excitation.frequency", "max", "half the loop rate"),
-    // The position-command point (the largest code) sweeps below the position loop's Nyquist
-    // frequency, 2 kHz at the defaults, under the default stop frequency of 3 kHz.
-    ("sweep.point", "max", "Nyquist"),
-    // The torque-command point (the smallest code) with the default amplitude, 2 (rad/s for the
-    // velocity points): a 2 N·m sine reaches the current limit, refused by the amplitude.
-    ("sweep.point", "min", "amplitude"),
     // The machine-end acceleration measure needs torque- or position-command injection (the
     // default point is the velocity command).
     ("sweep.measure", "max", "needs torque-command (sweep.point 1) or position-command"),
@@ -39,9 +36,6 @@ const COUPLED: &[(&str, &str, &str)] = &[
     ("sweep.start_hz", "max", "must exceed start_hz"),
     ("sweep.stop_hz", "min", "must exceed start_hz"),
     ("plant.absorber_inertia", "max", "absorber_stiffness must be > 0"),
-    // The sweep's dither within the torque limit (it is added after the limit).
-    ("sweep.dither", "max", "sweep dither"),
-    ("ctrl.torque_limit", "min", "sweep dither"),
     // The plant's explicit terms against its sub-step (plant.substeps raises the limit).
     ("plant.pole_pairs", "max", "too fast for a sub-step"),
     ("plant.lq", "min", "too fast for a sub-step"),
@@ -51,6 +45,24 @@ const COUPLED: &[(&str, &str, &str)] = &[
     ("plant.motor_coulomb", "max", "too fast for a sub-step"),
     ("plant.load_coulomb", "max", "too fast for a sub-step"),
     ("plant.coulomb_velocity", "min", "too fast for a sub-step"),
+];
+
+/// Bounds that initialise but whose sweep cannot run with the other values at their
+/// defaults: the start is refused with the reason (`Params::validate_sweep`, what
+/// `Axis::start_sweep` checks first).
+const SWEEP_START_COUPLED: &[(&str, &str, &str)] = &[
+    // Frequencies below the Nyquist frequency of the loop the sine is injected into.
+    ("sweep.stop_hz", "max", "Nyquist"),
+    ("sweep.extra_hz", "max", "Nyquist"),
+    // The position-command point (the largest code) sweeps below the position loop's Nyquist
+    // frequency, 2 kHz at the defaults, under the default stop frequency of 3 kHz.
+    ("sweep.point", "max", "Nyquist"),
+    // The torque-command point (the smallest code) with the default amplitude, 2 (rad/s for the
+    // velocity points): a 2 N·m sine reaches the current limit, refused by the amplitude.
+    ("sweep.point", "min", "amplitude"),
+    // The sweep's dither within the torque limit (it is added after the limit).
+    ("sweep.dither", "max", "sweep dither"),
+    ("ctrl.torque_limit", "min", "sweep dither"),
 ];
 
 fn value(kind: Kind, x: f64) -> Value {
@@ -92,6 +104,23 @@ fn declared_ranges_are_what_validation_accepts_and_refuses() {
             }
             let result = m.initialize();
             let coupled = COUPLED.iter().find(|(n, s, _)| *n == d.name && *s == side);
+            let sweep_start = m.state.sim.as_ref().map(|sim| sim.axis.params().validate_sweep());
+            let sweep_coupled = SWEEP_START_COUPLED.iter().find(|(n, s, _)| *n == d.name && *s == side);
+            match (sweep_start, sweep_coupled) {
+                (Some(Ok(())), Some(_)) => {
+                    problems.push(format!("{} {side}: listed as refused at the sweep start but accepted", d.name))
+                }
+                (Some(Err(e)), Some((_, _, word))) if e.to_string().contains(word) => {
+                    coupled_seen.push(format!("{} {side}: sweep start: {e}", d.name))
+                }
+                (Some(Err(e)), _) => {
+                    problems.push(format!("{} = {bound} (its {side}): sweep start refused: {e}", d.name))
+                }
+                (None, Some(_)) => {
+                    problems.push(format!("{} {side}: listed for the sweep start, not initialised", d.name))
+                }
+                _ => {}
+            }
             match (result, coupled) {
                 (Ok(()), None) => {}
                 (Ok(()), Some(_)) => problems.push(format!("{} {side}: listed as coupled but accepted", d.name)),

@@ -59,3 +59,9 @@ pub fn reasons() -> String {
         all.join("; ")
     }
 }
+
+/// What this thread's FMU calls logged since the last `clear`/`reasons`/`take`, one message
+/// each (a run's warnings: a refused `sweep_start`, a refused sequence key).
+pub fn take() -> Vec<String> {
+    MESSAGES.with(|m| std::mem::take(&mut *m.borrow_mut()))
+}

@@ -10,3 +10,4 @@ pub mod runner;
 pub mod scenario;
 pub mod sweep_run;
 pub mod trace;
+pub mod trace_budget;

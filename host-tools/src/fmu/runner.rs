@@ -237,7 +237,11 @@ impl Fmu {
         let mut columns = vec!["time".to_string()];
         columns.extend(outputs.iter().map(|v| v.name.clone()));
         let mut trace = Trace::new(columns);
-        trace.rows.reserve_exact(if keep_rows { n + 1 } else { 1 });
+        // Reserved up to the trace budget: a scenario built in code (a sweep's longest
+        // schedule, say, which `run_until` usually ends early) cannot abort on an allocation
+        // of memory its run never fills; files are refused beyond it when loaded.
+        let budget_rows = (crate::fmu::trace_budget::MAX_TRACE_BYTES / (8.0 * (outputs.len() + 1) as f64)) as usize;
+        trace.rows.reserve_exact(if keep_rows { (n + 1).min(budget_rows) } else { 1 });
         // Outputs are read in one call per type, then put back in column order.
         let of_kind = |kind: Kind| -> (Vec<usize>, Vec<u32>) {
             outputs.iter().enumerate().filter(|(_, v)| v.kind == kind).map(|(i, v)| (i, v.vr)).unzip()
@@ -306,6 +310,9 @@ pub struct CheckResult {
     pub min: Option<f64>,
     pub max: Option<f64>,
     pub window: (f64, f64),
+    /// Why the check was not evaluated (a window the trace does not cover): it then fails.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub not_evaluated: Option<String>,
 }
 
 pub fn evaluate_checks(scenario: &Scenario, trace: &Trace) -> Result<Vec<CheckResult>> {
@@ -319,11 +326,31 @@ pub fn evaluate_checks(scenario: &Scenario, trace: &Trace) -> Result<Vec<CheckRe
             None => (c.from.unwrap_or(0.0), c.to.unwrap_or(scenario.stop_time)),
         };
         let h = scenario.step();
+        let mut result = CheckResult {
+            signal: c.signal.clone(),
+            description: c.description.clone().unwrap_or_default(),
+            passed: false,
+            observed: (f64::NAN, f64::NAN),
+            min: c.min,
+            max: c.max,
+            window: (from, to),
+            not_evaluated: None,
+        };
+        // Judged only where the trace has samples: a window that ends past its end, or before
+        // its first sample, fails with the reason, never on the nearest sample. (A window from
+        // 0 on a drive's telemetry, whose first sample comes one telemetry period after the
+        // start, is judged on the samples it holds.)
+        let (first, last) = (time.first().copied().unwrap_or(f64::NAN), time.last().copied().unwrap_or(f64::NAN));
+        if !(to >= first - 0.5 * h && to <= last + 0.5 * h) {
+            result.not_evaluated = Some(format!("the trace covers [{first}, {last}] s, not [{from}, {to}] s"));
+            results.push(result);
+            continue;
+        }
         let mut idx: Vec<usize> =
             (0..time.len()).filter(|&i| time[i] >= from - 0.5 * h && time[i] <= to + 0.5 * h).collect();
         if idx.is_empty() && c.at.is_some() {
             // A trace sampled off the step grid (a drive's telemetry): the value in force at
-            // that time is the latest sample before it.
+            // that time is the latest sample before it (one exists: `at` is inside the trace).
             idx.extend(time.iter().rposition(|&t| t <= to + 0.5 * h));
         }
         if idx.is_empty() {
@@ -331,18 +358,90 @@ pub fn evaluate_checks(scenario: &Scenario, trace: &Trace) -> Result<Vec<CheckRe
         }
         let lo = c.min.unwrap_or(f64::NEG_INFINITY);
         let hi = c.max.unwrap_or(f64::INFINITY);
-        let observed =
+        result.observed =
             idx.iter().fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), &i| (a.min(values[i]), b.max(values[i])));
-        let passed = idx.iter().all(|&i| values[i] >= lo && values[i] <= hi);
-        results.push(CheckResult {
-            signal: c.signal.clone(),
-            description: c.description.clone().unwrap_or_default(),
-            passed,
-            observed,
-            min: c.min,
-            max: c.max,
-            window: (from, to),
-        });
+        result.passed = idx.iter().all(|&i| values[i] >= lo && values[i] <= hi);
+        results.push(result);
     }
     Ok(results)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::fmu::scenario::Check;
+
+    /// A drive's telemetry: samples every 0.7 ms (off the 0.25 ms grid) from sample `first`
+    /// (at `first`·0.7 ms) to 0.3010 s, the value equal to the sample's time.
+    fn drive_trace(first: usize) -> Trace {
+        let mut t = Trace::new(vec!["time".into(), "iq".into()]);
+        for k in first..=430 {
+            let time = k as f64 * 0.7e-3;
+            t.rows.push([time, time]);
+        }
+        t
+    }
+
+    fn check(at: Option<f64>, window: Option<(f64, f64)>) -> CheckResult {
+        let c = Check {
+            signal: "iq".into(),
+            at,
+            from: window.map(|w| w.0),
+            to: window.map(|w| w.1),
+            min: None,
+            max: Some(1.0),
+            description: None,
+        };
+        let s = Scenario { checks: vec![c], ..scenario() };
+        evaluate_checks(&s, &drive_trace(0)).unwrap().remove(0)
+    }
+
+    fn scenario() -> Scenario {
+        Scenario {
+            name: "x".into(),
+            description: String::new(),
+            stop_time: 0.3,
+            step: None,
+            parameters: Default::default(),
+            events: vec![],
+            checks: vec![],
+            plot: vec![],
+            record: vec![],
+        }
+    }
+
+    #[test]
+    fn a_check_off_the_sample_grid_takes_the_sample_in_force_but_never_one_past_the_trace() {
+        // 0.2999 s is more than half a step from every sample (0.2996 and 0.3003 s are the
+        // nearest): the value in force is the latest sample before it.
+        let r = check(Some(0.2999), None);
+        assert!(r.passed && r.not_evaluated.is_none(), "{r:?}");
+        assert_eq!(r.observed.0, 428.0 * 0.7e-3);
+        // Past the trace's end: not judged on its last sample.
+        let r = check(Some(7.0), None);
+        assert!(!r.passed && r.not_evaluated.as_deref().is_some_and(|w| w.contains("not [7, 7] s")), "{r:?}");
+        let r = check(None, Some((0.1, 0.5)));
+        assert!(!r.passed && r.not_evaluated.is_some(), "{r:?}");
+        let r = check(None, Some((0.1, 0.3)));
+        assert!(r.passed && r.not_evaluated.is_none(), "{r:?}");
+        // A drive's first sample comes after the start: a window from 0 is judged on the
+        // samples it holds; a moment before the first sample is not evaluated.
+        let trace = drive_trace(3);
+        let s = |at: Option<f64>, window: Option<(f64, f64)>| Scenario {
+            checks: vec![Check {
+                signal: "iq".into(),
+                at,
+                from: window.map(|w| w.0),
+                to: window.map(|w| w.1),
+                min: None,
+                max: Some(1.0),
+                description: None,
+            }],
+            ..scenario()
+        };
+        let r = evaluate_checks(&s(None, Some((0.0, 0.3))), &trace).unwrap().remove(0);
+        assert!(r.passed && r.observed.0 == 3.0 * 0.7e-3, "{r:?}");
+        let r = evaluate_checks(&s(Some(0.001), None), &trace).unwrap().remove(0);
+        assert!(!r.passed && r.not_evaluated.is_some(), "{r:?}");
+    }
 }

@@ -3,7 +3,8 @@
 //! ```toml
 //! name = "position_step"
 //! description = "1 rad position step on the default axis"
-//! stop_time = 0.3          # s, a whole number of steps
+//! stop_time = 0.3          # s, a whole number of steps; the trace it implies must fit
+//!                          # `trace_budget::MAX_TRACE_BYTES` (1 GiB)
 //! step = 0.00025           # s, optional: communication step (default: position-loop period)
 //!
 //! [parameters]             # FMU parameters by name
@@ -20,7 +21,7 @@
 //!
 //! [[checks]]               # evaluated on the result; a failed check makes `servo` exit 1
 //! signal = "motor_position"
-//! at = 0.3                 # or `from`/`to` for a window
+//! at = 0.3                 # or `from`/`to` for a window, inside [0, stop_time]
 //! min = 0.99
 //! max = 1.01
 //! ```
@@ -28,9 +29,11 @@
 use std::collections::BTreeMap;
 use std::path::Path;
 
-use anyhow::{bail, Context, Result};
+use anyhow::{anyhow, bail, Context, Result};
 use control_core::axis::Mode;
 use serde::Deserialize;
+
+use crate::fmu::trace_budget::{check_trace_size, fmu_output_count};
 
 /// Value of a parameter or an input: a number, an integer or a boolean.
 #[derive(Clone, Copy, Debug, PartialEq, Deserialize)]
@@ -126,6 +129,40 @@ pub struct Scenario {
 /// Default communication step: the position-loop period of the default parameters.
 pub const DEFAULT_STEP: f64 = 4.0 / 16_000.0;
 
+/// A parameter's value in `parameters`, or the FMU's start value (NaN for an unknown name).
+pub fn parameter_or_start(parameters: &BTreeMap<String, Value>, name: &str) -> f64 {
+    match parameters.get(name) {
+        Some(v) => v.as_f64(),
+        None => servo_axis::variables::by_name(name)
+            .and_then(|d| servo_axis::variables::Values::start().get(d.vr))
+            .map_or(f64::NAN, |v| Value::from(v).as_f64()),
+    }
+}
+
+/// The FMU takes communication steps of whole position-loop periods
+/// (`ctrl.position_divider / ctrl.current_loop_hz`): a step that is not (the default 0.25 ms
+/// once the rate is lowered, say) is refused when the file is loaded, saying which period and
+/// what to set, rather than by the FMU's first `do_step`. `default` says the step was not
+/// written in the file. Rates the FMU itself refuses are left to it.
+pub fn check_step_fits_position_loop(step: f64, default: bool, parameters: &BTreeMap<String, Value>) -> Result<()> {
+    let rate = parameter_or_start(parameters, "ctrl.current_loop_hz");
+    let divider = parameter_or_start(parameters, "ctrl.position_divider");
+    if !(rate.is_finite() && rate > 0.0 && divider.is_finite() && divider >= 1.0) {
+        return Ok(());
+    }
+    let period = divider / rate;
+    let periods = (step / period).round();
+    if periods < 1.0 || (step - periods * period).abs() > 1e-9 * period.max(step) {
+        let which = if default { " (the default: the position-loop period at 16 kHz)" } else { "" };
+        bail!(
+            "step = {step} s{which} is not a whole multiple of the position-loop period {period} s \
+             (ctrl.position_divider {divider} / ctrl.current_loop_hz {rate} Hz): set `step` to a multiple of it, \
+             e.g. step = {period}"
+        );
+    }
+    Ok(())
+}
+
 impl Scenario {
     pub fn load(path: &Path) -> Result<Self> {
         let text = std::fs::read_to_string(path).with_context(|| format!("cannot read scenario {}", path.display()))?;
@@ -151,6 +188,9 @@ impl Scenario {
         if !(self.stop_time.is_finite() && self.stop_time > 0.0) {
             bail!("stop_time must be a positive number of seconds (got {})", self.stop_time);
         }
+        check_step_fits_position_loop(h, self.step.is_none(), &self.parameters)?;
+        check_trace_size(self.stop_time, h, self.trace_columns())
+            .map_err(|e| anyhow!("{e} (record fewer outputs with `record`, or take a longer `step`)"))?;
         let n = self.stop_time / h;
         if (n - n.round()).abs() > 1e-6 {
             bail!("stop_time {} s is not a whole number of steps of {h} s", self.stop_time);
@@ -190,7 +230,7 @@ impl Scenario {
         if let Some(p) = self.plot.iter().find(|p| !self.record.is_empty() && !self.record.contains(p)) {
             bail!("plot lists {p}, which is not recorded: add it to `record`");
         }
-        for c in &self.checks {
+        for (i, c) in self.checks.iter().enumerate() {
             if !self.record.is_empty() && !self.record.contains(&c.signal) {
                 bail!("check on {} needs it recorded: add it to `record`", c.signal);
             }
@@ -199,6 +239,48 @@ impl Scenario {
             }
             if c.min.is_none() && c.max.is_none() {
                 bail!("check on {} needs `min` and/or `max`", c.signal);
+            }
+            self.check_times_and_bounds(i, c)?;
+        }
+        Ok(())
+    }
+
+    /// Columns of the run's trace: time and the recorded outputs (every output of the FMU
+    /// when `record` is empty).
+    pub fn trace_columns(&self) -> usize {
+        1 + if self.record.is_empty() { fmu_output_count() } else { self.record.len() }
+    }
+
+    /// A check's times lie in the run, its window is not reversed and its bounds are numbers
+    /// that some value satisfies: a check is judged on samples the run has, never on the
+    /// nearest end of it.
+    fn check_times_and_bounds(&self, index: usize, c: &Check) -> Result<()> {
+        let name = match &c.description {
+            Some(d) => format!("check {} on {} ({d})", index + 1, c.signal),
+            None => format!("check {} on {}", index + 1, c.signal),
+        };
+        for (field, t) in [("at", c.at), ("from", c.from), ("to", c.to)] {
+            let Some(t) = t else { continue };
+            if !t.is_finite() {
+                bail!("{name}: {field} = {t} is not a time");
+            }
+            if t < 0.0 || t > self.stop_time + 1e-9 {
+                bail!("{name}: {field} = {t} s is outside the run [0, stop_time = {} s]", self.stop_time);
+            }
+        }
+        if let (Some(from), Some(to)) = (c.from, c.to) {
+            if from > to {
+                bail!("{name}: from = {from} s is after to = {to} s");
+            }
+        }
+        for (field, b) in [("min", c.min), ("max", c.max)] {
+            if b.is_some_and(f64::is_nan) {
+                bail!("{name}: {field} is not a number");
+            }
+        }
+        if let (Some(lo), Some(hi)) = (c.min, c.max) {
+            if lo > hi {
+                bail!("{name}: min = {lo} is above max = {hi}: no value passes");
             }
         }
         Ok(())
@@ -336,6 +418,70 @@ mod tests {
         assert!(parse("name='x'\nstop_time=0.01\nrecord=['iq']\n[[checks]]\nsignal='iq'\nat=0.01\nmax=1.0\n").is_ok());
         let e = parse("name='x'\nstop_time=0.01\nrecord=['iq']\nplot=['iq','id']\n").unwrap_err();
         assert!(e.to_string().contains("plot lists id"), "{e}");
+    }
+
+    #[test]
+    fn refuses_a_run_whose_trace_would_not_fit_memory_naming_stop_time_and_the_limit() {
+        let e = format!("{:#}", parse("name='x'\nstop_time=1e9\n").unwrap_err());
+        assert!(
+            e.contains("stop_time = 1000000000 s") && e.contains("1 GiB") && e.contains("at most stop_time"),
+            "{e}"
+        );
+        // A tiny step is refused (shorter than the position-loop period), and at the fastest
+        // rate (200 kHz, every tick a position tick: 5 µs steps) the memory names the limit.
+        let e = format!("{:#}", parse("name='x'\nstop_time=0.3\nstep=1e-12\n").unwrap_err());
+        assert!(e.contains("step = 0.000000000001 s"), "{e}");
+        let fastest = |stop: f64| {
+            parse(&format!(
+                "name='x'\nstop_time={stop:?}\nstep=5e-6\n[parameters]\n'ctrl.current_loop_hz'=200000.0\n\
+                 'ctrl.velocity_divider'=1\n'ctrl.position_divider'=1\n"
+            ))
+        };
+        assert!(fastest(10.0).is_ok());
+        let e = format!("{:#}", fastest(100.0).unwrap_err());
+        assert!(e.contains("step = 0.000005 s") && e.contains("1 GiB"), "{e}");
+        // Recording fewer outputs makes room for a longer run: 1000 s of 3 columns is 96 MB.
+        assert!(parse("name='x'\nstop_time=1000.0\n").is_err());
+        assert!(parse("name='x'\nstop_time=1000.0\nrecord=['iq','id']\n").is_ok());
+    }
+
+    #[test]
+    fn a_step_off_the_position_loop_period_is_refused_at_load_saying_what_to_set() {
+        let lowered =
+            |step: &str| format!("name='x'\nstop_time=0.01\n{step}\n[parameters]\n'ctrl.current_loop_hz'=8000.0\n");
+        let e = format!("{:#}", parse(&lowered("")).unwrap_err());
+        assert!(
+            e.contains("step = 0.00025 s (the default")
+                && e.contains("position-loop period 0.0005 s")
+                && e.contains("step = 0.0005"),
+            "{e}"
+        );
+        assert!(parse(&lowered("step=0.0005")).is_ok());
+        assert!(parse(&lowered("step=0.001")).is_ok());
+        let e = format!("{:#}", parse(&lowered("step=0.00075")).unwrap_err());
+        assert!(e.contains("step = 0.00075 s is not a whole multiple"), "{e}");
+        // A higher rate: the default step is 8 periods at 32 kHz, and a divider the same way.
+        assert!(parse("name='x'\nstop_time=0.01\n[parameters]\n'ctrl.current_loop_hz'=32000.0\n").is_ok());
+        assert!(parse("name='x'\nstop_time=0.01\n[parameters]\n'ctrl.position_divider'=8\n").is_err());
+    }
+
+    #[test]
+    fn refuses_checks_outside_the_run_or_that_nothing_passes() {
+        let with_check = |c: &str| parse(&format!("name='x'\nstop_time=0.3\n[[checks]]\nsignal='iq'\n{c}\n"));
+        for (check, reason) in [
+            ("at=7.0\nmax=1.0", "at = 7 s is outside the run [0, stop_time = 0.3 s]"),
+            ("at=-0.1\nmax=1.0", "at = -0.1 s is outside the run"),
+            ("from=0.0\nto=0.5\nmax=1.0", "to = 0.5 s is outside the run"),
+            ("from=0.2\nto=0.1\nmax=1.0", "from = 0.2 s is after to = 0.1 s"),
+            ("at=0.1\nmin=2.0\nmax=1.0", "min = 2 is above max = 1"),
+            ("at=nan\nmax=1.0", "at = NaN is not a time"),
+            ("at=0.1\nmax=nan", "max is not a number"),
+        ] {
+            let e = format!("{:#}", with_check(check).unwrap_err());
+            assert!(e.contains("check 1 on iq") && e.contains(reason), "{check}: {e}");
+        }
+        assert!(with_check("at=0.3\nmin=1.0\nmax=1.0").is_ok());
+        assert!(with_check("from=0.0\nto=0.3\nmax=1.0").is_ok());
     }
 
     #[test]

@@ -63,7 +63,10 @@ impl SweepRun {
         self.settings.validate(rates.current_loop_hz, rates.velocity_divider).map_err(|e| anyhow!("{e}"))?;
         let mut parameters = self.parameters.clone();
         parameters.extend(sweep_parameters(&self.settings));
-        Ok(configuration(&parameters)?.control)
+        let control = configuration(&parameters)?.control;
+        // What the start would refuse (the limits, the position loop's rate), refused here.
+        control.validate_sweep().map_err(|e| anyhow!("{e}"))?;
+        Ok(control)
     }
 
     /// The mode the sweep rides in: position (holding where the axis stands) for a
@@ -82,6 +85,9 @@ impl SweepRun {
         self.settings.validate(rates.current_loop_hz, rates.velocity_divider).map_err(|e| anyhow!("{e}"))?;
         let mut parameters = self.parameters.clone();
         parameters.extend(sweep_parameters(&self.settings));
+        // The FMU refuses a sweep it cannot run when it starts (logged): refused here, before
+        // the run, with the same reason.
+        configuration(&parameters)?.control.validate_sweep().map_err(|e| anyhow!("{e}"))?;
         // One communication step per position-loop period, as a drive's link streams: the
         // stream then carries every acquisition sample (acquisition divider = position
         // divider) at any loop rate. (A fixed 250 µs step at a 32 kHz loop kept every other

@@ -59,6 +59,8 @@ fn run(args: &RunArgs) -> Result<bool> {
         let pb = progress_bar(&scenario.name, common.json);
         let trace = fmu.run(&scenario, |f| pb.set_position((f * 1000.0) as u64))?;
         pb.finish_and_clear();
+        // What the FMU refused during the run (a sweep it cannot run, a refused key).
+        let fmu_warnings = crate::fmu::log::take();
         let csv = out.join(format!("{}.csv", scenario.name));
         trace.write_csv(&csv)?;
         let checks = evaluate_checks(&scenario, &trace)?;
@@ -94,6 +96,7 @@ fn run(args: &RunArgs) -> Result<bool> {
             "passed": passed,
             "checks": checks,
             "fmpy": fmpy_verdict.as_ref().map(fmpy::verdict_json),
+            "fmu_warnings": fmu_warnings,
             "csv": csv,
             "plot": svg,
         });
@@ -102,6 +105,9 @@ fn run(args: &RunArgs) -> Result<bool> {
             println!("{} — {}", scenario.name, scenario.description);
             for c in &checks {
                 crate::run::report::print_check(c);
+            }
+            for w in &fmu_warnings {
+                println!("  FMU: {w}");
             }
             if let Some(v) = &fmpy_verdict {
                 fmpy::print_verdict("fmpy cross-check", v);

@@ -35,6 +35,10 @@ pub fn write_html(path: &Path, title: &str, preamble: &str, scenarios: &[Scenari
         if !s.checks.is_empty() {
             h.push_str("<table><tr><th>check</th><th>signal</th><th>window (s)</th><th>bounds</th><th>observed</th><th>result</th></tr>");
             for c in &s.checks {
+                let observed = match &c.not_evaluated {
+                    Some(why) => format!("not evaluated: {}", esc(why)),
+                    None => format!("{:.6} … {:.6}", c.observed.0, c.observed.1),
+                };
                 let bounds = format!(
                     "{} … {}",
                     c.min.map(|x| x.to_string()).unwrap_or("-∞".into()),
@@ -42,14 +46,13 @@ pub fn write_html(path: &Path, title: &str, preamble: &str, scenarios: &[Scenari
                 );
                 writeln!(
                     h,
-                    "<tr><td>{}</td><td>{}</td><td>{} – {}</td><td>{}</td><td>{:.6} … {:.6}</td><td class=\"{}\">{}</td></tr>",
+                    "<tr><td>{}</td><td>{}</td><td>{} – {}</td><td>{}</td><td>{}</td><td class=\"{}\">{}</td></tr>",
                     esc(&c.description),
                     esc(&c.signal),
                     c.window.0,
                     c.window.1,
                     bounds,
-                    c.observed.0,
-                    c.observed.1,
+                    observed,
                     if c.passed { "pass" } else { "fail" },
                     if c.passed { "pass" } else { "FAIL" }
                 )?;
@@ -70,6 +73,10 @@ pub fn write_html(path: &Path, title: &str, preamble: &str, scenarios: &[Scenari
 
 /// A check's line in a report.
 pub fn print_check(c: &crate::fmu::runner::CheckResult) {
+    if let Some(why) = &c.not_evaluated {
+        println!("  [FAIL] {:<45} {:<18} not evaluated: {why}", c.description, c.signal);
+        return;
+    }
     println!(
         "  [{}] {:<45} {:<18} observed {:>11.6} … {:<11.6} bounds {} … {}",
         if c.passed { "pass" } else { "FAIL" },

@@ -61,10 +61,12 @@ use std::path::Path;
 
 use anyhow::{anyhow, bail, Context, Result};
 use control_core::axis::Mode;
+use control_core::stop_sequence::Refusal;
 use serde::{Deserialize, Serialize};
 
 use crate::fmu::scenario::{Check, Event, Scenario, Value, DEFAULT_STEP};
 use crate::fmu::trace::Trace;
+use crate::fmu::trace_budget::{check_trace_size, fmu_output_count};
 use crate::sequence::timeline_reference::{key_time, Anchor, AngleSpec, PlainUnit, RunMarks, TimeSpec};
 
 pub const STATES: [&str; 5] = ["idle", "running", "decelerating", "servo_lock", "fine_adjust"];
@@ -166,6 +168,11 @@ impl SequenceScenario {
         if !(self.stop_time.is_finite() && self.stop_time > 0.0) {
             bail!("stop_time must be a positive number of seconds");
         }
+        crate::fmu::scenario::check_step_fits_position_loop(DEFAULT_STEP, true, &self.parameters)
+            .context("a timeline runs at the default step")?;
+        // The run records every output of the FMU at the default step.
+        check_trace_size(self.stop_time, DEFAULT_STEP, 1 + fmu_output_count())
+            .map_err(|e| anyhow!("{e} (a timeline records every output at the {DEFAULT_STEP} s step)"))?;
         let cpr = self.counts_per_rev();
         if !(cpr.is_finite() && cpr >= 1.0) {
             bail!("plant.encoder_counts_per_rev {cpr} must be a positive number of counts");
@@ -254,19 +261,89 @@ impl SequenceScenario {
             if x.refused.is_some() && x.at.is_none() {
                 bail!("refused expectation needs `at`");
             }
+            if let Some(n) = x.refused {
+                if n < 0 {
+                    bail!("refused = {n}: a count of refused events is 0 or more");
+                }
+            }
             if x.last_refusal.is_some() && x.refused.is_none() {
                 bail!("last_refusal goes with a `refused` expectation");
+            }
+            if let Some(r) = x.last_refusal {
+                let most = Refusal::NotInSequenceMode.code() as i64;
+                if !(0..=most).contains(&r) {
+                    bail!("last_refusal = {r} is not a reason code: 0 (none) to {most} (see the FMU output seq_last_refusal)");
+                }
             }
             if let Some(signal) = &x.signal {
                 if x.min.is_none() && x.max.is_none() || x.at.is_none() && (x.from.is_none() || x.to.is_none()) {
                     bail!("signal expectation needs min and/or max, and `at` or `from` and `to`");
                 }
-                for b in [&x.min, &x.max].into_iter().flatten() {
-                    self.signal_bound(signal, b)?;
+                self.check_signal_expectation(signal, x)?;
+            }
+        }
+        Ok(())
+    }
+
+    /// A signal expectation names an output of the FMU, its bounds are numbers in the signal's
+    /// unit that some value satisfies (min <= max) and its window, where known before the run,
+    /// is not reversed.
+    fn check_signal_expectation(&self, signal: &str, x: &Expectation) -> Result<()> {
+        use servo_axis::variables::Causality;
+        match servo_axis::variables::by_name(signal) {
+            Some(d) if d.causality == Causality::Output => {}
+            Some(d) => bail!("signal = {signal:?} is not an output of the FMU (its causality is {:?})", d.causality),
+            None => {
+                let close: Vec<&str> = servo_axis::variables::DECLARATIONS
+                    .iter()
+                    .filter(|d| {
+                        d.causality == Causality::Output && (d.name.contains(signal) || signal.contains(d.name))
+                    })
+                    .map(|d| d.name)
+                    .take(5)
+                    .collect();
+                let hint = if close.is_empty() { String::new() } else { format!(" (did you mean {close:?}?)") };
+                bail!("signal = {signal:?} is not an output of the FMU{hint}");
+            }
+        }
+        let bound = |b: &Option<AngleSpec>, field: &str| -> Result<Option<f64>> {
+            let Some(b) = b else { return Ok(None) };
+            let v = self.signal_bound(signal, b)?;
+            if v.is_nan() {
+                bail!("signal {signal}: {field} = {b} is not a number");
+            }
+            Ok(Some(v))
+        };
+        if let (Some(lo), Some(hi)) = (bound(&x.min, "min")?, bound(&x.max, "max")?) {
+            if lo > hi {
+                bail!(
+                    "signal {signal}: min = {} is above max = {}: no value passes",
+                    x.min.as_ref().expect("bound"),
+                    x.max.as_ref().expect("bound")
+                );
+            }
+        }
+        if let (Some(from), Some(to)) = (&x.from, &x.to) {
+            if let (Some(a), Some(b)) = (self.time_before_run(from)?, self.time_before_run(to)?) {
+                if a > b {
+                    bail!("signal {signal}: from = `{from}` ({a} s) is after to = `{to}` ({b} s)");
                 }
             }
         }
         Ok(())
+    }
+
+    /// Seconds from the start of a time field that does not depend on the run (None for
+    /// `accepted` and `completed`, read off the run).
+    fn time_before_run(&self, spec: &TimeSpec) -> Result<Option<f64>> {
+        let r = spec.parse()?;
+        Ok(match &r.anchor {
+            None => Some(r.offset),
+            Some(Anchor::Key { event, occurrence, explicit }) => {
+                Some(key_time(&self.key_events(), event, *occurrence, *explicit)? + r.offset)
+            }
+            Some(Anchor::Accepted(_) | Anchor::Completed(_)) => None,
+        })
     }
 
     /// Encoder counts per revolution of this run (its parameter, or the FMU's default).
@@ -534,7 +611,11 @@ impl SequenceScenario {
                 min.map_or("-inf".into(), |v| v.to_string()),
                 max.map_or("+inf".into(), |v| v.to_string())
             );
-            (r.passed, format!("{} … {}", r.observed.0, r.observed.1), bound, format!("{signal} in bounds"))
+            let observed = match &r.not_evaluated {
+                Some(why) => format!("not evaluated: {why}"),
+                None => format!("{} … {}", r.observed.0, r.observed.1),
+            };
+            (r.passed, observed, bound, format!("{signal} in bounds"))
         })
     }
 }
@@ -660,6 +741,16 @@ mod tests {
     }
 
     #[test]
+    fn a_timeline_whose_trace_would_not_fit_memory_is_refused_naming_stop_time() {
+        let e = format!("{:#}", parse("name='x'\nstop_time=1e9\n").unwrap_err());
+        assert!(
+            e.contains("stop_time = 1000000000 s") && e.contains("1 GiB") && e.contains("at most stop_time"),
+            "{e}"
+        );
+        assert!(parse("name='x'\nstop_time=100.0\n").is_ok());
+    }
+
+    #[test]
     fn malformed_timelines_are_refused_with_the_reason() {
         for (text, reason) in [
             ("[[events]]\ntime=0.0\nevent='jump'\n", "unknown event"),
@@ -677,6 +768,18 @@ mod tests {
             ("[[expect]]\nsignal='motor_velocity'\nat=0.5\nmax='3 rad'\n", "only angles"),
             ("[[expect]]\nstate='idle'\nat=0.5\nheld=true\n", "`held` goes with"),
             ("[[events]]\ntime=0.0\nevent='move'\ntarget='3 parsecs'\n", "unknown unit"),
+            // Checked when the file is loaded, not after the run.
+            ("[[expect]]\nsignal='motor_speed'\nat=0.5\nmax=1.0\n", "signal = \"motor_speed\" is not an output"),
+            ("[[expect]]\nsignal='seq_run'\nat=0.5\nmax=1.0\n", "is not an output of the FMU (its causality is Input)"),
+            ("[[expect]]\nsignal='motor_velocity'\nat=0.5\nmin=2.0\nmax=1.0\n", "min = 2 is above max = 1"),
+            (
+                "[[expect]]\nsignal='motor_position'\nat=0.5\nmin='2 rad'\nmax='90 deg'\n",
+                "min = 2 rad is above max = 90 deg",
+            ),
+            ("[[expect]]\nsignal='motor_velocity'\nfrom=0.5\nto=0.2\nmax=1.0\n", "is after to"),
+            ("[[expect]]\nrefused=-1\nat=0.5\n", "refused = -1"),
+            ("[[expect]]\nrefused=1\nat=0.5\nlast_refusal=42\n", "last_refusal = 42 is not a reason code"),
+            ("[[expect]]\nstate='idle'\nat=1.5\n", "must lie in [0, stop_time = 1]"),
         ] {
             let e = parse(&format!("name='x'\nstop_time=1.0\n{text}")).unwrap_err();
             assert!(format!("{e:#}").contains(reason), "{text}: {e:#}");
