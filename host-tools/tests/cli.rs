@@ -328,6 +328,51 @@ fn tune_writes_each_axis_correction_and_refuses_unusable_models() {
     assert!(String::from_utf8_lossy(&o.stderr).contains("at least two"));
 }
 
+/// One check of a model file for `ident --model` and `tune`: values no axis has are refused
+/// with the field named, and axis names (which name the files written) cannot leave --out.
+#[test]
+fn ident_and_tune_refuse_impossible_models_and_unsafe_axis_names() {
+    let out = tmp("model-check");
+    let model = |axis: &str| {
+        serde_json::json!({"axis": axis, "anti_resonance": {"hz": 40.0, "damping": 0.05},
+            "resonance": {"hz": 51.4, "damping": 0.064}, "gain": 4003.0, "band": [12.0, 240.0], "fit_error": 0.001})
+    };
+    let y = out.join("y.model.json");
+    std::fs::write(&y, model("y").to_string()).unwrap();
+    let edited = out.join("edited.model.json");
+    let tune_out = out.join("tune");
+    for (field, value, named) in [
+        ("/anti_resonance/hz", serde_json::json!(-5.0), "`anti_resonance.hz` = -5"),
+        ("/anti_resonance/damping", serde_json::json!(-1.0), "`anti_resonance.damping` = -1"),
+        ("/gain", serde_json::json!(0.0), "`gain` = 0"),
+        ("/axis", serde_json::json!("../evil"), "letters, digits, _ and -"),
+    ] {
+        let mut m = model("x");
+        *m.pointer_mut(field).unwrap() = value;
+        std::fs::write(&edited, m.to_string()).unwrap();
+        for command in [&["tune", "--method", "response"][..], &["ident"][..]] {
+            let o = servo().args(command).arg("--model").arg(&edited).arg(&y).on_fmu(&tune_out).output().unwrap();
+            let err = String::from_utf8_lossy(&o.stderr);
+            assert_eq!(o.status.code(), Some(2), "{command:?} {field}: {err}");
+            assert!(err.contains(named) && err.contains("edited.model.json"), "{command:?} {field}: {err}");
+        }
+    }
+    assert!(!out.join("evil.corr.toml").exists() && !tune_out.exists(), "nothing written");
+    let ident_out = out.join("ident");
+    for (axes, reason) in [
+        (&["--axes", "../zz"][..], "`../zz` is not allowed"),
+        (&["--axes", ""][..], "`` is not allowed"),
+        (&["--axes", "x,x"][..], "`x` is given twice"),
+        (&["--axes", "x", "--anti-resonance", "x=40,x=70"][..], "already has an anti-resonance"),
+    ] {
+        let o = servo().arg("ident").args(axes).on_fmu(&ident_out).output().unwrap();
+        let err = String::from_utf8_lossy(&o.stderr);
+        assert_eq!(o.status.code(), Some(2), "{axes:?}: {err}");
+        assert!(err.contains(reason), "{axes:?}: {err}");
+    }
+    assert!(!out.join("zz.model.json").exists() && !ident_out.exists(), "nothing written");
+}
+
 #[test]
 fn device_refuses_what_it_cannot_send_before_touching_a_port() {
     let err = |args: &[&str]| {

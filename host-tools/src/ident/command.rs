@@ -35,6 +35,7 @@ fn ident(args: &IdentArgs) -> Result<bool> {
         println!("re-plotted {} model(s) → {}", model.len(), svg.display());
         return Ok(true);
     }
+    crate::ident::axis_name::check_axis_names(axes.iter().map(String::as_str), "--axes")?;
     let mut parameters: std::collections::BTreeMap<
         String,
         std::collections::BTreeMap<String, crate::fmu::scenario::Value>,
@@ -47,8 +48,13 @@ fn ident(args: &IdentArgs) -> Result<bool> {
             .ok_or_else(|| anyhow::anyhow!("--set `{s}`: no axis `{axis}` in --axes"))?
             .insert(k, v);
     }
+    let mut absorbed: Vec<&str> = Vec::new();
     for s in anti_resonance {
         let (axis, hz) = s.split_once('=').ok_or_else(|| anyhow::anyhow!("--anti-resonance `{s}`: use AXIS=HZ"))?;
+        if absorbed.contains(&axis) {
+            bail!("--anti-resonance `{s}`: axis `{axis}` already has an anti-resonance (one absorber per axis)");
+        }
+        absorbed.push(axis);
         let hz: f64 = hz.parse().map_err(|_| anyhow::anyhow!("--anti-resonance `{s}`: `{hz}` is not a frequency"))?;
         if !(hz.is_finite() && hz > 0.0) {
             bail!("--anti-resonance `{s}`: the frequency must be positive");
@@ -425,8 +431,8 @@ fn tune(args: &TuneArgs) -> Result<bool> {
     use crate::ident::tuning::Method;
     let method: Method = method.parse()?;
     let out = common.out.clone().unwrap_or_else(|| default_out("tune"));
-    std::fs::create_dir_all(&out).with_context(|| format!("cannot create {}", out.display()))?;
     let models: Vec<AxisModel> = models.iter().map(|p| AxisModel::load(p)).collect::<Result<_>>()?;
+    std::fs::create_dir_all(&out).with_context(|| format!("cannot create {}", out.display()))?;
     if args.axis.is_some() && args.target.device.is_none() {
         bail!("--axis chooses the axis a drive gets: add --device PORT");
     }

@@ -127,13 +127,6 @@ pub struct AxisModel {
 }
 
 impl AxisModel {
-    /// Read a model file (`servo ident` writes them; the user may edit them).
-    pub fn load(path: &std::path::Path) -> Result<Self> {
-        use anyhow::Context;
-        let text = std::fs::read_to_string(path).with_context(|| format!("cannot read {}", path.display()))?;
-        serde_json::from_str(&text).with_context(|| format!("{} is not a model file", path.display()))
-    }
-
     pub fn response(&self, f: f64) -> Complex64 {
         let n = self.anti_resonance.map_or(Complex64::new(1.0, 0.0), |z| z.at(f));
         let p = self.resonance.map_or(Complex64::new(1.0, 0.0), |z| z.at(f));
