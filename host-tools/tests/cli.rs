@@ -373,6 +373,44 @@ fn ident_and_tune_refuse_impossible_models_and_unsafe_axis_names() {
     assert!(!out.join("zz.model.json").exists() && !ident_out.exists(), "nothing written");
 }
 
+/// `--anti-resonance` takes what the identification finds: both ends of the range are found
+/// within 1 %, values outside it are refused with the range; a rigid axis's report names the
+/// band the notch search looked in.
+#[test]
+fn ident_finds_anti_resonances_over_its_range_and_refuses_others() {
+    let out = tmp("ident-range");
+    for hz in [10.0, 450.0] {
+        let o = servo()
+            .args(["ident", "--axes", "x", "--json", "--anti-resonance"])
+            .arg(format!("x={hz}"))
+            .on_fmu(&out)
+            .output()
+            .unwrap();
+        assert!(o.status.success(), "{hz}: {}", String::from_utf8_lossy(&o.stderr));
+        let r: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+        let found = r["axes"][0]["model"]["anti_resonance"]["hz"].as_f64().unwrap_or(f64::NAN);
+        assert!((found / hz - 1.0).abs() < 0.01, "{hz} Hz: found {found}");
+    }
+    for hz in ["8", "9.9", "480", "1500"] {
+        let o = servo()
+            .args(["ident", "--axes", "x", "--anti-resonance"])
+            .arg(format!("x={hz}"))
+            .on_fmu(&out)
+            .output()
+            .unwrap();
+        let err = String::from_utf8_lossy(&o.stderr);
+        assert_eq!(o.status.code(), Some(2), "{hz}: {err}");
+        assert!(err.contains("from 10 to 450 Hz"), "{hz}: {err}");
+    }
+    let o = servo().args(["ident", "--axes", "x"]).on_fmu(&out).output().unwrap();
+    let text = String::from_utf8_lossy(&o.stdout);
+    assert!(o.status.success() && text.contains("the band searched"), "{text}");
+    let band = text.split("no clear anti-resonance between ").nth(1).unwrap_or_default();
+    let hz: Vec<f64> =
+        band.split(" Hz").next().unwrap_or_default().split(" and ").filter_map(|x| x.parse().ok()).collect();
+    assert!(hz.len() == 2 && hz[0] < 10.0 && hz[1] > 400.0, "{text}");
+}
+
 #[test]
 fn device_refuses_what_it_cannot_send_before_touching_a_port() {
     let err = |args: &[&str]| {

@@ -56,8 +56,15 @@ fn ident(args: &IdentArgs) -> Result<bool> {
         }
         absorbed.push(axis);
         let hz: f64 = hz.parse().map_err(|_| anyhow::anyhow!("--anti-resonance `{s}`: `{hz}` is not a frequency"))?;
-        if !(hz.is_finite() && hz > 0.0) {
-            bail!("--anti-resonance `{s}`: the frequency must be positive");
+        let (lowest, highest) = crate::ident::identification::IDENTIFIABLE_HZ;
+        if !(hz.is_finite() && (lowest..=highest).contains(&hz)) {
+            bail!(
+                "--anti-resonance `{s}`: the identification finds anti-resonances from {lowest} to {highest} Hz (the M-sequence's response is measured over {}–{} Hz at {:.2} Hz resolution; the notch search needs ±{:.0} % around a notch)",
+                crate::ident::report::BAND.0,
+                crate::ident::report::BAND.1,
+                1.0 / crate::ident::identification::period_s(),
+                (crate::ident::identification::NOTCH_SPAN - 1.0) * 100.0
+            );
         }
         let axis_parameters = parameters
             .get_mut(axis)
@@ -137,8 +144,9 @@ fn ident(args: &IdentArgs) -> Result<bool> {
                     m.fit_error * 100.0,
                 ),
                 (None, _) => println!(
-                    "  {}: no clear anti-resonance (rigid axis, N = 1): {}; gain {:.4e}{noise}",
+                    "  {}: {} (rigid axis, N = 1): {}; gain {:.4e}{noise}",
                     m.axis,
+                    r.notch.filter(|_| r.undetermined.is_none()).map_or("no clear anti-resonance".to_string(), |n| n.none_clear()),
                     r.undetermined.as_deref().unwrap_or(&notch),
                     m.gain
                 ),
