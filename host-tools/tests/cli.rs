@@ -116,6 +116,38 @@ fn accdec_refuses_bad_designs_with_the_reason() {
     }
 }
 
+/// A Butterworth slower than any cascade of moving averages the drive holds is not compared
+/// "at equal delay": refused with the limit, or, with --ma-lengths, reported as not equal.
+#[test]
+fn accdec_never_calls_a_comparison_equal_delay_that_is_not() {
+    let out = tmp("accdec-delay");
+    let run = |extra: &[&str]| {
+        servo()
+            .args(["accdec", "--order", "2", "--cutoff", "1", "--no-sweep", "--no-fmu"])
+            .args(extra)
+            .on_fmu(&out)
+            .output()
+            .unwrap()
+    };
+    let o = run(&[]);
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert_eq!(o.status.code(), Some(2), "{err}");
+    assert!(err.contains("512 ticks") && err.contains("not be at equal delay"), "{err}");
+    let o = run(&["--ma-lengths", "512,512,512", "--json"]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let r: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+    assert_eq!(r["equal_delay"], false, "{r}");
+    let o = run(&["--ma-lengths", "512,512,512"]);
+    assert!(String::from_utf8_lossy(&o.stdout).contains("NOT at equal delay"));
+    // The automatic sweep leaves such cut-offs out, naming them.
+    let o = servo().args(["accdec", "--order", "2", "--cutoff", "4", "--no-fmu"]).on_fmu(&out).output().unwrap();
+    let text = String::from_utf8_lossy(&o.stdout);
+    assert!(
+        o.status.success() && text.contains("left out 1 Hz") && text.contains("comparison at equal 99 % delay"),
+        "{text}"
+    );
+}
+
 #[test]
 fn sequence_reports_failed_expectations_and_refuses_malformed_timelines() {
     let out = tmp("sequence");

@@ -12,7 +12,10 @@ use crate::cli::Common;
 /// load for each --resonance and reports the load's residual vibration after the command
 /// arrives; sweeps the cut-off to show the delay / jerk / vibration trade-off. Unless
 /// --ma-lengths is given, the moving averages are three stages matched to the
-/// Butterworth's 99 % delay, so the comparison is at equal delay.
+/// Butterworth's 99 % delay (to one tick), so the comparison is at equal delay; where no
+/// cascade within the drive's limit (512 ticks a stage) reaches that delay, the command is
+/// refused with the closest (give --ma-lengths for a comparison not at equal delay: the
+/// report then says so).
 ///
 /// Writes profiles.svg, profile_*.csv, vibration_<Hz>hz.svg/.csv, sweep.csv/.svg and
 /// accdec.json into --out (default out/accdec/).
@@ -54,7 +57,8 @@ pub struct AccdecArgs {
     #[arg(long, default_value_t = 0.02)]
     pub damping_ratio: f64,
     /// Cut-offs to sweep (Hz, comma separated); default: 1/4, 1/2, 1, 2 and 4 times the
-    /// cut-off (up to the Nyquist frequency)
+    /// cut-off, those the design accepts (see --cutoff) and where three moving averages within
+    /// the drive's limit have the Butterworth's delay (the others are named as left out)
     #[arg(long, value_delimiter = ',')]
     pub sweep: Option<Vec<f32>>,
     /// No cut-off sweep

@@ -62,6 +62,7 @@ fn accdec(args: &AccdecArgs) -> Result<bool> {
         counts_per_rev,
         resonances: resonance.iter().map(|&hz| crate::accdec::study::Resonance { hz, damping_ratio }).collect(),
         sweep,
+        sweep_is_automatic: args.sweep.is_none(),
         fmu: (!no_fmu && !zeros_as_delays).then(|| common.fmu.clone().unwrap_or_else(default_fmu)),
         out: common.out.clone().unwrap_or_else(|| default_out("accdec")),
     };

@@ -7,8 +7,8 @@ use anyhow::{bail, Context, Result};
 use serde::Serialize;
 
 use crate::accdec::study::{
-    delay, matching_moving_average, profile, residual_vibration, Delay, FilterSpec, PulseMove, Resonance, ShapeFigures,
-    Vibration,
+    delay, matching_moving_average, profile, residual_vibration, Delay, FilterSpec, NoEqualDelay, PulseMove, Resonance,
+    ShapeFigures, Vibration,
 };
 use crate::fmu::runner::Fmu;
 use crate::fmu::trace::Trace;
@@ -29,6 +29,10 @@ pub struct AccDecRequest {
     pub resonances: Vec<Resonance>,
     /// Cut-offs of the trade-off sweep (Hz); empty: no sweep.
     pub sweep: Vec<f32>,
+    /// The sweep's cut-offs were chosen automatically: one where no moving-average cascade
+    /// within the drive's limit has the Butterworth's delay is left out (and named) instead
+    /// of refused.
+    pub sweep_is_automatic: bool,
     /// FMU for the residual-vibration runs; None: skip them.
     pub fmu: Option<PathBuf>,
     pub out: PathBuf,
@@ -73,8 +77,13 @@ pub struct AccDecReport {
     pub design: Design,
     pub butterworth: FilterResult,
     pub moving_average: FilterResult,
+    /// Whether the moving averages' 99 % delay is the Butterworth's (to one tick): always
+    /// without --ma-lengths; with them, as they happen to be.
+    pub equal_delay: bool,
     pub vibration: Vec<Vibration>,
     pub sweep: Vec<SweepPoint>,
+    /// Automatic sweep cut-offs left out, with the reason.
+    pub sweep_left_out: Vec<String>,
     pub files: Vec<PathBuf>,
 }
 
@@ -134,7 +143,12 @@ fn analyse(spec: &FilterSpec, r: &AccDecRequest, m: PulseMove) -> Result<(Filter
 fn moving_average_for(r: &AccDecRequest, butterworth_t99: f64) -> Result<FilterSpec> {
     match &r.ma_lengths {
         Some(l) => Ok(FilterSpec::MovingAverage { lengths: l.clone() }),
-        None => matching_moving_average(butterworth_t99, r.sample_period, 3),
+        None => matching_moving_average(butterworth_t99, r.sample_period, 3).map_err(|e| match e.downcast_ref::<NoEqualDelay>() {
+            Some(no) => anyhow::anyhow!(
+                "{no}. Raise --cutoff or --sample-period, or give --ma-lengths for a comparison that is not at equal delay"
+            ),
+            None => e,
+        }),
     }
 }
 
@@ -159,6 +173,7 @@ pub fn run(r: &AccDecRequest, mut progress: impl FnMut(&str, f64)) -> Result<Acc
     let (bw, bw_trace) = analyse(&bw_spec, r, m)?;
     let ma_spec = moving_average_for(r, bw.delay.t99)?;
     let (ma, ma_trace) = analyse(&ma_spec, r, m)?;
+    let equal_delay = (ma.delay.t99 - bw.delay.t99).abs() <= r.sample_period as f64 * (1.0 + 1e-6);
     let mut files = Vec::new();
 
     for (name, t) in [("profile_butterworth.csv", &bw_trace), ("profile_moving_average.csv", &ma_trace)] {
@@ -216,11 +231,19 @@ pub fn run(r: &AccDecRequest, mut progress: impl FnMut(&str, f64)) -> Result<Acc
     }
 
     let mut sweep = Vec::new();
+    let mut sweep_left_out = Vec::new();
     for (i, &cutoff) in r.sweep.iter().enumerate() {
         progress("cut-off sweep", i as f64 / r.sweep.len() as f64);
         let b = FilterSpec::Butterworth { order: r.order, cutoff_hz: cutoff, all_delays: r.all_delays };
         let (bres, _) = analyse(&b, r, m).with_context(|| format!("sweep at {cutoff} Hz"))?;
-        let a = matching_moving_average(bres.delay.t99, r.sample_period, 3)?;
+        let a = match matching_moving_average(bres.delay.t99, r.sample_period, 3) {
+            Ok(a) => a,
+            Err(e) if r.sweep_is_automatic && e.downcast_ref::<NoEqualDelay>().is_some() => {
+                sweep_left_out.push(format!("{cutoff} Hz: {e}"));
+                continue;
+            }
+            Err(e) => return Err(e.context(format!("sweep at {cutoff} Hz"))),
+        };
         let (ares, _) = analyse(&a, r, m)?;
         let mut residuals = Vec::new();
         if let Some(fmu) = &fmu {
@@ -268,8 +291,10 @@ pub fn run(r: &AccDecRequest, mut progress: impl FnMut(&str, f64)) -> Result<Acc
         design,
         butterworth: bw,
         moving_average: ma,
+        equal_delay,
         vibration,
         sweep,
+        sweep_left_out,
         files: files.clone(),
     };
     let path = r.out.join("accdec.json");
@@ -385,8 +410,18 @@ impl AccDecReport {
             );
         }
         println!("  (delays: response to a velocity step; rad/s² and rad/s³ of the unrounded output; jerk (pulses): of the whole-pulse output, quantisation included)");
+        let delays = if self.equal_delay {
+            "at equal 99 % delay".to_string()
+        } else {
+            format!(
+                "NOT at equal delay: the moving averages (--ma-lengths) settle in {:.3} ms, the Butterworth in {:.3} ms",
+                self.moving_average.delay.t99 * 1e3,
+                self.butterworth.delay.t99 * 1e3
+            )
+        };
+        println!("  comparison {delays}");
         if !self.vibration.is_empty() {
-            println!("\n  residual load vibration on the FMU (peak shaft twist |θ_load − θ_motor| from the end of interpolation + the filter's 99 % delay; friction off):");
+            println!("\n  residual load vibration on the FMU, {delays} (peak shaft twist |θ_load − θ_motor| from the end of interpolation + the filter's 99 % delay; friction off):");
             for pair in self.vibration.chunks(2) {
                 if let [b, m] = pair {
                     println!(
@@ -420,6 +455,9 @@ impl AccDecReport {
                 }
                 println!();
             }
+        }
+        for why in &self.sweep_left_out {
+            println!("  sweep: left out {why}");
         }
         println!();
         for f in &self.files {
