@@ -117,7 +117,8 @@ fn accdec_refuses_bad_designs_with_the_reason() {
 }
 
 /// A Butterworth slower than any cascade of moving averages the drive holds is not compared
-/// "at equal delay": refused with the limit, or, with --ma-lengths, reported as not equal.
+/// "at equal delay": the closest cascade is, reported as not at equal delay with the limit;
+/// so are --ma-lengths of another delay.
 #[test]
 fn accdec_never_calls_a_comparison_equal_delay_that_is_not() {
     let out = tmp("accdec-delay");
@@ -129,16 +130,17 @@ fn accdec_never_calls_a_comparison_equal_delay_that_is_not() {
             .output()
             .unwrap()
     };
-    let o = run(&[]);
-    let err = String::from_utf8_lossy(&o.stderr);
-    assert_eq!(o.status.code(), Some(2), "{err}");
-    assert!(err.contains("512 ticks") && err.contains("not be at equal delay"), "{err}");
-    let o = run(&["--ma-lengths", "512,512,512", "--json"]);
-    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
-    let r: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
-    assert_eq!(r["equal_delay"], false, "{r}");
-    let o = run(&["--ma-lengths", "512,512,512"]);
-    assert!(String::from_utf8_lossy(&o.stdout).contains("NOT at equal delay"));
+    for extra in [&[][..], &["--ma-lengths", "100,100,100"][..]] {
+        let o = run(extra);
+        let text = String::from_utf8_lossy(&o.stdout);
+        assert!(o.status.success(), "{extra:?}: {}", String::from_utf8_lossy(&o.stderr));
+        assert!(text.contains("comparison NOT at equal delay") && !text.contains("at equal 99 %"), "{extra:?}: {text}");
+        let o = run(&[extra, &["--json"]].concat());
+        let r: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+        assert_eq!(r["equal_delay"], false, "{extra:?}: {r}");
+    }
+    let text = String::from_utf8_lossy(&run(&[]).stdout).into_owned();
+    assert!(text.contains("512 ticks") && text.contains("512/512/512"), "{text}");
     // The automatic sweep leaves such cut-offs out, naming them.
     let o = servo().args(["accdec", "--order", "2", "--cutoff", "4", "--no-fmu"]).on_fmu(&out).output().unwrap();
     let text = String::from_utf8_lossy(&o.stdout);
@@ -146,6 +148,33 @@ fn accdec_never_calls_a_comparison_equal_delay_that_is_not() {
         o.status.success() && text.contains("left out 1 Hz") && text.contains("comparison at equal 99 % delay"),
         "{text}"
     );
+}
+
+/// The documented corners: the lowest cut-off runs with its automatic sweep (kept inside the
+/// design's range), and a sample period the FMU's position loop cannot run at is refused
+/// naming --sample-period and its range.
+#[test]
+fn accdec_runs_its_documented_range_and_names_a_bad_sample_period() {
+    let out = tmp("accdec-range");
+    let o = servo()
+        .args(["accdec", "--order", "6", "--cutoff", "0.5", "--no-fmu", "--json"])
+        .on_fmu(&out)
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let r: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+    let swept: Vec<f64> = r["sweep"].as_array().unwrap().iter().map(|p| p["cutoff_hz"].as_f64().unwrap()).collect();
+    let left_out = r["sweep_left_out"].as_array().unwrap();
+    assert!(swept.iter().all(|&c| c >= 0.5), "{swept:?}");
+    assert_eq!(swept.len() + left_out.len(), 3, "0.5, 1 and 2 Hz: {r}");
+    for (t, named) in
+        [("0", "positive"), ("0.0000625", "125.0 µs"), ("0.0001875", "whole multiple"), ("0.07", "62.5 ms")]
+    {
+        let o = servo().args(["accdec", "--no-sweep", "--sample-period", t]).on_fmu(&out).output().unwrap();
+        let err = String::from_utf8_lossy(&o.stderr);
+        assert_eq!(o.status.code(), Some(2), "{t}: {err}");
+        assert!(err.contains("--sample-period") && err.contains(named), "{t}: {err}");
+    }
 }
 
 #[test]
