@@ -517,6 +517,38 @@ fn index_gathers_the_experiments_into_one_page() {
     assert!(page.contains("1 of 2 checks"), "{page}");
 }
 
+/// A corrupt result file is named, counted as unreadable and gives exit status 1, never a
+/// passing experiment; --json prints the summary.
+#[test]
+fn index_names_unreadable_results_and_prints_json() {
+    let root = tmp("index-corrupt");
+    std::fs::create_dir_all(root.join("sweep")).unwrap();
+    std::fs::create_dir_all(root.join("run")).unwrap();
+    std::fs::write(root.join("sweep/sweep.json"), "{bad").unwrap();
+    std::fs::write(root.join("run/garbage.json"), "garbage").unwrap();
+    let o = servo().arg("index").arg("--out").arg(&root).output().unwrap();
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert_eq!(o.status.code(), Some(1), "{err}");
+    assert!(err.contains("sweep/sweep.json") && err.contains("run/garbage.json"), "{err}");
+    assert!(String::from_utf8_lossy(&o.stdout).contains("2 result file(s) that cannot be read"));
+    let page = std::fs::read_to_string(root.join("index.html")).unwrap();
+    assert!(page.contains("UNREADABLE sweep/sweep.json"), "{page}");
+    let o = servo().arg("index").arg("--json").arg("--out").arg(&root).output().unwrap();
+    assert_eq!(o.status.code(), Some(1));
+    let r: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+    assert_eq!(r["unreadable"].as_array().unwrap().len(), 2, "{r}");
+    assert_eq!(r["failed_checks"], 0, "{r}");
+    // A readable folder: the JSON summary counts its checks.
+    std::fs::remove_dir_all(root.join("sweep")).unwrap();
+    std::fs::remove_file(root.join("run/garbage.json")).unwrap();
+    let passing = workspace_root().join("scenarios/position_step.toml");
+    assert!(servo().arg("run").arg(&passing).on_fmu(root.join("run")).output().unwrap().status.success());
+    let o = servo().arg("index").arg("--json").arg("--out").arg(&root).output().unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let r: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+    assert!(r["checks"].as_u64().unwrap() >= 1 && r["unreadable"].as_array().unwrap().is_empty(), "{r}");
+}
+
 /// `servo bench sweep --random`: plants drawn in the ranges, the same for the same seed (the
 /// JSON names them), run against their oracles; refused with a plant index or with
 /// --interior, before any FMU runs.
