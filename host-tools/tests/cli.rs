@@ -47,6 +47,13 @@ fn bad_input_gets_a_clear_error() {
 
     let o = servo().arg("run").arg(&s).arg("--fmu").arg("/nonexistent.fmu").output().unwrap();
     assert!(String::from_utf8_lossy(&o.stderr).contains("xtask -- bundle"));
+
+    // The FMI 2.0 archive of the same model: named as such, not a schema error.
+    let fmi2 = fmu_path().with_file_name("servo_axis_fmi2.fmu");
+    let o = servo().arg("run").arg(&s).arg("--fmu").arg(&fmi2).arg("--out").arg(&out).output().unwrap();
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert_eq!(o.status.code(), Some(2), "{err}");
+    assert!(err.contains("it is an FMI 2.0 FMU") && err.contains("run FMI 3.0 FMUs"), "{err}");
 }
 
 #[test]
