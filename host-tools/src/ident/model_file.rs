@@ -103,7 +103,8 @@ mod tests {
         let mut undamped = good();
         undamped.anti_resonance = Some(Factor { hz: 40.0, damping: 0.0 });
         assert_eq!(undamped.check(), Ok(()));
-        let cases: Vec<(fn(&mut AxisModel), &str)> = vec![
+        type Edit = fn(&mut AxisModel);
+        let cases: Vec<(Edit, &str)> = vec![
             (|m| m.anti_resonance = Some(Factor { hz: -5.0, damping: 0.05 }), "`anti_resonance.hz` = -5"),
             (|m| m.anti_resonance = Some(Factor { hz: 40.0, damping: -1.0 }), "`anti_resonance.damping` = -1"),
             (|m| m.resonance = Some(Factor { hz: 51.0, damping: 0.0 }), "`resonance.damping` = 0"),
