@@ -542,4 +542,19 @@ mod tests {
         assert!(e.to_string().contains("512 ticks") && e.to_string().contains("not be at equal delay"), "{e}");
         assert!(matching_moving_average(reach, period, 3).is_ok());
     }
+
+    /// `servo bench accdec`'s comparisons (the default Butterworth, matched on its 99 % and on
+    /// its 50 % delay) are at equal delay to one tick.
+    #[test]
+    fn the_benchs_matches_are_at_equal_delay() {
+        let period = 0.00025f32;
+        let bw = FilterSpec::butterworth(3, crate::accdec::report::default_cutoff_hz());
+        let bd = delay(&bw, period).unwrap();
+        for target in [DelayMatch::T99(bd.t99), DelayMatch::T50(bd.t50)] {
+            let ma = moving_average_matched_on(target, period, 3).expect("matched");
+            let md = delay(&ma, period).unwrap();
+            let reached = if matches!(target, DelayMatch::T99(_)) { md.t99 } else { md.t50 };
+            assert!((reached - target.seconds()).abs() <= period as f64 * 1.000001, "{target:?}: {ma:?}");
+        }
+    }
 }
