@@ -11,7 +11,9 @@ use crate::cli::Common;
 ///
 /// Reads what `servo run`, `servo sequence`, `servo sweep`, `servo accdec`, `servo ident`,
 /// `servo tune` and `servo circle` wrote under --out (default out/): their checks with the
-/// verdicts, the fmpy cross-checks, the plots and the files behind them.
+/// verdicts, the fmpy cross-checks, the plots and the files behind them. A result file that is
+/// there but cannot be read is named in a warning and on the page, and the exit status is 1
+/// (as for a failed check). --json prints the summary as JSON.
 #[derive(clap::Args)]
 pub struct IndexArgs {
     #[command(flatten)]
@@ -38,9 +40,32 @@ impl IndexArgs {
         }
         let path = crate::page::write_index(&root, &sections)?;
         let failed = sections.iter().flat_map(|s| &s.verdicts).filter(|v| !v.1).count();
-        if !self.common.json {
-            println!("{} experiments, {failed} failed checks → {}", sections.len(), path.display());
+        let unreadable: Vec<&(PathBuf, String)> = sections.iter().flat_map(|s| &s.unreadable).collect();
+        for (file, why) in &unreadable {
+            eprintln!("warning: {}: {why}", root.join(file).display());
         }
-        Ok(failed == 0)
+        if self.common.json {
+            let summary = serde_json::json!({
+                "experiments": sections.len(),
+                "checks": sections.iter().map(|s| s.verdicts.len()).sum::<usize>(),
+                "failed_checks": failed,
+                "unreadable": unreadable.iter().map(|(f, why)| serde_json::json!({"file": root.join(f), "reason": why})).collect::<Vec<_>>(),
+                "index": path,
+                "sections": sections.iter().map(|s| serde_json::json!({
+                    "title": s.title,
+                    "verdicts": s.verdicts.iter().map(|(check, passed)| serde_json::json!({"check": check, "passed": passed})).collect::<Vec<_>>(),
+                })).collect::<Vec<_>>(),
+            });
+            println!("{}", serde_json::to_string_pretty(&summary)?);
+        } else {
+            let unread = if unreadable.is_empty() {
+                String::new()
+            } else {
+                format!(", {} result file(s) that cannot be read", unreadable.len())
+            };
+            println!("{} experiments, {failed} failed checks{unread} → {}", sections.len(), path.display());
+        }
+        // Exit status 1: a check failed, or something in the folder could not be read.
+        Ok(failed == 0 && unreadable.is_empty())
     }
 }

@@ -19,6 +19,23 @@ pub struct Section {
     pub plots: Vec<PathBuf>,
     /// Other files worth opening (relative to the out folder).
     pub files: Vec<PathBuf>,
+    /// Result files that are there but cannot be read (path relative to the out folder, why):
+    /// named on the page and in a warning, and they make the exit status 1.
+    pub unreadable: Vec<(PathBuf, String)>,
+}
+
+impl Section {
+    /// The result file at `path`: None when it is absent; when it is there but is not JSON
+    /// (corrupt, truncated), None and the file recorded as unreadable.
+    pub fn read_result(&mut self, root: &Path, path: &Path) -> Option<serde_json::Value> {
+        match read_result(path) {
+            Ok(json) => json,
+            Err(why) => {
+                self.unreadable.push((relative(root, path), why));
+                None
+            }
+        }
+    }
 }
 
 /// The files of `dir` with extension `ext`, sorted (none when the folder is missing).
@@ -34,7 +51,18 @@ pub fn files_with(dir: &Path, ext: &str) -> Vec<PathBuf> {
 
 /// A JSON file, if it is there and readable.
 pub fn read_json(path: &Path) -> Option<serde_json::Value> {
-    serde_json::from_str(&std::fs::read_to_string(path).ok()?).ok()
+    read_result(path).ok().flatten()
+}
+
+/// A result file: Ok(None) when it is absent, Err(why) when it is there but cannot be read as
+/// JSON.
+pub fn read_result(path: &Path) -> std::result::Result<Option<serde_json::Value>, String> {
+    let text = match std::fs::read_to_string(path) {
+        Ok(t) => t,
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound => return Ok(None),
+        Err(e) => return Err(format!("cannot be read: {e}")),
+    };
+    serde_json::from_str(&text).map(Some).map_err(|e| format!("not a JSON result file: {e}"))
 }
 
 /// The verdicts of a file a scenario-like command writes: `passed` and the fmpy cross-check.
@@ -54,7 +82,7 @@ pub fn scenario_verdicts(name: &str, json: &serde_json::Value) -> Vec<(String, b
 /// are skipped).
 pub fn add_scenario_files(section: &mut Section, root: &Path, dir: &Path, jsons: &[PathBuf]) {
     for j in jsons {
-        let Some(json) = read_json(j) else { continue };
+        let Some(json) = section.read_result(root, j) else { continue };
         let Some(name) = json["scenario"].as_str().map(str::to_string) else { continue };
         section.verdicts.extend(scenario_verdicts(&name, &json));
         section.plots.push(relative(root, &dir.join(format!("{name}.svg"))));
@@ -81,19 +109,27 @@ pub fn write_index(root: &Path, sections: &[Section]) -> Result<PathBuf> {
     );
     let failed: usize = sections.iter().map(|s| s.verdicts.iter().filter(|v| !v.1).count()).sum();
     let total: usize = sections.iter().map(|s| s.verdicts.len()).sum();
+    let unreadable: usize = sections.iter().map(|s| s.unreadable.len()).sum();
     writeln!(h, "<h1>servo: experiments on the servo-axis FMU</h1>")?;
     writeln!(
         h,
-        "<p class=\"{}\">{} of {total} checks and cross-checks pass.</p><ul>",
+        "<p class=\"{}\">{} of {total} checks and cross-checks pass.</p>",
         if failed == 0 { "pass" } else { "fail" },
         total - failed
     )?;
+    if unreadable > 0 {
+        writeln!(h, "<p class=\"fail\">{unreadable} result file(s) cannot be read (named below).</p>")?;
+    }
+    h.push_str("<ul>");
     for (i, s) in sections.iter().enumerate() {
         writeln!(h, "<li><a href=\"#s{i}\">{}</a></li>", esc(&s.title))?;
     }
     h.push_str("</ul>");
     for (i, s) in sections.iter().enumerate() {
         writeln!(h, "<h2 id=\"s{i}\">{}</h2><p><code>{}</code></p>", esc(&s.title), esc(&s.command))?;
+        for (path, why) in &s.unreadable {
+            writeln!(h, "<p class=\"fail\">UNREADABLE {}: {}</p>", esc(&path.display().to_string()), esc(why))?;
+        }
         if !s.verdicts.is_empty() {
             h.push_str("<table><tr><th>check</th><th>result</th></tr>");
             for (label, ok) in &s.verdicts {

@@ -47,6 +47,13 @@ fn bad_input_gets_a_clear_error() {
 
     let o = servo().arg("run").arg(&s).arg("--fmu").arg("/nonexistent.fmu").output().unwrap();
     assert!(String::from_utf8_lossy(&o.stderr).contains("xtask -- bundle"));
+
+    // The FMI 2.0 archive of the same model: named as such, not a schema error.
+    let fmi2 = fmu_path().with_file_name("servo_axis_fmi2.fmu");
+    let o = servo().arg("run").arg(&s).arg("--fmu").arg(&fmi2).arg("--out").arg(&out).output().unwrap();
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert_eq!(o.status.code(), Some(2), "{err}");
+    assert!(err.contains("it is an FMI 2.0 FMU") && err.contains("run FMI 3.0 FMUs"), "{err}");
 }
 
 #[test]
@@ -113,6 +120,67 @@ fn accdec_refuses_bad_designs_with_the_reason() {
         let err = String::from_utf8_lossy(&o.stderr);
         assert_eq!(o.status.code(), Some(2), "{args:?}: {err}");
         assert!(err.contains(reason), "{args:?}: {err}");
+    }
+}
+
+/// A Butterworth slower than any cascade of moving averages the drive holds is not compared
+/// "at equal delay": the closest cascade is, reported as not at equal delay with the limit;
+/// so are --ma-lengths of another delay.
+#[test]
+fn accdec_never_calls_a_comparison_equal_delay_that_is_not() {
+    let out = tmp("accdec-delay");
+    let run = |extra: &[&str]| {
+        servo()
+            .args(["accdec", "--order", "2", "--cutoff", "1", "--no-sweep", "--no-fmu"])
+            .args(extra)
+            .on_fmu(&out)
+            .output()
+            .unwrap()
+    };
+    for extra in [&[][..], &["--ma-lengths", "100,100,100"][..]] {
+        let o = run(extra);
+        let text = String::from_utf8_lossy(&o.stdout);
+        assert!(o.status.success(), "{extra:?}: {}", String::from_utf8_lossy(&o.stderr));
+        assert!(text.contains("comparison NOT at equal delay") && !text.contains("at equal 99 %"), "{extra:?}: {text}");
+        let o = run(&[extra, &["--json"]].concat());
+        let r: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+        assert_eq!(r["equal_delay"], false, "{extra:?}: {r}");
+    }
+    let text = String::from_utf8_lossy(&run(&[]).stdout).into_owned();
+    assert!(text.contains("512 ticks") && text.contains("512/512/512"), "{text}");
+    // The automatic sweep leaves such cut-offs out, naming them.
+    let o = servo().args(["accdec", "--order", "2", "--cutoff", "4", "--no-fmu"]).on_fmu(&out).output().unwrap();
+    let text = String::from_utf8_lossy(&o.stdout);
+    assert!(
+        o.status.success() && text.contains("left out 1 Hz") && text.contains("comparison at equal 99 % delay"),
+        "{text}"
+    );
+}
+
+/// The documented corners: the lowest cut-off runs with its automatic sweep (kept inside the
+/// design's range), and a sample period the FMU's position loop cannot run at is refused
+/// naming --sample-period and its range.
+#[test]
+fn accdec_runs_its_documented_range_and_names_a_bad_sample_period() {
+    let out = tmp("accdec-range");
+    let o = servo()
+        .args(["accdec", "--order", "6", "--cutoff", "0.5", "--no-fmu", "--json"])
+        .on_fmu(&out)
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let r: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+    let swept: Vec<f64> = r["sweep"].as_array().unwrap().iter().map(|p| p["cutoff_hz"].as_f64().unwrap()).collect();
+    let left_out = r["sweep_left_out"].as_array().unwrap();
+    assert!(swept.iter().all(|&c| c >= 0.5), "{swept:?}");
+    assert_eq!(swept.len() + left_out.len(), 3, "0.5, 1 and 2 Hz: {r}");
+    for (t, named) in
+        [("0", "positive"), ("0.0000625", "125.0 µs"), ("0.0001875", "whole multiple"), ("0.07", "62.5 ms")]
+    {
+        let o = servo().args(["accdec", "--no-sweep", "--sample-period", t]).on_fmu(&out).output().unwrap();
+        let err = String::from_utf8_lossy(&o.stderr);
+        assert_eq!(o.status.code(), Some(2), "{t}: {err}");
+        assert!(err.contains("--sample-period") && err.contains(named), "{t}: {err}");
     }
 }
 
@@ -610,6 +678,89 @@ fn tune_writes_each_axis_correction_and_refuses_unusable_models() {
     assert!(String::from_utf8_lossy(&o.stderr).contains("at least two"));
 }
 
+/// One check of a model file for `ident --model` and `tune`: values no axis has are refused
+/// with the field named, and axis names (which name the files written) cannot leave --out.
+#[test]
+fn ident_and_tune_refuse_impossible_models_and_unsafe_axis_names() {
+    let out = tmp("model-check");
+    let model = |axis: &str| {
+        serde_json::json!({"axis": axis, "anti_resonance": {"hz": 40.0, "damping": 0.05},
+            "resonance": {"hz": 51.4, "damping": 0.064}, "gain": 4003.0, "band": [12.0, 240.0], "fit_error": 0.001})
+    };
+    let y = out.join("y.model.json");
+    std::fs::write(&y, model("y").to_string()).unwrap();
+    let edited = out.join("edited.model.json");
+    let tune_out = out.join("tune");
+    for (field, value, named) in [
+        ("/anti_resonance/hz", serde_json::json!(-5.0), "`anti_resonance.hz` = -5"),
+        ("/anti_resonance/damping", serde_json::json!(-1.0), "`anti_resonance.damping` = -1"),
+        ("/gain", serde_json::json!(0.0), "`gain` = 0"),
+        ("/axis", serde_json::json!("../evil"), "letters, digits, _ and -"),
+    ] {
+        let mut m = model("x");
+        *m.pointer_mut(field).unwrap() = value;
+        std::fs::write(&edited, m.to_string()).unwrap();
+        for command in [&["tune", "--method", "response"][..], &["ident"][..]] {
+            let o = servo().args(command).arg("--model").arg(&edited).arg(&y).on_fmu(&tune_out).output().unwrap();
+            let err = String::from_utf8_lossy(&o.stderr);
+            assert_eq!(o.status.code(), Some(2), "{command:?} {field}: {err}");
+            assert!(err.contains(named) && err.contains("edited.model.json"), "{command:?} {field}: {err}");
+        }
+    }
+    assert!(!out.join("evil.corr.toml").exists() && !tune_out.exists(), "nothing written");
+    let ident_out = out.join("ident");
+    for (axes, reason) in [
+        (&["--axes", "../zz"][..], "`../zz` is not allowed"),
+        (&["--axes", ""][..], "`` is not allowed"),
+        (&["--axes", "x,x"][..], "`x` is given twice"),
+        (&["--axes", "x", "--anti-resonance", "x=40,x=70"][..], "already has an anti-resonance"),
+    ] {
+        let o = servo().arg("ident").args(axes).on_fmu(&ident_out).output().unwrap();
+        let err = String::from_utf8_lossy(&o.stderr);
+        assert_eq!(o.status.code(), Some(2), "{axes:?}: {err}");
+        assert!(err.contains(reason), "{axes:?}: {err}");
+    }
+    assert!(!out.join("zz.model.json").exists() && !ident_out.exists(), "nothing written");
+}
+
+/// `--anti-resonance` takes what the identification finds: both ends of the range are found
+/// within 1 %, values outside it are refused with the range; a rigid axis's report names the
+/// band the notch search looked in.
+#[test]
+fn ident_finds_anti_resonances_over_its_range_and_refuses_others() {
+    let out = tmp("ident-range");
+    for hz in [10.0, 450.0] {
+        let o = servo()
+            .args(["ident", "--axes", "x", "--json", "--anti-resonance"])
+            .arg(format!("x={hz}"))
+            .on_fmu(&out)
+            .output()
+            .unwrap();
+        assert!(o.status.success(), "{hz}: {}", String::from_utf8_lossy(&o.stderr));
+        let r: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+        let found = r["axes"][0]["model"]["anti_resonance"]["hz"].as_f64().unwrap_or(f64::NAN);
+        assert!((found / hz - 1.0).abs() < 0.01, "{hz} Hz: found {found}");
+    }
+    for hz in ["8", "9.9", "480", "1500"] {
+        let o = servo()
+            .args(["ident", "--axes", "x", "--anti-resonance"])
+            .arg(format!("x={hz}"))
+            .on_fmu(&out)
+            .output()
+            .unwrap();
+        let err = String::from_utf8_lossy(&o.stderr);
+        assert_eq!(o.status.code(), Some(2), "{hz}: {err}");
+        assert!(err.contains("from 10 to 450 Hz"), "{hz}: {err}");
+    }
+    let o = servo().args(["ident", "--axes", "x"]).on_fmu(&out).output().unwrap();
+    let text = String::from_utf8_lossy(&o.stdout);
+    assert!(o.status.success() && text.contains("the band searched"), "{text}");
+    let band = text.split("no clear anti-resonance between ").nth(1).unwrap_or_default();
+    let hz: Vec<f64> =
+        band.split(" Hz").next().unwrap_or_default().split(" and ").filter_map(|x| x.parse().ok()).collect();
+    assert!(hz.len() == 2 && hz[0] < 10.0 && hz[1] > 400.0, "{text}");
+}
+
 #[test]
 fn device_refuses_what_it_cannot_send_before_touching_a_port() {
     let err = |args: &[&str]| {
@@ -653,6 +804,38 @@ fn index_gathers_the_experiments_into_one_page() {
     assert_eq!(o.status.code(), Some(1));
     let page = std::fs::read_to_string(root.join("index.html")).unwrap();
     assert!(page.contains("1 of 2 checks"), "{page}");
+}
+
+/// A corrupt result file is named, counted as unreadable and gives exit status 1, never a
+/// passing experiment; --json prints the summary.
+#[test]
+fn index_names_unreadable_results_and_prints_json() {
+    let root = tmp("index-corrupt");
+    std::fs::create_dir_all(root.join("sweep")).unwrap();
+    std::fs::create_dir_all(root.join("run")).unwrap();
+    std::fs::write(root.join("sweep/sweep.json"), "{bad").unwrap();
+    std::fs::write(root.join("run/garbage.json"), "garbage").unwrap();
+    let o = servo().arg("index").arg("--out").arg(&root).output().unwrap();
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert_eq!(o.status.code(), Some(1), "{err}");
+    assert!(err.contains("sweep/sweep.json") && err.contains("run/garbage.json"), "{err}");
+    assert!(String::from_utf8_lossy(&o.stdout).contains("2 result file(s) that cannot be read"));
+    let page = std::fs::read_to_string(root.join("index.html")).unwrap();
+    assert!(page.contains("UNREADABLE sweep/sweep.json"), "{page}");
+    let o = servo().arg("index").arg("--json").arg("--out").arg(&root).output().unwrap();
+    assert_eq!(o.status.code(), Some(1));
+    let r: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+    assert_eq!(r["unreadable"].as_array().unwrap().len(), 2, "{r}");
+    assert_eq!(r["failed_checks"], 0, "{r}");
+    // A readable folder: the JSON summary counts its checks.
+    std::fs::remove_dir_all(root.join("sweep")).unwrap();
+    std::fs::remove_file(root.join("run/garbage.json")).unwrap();
+    let passing = workspace_root().join("scenarios/position_step.toml");
+    assert!(servo().arg("run").arg(&passing).on_fmu(root.join("run")).output().unwrap().status.success());
+    let o = servo().arg("index").arg("--json").arg("--out").arg(&root).output().unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let r: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+    assert!(r["checks"].as_u64().unwrap() >= 1 && r["unreadable"].as_array().unwrap().is_empty(), "{r}");
 }
 
 /// `servo bench sweep --random`: plants drawn in the ranges, the same for the same seed (the

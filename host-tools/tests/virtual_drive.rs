@@ -136,6 +136,30 @@ fn a_sweep_over_the_virtual_drive_matches_its_twin_and_parameters_survive_a_rest
     assert_eq!(json(&device(&vd.port, &["load-correction", file.to_str().unwrap()]))["done"], true);
 }
 
+/// `servo device telemetry` prints the drive's telemetry as JSON fields (not a debug string):
+/// the tick advances between two polls, and the parameter record is the one a save wrote.
+#[test]
+fn telemetry_is_printed_as_json_fields() {
+    let _serial = one_at_a_time();
+    let dir = tmp("telemetry");
+    let _ = std::fs::remove_file(dir.join("flash.bin"));
+    let vd = VirtualDrive::start(&dir, "max", &[]);
+    let first = json(&device(&vd.port, &["telemetry"]));
+    let t = &first["telemetry"];
+    assert_eq!(t["axis"]["faults"], 0, "a fresh drive has no faults: {first}");
+    assert!(t["axis"]["current"]["q"].is_number() && t["axis"]["mode"].is_string(), "{first}");
+    assert!(t["params_record"].is_null(), "nothing saved yet: {first}");
+    let tick =
+        |v: &serde_json::Value| v["telemetry"]["axis"]["tick"].as_u64().unwrap_or_else(|| panic!("no tick: {v}"));
+    for field in ["position", "velocity_estimate", "torque_command", "sequence", "sweep"] {
+        assert!(!t["axis"][field].is_null(), "{field} missing: {first}");
+    }
+    let record = json(&device(&vd.port, &["save-params"]))["record"].as_u64().unwrap();
+    let second = json(&device(&vd.port, &["telemetry"]));
+    assert!(tick(&second) > tick(&first), "{first} then {second}");
+    assert_eq!(second["telemetry"]["params_record"].as_u64(), Some(record), "{second}");
+}
+
 /// The link's summary on stderr: (corrupt frames, requests sent again).
 fn line_costs(stderr: &str) -> (u64, u64) {
     let Some(line) = stderr.lines().find(|l| l.starts_with("link: ")) else { return (0, 0) };

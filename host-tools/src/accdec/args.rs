@@ -12,7 +12,10 @@ use crate::cli::Common;
 /// load for each --resonance and reports the load's residual vibration after the command
 /// arrives; sweeps the cut-off to show the delay / jerk / vibration trade-off. Unless
 /// --ma-lengths is given, the moving averages are three stages matched to the
-/// Butterworth's 99 % delay, so the comparison is at equal delay.
+/// Butterworth's 99 % delay (to one tick), so the comparison is at equal delay; where no
+/// cascade within the drive's limit (512 ticks a stage) reaches that delay, the closest is
+/// compared and the report says the comparison is NOT at equal delay, and why (as it does for
+/// --ma-lengths of another delay).
 ///
 /// Writes profiles.svg, profile_*.csv, vibration_<Hz>hz.svg/.csv, sweep.csv/.svg and
 /// accdec.json into --out (default out/accdec/).
@@ -23,10 +26,13 @@ pub struct AccdecArgs {
     /// Butterworth order (1 to 6)
     #[arg(long, default_value_t = 3)]
     pub order: u32,
-    /// Butterworth cut-off (Hz); default: twice the position loop's bandwidth kp/2π
+    /// Butterworth cut-off (Hz); default: twice the position loop's bandwidth kp/2π. From
+    /// 0.5 Hz (and 6e-5/T) up to the Nyquist frequency 1/(2T) inclusive, as the drive's
+    /// design accepts (the seed's worked example, 1 kHz at 0.5 ms, sits at Nyquist)
     #[arg(long)]
     pub cutoff: Option<f32>,
-    /// Sample period of the filter = the position-loop period (s)
+    /// Sample period of the filter = the position-loop period (s); with FMU runs a whole
+    /// multiple of the FMU's velocity-loop period (125 µs) up to 62.5 ms
     #[arg(long, default_value_t = 0.00025)]
     pub sample_period: f32,
     /// Keep every zero at infinity as a delay (python-control's `matched`) instead of the
@@ -54,7 +60,8 @@ pub struct AccdecArgs {
     #[arg(long, default_value_t = 0.02)]
     pub damping_ratio: f64,
     /// Cut-offs to sweep (Hz, comma separated); default: 1/4, 1/2, 1, 2 and 4 times the
-    /// cut-off (up to the Nyquist frequency)
+    /// cut-off, those the design accepts (see --cutoff) and where three moving averages within
+    /// the drive's limit have the Butterworth's delay (the others are named as left out)
     #[arg(long, value_delimiter = ',')]
     pub sweep: Option<Vec<f32>>,
     /// No cut-off sweep

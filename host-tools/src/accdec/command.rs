@@ -49,7 +49,17 @@ fn accdec(args: &AccdecArgs) -> Result<bool> {
     let sweep = match (no_sweep, sweep) {
         (true, _) => vec![],
         (false, Some(s)) => s.clone(),
-        (false, None) => [0.25, 0.5, 1.0, 2.0, 4.0].iter().map(|f| f * cutoff).filter(|&c| c <= nyquist).collect(),
+        // Only the cut-offs the design accepts at this period (at least 0.5 Hz and 6e-5/T, at
+        // most the Nyquist frequency): the sweep shows the design's range, it does not fail on it.
+        (false, None) => [0.25, 0.5, 1.0, 2.0, 4.0]
+            .iter()
+            .map(|f| f * cutoff)
+            .filter(|&c| {
+                let spec =
+                    crate::accdec::study::FilterSpec::Butterworth { order, cutoff_hz: c, all_delays: zeros_as_delays };
+                c <= nyquist && spec.design(sample_period).is_ok()
+            })
+            .collect(),
     };
     let request = crate::accdec::report::AccDecRequest {
         order,
@@ -62,6 +72,7 @@ fn accdec(args: &AccdecArgs) -> Result<bool> {
         counts_per_rev,
         resonances: resonance.iter().map(|&hz| crate::accdec::study::Resonance { hz, damping_ratio }).collect(),
         sweep,
+        sweep_is_automatic: args.sweep.is_none(),
         fmu: (!no_fmu && !zeros_as_delays).then(|| common.fmu.clone().unwrap_or_else(default_fmu)),
         out: common.out.clone().unwrap_or_else(|| default_out("accdec")),
     };

@@ -7,8 +7,8 @@ use anyhow::{bail, Context, Result};
 use serde::Serialize;
 
 use crate::accdec::study::{
-    delay, matching_moving_average, profile, residual_vibration, Delay, FilterSpec, PulseMove, Resonance, ShapeFigures,
-    Vibration,
+    delay, matching_moving_average, position_period_parameters, profile, residual_vibration, Delay, FilterSpec,
+    NoEqualDelay, PulseMove, Resonance, ShapeFigures, Vibration,
 };
 use crate::fmu::runner::Fmu;
 use crate::fmu::trace::Trace;
@@ -29,6 +29,10 @@ pub struct AccDecRequest {
     pub resonances: Vec<Resonance>,
     /// Cut-offs of the trade-off sweep (Hz); empty: no sweep.
     pub sweep: Vec<f32>,
+    /// The sweep's cut-offs were chosen automatically: one where no moving-average cascade
+    /// within the drive's limit has the Butterworth's delay is left out (and named) instead
+    /// of refused.
+    pub sweep_is_automatic: bool,
     /// FMU for the residual-vibration runs; None: skip them.
     pub fmu: Option<PathBuf>,
     pub out: PathBuf,
@@ -73,8 +77,16 @@ pub struct AccDecReport {
     pub design: Design,
     pub butterworth: FilterResult,
     pub moving_average: FilterResult,
+    /// Whether the moving averages' 99 % delay is the Butterworth's (to one tick): without
+    /// --ma-lengths unless no cascade within the drive's limit is that long; with them, as
+    /// they happen to be.
+    pub equal_delay: bool,
+    /// Why not, when not.
+    pub unequal_delay: Option<String>,
     pub vibration: Vec<Vibration>,
     pub sweep: Vec<SweepPoint>,
+    /// Automatic sweep cut-offs left out, with the reason.
+    pub sweep_left_out: Vec<String>,
     pub files: Vec<PathBuf>,
 }
 
@@ -131,10 +143,22 @@ fn analyse(spec: &FilterSpec, r: &AccDecRequest, m: PulseMove) -> Result<(Filter
     Ok((FilterResult { filter: spec.clone(), label: spec.label(), delay: d, shape }, p.trace(to_rad)))
 }
 
-fn moving_average_for(r: &AccDecRequest, butterworth_t99: f64) -> Result<FilterSpec> {
+/// The moving averages compared: --ma-lengths, or three stages with the Butterworth's 99 %
+/// delay; where the drive holds none that long, the closest, with the reason the comparison
+/// is not at equal delay.
+fn moving_average_for(r: &AccDecRequest, butterworth_t99: f64) -> Result<(FilterSpec, Option<String>)> {
     match &r.ma_lengths {
-        Some(l) => Ok(FilterSpec::MovingAverage { lengths: l.clone() }),
-        None => matching_moving_average(butterworth_t99, r.sample_period, 3),
+        Some(l) => Ok((FilterSpec::MovingAverage { lengths: l.clone() }, None)),
+        None => match matching_moving_average(butterworth_t99, r.sample_period, 3) {
+            Ok(spec) => Ok((spec, None)),
+            Err(e) => {
+                let no = e.downcast::<NoEqualDelay>()?;
+                Ok((
+                    no.closest.clone(),
+                    Some(format!("{no} (raise --cutoff or --sample-period for one at equal delay)")),
+                ))
+            }
+        },
     }
 }
 
@@ -151,14 +175,54 @@ fn fmu_duration(results: &[&FilterResult], resonances: &[Resonance]) -> f64 {
     start + (10.0 / slowest).max(0.1)
 }
 
+/// The sample period: positive; with FMU runs, one the FMU's position loop can run at (a whole
+/// multiple of its velocity-loop period, at most 1000 base ticks), checked with the filter's
+/// parameters before anything runs.
+fn check_sample_period(r: &AccDecRequest, butterworth: &FilterSpec) -> Result<()> {
+    let t = r.sample_period;
+    if !(t.is_finite() && t > 0.0) {
+        bail!("--sample-period must be a positive number of seconds (got {t})");
+    }
+    if r.fmu.is_none() {
+        return Ok(());
+    }
+    let rates = control_core::Params::default().rates;
+    let fmu_accepts = || -> Result<()> {
+        let mut p: std::collections::BTreeMap<String, crate::fmu::scenario::Value> =
+            position_period_parameters(t as f64)?.into_iter().collect();
+        p.extend(butterworth.fmu_parameters()?);
+        let control = crate::fmu::configuration::configuration(&p)?.control;
+        control.validate().map_err(|e| anyhow::anyhow!("{e}"))
+    };
+    fmu_accepts().map_err(|e| {
+        anyhow::anyhow!(
+            "--sample-period {t} s: the FMU runs the filter in its position loop, whose period is a whole multiple of its velocity-loop period, {:.1} µs, from {:.1} µs to {} ms ({e:#}); or give --no-fmu",
+            rates.velocity_period() as f64 * 1e6,
+            rates.velocity_period() as f64 * 1e6,
+            1000.0 / rates.current_loop_hz as f64 * 1e3
+        )
+    })
+}
+
 pub fn run(r: &AccDecRequest, mut progress: impl FnMut(&str, f64)) -> Result<AccDecReport> {
+    let bw_spec = FilterSpec::Butterworth { order: r.order, cutoff_hz: r.cutoff_hz, all_delays: r.all_delays };
+    check_sample_period(r, &bw_spec)?;
     std::fs::create_dir_all(&r.out).with_context(|| format!("cannot create {}", r.out.display()))?;
     let m = pulse_move(r)?;
-    let bw_spec = FilterSpec::Butterworth { order: r.order, cutoff_hz: r.cutoff_hz, all_delays: r.all_delays };
     let design = design_of(&bw_spec, r.sample_period)?;
     let (bw, bw_trace) = analyse(&bw_spec, r, m)?;
-    let ma_spec = moving_average_for(r, bw.delay.t99)?;
+    let (ma_spec, unmatched) = moving_average_for(r, bw.delay.t99)?;
     let (ma, ma_trace) = analyse(&ma_spec, r, m)?;
+    let equal_delay = (ma.delay.t99 - bw.delay.t99).abs() <= r.sample_period as f64 * (1.0 + 1e-6);
+    let unequal_delay = (!equal_delay).then(|| {
+        unmatched.unwrap_or_else(|| {
+            format!(
+                "the moving averages (--ma-lengths) settle in {:.3} ms, the Butterworth in {:.3} ms",
+                ma.delay.t99 * 1e3,
+                bw.delay.t99 * 1e3
+            )
+        })
+    });
     let mut files = Vec::new();
 
     for (name, t) in [("profile_butterworth.csv", &bw_trace), ("profile_moving_average.csv", &ma_trace)] {
@@ -216,11 +280,19 @@ pub fn run(r: &AccDecRequest, mut progress: impl FnMut(&str, f64)) -> Result<Acc
     }
 
     let mut sweep = Vec::new();
+    let mut sweep_left_out = Vec::new();
     for (i, &cutoff) in r.sweep.iter().enumerate() {
         progress("cut-off sweep", i as f64 / r.sweep.len() as f64);
         let b = FilterSpec::Butterworth { order: r.order, cutoff_hz: cutoff, all_delays: r.all_delays };
         let (bres, _) = analyse(&b, r, m).with_context(|| format!("sweep at {cutoff} Hz"))?;
-        let a = matching_moving_average(bres.delay.t99, r.sample_period, 3)?;
+        let a = match matching_moving_average(bres.delay.t99, r.sample_period, 3) {
+            Ok(a) => a,
+            Err(e) if r.sweep_is_automatic && e.downcast_ref::<NoEqualDelay>().is_some() => {
+                sweep_left_out.push(format!("{cutoff} Hz: {e}"));
+                continue;
+            }
+            Err(e) => return Err(e.context(format!("sweep at {cutoff} Hz"))),
+        };
         let (ares, _) = analyse(&a, r, m)?;
         let mut residuals = Vec::new();
         if let Some(fmu) = &fmu {
@@ -268,8 +340,11 @@ pub fn run(r: &AccDecRequest, mut progress: impl FnMut(&str, f64)) -> Result<Acc
         design,
         butterworth: bw,
         moving_average: ma,
+        equal_delay,
+        unequal_delay,
         vibration,
         sweep,
+        sweep_left_out,
         files: files.clone(),
     };
     let path = r.out.join("accdec.json");
@@ -385,8 +460,14 @@ impl AccDecReport {
             );
         }
         println!("  (delays: response to a velocity step; rad/s² and rad/s³ of the unrounded output; jerk (pulses): of the whole-pulse output, quantisation included)");
+        let delays = match &self.unequal_delay {
+            None => "at equal 99 % delay".to_string(),
+            Some(why) => format!("NOT at equal delay: {why}"),
+        };
+        println!("  comparison {delays}");
         if !self.vibration.is_empty() {
-            println!("\n  residual load vibration on the FMU (peak shaft twist |θ_load − θ_motor| from the end of interpolation + the filter's 99 % delay; friction off):");
+            let delays = if self.equal_delay { "at equal 99 % delay" } else { "NOT at equal delay (see above)" };
+            println!("\n  residual load vibration on the FMU, {delays} (peak shaft twist |θ_load − θ_motor| from the end of interpolation + the filter's 99 % delay; friction off):");
             for pair in self.vibration.chunks(2) {
                 if let [b, m] = pair {
                     println!(
@@ -420,6 +501,9 @@ impl AccDecReport {
                 }
                 println!();
             }
+        }
+        for why in &self.sweep_left_out {
+            println!("  sweep: left out {why}");
         }
         println!();
         for f in &self.files {

@@ -169,16 +169,64 @@ pub enum DelayMatch {
     T99(f64),
 }
 
-/// Three equal (or nearly equal: lengths differ by at most one) moving averages whose 99 %
-/// delay is closest to `t99`.
+impl DelayMatch {
+    fn seconds(self) -> f64 {
+        let (Self::T50(t) | Self::T99(t)) = self;
+        t
+    }
+
+    fn name(self) -> &'static str {
+        match self {
+            Self::T50(_) => "50 %",
+            Self::T99(_) => "99 %",
+        }
+    }
+}
+
+/// No cascade of moving averages within the drive's limit ([`MAX_MOVING_AVERAGE_LENGTH`] ticks
+/// a stage) has the delay asked for to one tick: a comparison with the closest would not be at
+/// equal delay.
+#[derive(Clone, Debug, PartialEq)]
+pub struct NoEqualDelay {
+    pub target: DelayMatch,
+    pub period: f32,
+    /// The cascade whose delay comes closest, and that delay (s).
+    pub closest: FilterSpec,
+    pub closest_delay: f64,
+}
+
+impl std::fmt::Display for NoEqualDelay {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        let stages = match &self.closest {
+            FilterSpec::MovingAverage { lengths } => lengths.len(),
+            FilterSpec::Butterworth { .. } => 0,
+        };
+        write!(
+            f,
+            "no cascade of {stages} moving averages within the drive's limit of {MAX_MOVING_AVERAGE_LENGTH} ticks a stage ({:.1} ms at T = {} ms) has the Butterworth's {} delay of {:.1} ms (to one tick): the closest, {}, has {:.1} ms, so a comparison would not be at equal delay",
+            MAX_MOVING_AVERAGE_LENGTH as f64 * self.period as f64 * 1e3,
+            self.period * 1e3,
+            self.target.name(),
+            self.target.seconds() * 1e3,
+            self.closest.label(),
+            self.closest_delay * 1e3
+        )
+    }
+}
+
+impl std::error::Error for NoEqualDelay {}
+
+/// Three equal (or nearly equal: lengths differ by at most one) moving averages with the 99 %
+/// delay `t99` (to one tick); an error holding a [`NoEqualDelay`] when there are none.
 pub fn matching_moving_average(t99: f64, period: f32, stages: usize) -> Result<FilterSpec> {
     moving_average_matched_on(DelayMatch::T99(t99), period, stages)
 }
 
-/// `stages` equal (or nearly equal) moving averages whose delay is closest to `target`.
+/// `stages` equal (or nearly equal) moving averages whose delay is `target` to one tick (the
+/// closest); an error holding a [`NoEqualDelay`] when none within the drive's limit is.
 pub fn moving_average_matched_on(target: DelayMatch, period: f32, stages: usize) -> Result<FilterSpec> {
-    let (DelayMatch::T50(t) | DelayMatch::T99(t)) = target;
-    let mut best: Option<(f64, FilterSpec)> = None;
+    let t = target.seconds();
+    let mut best: Option<(f64, f64, FilterSpec)> = None;
     for base in 1..=MAX_MOVING_AVERAGE_LENGTH {
         for extra in 0..stages {
             let lengths: Vec<u32> = (0..stages).map(|i| base + u32::from(i >= stages - extra)).collect();
@@ -187,12 +235,13 @@ pub fn moving_average_matched_on(target: DelayMatch, period: f32, stages: usize)
             }
             let spec = FilterSpec::MovingAverage { lengths };
             let d = delay(&spec, period)?;
-            let err = match target {
-                DelayMatch::T50(t50) => (d.t50 - t50).abs(),
-                DelayMatch::T99(t99) => (d.t99 - t99).abs(),
+            let reached = match target {
+                DelayMatch::T50(_) => d.t50,
+                DelayMatch::T99(_) => d.t99,
             };
-            if best.as_ref().is_none_or(|(e, _)| err < *e) {
-                best = Some((err, spec));
+            let err = (reached - t).abs();
+            if best.as_ref().is_none_or(|(e, ..)| err < *e) {
+                best = Some((err, reached, spec));
             }
         }
         // Both delays grow with the length and exceed one window: stop once past the target.
@@ -200,7 +249,12 @@ pub fn moving_average_matched_on(target: DelayMatch, period: f32, stages: usize)
             break;
         }
     }
-    best.map(|(_, s)| s).ok_or_else(|| anyhow!("no moving average matches a delay of {target:?} s"))
+    let (err, reached, spec) = best.ok_or_else(|| anyhow!("no moving average matches a delay of {target:?} s"))?;
+    // The cascades' delays are whole ticks: within one tick is equal.
+    if err > period as f64 * (1.0 + 1e-6) {
+        return Err(NoEqualDelay { target, period, closest: spec, closest_delay: reached }.into());
+    }
+    Ok(spec)
 }
 
 /// A positioning move in encoder counts, as the drive's interpolator gets it.
@@ -465,4 +519,42 @@ pub fn residual_vibration(
         },
         trace,
     ))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A delay the drive's moving averages reach is matched to one tick (checked on the
+    /// cascade's own step response); one beyond three stages of 512 ticks is refused with the
+    /// closest cascade, never returned as a match.
+    #[test]
+    fn a_delay_beyond_the_longest_cascade_is_no_match() {
+        let period = 0.00025f32;
+        let t99 = 0.1;
+        let ma = matching_moving_average(t99, period, 3).expect("reachable");
+        assert!((delay(&ma, period).unwrap().t99 - t99).abs() <= period as f64 * 1.000001, "{ma:?}");
+        let longest = FilterSpec::MovingAverage { lengths: vec![MAX_MOVING_AVERAGE_LENGTH; 3] };
+        let reach = delay(&longest, period).unwrap().t99;
+        let e = matching_moving_average(reach + 3.0 * period as f64, period, 3).unwrap_err();
+        let no = e.downcast_ref::<NoEqualDelay>().expect("a NoEqualDelay");
+        assert_eq!(no.closest, longest);
+        assert!(e.to_string().contains("512 ticks") && e.to_string().contains("not be at equal delay"), "{e}");
+        assert!(matching_moving_average(reach, period, 3).is_ok());
+    }
+
+    /// `servo bench accdec`'s comparisons (the default Butterworth, matched on its 99 % and on
+    /// its 50 % delay) are at equal delay to one tick.
+    #[test]
+    fn the_benchs_matches_are_at_equal_delay() {
+        let period = 0.00025f32;
+        let bw = FilterSpec::butterworth(3, crate::accdec::report::default_cutoff_hz());
+        let bd = delay(&bw, period).unwrap();
+        for target in [DelayMatch::T99(bd.t99), DelayMatch::T50(bd.t50)] {
+            let ma = moving_average_matched_on(target, period, 3).expect("matched");
+            let md = delay(&ma, period).unwrap();
+            let reached = if matches!(target, DelayMatch::T99(_)) { md.t99 } else { md.t50 };
+            assert!((reached - target.seconds()).abs() <= period as f64 * 1.000001, "{target:?}: {ma:?}");
+        }
+    }
 }

@@ -3,7 +3,7 @@
 
 use std::path::Path;
 
-use crate::page::{files_with, read_json, relative, Section};
+use crate::page::{files_with, relative, Section};
 
 pub fn section(root: &Path) -> Option<Section> {
     let dir = root.join("circle");
@@ -17,7 +17,7 @@ pub fn section(root: &Path) -> Option<Section> {
     for d in &dirs {
         for name in ["circle.json", "pseudo_circle.json"] {
             let path = d.join(name);
-            let Some(json) = read_json(&path) else { continue };
+            let Some(json) = s.read_result(root, &path) else { continue };
             if let Some(i) = json["fmpy"]["identical"].as_bool() {
                 s.verdicts
                     .push((format!("{}: fmpy gives the same feedback bit for bit", relative(root, d).display()), i));
@@ -26,7 +26,7 @@ pub fn section(root: &Path) -> Option<Section> {
         }
         s.plots.extend(files_with(d, "svg").iter().map(|p| relative(root, p)));
     }
-    if s.files.is_empty() {
+    if s.files.is_empty() && s.unreadable.is_empty() {
         return None;
     }
     Some(s)

@@ -77,7 +77,7 @@ fn device(args: &DeviceArgs) -> Result<bool> {
             "boot_params": boot_params.to_string(),
         }),
         (_, Some(r)) => match session.answer(&r)? {
-            Response::Telemetry(t) => serde_json::json!({"telemetry": format!("{t:?}")}),
+            Response::Telemetry(t) => serde_json::json!({"telemetry": serde_json::to_value(t)?}),
             Response::Done => serde_json::json!({"done": true}),
             Response::Saved { sequence } => serde_json::json!({"done": true, "record": sequence}),
             Response::Refused(why) => bail!("the drive refused the request: {why}"),

@@ -3,16 +3,21 @@
 
 use std::path::Path;
 
-use crate::page::{files_with, read_json, relative, Section};
+use crate::page::{files_with, read_result, relative, Section};
 
 pub fn section(root: &Path) -> Option<Section> {
     let (sweep_dir, run_dir) = (root.join("device/sweep"), root.join("device/run"));
-    let sweep = read_json(&sweep_dir.join("sweep.json"));
+    let sweep_path = sweep_dir.join("sweep.json");
+    let (sweep, unreadable) = match read_result(&sweep_path) {
+        Ok(json) => (json, vec![]),
+        Err(why) => (None, vec![(relative(root, &sweep_path), why)]),
+    };
     let runs = files_with(&run_dir, "json");
-    if sweep.is_none() && runs.is_empty() {
+    if sweep.is_none() && runs.is_empty() && unreadable.is_empty() {
         return None;
     }
     let mut s = Section {
+        unreadable,
         title: "On a drive: the virtual drive over its serial link, against the FMU twin".into(),
         command: "servo virtual-drive & servo sweep --device PORT; servo run --device PORT".into(),
         ..Default::default()
@@ -37,7 +42,7 @@ pub fn section(root: &Path) -> Option<Section> {
         s.files.extend(["sweep.csv", "sweep.json"].iter().map(|f| relative(root, &sweep_dir.join(f))));
     }
     for path in &runs {
-        let Some(j) = read_json(path) else { continue };
+        let Some(j) = s.read_result(root, path) else { continue };
         let name = j["scenario"].as_str().unwrap_or("?").to_string();
         for c in j["checks"].as_array().into_iter().flatten() {
             let what = c["description"].as_str().unwrap_or("check");

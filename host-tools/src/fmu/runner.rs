@@ -43,8 +43,25 @@ pub fn import_fmi3(path: &Path) -> Result<Fmi3Import> {
     archive.extract(dir.path())?;
     let xml =
         std::fs::read_to_string(dir.path().join("modelDescription.xml")).context("reading modelDescription.xml")?;
+    match fmi_version(&xml) {
+        Some(v) if v.starts_with("3.") => {}
+        Some(v) => bail!(
+            "it is an FMI {v} FMU; the host tools run FMI 3.0 FMUs: pass the FMI 3.0 archive (target/fmu/servo_axis.fmu; `cargo run -p xtask -- bundle` builds both, the FMI 2.0 one is for FMI 2.0 importers such as fmpy)"
+        ),
+        None => bail!("its modelDescription.xml names no fmiVersion: not an FMU the host tools can run (they run FMI 3.0 FMUs)"),
+    }
     let patched = base_units_for_fmi_schema(&xml);
     Ok(<Fmi3Import as FmiImport>::new(dir, &patched)?)
+}
+
+/// The `fmiVersion` attribute of a model description's root element (FMI 2.0: "2.0", FMI 3.0:
+/// "3.0"); the first occurrence of the attribute is the root's.
+fn fmi_version(xml: &str) -> Option<&str> {
+    let start = xml.find("fmiVersion")? + "fmiVersion".len();
+    let rest = xml[start..].trim_start().strip_prefix('=')?.trim_start();
+    let quote = rest.chars().next().filter(|c| *c == '"' || *c == '\'')?;
+    let value = &rest[1..];
+    value.find(quote).map(|end| &value[..end])
 }
 
 fn base_units_for_fmi_schema(xml: &str) -> String {
@@ -443,5 +460,12 @@ mod tests {
         assert!(r.passed && r.observed.0 == 3.0 * 0.7e-3, "{r:?}");
         let r = evaluate_checks(&s(Some(0.001), None), &trace).unwrap().remove(0);
         assert!(!r.passed && r.not_evaluated.is_some(), "{r:?}");
+    }
+
+    #[test]
+    fn the_fmi_version_is_read_from_the_root_element() {
+        assert_eq!(fmi_version(r#"<?xml version="1.0"?><fmiModelDescription fmiVersion="2.0" guid="x">"#), Some("2.0"));
+        assert_eq!(fmi_version("<fmiModelDescription fmiVersion = '3.0' instantiationToken='t'>"), Some("3.0"));
+        assert_eq!(fmi_version("<fmiModelDescription modelName='m'>"), None);
     }
 }

@@ -5,9 +5,10 @@ use std::path::PathBuf;
 use crate::cli::Common;
 
 /// Identify each axis's anti-resonance (seed 001) on the FMU: an M-sequence on the torque
-/// command, the machine-end acceleration recorded, the response searched for an
-/// anti-resonance (moving-average-smoothed minimum; none means N = 1) and a rational
-/// model fitted around it.
+/// command, the machine-end acceleration recorded, the response (measured over 5–500 Hz)
+/// searched for an anti-resonance (moving-average-smoothed minimum, searched over 6.2–435 Hz;
+/// none means N = 1) and a rational model fitted around it. Anti-resonances from 10 to 450 Hz
+/// are identified; one outside that range is not seen.
 ///
 /// Axes are named by --axes (default x,y); each gets its own FMU parameters with
 /// --set AXIS:NAME=VALUE (for example y:plant.absorber_stiffness=19.34), or an absorber
@@ -36,7 +37,7 @@ pub struct IdentArgs {
     #[arg(long = "set")]
     pub set: Vec<String>,
     /// AXIS=HZ: an absorber on that axis's load with this anti-resonance (5 % damping,
-    /// absorber inertia equal to the load's)
+    /// absorber inertia equal to the load's), 10–450 Hz (what the identification finds)
     #[arg(long = "anti-resonance", value_delimiter = ',')]
     pub anti_resonance: Vec<String>,
     /// M-sequence amplitude on the torque command (N·m)

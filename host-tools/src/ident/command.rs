@@ -35,6 +35,7 @@ fn ident(args: &IdentArgs) -> Result<bool> {
         println!("re-plotted {} model(s) → {}", model.len(), svg.display());
         return Ok(true);
     }
+    crate::ident::axis_name::check_axis_names(axes.iter().map(String::as_str), "--axes")?;
     let mut parameters: std::collections::BTreeMap<
         String,
         std::collections::BTreeMap<String, crate::fmu::scenario::Value>,
@@ -47,11 +48,23 @@ fn ident(args: &IdentArgs) -> Result<bool> {
             .ok_or_else(|| anyhow::anyhow!("--set `{s}`: no axis `{axis}` in --axes"))?
             .insert(k, v);
     }
+    let mut absorbed: Vec<&str> = Vec::new();
     for s in anti_resonance {
         let (axis, hz) = s.split_once('=').ok_or_else(|| anyhow::anyhow!("--anti-resonance `{s}`: use AXIS=HZ"))?;
+        if absorbed.contains(&axis) {
+            bail!("--anti-resonance `{s}`: axis `{axis}` already has an anti-resonance (one absorber per axis)");
+        }
+        absorbed.push(axis);
         let hz: f64 = hz.parse().map_err(|_| anyhow::anyhow!("--anti-resonance `{s}`: `{hz}` is not a frequency"))?;
-        if !(hz.is_finite() && hz > 0.0) {
-            bail!("--anti-resonance `{s}`: the frequency must be positive");
+        let (lowest, highest) = crate::ident::identification::IDENTIFIABLE_HZ;
+        if !(hz.is_finite() && (lowest..=highest).contains(&hz)) {
+            bail!(
+                "--anti-resonance `{s}`: the identification finds anti-resonances from {lowest} to {highest} Hz (the M-sequence's response is measured over {}–{} Hz at {:.2} Hz resolution; the notch search needs ±{:.0} % around a notch)",
+                crate::ident::report::BAND.0,
+                crate::ident::report::BAND.1,
+                1.0 / crate::ident::identification::period_s(),
+                (crate::ident::identification::NOTCH_SPAN - 1.0) * 100.0
+            );
         }
         let axis_parameters = parameters
             .get_mut(axis)
@@ -131,8 +144,9 @@ fn ident(args: &IdentArgs) -> Result<bool> {
                     m.fit_error * 100.0,
                 ),
                 (None, _) => println!(
-                    "  {}: no clear anti-resonance (rigid axis, N = 1): {}; gain {:.4e}{noise}",
+                    "  {}: {} (rigid axis, N = 1): {}; gain {:.4e}{noise}",
                     m.axis,
+                    r.notch.filter(|_| r.undetermined.is_none()).map_or("no clear anti-resonance".to_string(), |n| n.none_clear()),
                     r.undetermined.as_deref().unwrap_or(&notch),
                     m.gain
                 ),
@@ -425,8 +439,8 @@ fn tune(args: &TuneArgs) -> Result<bool> {
     use crate::ident::tuning::Method;
     let method: Method = method.parse()?;
     let out = common.out.clone().unwrap_or_else(|| default_out("tune"));
-    std::fs::create_dir_all(&out).with_context(|| format!("cannot create {}", out.display()))?;
     let models: Vec<AxisModel> = models.iter().map(|p| AxisModel::load(p)).collect::<Result<_>>()?;
+    std::fs::create_dir_all(&out).with_context(|| format!("cannot create {}", out.display()))?;
     if args.axis.is_some() && args.target.device.is_none() {
         bail!("--axis chooses the axis a drive gets: add --device PORT");
     }

@@ -404,7 +404,8 @@ impl DeviceIdentification {
                         m.fit_error * 100.0
                     ),
                     None => println!(
-                        "  {label}: no clear anti-resonance (rigid axis, N = 1): {}; gain {:.4e}",
+                        "  {label}: {} (rigid axis, N = 1): {}; gain {:.4e}",
+                        r.notch.filter(|_| r.undetermined.is_none()).map_or("no clear anti-resonance".to_string(), |n| n.none_clear()),
                         r.undetermined.as_deref().unwrap_or(&notch),
                         m.gain
                     ),

@@ -48,6 +48,16 @@ use crate::ident::averaged_response::{averaged_response, Record};
 use nalgebra::{DMatrix, DVector};
 
 pub const DEGREE: u32 = 11;
+/// The anti-resonances `servo ident --anti-resonance` may put on an axis (Hz, 5 % damping):
+/// those the identification finds. The response is measured over [`crate::ident::report::BAND`]
+/// (5–500 Hz) at the M-sequence's resolution, one bin per period (0.49 Hz), and the notch
+/// search needs a notch's surroundings (±15 %, [`NOTCH_SPAN`]) inside it: it searches
+/// 6.2–435 Hz (the first bin at or above 5 Hz is 5.37 Hz). Below 10 Hz a 5 % notch (±0.5 Hz
+/// wide) spans too few bins for a confident dip, and above 450 Hz its lower flank lies too
+/// close to the band's top; 10 and 450 Hz are found within 1 % (a CLI test identifies both
+/// ends).
+pub const IDENTIFIABLE_HZ: (f64, f64) = (10.0, 450.0);
+
 /// Base ticks per acquisition sample (4 kHz) and per chip (1 kHz: the chips' spectrum has its
 /// first null at 1 kHz and little power left above the acquisition Nyquist frequency to fold
 /// back; chips at 4 kHz put 2 % of bias on the anti-resonance frequency).
@@ -127,13 +137,6 @@ pub struct AxisModel {
 }
 
 impl AxisModel {
-    /// Read a model file (`servo ident` writes them; the user may edit them).
-    pub fn load(path: &std::path::Path) -> Result<Self> {
-        use anyhow::Context;
-        let text = std::fs::read_to_string(path).with_context(|| format!("cannot read {}", path.display()))?;
-        serde_json::from_str(&text).with_context(|| format!("{} is not a model file", path.display()))
-    }
-
     pub fn response(&self, f: f64) -> Complex64 {
         let n = self.anti_resonance.map_or(Complex64::new(1.0, 0.0), |z| z.at(f));
         let p = self.resonance.map_or(Complex64::new(1.0, 0.0), |z| z.at(f));
@@ -267,11 +270,22 @@ pub struct Notch {
     pub depth_db: f64,
     /// Depth over its standard error (from the measured points' scatter about the average).
     pub confidence: f64,
+    /// The band the search looked for notches in (Hz): where a notch's surroundings
+    /// (±`NOTCH_SPAN`) lie inside the measured band. A notch outside it is not seen.
+    pub searched_hz: (f64, f64),
 }
 
 impl Notch {
     pub fn is_clear(&self) -> bool {
         self.depth_db >= MIN_DEPTH_DB && self.confidence >= MIN_CONFIDENCE
+    }
+
+    /// The sentence for an axis the search found no clear notch on: the band searched.
+    pub fn none_clear(&self) -> String {
+        format!(
+            "no clear anti-resonance between {:.1} and {:.1} Hz, the band searched (one outside it is not seen)",
+            self.searched_hz.0, self.searched_hz.1
+        )
     }
 
     /// Why the notch does or does not count as an anti-resonance.
@@ -318,6 +332,7 @@ pub fn deepest_notch(m: &Measured) -> Option<Notch> {
     }
     let (s, se) = smoothed_db(m);
     let (first, last) = (f[0], f[f.len() - 1]);
+    let searched_hz = (first * NOTCH_SPAN, last / NOTCH_SPAN);
     let mut candidates = Vec::new();
     for i in 0..f.len() {
         let (below, above) = (f[i] / NOTCH_SPAN, f[i] * NOTCH_SPAN);
@@ -328,7 +343,7 @@ pub fn deepest_notch(m: &Measured) -> Option<Notch> {
         let depth = around - s[i];
         let e_around = 0.5 * (interpolate(f, &se, below).powi(2) + interpolate(f, &se, above).powi(2)).sqrt();
         let error = (se[i].powi(2) + e_around.powi(2)).sqrt().max(1e-12);
-        candidates.push(Notch { hz: f[i], depth_db: depth, confidence: depth / error });
+        candidates.push(Notch { hz: f[i], depth_db: depth, confidence: depth / error, searched_hz });
     }
     // The deepest of the confident dips; if none is confident, the deepest dip (to report).
     let deepest = |c: &mut dyn Iterator<Item = Notch>| c.max_by(|a, b| a.depth_db.total_cmp(&b.depth_db));

@@ -13,7 +13,12 @@ pub fn section(root: &Path) -> Option<Section> {
     }
     let mut files: Vec<_> = models.iter().map(|p| relative(root, p)).collect();
     files.extend(files_with(&tune, "toml").iter().map(|p| relative(root, p)));
-    files.extend(files_with(&tune, "json").iter().map(|p| relative(root, p)));
+    let tune_json = files_with(&tune, "json");
+    files.extend(tune_json.iter().map(|p| relative(root, p)));
+    let mut s = Section::default();
+    for path in models.iter().chain(&tune_json) {
+        s.read_result(root, path);
+    }
     Some(Section {
         title: "Identification and response correction (seed 001)".into(),
         command: "servo ident …; servo tune --model out/ident/*.model.json".into(),
@@ -23,6 +28,6 @@ pub fn section(root: &Path) -> Option<Section> {
             .map(|p| relative(root, p))
             .collect(),
         files,
-        ..Default::default()
+        ..s
     })
 }

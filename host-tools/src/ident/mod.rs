@@ -3,6 +3,7 @@
 pub mod anti_resonance_error;
 pub mod args;
 pub mod averaged_response;
+pub mod axis_name;
 pub mod bench;
 pub mod command;
 pub mod device;
@@ -11,6 +12,7 @@ pub mod device_check;
 pub mod device_machine_end;
 pub mod identification;
 pub mod index;
+pub mod model_file;
 pub mod report;
 pub mod response_model;
 pub mod tune_device_bench;

@@ -138,11 +138,6 @@ pub fn replot(models: &[PathBuf], out: &Path) -> Result<PathBuf> {
     let mut axes = Vec::new();
     for path in models {
         let model = AxisModel::load(path)?;
-        if let Some(z) = model.anti_resonance {
-            if !(z.hz.is_finite() && z.hz > 0.0 && z.damping.is_finite() && z.damping >= 0.0) {
-                bail!("{}: the anti-resonance must have a positive frequency and a damping >= 0 (zeros in the right half plane cannot be used)", path.display());
-            }
-        }
         let measured_path = path.with_file_name(format!("{}.measured.csv", model.axis));
         let t = Trace::read_csv(&measured_path)
             .with_context(|| format!("the measurement of axis {} ({})", model.axis, measured_path.display()))?;

@@ -3,12 +3,17 @@
 
 use std::path::Path;
 
-use crate::page::{read_json, relative, Section};
+use crate::page::{read_result, relative, Section};
 
 pub fn section(root: &Path) -> Option<Section> {
     let dir = root.join("sweep");
-    let json = read_json(&dir.join("sweep.json"))?;
+    let path = dir.join("sweep.json");
+    let (json, unreadable) = match read_result(&path) {
+        Ok(json) => (json?, vec![]),
+        Err(why) => (serde_json::Value::Null, vec![(relative(root, &path), why)]),
+    };
     let mut s = Section {
+        unreadable,
         title: "Frequency response, phase-shifted stepped sine (seed 000)".into(),
         command: "servo sweep --oracle".into(),
         plots: vec![relative(root, &dir.join("bode.svg"))],
