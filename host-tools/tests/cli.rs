@@ -978,3 +978,21 @@ fn a_lowered_loop_rate_runs_without_touching_the_sweep_settings() {
     );
     std::fs::remove_dir_all(&out).ok();
 }
+
+/// An --out that names a file: every command says which folder it could not create.
+#[test]
+fn an_out_folder_that_is_a_file_is_named() {
+    let file = tmp("out-file").join("not-a-folder");
+    std::fs::write(&file, "").unwrap();
+    let scenario = workspace_root().join("scenarios/position_step.toml");
+    for args in [
+        vec!["sweep".into(), "--points".into(), "2".into()],
+        vec!["run".into(), scenario.display().to_string()],
+        vec!["ident".into(), "--axes".into(), "x".into()],
+    ] {
+        let o = servo().args(&args).on_fmu(&file).output().unwrap();
+        let err = String::from_utf8_lossy(&o.stderr);
+        assert_eq!(o.status.code(), Some(2), "{args:?}: {err}");
+        assert!(err.contains(&format!("cannot create the output folder {}", file.display())), "{args:?}: {err}");
+    }
+}

@@ -207,7 +207,7 @@ fn check_sample_period(r: &AccDecRequest, butterworth: &FilterSpec) -> Result<()
 pub fn run(r: &AccDecRequest, mut progress: impl FnMut(&str, f64)) -> Result<AccDecReport> {
     let bw_spec = FilterSpec::Butterworth { order: r.order, cutoff_hz: r.cutoff_hz, all_delays: r.all_delays };
     check_sample_period(r, &bw_spec)?;
-    std::fs::create_dir_all(&r.out).with_context(|| format!("cannot create {}", r.out.display()))?;
+    crate::paths::create_out_dir(&r.out)?;
     let m = pulse_move(r)?;
     let design = design_of(&bw_spec, r.sample_period)?;
     let (bw, bw_trace) = analyse(&bw_spec, r, m)?;

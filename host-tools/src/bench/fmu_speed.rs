@@ -144,7 +144,7 @@ pub fn bench_fmu(
     with_fmpy: bool,
     mut progress: impl FnMut(f64),
 ) -> Result<FmuBench> {
-    std::fs::create_dir_all(out)?;
+    crate::paths::create_out_dir(out)?;
     let fmu = Fmu::load(fmu_path)?;
     let load = |record: &[&str], name: &str| -> Result<Scenario> {
         let path = out.join(format!("{name}.toml"));

@@ -225,7 +225,7 @@ pub fn run_on_device_loading<T: DrivePort>(
     out: &Path,
     mut progress: impl FnMut(&str, f64),
 ) -> Result<DeviceCircleReport> {
-    std::fs::create_dir_all(out)?;
+    crate::paths::create_out_dir(out)?;
     let run = pseudo_circle_sweep(request)?;
     let (_, _, n) = request.timing()?;
     let mut drive_run = run.clone();

@@ -120,7 +120,7 @@ pub fn run(
         let given = if i == 0 { "--set / --x-set / --y-set" } else { "the second run's --compare / --tuned" };
         r.check_parameters().with_context(|| format!("parameters of the run `{label}` ({given})"))?;
     }
-    std::fs::create_dir_all(out).with_context(|| format!("cannot create {}", out.display()))?;
+    crate::paths::create_out_dir(out)?;
     let mut runs = Vec::new();
     let mut figures: Vec<(String, Figure)> = Vec::new();
     let mut files = Vec::new();

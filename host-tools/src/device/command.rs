@@ -66,7 +66,7 @@ fn device(args: &DeviceArgs) -> Result<bool> {
                 t.rows.push(r);
             }
             let out = common.out.clone().unwrap_or_else(|| default_out("device"));
-            std::fs::create_dir_all(&out)?;
+            crate::paths::create_out_dir(&out)?;
             let csv = out.join("stream.csv");
             t.write_csv(&csv)?;
             serde_json::json!({"samples": t.rows.len(), "dropped": dropped, "file": csv})

@@ -72,7 +72,7 @@ pub fn write_runs(
     (drive, twin): (&Trace, &Trace),
     signals: &[String],
 ) -> Result<Vec<PathBuf>> {
-    std::fs::create_dir_all(out)?;
+    crate::paths::create_out_dir(out)?;
     let csv = out.join(format!("{name}.device.csv"));
     drive.write_csv(&csv)?;
     let twin_csv = out.join(format!("{name}.twin.csv"));

@@ -1,6 +1,6 @@
 //! `servo ident` and `servo bench ident` (seed 001).
 
-use anyhow::{bail, Context, Result};
+use anyhow::{bail, Result};
 
 use crate::cli::progress_bar;
 use crate::fmu::configuration::configuration;
@@ -440,7 +440,7 @@ fn tune(args: &TuneArgs) -> Result<bool> {
     let method: Method = method.parse()?;
     let out = common.out.clone().unwrap_or_else(|| default_out("tune"));
     let models: Vec<AxisModel> = models.iter().map(|p| AxisModel::load(p)).collect::<Result<_>>()?;
-    std::fs::create_dir_all(&out).with_context(|| format!("cannot create {}", out.display()))?;
+    crate::paths::create_out_dir(&out)?;
     if args.axis.is_some() && args.target.device.is_none() {
         bail!("--axis chooses the axis a drive gets: add --device PORT");
     }

@@ -251,7 +251,7 @@ pub fn identify_on_device<T: DrivePort>(
     mut progress: impl FnMut(&str, f64),
 ) -> Result<DeviceIdentification> {
     let (axis, parameters) = (request.axis, request.parameters);
-    std::fs::create_dir_all(out)?;
+    crate::paths::create_out_dir(out)?;
     let run = device_run(parameters, request.amplitude)?;
     let rates = run.rates()?;
     let acquisition_hz = rates.current_loop_hz as f64 / DIVIDER as f64;

@@ -321,7 +321,7 @@ fn measure<T: DrivePort>(
     out: &Path,
     mut progress: impl FnMut(&str, f64),
 ) -> Result<Measured> {
-    std::fs::create_dir_all(out)?;
+    crate::paths::create_out_dir(out)?;
     let mut drive_run = run.clone();
     drive_run.parameters.retain(|k, _| !k.starts_with("corr."));
     let drive = sweep_on_drive_loading(session, &drive_run, correction, (out, "machine_end"), |f| {

@@ -79,7 +79,7 @@ pub fn identify_axis(
     }
     let m = measure(fmu, &p, amplitude, BAND.0, BAND.1).with_context(|| format!("axis {axis}"))?;
     // The measurement first: it is there to look at when the fit is refused.
-    std::fs::create_dir_all(out)?;
+    crate::paths::create_out_dir(out)?;
     let measured_path = out.join(format!("{axis}.measured.csv"));
     write_measured(&measured_path, &m)?;
     let model_path = out.join(format!("{axis}.model.json"));
@@ -151,7 +151,7 @@ pub fn replot(models: &[PathBuf], out: &Path) -> Result<PathBuf> {
             .collect();
         axes.push((model, measured));
     }
-    std::fs::create_dir_all(out)?;
+    crate::paths::create_out_dir(out)?;
     let svg = out.join("ident.svg");
     plot(&svg, &axes)?;
     Ok(svg)

@@ -332,7 +332,7 @@ pub fn tune(
 /// `LoadCorrection` request) per axis, tune.json and (when measured) tune.svg; returns the
 /// files.
 pub fn write(t: &Tuning, out: &std::path::Path) -> Result<Vec<std::path::PathBuf>> {
-    std::fs::create_dir_all(out)?;
+    crate::paths::create_out_dir(out)?;
     let mut files = Vec::new();
     for a in &t.axes {
         let text: String = a

@@ -2,7 +2,7 @@
 
 use std::path::PathBuf;
 
-use anyhow::{bail, Context, Result};
+use anyhow::{bail, Result};
 
 use crate::cli::progress_bar;
 use crate::fmu::fmpy;
@@ -39,7 +39,7 @@ fn run(args: &RunArgs) -> Result<bool> {
     let (files, with_fmpy, common) = (&args.scenarios, args.fmpy, &args.common);
     let fmu_path = common.fmu.clone().unwrap_or_else(default_fmu);
     let out = common.out.clone().unwrap_or_else(|| default_out("run"));
-    std::fs::create_dir_all(&out).with_context(|| format!("cannot create {}", out.display()))?;
+    crate::paths::create_out_dir(&out)?;
     let fmu = Fmu::load(&fmu_path)?;
     if let Some(mut session) = args.target.session()? {
         let port = args.target.device.as_deref().unwrap_or_default();

@@ -1,6 +1,6 @@
 //! `servo sequence` and `servo bench sequence` (seed 004).
 
-use anyhow::{Context, Result};
+use anyhow::Result;
 
 use crate::cli::progress_bar;
 use crate::fmu::fmpy;
@@ -21,7 +21,7 @@ fn sequence(args: &SequenceArgs) -> Result<bool> {
     use crate::sequence::timeline::{SequenceScenario, PLOT};
     let fmu_path = common.fmu.clone().unwrap_or_else(default_fmu);
     let out = common.out.clone().unwrap_or_else(|| default_out("sequence"));
-    std::fs::create_dir_all(&out).with_context(|| format!("cannot create {}", out.display()))?;
+    crate::paths::create_out_dir(&out)?;
     let files = if files.is_empty() {
         crate::paths::toml_files_in(&workspace_root().join("scenarios/sequences"))?
     } else {
