@@ -996,3 +996,17 @@ fn an_out_folder_that_is_a_file_is_named() {
         assert!(err.contains(&format!("cannot create the output folder {}", file.display())), "{args:?}: {err}");
     }
 }
+
+/// An axis whose drive trips during the excitation: the identification names the fault and
+/// when, instead of a number.
+#[test]
+fn ident_names_the_fault_of_an_axis_that_trips() {
+    let o = servo()
+        .args(["ident", "--axes", "x", "--set", "x:ctrl.overcurrent=3", "--set", "x:ctrl.max_current=2.9"])
+        .on_fmu(tmp("ident-trip"))
+        .output()
+        .unwrap();
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert_eq!(o.status.code(), Some(2), "{err}");
+    assert!(err.contains("tripped during the excitation") && err.contains("(overcurrent)"), "{err}");
+}

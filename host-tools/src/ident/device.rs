@@ -271,8 +271,8 @@ pub fn identify_on_device<T: DrivePort>(
     let drive = identify_run(axis, measured, parameters)?;
     progress("twin on the FMU", 0.0);
     let twin_trace = run.run(fmu, |f| progress("twin on the FMU", f))?;
-    if twin_trace.column("faults").is_some_and(|f| f.iter().any(|&x| x != 0.0)) {
-        bail!("the twin tripped during the excitation: lower the amplitude");
+    if let Some(trip) = crate::fmu::axis_health::first_trip(&twin_trace)? {
+        bail!("the twin tripped during the excitation: {}; lower the amplitude", trip.sentence());
     }
     let twin = identify_run(axis, response_of(&twin_trace, acquisition_hz)?, parameters)?;
     let (points, largest) = compare(&drive.measured, &twin.measured);

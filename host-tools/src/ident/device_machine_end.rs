@@ -217,8 +217,8 @@ fn other_axes(
         let run = machine_end_sweep(&parameters, top_hz)?;
         let label = format!("axis {} on the FMU", other.axis);
         let trace = run.run(fmu, |f| progress(&label, f))?;
-        if trace.column("faults").is_some_and(|f| f.iter().any(|&x| x != 0.0)) {
-            bail!("axis {} tripped during the machine-end sweep on the FMU", other.axis);
+        if let Some(trip) = crate::fmu::axis_health::first_trip(&trace)? {
+            bail!("axis {} tripped during the machine-end sweep on the FMU: {}", other.axis, trip.sentence());
         }
         out.push(stream_results(&trace, &run.settings)?.iter().map(as_position).collect());
     }
@@ -340,8 +340,8 @@ fn measure<T: DrivePort>(
 /// response measured through the current limit is not the axis's response).
 fn twin_run(fmu: &Fmu, run: &SweepRun, progress: &mut impl FnMut(&str, f64)) -> Result<Trace> {
     let twin_trace = run.run(fmu, |f| progress("machine end on the twin", f))?;
-    if twin_trace.column("faults").is_some_and(|f| f.iter().any(|&x| x != 0.0)) {
-        bail!("the twin tripped during the machine-end sweep");
+    if let Some(trip) = crate::fmu::axis_health::first_trip(&twin_trace)? {
+        bail!("the twin tripped during the machine-end sweep: {}", trip.sentence());
     }
     let max_current = crate::fmu::configuration::configuration(&run.parameters)?.control.current.max_current as f64;
     let largest_iq = twin_trace.column("iq").unwrap_or_default().iter().fold(0.0f64, |a, x| a.max(x.abs()));

@@ -208,12 +208,9 @@ pub fn measure_records(
     let period = chips as f64 * CHIP_DIVIDER as f64 / fs;
     let trace = excitation(parameters, amplitude, TRANSIENT_S + periods as f64 * period).run(fmu, |_| {})?;
     let col = |n: &str| trace.column(n).ok_or_else(|| anyhow!("the FMU has no output {n}"));
-    let (measuring, u_all, y_all, faults) = (col("acq_measuring")?, col(input)?, col(output)?, col("faults")?);
-    if faults.iter().any(|&f| f != 0.0) {
-        bail!(
-            "the axis tripped during the excitation (faults {}): lower the amplitude",
-            faults.iter().cloned().fold(0.0, f64::max)
-        );
+    let (measuring, u_all, y_all) = (col("acq_measuring")?, col(input)?, col(output)?);
+    if let Some(trip) = crate::fmu::axis_health::first_trip(&trace)? {
+        bail!("the axis tripped during the excitation: {}; lower the amplitude", trip.sentence());
     }
     let torque_limit = control.velocity.torque_limit as f64;
     if u_all.iter().any(|u| u.abs() >= 0.999 * torque_limit) {

@@ -107,11 +107,8 @@ pub fn command_to_load(
     let trace = fmu.run(&scenario, |_| {})?;
     // A response measured through a current limit or a trip is not the axis's response.
     let largest = |c: &str| trace.column(c).unwrap_or_default().iter().fold(0.0f64, |a, x| a.max(x.abs()));
-    if largest("faults") != 0.0 {
-        bail!(
-            "the axis tripped during the multisine (faults {}): its response cannot be measured this way",
-            largest("faults")
-        );
+    if let Some(trip) = crate::fmu::axis_health::first_trip(&trace)? {
+        bail!("the axis tripped during the multisine: {}; its response cannot be measured this way", trip.sentence());
     }
     let max_current = configuration(parameters)?.control.current.max_current as f64;
     if largest("iq") >= 0.9 * max_current {
@@ -461,9 +458,17 @@ pub fn circle_check(fmu: &Fmu, t: &Tuning, radius: f64, frequency_hz: f64, lead_
         x_parameters: base(x),
         y_parameters: base(y),
     };
-    let without = two_axis(fmu, &request)?.feedback.roundness(radius).roundness;
+    // A roundness is only the loops' where neither drive tripped.
+    let roundness = |request: &CircleRequest, label: &str| -> Result<f64> {
+        let run = two_axis(fmu, request)?;
+        if let Some((h, trip)) = run.health.iter().find_map(|h| h.trip.as_ref().map(|t| (h, t))) {
+            anyhow::bail!("the circle check {label} the correction: {} tripped: {}", h.name(), trip.sentence());
+        }
+        Ok(run.feedback.roundness(radius).roundness)
+    };
+    let without = roundness(&request, "without")?;
     request.x_parameters.extend(x.correction.parameters());
     request.y_parameters.extend(y.correction.parameters());
-    let with = two_axis(fmu, &request)?.feedback.roundness(radius).roundness;
+    let with = roundness(&request, "with")?;
     Ok(CircleCheck { radius, frequency_hz, lead_in, roundness_without: without, roundness_with: with })
 }
