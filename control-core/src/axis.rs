@@ -250,6 +250,10 @@ pub struct Axis {
     sequence: StopSequence,
     telemetry: Telemetry,
     sweep: PhaseShiftedSweep,
+    /// [`Params::validate_sweep`] of `params`, computed when the axis is built: a drive starts
+    /// a sweep with its interrupts off, and the check evaluates every planned frequency (a
+    /// power each, up to 128 of them).
+    sweep_check: Result<(), SweepError>,
 }
 
 impl Axis {
@@ -275,6 +279,7 @@ impl Axis {
             sequence: StopSequence::new(&params.sequence, cpr, position_period),
             friction: FrictionCompensation::new(&params.friction, params.rates.velocity_period()),
             sweep: PhaseShiftedSweep::new(params.sweep, params.rates.current_loop_hz),
+            sweep_check: params.validate_sweep(),
             velocity_loop_inputs: (0.0, 0.0),
             position_injection: 0,
             last_acceleration: 0.0,
@@ -366,10 +371,11 @@ impl Axis {
     /// position mode.
     ///
     /// The settings are held against the axis's rates and limits here
-    /// ([`Params::validate_sweep`]): a sweep that would alias or be cut is refused with the
-    /// reason and nothing changes, while an axis that never sweeps runs whatever its rate.
+    /// ([`Params::validate_sweep`], evaluated when the axis was built): a sweep that would
+    /// alias or be cut is refused with the reason and nothing changes, while an axis that never
+    /// sweeps runs whatever its rate.
     pub fn start_sweep(&mut self) -> Result<(), SweepError> {
-        self.params.validate_sweep()?;
+        self.sweep_check?;
         let point = self.params.sweep.point;
         if point == InjectionPoint::PositionCommand {
             if self.mode != Some(Mode::Position) {

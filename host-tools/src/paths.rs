@@ -26,13 +26,13 @@ pub fn default_out(command: &str) -> PathBuf {
     PathBuf::from("out").join(command)
 }
 
-/// The `.toml` files of a folder, sorted.
 /// Create an experiment's output folder (and its parents); the error names the folder, for
 /// example when --out names a file.
 pub fn create_out_dir(out: &std::path::Path) -> Result<()> {
     std::fs::create_dir_all(out).with_context(|| format!("cannot create the output folder {}", out.display()))
 }
 
+/// The `.toml` files of a folder, sorted.
 pub fn toml_files_in(dir: &std::path::Path) -> Result<Vec<PathBuf>> {
     let mut v: Vec<PathBuf> = std::fs::read_dir(dir)
         .with_context(|| format!("cannot list {}", dir.display()))?

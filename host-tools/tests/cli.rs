@@ -411,8 +411,8 @@ fn sweep_refuses_bad_settings_with_the_reason() {
             "--set sweep.start_hz: the sweep's settings come from this command's options",
         ),
         (vec!["--points", "128"], "sweep points = 128: at most 127"),
-        // Two cycles and no shortest measurement: seven samples at 1.08 kHz, three at 3 kHz.
-        (vec!["--min-measure", "0"], "would hold 7 acquisition samples"),
+        // Two cycles and no shortest measurement: three samples at 3 kHz.
+        (vec!["--min-measure", "0"], "a record at 3000 Hz would hold 3 acquisition samples"),
         (vec!["--device", "/dev/no-such-port", "--baud", "0"], "a baud rate is a whole number from 1 200"),
         (vec!["--reference", "/nonexistent/reference.csv"], "/nonexistent/reference.csv"),
     ] {
@@ -886,7 +886,11 @@ fn run_and_sequence_refuse_a_stop_time_whose_trace_would_not_fit_memory() {
         let err = String::from_utf8_lossy(&o.stderr);
         assert_eq!(o.status.code(), Some(2), "{command}: {err}");
         assert!(err.contains("stop_time = 1000000000 s") && err.contains("1 GiB"), "{command}: {err}");
-        assert!(err.contains("at most stop_time = 762.6"), "{command}: {err}");
+        // The longest that fits at the default 0.25 ms with every output recorded (762.6 s
+        // with today's outputs): from the trace's row size, not a copy of today's count.
+        let columns = host_tools::fmu::trace_budget::fmu_output_count() + 1;
+        let longest = ((1u64 << 30) as f64 / (8.0 * columns as f64) - 1.0).floor() * 0.25e-3;
+        assert!(err.contains(&format!("at most stop_time = {longest:.6} s")), "{command}: {err}");
     }
     // A tiny step is the same explosion, refused the same way.
     std::fs::write(&scenario, "name='huge'\nstop_time=0.3\nstep=1e-12\n[[events]]\ntime=0.0\nmode=1\n").unwrap();

@@ -229,16 +229,28 @@ impl SweepParams {
     }
 
     /// Every record of a stepped sine holds at least [`MIN_RECORD_SAMPLES`] acquisition samples
-    /// at this base rate.
+    /// at this base rate. A record's samples fall with its frequency within each stretch of
+    /// one shortest measurement (halved below half the threshold: see `min_measure_at`), so
+    /// the shortest records are at the top of each stretch: the highest frequency, and just
+    /// below half the threshold where the sweep reaches that low. Two evaluations, not one per
+    /// frequency: on the drive each planned frequency is a `powf` in soft f64 (about 30 000
+    /// Cortex-M4 instructions for the 41 default ones, a `SetParams` 10 times longer).
     fn records_long_enough(&self, base_rate_hz: f32) -> Result<(), SweepError> {
-        if self.signal == SweepSignal::SteppedSine {
-            let plan = self.plan();
-            for i in 0..plan.count as usize {
-                let frequency = self.frequency_in(&plan, i);
-                let samples = self.record_length(frequency, base_rate_hz).1;
-                if samples < MIN_RECORD_SAMPLES {
-                    return Err(SweepError::RecordTooShort { frequency, samples: samples as u32 });
-                }
+        if self.signal != SweepSignal::SteppedSine {
+            return Ok(());
+        }
+        let top = self.top_hz();
+        let half_threshold = 0.5 * self.threshold(base_rate_hz);
+        let lowest = if self.points > 1 { self.start_hz.min(top) } else { self.start_hz };
+        let mut tops = [Some(top), None];
+        if lowest < half_threshold && half_threshold < top {
+            // The halved stretch ends just below half the threshold.
+            tops[1] = Some(half_threshold * (1.0 - f32::EPSILON));
+        }
+        for frequency in tops.into_iter().flatten() {
+            let samples = self.record_length(frequency, base_rate_hz).1;
+            if samples < MIN_RECORD_SAMPLES {
+                return Err(SweepError::RecordTooShort { frequency, samples: samples as u32 });
             }
         }
         Ok(())
@@ -357,6 +369,52 @@ mod tests {
 
     const FS: f32 = 16_000.0;
 
+    /// The record-length check evaluates two frequencies, not every one: it refuses every
+    /// setting where some planned frequency's record is too short (checked one by one here),
+    /// and accepts those where none is, up to the frequencies it takes as the stretches' tops.
+    #[test]
+    fn the_record_length_check_finds_every_too_short_record() {
+        let mut refused_right = 0;
+        for min_measure_s in [0.0, 0.001, 0.002, 0.004, 0.04] {
+            for measure_cycles in [0.5, 1.0, 2.0, 8.0] {
+                for (start_hz, stop_hz, points, extra_hz) in [
+                    (10.0, 3000.0, 40, 2000.0),
+                    (100.0, 900.0, 7, 0.0),
+                    (1500.0, 3000.0, 3, 0.0),
+                    (300.0, 300.0, 1, 0.0),
+                ] {
+                    for acquisition_divider in [2, 4, 8] {
+                        let p = SweepParams {
+                            min_measure_s,
+                            measure_cycles,
+                            start_hz,
+                            stop_hz,
+                            points,
+                            extra_hz,
+                            acquisition_divider,
+                            ..Default::default()
+                        };
+                        let plan = p.plan();
+                        let short = (0..plan.count as usize)
+                            .any(|i| p.record_length(p.frequency_in(&plan, i), FS).1 < MIN_RECORD_SAMPLES);
+                        let refused = matches!(p.records_long_enough(FS), Err(SweepError::RecordTooShort { .. }));
+                        assert!(!short || refused, "{p:?}: a planned record is too short and the check passed it");
+                        // Where every planned frequency is fine, it refuses only if a stretch's
+                        // top (not a planned frequency) would be short.
+                        if refused && !short {
+                            let Err(SweepError::RecordTooShort { frequency, .. }) = p.records_long_enough(FS) else {
+                                unreachable!()
+                            };
+                            assert!(frequency < 0.5 * p.threshold(FS), "{p:?}");
+                        }
+                        refused_right += (short && refused) as u32;
+                    }
+                }
+            }
+        }
+        assert!(refused_right > 20, "{refused_right} too-short settings refused: the grid must exercise them");
+    }
+
     #[test]
     fn bad_settings_are_named() {
         let v = |p: SweepParams| p.validate(FS, 2);
@@ -377,12 +435,12 @@ mod tests {
             v(SweepParams { amplitude: 1e6, ..Default::default() }),
             Err(SweepError::Range { field: "amplitude", value: 1e6, min: 0.0, max: crate::ranges::MAX_SPEED })
         );
-        // Two cycles without a shortest measurement: from about 1.1 kHz up fewer than eight
-        // samples at 4 kHz (the first such frequency of the default plan is named).
-        assert!(matches!(
+        // Two cycles without a shortest measurement: three samples at 3 kHz (4 kHz acquisition).
+        assert_eq!(
             v(SweepParams { min_measure_s: 0.0, ..Default::default() }),
-            Err(SweepError::RecordTooShort { frequency, samples: 7 }) if (frequency - 1077.73).abs() < 0.01
-        ));
+            Err(SweepError::RecordTooShort { frequency: 3000.0, samples: 3 })
+        );
+
         assert_eq!(v(SweepParams { min_measure_s: 0.0, measure_cycles: 8.0, ..Default::default() }), Ok(()));
         assert_eq!(
             v(SweepParams { acquisition_divider: 3, ..Default::default() }),

@@ -63,6 +63,10 @@ const SWEEP_START_COUPLED: &[(&str, &str, &str)] = &[
     // The sweep's dither within the torque limit (it is added after the limit).
     ("sweep.dither", "max", "sweep dither"),
     ("ctrl.torque_limit", "min", "sweep dither"),
+    // Records too short for a sine fit: no shortest measurement (two cycles at 1.1 kHz and up
+    // are fewer than 8 samples), or one acquisition sample per 62.5 s.
+    ("sweep.min_measure_s", "min", "acquisition samples"),
+    ("sweep.acquisition_divider", "max", "acquisition samples"),
 ];
 
 fn value(kind: Kind, x: f64) -> Value {

@@ -298,7 +298,6 @@ pub fn correction_request(frame: &mut [u8]) -> Result<Request> {
     }
 }
 
-/// Open the drive's serial port (8N1, no flow control).
 /// The baud rates a serial link takes (a clap value parser for every `--baud`): 1 200 to
 /// 12 000 000, the range of USB serial adapters; 0 or a stray digit would open a port that
 /// moves nothing.
@@ -310,6 +309,7 @@ pub fn baud_rate(text: &str) -> std::result::Result<u32, String> {
     }
 }
 
+/// Open the drive's serial port (8N1, no flow control).
 pub fn open_serial(path: &str, baud: u32) -> Result<Box<dyn serialport::SerialPort>> {
     let port = serialport::new(path, baud).timeout(Duration::from_millis(50)).open().with_context(|| {
         format!("cannot open the serial port {path} (is the board attached, or the virtual drive running, and may you use the port?)")

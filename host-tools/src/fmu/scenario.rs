@@ -5,7 +5,8 @@
 //! description = "1 rad position step on the default axis"
 //! stop_time = 0.3          # s, a whole number of steps; the trace it implies must fit
 //!                          # `trace_budget::MAX_TRACE_BYTES` (1 GiB)
-//! step = 0.00025           # s, optional: communication step (default: position-loop period)
+//! step = 0.00025           # s, optional: communication step, a whole number of position-loop
+//!                          # periods (default 0.25 ms: the position-loop period at 16 kHz)
 //!
 //! [parameters]             # FMU parameters by name
 //! "ctrl.position_kp" = 125.7

@@ -37,7 +37,8 @@ pub const ORACLE_MIN_SETTLE_S: f32 = 0.5;
 /// up to 4 kHz, each sample a single velocity estimate), one unshifted record ten times as
 /// long (at least 40 cycles and 1 s), settling twice as long and at least 4 cycles and
 /// [`ORACLE_MIN_SETTLE_S`], read from the on-line correlator; dithered by the default
-/// `sweep.dither` from the sweep's threshold up (`base_rate_hz`: the loop rate it runs at).
+/// `sweep.dither` from the sweep's threshold up, or from 2 kHz where a faster loop's threshold
+/// lies higher, as the sweep is (`base_rate_hz`: the loop rate it runs at).
 ///
 /// The dither is there for the same reason as in the sweep: at the top the response is a few
 /// tens of counts even on the oracle's encoder, and at a constant riding speed the count
@@ -175,11 +176,10 @@ pub fn run(
     let limited_hz = flagged(&limited);
     let limited_known = trace.column("sweep_last_limited").is_some();
     let limits = TorqueLimits::of(&sweep.drive_params()?, &sweep.settings);
-    let torque_limited = torque_limited_shares(&trace, &sweep.settings, &limits)?;
-    let torque_limited_share: Vec<f64> = online
-        .iter()
-        .map(|p| torque_limited.iter().find(|(f, _)| *f == p.frequency).map_or(0.0, |&(_, share)| share))
-        .collect();
+    // By frequency index: the on-line results come one per frequency, in order.
+    let torque_limited = torque_limited_shares(&trace, &limits)?;
+    let torque_limited_share: Vec<f64> =
+        (0..online.len()).map(|k| torque_limited.get(&(k as i64)).copied().unwrap_or(0.0)).collect();
     let torque_limited_hz: Vec<f64> =
         online.iter().zip(&torque_limited_share).filter(|(_, &share)| share > 0.0).map(|(p, _)| p.frequency).collect();
     let mut unmeasured_hz = unmeasured(&stream);

@@ -6,6 +6,8 @@
 //! velocity-command amplitude of 100 rad/s on the default axis pins the torque at 2 N·m from
 //! 10 Hz up and leaves the result decibels off, where the voltage flag says nothing.
 
+use std::collections::BTreeMap;
+
 use anyhow::{anyhow, Result};
 use control_core::excitation::InjectionPoint;
 use control_core::phase_shifted_sweep::SweepParams;
@@ -49,11 +51,11 @@ impl TorqueLimits {
 }
 
 /// Each frequency's share of its measured samples (one per communication step) with the torque
-/// command at a limit, by frequency index, with the index's frequency; in frequency order.
-pub fn torque_limited_shares(t: &Trace, settings: &SweepParams, limits: &TorqueLimits) -> Result<Vec<(f64, f64)>> {
+/// command at a limit, by frequency index (frequencies without measured samples are absent).
+pub fn torque_limited_shares(t: &Trace, limits: &TorqueLimits) -> Result<BTreeMap<i64, f64>> {
     let column = |name: &str| t.column(name).ok_or_else(|| anyhow!("the FMU has no output {name}"));
     let (point, measuring, torque) = (column("acq_point")?, column("acq_measuring")?, column("torque_command_out")?);
-    let mut counts: std::collections::BTreeMap<i64, (usize, usize)> = Default::default();
+    let mut counts: BTreeMap<i64, (usize, usize)> = BTreeMap::new();
     for i in 0..point.len() {
         if measuring[i] != 0.0 {
             let c = counts.entry(point[i] as i64).or_default();
@@ -61,10 +63,7 @@ pub fn torque_limited_shares(t: &Trace, settings: &SweepParams, limits: &TorqueL
             c.1 += limits.reached(torque[i]) as usize;
         }
     }
-    Ok(counts
-        .into_iter()
-        .map(|(k, (n, limited))| (settings.frequency(k as usize) as f64, limited as f64 / n as f64))
-        .collect())
+    Ok(counts.into_iter().map(|(k, (n, limited))| (k, limited as f64 / n as f64)).collect())
 }
 
 #[cfg(test)]
@@ -97,8 +96,8 @@ mod tests {
             (1.0, 1.0, 0.3),
             (1.0, 1.0, -0.3),
         ]);
-        let shares = torque_limited_shares(&t, &settings, &limits).unwrap();
-        assert_eq!(shares, vec![(10.0, 0.25), (20.0, 0.0)]);
+        let shares = torque_limited_shares(&t, &limits).unwrap();
+        assert_eq!(shares, BTreeMap::from([(0, 0.25), (1, 0.0)]));
         // A torque-command injection adds after the loop's clamp: only the current's counts.
         let torque = TorqueLimits::of(&params, &SweepParams { point: InjectionPoint::TorqueCommand, ..settings });
         assert_eq!(torque.loop_limit, None);
