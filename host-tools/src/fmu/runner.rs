@@ -399,8 +399,9 @@ mod tests {
         t
     }
 
-    fn check(at: Option<f64>, window: Option<(f64, f64)>) -> CheckResult {
-        let c = Check {
+    /// A check that `iq` stays at most 1 at `at` or over `window`.
+    fn iq_check(at: Option<f64>, window: Option<(f64, f64)>) -> Check {
+        Check {
             signal: "iq".into(),
             at,
             from: window.map(|w| w.0),
@@ -408,8 +409,11 @@ mod tests {
             min: None,
             max: Some(1.0),
             description: None,
-        };
-        let s = Scenario { checks: vec![c], ..scenario() };
+        }
+    }
+
+    fn check(at: Option<f64>, window: Option<(f64, f64)>) -> CheckResult {
+        let s = Scenario { checks: vec![iq_check(at, window)], ..scenario() };
         evaluate_checks(&s, &drive_trace(0)).unwrap().remove(0)
     }
 
@@ -444,18 +448,8 @@ mod tests {
         // A drive's first sample comes after the start: a window from 0 is judged on the
         // samples it holds; a moment before the first sample is not evaluated.
         let trace = drive_trace(3);
-        let s = |at: Option<f64>, window: Option<(f64, f64)>| Scenario {
-            checks: vec![Check {
-                signal: "iq".into(),
-                at,
-                from: window.map(|w| w.0),
-                to: window.map(|w| w.1),
-                min: None,
-                max: Some(1.0),
-                description: None,
-            }],
-            ..scenario()
-        };
+        let s =
+            |at: Option<f64>, window: Option<(f64, f64)>| Scenario { checks: vec![iq_check(at, window)], ..scenario() };
         let r = evaluate_checks(&s(None, Some((0.0, 0.3))), &trace).unwrap().remove(0);
         assert!(r.passed && r.observed.0 == 3.0 * 0.7e-3, "{r:?}");
         let r = evaluate_checks(&s(Some(0.001), None), &trace).unwrap().remove(0);
