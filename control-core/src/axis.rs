@@ -251,8 +251,7 @@ pub struct Axis {
     telemetry: Telemetry,
     sweep: PhaseShiftedSweep,
     /// [`Params::validate_sweep`] of `params`, computed when the axis is built: a drive starts
-    /// a sweep with its interrupts off, and the check evaluates every planned frequency (a
-    /// power each, up to 128 of them).
+    /// a sweep with its interrupts off, and builds its axis outside that section.
     sweep_check: Result<(), SweepError>,
 }
 
