@@ -400,6 +400,8 @@ fn sweep_refuses_bad_settings_with_the_reason() {
         (vec!["--acquisition-divider", "3"], "multiple of the velocity"),
         (vec!["--start", "100", "--stop", "50"], "stop_hz"),
         (vec!["--amplitude=-1"], "amplitude"),
+        // A negative number reaches its check (clap took it for an unknown option before).
+        (vec!["--start", "-5"], "sweep start_hz = -5 is out of range"),
         (vec!["--acquisition-divider", "8"], "once per communication step"),
         // A torque-command sine whose peak reaches the torque limit (2 N·m) would be cut.
         (vec!["--point", "torque", "--amplitude", "2"], "sweep amplitude = 2 is outside [0, 1.997"),
@@ -1013,4 +1015,21 @@ fn ident_names_the_fault_of_an_axis_that_trips() {
     let err = String::from_utf8_lossy(&o.stderr);
     assert_eq!(o.status.code(), Some(2), "{err}");
     assert!(err.contains("tripped during the excitation") && err.contains("(overcurrent)"), "{err}");
+}
+
+/// `servo compare` answers whether two traces are the same: different lengths are a
+/// difference (exit 1), a file that is not a trace is bad input (exit 2).
+#[test]
+fn compare_tells_traces_of_different_lengths_apart() {
+    let dir = tmp("compare");
+    let (a, b, c) = (dir.join("a.csv"), dir.join("b.csv"), dir.join("c.csv"));
+    std::fs::write(&a, "time,x\n0,1\n1,2\n").unwrap();
+    std::fs::write(&b, "time,x\n0,1\n1,2\n2,3\n").unwrap();
+    std::fs::write(&c, "time,x\n0,1\n1,2\n").unwrap();
+    let run = |x: &std::path::Path, y: &std::path::Path| servo().arg("compare").arg(x).arg(y).output().unwrap();
+    let o = run(&a, &b);
+    assert_eq!(o.status.code(), Some(1), "{}", String::from_utf8_lossy(&o.stderr));
+    assert!(String::from_utf8_lossy(&o.stdout).contains("differ: 2 vs 3 rows"));
+    assert_eq!(run(&a, &c).status.code(), Some(0));
+    assert_eq!(run(&a, &dir.join("missing.csv")).status.code(), Some(2));
 }

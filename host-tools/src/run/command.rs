@@ -137,6 +137,11 @@ fn run(args: &RunArgs) -> Result<bool> {
 impl CompareArgs {
     pub fn run(&self) -> Result<bool> {
         let (ta, tb) = (Trace::read_csv(&self.a)?, Trace::read_csv(&self.b)?);
+        // Traces of different lengths are an answer (they differ), not bad input.
+        if ta.rows.len() != tb.rows.len() {
+            println!("differ: {} vs {} rows", ta.rows.len(), tb.rows.len());
+            return Ok(false);
+        }
         match compare_exact(&ta, &tb)? {
             Ok(n) => {
                 println!("identical: {} rows × {n} common columns, bit for bit", ta.rows.len());

@@ -2,7 +2,7 @@
 
 use std::process::ExitCode;
 
-use clap::{Parser, Subcommand};
+use clap::{CommandFactory, FromArgMatches, Parser, Subcommand};
 
 use host_tools::{accdec, bench, circle, device, ident, index, run, sequence, sweep, virtual_drive};
 
@@ -61,8 +61,16 @@ enum BenchCommand {
     AccdecProbe(accdec::args::AccdecProbeArgs),
 }
 
+/// Every command takes a negative number as an option's value (`--start -5`, `--speed -1`):
+/// the value then reaches its check, which says what is wrong with it, instead of clap taking
+/// it for an unknown option.
+fn with_negative_numbers(command: clap::Command) -> clap::Command {
+    command.allow_negative_numbers(true).mut_subcommands(with_negative_numbers)
+}
+
 fn main() -> ExitCode {
-    let cli = Cli::parse();
+    let matches = with_negative_numbers(Cli::command()).get_matches();
+    let cli = Cli::from_arg_matches(&matches).unwrap_or_else(|e| e.exit());
     let result = match &cli.command {
         Command::Run(args) => args.run(),
         Command::Accdec(args) => args.run(),
