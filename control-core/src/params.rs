@@ -319,6 +319,11 @@ impl Params {
     }
 
     /// Check every field; the first problem found is returned.
+    // Inlined into `Axis::new` (as it was when it had one caller): out of line, its frame
+    // (room for the acc/dec filter it builds, 12 KiB) sits between `Axis::new`'s and
+    // `AccDecFilter::new`'s, and on the Cortex-M4 the stack of `servo bench firmware`'s
+    // interrupts-off run grew ~3 KiB into the statics below it (0 bytes free, figures garbage).
+    #[inline(always)]
     pub fn validate(&self) -> Result<(), ParamError> {
         let m = &self.motor;
         nonzero("motor.pole_pairs", m.pole_pairs)?;

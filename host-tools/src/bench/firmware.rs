@@ -310,6 +310,15 @@ pub fn interrupts_off_on_cortex_m4() -> Result<InterruptsOff> {
     let Some(summary) = text.lines().find(|l| l.starts_with("interrupts-off summary")) else {
         bail!("interrupts-off printed no summary: {text}");
     };
+    // The stack paint below the statics: none left means the stack ran into them (the
+    // section lengths read from statics it overwrote are then meaningless).
+    let free_stack = text
+        .lines()
+        .find_map(|l| l.strip_prefix("stack: ")?.split_whitespace().next()?.parse::<u32>().ok())
+        .with_context(|| format!("interrupts-off printed no stack figure: {text}"))?;
+    if free_stack == 0 {
+        bail!("interrupts-off: the stack overflowed into .bss (0 bytes free); its figures are not valid:\n{text}");
+    }
     let w: Vec<&str> = summary.split_whitespace().collect();
     let number = |key: &str| -> Result<f64> {
         let at = w.iter().position(|x| *x == key).with_context(|| format!("no {key} in {summary}"))?;
