@@ -319,11 +319,6 @@ impl Params {
     }
 
     /// Check every field; the first problem found is returned.
-    // Inlined into `Axis::new` (as it was when it had one caller): out of line, its frame
-    // (room for the acc/dec filter it builds, 12 KiB) sits between `Axis::new`'s and
-    // `AccDecFilter::new`'s, and on the Cortex-M4 the stack of `servo bench firmware`'s
-    // interrupts-off run grew ~3 KiB into the statics below it (0 bytes free, figures garbage).
-    #[inline(always)]
     pub fn validate(&self) -> Result<(), ParamError> {
         let m = &self.motor;
         nonzero("motor.pole_pairs", m.pole_pairs)?;
@@ -381,7 +376,7 @@ impl Params {
             return Err(ParamError::BusLimitsInverted { under: l.bus_undervoltage, over: l.bus_overvoltage });
         }
         positive("limits.following_error", l.following_error)?;
-        AccDecFilter::new(&self.acc_dec, r.position_period()).map_err(ParamError::AccDec)?;
+        AccDecFilter::check(&self.acc_dec, r.position_period()).map_err(ParamError::AccDec)?;
         self.sequence.validate().map_err(ParamError::Sequence)?;
         self.friction.validate().map_err(ParamError::Friction)?;
         // The sweep's settings on their own; held against the rates and the limits when a

@@ -89,10 +89,7 @@ impl AccDecFilter {
     /// Build from settings at the position-loop period (s). Every setting is checked, also
     /// those of the kinds not selected, so that switching kind later cannot fail.
     pub fn new(p: &AccDecParams, sample_period: f32) -> Result<Self, AccDecError> {
-        let stages = p.ma_stages as usize;
-        if !(1..=MAX_MOVING_AVERAGE_STAGES).contains(&stages) {
-            return Err(AccDecError::Stages(stages));
-        }
+        let stages = moving_average_stages(p)?;
         let ma = MovingAverageCascade::new(&p.ma_lengths[..stages])?;
         let bw = ButterworthDesign::new(p.order, p.cutoff_hz, sample_period)?;
         Ok(match p.kind {
@@ -100,6 +97,16 @@ impl AccDecFilter {
             AccDecKind::MovingAverage => Self::MovingAverage(ma),
             AccDecKind::Butterworth => Self::Butterworth(ButterworthPulseFilter::new(bw)),
         })
+    }
+
+    /// [`Self::new`]'s checks, in its order, without building the filter: a parameter check
+    /// needs no room for one (12 KB, most of it moving-average windows; on the Cortex-M4 that
+    /// room in `Params::validate`'s frame, under `Axis::new`'s, overflowed the stack).
+    pub fn check(p: &AccDecParams, sample_period: f32) -> Result<(), AccDecError> {
+        let stages = moving_average_stages(p)?;
+        MovingAverageCascade::check(&p.ma_lengths[..stages])?;
+        ButterworthDesign::new(p.order, p.cutoff_hz, sample_period)?;
+        Ok(())
     }
 
     /// Empty the filter (as built; settings kept).
@@ -118,6 +125,16 @@ impl AccDecFilter {
             Self::MovingAverage(m) => m.step(pulses),
             Self::Butterworth(b) => b.step(pulses),
         }
+    }
+}
+
+/// The number of moving-average stages, 1 to [`MAX_MOVING_AVERAGE_STAGES`].
+fn moving_average_stages(p: &AccDecParams) -> Result<usize, AccDecError> {
+    let stages = p.ma_stages as usize;
+    if (1..=MAX_MOVING_AVERAGE_STAGES).contains(&stages) {
+        Ok(stages)
+    } else {
+        Err(AccDecError::Stages(stages))
     }
 }
 

@@ -38,8 +38,8 @@ pub struct MovingAverageCascade {
 }
 
 impl MovingAverageCascade {
-    /// `lengths`: one window length (samples) per stage, 1 to 3 stages.
-    pub fn new(lengths: &[u32]) -> Result<Self, AccDecError> {
+    /// What [`Self::new`] checks, without building the cascade (its windows are kilobytes).
+    pub fn check(lengths: &[u32]) -> Result<(), AccDecError> {
         if lengths.is_empty() || lengths.len() > MAX_MOVING_AVERAGE_STAGES {
             return Err(AccDecError::Stages(lengths.len()));
         }
@@ -48,6 +48,12 @@ impl MovingAverageCascade {
                 return Err(AccDecError::Length { stage: stage + 1, length });
             }
         }
+        Ok(())
+    }
+
+    /// `lengths`: one window length (samples) per stage, 1 to 3 stages.
+    pub fn new(lengths: &[u32]) -> Result<Self, AccDecError> {
+        Self::check(lengths)?;
         let empty = Stage { length: 1, window: [0; MAX_MOVING_AVERAGE_LENGTH as usize], next: 0, sum: 0, remainder: 0 };
         let mut stages = [empty; MAX_MOVING_AVERAGE_STAGES];
         for (s, &length) in stages.iter_mut().zip(lengths) {

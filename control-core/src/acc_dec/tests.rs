@@ -207,3 +207,49 @@ fn reset_gives_back_a_fresh_filter() {
 }
 
 mod against_the_f64_reference;
+
+/// `check` (what `Params::validate` runs) refuses exactly what `new` refuses, with the same
+/// error, over random settings around every bound: stages 0 to 4, lengths 0 to 513, orders
+/// 0 to 7, cut-offs from zero and negative to beyond Nyquist, NaN and infinities, three kinds.
+#[test]
+fn check_refuses_exactly_what_new_refuses() {
+    let mut r = Random(0x9E37_79B9_7F4A_7C15);
+    let periods = [0.00025f32, 0.001, 0.000_062_5];
+    let cutoffs = [0.0f32, -1.0, f32::NAN, f32::INFINITY, 0.001, 0.05, 1.0, 40.0, 1999.0, 2000.0, 2001.0, 8000.0, 1e6];
+    let (mut refused, mut accepted) = (0, 0);
+    for _ in 0..20_000 {
+        let p = AccDecParams {
+            kind: [AccDecKind::None, AccDecKind::MovingAverage, AccDecKind::Butterworth][r.below(3) as usize],
+            order: r.below(8) as u32,
+            cutoff_hz: if r.below(2) == 0 {
+                cutoffs[r.below(cutoffs.len() as u64) as usize]
+            } else {
+                r.unit() * 3000.0
+            },
+            ma_stages: r.below(5) as u32,
+            ma_lengths: core::array::from_fn(|_| {
+                if r.below(4) == 0 {
+                    [0, 512, 513][r.below(3) as usize]
+                } else {
+                    r.below(600) as u32
+                }
+            }),
+        };
+        let period = periods[r.below(3) as usize];
+        let built = AccDecFilter::new(&p, period).map(|_| ());
+        let checked = AccDecFilter::check(&p, period);
+        // The same error, a NaN cut-off by its bits (NaN != NaN).
+        let same = match (checked, built) {
+            (Err(AccDecError::Cutoff(a)), Err(AccDecError::Cutoff(b))) => a.to_bits() == b.to_bits(),
+            _ => checked == built,
+        };
+        assert!(same, "{p:?} at {period} s: check {checked:?}, new {built:?}");
+        if built.is_err() {
+            refused += 1;
+        } else {
+            accepted += 1;
+        }
+    }
+    // Both outcomes well represented.
+    assert!(refused > 2_000 && accepted > 2_000, "refused {refused}, accepted {accepted}");
+}
