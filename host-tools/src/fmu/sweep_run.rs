@@ -58,15 +58,22 @@ impl SweepRun {
     }
 
     /// The parameters a drive is given for this sweep: the run's, with the sweep's settings.
+    /// The FMU refuses a sweep it cannot run when it starts (logged); these are refused here,
+    /// before any run, with the same reason.
     pub fn drive_params(&self) -> Result<control_core::Params> {
         let rates = self.rates()?;
         self.settings.validate(rates.current_loop_hz, rates.velocity_divider).map_err(|e| anyhow!("{e}"))?;
-        let mut parameters = self.parameters.clone();
-        parameters.extend(sweep_parameters(&self.settings));
-        let control = configuration(&parameters)?.control;
+        let control = configuration(&self.fmu_parameters())?.control;
         // What the start would refuse (the limits, the position loop's rate), refused here.
         control.validate_sweep().map_err(|e| anyhow!("{e}"))?;
         Ok(control)
+    }
+
+    /// The run's FMU parameters with the sweep's settings.
+    fn fmu_parameters(&self) -> BTreeMap<String, Value> {
+        let mut parameters = self.parameters.clone();
+        parameters.extend(sweep_parameters(&self.settings));
+        parameters
     }
 
     /// The mode the sweep rides in: position (holding where the axis stands) for a
@@ -81,13 +88,8 @@ impl SweepRun {
     }
 
     pub fn scenario(&self) -> Result<Scenario> {
-        let rates = self.rates()?;
-        self.settings.validate(rates.current_loop_hz, rates.velocity_divider).map_err(|e| anyhow!("{e}"))?;
-        let mut parameters = self.parameters.clone();
-        parameters.extend(sweep_parameters(&self.settings));
-        // The FMU refuses a sweep it cannot run when it starts (logged): refused here, before
-        // the run, with the same reason.
-        configuration(&parameters)?.control.validate_sweep().map_err(|e| anyhow!("{e}"))?;
+        let rates = self.drive_params()?.rates;
+        let parameters = self.fmu_parameters();
         // One communication step per position-loop period, as a drive's link streams: the
         // stream then carries every acquisition sample (acquisition divider = position
         // divider) at any loop rate. (A fixed 250 µs step at a 32 kHz loop kept every other
