@@ -50,6 +50,7 @@
 
 mod acquisition;
 mod frequency_plan;
+mod half_block_spread;
 mod measure;
 mod prbs;
 mod precision_control;
@@ -69,6 +70,7 @@ use crate::excitation::{phase_angle, InjectionPoint, SineGenerator};
 use crate::m_sequence::MSequence;
 use crate::trigonometry::ReducedAngle;
 use crate::TAU;
+use half_block_spread::HalfBlockSpread;
 use settling_check::MIN_CHECKED_SAMPLES;
 use sine_fit::SineFitSums;
 
@@ -213,6 +215,9 @@ pub struct PhaseShiftedSweep {
     /// The previous comparison's `tail_over_difference` (0 when it had none).
     previous_tail: f32,
     checking_settling: bool,
+    /// The half-block responses of the present frequency's record once it has settled, below
+    /// the threshold (one record; see [`Self::next_half_block`]; none measured otherwise).
+    spread: HalfBlockSpread,
     /// Index of the present half block (see [`AcquisitionSample::half_block`]; at most
     /// `1 +` [`SweepParams::half_block_cap`], below `1 + 4·MAX_EXTENSIONS`), and the samples'
     /// word of record and half block (found when either changes, not on every sample: the
@@ -264,6 +269,7 @@ impl PhaseShiftedSweep {
             previous_excess: 0.0,
             previous_tail: 0.0,
             checking_settling: false,
+            spread: HalfBlockSpread::default(),
             half_block: 0,
             segment: 0,
             period_sums: (0.0, 0.0, 0.0),
@@ -374,6 +380,7 @@ impl PhaseShiftedSweep {
             self.previous_excess = 0.0;
             self.previous_tail = 0.0;
             self.half_block = 0;
+            self.spread = HalfBlockSpread::default();
             self.checking_settling = p.precision_db > 0.0
                 && p.max_extensions > 0
                 && p.record_length(f, self.base_rate_hz).1 >= MIN_CHECKED_SAMPLES;
@@ -533,7 +540,14 @@ impl PhaseShiftedSweep {
                 // this frequency takes (the same for all, so that the phase-shifted records
                 // stay balanced); the first one measures on at once, without settling. Its
                 // end comes back here only when blocks were added, with `extensions` > 0.
-                if self.status.record == 0 && self.extensions == 0 {
+                let half = self.params.record_length(f, self.base_rate_hz).1 / 2;
+                if self.status.record == 0 && self.spread.half_blocks > 0 {
+                    // A half block of the settled record's extension has ended.
+                    if self.next_half_block() {
+                        self.set_left(half.saturating_mul(divider as u64));
+                        return;
+                    }
+                } else if self.status.record == 0 && self.extensions == 0 {
                     if self.checking_settling {
                         if let Some(samples) = self.settled() {
                             self.set_left(samples.saturating_mul(divider as u64));
@@ -541,11 +555,14 @@ impl PhaseShiftedSweep {
                         }
                     }
                     self.extensions = self.halves_needed(records);
-                    if self.extensions > 0 {
-                        let ticks = (self.extensions as u64)
-                            .saturating_mul(self.params.record_length(f, self.base_rate_hz).1 / 2)
-                            .saturating_mul(divider as u64);
-                        self.set_left(ticks);
+                    if self.spread.half_blocks > 0 {
+                        // Measured on in half blocks, each checked (see `next_half_block`).
+                        if self.extensions > 0 {
+                            self.set_left(half.saturating_mul(divider as u64));
+                            return;
+                        }
+                    } else if self.extensions > 0 {
+                        self.set_left((self.extensions as u64).saturating_mul(half).saturating_mul(divider as u64));
                         return;
                     }
                 }

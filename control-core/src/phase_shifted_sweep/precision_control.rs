@@ -1,8 +1,18 @@
 //! Precision control: how many half blocks every record of a frequency adds for its
-//! response to meet `precision_db` (see [`PhaseShiftedSweep::halves_needed`]).
+//! response to meet `precision_db` (see [`PhaseShiftedSweep::halves_needed`]), and, below the
+//! threshold, the check of that prediction against the half blocks' own spread (see
+//! [`PhaseShiftedSweep::next_half_block`]).
 
+#[cfg(doc)]
+use super::HalfBlockSpread;
 use super::PhaseShiftedSweep;
 use crate::TAU;
+
+/// The half blocks' spread extends a record when it puts the error above the precision by
+/// more than this factor: from three half blocks on its estimate of the error is itself
+/// uncertain (by about ±40 % at three), and extending on every chance excess would cost
+/// measurement time for nothing.
+const SPREAD_MARGIN: f32 = 1.25;
 
 impl PhaseShiftedSweep {
     /// Extra half blocks per record (at most
@@ -34,5 +44,39 @@ impl PhaseShiftedSweep {
         } else {
             halves as u32 - 2
         }
+    }
+
+    /// The end of a half block of a settled record below the threshold (measured on in half
+    /// blocks, see [`HalfBlockSpread`]): true when another half block follows. The record runs
+    /// the half blocks [`Self::halves_needed`] predicted; then, when the half blocks' spread
+    /// says the error is still more than [`SPREAD_MARGIN`] times the precision, as many more as
+    /// that spread asks for, up to the same cap, checked again at their end. The prediction
+    /// models the noise as a first-order spectrum, which a lightly damped closed-loop mode
+    /// driven by current noise is not: on a 0.3:1, 53 Hz axis, velocity-feedback point, 0.01 A,
+    /// the result at 50 Hz scattered by 0.059 dB (12 noise seeds) for a predicted 0.03 dB.
+    // Once per half block: kept out of line so that the every-tick path stays small.
+    #[inline(never)]
+    pub(super) fn next_half_block(&mut self) -> bool {
+        self.spread.close(self.acc.since(&self.half_start).response());
+        self.half_start = self.acc;
+        // The base block's two and the extension's so far.
+        let measured = self.spread.half_blocks;
+        if measured < 2 + self.extensions {
+            return true;
+        }
+        let p = &self.params;
+        let cap = p.half_block_cap(self.status.frequency, self.base_rate_hz);
+        let Some(error) = self.spread.relative_error() else { return false };
+        let target = p.precision_db * (core::f32::consts::LN_10 / 20.0);
+        let ratio = error / target;
+        if !(ratio > SPREAD_MARGIN) || self.extensions >= cap {
+            return false;
+        }
+        // The error falls as 1/√(half blocks): so many in all for the precision.
+        let wanted = libm::ceilf(measured as f32 * ratio * ratio);
+        let more =
+            if wanted > (cap + 2) as f32 { cap - self.extensions } else { (wanted as u32).saturating_sub(measured) };
+        self.extensions = (self.extensions + more).min(cap);
+        more > 0
     }
 }

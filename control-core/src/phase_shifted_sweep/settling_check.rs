@@ -1,7 +1,7 @@
 //! The settling check: the first record of a frequency is measured in half blocks, and the
 //! earlier of two is discarded while they disagree (see [`PhaseShiftedSweep::settled`]).
 
-use super::{AcquisitionSample, PhaseShiftedSweep};
+use super::{AcquisitionSample, HalfBlockSpread, PhaseShiftedSweep};
 use crate::TAU;
 
 /// Half blocks agree within so many standard deviations of their difference (see
@@ -95,6 +95,15 @@ impl PhaseShiftedSweep {
         self.previous_excess = excess;
         if settled || self.discarded_halves >= p.half_block_cap(self.status.frequency, self.base_rate_hz) {
             self.checking_settling = false;
+            if settled && self.averaging {
+                // Below the threshold the frequency has this one record: its extension is
+                // measured in half blocks too, whose spread checks the predicted error (see
+                // `next_half_block`).
+                self.spread = HalfBlockSpread::default();
+                self.spread.close(Some((re0, im0)));
+                self.spread.close(Some((re, im)));
+                self.half_start = self.acc;
+            }
             return None;
         }
         // Keep the last half block only and compare it with the next one.
