@@ -279,6 +279,11 @@ pub fn drive_image_size() -> Result<ImageSize> {
     Ok(ImageSize { flash: in_flash + data, ram: in_ram })
 }
 
+/// The drive image's worst-case stack, read from the image `drive_image_size` built.
+pub fn drive_image_stack() -> Result<crate::bench::stack_depth::StackBound> {
+    crate::bench::stack_depth::stack_bound(&workspace_root().join("target/fw/thumbv7em-none-eabihf/release/drive-g474"))
+}
+
 /// The drive application's critical sections on the Cortex-M4 (QEMU, instructions): the
 /// longest during a parameter change (SetParams, LoadCorrection, SaveParams), the longest
 /// over every request and which, the tick's own section, and the old SetParams (the axis

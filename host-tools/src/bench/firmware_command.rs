@@ -21,11 +21,13 @@ impl FirmwareBenchArgs {
 fn bench_firmware(args: &FirmwareBenchArgs) -> Result<bool> {
     let common = &args.common;
     use crate::bench::firmware::{
-        all_features_recordings, drive_image_size, encode, interrupts_off_on_cortex_m4, recordings, replay_on_cortex_m4,
+        all_features_recordings, drive_image_size, drive_image_stack, encode, interrupts_off_on_cortex_m4, recordings,
+        replay_on_cortex_m4,
     };
     let pb = progress_bar("firmware bench", common.json);
     pb.set_position(50);
     let size = drive_image_size()?;
+    let stack = drive_image_stack()?;
     pb.set_position(300);
     let vectors = replay_on_cortex_m4(&encode(&recordings()), "golden-vectors")?;
     pb.set_position(700);
@@ -35,13 +37,14 @@ fn bench_firmware(args: &FirmwareBenchArgs) -> Result<bool> {
     pb.finish_and_clear();
     let off_goal = off.parameter_changes <= INTERRUPTS_OFF_GOAL;
     let per_tick_all = all.instructions_per_tick.unwrap_or(f64::INFINITY);
-    let ok = vectors.identical && all.identical && size.flash <= FLASH_GOAL && size.ram <= RAM_GOAL;
+    let stack_fits = stack.worst <= stack.stack;
+    let ok = vectors.identical && all.identical && size.flash <= FLASH_GOAL && size.ram <= RAM_GOAL && stack_fits;
     let tick_goal = per_tick_all <= TICK_GOAL;
     if common.json {
         println!(
             "{}",
             serde_json::to_string_pretty(&serde_json::json!({
-                "bench": "firmware", "image": size, "golden_vectors": vectors, "all_features": all,
+                "bench": "firmware", "image": size, "stack": stack, "golden_vectors": vectors, "all_features": all,
                 "tick_goal_met": tick_goal, "interrupts_off": off, "interrupts_off_goal_met": off_goal, "passed": ok
             }))?
         );
@@ -57,6 +60,7 @@ fn bench_firmware(args: &FirmwareBenchArgs) -> Result<bool> {
         size.ram,
         size.ram as f64 / 1024.0
     );
+    print_stack(&stack);
     for (name, r) in
         [("golden vectors (the shipped scenarios' situations)", &vectors), ("every feature on at once", &all)]
     {
@@ -90,4 +94,32 @@ fn bench_firmware(args: &FirmwareBenchArgs) -> Result<bool> {
         println!("    {}", line.trim_start_matches("interrupts-off request "));
     }
     Ok(ok)
+}
+
+/// The drive image's worst-case stack: the figure, the thread's path and each handler's.
+fn print_stack(stack: &crate::bench::stack_depth::StackBound) {
+    use crate::bench::stack_depth::EXCEPTION_FRAME_BYTES;
+    println!(
+        "  drive-g474 stack: worst path {} of {} bytes → {} ({} bytes left; from the ELF: the thread's deepest path, every interrupt handler's nested on it, {} bytes of exception frame each)",
+        stack.worst,
+        stack.stack,
+        if stack.worst <= stack.stack { "fits" } else { "DOES NOT FIT" },
+        stack.stack as i64 - stack.worst as i64,
+        EXCEPTION_FRAME_BYTES
+    );
+    let short = |name: &str| -> String { name.chars().take(90).collect() };
+    let frames = |p: &crate::bench::stack_depth::StackPath| -> String {
+        p.functions.iter().filter(|(_, b)| *b >= 512).map(|(n, b)| format!("{} {b}", short(n))).collect::<Vec<_>>().join(" → ")
+    };
+    println!("    thread (reset, main, tasks) {} bytes; frames of 512 bytes and more: {}", stack.thread.bytes, frames(&stack.thread));
+    for (name, p) in &stack.handlers {
+        println!("    {name} {} bytes", p.bytes);
+    }
+    if !stack.cycles.is_empty() {
+        println!(
+            "    recursion cut (paths counted without repeating a function): {} group(s), {} functions",
+            stack.cycles.len(),
+            stack.cycles.iter().map(Vec::len).sum::<usize>()
+        );
+    }
 }
