@@ -421,11 +421,9 @@ pub fn handle(axis: &mut Axis, commands: &mut Commands, stream: &mut Acquisition
             axis.clear_faults();
             Response::Done
         }
-        Request::GetTelemetry => Response::Telemetry(DriveTelemetry {
-            axis: *axis.telemetry(),
-            params_record: None,
-            stack_free_bytes: None,
-        }),
+        Request::GetTelemetry => {
+            Response::Telemetry(DriveTelemetry { axis: *axis.telemetry(), params_record: None, stack_free_bytes: None })
+        }
         Request::Stream { enabled } => {
             stream.set_enabled(enabled);
             Response::Done
@@ -488,8 +486,8 @@ mod tests {
     }
 
     /// Version 9: the unused stack crosses the link at its extremes, the core (which does not
-    /// measure a stack) reports none, and the field costs its postcard bytes only: the tag, and
-    /// a varint of at most five bytes.
+    /// measure a stack) reports none, and the field costs its postcard bytes only: `None` its
+    /// one tag byte, a value the varint's one to five bytes more.
     #[test]
     fn the_unused_stack_survives_a_frame_and_the_core_has_none() {
         let mut axis = Axis::new(Params::default()).unwrap();
@@ -502,7 +500,7 @@ mod tests {
         let none = body(&Response::Telemetry(t));
         for (free, extra) in [(0u32, 1), (127, 1), (128, 2), (82_040, 3), (u32::MAX, 5)] {
             let r = Response::Telemetry(DriveTelemetry { stack_free_bytes: Some(free), ..t });
-            assert_eq!(body(&r), none + 1 + extra, "{free}");
+            assert_eq!(body(&r), none + extra, "{free}");
             let mut buf = [0u8; MAX_FRAME + 8];
             let n = encode(&r, &mut buf).unwrap();
             assert!(n <= MAX_FRAME + 1);

@@ -112,7 +112,11 @@ async fn main(spawner: Spawner) {
     };
     log_boot_params(host.boot_params());
     // The boot's deepest calls (the axis built and checked) are behind us: their mark stands.
-    defmt::info!("stack: {} of {} bytes never touched after the drive's install", stack::unused_stack_bytes(), stack::stack_bytes());
+    defmt::info!(
+        "stack: {} of {} bytes never touched after the drive's install",
+        stack::unused_stack_bytes(),
+        stack::stack_bytes()
+    );
     host.report_stack_with(stack::unused_stack_bytes);
     interrupt::UART4.set_priority(Priority::P1);
     let housekeeping = CONTROL_EXECUTOR.start(interrupt::UART4);

@@ -107,11 +107,45 @@ fn print_stack(stack: &crate::bench::stack_depth::StackBound) {
         stack.stack as i64 - stack.worst as i64,
         EXCEPTION_FRAME_BYTES
     );
-    let short = |name: &str| -> String { name.chars().take(90).collect() };
-    let frames = |p: &crate::bench::stack_depth::StackPath| -> String {
-        p.functions.iter().filter(|(_, b)| *b >= 512).map(|(n, b)| format!("{} {b}", short(n))).collect::<Vec<_>>().join(" → ")
+    // Generic arguments inside generic arguments elided: `<A<B<C>>>::poll` reads `<A<…>>::poll`.
+    let short = |name: &str| -> String {
+        let (mut depth, mut out) = (0, String::new());
+        for c in name.chars() {
+            match c {
+                '<' => {
+                    depth += 1;
+                    if depth <= 2 {
+                        out.push('<');
+                    }
+                    if depth == 2 {
+                        out.push('…');
+                    }
+                }
+                '>' => {
+                    if depth <= 2 {
+                        out.push('>');
+                    }
+                    depth -= 1;
+                }
+                _ if depth <= 1 => out.push(c),
+                _ => {}
+            }
+        }
+        out
     };
-    println!("    thread (reset, main, tasks) {} bytes; frames of 512 bytes and more: {}", stack.thread.bytes, frames(&stack.thread));
+    let frames = |p: &crate::bench::stack_depth::StackPath| -> String {
+        p.functions
+            .iter()
+            .filter(|(_, b)| *b >= 512)
+            .map(|(n, b)| format!("{} {b}", short(n)))
+            .collect::<Vec<_>>()
+            .join(" → ")
+    };
+    println!(
+        "    thread (reset, main, tasks) {} bytes; frames of 512 bytes and more: {}",
+        stack.thread.bytes,
+        frames(&stack.thread)
+    );
     for (name, p) in &stack.handlers {
         println!("    {name} {} bytes", p.bytes);
     }

@@ -30,7 +30,7 @@ pub const EXCEPTION_FRAME_BYTES: u32 = 26 * 4 + 4;
 /// fails the analysis (a new task must say where it runs).
 pub const EXECUTORS: &[(&str, &[&str])] = &[
     // The thread-mode executor of `#[embassy_executor::main]`: main and the link task.
-    ("8Executor3run", &["embassy_main_task", "link_task"]),
+    ("thread::Executor>::run", &["embassy_main_task", "link_task"]),
     // The housekeeping executor, run in the UART4 interrupt.
     ("UART4", &["position_tick_task"]),
 ];
@@ -75,13 +75,14 @@ pub struct CallGraph {
     pub address_taken: BTreeSet<usize>,
 }
 
-/// Functions of `llvm-nm -S -n --defined-only` (text symbols with a size), sorted by address.
+/// Functions of `llvm-nm -C -S -n --defined-only` (text symbols with a size; demangled names
+/// hold spaces), sorted by address.
 pub fn functions(nm: &str) -> Vec<Function> {
     let mut f: Vec<Function> = nm
         .lines()
         .filter_map(|l| {
-            let w: Vec<&str> = l.split_whitespace().collect();
-            let [start, size, kind, name] = w[..] else { return None };
+            let mut w = l.splitn(4, ' ');
+            let (start, size, kind, name) = (w.next()?, w.next()?, w.next()?, w.next()?);
             let (start, size) = (u32::from_str_radix(start, 16).ok()?, u32::from_str_radix(size, 16).ok()?);
             (matches!(kind, "t" | "T") && size > 0).then(|| Function { start, size, name: name.to_string() })
         })
@@ -379,7 +380,7 @@ fn section_words(elf: &[u8]) -> (Vec<u32>, Vec<u32>) {
 
 /// The worst case of the ELF image at `elf` (see the module's documentation).
 pub fn stack_bound(elf: &Path) -> Result<StackBound> {
-    let nm = run("llvm-nm", &["-S", "-n", "--defined-only"], elf)?;
+    let nm = run("llvm-nm", &["-C", "-S", "-n", "--defined-only"], elf)?;
     let disassembly = run("llvm-objdump", &["-d", "--no-show-raw-insn"], elf)?;
     let bytes = std::fs::read(elf).with_context(|| format!("cannot read {}", elf.display()))?;
     let (data, vectors) = section_words(&bytes);
@@ -416,7 +417,7 @@ mod tests {
     /// Reset: Reset (8) + a (32) + b (4 120) = 4 160, hand-added; through `c` it would be
     /// 8 + 32 + 12 + d's 64 = 116.
     const NM: &str = "08000000 00000010 T Reset\n08000010 00000020 t a\n08000030 00000010 t b\n\
-        08000040 00000020 t c\n08000060 00000008 t d\n20000100 B _stack_end\n20001000 A _stack_start\n";
+        08000040 00000020 t c\n08000060 00000008 t <d as e>::f\n20000100 B _stack_end\n20001000 A _stack_start\n";
     const DISASSEMBLY: &str = "
  8000000:      \tpush\t{r7, lr}
  8000002:      \tbl\t0x8000010 <a>           @ imm = #12
@@ -442,7 +443,7 @@ mod tests {
     #[test]
     fn frames_calls_and_the_deepest_path_of_a_made_up_image() {
         let f = functions(NM);
-        assert_eq!(f.iter().map(|x| x.name.as_str()).collect::<Vec<_>>(), ["Reset", "a", "b", "c", "d"]);
+        assert_eq!(f.iter().map(|x| x.name.as_str()).collect::<Vec<_>>(), ["Reset", "a", "b", "c", "<d as e>::f"]);
         assert_eq!((symbol(NM, "_stack_start"), symbol(NM, "_stack_end")), (Some(0x2000_1000), Some(0x2000_0100)));
         let g = call_graph(&f, DISASSEMBLY, &[]).unwrap();
         assert_eq!(g.frames, [8, 32, 4_120, 12, 64]);
