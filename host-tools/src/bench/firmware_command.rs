@@ -38,14 +38,22 @@ fn bench_firmware(args: &FirmwareBenchArgs) -> Result<bool> {
     let off_goal = off.parameter_changes <= INTERRUPTS_OFF_GOAL;
     let per_tick_all = all.instructions_per_tick.unwrap_or(f64::INFINITY);
     let stack_fits = stack.worst <= stack.stack;
-    let ok = vectors.identical && all.identical && size.flash <= FLASH_GOAL && size.ram <= RAM_GOAL && stack_fits;
+    // The analysis checked against a run: on the interrupts-off image its bound must cover the
+    // deepest the painted stack went.
+    let bound_holds = off.stack_bound.worst >= off.stack_used;
+    let ok = vectors.identical
+        && all.identical
+        && size.flash <= FLASH_GOAL
+        && size.ram <= RAM_GOAL
+        && stack_fits
+        && bound_holds;
     let tick_goal = per_tick_all <= TICK_GOAL;
     if common.json {
         println!(
             "{}",
             serde_json::to_string_pretty(&serde_json::json!({
                 "bench": "firmware", "image": size, "stack": stack, "golden_vectors": vectors, "all_features": all,
-                "tick_goal_met": tick_goal, "interrupts_off": off, "interrupts_off_goal_met": off_goal, "passed": ok
+                "tick_goal_met": tick_goal, "interrupts_off": off, "stack_bound_holds": bound_holds, "interrupts_off_goal_met": off_goal, "passed": ok
             }))?
         );
         return Ok(ok);
@@ -89,6 +97,13 @@ fn bench_firmware(args: &FirmwareBenchArgs) -> Result<bool> {
         off.longest_request,
         off.tick,
         off.old_set_params
+    );
+    println!(
+        "  stack bound checked on the interrupts-off run (its stack painted): the deepest it went {} bytes, the image's bound {} (thread {}) → {}",
+        off.stack_used,
+        off.stack_bound.worst,
+        off.stack_bound.thread.bytes,
+        if bound_holds { "the bound holds" } else { "the bound is BELOW the run: the analysis misses frames" }
     );
     for line in &off.requests {
         println!("    {}", line.trim_start_matches("interrupts-off request "));

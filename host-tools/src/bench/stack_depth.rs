@@ -378,8 +378,23 @@ fn section_words(elf: &[u8]) -> (Vec<u32>, Vec<u32>) {
     (data, vectors)
 }
 
+/// What the analysis needs to know of an image beyond its ELF: its reset handler and the
+/// symbols at its stack's top and low end.
+#[derive(Clone, Copy, Debug)]
+pub struct ImageLayout {
+    pub reset: &'static str,
+    pub stack_top: &'static str,
+    pub stack_low: &'static str,
+}
+
+/// The drive image: cortex-m-rt's names.
+pub const DRIVE_IMAGE: ImageLayout = ImageLayout { reset: "Reset", stack_top: "_stack_start", stack_low: "_stack_end" };
+
+/// The QEMU programs of `fw/core-vectors` (their own runtime and linker script).
+pub const CORE_VECTORS_IMAGE: ImageLayout = ImageLayout { reset: "reset", stack_top: "_stack_top", stack_low: "_ebss" };
+
 /// The worst case of the ELF image at `elf` (see the module's documentation).
-pub fn stack_bound(elf: &Path) -> Result<StackBound> {
+pub fn stack_bound(elf: &Path, layout: ImageLayout) -> Result<StackBound> {
     let nm = run("llvm-nm", &["-C", "-S", "-n", "--defined-only"], elf)?;
     let disassembly = run("llvm-objdump", &["-d", "--no-show-raw-insn"], elf)?;
     let bytes = std::fs::read(elf).with_context(|| format!("cannot read {}", elf.display()))?;
@@ -387,11 +402,11 @@ pub fn stack_bound(elf: &Path) -> Result<StackBound> {
     let functions = functions(&nm);
     let graph = call_graph(&functions, &disassembly, &data)?;
     let succ = successors(&functions, &graph)?;
-    let stack = match (symbol(&nm, "_stack_start"), symbol(&nm, "_stack_end")) {
+    let stack = match (symbol(&nm, layout.stack_top), symbol(&nm, layout.stack_low)) {
         (Some(top), Some(low)) if top >= low => top - low,
-        _ => bail!("no _stack_start/_stack_end in {}", elf.display()),
+        _ => bail!("no {}/{} in {}", layout.stack_top, layout.stack_low, elf.display()),
     };
-    let reset = functions.iter().position(|f| f.name == "Reset").context("no Reset handler")?;
+    let reset = functions.iter().position(|f| f.name == layout.reset).context("no reset handler")?;
     let thread = deepest(&functions, &graph.frames, &succ, reset);
     // Every distinct handler of the vector table but the reset handler (each may interrupt
     // the others: counted once each, which over-estimates handlers of one priority).
