@@ -28,7 +28,9 @@ pub fn stack_bytes() -> u32 {
 /// Bytes of the stack never written since reset: the painted words from the stack's low end
 /// up to the first word that differs. The scan reads only those (a few kilobytes while the
 /// stack holds), with interrupts on: a deeper interrupt meanwhile can only lower the mark,
-/// which the next call sees.
+/// which the next call sees. Never inlined: one copy for its three callers (boot, heartbeat,
+/// telemetry).
+#[inline(never)]
 pub fn unused_stack_bytes() -> u32 {
     let low = core::ptr::addr_of!(_stack_end) as usize;
     let top = core::ptr::addr_of!(_stack_start) as usize;
