@@ -7,10 +7,10 @@
 //! handler's deepest path and an exception frame for each (with the FPU's registers) to the
 //! thread's. The disassembly is `llvm-objdump`'s (apt `llvm`; `scripts/fw` installs it).
 //!
-//! Indirect calls (`blx rN`, `bx rN`): an executor's run loop calls the poll functions of the
-//! tasks it runs ([`EXECUTORS`]); any other indirect call may reach any function whose address
-//! the image holds (in a literal pool, `.rodata`, `.data` or built by `movw`/`movt`) but a
-//! task's poll. Recursion through them (core's formatting, defmt's) is cut where a path meets
+//! Indirect calls (`blx rN`, `bx rN`) may reach any function whose address the image holds (in
+//! a literal pool, `.rodata`, `.data` or built by `movw`/`movt`) but a task's poll, and an
+//! executor's run loop the poll functions of the tasks it runs ([`EXECUTORS`]) as well: without
+//! that split every task would nest in every other (through a waker or a formatter). Recursion through them (core's formatting, defmt's) is cut where a path meets
 //! a function already on it, and reported: the bound is over paths that do not repeat a
 //! function. Writes to `sp` the analysis does not know (`sub sp, rN`, `mov sp, rN`) fail it.
 
@@ -225,7 +225,8 @@ pub fn successors(functions: &[Function], g: &CallGraph) -> Result<Vec<BTreeSet<
         .map(|f| {
             let mut s = g.calls[f].clone();
             if g.indirect[f] {
-                s.extend(polled_by.get(&f).unwrap_or(&others).iter().copied());
+                s.extend(others.iter().copied());
+                s.extend(polled_by.get(&f).into_iter().flatten().copied());
             }
             s
         })
