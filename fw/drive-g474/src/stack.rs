@@ -8,8 +8,9 @@
 //!
 //! Limits of the measure: a frame that reserves room and never writes its lowest words (an
 //! uninitialised buffer) leaves them painted, and a word written with the paint's own value
-//! reads as untouched; either makes the figure read high by that much. The static worst case
-//! from the image (`servo bench firmware`) has neither limit, but not the real call paths'.
+//! reads as untouched; either makes the figure read high by that much. The static bound from
+//! the image (`servo bench firmware`) has neither limit: it counts every path the code allows,
+//! where this mark shows the paths the drive has taken since reset.
 
 use cortex_m_rt::STACK_PAINT_VALUE;
 
@@ -35,9 +36,9 @@ pub fn unused_stack_bytes() -> u32 {
     let low = core::ptr::addr_of!(_stack_end) as usize;
     let top = core::ptr::addr_of!(_stack_start) as usize;
     let mut at = low;
-    // SAFETY: every word between `_stack_end` and `_stack_start` is RAM, read with volatile
-    // loads (the stack below the current frame is not Rust memory the compiler may assume);
-    // the scan stops below the caller's own frame at the latest (its words are written).
+    // SAFETY: every word between `_stack_end` and `_stack_start` is RAM (aligned: both ends
+    // are multiples of 4, link.x asserts it), read with volatile loads and never written; the
+    // scan stops at the first word that differs from the paint, at the top at the latest.
     while at < top && unsafe { (at as *const u32).read_volatile() } == STACK_PAINT_VALUE {
         at += 4;
     }
