@@ -26,7 +26,9 @@ use crate::ranges::{check_position, Quantity, RangeError};
 use crate::response_correction::CorrectionParams;
 use crate::stop_sequence::{Refusal, SequenceEvent};
 
-/// Protocol version 8: each streamed acquisition sample says whether the drive's output was
+/// Protocol version 9: the telemetry carries the drive's unused stack
+/// ([`DriveTelemetry::stack_free_bytes`]: the bytes of its painted stack never touched since
+/// boot), so that a stack about to run into the statics shows before it does. Version 8: each streamed acquisition sample says whether the drive's output was
 /// limited during its acquisition period (a flag bit beside `measuring`, the same byte on the
 /// line: see [`crate::acquisition_stream::SAMPLE_LIMITED`]), so that the host counts every
 /// result's share from the stream; the telemetry's copy of the last sample (serde's derived
@@ -42,7 +44,7 @@ use crate::stop_sequence::{Refusal, SequenceEvent};
 /// board's PWM rate are refused with that rate; version 4: `SaveParams`, and the answer to `Hello` says where the
 /// drive's parameters came from at boot; version 3: CRC-32C instead of CRC-16, trailing bytes
 /// refused, range refusals).
-pub const VERSION: u16 = 8;
+pub const VERSION: u16 = 9;
 /// Largest encoded frame, COBS body without its terminator (a full parameter set fits with
 /// room to spare).
 pub const MAX_FRAME: usize = 1024;
@@ -95,6 +97,10 @@ pub struct DriveTelemetry {
     /// at boot, or the one `SaveParams` wrote last (each save writes the next number). `None`:
     /// no record (nothing saved, only corrupt or foreign ones), or no parameter storage.
     pub params_record: Option<u32>,
+    /// Bytes of the drive's stack never touched since boot (its high-water mark: the stack is
+    /// painted at reset and scanned from its low end when the telemetry is asked for). `None`:
+    /// the drive does not measure its stack (the core alone, the virtual drive).
+    pub stack_free_bytes: Option<u32>,
 }
 
 /// Where the parameters a drive booted with came from.
@@ -415,7 +421,9 @@ pub fn handle(axis: &mut Axis, commands: &mut Commands, stream: &mut Acquisition
             axis.clear_faults();
             Response::Done
         }
-        Request::GetTelemetry => Response::Telemetry(DriveTelemetry { axis: *axis.telemetry(), params_record: None }),
+        Request::GetTelemetry => {
+            Response::Telemetry(DriveTelemetry { axis: *axis.telemetry(), params_record: None, stack_free_bytes: None })
+        }
         Request::Stream { enabled } => {
             stream.set_enabled(enabled);
             Response::Done
@@ -473,6 +481,29 @@ mod tests {
         ] {
             let mut buf = [0u8; MAX_FRAME + 8];
             let n = encode(&r, &mut buf).unwrap();
+            assert_eq!(decode_response(&mut buf[..n]), Ok(r));
+        }
+    }
+
+    /// Version 9: the unused stack crosses the link at its extremes, the core (which does not
+    /// measure a stack) reports none, and the field costs its postcard bytes only: `None` its
+    /// one tag byte, a value the varint's one to five bytes more.
+    #[test]
+    fn the_unused_stack_survives_a_frame_and_the_core_has_none() {
+        let mut axis = Axis::new(Params::default()).unwrap();
+        let (mut commands, mut stream) = (Commands::default(), AcquisitionStream::default());
+        let Response::Telemetry(t) = handle(&mut axis, &mut commands, &mut stream, Request::GetTelemetry) else {
+            panic!("no telemetry")
+        };
+        assert_eq!(t.stack_free_bytes, None);
+        let body = |r: &Response| postcard::to_slice(r, &mut [0u8; MAX_FRAME]).unwrap().len();
+        let none = body(&Response::Telemetry(t));
+        for (free, extra) in [(0u32, 1), (127, 1), (128, 2), (82_040, 3), (u32::MAX, 5)] {
+            let r = Response::Telemetry(DriveTelemetry { stack_free_bytes: Some(free), ..t });
+            assert_eq!(body(&r), none + extra, "{free}");
+            let mut buf = [0u8; MAX_FRAME + 8];
+            let n = encode(&r, &mut buf).unwrap();
+            assert!(n <= MAX_FRAME + 1);
             assert_eq!(decode_response(&mut buf[..n]), Ok(r));
         }
     }

@@ -166,6 +166,7 @@ impl Drive {
             assembler: FrameAssembler::new(),
             board_hz,
             accelerometer_volts_per_count: P::ACCELEROMETER_VOLTS_PER_COUNT,
+            stack_gauge: None,
         })
     }
 
@@ -329,12 +330,25 @@ pub struct Host<'d> {
     board_hz: f32,
     /// The board's accelerometer input: volts per count.
     accelerometer_volts_per_count: f32,
+    /// The board's measure of its unused stack (bytes), if it has one: see
+    /// [`Host::report_stack_with`].
+    stack_gauge: Option<StackGauge>,
 }
+
+/// A board's measure of its stack: the bytes never touched since boot (see
+/// `DriveTelemetry::stack_free_bytes`).
+pub type StackGauge = fn() -> u32;
 
 impl Host<'_> {
     /// Where the parameters the drive booted with came from.
     pub fn boot_params(&self) -> ParamsOrigin {
         self.boot_params
+    }
+
+    /// The telemetry reports `gauge`'s unused stack from now on (a board that paints its stack
+    /// gives it; without one the telemetry says `None`).
+    pub fn report_stack_with(&mut self, gauge: StackGauge) {
+        self.stack_gauge = Some(gauge);
     }
 
     /// The parameters in force.
@@ -368,9 +382,14 @@ impl Host<'_> {
             Request::LoadCorrection(c) => self.load_correction(&c),
             Request::SaveParams => self.save_params(flash),
             // One copy of the telemetry inside the section; the answer is built outside, with the
-            // newest record of the parameter store (the link side's own state).
+            // newest record of the parameter store (the link side's own state) and the stack's
+            // measure (a scan with interrupts on).
             Request::GetTelemetry => match self.drive.with(|_, axis| *axis.telemetry()) {
-                Some(axis) => Response::Telemetry(DriveTelemetry { axis, params_record: self.params_record() }),
+                Some(axis) => Response::Telemetry(DriveTelemetry {
+                    axis,
+                    params_record: self.params_record(),
+                    stack_free_bytes: self.stack_gauge.map(|gauge| gauge()),
+                }),
                 None => Response::FrameError(FrameError::Message),
             },
             other => self

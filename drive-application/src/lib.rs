@@ -30,4 +30,4 @@ pub mod link;
 pub mod param_store;
 
 pub use board::{FlashError, ParamFlash, PowerStage, Sample};
-pub use drive::{Drive, Host, InstallError};
+pub use drive::{Drive, Host, InstallError, StackGauge};

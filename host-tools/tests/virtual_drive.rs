@@ -149,6 +149,8 @@ fn telemetry_is_printed_as_json_fields() {
     assert_eq!(t["axis"]["faults"], 0, "a fresh drive has no faults: {first}");
     assert!(t["axis"]["current"]["q"].is_number() && t["axis"]["mode"].is_string(), "{first}");
     assert!(t["params_record"].is_null(), "nothing saved yet: {first}");
+    // Protocol 9's unused stack: the field is there, and the simulated board measures none.
+    assert!(t.get("stack_free_bytes").is_some_and(|v| v.is_null()), "not measured on the host: {first}");
     let tick =
         |v: &serde_json::Value| v["telemetry"]["axis"]["tick"].as_u64().unwrap_or_else(|| panic!("no tick: {v}"));
     for field in ["position", "velocity_estimate", "torque_command", "sequence", "sweep"] {

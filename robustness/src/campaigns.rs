@@ -584,9 +584,11 @@ fn random_response(rng: &mut Rng, tick: &mut u64) -> Response {
             }
             Response::Samples(b)
         }
-        5 => {
-            Response::Telemetry(DriveTelemetry { params_record: rng.bool().then(|| rng.u32(..)), ..Default::default() })
-        }
+        5 => Response::Telemetry(DriveTelemetry {
+            params_record: rng.bool().then(|| rng.u32(..)),
+            stack_free_bytes: rng.bool().then(|| rng.u32(..)),
+            ..Default::default()
+        }),
         6 if rng.bool() => Response::Saved { sequence: rng.u32(..) },
         6 => Response::Done,
         _ => Response::Hello {

@@ -6,7 +6,8 @@
 //! Needs the firmware toolchain and QEMU; `scripts/fw` installs them (apt) on first use.
 
 use host_tools::bench::firmware::{
-    all_features_recordings, build, drive_image_size, encode, recordings, replay_on_cortex_m4, sections,
+    all_features_recordings, build, drive_image_size, drive_image_stack, encode, interrupts_off_on_cortex_m4,
+    recordings, replay_on_cortex_m4, sections,
 };
 use host_tools::paths::workspace_root;
 
@@ -48,6 +49,25 @@ fn the_drive_firmware_builds_within_its_flash_and_ram_budget() {
     assert!(size.flash > 16 * 1024, "an image with the core in it: {size:?}");
     assert!(size.flash <= 128 * 1024, "flash {} bytes", size.flash);
     assert!(size.ram <= 48 * 1024, "RAM {} bytes", size.ram);
+}
+
+/// The drive image's worst-case stack (read from its ELF) fits its stack, and the path it
+/// finds is the boot's: the axis built in its slot. The same analysis of the interrupts-off
+/// image must cover how deep that program's painted stack went in QEMU: an analysis that
+/// missed frames would read below the run.
+#[test]
+fn the_drive_images_stack_bound_fits_and_covers_a_painted_run() {
+    drive_image_size().unwrap();
+    let bound = drive_image_stack().unwrap();
+    eprintln!("drive-g474 stack: worst path {} of {} bytes (thread {})", bound.worst, bound.stack, bound.thread.bytes);
+    assert!(bound.worst <= bound.stack, "{bound:?}");
+    let names: Vec<&str> = bound.thread.functions.iter().map(|(n, _)| n.as_str()).collect();
+    assert!(names.contains(&"<control_core::axis::Axis>::new"), "{names:?}");
+    assert!(!bound.handlers.is_empty(), "the interrupt handlers are counted: {bound:?}");
+    let off = interrupts_off_on_cortex_m4().unwrap();
+    eprintln!("interrupts-off: the deepest the run went {} bytes, the bound {}", off.stack_used, off.stack_bound.worst);
+    assert!(off.stack_used > 16 * 1024, "the run builds axes on its stack: {} bytes", off.stack_used);
+    assert!(off.stack_bound.worst >= off.stack_used, "{} < {}", off.stack_bound.worst, off.stack_used);
 }
 
 /// The on-target tests (defmt-test) build for the board in CI; they run with probe-rs when a

@@ -11,7 +11,7 @@ use embassy_stm32::interrupt;
 use embassy_sync::blocking_mutex::raw::CriticalSectionRawMutex;
 use embassy_sync::signal::Signal;
 
-use crate::board;
+use crate::{board, stack};
 
 /// The drive: what the tick and the link share, and the two axis slots (in `.bss`).
 pub static DRIVE: Drive = Drive::new();
@@ -66,8 +66,12 @@ fn log(note: Note) {
                 defmt::info!("faults cleared");
             }
         }
-        Note::Alive { ticks, faults, bus_voltage } => {
-            defmt::info!("control loop alive: {} ticks, faults {:#x}, bus {} V", ticks, faults.0, bus_voltage)
-        }
+        Note::Alive { ticks, faults, bus_voltage } => defmt::info!(
+            "control loop alive: {} ticks, faults {:#x}, bus {} V, stack {} bytes never touched",
+            ticks,
+            faults.0,
+            bus_voltage,
+            stack::unused_stack_bytes()
+        ),
     }
 }

@@ -7,3 +7,4 @@
 pub mod board;
 pub mod control;
 pub mod link;
+pub mod stack;

@@ -15,7 +15,7 @@
 #![no_std]
 #![no_main]
 
-use drive_g474::{board, control, link};
+use drive_g474::{board, control, link, stack};
 
 use defmt_rtt as _;
 use embassy_executor::{InterruptExecutor, Spawner};
@@ -103,7 +103,7 @@ async fn main(spawner: Spawner) {
     interrupt::USART2.set_priority(Priority::P3);
     let mut board = board::init(p, TX.init([0; 1024]), RX.init([0; 1024]));
     let defaults = board::with_board_limits(control_core::Params::default());
-    let host = match control::DRIVE.install::<board::Stage, _>(defaults, &mut board.flash) {
+    let mut host = match control::DRIVE.install::<board::Stage, _>(defaults, &mut board.flash) {
         Ok(host) => host,
         Err(e) => {
             defmt::error!("drive not installed: {=str}", install_error(e));
@@ -111,6 +111,13 @@ async fn main(spawner: Spawner) {
         }
     };
     log_boot_params(host.boot_params());
+    // The boot's deepest calls (the axis built and checked) are behind us: their mark stands.
+    defmt::info!(
+        "stack: {} of {} bytes never touched after the drive's install",
+        stack::unused_stack_bytes(),
+        stack::stack_bytes()
+    );
+    host.report_stack_with(stack::unused_stack_bytes);
     interrupt::UART4.set_priority(Priority::P1);
     let housekeeping = CONTROL_EXECUTOR.start(interrupt::UART4);
     housekeeping.spawn(control::position_tick_task().expect("position-tick task"));

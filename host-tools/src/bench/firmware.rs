@@ -18,6 +18,7 @@ use control_core::Mode;
 use serde::Serialize;
 use servo_axis::simulation::{AxisSimulation, SimulationConfig, UserInputs};
 
+use crate::bench::stack_depth::{stack_bound, StackBound, CORE_VECTORS_IMAGE, DRIVE_IMAGE};
 use crate::paths::workspace_root;
 
 pub struct Recording {
@@ -279,6 +280,11 @@ pub fn drive_image_size() -> Result<ImageSize> {
     Ok(ImageSize { flash: in_flash + data, ram: in_ram })
 }
 
+/// The drive image's worst-case stack, read from the image `drive_image_size` built.
+pub fn drive_image_stack() -> Result<StackBound> {
+    stack_bound(&workspace_root().join("target/fw/thumbv7em-none-eabihf/release/drive-g474"), DRIVE_IMAGE)
+}
+
 /// The drive application's critical sections on the Cortex-M4 (QEMU, instructions): the
 /// longest during a parameter change (SetParams, LoadCorrection, SaveParams), the longest
 /// over every request and which, the tick's own section, and the old SetParams (the axis
@@ -290,6 +296,10 @@ pub struct InterruptsOff {
     pub longest_request: String,
     pub tick: f64,
     pub old_set_params: f64,
+    /// The deepest the run's stack went (bytes, from its paint), and the bound the image's
+    /// analysis gives (`stack_depth`): a bound below the measured depth would be wrong.
+    pub stack_used: u32,
+    pub stack_bound: StackBound,
     /// The program's line per request.
     pub requests: Vec<String>,
 }
@@ -319,6 +329,7 @@ pub fn interrupts_off_on_cortex_m4() -> Result<InterruptsOff> {
     if free_stack == 0 {
         bail!("interrupts-off: the stack overflowed into .bss (0 bytes free); its figures are not valid:\n{text}");
     }
+    let bound = stack_bound(&elf, CORE_VECTORS_IMAGE)?;
     let w: Vec<&str> = summary.split_whitespace().collect();
     let number = |key: &str| -> Result<f64> {
         let at = w.iter().position(|x| *x == key).with_context(|| format!("no {key} in {summary}"))?;
@@ -331,6 +342,8 @@ pub fn interrupts_off_on_cortex_m4() -> Result<InterruptsOff> {
         longest_request: w.get(longest_at + 2).unwrap_or(&"?").to_string(),
         tick: number("tick")?,
         old_set_params: number("old-set-params")?,
+        stack_used: bound.stack - free_stack,
+        stack_bound: bound,
         requests: text.lines().filter(|l| l.starts_with("interrupts-off request")).map(String::from).collect(),
     })
 }

@@ -21,11 +21,13 @@ impl FirmwareBenchArgs {
 fn bench_firmware(args: &FirmwareBenchArgs) -> Result<bool> {
     let common = &args.common;
     use crate::bench::firmware::{
-        all_features_recordings, drive_image_size, encode, interrupts_off_on_cortex_m4, recordings, replay_on_cortex_m4,
+        all_features_recordings, drive_image_size, drive_image_stack, encode, interrupts_off_on_cortex_m4, recordings,
+        replay_on_cortex_m4,
     };
     let pb = progress_bar("firmware bench", common.json);
     pb.set_position(50);
     let size = drive_image_size()?;
+    let stack = drive_image_stack()?;
     pb.set_position(300);
     let vectors = replay_on_cortex_m4(&encode(&recordings()), "golden-vectors")?;
     pb.set_position(700);
@@ -35,14 +37,23 @@ fn bench_firmware(args: &FirmwareBenchArgs) -> Result<bool> {
     pb.finish_and_clear();
     let off_goal = off.parameter_changes <= INTERRUPTS_OFF_GOAL;
     let per_tick_all = all.instructions_per_tick.unwrap_or(f64::INFINITY);
-    let ok = vectors.identical && all.identical && size.flash <= FLASH_GOAL && size.ram <= RAM_GOAL;
+    let stack_fits = stack.worst <= stack.stack;
+    // The analysis checked against a run: on the interrupts-off image its bound must cover the
+    // deepest the painted stack went.
+    let bound_holds = off.stack_bound.worst >= off.stack_used;
+    let ok = vectors.identical
+        && all.identical
+        && size.flash <= FLASH_GOAL
+        && size.ram <= RAM_GOAL
+        && stack_fits
+        && bound_holds;
     let tick_goal = per_tick_all <= TICK_GOAL;
     if common.json {
         println!(
             "{}",
             serde_json::to_string_pretty(&serde_json::json!({
-                "bench": "firmware", "image": size, "golden_vectors": vectors, "all_features": all,
-                "tick_goal_met": tick_goal, "interrupts_off": off, "interrupts_off_goal_met": off_goal, "passed": ok
+                "bench": "firmware", "image": size, "stack": stack, "golden_vectors": vectors, "all_features": all,
+                "tick_goal_met": tick_goal, "interrupts_off": off, "stack_bound_holds": bound_holds, "interrupts_off_goal_met": off_goal, "passed": ok
             }))?
         );
         return Ok(ok);
@@ -57,6 +68,7 @@ fn bench_firmware(args: &FirmwareBenchArgs) -> Result<bool> {
         size.ram,
         size.ram as f64 / 1024.0
     );
+    print_stack(&stack);
     for (name, r) in
         [("golden vectors (the shipped scenarios' situations)", &vectors), ("every feature on at once", &all)]
     {
@@ -86,8 +98,77 @@ fn bench_firmware(args: &FirmwareBenchArgs) -> Result<bool> {
         off.tick,
         off.old_set_params
     );
+    println!(
+        "  stack bound checked on the interrupts-off run (its stack painted): the deepest it went {} bytes, the image's bound {} (thread {}) → {}",
+        off.stack_used,
+        off.stack_bound.worst,
+        off.stack_bound.thread.bytes,
+        if bound_holds { "the bound holds" } else { "the bound is BELOW the run: the analysis misses frames" }
+    );
     for line in &off.requests {
         println!("    {}", line.trim_start_matches("interrupts-off request "));
     }
     Ok(ok)
+}
+
+/// The drive image's worst-case stack: the figure, the thread's path and each handler's.
+fn print_stack(stack: &crate::bench::stack_depth::StackBound) {
+    use crate::bench::stack_depth::EXCEPTION_FRAME_BYTES;
+    println!(
+        "  drive-g474 stack: worst path {} of {} bytes → {} ({} bytes left; from the ELF: the thread's deepest path, every interrupt handler's nested on it, {} bytes of exception frame each)",
+        stack.worst,
+        stack.stack,
+        if stack.worst <= stack.stack { "fits" } else { "DOES NOT FIT" },
+        stack.stack as i64 - stack.worst as i64,
+        EXCEPTION_FRAME_BYTES
+    );
+    // Generic arguments inside generic arguments elided: `<A<B<C>>>::poll` reads `<A<…>>::poll`.
+    let short = |name: &str| -> String {
+        let (mut depth, mut out) = (0, String::new());
+        for c in name.chars() {
+            match c {
+                '<' => {
+                    depth += 1;
+                    if depth <= 2 {
+                        out.push('<');
+                    }
+                    if depth == 2 {
+                        out.push('…');
+                    }
+                }
+                '>' => {
+                    if depth <= 2 {
+                        out.push('>');
+                    }
+                    depth -= 1;
+                }
+                _ if depth <= 1 => out.push(c),
+                _ => {}
+            }
+        }
+        out
+    };
+    let frames = |p: &crate::bench::stack_depth::StackPath| -> String {
+        p.functions
+            .iter()
+            .filter(|(_, b)| *b >= 512)
+            .map(|(n, b)| format!("{} {b}", short(n)))
+            .collect::<Vec<_>>()
+            .join(" → ")
+    };
+    println!(
+        "    thread (reset, main, tasks) {} bytes; frames of 512 bytes and more: {}",
+        stack.thread.bytes,
+        frames(&stack.thread)
+    );
+    for (name, p) in &stack.handlers {
+        println!("    {name} {} bytes", p.bytes);
+    }
+    if !stack.cycles.is_empty() {
+        println!(
+            "    recursion cut (paths counted without repeating a function): {} group(s), {} functions",
+            stack.cycles.len(),
+            stack.cycles.iter().map(Vec::len).sum::<usize>()
+        );
+    }
 }

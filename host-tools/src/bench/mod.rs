@@ -9,3 +9,4 @@ pub mod firmware_command;
 pub mod fmi_campaign;
 pub mod fmu_speed;
 pub mod plant;
+pub mod stack_depth;

@@ -271,7 +271,11 @@ mod tests {
                 Ok(Request::GetTelemetry) => {
                     self.acted.push(Request::GetTelemetry);
                     let params_record = (self.records > 0).then_some(self.records);
-                    Response::Telemetry(DriveTelemetry { axis: *self.axis.telemetry(), params_record })
+                    Response::Telemetry(DriveTelemetry {
+                        axis: *self.axis.telemetry(),
+                        params_record,
+                        stack_free_bytes: None,
+                    })
                 }
                 Ok(r) => {
                     self.acted.push(r);
