@@ -604,9 +604,10 @@ fn sweep_names_the_results_measured_with_the_output_limited() {
         assert!((share - drive).abs() < 1e-6, "{f} Hz: stream share {share}, drive's {drive}");
     }
     assert!(streamed.iter().any(|&(_, share)| share > 0.0) && streamed.iter().any(|&(_, share)| share == 0.0));
-    // At 50 rad/s and 0.1 N·m nothing is limited: no warning, nothing named.
+    // At 50 rad/s and 0.1 N·m nothing is limited: no warning, nothing named. (The 3 kHz
+    // result's standard error, a few counts of response, may be named: another warning.)
     let text = torque_sweep(&["--amplitude", "0.1"]);
-    assert!(!text.contains("WARNING"), "{text}");
+    assert!(!text.contains("WARNING: the drive's output was limited"), "{text}");
     let r: serde_json::Value = serde_json::from_slice(&std::fs::read(out.join("sweep.json")).unwrap()).unwrap();
     assert!(r["limited_hz"].as_array().unwrap().is_empty(), "{r}");
 }
@@ -1067,7 +1068,8 @@ fn sweep_reports_each_results_standard_error_and_names_the_imprecise_ones() {
     for (i, &(f, g, p)) in quiet.iter().enumerate() {
         assert!(g.is_finite() && g > 0.0 && g < 0.06 && p.is_finite() && p > 0.0, "{f} Hz: {g} dB, {p} deg");
         let j = &quiet_json["standard_error"][i];
-        assert_eq!((j["gain_db"].as_f64(), j["phase_deg"].as_f64()), (Some(g), Some(p)), "{j}");
+        let close = |a: &serde_json::Value, b: f64| (a.as_f64().unwrap() - b).abs() <= 1e-9 * b;
+        assert!(close(&j["gain_db"], g) && close(&j["phase_deg"], p), "{j} vs {g}, {p}");
     }
     assert_eq!(quiet_json["imprecise_hz"], serde_json::json!([]));
     let unsettled = ["--min-measure", "0.003", "--min-settle", "0", "--settle-cycles", "0"];
