@@ -106,6 +106,17 @@ pub fn imprecise(points: &[ResponsePoint], errors: &[ResponseStandardError], tar
         .collect()
 }
 
+/// What a user reads when results' standard errors exceed [`IMPRECISE_FACTOR`] times the
+/// precision `target_db`.
+pub fn imprecise_warning(hz: &[f64], target_db: f64) -> String {
+    format!(
+        "the standard error at {} is more than {IMPRECISE_FACTOR} times the precision of {} dB ({:.2} deg): noise, or a transient that had not died out, may have moved these results by that much; measure longer there (--min-measure, --max-extensions, --min-settle) or with a larger --amplitude",
+        frequency_list(hz),
+        target_db as f32,
+        (target_db * LN_10 / 20.0).to_degrees(),
+    )
+}
+
 /// Largest difference between the drive's on-line results and the host's estimate from the
 /// stream that a sweep accepts (dB, degrees): the same samples, fitted in f32 and in f64.
 pub const AGREEMENT_LIMIT: (f64, f64) = (0.01, 0.1);
@@ -424,12 +435,7 @@ impl SweepReport {
             println!("  WARNING: {}", limited_warning(&self.limited_hz));
         }
         if !self.imprecise_hz.is_empty() {
-            println!(
-                "  WARNING: the standard error at {} is more than {IMPRECISE_FACTOR} times the precision of {} dB ({:.2} deg): noise, or a transient that had not died out, may have moved these results by that much; measure longer there (--min-measure, --max-extensions, --min-settle) or with a larger --amplitude",
-                frequency_list(&self.imprecise_hz),
-                self.precision_target_db as f32,
-                self.precision_target_db * LN_10 / 20.0 * 180.0 / std::f64::consts::PI,
-            );
+            println!("  WARNING: {}", imprecise_warning(&self.imprecise_hz, self.precision_target_db));
         }
         if !self.torque_limited_hz.is_empty() {
             println!(
