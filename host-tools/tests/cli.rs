@@ -604,9 +604,10 @@ fn sweep_names_the_results_measured_with_the_output_limited() {
         assert!((share - drive).abs() < 1e-6, "{f} Hz: stream share {share}, drive's {drive}");
     }
     assert!(streamed.iter().any(|&(_, share)| share > 0.0) && streamed.iter().any(|&(_, share)| share == 0.0));
-    // At 50 rad/s and 0.1 N·m nothing is limited: no warning, nothing named.
+    // At 50 rad/s and 0.1 N·m nothing is limited: no warning, nothing named. (The 3 kHz
+    // result's standard error, a few counts of response, may be named: another warning.)
     let text = torque_sweep(&["--amplitude", "0.1"]);
-    assert!(!text.contains("WARNING"), "{text}");
+    assert!(!text.contains("WARNING: the drive's output was limited"), "{text}");
     let r: serde_json::Value = serde_json::from_slice(&std::fs::read(out.join("sweep.json")).unwrap()).unwrap();
     assert!(r["limited_hz"].as_array().unwrap().is_empty(), "{r}");
 }
@@ -1032,4 +1033,57 @@ fn compare_tells_traces_of_different_lengths_apart() {
     assert!(String::from_utf8_lossy(&o.stdout).contains("differ: 2 vs 3 rows"));
     assert_eq!(run(&a, &c).status.code(), Some(0));
     assert_eq!(run(&a, &dir.join("missing.csv")).status.code(), Some(2));
+}
+
+/// Every result carries its standard error, gain (dB) and phase (deg), in the table, the CSV
+/// and the JSON, finite and positive; a quiet, settled sweep stays within twice the precision
+/// (no warning), and a noisy one without settling names exactly the results whose error
+/// exceeds it (the larger of the gain's and the phase's as a gain of the same relative size).
+#[test]
+fn sweep_reports_each_results_standard_error_and_names_the_imprecise_ones() {
+    let out = tmp("sweep-standard-error");
+    let sweep = |args: &[&str]| {
+        let o = servo()
+            .args(["sweep", "--start", "100", "--stop", "1000", "--points", "3"])
+            .args(args)
+            .on_fmu(&out)
+            .output()
+            .unwrap();
+        assert_eq!(o.status.code(), Some(0), "{}", String::from_utf8_lossy(&o.stderr));
+        let text = String::from_utf8_lossy(&o.stdout).to_string();
+        let csv = host_tools::fmu::trace::Trace::read_csv(&out.join("sweep.csv")).unwrap();
+        let json: serde_json::Value = serde_json::from_slice(&std::fs::read(out.join("sweep.json")).unwrap()).unwrap();
+        (text, csv, json)
+    };
+    let se = |csv: &host_tools::fmu::trace::Trace| -> Vec<(f64, f64, f64)> {
+        let (f, g, p) = (csv.column("frequency"), csv.column("gain_se_db"), csv.column("phase_se_deg"));
+        let (f, g, p) = (f.unwrap(), g.expect("gain_se_db column"), p.expect("phase_se_deg column"));
+        (0..f.len()).map(|i| (f[i], g[i], p[i])).collect()
+    };
+    let (quiet_text, quiet_csv, quiet_json) = sweep(&[]);
+    assert!(quiet_text.contains("± dB") && quiet_text.contains("± deg"), "{quiet_text}");
+    assert!(!quiet_text.contains("standard error at"), "{quiet_text}");
+    let quiet = se(&quiet_csv);
+    assert_eq!(quiet.len(), 3);
+    for (i, &(f, g, p)) in quiet.iter().enumerate() {
+        assert!(g.is_finite() && g > 0.0 && g < 0.06 && p.is_finite() && p > 0.0, "{f} Hz: {g} dB, {p} deg");
+        let j = &quiet_json["standard_error"][i];
+        let close = |a: &serde_json::Value, b: f64| (a.as_f64().unwrap() - b).abs() <= 1e-9 * b;
+        assert!(close(&j["gain_db"], g) && close(&j["phase_deg"], p), "{j} vs {g}, {p}");
+    }
+    assert_eq!(quiet_json["imprecise_hz"], serde_json::json!([]));
+    let unsettled = ["--min-measure", "0.003", "--min-settle", "0", "--settle-cycles", "0"];
+    let (text, csv, json) = sweep(&[&unsettled[..], &["--set", "plant.current_noise_std=0.05"]].concat());
+    let noisy = se(&csv);
+    let as_db = |deg: f64| deg.to_radians() * 20.0 / std::f64::consts::LN_10;
+    let named: Vec<f64> = noisy.iter().filter(|&&(_, g, p)| g.max(as_db(p)) > 0.06).map(|&(f, _, _)| f).collect();
+    assert!(!named.is_empty(), "{noisy:?}");
+    assert_eq!(json["imprecise_hz"], serde_json::json!(named), "{json}");
+    let warning = text.lines().find(|l| l.contains("WARNING: the standard error at")).expect("a warning");
+    for f in &named {
+        assert!(warning.contains(&format!("{f:.1}")), "{warning}");
+    }
+    for (q, n) in quiet.iter().zip(&noisy) {
+        assert!(n.1 > q.1, "noise and no settling make {} Hz less certain: {n:?} vs {q:?}", n.0);
+    }
 }

@@ -112,6 +112,14 @@ fn a_sweep_over_the_virtual_drive_matches_its_twin_and_parameters_survive_a_rest
     let r = json(&o);
     assert_eq!(r["drive"]["dropped"], 0, "samples dropped on the link");
     assert_eq!(r["points"].as_array().unwrap().len(), 41);
+    // Every drive result has its standard error from the streamed samples, finite and positive.
+    for p in r["points"].as_array().unwrap() {
+        let e = &p["standard_error"];
+        let (g, ph) = (e["gain_db"].as_f64().unwrap_or(f64::NAN), e["phase_deg"].as_f64().unwrap_or(f64::NAN));
+        assert!(g.is_finite() && g > 0.0 && ph.is_finite() && ph > 0.0, "{p}");
+    }
+    let csv = std::fs::read_to_string(dir.join("out").join("sweep.csv")).unwrap();
+    assert!(csv.lines().next().unwrap().contains(",quality,gain_se_db,phase_se_deg,"), "{csv}");
     // Two measurements of the same response (see `device::bench::GOAL_DB`).
     let (db, deg) = (r["largest_difference"][0].as_f64().unwrap(), r["largest_difference"][1].as_f64().unwrap());
     assert!(

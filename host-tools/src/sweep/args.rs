@@ -16,7 +16,15 @@ use crate::cli::Common;
 /// on-line correlator results; the two must agree. --oracle also measures the same loop
 /// with acquisition at the full velocity-loop rate and ten times longer records and
 /// reports the errors against it. Writes sweep.csv (frequency, gain, phase, quality, the
-/// on-line values), bode.svg and sweep.json into --out (default out/sweep/).
+/// standard errors, the on-line values), bode.svg and sweep.json into --out (default
+/// out/sweep/).
+///
+/// "± dB" and "± deg" (gain_se_db, phase_se_deg) are each result's standard error from the
+/// stream's samples: the larger of the white/lag-one noise model's and the spread of the
+/// result over batches of its samples (which sees colored noise and a transient that drifts
+/// within the record); "quality" only tells whether the phases could tell a sine. Results
+/// whose error exceeds twice --precision-db (its phase equivalent: 0.03 dB = 0.2 deg) are
+/// named in a warning.
 #[derive(clap::Args)]
 pub struct SweepArgs {
     /// Injection point: velocity, torque or feedback

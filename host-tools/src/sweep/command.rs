@@ -242,11 +242,21 @@ fn bench_sweep(common: &Common, detail: bool, seeds: u32) -> Result<bool> {
     let r = crate::sweep::bench::bench(&fmu, seeds, |f| pb.set_position((f * 1000.0) as u64))?;
     pb.finish_and_clear();
     let ok = r.goals_met();
+    // With --detail, how well the sweep's standard errors predict its errors (not a goal).
+    let calibration = if detail {
+        let pb = progress_bar("standard error calibration", common.json);
+        let c = crate::sweep::standard_error_calibration::calibration(&fmu, |f| pb.set_position((f * 1000.0) as u64))?;
+        pb.finish_and_clear();
+        Some(c)
+    } else {
+        None
+    };
     if common.json {
-        println!(
-            "{}",
-            serde_json::to_string_pretty(&serde_json::json!({"bench": "sweep", "result": r, "passed": ok}))?
-        );
+        let mut json = serde_json::json!({"bench": "sweep", "result": r, "passed": ok});
+        if let Some(c) = &calibration {
+            json["standard_error_calibration"] = serde_json::to_value(c)?;
+        }
+        println!("{}", serde_json::to_string_pretty(&json)?);
         return Ok(ok);
     }
     let d = control_core::phase_shifted_sweep::SweepParams::default();
@@ -299,6 +309,9 @@ fn bench_sweep(common: &Common, detail: bool, seeds: u32) -> Result<bool> {
         r.analytic_low_frequency.0, r.analytic_low_frequency.1
     );
     print_limit_detection(&r.limit_detection);
+    if let Some(c) = &calibration {
+        crate::sweep::standard_error_calibration::print_calibration(c);
+    }
     println!("  goal on every row: {}", if ok { "met" } else { "NOT met" });
     Ok(ok)
 }

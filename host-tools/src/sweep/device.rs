@@ -23,7 +23,8 @@ use crate::device::session::DriveSession;
 use crate::fmu::sweep_run::{SweepRun, START_AT};
 use crate::fmu::trace::Trace;
 use crate::sweep::device_report::save_partial;
-use crate::sweep::measurement::{flagged, stream_limited_shares, stream_results};
+use crate::sweep::measurement::{flagged, stream_limited_shares, stream_results, stream_standard_errors};
+use crate::sweep::standard_error::ResponseStandardError;
 use power_stage::ratings::with_board_limits;
 
 /// What a sweep over the link brought back.
@@ -46,6 +47,9 @@ pub struct DeviceSweep {
     /// protocol version 8), or the drive's own share where the telemetry caught the result
     /// and it is larger (a limited sample the link lost).
     pub limited_share: Vec<f64>,
+    /// Each result of `stream`'s standard error (paired by index; see
+    /// [`crate::sweep::standard_error`]).
+    pub standard_error: Vec<ResponseStandardError>,
     pub samples: usize,
     /// Samples the drive could not send (its ring full: the link too slow).
     pub dropped: u32,
@@ -159,11 +163,13 @@ pub fn sweep_on_drive_after<T: crate::device::link::DrivePort>(
     }
     // A stepped sine's response per frequency; a PRBS (the identification's) has none here:
     // its caller analyses the samples.
-    let (stream, streamed_shares) = match run.settings.signal {
-        SweepSignal::SteppedSine => {
-            (stream_results(&trace, &run.settings)?, stream_limited_shares(&trace, &run.settings)?.unwrap_or_default())
-        }
-        SweepSignal::Prbs => (Vec::new(), Vec::new()),
+    let (stream, streamed_shares, standard_error) = match run.settings.signal {
+        SweepSignal::SteppedSine => (
+            stream_results(&trace, &run.settings)?,
+            stream_limited_shares(&trace, &run.settings)?.unwrap_or_default(),
+            stream_standard_errors(&trace)?,
+        ),
+        SweepSignal::Prbs => (Vec::new(), Vec::new(), Vec::new()),
     };
     let shares: Vec<(f64, f64)> = streamed_shares
         .iter()
@@ -189,6 +195,7 @@ pub fn sweep_on_drive_after<T: crate::device::link::DrivePort>(
         online,
         limited_hz,
         limited_share,
+        standard_error,
         samples: rows.len(),
         dropped,
         corrupt_frames: session.link.corrupt_frames - corrupt_before,

@@ -15,6 +15,8 @@ use crate::fmu::trace::Trace;
 use crate::plot::bode::plot_bode;
 use crate::sweep::device::{sweep_on_drive, DeviceSweep};
 use crate::sweep::measurement::stream_results;
+use crate::sweep::report::{imprecise, imprecise_warning, precision_target_db};
+use crate::sweep::standard_error::ResponseStandardError;
 
 /// One frequency point: the drive's response, the twin's, and the difference.
 #[derive(Clone, Copy, Debug, Serialize)]
@@ -27,18 +29,22 @@ pub struct TwinPoint {
     /// Share of the drive's samples at this frequency acquired with its output limited (0..1,
     /// from the stream's flags).
     pub limited_share: f64,
+    /// Standard error of the drive's result (see [`crate::sweep::standard_error`]).
+    pub standard_error: ResponseStandardError,
 }
 
 impl TwinPoint {
-    /// Hz, the drive's dB, degrees and quality, the twin's dB and degrees, the differences,
-    /// the drive's limited share.
-    pub fn values(&self) -> [f64; 9] {
+    /// Hz, the drive's dB, degrees, quality and standard errors (dB, degrees), the twin's dB
+    /// and degrees, the differences, the drive's limited share.
+    pub fn values(&self) -> [f64; 11] {
         let (d, t) = (&self.drive, &self.twin);
         [
             self.frequency,
             d.gain_db,
             d.phase_deg,
             d.quality,
+            self.standard_error.gain_db,
+            self.standard_error.phase_deg,
             t.gain_db,
             t.phase_deg,
             self.difference_db,
@@ -58,6 +64,10 @@ pub struct DeviceSweepReport {
     pub largest_difference: (f64, f64),
     /// Frequencies measured by only one of the two (Hz).
     pub missing: Vec<f64>,
+    /// The precision (dB) the drive's standard errors are held against and the frequencies
+    /// whose error exceeds twice it (see [`crate::sweep::report::imprecise`]).
+    pub precision_target_db: f64,
+    pub imprecise_hz: Vec<f64>,
     /// Every sample arrived (none dropped by the drive, no frame lost on the line), every
     /// frequency is in both, and they agree within the goal (`device::bench::GOAL_DB`, `GOAL_DEG`).
     pub passed: bool,
@@ -84,6 +94,12 @@ pub fn compare_with_twin(drive: &DeviceSweep, twin: &[ResponsePoint]) -> (Vec<Tw
                 .zip(&drive.limited_share)
                 .find(|(p, _)| same_frequency(p.frequency, d.frequency))
                 .map_or(0.0, |(_, &share)| share);
+            let standard_error = drive
+                .stream
+                .iter()
+                .zip(&drive.standard_error)
+                .find(|(p, _)| same_frequency(p.frequency, d.frequency))
+                .map_or(ResponseStandardError::unknown(), |(_, &e)| e);
             Some(TwinPoint {
                 frequency: d.frequency,
                 drive: *d,
@@ -91,6 +107,7 @@ pub fn compare_with_twin(drive: &DeviceSweep, twin: &[ResponsePoint]) -> (Vec<Tw
                 difference_db: dg,
                 difference_deg: dp,
                 limited_share,
+                standard_error,
             })
         })
         .collect();
@@ -138,6 +155,8 @@ pub fn run_on_device<T: crate::device::link::DrivePort>(
             "gain_db",
             "phase_deg",
             "quality",
+            "gain_se_db",
+            "phase_se_deg",
             "twin_gain_db",
             "twin_phase_deg",
             "diff_db",
@@ -164,8 +183,12 @@ pub fn run_on_device<T: crate::device::link::DrivePort>(
         && drive.corrupt_frames == 0
         && largest.0 <= crate::device::bench::GOAL_DB
         && largest.1 <= crate::device::bench::GOAL_DEG;
+    let precision_target_db = precision_target_db(&run.settings);
+    let imprecise_hz = imprecise(&drive.stream, &drive.standard_error, precision_target_db);
     let report = DeviceSweepReport {
         port: port.to_string(),
+        precision_target_db,
+        imprecise_hz,
         line_use: drive.link_bytes_per_s / capacity,
         missing: missing(&drive, &twin),
         drive,
@@ -224,14 +247,24 @@ impl DeviceSweepReport {
             self.twin_measurement_time_s
         );
         println!(
-            "  {:>10} {:>10} {:>10} {:>8} {:>10} {:>10} {:>9} {:>9} {:>9}",
-            "Hz", "gain dB", "phase deg", "quality", "twin dB", "twin deg", "diff dB", "diff deg", "limited %"
+            "  {:>10} {:>10} {:>10} {:>8} {:>8} {:>8} {:>10} {:>10} {:>9} {:>9} {:>9}",
+            "Hz",
+            "gain dB",
+            "phase deg",
+            "quality",
+            "± dB",
+            "± deg",
+            "twin dB",
+            "twin deg",
+            "diff dB",
+            "diff deg",
+            "limited %"
         );
         for p in &self.points {
-            let [f, g, ph, q, tg, tp, dg, dp, l] = p.values();
+            let [f, g, ph, q, sg, sp, tg, tp, dg, dp, l] = p.values();
             let limited = if l > 0.0 { format!("{:.1}", 100.0 * l) } else { String::new() };
             println!(
-                "  {f:>10.2} {g:>10.3} {ph:>10.2} {q:>8.4} {tg:>10.3} {tp:>10.2} {dg:>9.3} {dp:>9.2} {limited:>9}"
+                "  {f:>10.2} {g:>10.3} {ph:>10.2} {q:>8.4} {sg:>8.3} {sp:>8.2} {tg:>10.3} {tp:>10.2} {dg:>9.3} {dp:>9.2} {limited:>9}"
             );
         }
         println!(
@@ -248,6 +281,9 @@ impl DeviceSweepReport {
         );
         if !d.limited_hz.is_empty() {
             println!("  WARNING: {}", crate::sweep::measurement::limited_warning(&d.limited_hz));
+        }
+        if !self.imprecise_hz.is_empty() {
+            println!("  WARNING: {}", imprecise_warning(&self.imprecise_hz, self.precision_target_db));
         }
         println!(
             "  link: {} samples, {} dropped by the drive, {} frame(s) lost on the line; {:.0} B/s of {:.0} B/s ({:.0} % of the line)",

@@ -14,6 +14,7 @@ use crate::analysis::response_point::{difference, same_frequency, ResponsePoint}
 use crate::analysis::spectral::welch_h1;
 use crate::fmu::sweep_run::{is_done, SweepRun, START_AT};
 use crate::fmu::trace::Trace;
+use crate::sweep::standard_error::{response_standard_error, FitSample, ResponseStandardError};
 
 /// Simulated time a sweep took in `trace`: from its start to the first step it reports done.
 pub fn measured_time(trace: &Trace) -> Result<f64> {
@@ -120,7 +121,7 @@ pub fn limited_warning(hz: &[f64]) -> String {
 /// Three-parameter sine fit (known phase) in f64: complex amplitudes of u and y and the
 /// conditioning of the phases, as the drive computes them in f32.
 #[derive(Clone, Copy, Debug, Default)]
-struct SineFit {
+pub(crate) struct SineFit {
     n: f64,
     c: f64,
     s: f64,
@@ -138,7 +139,7 @@ struct SineFit {
 }
 
 impl SineFit {
-    fn add(&mut self, u: f64, y: f64, phase: f64) {
+    pub(crate) fn add(&mut self, u: f64, y: f64, phase: f64) {
         let (s, c) = phase.sin_cos();
         self.n += 1.0;
         self.c += c;
@@ -173,7 +174,7 @@ impl SineFit {
         (residual * (sss + scc) / det).sqrt() / a.hypot(b)
     }
 
-    fn solve(&self) -> (Complex64, Complex64, f64) {
+    pub(crate) fn solve(&self) -> (Complex64, Complex64, f64) {
         let n = self.n.max(1.0);
         let scc = self.cc - self.c * self.c / n;
         let sss = self.ss - self.s * self.s / n;
@@ -217,6 +218,22 @@ pub fn stream_results_with_errors(t: &Trace, settings: &SweepParams) -> Result<V
                 ResponsePoint::from_complex(settings.frequency(k as usize) as f64, g, quality),
                 fit.relative_standard_error(),
             )
+        })
+        .collect())
+}
+
+/// Standard errors of every result of [`stream_results`] (in its order), from the same samples
+/// with their records (`acq_record`): see [`crate::sweep::standard_error`].
+pub fn stream_standard_errors(t: &Trace) -> Result<Vec<ResponseStandardError>> {
+    let [u, y, phase, record] = columns(t, ["acq_u", "acq_y", "acq_phase", "acq_record"])?;
+    Ok(kept_samples(t)?
+        .values()
+        .map(|rows| {
+            let samples: Vec<FitSample> = rows
+                .iter()
+                .map(|&i| FitSample { u: u[i], y: y[i], phase: phase[i], record: record[i] as i64 })
+                .collect();
+            response_standard_error(&samples)
         })
         .collect())
 }

@@ -9,4 +9,6 @@ pub mod index;
 pub mod limit_detection;
 pub mod measurement;
 pub mod report;
+pub mod standard_error;
+pub mod standard_error_calibration;
 pub mod torque_limit;

@@ -3,6 +3,7 @@
 //! two agree, optionally measure the oracle, and write CSV, Bode plot and JSON.
 
 use servo_axis::variables::name;
+use std::f64::consts::LN_10;
 use std::path::{Path, PathBuf};
 
 use anyhow::{bail, Result};
@@ -18,8 +19,9 @@ use crate::fmu::trace::Trace;
 use crate::plot::bode::plot_bode;
 use crate::sweep::measurement::{
     errors, flagged, frequency_list, limited_shares, limited_warning, measured_time, online_results, stream_results,
-    unmeasurable, unmeasured, ErrorSummary,
+    stream_standard_errors, unmeasurable, unmeasured, ErrorSummary,
 };
+use crate::sweep::standard_error::ResponseStandardError;
 use crate::sweep::torque_limit::{torque_limited_shares, TorqueLimits};
 
 /// Encoder of the oracle (counts per revolution; the FMU's finest, 16 times the default 2^20).
@@ -77,6 +79,44 @@ pub fn oracle_run(run: &SweepRun) -> Result<SweepRun> {
     Ok(SweepRun { settings: oracle_settings(&run.settings, base_rate_hz), parameters, velocity: run.velocity })
 }
 
+/// A result's standard error (the larger of the gain's and the phase's, in dB) above so many
+/// times the sweep's precision target is named in a warning: the noise may have moved it by
+/// more than the precision the sweep promises.
+pub const IMPRECISE_FACTOR: f64 = 2.0;
+
+/// The precision (dB) a sweep's standard errors are held against: its `precision_db`, or the
+/// default's where the precision control is off (0: fixed records).
+pub fn precision_target_db(settings: &SweepParams) -> f64 {
+    if settings.precision_db > 0.0 {
+        settings.precision_db as f64
+    } else {
+        SweepParams::default().precision_db as f64
+    }
+}
+
+/// The frequencies of the measurable `points` whose standard error exceeds
+/// [`IMPRECISE_FACTOR`] times `target_db` (the phase's taken as a gain of the same relative
+/// size: `precision_db·ln10/20` rad).
+pub fn imprecise(points: &[ResponsePoint], errors: &[ResponseStandardError], target_db: f64) -> Vec<f64> {
+    points
+        .iter()
+        .zip(errors)
+        .filter(|(p, e)| !unmeasurable(p) && e.larger_db() > IMPRECISE_FACTOR * target_db)
+        .map(|(p, _)| p.frequency)
+        .collect()
+}
+
+/// What a user reads when results' standard errors exceed [`IMPRECISE_FACTOR`] times the
+/// precision `target_db`.
+pub fn imprecise_warning(hz: &[f64], target_db: f64) -> String {
+    format!(
+        "the standard error at {} is more than {IMPRECISE_FACTOR} times the precision of {} dB ({:.2} deg): noise, or a transient that had not died out, may have moved these results by that much; measure longer there (--min-measure, --max-extensions, --min-settle) or with a larger --amplitude",
+        frequency_list(hz),
+        target_db as f32,
+        (target_db * LN_10 / 20.0).to_degrees(),
+    )
+}
+
 /// Largest difference between the drive's on-line results and the host's estimate from the
 /// stream that a sweep accepts (dB, degrees): the same samples, fitted in f32 and in f64.
 pub const AGREEMENT_LIMIT: (f64, f64) = (0.01, 0.1);
@@ -87,6 +127,13 @@ pub struct SweepReport {
     pub acquisition_hz: f64,
     pub threshold_hz: f64,
     pub stream: Vec<ResponsePoint>,
+    /// Standard error of every `stream` result (gain dB, phase deg; see
+    /// [`crate::sweep::standard_error`]), in its order.
+    pub standard_error: Vec<ResponseStandardError>,
+    /// The precision (dB) the standard errors are held against ([`precision_target_db`]) and
+    /// the frequencies whose error exceeds [`IMPRECISE_FACTOR`] times it.
+    pub precision_target_db: f64,
+    pub imprecise_hz: Vec<f64>,
     pub online: Vec<ResponsePoint>,
     /// Largest |stream − on-line| difference: (dB, degrees).
     pub stream_vs_online: (f64, f64),
@@ -158,6 +205,9 @@ pub fn run(
     let trace = sweep.run(fmu, |f| progress("sweep", f))?;
     let measurement_time = measured_time(&trace)?;
     let stream = stream_results(&trace, &sweep.settings)?;
+    let standard_error = stream_standard_errors(&trace)?;
+    let precision_target = precision_target_db(&sweep.settings);
+    let imprecise_hz = imprecise(&stream, &standard_error, precision_target);
     let online = online_results(&trace)?;
     if stream.len() != online.len() {
         bail!("{} frequencies from the stream, {} from the drive", stream.len(), online.len());
@@ -198,6 +248,8 @@ pub fn run(
             "gain_db",
             "phase_deg",
             "quality",
+            "gain_se_db",
+            "phase_se_deg",
             "online_gain_db",
             "online_phase_deg",
             "online_quality",
@@ -207,12 +259,16 @@ pub fn run(
         .map(String::from)
         .to_vec(),
     );
-    for (((a, b), &(_, share)), &torque_share) in stream.iter().zip(&online).zip(&limited).zip(&torque_limited_share) {
+    for ((((a, b), &(_, share)), &torque_share), se) in
+        stream.iter().zip(&online).zip(&limited).zip(&torque_limited_share).zip(&standard_error)
+    {
         t.rows.push(vec![
             a.frequency,
             a.gain_db,
             a.phase_deg,
             a.quality,
+            se.gain_db,
+            se.phase_deg,
             b.gain_db,
             b.phase_deg,
             b.quality,
@@ -274,6 +330,9 @@ pub fn run(
         acquisition_hz,
         threshold_hz: sweep.settings.threshold(fs) as f64,
         stream,
+        standard_error,
+        precision_target_db: precision_target,
+        imprecise_hz,
         online,
         stream_vs_online: agreement,
         limited_hz,
@@ -316,19 +375,35 @@ impl SweepReport {
             self.threshold_hz
         );
         println!(
-            "  {:>10} {:>10} {:>10} {:>8} {:>12} {:>12} {:>10} {:>12}",
-            "Hz", "gain dB", "phase deg", "quality", "online dB", "online deg", "limited %", "torque lim %"
+            "  {:>10} {:>10} {:>10} {:>8} {:>8} {:>8} {:>12} {:>12} {:>10} {:>12}",
+            "Hz",
+            "gain dB",
+            "phase deg",
+            "quality",
+            "± dB",
+            "± deg",
+            "online dB",
+            "online deg",
+            "limited %",
+            "torque lim %"
         );
         let percent = |share: f64| if share > 0.0 { format!("{:.1}", 100.0 * share) } else { String::new() };
-        for (((a, b), &share), &torque_share) in
-            self.stream.iter().zip(&self.online).zip(&self.limited_share).zip(&self.torque_limited_share)
+        for ((((a, b), &share), &torque_share), se) in self
+            .stream
+            .iter()
+            .zip(&self.online)
+            .zip(&self.limited_share)
+            .zip(&self.torque_limited_share)
+            .zip(&self.standard_error)
         {
             println!(
-                "  {:>10.2} {:>10.3} {:>10.2} {:>8.4} {:>12.3} {:>12.2} {:>10} {:>12}",
+                "  {:>10.2} {:>10.3} {:>10.2} {:>8.4} {:>8.3} {:>8.2} {:>12.3} {:>12.2} {:>10} {:>12}",
                 a.frequency,
                 a.gain_db,
                 a.phase_deg,
                 a.quality,
+                se.gain_db,
+                se.phase_deg,
                 b.gain_db,
                 b.phase_deg,
                 percent(share),
@@ -358,6 +433,9 @@ impl SweepReport {
         }
         if !self.limited_hz.is_empty() {
             println!("  WARNING: {}", limited_warning(&self.limited_hz));
+        }
+        if !self.imprecise_hz.is_empty() {
+            println!("  WARNING: {}", imprecise_warning(&self.imprecise_hz, self.precision_target_db));
         }
         if !self.torque_limited_hz.is_empty() {
             println!(
