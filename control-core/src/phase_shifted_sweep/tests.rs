@@ -258,6 +258,42 @@ fn noise_at_the_excitation_the_residuals_cannot_see_is_measured_down_by_the_half
     assert!(per_component < 1.3 * target, "relative error {per_component} RMS per component, precision {target}");
 }
 
+#[test]
+fn noise_away_from_the_excitation_ends_the_record_early() {
+    // 10 Hz under a hum at 60 Hz (0.3 of the response, a phase per seed) and white noise: the
+    // residuals are large and correlated from one sample to the next, which the first-order
+    // spectrum reads as much noise at 10 Hz, where there is almost none: the prediction asks
+    // for its cap. The half blocks (one 10 Hz cycle, six of the hum each) agree, and the
+    // record ends after six.
+    let p = at(10.0, 3, 3);
+    let target = p.precision_db * core::f32::consts::LN_10 / 20.0;
+    let (settle, samples) = p.record_length(10.0, FS);
+    let half_block_ticks = samples / 2 * p.acquisition_divider as u64;
+    for seed in 1..=10u32 {
+        let mut s = PhaseShiftedSweep::new(p, FS);
+        s.start().unwrap();
+        let (mut tick, mut state, mut first_done) = (0u64, seed, 0u64);
+        let hum_phase = 3.0 * uniform(&mut state);
+        while s.running() {
+            let (_, u) = s.excitation(true).unwrap();
+            let hum = 0.3 * p.amplitude * libm::sinf(TAU * 60.0 * tick as f32 / FS + hum_phase);
+            let y = u + hum + 0.01 * uniform(&mut state);
+            s.end_tick(tick, tick.is_multiple_of(2), tick.is_multiple_of(p.acquisition_divider as u64), u, y, false);
+            tick += 1;
+            if first_done == 0 && s.status().done_points == 1 {
+                first_done = tick;
+            }
+        }
+        let r = s.results()[0];
+        let error = libm::hypotf(r.re - 1.0, r.im);
+        assert!(error < target, "seed {seed}: relative error {error}, precision {target}");
+        // The first frequency: its settling (one cycle), the base block and at most four more
+        // half blocks, and one discarded; the prediction alone runs to its cap, 16 more.
+        let limit = settle + 7 * half_block_ticks;
+        assert!(first_done <= limit, "seed {seed}: the first frequency took {first_done} ticks, early end by {limit}");
+    }
+}
+
 /// Every frequency's result with its share of limited samples, for a response that a limit
 /// clips at `clip` (y = u cut to ±clip, the tick flagged when cut) while `flag_when` holds.
 fn measure_clipped(params: SweepParams, clip: f32, flag_when: impl Fn(SweepState) -> bool) -> [(f32, f32, f32); 3] {
