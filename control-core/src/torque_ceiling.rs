@@ -53,6 +53,8 @@
 //! Not on the tick: nothing here runs in `Axis::step`, which watches neither clamp (each would
 //! cost the Cortex-M4 about 20 instructions per tick).
 
+use core::fmt;
+
 use crate::excitation::InjectionPoint;
 use crate::params::Params;
 
@@ -96,7 +98,7 @@ impl ExcitationEntry {
 }
 
 /// The torque command (N·m, magnitude) from which a clamp may be cutting the excitation, the
-/// same as a q current (A), and the clamp.
+/// same as a q current (A), and the clamp with what sets it (for a message: [`fmt::Display`]).
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct TorqueCeiling {
     /// N·m, as the drive's torque command reads it.
@@ -104,6 +106,12 @@ pub struct TorqueCeiling {
     /// A: `max_current` itself where the current clamp binds, else `torque / kt`.
     pub current: f32,
     pub clamp: TorqueClamp,
+    /// The clamp's parameter: `velocity.torque_limit` (N·m) or `current.max_current` (A).
+    pub setting: f32,
+    /// The dither the loop's clamp is read through (N·m; 0 where the current clamp binds).
+    pub dither: f32,
+    /// The motor's torque constant (N·m/A).
+    pub kt: f32,
 }
 
 impl TorqueCeiling {
@@ -114,12 +122,15 @@ impl TorqueCeiling {
     /// loop, the current clamp. On a tie the current clamp is named (both cut there).
     pub fn of(params: &Params, entry: ExcitationEntry, dither: f32) -> Self {
         let kt = params.motor.torque_constant();
-        let current_clamp = kt * params.current.max_current;
-        let loop_clamp = params.velocity.torque_limit - dither;
+        let (torque_limit, max_current) = (params.velocity.torque_limit, params.current.max_current);
+        let current_clamp = kt * max_current;
+        let loop_clamp = torque_limit - dither;
         if entry == ExcitationEntry::BeforeTheLoopClamp && loop_clamp < current_clamp {
-            Self { torque: loop_clamp, current: loop_clamp / kt, clamp: TorqueClamp::TorqueLimit }
+            let clamp = TorqueClamp::TorqueLimit;
+            Self { torque: loop_clamp, current: loop_clamp / kt, clamp, setting: torque_limit, dither, kt }
         } else {
-            Self { torque: current_clamp, current: params.current.max_current, clamp: TorqueClamp::CurrentLimit }
+            let clamp = TorqueClamp::CurrentLimit;
+            Self { torque: current_clamp, current: max_current, clamp, setting: max_current, dither: 0.0, kt }
         }
     }
 
@@ -127,6 +138,24 @@ impl TorqueCeiling {
     /// it: an excitation at or above this reaches the ceiling (N·m; may be ≤ 0).
     pub fn room_beside(&self, dither: f32) -> f32 {
         self.torque - dither
+    }
+}
+
+/// The clamp by its parameter and value, and the torque it reads as: "velocity.torque_limit
+/// = 0.5 N·m", "velocity.torque_limit = 2 N·m less the 0.003 N·m dither", "current.max_current
+/// = 20 A, 2 N·m at kt = 0.1 N·m/A".
+impl fmt::Display for TorqueCeiling {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        let name = self.clamp.parameter();
+        match self.clamp {
+            TorqueClamp::TorqueLimit if self.dither > 0.0 => {
+                write!(f, "{name} = {} N·m less the {} N·m dither", self.setting, self.dither)
+            }
+            TorqueClamp::TorqueLimit => write!(f, "{name} = {} N·m", self.setting),
+            TorqueClamp::CurrentLimit => {
+                write!(f, "{name} = {} A, {} N·m at kt = {} N·m/A", self.setting, self.torque, self.kt)
+            }
+        }
     }
 }
 
@@ -153,6 +182,12 @@ mod tests {
         let low_current = TorqueCeiling::of(&params(2.0, 5.0), before, 0.1);
         assert_eq!((low_current.torque, low_current.current), (kt * 5.0, 5.0));
         assert_eq!(low_current.clamp.parameter(), "current.max_current");
+        extern crate std;
+        use std::string::ToString;
+        assert_eq!(low_current.to_string(), std::format!("current.max_current = 5 A, {} N·m at kt = {kt} N·m/A", kt * 5.0));
+        assert_eq!(low_torque.to_string(), "velocity.torque_limit = 0.5 N·m less the 0.1 N·m dither");
+        let undithered = TorqueCeiling::of(&params(0.5, 20.0), before, 0.0);
+        assert_eq!(undithered.to_string(), "velocity.torque_limit = 0.5 N·m");
         let injected = TorqueCeiling::of(&params(0.5, 20.0), after, 0.1);
         assert_eq!((injected.torque, injected.clamp), (kt * 20.0, TorqueClamp::CurrentLimit));
         assert_eq!(injected.room_beside(0.1), kt * 20.0 - 0.1);
