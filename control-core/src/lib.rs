@@ -34,8 +34,8 @@ pub mod reference_frames;
 pub mod response_correction;
 pub mod square_root;
 pub mod stop_sequence;
-pub mod trigonometry;
 pub mod torque_ceiling;
+pub mod trigonometry;
 pub mod velocity_loop;
 
 pub use axis::{Axis, AxisInputs, Commands, Mode, PwmOutput, Telemetry};

@@ -184,7 +184,10 @@ mod tests {
         assert_eq!(low_current.clamp.parameter(), "current.max_current");
         extern crate std;
         use std::string::ToString;
-        assert_eq!(low_current.to_string(), std::format!("current.max_current = 5 A, {} N·m at kt = {kt} N·m/A", kt * 5.0));
+        assert_eq!(
+            low_current.to_string(),
+            std::format!("current.max_current = 5 A, {} N·m at kt = {kt} N·m/A", kt * 5.0)
+        );
         assert_eq!(low_torque.to_string(), "velocity.torque_limit = 0.5 N·m less the 0.1 N·m dither");
         let undithered = TorqueCeiling::of(&params(0.5, 20.0), before, 0.0);
         assert_eq!(undithered.to_string(), "velocity.torque_limit = 0.5 N·m");
