@@ -143,7 +143,8 @@ impl TorqueCeiling {
 
 /// The clamp by its parameter and value, and the torque it reads as: "velocity.torque_limit
 /// = 0.5 N·m", "velocity.torque_limit = 2 N·m less the 0.003 N·m dither", "current.max_current
-/// = 20 A, 2 N·m at kt = 0.1 N·m/A".
+/// = 20 A, 2 N·m at kt = 0.1 N·m/A" (the product and kt to six significant digits: not the
+/// f32's 0.060000006).
 impl fmt::Display for TorqueCeiling {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         let name = self.clamp.parameter();
@@ -153,10 +154,21 @@ impl fmt::Display for TorqueCeiling {
             }
             TorqueClamp::TorqueLimit => write!(f, "{name} = {} N·m", self.setting),
             TorqueClamp::CurrentLimit => {
-                write!(f, "{name} = {} A, {} N·m at kt = {} N·m/A", self.setting, self.torque, self.kt)
+                let (torque, kt) = (six_digits(self.torque), six_digits(self.kt));
+                write!(f, "{name} = {} A, {torque} N·m at kt = {kt} N·m/A", self.setting)
             }
         }
     }
+}
+
+/// `x` rounded to six significant digits (for a message).
+fn six_digits(x: f32) -> f64 {
+    let x = x as f64;
+    if x == 0.0 || !x.is_finite() {
+        return x;
+    }
+    let scale = libm::pow(10.0, 5.0 - libm::floor(libm::log10(libm::fabs(x))));
+    libm::round(x * scale) / scale
 }
 
 #[cfg(test)]
@@ -184,11 +196,11 @@ mod tests {
         assert_eq!(low_current.clamp.parameter(), "current.max_current");
         extern crate std;
         use std::string::ToString;
-        assert_eq!(
-            low_current.to_string(),
-            std::format!("current.max_current = 5 A, {} N·m at kt = {kt} N·m/A", kt * 5.0)
-        );
+        assert_eq!(low_current.to_string(), "current.max_current = 5 A, 0.5 N·m at kt = 0.1 N·m/A");
         assert_eq!(low_torque.to_string(), "velocity.torque_limit = 0.5 N·m less the 0.1 N·m dither");
+        // The f32 product 0.060000006 and kt 0.10000001 read as set.
+        let small = TorqueCeiling::of(&params(2.0, 0.6), before, 0.0);
+        assert_eq!(small.to_string(), "current.max_current = 0.6 A, 0.06 N·m at kt = 0.1 N·m/A");
         let undithered = TorqueCeiling::of(&params(0.5, 20.0), before, 0.0);
         assert_eq!(undithered.to_string(), "velocity.torque_limit = 0.5 N·m");
         let injected = TorqueCeiling::of(&params(0.5, 20.0), after, 0.1);
