@@ -134,6 +134,12 @@ impl TorqueCeiling {
         }
     }
 
+    /// [`TorqueCeiling::current`] to six significant digits, for a message (0.2 A, not the
+    /// f32's 0.19999997 of 0.02 N·m / 0.10000001 N·m/A).
+    pub fn rounded_current(&self) -> f64 {
+        six_digits(self.current)
+    }
+
     /// The torque left to a peak excitation added after the loop's clamp with `dither` beside
     /// it: an excitation at or above this reaches the ceiling (N·m; may be ≤ 0).
     pub fn room_beside(&self, dither: f32) -> f32 {
@@ -201,6 +207,8 @@ mod tests {
         // The f32 product 0.060000006 and kt 0.10000001 read as set.
         let small = TorqueCeiling::of(&params(2.0, 0.6), before, 0.0);
         assert_eq!(small.to_string(), "current.max_current = 0.6 A, 0.06 N·m at kt = 0.1 N·m/A");
+        let torque_bound = TorqueCeiling::of(&params(0.02, 20.0), before, 0.0);
+        assert_eq!((torque_bound.current == 0.2, torque_bound.rounded_current()), (false, 0.2));
         let undithered = TorqueCeiling::of(&params(0.5, 20.0), before, 0.0);
         assert_eq!(undithered.to_string(), "velocity.torque_limit = 0.5 N·m");
         let injected = TorqueCeiling::of(&params(0.5, 20.0), after, 0.1);

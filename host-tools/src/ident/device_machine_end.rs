@@ -349,8 +349,8 @@ fn twin_run(fmu: &Fmu, run: &SweepRun, progress: &mut impl FnMut(&str, f64)) -> 
     let ceiling = TorqueCeiling::of(&run.drive_params()?, entry, run.settings.dither);
     if let Some(largest_iq) = current_near_ceiling(&twin_trace, &ceiling)? {
         bail!(
-            "the machine-end sweep drove the twin's current to {largest_iq:.1} A, near the {} A limit ({ceiling}): its response would not be linear",
-            ceiling.current
+            "the machine-end sweep drove the twin's current to {largest_iq:.2} A, near the {} A limit ({ceiling}): its response would not be linear",
+            ceiling.rounded_current()
         );
     }
     Ok(twin_trace)

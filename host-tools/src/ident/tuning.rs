@@ -116,8 +116,8 @@ pub fn command_to_load(
     let ceiling = TorqueCeiling::of(&configuration(parameters)?.control, ExcitationEntry::BeforeTheLoopClamp, 0.0);
     if let Some(largest) = current_near_ceiling(&trace, &ceiling)? {
         bail!(
-            "the multisine drove the current to {largest:.1} A, near the {} A limit ({ceiling}): the measured response would not be linear (the correction filter lifts the command too much near a lightly damped mode?)",
-            ceiling.current
+            "the multisine drove the current to {largest:.2} A, near the {} A limit ({ceiling}): the measured response would not be linear (the correction filter lifts the command too much near a lightly damped mode?)",
+            ceiling.rounded_current()
         );
     }
     let load = trace.column("load_position").unwrap_or_default();
