@@ -42,7 +42,10 @@
 //!   `kt·max_current < torque_limit` the current clamp cut it unseen, and with `torque_limit <
 //!   kt·max_current` a loop torque plus PRBS above `torque_limit` (cut by nothing) was refused.
 //!   After: the torque command against the torque-command ceiling (`kt·max_current`), as the
-//!   sweep's trace at the same point.
+//!   sweep's trace at the same point. (On one such axis — 0.6 A, 0.01 N·m of Coulomb friction,
+//!   a 40 Hz absorber — the data refused now gave the anti-resonance at 40.000 Hz before, rms
+//!   fit error 0.2 % against 0.1 % unclamped: the identification divides the measured torque
+//!   out. The refusal keeps the old rule's intent, data measured through a clamp are not used.)
 //! - **Tune's multisine** (`host-tools/src/ident/tuning.rs`, and the machine-end sweep's twin in
 //!   `ident/device_machine_end.rs`): a streamed position multisine. Before: refused when the
 //!   measured q current reached 0.9 of `max_current` — the wrong clamp where the torque limit
