@@ -34,6 +34,7 @@ pub mod reference_frames;
 pub mod response_correction;
 pub mod square_root;
 pub mod stop_sequence;
+pub mod torque_ceiling;
 pub mod trigonometry;
 pub mod velocity_loop;
 

@@ -11,6 +11,7 @@ use crate::friction_compensation::{FrictionCompensationError, FrictionCompensati
 use crate::phase_shifted_sweep::{SweepError, SweepParams};
 use crate::response_correction::{CorrectionError, CorrectionParams};
 use crate::stop_sequence::{SequenceParamError, SequenceParams};
+use crate::torque_ceiling::{ExcitationEntry, TorqueCeiling};
 
 /// Motor data the controller needs (decoupling, torque constant, electrical angle).
 #[derive(Clone, Copy, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
@@ -407,24 +408,27 @@ impl Params {
                 return Err(SweepError::Range { field: "amplitude", value, min: 0.0, max });
             }
         }
-        // The dither is added after the torque limit: one beyond the limit would be cut by the
-        // current limit instead of injected as asked.
-        if self.sweep.dither > self.velocity.torque_limit {
-            let (value, max) = (self.sweep.dither, self.velocity.torque_limit);
+        // The dither is added after the loop's torque clamp, so the current clamp cuts it: one
+        // beyond the lower of the torque limit and the current limit's torque (kt·max_current)
+        // is refused rather than cut (`crate::torque_ceiling`; at the clamp, on its own, it is
+        // not cut).
+        let dither_ceiling = TorqueCeiling::of(self, ExcitationEntry::BeforeTheLoopClamp, 0.0);
+        if self.sweep.dither > dither_ceiling.torque {
+            let (value, max) = (self.sweep.dither, dither_ceiling.torque);
             return Err(SweepError::Range { field: "dither", value, min: 0.0, max });
         }
         // Likewise a torque-command excitation whose own peak with the dither reaches the
-        // current limit's torque (kt·max_current: the injection is added after the torque
-        // limit, the current reference's clamp cuts it): the measured response would not be
-        // the loop's. The torque the loop commands beside it (a riding speed's friction, a
-        // torque set-point) is not known here; the voltage circle is watched while it runs
-        // (`SweepStatus::last_limited`).
-        let peak_torque = self.motor.torque_constant() * self.current.max_current;
-        if self.sweep.point == crate::excitation::InjectionPoint::TorqueCommand
-            && self.sweep.amplitude + self.sweep.dither >= peak_torque
-        {
-            let (value, max) = (self.sweep.amplitude, peak_torque - self.sweep.dither);
-            return Err(SweepError::Range { field: "amplitude", value, min: 0.0, max });
+        // current limit's torque (the injection is added after the loop's clamp, the current
+        // reference's clamp cuts it): the measured response would not be the loop's. The
+        // torque the loop commands beside it (a riding speed's friction, a torque set-point)
+        // is not known here; the voltage circle is watched while it runs
+        // (`SweepStatus::last_limited`), the torque command on the FMU's trace by the host.
+        if self.sweep.point == crate::excitation::InjectionPoint::TorqueCommand {
+            let ceiling = TorqueCeiling::of(self, ExcitationEntry::AfterTheLoopClamp, self.sweep.dither);
+            if self.sweep.amplitude + self.sweep.dither >= ceiling.torque {
+                let (value, max) = (self.sweep.amplitude, ceiling.room_beside(self.sweep.dither));
+                return Err(SweepError::Range { field: "amplitude", value, min: 0.0, max });
+            }
         }
         Ok(())
     }
@@ -453,6 +457,29 @@ mod tests {
         assert_eq!(e.field(), "dither");
         // The axis itself runs (held against the limit when a sweep starts).
         assert_eq!(p.validate(), Ok(()));
+    }
+
+    /// The dither is added after the loop's torque clamp: where the current limit's torque
+    /// (kt·max_current) is the lower, it is what cuts the dither, and what bounds it. (The
+    /// torque limit alone accepted a 1.5 N·m dither on a 1 N·m current clamp.)
+    #[test]
+    fn a_sweep_dither_beyond_the_current_limit_torque_is_refused_where_the_current_binds() {
+        let mut p = Params::default();
+        p.current.max_current = 10.0;
+        let current_torque = p.motor.torque_constant() * p.current.max_current;
+        assert!(current_torque < p.velocity.torque_limit);
+        p.sweep.dither = current_torque;
+        assert_eq!(p.validate_for_drive(), Ok(()));
+        p.sweep.dither = 1.5 * current_torque;
+        assert_eq!(
+            p.validate_sweep(),
+            Err(SweepError::Range { field: "dither", value: 1.5 * current_torque, min: 0.0, max: current_torque })
+        );
+        // Where the torque limit is the lower, it bounds the dither as before.
+        p.current.max_current = 40.0;
+        assert_eq!(p.validate_for_drive(), Ok(()));
+        p.sweep.dither = 1.01 * p.velocity.torque_limit;
+        assert!(matches!(p.validate_sweep(), Err(SweepError::Range { field: "dither", .. })));
     }
 
     /// A lowered loop rate with the default sweep settings (3 kHz, above the velocity loop's

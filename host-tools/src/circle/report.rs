@@ -272,8 +272,8 @@ fn trip_words(h: &AxisHealth, trip: &Trip, (period, n, revolutions): (f64, usize
     let limited = &h.torque_limited_run;
     let torque = if limited.limited > 0 {
         format!(
-            ", after its torque command had sat at its {} N·m limit on {} samples",
-            h.torque_limit_nm, limited.limited
+            ", after its torque command had sat at its {} N·m limit ({}) on {} samples",
+            h.torque_limit_nm, h.torque_limit_by, limited.limited
         )
     } else {
         String::new()
@@ -296,9 +296,10 @@ fn torque_limited_words(h: &AxisHealth, request: &CircleRequest) -> Option<Strin
     let percent = |s: f64| format!("{:.2} %", s * 100.0);
     Some(if measured.limited > 0 {
         format!(
-            "{}'s torque command sat at its {} N·m limit on {} of the measured revolution's {} samples ({}; {} of the run's {}, {}): the drive ran out of torque there, so the figures are not the linear loop's (the circle asks each axis for up to feed²/radius = {:.1} rad/s²: lower the feed or raise the radius, or give the axis more torque)",
+            "{}'s torque command sat at its {} N·m limit ({}) on {} of the measured revolution's {} samples ({}; {} of the run's {}, {}): the drive ran out of torque there, so the figures are not the linear loop's (the circle asks each axis for up to feed²/radius = {:.1} rad/s²: lower the feed or raise the radius, or give the axis more torque)",
             h.name(),
             h.torque_limit_nm,
+            h.torque_limit_by,
             measured.limited,
             measured.steps,
             percent(measured.share),
@@ -309,9 +310,10 @@ fn torque_limited_words(h: &AxisHealth, request: &CircleRequest) -> Option<Strin
         )
     } else {
         format!(
-            "{}'s torque command sat at its {} N·m limit on {} of the run's {} samples ({}), all before the measured revolution (the start from rest at full feed) and none in it: its figures are the linear loop's once that start has settled (a longer --lead-in shows whether they change)",
+            "{}'s torque command sat at its {} N·m limit ({}) on {} of the run's {} samples ({}), all before the measured revolution (the start from rest at full feed) and none in it: its figures are the linear loop's once that start has settled (a longer --lead-in shows whether they change)",
             h.name(),
             h.torque_limit_nm,
+            h.torque_limit_by,
             run.limited,
             run.steps,
             percent(run.share)

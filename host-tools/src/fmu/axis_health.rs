@@ -7,6 +7,7 @@ use std::collections::BTreeMap;
 use std::ops::Range;
 
 use anyhow::{anyhow, bail, Result};
+use control_core::torque_ceiling::{ExcitationEntry, TorqueCeiling};
 use control_core::Faults;
 use serde::Serialize;
 
@@ -44,11 +45,12 @@ pub fn first_trip(trace: &Trace) -> Result<Option<Trip>> {
     }))
 }
 
-/// The largest torque the drive commands with `parameters` (N·m): its torque limit, or the
-/// current limit's torque (kt·max_current) where that is lower.
-pub fn torque_ceiling(parameters: &BTreeMap<String, Value>) -> Result<f64> {
+/// The largest torque the drive commands with `parameters` without a clamp cutting it, for a
+/// run with no injection and no dither (a circle): its torque limit, or the current limit's
+/// torque (kt·max_current) where that is lower ([`TorqueCeiling`]).
+pub fn torque_ceiling(parameters: &BTreeMap<String, Value>) -> Result<TorqueCeiling> {
     let c = configuration(parameters)?.control;
-    Ok(c.velocity.torque_limit.min(c.motor.torque_constant() * c.current.max_current) as f64)
+    Ok(TorqueCeiling::of(&c, ExcitationEntry::BeforeTheLoopClamp, 0.0))
 }
 
 /// How many of some steps had the torque command at its limit.
@@ -71,6 +73,19 @@ pub fn torque_limited(trace: &Trace, rows: Range<usize>, ceiling: f64) -> Result
     let at_limit = ceiling * (1.0 - f32::EPSILON as f64);
     let limited = torque.iter().filter(|t| t.abs() >= at_limit).count();
     Ok(LimitedSteps { limited, steps: torque.len(), share: limited as f64 / torque.len().max(1) as f64 })
+}
+
+/// Share of the torque ceiling's current a measured q current may reach before a response
+/// measured through it counts as near the clamp: the measured current overshoots the clamped
+/// reference and rides on the current loop's ripple, so an exact comparison would miss it.
+pub const NEAR_CEILING: f64 = 0.9;
+
+/// The largest |q current| (A) of `trace` where it reaches [`NEAR_CEILING`] of `ceiling`'s
+/// current (the current limit's own, or the torque limit's as a current, `torque_limit / kt`,
+/// whichever binds), else None.
+pub fn current_near_ceiling(trace: &Trace, ceiling: &TorqueCeiling) -> Result<Option<f64>> {
+    let largest = column(trace, "iq")?.iter().fold(0.0f64, |a, x| a.max(x.abs()));
+    Ok((largest >= NEAR_CEILING * ceiling.current as f64).then_some(largest))
 }
 
 fn column(trace: &Trace, name: &str) -> Result<Vec<f64>> {
@@ -112,8 +127,11 @@ mod tests {
         let one = |k: &str, v: f64| [(k.to_string(), Value::Float(v))].into_iter().collect();
         let default = configuration(&BTreeMap::new()).unwrap().control;
         let kt = default.motor.torque_constant() as f64;
-        assert_eq!(torque_ceiling(&one("ctrl.torque_limit", 0.5)).unwrap(), 0.5);
+        let low_torque = torque_ceiling(&one("ctrl.torque_limit", 0.5)).unwrap();
+        assert_eq!((low_torque.torque, low_torque.clamp.parameter()), (0.5, "velocity.torque_limit"));
         let low_current = torque_ceiling(&one("ctrl.max_current", 1.0)).unwrap();
+        assert_eq!(low_current.clamp.parameter(), "current.max_current");
+        let low_current = low_current.torque as f64;
         assert!((low_current - kt).abs() < 1e-6 * kt, "{low_current} vs kt {kt}");
     }
 }

@@ -272,6 +272,8 @@ pub struct AxisHealth {
     pub trip: Option<Trip>,
     /// The torque the drive cannot exceed (N·m): see [`torque_ceiling`].
     pub torque_limit_nm: f64,
+    /// That limit by its parameter and value ("velocity.torque_limit = 0.05 N·m").
+    pub torque_limit_by: String,
     pub torque_limited_run: LimitedSteps,
     pub torque_limited_measured: LimitedSteps,
 }
@@ -292,12 +294,14 @@ fn axis_health(
     steps: usize,
     measured: &std::ops::Range<usize>,
 ) -> Result<AxisHealth> {
-    let limit = torque_ceiling(parameters)?;
+    let ceiling = torque_ceiling(parameters)?;
+    let limit = ceiling.torque as f64;
     Ok(AxisHealth {
         axis,
         trip: first_trip(trace)?,
         // As set: 0.05, not the f32's 0.05000000074505806.
-        torque_limit_nm: servo_axis::variables::from_f32(limit as f32),
+        torque_limit_nm: servo_axis::variables::from_f32(ceiling.torque),
+        torque_limit_by: ceiling.to_string(),
         torque_limited_run: torque_limited(trace, 1..steps + 1, limit)?,
         torque_limited_measured: torque_limited(trace, measured.start + 1..measured.end + 1, limit)?,
     })

@@ -31,6 +31,7 @@ use anyhow::{bail, Result};
 use control_core::excitation::InjectionPoint;
 use control_core::phase_shifted_sweep::{SweepMeasure, SweepParams, SweepSignal};
 use control_core::response_correction::CorrectionParams;
+use control_core::torque_ceiling::{ExcitationEntry, TorqueCeiling};
 use num_complex::Complex64;
 use serde::Serialize;
 
@@ -38,6 +39,7 @@ use crate::analysis::response_point::{difference, ResponsePoint};
 use crate::device::link::DrivePort;
 use crate::device::session::DriveSession;
 use crate::device::twin::DriveTwinPoint;
+use crate::fmu::axis_health::current_near_ceiling;
 use crate::fmu::runner::Fmu;
 use crate::fmu::scenario::Value;
 use crate::fmu::sweep_run::SweepRun;
@@ -343,10 +345,13 @@ fn twin_run(fmu: &Fmu, run: &SweepRun, progress: &mut impl FnMut(&str, f64)) -> 
     if let Some(trip) = crate::fmu::axis_health::first_trip(&twin_trace)? {
         bail!("the twin tripped during the machine-end sweep: {}", trip.sentence());
     }
-    let max_current = crate::fmu::configuration::configuration(&run.parameters)?.control.current.max_current as f64;
-    let largest_iq = twin_trace.column("iq").unwrap_or_default().iter().fold(0.0f64, |a, x| a.max(x.abs()));
-    if largest_iq >= 0.9 * max_current {
-        bail!("the machine-end sweep drove the twin's current to {largest_iq:.1} A, near the {max_current} A limit: its response would not be linear");
+    let entry = ExcitationEntry::of(run.settings.point);
+    let ceiling = TorqueCeiling::of(&run.drive_params()?, entry, run.settings.dither);
+    if let Some(largest_iq) = current_near_ceiling(&twin_trace, &ceiling)? {
+        bail!(
+            "the machine-end sweep drove the twin's current to {largest_iq:.2} A, near the {} A limit ({ceiling}): its response would not be linear",
+            ceiling.rounded_current()
+        );
     }
     Ok(twin_trace)
 }

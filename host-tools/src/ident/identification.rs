@@ -45,6 +45,7 @@ use crate::fmu::scenario::Value;
 use crate::fmu::sweep_run::SweepRun;
 use crate::ident::anti_resonance_error::{anti_resonance_error, FactorError, RESAMPLES};
 use crate::ident::averaged_response::{averaged_response, Record};
+use crate::sweep::torque_limit::TorqueLimits;
 use nalgebra::{DMatrix, DVector};
 
 pub const DEGREE: u32 = 11;
@@ -206,16 +207,14 @@ pub fn measure_records(
     let periods = PERIODS;
     // The run's own loop rate sets the period (`measurement_time_s` is the default axis's).
     let period = chips as f64 * CHIP_DIVIDER as f64 / fs;
-    let trace = excitation(parameters, amplitude, TRANSIENT_S + periods as f64 * period).run(fmu, |_| {})?;
+    let run = excitation(parameters, amplitude, TRANSIENT_S + periods as f64 * period);
+    let trace = run.run(fmu, |_| {})?;
     let col = |n: &str| trace.column(n).ok_or_else(|| anyhow!("the FMU has no output {n}"));
     let (measuring, u_all, y_all) = (col("acq_measuring")?, col(input)?, col(output)?);
     if let Some(trip) = crate::fmu::axis_health::first_trip(&trace)? {
         bail!("the axis tripped during the excitation: {}; lower the amplitude", trip.sentence());
     }
-    let torque_limit = control.velocity.torque_limit as f64;
-    if u_all.iter().any(|u| u.abs() >= 0.999 * torque_limit) {
-        bail!("the torque command saturated at {torque_limit} N·m during the excitation: the data cannot be used (lower the amplitude)");
-    }
+    excitation_within_ceiling(&TorqueLimits::of(&run.drive_params()?, &run.settings), &col("torque_command_out")?)?;
     // Rows following a measuring step: one sample of each signal per acquisition period.
     let rows: Vec<usize> = (1..measuring.len()).filter(|&i| measuring[i] != 0.0).collect();
     let u: Vec<f64> = rows.iter().map(|&i| u_all[i]).collect();
@@ -223,6 +222,21 @@ pub fn measure_records(
     let n = samples_per_period();
     let record = Record { u: &u, y: &y, acquisition_hz: fs / DIVIDER as f64 };
     averaged_response(&record, n, periods, (f_min, f_max))
+}
+
+/// The M-sequence is added to the torque command after the velocity loop's clamp: what cuts
+/// it is the current clamp (kt·max_current), which the drive's torque command (`torque`, the
+/// loop's torque with the sequence) reaches exactly where it acts — the sweep's rule at the
+/// same injection point ([`TorqueLimits`]). Refused, naming the limit, where it does.
+pub fn excitation_within_ceiling(limits: &TorqueLimits, torque: &[f64]) -> Result<()> {
+    let peak = torque.iter().fold(0.0f64, |m, t| m.max(t.abs()));
+    if limits.reached(peak) {
+        bail!(
+            "the torque command saturated at the drive's limit ({}) during the excitation, reaching {peak:.4} N·m: the excitation was cut there and the data cannot be used (lower the amplitude)",
+            limits.ceiling
+        );
+    }
+    Ok(())
 }
 
 /// Acquisition samples in one period of the M-sequence.

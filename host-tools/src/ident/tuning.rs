@@ -19,12 +19,14 @@ use servo_axis::variables::name;
 use std::collections::BTreeMap;
 
 use anyhow::{bail, Result};
+use control_core::torque_ceiling::{ExcitationEntry, TorqueCeiling};
 use num_complex::Complex64;
 use serde::Serialize;
 
 use crate::analysis::response_point::ResponsePoint;
 use crate::analysis::spectral::dft_bin;
 use crate::correction::{drive_frame, validate, AxisCorrection, Section};
+use crate::fmu::axis_health::current_near_ceiling;
 use crate::fmu::configuration::configuration;
 use crate::fmu::runner::Fmu;
 use crate::fmu::scenario::{Scenario, Value, DEFAULT_STEP};
@@ -105,16 +107,17 @@ pub fn command_to_load(
     let command = multisine(frequencies, MULTISINE_AMPLITUDE, (1 + MEASURED_PERIODS) * period);
     let scenario = Scenario::streamed_position("command_to_load", parameters, &command);
     let trace = fmu.run(&scenario, |_| {})?;
-    // A response measured through a current limit or a trip is not the axis's response.
-    let largest = |c: &str| trace.column(c).unwrap_or_default().iter().fold(0.0f64, |a, x| a.max(x.abs()));
+    // A response measured through a current or torque clamp or a trip is not the axis's
+    // response. The multisine is streamed in front of the loop, without a dither: the lower of
+    // the two clamps binds.
     if let Some(trip) = crate::fmu::axis_health::first_trip(&trace)? {
         bail!("the axis tripped during the multisine: {}; its response cannot be measured this way", trip.sentence());
     }
-    let max_current = configuration(parameters)?.control.current.max_current as f64;
-    if largest("iq") >= 0.9 * max_current {
+    let ceiling = TorqueCeiling::of(&configuration(parameters)?.control, ExcitationEntry::BeforeTheLoopClamp, 0.0);
+    if let Some(largest) = current_near_ceiling(&trace, &ceiling)? {
         bail!(
-            "the multisine drove the current to {:.1} A, near the {max_current} A limit: the measured response would not be linear (the correction filter lifts the command too much near a lightly damped mode?)",
-            largest("iq")
+            "the multisine drove the current to {largest:.2} A, near the {} A limit ({ceiling}): the measured response would not be linear (the correction filter lifts the command too much near a lightly damped mode?)",
+            ceiling.rounded_current()
         );
     }
     let load = trace.column("load_position").unwrap_or_default();

@@ -151,6 +151,8 @@ pub struct SweepReport {
     pub torque_limited_share: Vec<f64>,
     /// The torque (N·m) from which a sample counts as at a limit (the lower clamp).
     pub torque_limit_nm: f64,
+    /// That clamp by its parameter and value (see [`control_core::torque_ceiling`]).
+    pub torque_limit_by: String,
     /// Frequencies with no measurable result (see [`crate::sweep::measurement::unmeasurable`]),
     /// from the stream or the drive.
     pub unmeasured_hz: Vec<f64>,
@@ -341,6 +343,7 @@ pub fn run(
         torque_limited_hz,
         torque_limited_share,
         torque_limit_nm: limits.lowest(),
+        torque_limit_by: limits.ceiling.to_string(),
         unmeasured_hz,
         fault,
         agreement_limit: AGREEMENT_LIMIT,
@@ -439,8 +442,9 @@ impl SweepReport {
         }
         if !self.torque_limited_hz.is_empty() {
             println!(
-                "  WARNING: the torque command reached the drive's limit ({:.3} N·m: the velocity loop's torque limit or the current limit) while it measured {}: the loop was not linear there, and the result can be off by decibels. Lower --amplitude",
+                "  WARNING: the torque command reached the drive's limit ({:.3} N·m: {}) while it measured {}: the loop was not linear there, and the result can be off by decibels. Lower --amplitude",
                 self.torque_limit_nm,
+                self.torque_limit_by,
                 frequency_list(&self.torque_limited_hz)
             );
         }

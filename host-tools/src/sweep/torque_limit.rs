@@ -9,44 +9,38 @@
 use std::collections::BTreeMap;
 
 use anyhow::{anyhow, Result};
-use control_core::excitation::InjectionPoint;
 use control_core::phase_shifted_sweep::SweepParams;
+use control_core::torque_ceiling::{ExcitationEntry, TorqueCeiling};
 use control_core::Params;
 
 use crate::fmu::trace::Trace;
 
-/// The torque command (N·m) from which a sample counts as limited: the velocity loop's torque
-/// limit (less the sweep's dither, which is added after it) and the current limit's torque,
-/// each less a part in 10⁵ for the f32 rounding of the clamp.
+/// The torque command (N·m) from which a sample counts as limited: the drive's torque ceiling
+/// for the sweep's injection point and dither ([`TorqueCeiling`]: the velocity loop's clamp
+/// less the dither, which is added after it, or the current limit's torque, whichever is
+/// lower; the current limit's only for a torque-command injection, which the loop's clamp
+/// cannot cut and whose trace cannot tell the loop's part), less a part in 10⁵ for the f32
+/// rounding of the clamp.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct TorqueLimits {
-    /// The velocity loop's clamp; None for a torque-command injection, where the injected sine
-    /// adds after it and the trace cannot tell the loop's part.
-    pub loop_limit: Option<f64>,
-    /// `max_current` times the torque constant: the current loop's clamp.
-    pub current_limit: f64,
+    pub ceiling: TorqueCeiling,
 }
 
 const ROUNDING: f64 = 1e-5;
 
 impl TorqueLimits {
     pub fn of(params: &Params, settings: &SweepParams) -> Self {
-        let loop_limit = params.velocity.torque_limit as f64 - settings.dither as f64;
-        Self {
-            loop_limit: (settings.point != InjectionPoint::TorqueCommand).then_some(loop_limit * (1.0 - ROUNDING)),
-            current_limit: (params.motor.torque_constant() * params.current.max_current) as f64 * (1.0 - ROUNDING),
-        }
+        Self { ceiling: TorqueCeiling::of(params, ExcitationEntry::of(settings.point), settings.dither) }
     }
 
     /// The torque command `torque` is at a limit.
     pub fn reached(&self, torque: f64) -> bool {
-        let t = torque.abs();
-        t >= self.current_limit || self.loop_limit.is_some_and(|l| t >= l)
+        torque.abs() >= self.lowest()
     }
 
-    /// The smaller of the two limits, for a message.
+    /// The torque from which a sample counts (N·m).
     pub fn lowest(&self) -> f64 {
-        self.loop_limit.map_or(self.current_limit, |l| l.min(self.current_limit))
+        self.ceiling.torque as f64 * (1.0 - ROUNDING)
     }
 }
 
@@ -99,8 +93,9 @@ mod tests {
         let shares = torque_limited_shares(&t, &limits).unwrap();
         assert_eq!(shares, BTreeMap::from([(0, 0.25), (1, 0.0)]));
         // A torque-command injection adds after the loop's clamp: only the current's counts.
-        let torque = TorqueLimits::of(&params, &SweepParams { point: InjectionPoint::TorqueCommand, ..settings });
-        assert_eq!(torque.loop_limit, None);
+        let point = control_core::excitation::InjectionPoint::TorqueCommand;
+        let torque = TorqueLimits::of(&params, &SweepParams { point, ..settings });
+        assert_eq!(torque.ceiling.clamp, control_core::torque_ceiling::TorqueClamp::CurrentLimit);
         let current = (params.motor.torque_constant() * params.current.max_current) as f64;
         assert!(torque.reached(current) && (current <= at_loop || !torque.reached(at_loop)));
     }
