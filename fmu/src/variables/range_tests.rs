@@ -60,9 +60,14 @@ const SWEEP_START_COUPLED: &[(&str, &str, &str)] = &[
     // The torque-command point (the smallest code) with the default amplitude, 2 (rad/s for the
     // velocity points): a 2 N·m sine reaches the current limit, refused by the amplitude.
     ("sweep.point", "min", "amplitude"),
-    // The sweep's dither within the torque limit (it is added after the limit).
+    // The sweep's dither within the lower of the torque limit and the current limit's torque
+    // kt·max_current (it is added after the loop's clamp; `control_core::torque_ceiling`): the
+    // smallest current limit, and the smallest flux linkage (kt = 1.5·pole pairs·flux),
+    // leave about 10⁻⁴ N·m of room for the default 0.003.
     ("sweep.dither", "max", "sweep dither"),
     ("ctrl.torque_limit", "min", "sweep dither"),
+    ("ctrl.max_current", "min", "sweep dither"),
+    ("plant.flux_linkage", "min", "sweep dither"),
     // Records too short for a sine fit: no shortest measurement (two cycles at 1.1 kHz and up
     // are fewer than 8 samples), or one acquisition sample per 62.5 s.
     ("sweep.min_measure_s", "min", "acquisition samples"),
