@@ -25,10 +25,32 @@ const POINTS: [InjectionPoint; 4] = [
     InjectionPoint::PositionCommand,
 ];
 
-/// Every drive of the grid: torque limits and current limits on both sides of each other
-/// (and equal: 2 N·m both on the default axis), two torque constants.
+/// Every drive of the grid: torque limits and current limits on both sides of each other,
+/// two torque constants, and for each torque limit one drive whose current limit's torque
+/// equals it (the current limit computed from it in f32: the default axis's 2 N·m and 20 A
+/// give kt·max_current = 2.0000002, not 2).
 fn drives() -> Vec<Params> {
     let mut all = Vec::new();
+    for torque_limit in [0.05, 0.4, 1.0, 2.0, 3.0, 12.0] {
+        let mut p = Params::default();
+        p.velocity.torque_limit = torque_limit;
+        // The largest current whose torque does not exceed the limit, and the next one up:
+        // one of the two ties in f32 or the grid says so below.
+        let kt = p.motor.torque_constant();
+        p.current.max_current = torque_limit / kt;
+        for _ in 0..4 {
+            if kt * p.current.max_current == torque_limit {
+                break;
+            }
+            p.current.max_current = if kt * p.current.max_current < torque_limit {
+                f32::from_bits(p.current.max_current.to_bits() + 1)
+            } else {
+                f32::from_bits(p.current.max_current.to_bits() - 1)
+            };
+        }
+        assert_eq!(p.validate(), Ok(()));
+        all.push(p);
+    }
     for flux_linkage in [Params::default().motor.flux_linkage, 0.0123] {
         for torque_limit in [0.05, 0.4, 1.0, 2.0, 3.0, 12.0] {
             for max_current in [0.5, 4.0, 10.0, 20.0, 30.0, 100.0] {
@@ -232,6 +254,7 @@ fn the_multisine_current_rule_is_the_old_one_where_the_current_limit_binds() {
 /// an injection added after it.
 #[test]
 fn the_prbs_rule_is_the_sweeps_at_the_torque_point_and_the_old_one_where_the_clamps_coincide() {
+    let mut ties = 0;
     for p in drives() {
         let prbs = SweepParams { point: InjectionPoint::TorqueCommand, ..p.sweep };
         let limits = TorqueLimits::of(&p, &prbs);
@@ -239,9 +262,15 @@ fn the_prbs_rule_is_the_sweeps_at_the_torque_point_and_the_old_one_where_the_cla
         assert_eq!(limits.ceiling.torque, current_torque(&p));
         let before = 0.999 * p.velocity.torque_limit as f64;
         if p.velocity.torque_limit == current_torque(&p) {
+            ties += 1;
             assert!((limits.lowest() - before).abs() <= 1e-3 * before, "{p:?}");
+            // In front of the loop without a dither both clamps cut at the same torque: the
+            // current clamp is named.
+            let ceiling = TorqueCeiling::of(&p, ExcitationEntry::BeforeTheLoopClamp, 0.0);
+            assert_eq!((ceiling.clamp, ceiling.torque), (TorqueClamp::CurrentLimit, p.velocity.torque_limit));
         }
     }
+    assert!(ties >= 4, "only {ties} drives whose clamps tie: the comparison above proves little");
 }
 
 fn fmu() -> Fmu {

@@ -105,6 +105,12 @@ impl SweepParams {
         (libm::roundf(min_measure.max(self.measure_cycles / f) * base_rate_hz / d) as u64).max(1)
     }
 
+    /// `precision_db` as a relative size of the response (the gain's error, and the phase's in
+    /// radians): 0.03 dB is 0.0035, 0.2°.
+    pub(super) fn relative_precision(&self) -> f32 {
+        self.precision_db * (core::f32::consts::LN_10 / 20.0)
+    }
+
     /// The most half blocks (of the record's own base block, see [`Self::record_length`]) that
     /// precision control adds to each record at f, and that the settling check discards:
     /// `2·max_extensions` half blocks of the block `min_measure_s` gives, the same time where

@@ -9,8 +9,8 @@ pub(super) struct HalfBlockSpread {
     reference: (f32, f32),
     sum: (f32, f32),
     squares: f32,
-    /// Responses summed.
-    count: u32,
+    /// Responses summed (half blocks that told one).
+    pub(super) count: u32,
     /// Half blocks measured, with or without a response (0: the record is not measured in
     /// half blocks).
     pub(super) half_blocks: u32,

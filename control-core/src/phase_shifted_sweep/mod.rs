@@ -196,9 +196,11 @@ pub struct PhaseShiftedSweep {
     /// arithmetic).
     left: u32,
     left_high: u32,
-    /// Half blocks (half a base measurement each) added to each record of the present frequency (see
-    /// `SweepParams::precision_db`), decided once the first record's base block is in (0
-    /// until then, and when none are needed).
+    /// Half blocks (half a base measurement each) added to each record of the present
+    /// frequency (see `SweepParams::precision_db`), predicted once the first record's base
+    /// block is in (0 until then, and when none are needed); below the threshold the half
+    /// blocks' spread may add more or end the record before they are in (see
+    /// [`Self::next_half_block`]).
     extensions: u32,
     acc: SineFitSums,
     /// Settling check of the present frequency's first record (see [`Self::settled`]): the
@@ -539,7 +541,8 @@ impl PhaseShiftedSweep {
                 // After the first record's base block: how many more blocks every record of
                 // this frequency takes (the same for all, so that the phase-shifted records
                 // stay balanced); the first one measures on at once, without settling. Its
-                // end comes back here only when blocks were added, with `extensions` > 0.
+                // end comes back here when blocks were added, with `extensions` > 0 (below the
+                // threshold after each half block of them, `next_half_block`).
                 let half = self.params.record_length(f, self.base_rate_hz).1 / 2;
                 if self.status.record == 0 && self.spread.half_blocks > 0 {
                     // A half block of the settled record's extension has ended.

@@ -53,9 +53,11 @@ pub struct SweepParams {
     pub prbs_degree: u32,
     pub prbs_divider: u32,
     pub prbs_seconds: f32,
-    /// Stepped sine: lengthen a frequency's records by whole blocks so that the standard
-    /// error of its gain (predicted from the fit's residual after the first block: mostly
-    /// encoder quantisation) is at most this (dB; 0: fixed records). At low-gain points (a
+    /// Stepped sine: lengthen a frequency's records by half blocks so that the standard
+    /// errors of its gain and phase (predicted from the fits' residuals after the first block:
+    /// mostly encoder quantisation; below the threshold checked against the half blocks' own
+    /// spread, see `PhaseShiftedSweep::next_half_block`) are at most this (dB; 0: fixed
+    /// records, no settling check). At low-gain points (a
     /// deep anti-resonance, the top of the sweep) the response is a few encoder counts and
     /// the base record leaves about 0.1 dB of error whose size depends on the fine detail of
     /// the motion; the well-measured points are not lengthened.

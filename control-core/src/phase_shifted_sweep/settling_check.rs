@@ -59,7 +59,7 @@ impl PhaseShiftedSweep {
             // host fitting from the last index minus one up keeps what the drive keeps.
             return first.then_some(samples - samples / 2);
         };
-        let target = p.precision_db * (core::f32::consts::LN_10 / 20.0);
+        let target = p.relative_precision();
         // The responses differ beyond the precision and beyond three standard deviations of a
         // difference of two half blocks (twice one's variance).
         let noise = SETTLING_NOISE_SIGMAS * crate::square_root::sqrt(2.0 * spread);

@@ -223,7 +223,8 @@ fn under_a_noise_phasor(params: SweepParams, phasor: f32, white: f32, seed: u32)
     s.start().unwrap();
     let (mut tick, mut state) = (0u64, seed | 1);
     let a = libm::expf(-1.0 / (FS * 0.010));
-    // Stationary from the start: the low-pass's output variance is phasor².
+    // The low-pass's output variance is phasor² (started at a third of it: settled within the
+    // first half block's 2 τ, and the settling check runs meanwhile).
     let drive = phasor * libm::sqrtf(3.0 * (1.0 - a * a));
     let (mut nc, mut ns) = (phasor * uniform(&mut state), phasor * uniform(&mut state));
     while s.running() {
@@ -246,7 +247,7 @@ fn noise_at_the_excitation_the_residuals_cannot_see_is_measured_down_by_the_half
     // residuals it predicts from. Per component and over 40 seeds the error is 1.49 times the
     // precision on the prediction alone, 1.17 with the spread's check (deterministic seeds).
     let p = at(50.0, 3, 3);
-    let target = p.precision_db * core::f32::consts::LN_10 / 20.0;
+    let target = p.relative_precision();
     let mut squares = 0.0f32;
     let seeds = 40;
     for seed in 1..=seeds {
@@ -266,7 +267,7 @@ fn noise_away_from_the_excitation_ends_the_record_early() {
     // for its cap. The half blocks (one 10 Hz cycle, six of the hum each) agree, and the
     // record ends after six.
     let p = at(10.0, 3, 3);
-    let target = p.precision_db * core::f32::consts::LN_10 / 20.0;
+    let target = p.relative_precision();
     let (settle, samples) = p.record_length(10.0, FS);
     let half_block_ticks = samples / 2 * p.acquisition_divider as u64;
     for seed in 1..=10u32 {

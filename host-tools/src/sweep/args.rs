@@ -23,8 +23,8 @@ use crate::cli::Common;
 /// stream's samples: the larger of the white/lag-one noise model's and the spread of the
 /// result over batches of its samples (which sees colored noise and a transient that drifts
 /// within the record); "quality" only tells whether the phases could tell a sine. Results
-/// whose error exceeds twice --precision-db (its phase equivalent: 0.03 dB = 0.2 deg) are
-/// named in a warning.
+/// whose error exceeds twice --precision-db (its phase equivalent: 0.03 dB = 0.2 deg; twice
+/// the default 0.03 dB with --precision-db 0) are named in a warning.
 #[derive(clap::Args)]
 pub struct SweepArgs {
     /// Injection point: velocity, torque or feedback
@@ -73,11 +73,14 @@ pub struct SweepArgs {
     /// Base ticks (62.5 µs) per acquisition sample
     #[arg(long, default_value_t = 4)]
     pub acquisition_divider: u32,
-    /// Lengthen a frequency's records by whole blocks so that the standard errors of its
+    /// Lengthen a frequency's records by half blocks so that the standard errors of its
     /// response G = Y/U, gain and phase (the phase's in the same relative size: 0.03 dB =
     /// 0.2 deg), predicted from the residuals of U and Y after the first block (encoder
-    /// quantisation, noise), are at most this (dB); 0 = fixed records. Low-gain points (an
-    /// anti-resonance, the top of the sweep) need it; the others keep their base length
+    /// quantisation, noise) and, below the threshold, checked against the half blocks' own
+    /// spread (more half blocks when it reads above 1.25 times this, an early end when six
+    /// read half of it or less), are at most this (dB); 0 = fixed records, no settling check.
+    /// Low-gain points (an anti-resonance, the top of the sweep) need it; the others keep
+    /// their base length
     #[arg(long, default_value_t = 0.03)]
     pub precision_db: f64,
     /// Pseudo-random ±dither on the torque command at and above the threshold, or 2 kHz where
