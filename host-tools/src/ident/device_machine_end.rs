@@ -431,15 +431,9 @@ pub fn check_machine_end<T: DrivePort>(
     // 0.138° once protocol 9's longer telemetry moved the sweep's start by a few ticks: the
     // drive's own differences from its twin read 0.05° and 0.13° in those two runs.)
     let fmu_after = tuning.spread_after.unwrap_or((0.0, 0.0));
-    let resolution = (with.largest_difference.0 + fmu_after.0, with.largest_difference.1 + fmu_after.1);
-    let both = (
-        without.largest_difference.0 + with.largest_difference.0,
-        without.largest_difference.1 + with.largest_difference.1,
-    );
-    let equalised = without
-        .largest_versus_other_axes
-        .zip(with.largest_versus_other_axes)
-        .map(|(b, a)| (a.0 < b.0 + both.0 || a.0 <= resolution.0) && (a.1 < b.1 + both.1 || a.1 <= resolution.1));
+    let equalised = without.largest_versus_other_axes.zip(with.largest_versus_other_axes).map(|(before, after)| {
+        closer_or_as_close(before, after, (without.largest_difference, with.largest_difference), fmu_after)
+    });
     Ok(MachineEndCheck {
         amplitude: run.settings.amplitude as f64,
         accelerometer_range: range,
@@ -521,9 +515,42 @@ impl MachineEndCheck {
     }
 }
 
+/// The corrected axis's largest difference from the other axes (`after`, dB and degrees) is
+/// not larger than the uncorrected one's (`before`) by more than the drive's largest
+/// differences from its twin in the two runs (`drive_vs_twin`: without, with) can explain, or
+/// it is within the with-run's difference plus what the correction leaves between the axes on
+/// the FMU (`fmu_after`), each of gain and phase.
+fn closer_or_as_close(
+    before: (f64, f64),
+    after: (f64, f64),
+    drive_vs_twin: ((f64, f64), (f64, f64)),
+    fmu_after: (f64, f64),
+) -> bool {
+    let (without, with) = drive_vs_twin;
+    let closer = |b: f64, a: f64, e0: f64, e1: f64, fmu: f64| a < b + e0 + e1 || a <= e1 + fmu;
+    closer(before.0, after.0, without.0, with.0, fmu_after.0)
+        && closer(before.1, after.1, without.1, with.1, fmu_after.1)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn a_correction_is_closer_up_to_what_the_drive_resolves_and_fails_beyond_it() {
+        let twin = ((0.005, 0.05), (0.005, 0.13));
+        let fmu_after = (0.003, 0.009);
+        // The 40/70 y axis of `servo bench tune-device`: alike in phase before (0.10°), 0.138°
+        // after, the drive within 0.05° and 0.13° of its twin in the two runs: not told apart.
+        assert!(closer_or_as_close((0.225, 0.098), (0.005, 0.138), twin, fmu_after));
+        // Moved away in phase by more than both runs' differences (0.098 + 0.18 < 0.4): fails.
+        assert!(!closer_or_as_close((0.225, 0.098), (0.005, 0.4), twin, fmu_after));
+        // Farther in gain by more than they explain (0.02 + 0.01 < 0.5): fails.
+        assert!(!closer_or_as_close((0.02, 0.098), (0.5, 0.05), twin, fmu_after));
+        // Much closer in both: passes; a tie within the with-run's resolution: passes.
+        assert!(closer_or_as_close((2.56, 29.6), (0.006, 0.04), twin, fmu_after));
+        assert!(closer_or_as_close((0.0, 0.0), (0.008, 0.139), twin, fmu_after));
+    }
 
     #[test]
     fn an_acceleration_response_divided_by_minus_omega_squared_is_the_position_response() {
