@@ -188,9 +188,9 @@ pub struct MachineEndCheck {
     /// The corrected response is closer to the other axes' than the uncorrected one (gain and
     /// phase, up to the bandwidth; not farther than before by more than the drive's
     /// differences from its twin in the two runs can explain), as the FMU check's `improved`,
-    /// or as close as the drive
-    /// resolves its twin (the with-run's largest drive − twin difference) plus the FMU check's
-    /// spread after the correction (None: no other axis).
+    /// or as close as the drive resolves its twin (the with-run's largest drive − twin
+    /// difference) plus the FMU check's spread after the correction (None: no other axis); see
+    /// [`closer_or_as_close`].
     pub equalised: Option<bool>,
     /// The FMU check's own figures for comparison: largest difference between all axes up to
     /// the bandwidth, before and after (dB, degrees).
@@ -426,10 +426,10 @@ pub fn check_machine_end<T: DrivePort>(
     // absorbers far above it, cannot get measurably closer). "Closer" up to what the drive
     // resolves in each run (its largest difference from its twin, without and with): two
     // figures each measured to that resolution are not told apart by less; a correction that
-    // moves the axis away by more still fails. (The 40/70 pair's
-    // y axis, whose phase is alike before the correction, 0.10°, read 0.008° after, then
-    // 0.138° once protocol 9's longer telemetry moved the sweep's start by a few ticks: the
-    // drive's own differences from its twin read 0.05° and 0.13° in those two runs.)
+    // moves the axis away by more still fails. (The 40/70 pair's y axis, whose phase is alike
+    // before the correction, 0.10°, read 0.008° after, then 0.138° once protocol 9's longer
+    // telemetry moved the sweep's start by a few ticks: the drive's own differences from its
+    // twin read 0.05° and 0.13° in those two runs.)
     let fmu_after = tuning.spread_after.unwrap_or((0.0, 0.0));
     let equalised = without.largest_versus_other_axes.zip(with.largest_versus_other_axes).map(|(before, after)| {
         closer_or_as_close(before, after, (without.largest_difference, with.largest_difference), fmu_after)

@@ -84,22 +84,14 @@ pub fn compare_with_twin(drive: &DeviceSweep, twin: &[ResponsePoint]) -> (Vec<Tw
     let points: Vec<TwinPoint> = drive
         .stream
         .iter()
-        .filter_map(|d| {
+        .enumerate()
+        .filter_map(|(k, d)| {
             let t = twin.iter().find(|t| same_frequency(t.frequency, d.frequency))?;
             let (dg, dp) = difference(d, t);
             largest = (largest.0.max(dg.abs()), largest.1.max(dp.abs()));
-            let limited_share = drive
-                .stream
-                .iter()
-                .zip(&drive.limited_share)
-                .find(|(p, _)| same_frequency(p.frequency, d.frequency))
-                .map_or(0.0, |(_, &share)| share);
-            let standard_error = drive
-                .stream
-                .iter()
-                .zip(&drive.standard_error)
-                .find(|(p, _)| same_frequency(p.frequency, d.frequency))
-                .map_or(ResponseStandardError::unknown(), |(_, &e)| e);
+            // `limited_share` and `standard_error` pair with `stream` by index.
+            let limited_share = drive.limited_share.get(k).copied().unwrap_or(0.0);
+            let standard_error = drive.standard_error.get(k).copied().unwrap_or(ResponseStandardError::unknown());
             Some(TwinPoint {
                 frequency: d.frequency,
                 drive: *d,

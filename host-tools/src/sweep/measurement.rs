@@ -367,11 +367,15 @@ pub fn errors(a: &[ResponsePoint], reference: &[ResponsePoint], split_hz: f64) -
     s
 }
 
+/// The smallest quality (the conditioning of a fit's phases, 0..1) from which a result tells
+/// a response.
+pub const MIN_QUALITY: f64 = 0.01;
+
 /// A result that tells no response: a non-finite gain or phase, or phases that cannot tell a
-/// sine (quality under 0.01: a single record at a multiple of half the acquisition rate,
-/// where every sample sits at one phase or its opposite).
+/// sine (quality under [`MIN_QUALITY`]: a single record at a multiple of half the acquisition
+/// rate, where every sample sits at one phase or its opposite).
 pub fn unmeasurable(p: &ResponsePoint) -> bool {
-    !(p.gain_db.is_finite() && p.phase_deg.is_finite() && p.quality >= 0.01)
+    !(p.gain_db.is_finite() && p.phase_deg.is_finite() && p.quality >= MIN_QUALITY)
 }
 
 /// The frequencies of the [`unmeasurable`] results.

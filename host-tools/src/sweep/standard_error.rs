@@ -31,6 +31,8 @@
 
 use std::f64::consts::LN_10;
 
+use crate::sweep::measurement::MIN_QUALITY;
+
 /// One acquisition sample a result's fit keeps: u, y, the excitation's phase (rad) and the
 /// record (phase-shifted repeat) it belongs to. In time order.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -157,8 +159,9 @@ fn error_shares(samples: &[FitSample]) -> Option<Vec<(f64, f64)>> {
         scs += c * s;
     }
     let det = scc * sss - scs * scs;
-    // Phases that cannot tell a sine (the fit's quality under 0.01, as `unmeasurable`).
-    if !(det > 0.01 * 0.25 * n * n) {
+    // Phases that cannot tell a sine (the fit's quality, det/(n²/4), under the threshold of
+    // `unmeasurable`).
+    if !(det > MIN_QUALITY * 0.25 * n * n) {
         return None;
     }
     // (p_k, q_k) = A⁻¹·(c'_k, s'_k).
