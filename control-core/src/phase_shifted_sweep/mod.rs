@@ -71,7 +71,7 @@ use crate::m_sequence::MSequence;
 use crate::trigonometry::ReducedAngle;
 use crate::TAU;
 use half_block_spread::HalfBlockSpread;
-use settling_check::MIN_CHECKED_SAMPLES;
+use settling_check::{TrackedRing, MIN_CHECKED_SAMPLES};
 use sine_fit::SineFitSums;
 
 pub const MAX_SWEEP_POINTS: usize = 128;
@@ -214,8 +214,11 @@ pub struct PhaseShiftedSweep {
     previous_difference: (f32, f32),
     previous_above_noise: bool,
     previous_excess: f32,
-    /// The previous comparison's `tail_over_difference` (0 when it had none).
-    previous_tail: f32,
+    /// The previous comparison's ratio of successive differences (NaN when it had none; see
+    /// [`Self::settled`]).
+    previous_ratio: (f32, f32),
+    /// The ring the settling check's ratios told, if any.
+    ring: TrackedRing,
     checking_settling: bool,
     /// The half-block responses of the present frequency's record once it has settled, below
     /// the threshold (one record; see [`Self::next_half_block`]; none measured otherwise).
@@ -269,7 +272,8 @@ impl PhaseShiftedSweep {
             previous_difference: (0.0, 0.0),
             previous_above_noise: false,
             previous_excess: 0.0,
-            previous_tail: 0.0,
+            previous_ratio: (f32::NAN, f32::NAN),
+            ring: TrackedRing::default(),
             checking_settling: false,
             spread: HalfBlockSpread::default(),
             half_block: 0,
@@ -380,7 +384,8 @@ impl PhaseShiftedSweep {
             self.discarded_halves = 0;
             self.previous_above_noise = false;
             self.previous_excess = 0.0;
-            self.previous_tail = 0.0;
+            self.previous_ratio = (f32::NAN, f32::NAN);
+            self.ring = TrackedRing::default();
             self.half_block = 0;
             self.spread = HalfBlockSpread::default();
             self.checking_settling = p.precision_db > 0.0

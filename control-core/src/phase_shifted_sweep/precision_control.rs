@@ -24,7 +24,7 @@ const SPREAD_MARGIN: f32 = 1.25;
 /// the first two are the settled pair, kept because their difference was small (the spread
 /// reads low with few half blocks: the early end asks for half the precision, the extension
 /// for 1.25 times it). Measured on the benches, not only argued: see the README.
-const EARLY_HALF_BLOCKS: u32 = 6;
+pub(super) const EARLY_HALF_BLOCKS: u32 = 6;
 const EARLY_MARGIN: f32 = 2.0;
 
 impl PhaseShiftedSweep {
