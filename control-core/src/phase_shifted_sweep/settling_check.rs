@@ -113,14 +113,18 @@ impl PhaseShiftedSweep {
         // refuses; the previous one's (or none) is passed over.
         let previous_tail = tail_over_difference(self.previous_ratio);
         let worst_tail = if tail <= previous_tail { previous_tail } else { tail };
-        // Two successive ratios that agree, of differences above the noise, are one mode's
-        // decay, not noise (see `RING_RATIO_AGREEMENT`): told while the ring is still above
-        // the noise, it is followed on by its ratio, whatever the later, noisier comparisons say, and the
-        // record settles only once what the ring is predicted to leave in the result is at
-        // most `RING_LEFT` of the precision (see `TrackedRing::left_in_result`). Of two rings
-        // told, the one predicted to leave more is followed.
+        // Two successive ratios that agree, of differences above the noise, the last one below
+        // 1 in size, are one mode's decay, not noise (see `RING_RATIO_AGREEMENT`; noise gives
+        // ratios above 1 in size as often as not, and a pair of those that agreed by chance
+        // held a record of the 0.2:1, 50 Hz axis's torque command to the cap at 77.5 Hz). Told
+        // while the ring is still above the noise, it is followed on by its ratio, whatever the
+        // later, noisier comparisons say, and the record settles only once what the ring is
+        // predicted to leave in the result is at most `RING_LEFT` of the precision (see
+        // `TrackedRing::left_in_result`). Of two rings told, the one predicted to leave more
+        // is followed.
         let (are, aim) = (ratio.0 - self.previous_ratio.0, ratio.1 - self.previous_ratio.1);
         let told = are * are + aim * aim <= RING_RATIO_AGREEMENT * RING_RATIO_AGREEMENT
+            && ratio.0 * ratio.0 + ratio.1 * ratio.1 < 1.0
             && difference > noise
             && self.previous_above_noise;
         let ring_left = if told || self.ring.difference > 0.0 {
@@ -196,13 +200,9 @@ pub(super) struct TrackedRing {
 impl TrackedRing {
     /// What the ring is predicted to leave, relative to |G|, in a result that averages
     /// `halves` half blocks from the last two at `half_block` on: its difference decays by
-    /// |q| per half block since it was told (see [`ring_left_in_result`]). Infinite when the
-    /// ring does not decay.
+    /// |q| per half block since it was told (see [`ring_left_in_result`]; a ring is told only
+    /// when it decays, |q| < 1).
     fn left_in_result(&self, half_block: u32, halves: u32) -> f32 {
-        let (qre, qim) = self.ratio;
-        if !(qre * qre + qim * qim < 1.0) {
-            return f32::INFINITY;
-        }
         let (pre, pim) = power(self.ratio, half_block.saturating_sub(self.at));
         let decayed = self.difference * crate::square_root::sqrt(pre * pre + pim * pim);
         ring_left_in_result(decayed, self.ratio, halves)
