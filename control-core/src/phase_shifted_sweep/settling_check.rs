@@ -28,8 +28,9 @@ const RING_RATIO_AGREEMENT: f32 = 0.25;
 /// A ring told by its ratios is waited for until what it is predicted to leave in the result
 /// is at most this share of the precision (its standard error's goal: the ring then takes no
 /// more of the 0.1 dB budget than the noise's standard error does). Lower shares cost
-/// measurement time on soft axes: at 0.3, `servo bench sweep`'s 5:1, 50 Hz velocity-feedback
-/// rows took 9.9–10.2 s (9.3 s before the rings were told), at 1.0 9.1–9.3 s.
+/// measurement time on soft axes: with a wait fixed when the ring was told, at 0.3
+/// `servo bench sweep`'s 5:1, 50 Hz velocity-feedback rows took 9.9–10.2 s, at 1.0 9.1–9.3 s
+/// (9.3 s before rings were told; 9.4–9.5 s as the check follows them now).
 const RING_LEFT: f32 = 1.0;
 
 /// Base blocks shorter than this (samples) are not checked for settling: a half block would
