@@ -408,13 +408,16 @@ impl Params {
                 return Err(SweepError::Range { field: "amplitude", value, min: 0.0, max });
             }
         }
+        // The dither runs with the stepped sine only (the PRBS mode adds none): a PRBS sweep is
+        // held against its own injection.
+        let dither = self.sweep.dither_in_use();
         // The dither is added after the loop's torque clamp, so the current clamp cuts it: one
         // beyond the lower of the torque limit and the current limit's torque (kt·max_current)
         // is refused rather than cut (`crate::torque_ceiling`; at the clamp, on its own, it is
         // not cut).
         let dither_ceiling = TorqueCeiling::of(self, ExcitationEntry::BeforeTheLoopClamp, 0.0);
-        if self.sweep.dither > dither_ceiling.torque {
-            let (value, max) = (self.sweep.dither, dither_ceiling.torque);
+        if dither > dither_ceiling.torque {
+            let (value, max) = (dither, dither_ceiling.torque);
             return Err(SweepError::Range { field: "dither", value, min: 0.0, max });
         }
         // Likewise a torque-command excitation whose own peak with the dither reaches the
@@ -424,9 +427,9 @@ impl Params {
         // is not known here; the voltage circle is watched while it runs
         // (`SweepStatus::last_limited`), the torque command on the FMU's trace by the host.
         if self.sweep.point == crate::excitation::InjectionPoint::TorqueCommand {
-            let ceiling = TorqueCeiling::of(self, ExcitationEntry::AfterTheLoopClamp, self.sweep.dither);
-            if self.sweep.amplitude + self.sweep.dither >= ceiling.torque {
-                let (value, max) = (self.sweep.amplitude, ceiling.room_beside(self.sweep.dither));
+            let ceiling = TorqueCeiling::of(self, ExcitationEntry::AfterTheLoopClamp, dither);
+            if self.sweep.amplitude + dither >= ceiling.torque {
+                let (value, max) = (self.sweep.amplitude, ceiling.room_beside(dither));
                 return Err(SweepError::Range { field: "amplitude", value, min: 0.0, max });
             }
         }
@@ -541,6 +544,31 @@ mod tests {
         p.sweep.point = crate::excitation::InjectionPoint::VelocityCommand;
         p.sweep.amplitude = 2.0 * p.velocity.torque_limit;
         assert_eq!(p.validate_for_drive(), Ok(()));
+    }
+
+    #[test]
+    fn a_prbs_sweep_is_held_against_its_own_injection_without_the_sine_s_dither() {
+        // The PRBS mode adds no dither: an amplitude that leaves no room for the stepped
+        // sine's dither below the current limit's torque is the PRBS's to use, and a dither
+        // it does not run is not refused.
+        let mut p = Params::default();
+        p.sweep.point = crate::excitation::InjectionPoint::TorqueCommand;
+        let peak = p.motor.torque_constant() * p.current.max_current;
+        p.sweep.amplitude = peak - 0.5 * p.sweep.dither;
+        let e = p.validate_for_drive().unwrap_err();
+        assert!(matches!(e, ParamError::Sweep(SweepError::Range { field: "amplitude", .. })), "{e:?}");
+        p.sweep.signal = crate::phase_shifted_sweep::SweepSignal::Prbs;
+        assert_eq!(p.validate_for_drive(), Ok(()));
+        // Its own peak at the ceiling is refused all the same.
+        p.sweep.amplitude = peak;
+        let e = p.validate_for_drive().unwrap_err();
+        assert!(matches!(e, ParamError::Sweep(SweepError::Range { field: "amplitude", .. })), "{e:?}");
+        p.sweep.amplitude = 0.5 * peak;
+        p.sweep.dither = 1.5 * p.velocity.torque_limit;
+        assert_eq!(p.validate_for_drive(), Ok(()));
+        p.sweep.signal = crate::phase_shifted_sweep::SweepSignal::SteppedSine;
+        let e = p.validate_for_drive().unwrap_err();
+        assert!(matches!(e, ParamError::Sweep(SweepError::Range { field: "dither", .. })), "{e:?}");
     }
 
     #[test]

@@ -190,6 +190,15 @@ impl fmt::Display for SweepError {
 }
 
 impl SweepParams {
+    /// The dither the sweep adds (N·m peak): `dither` for the stepped sine, 0 for the PRBS
+    /// mode, which adds none.
+    pub fn dither_in_use(&self) -> f32 {
+        match self.signal {
+            super::SweepSignal::SteppedSine => self.dither,
+            super::SweepSignal::Prbs => 0.0,
+        }
+    }
+
     /// The highest frequency swept (stop_hz, or start_hz alone with one point, or extra_hz).
     pub fn top_hz(&self) -> f32 {
         self.top().1

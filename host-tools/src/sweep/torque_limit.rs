@@ -16,7 +16,8 @@ use control_core::Params;
 use crate::fmu::trace::Trace;
 
 /// The torque command (N·m) from which a sample counts as limited: the drive's torque ceiling
-/// for the sweep's injection point and dither ([`TorqueCeiling`]: the velocity loop's clamp
+/// for the sweep's injection point and dither (the stepped sine's; the PRBS mode adds none)
+/// ([`TorqueCeiling`]: the velocity loop's clamp
 /// less the dither, which is added after it, or the current limit's torque, whichever is
 /// lower; the current limit's only for a torque-command injection, which the loop's clamp
 /// cannot cut and whose trace cannot tell the loop's part), less a part in 10⁵ for the f32
@@ -30,7 +31,7 @@ const ROUNDING: f64 = 1e-5;
 
 impl TorqueLimits {
     pub fn of(params: &Params, settings: &SweepParams) -> Self {
-        Self { ceiling: TorqueCeiling::of(params, ExcitationEntry::of(settings.point), settings.dither) }
+        Self { ceiling: TorqueCeiling::of(params, ExcitationEntry::of(settings.point), settings.dither_in_use()) }
     }
 
     /// The torque command `torque` is at a limit.
