@@ -46,10 +46,11 @@ fn a_rigid_axis_has_no_anti_resonance() {
 fn saturated_torque_is_refused_with_the_reason() {
     let mut p = absorber_parameters(40.0, 0.05, LOAD);
     p.insert("plant.motor_coulomb".into(), Value::Float(0.01));
-    // An M-sequence of ±3 N·m reaches the 2 N·m torque limit: the drive refuses it before it
-    // starts, naming the amplitude and the largest it takes.
+    // An M-sequence of ±3 N·m reaches the current limit's 2 N·m (kt·max_current; it is added
+    // after the loop's clamp, and the PRBS adds no dither beside it): the drive refuses it
+    // before it starts, naming the amplitude and the largest it takes.
     let e = measure(&load_fmu(), &p, 3.0, 5.0, 500.0).unwrap_err();
-    assert!(format!("{e:#}").contains("sweep amplitude = 3 is outside [0, 1.997"), "{e:#}");
+    assert!(format!("{e:#}").contains("sweep amplitude = 3 is outside [0, 2.0000"), "{e:#}");
     // Below the limit but with the friction's riding torque on top, the excitation is cut at
     // the limit during the measurement: the host refuses the data.
     let e = measure(&load_fmu(), &p, 1.995, 5.0, 500.0).unwrap_err();

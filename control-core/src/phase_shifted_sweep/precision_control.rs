@@ -23,7 +23,9 @@ const SPREAD_MARGIN: f32 = 1.25;
 /// 1 %, somewhat more over the repeated looks (one per half block), and more again because
 /// the first two are the settled pair, kept because their difference was small (the spread
 /// reads low with few half blocks: the early end asks for half the precision, the extension
-/// for 1.25 times it). Measured on the benches, not only argued: see the README.
+/// for 1.25 times it). Measured on the benches, not only argued: see the README. The
+/// settling check's ring rule counts at most this many half blocks in a record below the
+/// threshold, which the early end can stop there.
 pub(super) const EARLY_HALF_BLOCKS: u32 = 6;
 const EARLY_MARGIN: f32 = 2.0;
 
@@ -34,7 +36,9 @@ impl PhaseShiftedSweep {
     /// `precision_db` (the phase's: the same relative size, `precision_db·ln10/20`
     /// rad, 0.2° at 0.03 dB) over all `records`, predicted from the first base block (error ∝
     /// 1/√samples).
-    // Once per record or frequency: kept out of line so that the every-tick path stays small.
+    // Once per record or frequency, and at the settling check's comparisons while a ring is
+    // told or followed (`record_half_blocks`): kept out of line so that the every-tick path
+    // stays small.
     #[inline(never)]
     pub(super) fn halves_needed(&self, records: u32) -> u32 {
         let p = &self.params;

@@ -534,6 +534,8 @@ fn a_ring_told_by_its_ratios_is_waited_for_under_noise_the_residuals_over_read()
     let target = p.relative_precision();
     for seed in (1..=8).map(|k| 2 * k + 1) {
         let (error, last_half) = ringing_under_high_pass_noise(p, 0.1, seed);
+        // Settled, not held to the cap (the last half block's index is at most 1 + the cap).
+        assert!(last_half < 1 + p.half_block_cap(50.0, FS), "seed {seed}: held to the cap");
         assert!(
             error < target,
             "seed {seed}: {} times the precision, settled at half block {last_half}",
