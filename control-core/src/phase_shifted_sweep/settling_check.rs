@@ -183,10 +183,8 @@ impl PhaseShiftedSweep {
     /// now: its base block and the extension predicted from it, of every record; below the
     /// threshold at most [`EARLY_HALF_BLOCKS`], after which the half blocks' spread can end
     /// the record (see [`Self::next_half_block`]). From the threshold up the later records
-    /// are counted as if they followed on without a gap; each starts after a settling gap and
-    /// a phase step of 2π/shifts, which, with |q| < 1, leaves the ring less there, not more,
-    /// except that a complex q's mean over a run with gaps is not strictly bounded by the
-    /// run's (a model's figure, not a bound).
+    /// are counted as if they followed on without a gap, though each starts after a settling
+    /// gap and a phase step of 2π/shifts: there the figure is the model's, not a bound.
     fn record_half_blocks(&self) -> u32 {
         let records = self.params.records(self.status.frequency, self.base_rate_hz);
         let per_record = 2 + self.halves_needed(records);
@@ -210,10 +208,10 @@ impl TrackedRing {
     /// `self_left` in the result now: the slower of the two (the larger |q|), its size raised
     /// to leave what the other leaves now where that is more. It then bounds both from here on
     /// (exactly for the same N; the slower one decays less per half block). Keeping whichever
-    /// left more now let a fast ring told later displace a slow one that still mattered one
-    /// half block after the fast one had died out (the review's example: q = 0.95 leaving 2×
-    /// the precision, then q = 0.2 leaving 2.1×); a second ring per axis slot does not fit in
-    /// the drive's RAM (24 bytes left).
+    /// left more now could let a fast ring told later displace a slow one that still mattered
+    /// one half block after the fast one had died out (a reviewer's example: q = 0.95 leaving
+    /// 2× the precision, then q = 0.2 leaving 2.1×; not seen on the benches); a second ring
+    /// per axis slot does not fit in the drive's RAM (24 bytes left).
     fn or(self, other: TrackedRing, other_left: f32, self_left: f32) -> TrackedRing {
         let size = |(re, im): (f32, f32)| re * re + im * im;
         let (mut slower, slower_left, faster_left) = if size(other.ratio) > size(self.ratio) {
@@ -279,8 +277,8 @@ fn power((mut bre, mut bim): (f32, f32), mut n: u32) -> (f32, f32) {
 /// mode beats against the excitation), the half blocks carry `d_k·q/(q − 1)` and
 /// `d_k/(q − 1)`, their mean `d_k·(1 + q)/(2(q − 1))`. A slow decay (q near 1) leaves several
 /// times the last difference: a ring at 52 Hz with τ = 50 ms, measured at 50 Hz in half
-/// blocks of 20 ms (q = 0.67∠14°), leaves 2.1 times it. Infinite or NaN when the ratio tells no decay (NaN
-/// for a NaN ratio).
+/// blocks of 20 ms (q = 0.67∠14°), leaves 2.1 times it. Infinite or NaN when the ratio tells
+/// no decay (NaN for a NaN ratio).
 fn tail_over_difference((qre, qim): (f32, f32)) -> f32 {
     let plus = (1.0 + qre) * (1.0 + qre) + qim * qim;
     let minus = (1.0 - qre) * (1.0 - qre) + qim * qim;
