@@ -16,12 +16,11 @@ use control_core::Params;
 use crate::fmu::trace::Trace;
 
 /// The torque command (N·m) from which a sample counts as limited: the drive's torque ceiling
-/// for the sweep's injection point and dither (the stepped sine's; the PRBS mode adds none)
-/// ([`TorqueCeiling`]: the velocity loop's clamp
-/// less the dither, which is added after it, or the current limit's torque, whichever is
-/// lower; the current limit's only for a torque-command injection, which the loop's clamp
-/// cannot cut and whose trace cannot tell the loop's part), less a part in 10⁵ for the f32
-/// rounding of the clamp.
+/// for the sweep's injection point and dither (the stepped sine's; the PRBS mode adds none):
+/// [`TorqueCeiling`], the velocity loop's clamp less the dither, which is added after it, or
+/// the current limit's torque, whichever is lower (the current limit's only for a
+/// torque-command injection, which the loop's clamp cannot cut and whose trace cannot tell
+/// the loop's part), less a part in 10⁵ for the f32 rounding of the clamp.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct TorqueLimits {
     pub ceiling: TorqueCeiling,
