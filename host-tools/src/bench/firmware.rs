@@ -18,6 +18,7 @@ use control_core::Mode;
 use serde::Serialize;
 use servo_axis::simulation::{AxisSimulation, SimulationConfig, UserInputs};
 
+use crate::bench::elf_sections::{section_headers, ALLOC};
 use crate::bench::stack_depth::{stack_bound, StackBound, CORE_VECTORS_IMAGE, DRIVE_IMAGE};
 use crate::paths::workspace_root;
 
@@ -134,25 +135,10 @@ pub fn encode(recs: &[Recording]) -> Vec<u8> {
     out
 }
 
-/// (name, address, size) of the allocated sections of a 32-bit little-endian ELF file.
+/// (name, address, size) of the allocated sections of a 32-bit little-endian ELF file (none
+/// when it is not one).
 pub fn sections(elf: &[u8]) -> Vec<(String, u32, u32)> {
-    let u16_at = |o: usize| u16::from_le_bytes([elf[o], elf[o + 1]]) as usize;
-    let u32_at = |o: usize| u32::from_le_bytes([elf[o], elf[o + 1], elf[o + 2], elf[o + 3]]);
-    if elf.len() < 0x34 || &elf[..5] != b"\x7fELF\x01" {
-        return Vec::new(); // not a 32-bit ELF file: no sections
-    }
-    let (shoff, shentsize, shnum, shstrndx) = (u32_at(0x20) as usize, u16_at(0x2E), u16_at(0x30), u16_at(0x32));
-    let header = |i: usize| shoff + i * shentsize;
-    let strtab = u32_at(header(shstrndx) + 0x10) as usize;
-    (0..shnum)
-        .filter(|&i| u32_at(header(i) + 0x08) & 0x2 != 0) // SHF_ALLOC
-        .map(|i| {
-            let h = header(i);
-            let name_at = strtab + u32_at(h) as usize;
-            let end = elf[name_at..].iter().position(|&b| b == 0).unwrap_or(0);
-            (String::from_utf8_lossy(&elf[name_at..name_at + end]).into_owned(), u32_at(h + 0x0C), u32_at(h + 0x14))
-        })
-        .collect()
+    section_headers(elf).into_iter().filter(|s| s.flags & ALLOC != 0).map(|s| (s.name, s.address, s.size)).collect()
 }
 
 /// Every feature on at once: a position move and a streamed sine through the 6th-order

@@ -3,6 +3,7 @@
 pub mod args;
 pub mod backbone_command;
 pub mod campaign_command;
+pub mod elf_sections;
 pub mod fault_campaign;
 pub mod firmware;
 pub mod firmware_command;

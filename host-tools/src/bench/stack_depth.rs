@@ -10,12 +10,14 @@
 //! Indirect calls (`blx rN`, `bx rN`) may reach any function whose address the image holds (in
 //! a literal pool, `.rodata`, `.data` or built by `movw`/`movt`) but a task's poll, and an
 //! executor's run loop the poll functions of the tasks it runs ([`EXECUTORS`]) as well: without
-//! that split every task would nest in every other (through a waker or a formatter). Recursion through them (core's formatting, defmt's) is cut where a path meets
-//! a function already on it, and reported: the bound is over paths that do not repeat a
-//! function (nearly: a deepest path found while other members of a recursive group were on
-//! the path is memoised and reused from another entry into the group, so the figure can
-//! depend on the visiting order there; on today's images reversing the order gives the same
-//! figures, and the groups' frames are small: 192 and 136 bytes on the drive image). Writes to `sp` the analysis does not know (`sub sp, rN`, `mov sp, rN`) fail it.
+//! that split every task would nest in every other (through a waker or a formatter).
+//! Recursion through them (core's formatting, defmt's) is cut where a path meets a function
+//! already on it, and reported: the bound is over paths that do not repeat a function
+//! (nearly: a deepest path found while other members of a recursive group were on the path is
+//! memoised and reused from another entry into the group, so the figure can depend on the
+//! visiting order there; on today's images reversing the order gives the same figures, and
+//! the groups' frames are small: 192 and 136 bytes on the drive image). Writes to `sp` the
+//! analysis does not know (`sub sp, rN`, `mov sp, rN`) fail it.
 
 use std::collections::{BTreeMap, BTreeSet, HashMap};
 use std::path::Path;
@@ -23,6 +25,8 @@ use std::process::Command;
 
 use anyhow::{bail, Context, Result};
 use serde::Serialize;
+
+use crate::bench::elf_sections::section_headers;
 
 /// Bytes an exception adds to the stack it interrupts: eight core registers and, with the FPU
 /// in use, 18 more words (S0–S15, FPSCR, a reserved word), and up to 4 bytes of alignment.
@@ -61,6 +65,11 @@ pub struct StackBound {
 }
 
 impl StackBound {
+    /// The worst case fits the stack.
+    pub fn fits(&self) -> bool {
+        self.worst <= self.stack
+    }
+
     /// The thread's path and the named handlers' (by a part of their names, case-insensitive),
     /// each with its exception frame: the bound of a program in which only those fire.
     pub fn running_bound(&self, handler_names: &str) -> u32 {
@@ -369,28 +378,14 @@ fn run(tool: &str, args: &[&str], elf: &Path) -> Result<String> {
 /// The aligned words of `.rodata` and `.data`, and the vector table's entries (after the
 /// initial stack pointer), from the ELF's section contents.
 fn section_words(elf: &[u8]) -> (Vec<u32>, Vec<u32>) {
-    let u16_at = |o: usize| u16::from_le_bytes([elf[o], elf[o + 1]]) as usize;
-    let u32_at = |o: usize| u32::from_le_bytes([elf[o], elf[o + 1], elf[o + 2], elf[o + 3]]);
     let (mut data, mut vectors) = (Vec::new(), Vec::new());
-    if elf.len() < 0x34 || &elf[..5] != b"\x7fELF\x01" {
-        return (data, vectors);
-    }
-    let (shoff, shentsize, shnum, shstrndx) = (u32_at(0x20) as usize, u16_at(0x2E), u16_at(0x30), u16_at(0x32));
-    let header = |i: usize| shoff + i * shentsize;
-    let strtab = u32_at(header(shstrndx) + 0x10) as usize;
-    for i in 0..shnum {
-        let h = header(i);
-        let name_at = strtab + u32_at(h) as usize;
-        let end = elf[name_at..].iter().position(|&b| b == 0).unwrap_or(0);
-        let name = &elf[name_at..name_at + end];
-        let (kind, offset, size) = (u32_at(h + 0x04), u32_at(h + 0x10) as usize, u32_at(h + 0x14) as usize);
-        if kind != 1 || offset + size > elf.len() {
-            continue; // not PROGBITS (.bss, .uninit) or not in the file
-        }
-        let words = (offset..offset + size - size % 4).step_by(4).map(u32_at);
-        match name {
-            b".rodata" | b".data" => data.extend(words),
-            b".vector_table" => vectors.extend(words.skip(1)),
+    for section in section_headers(elf) {
+        // Not PROGBITS (.bss, .uninit) or not in the file: no words.
+        let Some(bytes) = section.contents(elf) else { continue };
+        let words = bytes.chunks_exact(4).map(|w| u32::from_le_bytes([w[0], w[1], w[2], w[3]]));
+        match section.name.as_str() {
+            ".rodata" | ".data" => data.extend(words),
+            ".vector_table" => vectors.extend(words.skip(1)),
             _ => {}
         }
     }
