@@ -28,8 +28,9 @@ use crate::stop_sequence::{Refusal, SequenceEvent};
 
 /// Protocol version 9: the telemetry carries the drive's unused stack
 /// ([`DriveTelemetry::stack_free_bytes`]: the bytes of its painted stack never touched since
-/// boot), so that a stack about to run into the statics shows before it does. Version 8: each streamed acquisition sample says whether the drive's output was
-/// limited during its acquisition period (a flag bit beside `measuring`, the same byte on the
+/// boot), so that a stack about to run into the statics shows before it does. Version 8: each
+/// streamed acquisition sample says whether the drive's output was limited during its
+/// acquisition period (a flag bit beside `measuring`, the same byte on the
 /// line: see [`crate::acquisition_stream::SAMPLE_LIMITED`]), so that the host counts every
 /// result's share from the stream; the telemetry's copy of the last sample (serde's derived
 /// encoding) grows by that flag's byte. Version 7: the telemetry's sweep status carries the
@@ -464,15 +465,21 @@ mod tests {
         }
     }
 
-    /// Version 6: the save's answer and the telemetry carry the record number through a frame,
-    /// and the core (no parameter storage) reports none.
-    #[test]
-    fn the_record_number_survives_a_frame_and_the_core_has_none() {
+    /// A default axis and the core's answer to `GetTelemetry`.
+    fn core_telemetry() -> (Axis, DriveTelemetry) {
         let mut axis = Axis::new(Params::default()).unwrap();
         let (mut commands, mut stream) = (Commands::default(), AcquisitionStream::default());
         let Response::Telemetry(t) = handle(&mut axis, &mut commands, &mut stream, Request::GetTelemetry) else {
             panic!("no telemetry")
         };
+        (axis, t)
+    }
+
+    /// Version 6: the save's answer and the telemetry carry the record number through a frame,
+    /// and the core (no parameter storage) reports none.
+    #[test]
+    fn the_record_number_survives_a_frame_and_the_core_has_none() {
+        let (axis, t) = core_telemetry();
         assert_eq!((t.axis, t.params_record), (*axis.telemetry(), None));
         for r in [
             Response::Saved { sequence: u32::MAX },
@@ -490,11 +497,7 @@ mod tests {
     /// one tag byte, a value the varint's one to five bytes more.
     #[test]
     fn the_unused_stack_survives_a_frame_and_the_core_has_none() {
-        let mut axis = Axis::new(Params::default()).unwrap();
-        let (mut commands, mut stream) = (Commands::default(), AcquisitionStream::default());
-        let Response::Telemetry(t) = handle(&mut axis, &mut commands, &mut stream, Request::GetTelemetry) else {
-            panic!("no telemetry")
-        };
+        let (_, t) = core_telemetry();
         assert_eq!(t.stack_free_bytes, None);
         let body = |r: &Response| postcard::to_slice(r, &mut [0u8; MAX_FRAME]).unwrap().len();
         let none = body(&Response::Telemetry(t));

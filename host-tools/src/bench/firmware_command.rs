@@ -37,7 +37,6 @@ fn bench_firmware(args: &FirmwareBenchArgs) -> Result<bool> {
     pb.finish_and_clear();
     let off_goal = off.parameter_changes <= INTERRUPTS_OFF_GOAL;
     let per_tick_all = all.instructions_per_tick.unwrap_or(f64::INFINITY);
-    let stack_fits = stack.worst <= stack.stack;
     // The analysis checked against a run: on the interrupts-off image the thread's path and
     // the handler that can fire there (SysTick, with its exception frame) must cover the
     // deepest the painted stack went (not the whole bound: its fault handlers' paths and
@@ -47,7 +46,7 @@ fn bench_firmware(args: &FirmwareBenchArgs) -> Result<bool> {
         && all.identical
         && size.flash <= FLASH_GOAL
         && size.ram <= RAM_GOAL
-        && stack_fits
+        && stack.fits()
         && bound_holds;
     let tick_goal = per_tick_all <= TICK_GOAL;
     if common.json {
@@ -121,7 +120,7 @@ fn print_stack(stack: &crate::bench::stack_depth::StackBound) {
         "  drive-g474 stack: worst path {} of {} bytes → {} ({} bytes left; from the ELF: the thread's deepest path, every interrupt handler's nested on it, {} bytes of exception frame each)",
         stack.worst,
         stack.stack,
-        if stack.worst <= stack.stack { "fits" } else { "DOES NOT FIT" },
+        if stack.fits() { "fits" } else { "DOES NOT FIT" },
         stack.stack as i64 - stack.worst as i64,
         EXCEPTION_FRAME_BYTES
     );

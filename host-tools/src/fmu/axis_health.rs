@@ -46,8 +46,9 @@ pub fn first_trip(trace: &Trace) -> Result<Option<Trip>> {
 }
 
 /// The largest torque the drive commands with `parameters` without a clamp cutting it, for a
-/// run with no injection and no dither (a circle): its torque limit, or the current limit's
-/// torque (kt·max_current) where that is lower ([`TorqueCeiling`]).
+/// run with no injection and no dither (a circle, tune's streamed multisine): its torque
+/// limit, or the current limit's torque (kt·max_current) where that is lower
+/// ([`TorqueCeiling`]).
 pub fn torque_ceiling(parameters: &BTreeMap<String, Value>) -> Result<TorqueCeiling> {
     let c = configuration(parameters)?.control;
     Ok(TorqueCeiling::of(&c, ExcitationEntry::BeforeTheLoopClamp, 0.0))

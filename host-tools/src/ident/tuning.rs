@@ -19,14 +19,13 @@ use servo_axis::variables::name;
 use std::collections::BTreeMap;
 
 use anyhow::{bail, Result};
-use control_core::torque_ceiling::{ExcitationEntry, TorqueCeiling};
 use num_complex::Complex64;
 use serde::Serialize;
 
 use crate::analysis::response_point::ResponsePoint;
 use crate::analysis::spectral::dft_bin;
 use crate::correction::{drive_frame, validate, AxisCorrection, Section};
-use crate::fmu::axis_health::current_near_ceiling;
+use crate::fmu::axis_health::{current_near_ceiling, torque_ceiling};
 use crate::fmu::configuration::configuration;
 use crate::fmu::runner::Fmu;
 use crate::fmu::scenario::{Scenario, Value, DEFAULT_STEP};
@@ -113,7 +112,7 @@ pub fn command_to_load(
     if let Some(trip) = crate::fmu::axis_health::first_trip(&trace)? {
         bail!("the axis tripped during the multisine: {}; its response cannot be measured this way", trip.sentence());
     }
-    let ceiling = TorqueCeiling::of(&configuration(parameters)?.control, ExcitationEntry::BeforeTheLoopClamp, 0.0);
+    let ceiling = torque_ceiling(parameters)?;
     if let Some(largest) = current_near_ceiling(&trace, &ceiling)? {
         bail!(
             "the multisine drove the current to {largest:.2} A, near the {} A limit ({ceiling}): the measured response would not be linear (the correction filter lifts the command too much near a lightly damped mode?)",

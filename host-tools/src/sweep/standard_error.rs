@@ -27,7 +27,9 @@
 //! the excitation frequency through all the kept samples: it looks like response (on the
 //! light, soft axis of `servo bench sweep --detail` the default sweep was 0.02 dB and 0.6°
 //! off at 43–50 Hz in every noise seed, 2–4 standard errors; with 0.5 s of settling the error
-//! went away).
+//! went away). The drive's settling check now waits out such a ring where its half blocks'
+//! differences tell it (`control_core::phase_shifted_sweep`'s settling check); one they do
+//! not tell stays unseen here too.
 
 use std::f64::consts::LN_10;
 
@@ -264,8 +266,8 @@ mod tests {
     }
 
     /// The experiment the errors must predict: samples of u = sin and y = g·sin shifted,
-    /// each with its own realisation of `noise` (on u, on y), fitted many times. The spread of the
-    /// fitted gain (dB) and phase (deg) over the realisations is the truth (Monte Carlo);
+    /// each with its own realisation of `noise` (on u, on y), fitted many times. The spread of
+    /// the fitted gain (dB) and phase (deg) over the realisations is the truth (Monte Carlo);
     /// returned with the root mean square of the reported standard errors, and of the
     /// model's alone.
     fn monte_carlo(
@@ -305,8 +307,9 @@ mod tests {
     }
 
     /// White noise on U and on Y, partly the same with the opposite sign (as where U carries
-    /// the loop's reaction to the noise of Y; the errors of Y and U then add): model and reported errors both match the Monte-Carlo spread (within
-    /// 15 %; the reported one, the larger of two estimates, lies at or above it).
+    /// the loop's reaction to the noise of Y; the errors of Y and U then add): model and
+    /// reported errors both match the Monte-Carlo spread (within 15 %; the reported one, the
+    /// larger of two estimates, lies at or above it).
     #[test]
     fn under_white_noise_the_standard_error_is_the_monte_carlo_spread() {
         let phases: Vec<(f64, i64)> = record(600, 0.2, 0.0, 0).collect();
