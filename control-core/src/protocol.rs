@@ -26,7 +26,8 @@ use crate::ranges::{check_position, Quantity, RangeError};
 use crate::response_correction::CorrectionParams;
 use crate::stop_sequence::{Refusal, SequenceEvent};
 
-/// Protocol version 9: the telemetry carries the drive's unused stack
+/// Protocol version 10: the parameters carry the sweep's time budget
+/// (`SweepParams::time_budget_s`). Version 9: the telemetry carries the drive's unused stack
 /// ([`DriveTelemetry::stack_free_bytes`]: the bytes of its painted stack never touched since
 /// boot), so that a stack about to run into the statics shows before it does. Version 8: each
 /// streamed acquisition sample says whether the drive's output was limited during its
@@ -45,7 +46,7 @@ use crate::stop_sequence::{Refusal, SequenceEvent};
 /// board's PWM rate are refused with that rate; version 4: `SaveParams`, and the answer to `Hello` says where the
 /// drive's parameters came from at boot; version 3: CRC-32C instead of CRC-16, trailing bytes
 /// refused, range refusals).
-pub const VERSION: u16 = 9;
+pub const VERSION: u16 = 10;
 /// Largest encoded frame, COBS body without its terminator (a full parameter set fits with
 /// room to spare).
 pub const MAX_FRAME: usize = 1024;

@@ -21,6 +21,11 @@ fn count(name: &str, v: i32) -> Result<u32, String> {
     u32::try_from(v).map_err(|_| format!("{name} must not be negative (got {v})"))
 }
 
+/// A count the core keeps in 16 bits (the sweep's shifts and repeats, at most 16).
+fn short_count(name: &str, v: i32) -> Result<u16, String> {
+    u16::try_from(v).map_err(|_| format!("{name} must be 0 to 65535 (got {v})"))
+}
+
 /// The whole configuration of the simulated axis.
 pub fn simulation_config(v: &Values) -> Result<SimulationConfig, String> {
     let pole_pairs = count("plant.pole_pairs", v.plant_pole_pairs)?;
@@ -192,8 +197,8 @@ fn sweep(v: &Values) -> Result<SweepParams, String> {
         min_settle_s: v.sweep_min_settle_s as f32,
         measure_cycles: v.sweep_measure_cycles as f32,
         min_measure_s: v.sweep_min_measure_s as f32,
-        shifts: count("sweep.shifts", v.sweep_shifts)?,
-        repeats: count("sweep.repeats", v.sweep_repeats)?,
+        shifts: short_count("sweep.shifts", v.sweep_shifts)?,
+        repeats: short_count("sweep.repeats", v.sweep_repeats)?,
         threshold_hz: v.sweep_threshold_hz as f32,
         acquisition_divider: count("sweep.acquisition_divider", v.sweep_acquisition_divider)?,
         prbs_degree: count("sweep.prbs_degree", v.sweep_prbs_degree)?,
@@ -202,6 +207,7 @@ fn sweep(v: &Values) -> Result<SweepParams, String> {
         precision_db: v.sweep_precision_db as f32,
         max_extensions: count("sweep.max_extensions", v.sweep_max_extensions)?,
         dither: v.sweep_dither as f32,
+        time_budget_s: v.sweep_time_budget_s as f32,
         measure: SweepMeasure::from_code(v.sweep_measure).ok_or_else(|| {
             format!(
                 "sweep.measure must be 0 (the point's signals) or 1 (torque → machine-end acceleration), got {}",
@@ -267,8 +273,8 @@ pub fn sweep_values(s: &SweepParams) -> Vec<(&'static str, Value)> {
         (name::sweep_min_settle_s, f(s.min_settle_s)),
         (name::sweep_measure_cycles, f(s.measure_cycles)),
         (name::sweep_min_measure_s, f(s.min_measure_s)),
-        (name::sweep_shifts, i(s.shifts)),
-        (name::sweep_repeats, i(s.repeats)),
+        (name::sweep_shifts, i(s.shifts.into())),
+        (name::sweep_repeats, i(s.repeats.into())),
         (name::sweep_threshold_hz, f(s.threshold_hz)),
         (name::sweep_acquisition_divider, i(s.acquisition_divider)),
         (name::sweep_prbs_degree, i(s.prbs_degree)),
@@ -277,6 +283,7 @@ pub fn sweep_values(s: &SweepParams) -> Vec<(&'static str, Value)> {
         (name::sweep_precision_db, f(s.precision_db)),
         (name::sweep_max_extensions, i(s.max_extensions)),
         (name::sweep_dither, f(s.dither)),
+        (name::sweep_time_budget_s, f(s.time_budget_s)),
         (name::sweep_measure, Value::Int32(s.measure.code())),
     ]
 }

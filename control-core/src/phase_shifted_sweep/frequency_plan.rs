@@ -82,7 +82,7 @@ impl SweepParams {
     /// Records at frequency f.
     pub fn records(&self, f: f32, base_rate_hz: f32) -> u32 {
         if f >= self.threshold(base_rate_hz) {
-            self.repeats
+            self.repeats as u32
         } else {
             1
         }
@@ -116,9 +116,34 @@ impl SweepParams {
     /// `2·max_extensions` half blocks of the block `min_measure_s` gives, the same time where
     /// the block is halved (twice as many of them then).
     pub fn half_block_cap(&self, f: f32, base_rate_hz: f32) -> u32 {
+        self.half_blocks_of(self.max_extensions, f, base_rate_hz)
+    }
+
+    /// `2·extensions` half blocks of the full block at f, in half blocks of the record's own.
+    fn half_blocks_of(&self, extensions: u32, f: f32, base_rate_hz: f32) -> u32 {
         let samples = self.record_length(f, base_rate_hz).1;
+        self.half_blocks_in(extensions, samples, f, base_rate_hz)
+    }
+
+    /// [`Self::half_blocks_of`] for a record of `samples` at f: `2·extensions` where the block
+    /// is the full one (no division: the longest sum takes it for every frequency, when the
+    /// sweep is built), as many more as the block is shorter.
+    pub(super) fn half_blocks_in(&self, extensions: u32, samples: u64, f: f32, base_rate_hz: f32) -> u32 {
         let full = self.block_samples(f, base_rate_hz, self.min_measure_s);
-        ((2 * self.max_extensions as u64).saturating_mul(full) / samples).min(u32::MAX as u64) as u32
+        if samples == full {
+            return 2 * extensions;
+        }
+        ((2 * extensions as u64).saturating_mul(full) / samples).min(u32::MAX as u64) as u32
+    }
+
+    /// Base ticks of the time budget (`time_budget_s`; 0 without one, or without precision
+    /// control, which alone uses it).
+    pub fn budget_ticks(&self, base_rate_hz: f32) -> u64 {
+        if self.precision_db > 0.0 && self.max_extensions > 0 && self.time_budget_s > 0.0 {
+            libm::floorf(self.time_budget_s * base_rate_hz) as u64
+        } else {
+            0
+        }
     }
 
     /// The shortest measurement of a record at f: `min_measure_s`, and half of it below half
@@ -156,10 +181,45 @@ impl SweepParams {
     }
 
     /// Base ticks of the sweep when every frequency's records take all the half blocks they
-    /// can ([`Self::half_block_cap`]) and its first record discards as many while settling:
-    /// the longest it can run.
+    /// can ([`Self::half_block_cap`]) and its first record discards as many while settling,
+    /// or the time budget where that is longer (a record goes past its cap only while the
+    /// sweep still ends within it: see `time_budget_s`): the longest it can run.
     pub fn max_total_ticks(&self, base_rate_hz: f32) -> u64 {
-        self.ticks_with_extensions(base_rate_hz, self.precision_db > 0.0)
+        self.ticks_with_extensions(base_rate_hz, self.precision_db > 0.0).max(self.budget_ticks(base_rate_hz))
+    }
+
+    /// The longest a frequency f can take (its records at their cap, as many half blocks
+    /// discarded while the first settles, and the wait for the next frequency's peak unless it
+    /// is the `last`): [`Self::max_total_ticks`]'s share of it, without the budget.
+    pub fn longest_point_ticks(&self, f: f32, last: bool, base_rate_hz: f32) -> u64 {
+        let d = self.acquisition_divider as u64;
+        let (settle, samples) = self.record_length(f, base_rate_hz);
+        // A stage lasts at least one tick (see `PhaseShiftedSweep::set_left`).
+        let settle = settle.max(1);
+        let halves = if self.precision_db > 0.0 {
+            self.half_blocks_in(self.max_extensions, samples, f, base_rate_hz) as u64
+        } else {
+            0
+        };
+        let half = (samples / 2).saturating_mul(d);
+        let record = settle.saturating_add(samples.saturating_mul(d)).saturating_add(half.saturating_mul(halves));
+        let discarded = half.saturating_mul(halves);
+        let wait = if last { 0 } else { self.peak_wait_bound(f, base_rate_hz) };
+        record.saturating_mul(self.records(f, base_rate_hz) as u64).saturating_add(discarded).saturating_add(wait)
+    }
+
+    /// The sum of [`Self::longest_point_ticks`] over the frequencies of `plan`.
+    pub fn longest_ticks(&self, plan: &FrequencyPlan, base_rate_hz: f32) -> u64 {
+        let count = plan.count as usize;
+        (0..count).fold(0u64, |total, i| {
+            total.saturating_add(self.longest_point_ticks(self.frequency_in(plan, i), i + 1 == count, base_rate_hz))
+        })
+    }
+
+    /// The longest wait for the next frequency's start at the sine's next peak (half a
+    /// period and a tick; see `PhaseShiftedSweep::next_frequency`).
+    pub(super) fn peak_wait_bound(&self, f: f32, base_rate_hz: f32) -> u64 {
+        libm::ceilf(0.5 * base_rate_hz / f) as u64 + 1
     }
 
     /// With `longest`, every record lengthened by its cap of half blocks and as many half
@@ -167,41 +227,32 @@ impl SweepParams {
     /// without, none.
     fn ticks_with_extensions(&self, base_rate_hz: f32, longest: bool) -> u64 {
         let d = self.acquisition_divider as u64;
+        let plan = self.plan();
         match self.signal {
             SweepSignal::Prbs => {
                 self.prbs_settle_ticks(base_rate_hz).saturating_add(self.prbs_samples(base_rate_hz).saturating_mul(d))
             }
+            SweepSignal::SteppedSine if longest => self.longest_ticks(&plan, base_rate_hz),
             SweepSignal::SteppedSine => {
                 // The sine's phase is followed along the schedule as the runner builds each
                 // record's generator, so that the wait for the next frequency's peak (see
-                // `PhaseShiftedSweep::next_frequency`) is exact when nothing is extended;
-                // with extensions it is bounded by half a period.
+                // `PhaseShiftedSweep::next_frequency`) is exact.
                 let mut generator = SineGenerator::default();
                 let mut total = 0u64;
-                let count = self.count();
+                let count = plan.count as usize;
                 for i in 0..count {
-                    let f = self.frequency(i);
+                    let f = self.frequency_in(&plan, i);
                     let (settle, samples) = self.record_length(f, base_rate_hz);
                     // A stage lasts at least one tick (see `PhaseShiftedSweep::set_left`).
-                    let settle = settle.max(1);
-                    let halves = if longest { self.half_block_cap(f, base_rate_hz) as u64 } else { 0 };
-                    let added = (samples / 2).saturating_mul(halves);
-                    let measure = samples.saturating_add(added).saturating_mul(d);
-                    let discarded = (samples / 2).saturating_mul(d).saturating_mul(halves);
+                    let ticks = settle.max(1).saturating_add(samples.saturating_mul(d));
                     for record in 0..self.records(f, base_rate_hz) {
                         let shift = if record == 0 { 0.0 } else { TAU / self.shifts as f32 };
-                        let ticks =
-                            settle.saturating_add(measure).saturating_add(if record == 0 { discarded } else { 0 });
                         let start = phase_angle(generator.phase_word()) + shift;
                         generator = SineGenerator::new(1.0, f, base_rate_hz, start).advanced(ticks);
                         total = total.saturating_add(ticks);
                     }
                     if i + 1 < count {
-                        let wait = if !longest {
-                            generator.ticks_to_peak() as u64
-                        } else {
-                            libm::ceilf(0.5 * base_rate_hz / f) as u64 + 1
-                        };
+                        let wait = generator.ticks_to_peak() as u64;
                         generator = generator.advanced(wait);
                         total = total.saturating_add(wait);
                     }

@@ -252,12 +252,34 @@ pub struct PhaseShiftedSweep {
     results: [SweepResult; MAX_SWEEP_POINTS],
     /// The parameters' frequency plan, found when the sweep is built (outside the tick).
     plan: FrequencyPlan,
+    /// The time budget's base ticks less the longest every frequency can take, found when the
+    /// sweep is built (see [`Self::extension_cap`]; [`NO_BUDGET`] without a budget); and while
+    /// it runs, the budget's ticks left after the stages begun so far and the longest of the
+    /// frequencies after the present one: what the present one may take in all (see
+    /// `SweepParams::time_budget_s`). 32-bit: the budget and the sum are kept below 2³⁰ ticks
+    /// (18 h at 16 kHz), so that neither can overflow; and a 64-bit field would align the
+    /// sweep to 8 bytes and move the axis's fields (the tick's loads went 36 instructions
+    /// longer on the Cortex-M4, `servo bench firmware`).
+    budget_over_longest: i32,
+    budget_left: i32,
 }
+
+/// [`PhaseShiftedSweep::budget_over_longest`] without a time budget: no budget
+/// (`time_budget_s` 0, no precision control, the PRBS mode), or a budget or a sweep of
+/// 2³⁰ ticks or more.
+const NO_BUDGET: i32 = i32::MIN;
+
+/// The most ticks a time budget, or the longest the sweep can take with one, may count.
+const MAX_BUDGET_TICKS: u64 = 1 << 30;
 
 impl PhaseShiftedSweep {
     pub fn new(params: SweepParams, base_rate_hz: f32) -> Self {
+        let plan = params.plan();
+        let budget_over_longest = Self::budget_over_longest(&params, &plan, base_rate_hz);
         Self {
-            plan: params.plan(),
+            plan,
+            budget_over_longest,
+            budget_left: NO_BUDGET,
             params,
             base_rate_hz,
             status: SweepStatus::default(),
@@ -291,6 +313,24 @@ impl PhaseShiftedSweep {
             phase_word: 0,
             angle: ReducedAngle::default(),
             results: [SweepResult::default(); MAX_SWEEP_POINTS],
+        }
+    }
+
+    /// [`Self::budget_over_longest`] of these settings: the budget's ticks less the longest
+    /// the sweep can take, or [`NO_BUDGET`]. A pass over the frequencies (a power and a
+    /// record length each), when the sweep is built; out of line, so that the constructor
+    /// (an axis of 20 KiB built in place) stays as it was.
+    #[inline(never)]
+    fn budget_over_longest(params: &SweepParams, plan: &FrequencyPlan, base_rate_hz: f32) -> i32 {
+        let budget = params.budget_ticks(base_rate_hz);
+        if params.signal != SweepSignal::SteppedSine || budget == 0 || budget >= MAX_BUDGET_TICKS {
+            return NO_BUDGET;
+        }
+        let longest = params.longest_ticks(plan, base_rate_hz);
+        if longest < MAX_BUDGET_TICKS {
+            budget as i32 - longest as i32
+        } else {
+            NO_BUDGET
         }
     }
 
@@ -328,6 +368,7 @@ impl PhaseShiftedSweep {
         self.dither_state = DITHER_SEED;
         self.dither = 0.0;
         self.aligning = false;
+        self.budget_left = self.budget_over_longest;
         self.begin_record(0, 0);
         Ok(())
     }
@@ -347,6 +388,8 @@ impl PhaseShiftedSweep {
             self.dithering = false;
             self.segment = 0;
             self.aligning = true;
+            // The first frequency begins (and takes its longest from the budget) after the wait.
+            self.budget_left = self.budget_over_longest;
             self.set_left(ticks as u64);
         }
         Ok(())
@@ -377,6 +420,12 @@ impl PhaseShiftedSweep {
         self.generator = SineGenerator::new(p.amplitude, f, self.base_rate_hz, initial);
         let ticks = p.record_length(f, self.base_rate_hz).0;
         if record == 0 {
+            if self.budget_over_longest != NO_BUDGET {
+                // The present frequency leaves the later ones: its own longest is now its to
+                // take (below 2³⁰ ticks, as their sum).
+                let last = point as usize + 1 >= self.plan.count as usize;
+                self.budget_left += p.longest_point_ticks(f, last, self.base_rate_hz) as i32;
+            }
             self.acc = SineFitSums::default();
             self.extensions = 0;
             self.half_start = SineFitSums::default();
@@ -495,7 +544,10 @@ impl PhaseShiftedSweep {
 
     /// The present stage lasts `ticks` more ticks, this one included (at least this one).
     fn set_left(&mut self, ticks: u64) {
-        let rest = ticks.max(1) - 1;
+        let ticks = ticks.max(1);
+        // Without a budget `budget_left` stays at its floor (a stage's ticks may reach 2⁴⁴).
+        self.budget_left = self.budget_left.saturating_sub(ticks.min(i32::MAX as u64) as i32);
+        let rest = ticks - 1;
         self.left = rest as u32;
         self.left_high = (rest >> 32) as u32;
     }
@@ -562,7 +614,7 @@ impl PhaseShiftedSweep {
                             return;
                         }
                     }
-                    self.extensions = self.halves_needed(records);
+                    self.extensions = self.halves_needed(records, self.extension_cap(records));
                     if self.spread.half_blocks > 0 {
                         // Measured on in half blocks, each checked (see `next_half_block`).
                         if self.extensions > 0 {

@@ -30,9 +30,8 @@ pub(super) const EARLY_HALF_BLOCKS: u32 = 6;
 const EARLY_MARGIN: f32 = 2.0;
 
 impl PhaseShiftedSweep {
-    /// Extra half blocks per record (at most
-    /// [`SweepParams::half_block_cap`](super::SweepParams::half_block_cap): `2·max_extensions`
-    /// of the full block) for the standard errors of the response, gain's and phase's, to reach
+    /// Extra half blocks per record (at most `cap`: [`Self::extension_cap`] or, for a
+    /// prediction that must not count on the budget, the cap of `max_extensions`) for the standard errors of the response, gain's and phase's, to reach
     /// `precision_db` (the phase's: the same relative size, `precision_db·ln10/20`
     /// rad, 0.2° at 0.03 dB) over all `records`, predicted from the first base block (error ∝
     /// 1/√samples).
@@ -40,7 +39,7 @@ impl PhaseShiftedSweep {
     // told or followed (`record_half_blocks`): kept out of line so that the every-tick path
     // stays small.
     #[inline(never)]
-    pub(super) fn halves_needed(&self, records: u32) -> u32 {
+    pub(super) fn halves_needed(&self, records: u32, cap: u32) -> u32 {
         let p = &self.params;
         if !(p.precision_db > 0.0) || p.max_extensions == 0 {
             return 0;
@@ -52,7 +51,6 @@ impl PhaseShiftedSweep {
         let ratio = error.gain.max(error.phase) / target;
         // Half blocks per record (the base block is two).
         let halves = libm::ceilf(2.0 * ratio * ratio / records as f32);
-        let cap = p.half_block_cap(self.status.frequency, self.base_rate_hz);
         // Compared as floats: a huge ratio must not wrap in the conversion.
         if halves <= 2.0 {
             0
@@ -78,8 +76,7 @@ impl PhaseShiftedSweep {
         self.half_start = self.acc;
         // The base block's two and the extension's so far.
         let measured = self.spread.half_blocks;
-        let p = &self.params;
-        let target = p.relative_precision();
+        let target = self.params.relative_precision();
         let error = self.spread.relative_error();
         if measured < 2 + self.extensions {
             // Done early when enough half blocks put the error far below the precision.
@@ -87,8 +84,8 @@ impl PhaseShiftedSweep {
                 self.spread.count >= EARLY_HALF_BLOCKS && error.is_some_and(|e| e * EARLY_MARGIN <= target);
             return !done_early;
         }
-        let cap = p.half_block_cap(self.status.frequency, self.base_rate_hz);
         let Some(error) = error else { return false };
+        let cap = self.extension_cap(1);
         let ratio = error / target;
         if !(ratio > SPREAD_MARGIN) || self.extensions >= cap {
             return false;
@@ -99,5 +96,44 @@ impl PhaseShiftedSweep {
             if wanted > (cap + 2) as f32 { cap - self.extensions } else { (wanted as u32).saturating_sub(measured) };
         self.extensions = (self.extensions + more).min(cap);
         more > 0
+    }
+}
+
+impl PhaseShiftedSweep {
+    /// The most half blocks each of the present frequency's `records` may add: the cap of
+    /// `max_extensions` ([`SweepParams::half_block_cap`](super::SweepParams::half_block_cap)),
+    /// or more, up to the cap of [`MAX_EXTENSIONS`](super::MAX_EXTENSIONS), where the time
+    /// budget has room for them: the frequency's remaining half blocks, its later records (at
+    /// their base length, with their settling) and the wait for the next frequency's peak fit in
+    /// what is left of the budget once every later frequency is given its own longest
+    /// (`budget_left`). So a grant never costs a later frequency its cap, and the sweep ends
+    /// within the budget whenever a record went past its cap. Called at the end of the first
+    /// record's base block (`records` of them) and, below the threshold, at the end of each
+    /// of its half blocks (one record; those already measured count as taken).
+    pub(super) fn extension_cap(&self, records: u32) -> u32 {
+        let p = &self.params;
+        let (f, rate) = (self.status.frequency, self.base_rate_hz);
+        let (settle, samples) = p.record_length(f, rate);
+        let cap = p.half_blocks_in(p.max_extensions, samples, f, rate);
+        if self.budget_over_longest == super::NO_BUDGET || self.budget_left <= 0 {
+            return cap;
+        }
+        // With a budget every frequency's longest is below 2³⁰ ticks (see
+        // `MAX_BUDGET_TICKS`), and with it each of the terms below: 64-bit sums cannot overflow.
+        let d = p.acquisition_divider as u64;
+        let half = ((samples / 2) * d).max(1);
+        let later_records = records.saturating_sub(1 + self.status.record) as u64;
+        let last = self.status.point as usize + 1 >= self.plan.count as usize;
+        let wait = if last { 0 } else { p.peak_wait_bound(f, rate) };
+        let fixed = later_records * (settle.max(1) + samples * d) + wait;
+        // Half blocks of this record's extension already measured (and paid for).
+        let taken = self.spread.half_blocks.saturating_sub(2) as u64;
+        let room = self.budget_left as i64 + (taken * half) as i64 - fixed as i64;
+        if room <= 0 {
+            return cap;
+        }
+        let granted = room as u64 / (half * records.max(1) as u64);
+        let most = p.half_blocks_in(super::MAX_EXTENSIONS, samples, f, rate);
+        (granted.min(most as u64) as u32).max(cap)
     }
 }

@@ -7,7 +7,7 @@ use super::{SweepMeasure, SweepSignal, MAX_SWEEP_POINTS};
 use crate::excitation::InjectionPoint;
 use crate::m_sequence::MSequence;
 
-const MAX_SHIFTS: u32 = 16;
+const MAX_SHIFTS: u16 = 16;
 /// Upper bound of `SweepParams::max_extensions`.
 pub const MAX_EXTENSIONS: u32 = 64;
 /// Fewest acquisition samples a stepped sine's record may hold: the three-parameter fit and
@@ -40,10 +40,13 @@ pub struct SweepParams {
     /// [`SweepParams::record_length`]).
     pub measure_cycles: f32,
     pub min_measure_s: f32,
-    /// Phase step 2π/shifts between repeats.
-    pub shifts: u32,
+    /// Phase step 2π/shifts between repeats. 16-bit, as `repeats` (at most 16 each): the two
+    /// leave room for `time_budget_s` without growing the settings, whose size moves the
+    /// axis's fields (4 bytes more took the tick 34 instructions longer on the Cortex-M4,
+    /// `servo bench firmware`); on the link postcard encodes both widths alike.
+    pub shifts: u16,
     /// Records per frequency at and above the threshold.
-    pub repeats: u32,
+    pub repeats: u16,
     /// Phase shifting from this frequency up (0: the acquisition Nyquist frequency).
     pub threshold_hz: f32,
     /// Base ticks per acquisition sample (a multiple of the velocity divider).
@@ -67,6 +70,15 @@ pub struct SweepParams {
     /// discarded while its first record settles; where the base block is halved the cap stays
     /// the same in time (twice as many half blocks: see [`SweepParams::half_block_cap`]).
     pub max_extensions: u32,
+    /// Stepped sine with precision control: a record may take more half blocks than its cap
+    /// ([`SweepParams::half_block_cap`]: `max_extensions`), up to the cap of
+    /// [`MAX_EXTENSIONS`], when the sweep still ends within this time (s, from its start)
+    /// with every later frequency at its own longest (0: never). The frequencies that finish
+    /// early leave their time to those that need more, so the top of the sweep, where the
+    /// response is a few encoder counts and the cap leaves about 0.04 dB of spread, is
+    /// measured longer when the lower frequencies were quick; a sweep whose longest schedule
+    /// already fits goes no further than before (see `PhaseShiftedSweep::extension_cap`).
+    pub time_budget_s: f32,
     /// Stepped sine: a pseudo-random ±dither (N·m) added to the torque command on every base
     /// tick of the frequencies at and above the threshold, or 2 kHz where the threshold is
     /// higher (a faster loop; see `DITHER_FROM_HZ`), (0: none). At constant speed and
@@ -91,7 +103,9 @@ impl Default for SweepParams {
     /// (4 kHz at 16 kHz). The base records are short: the settling check lengthens the wait
     /// where the loop rings (see `PhaseShiftedSweep::settled`), the precision control the
     /// records where the response is noisy (near 3 kHz it is a few encoder counts per
-    /// velocity period).
+    /// velocity period), past their cap while the sweep still ends within 9.9 s (10 Hz–3 kHz
+    /// within 10 s, with a tenth to spare: a trace sees the end up to a communication step
+    /// late).
     fn default() -> Self {
         Self {
             point: InjectionPoint::VelocityCommand,
@@ -115,6 +129,7 @@ impl Default for SweepParams {
             prbs_seconds: 5.0,
             precision_db: 0.03,
             max_extensions: 8,
+            time_budget_s: 9.9,
             dither: 0.003,
             measure: SweepMeasure::Loop,
         }
@@ -342,6 +357,7 @@ impl SweepParams {
         finite_positive("prbs_seconds", self.prbs_seconds)?;
         finite_non_negative("precision_db", self.precision_db)?;
         finite_non_negative("dither", self.dither)?;
+        finite_non_negative("time_budget_s", self.time_budget_s)?;
         if self.max_extensions > MAX_EXTENSIONS {
             return Err(SweepError::Setting {
                 field: "max_extensions (at most 64)",
@@ -367,6 +383,7 @@ impl SweepParams {
         range("min_settle_s", self.min_settle_s, 0.0, MAX_SWEEP_SECONDS)?;
         range("min_measure_s", self.min_measure_s, 0.0, MAX_SWEEP_SECONDS)?;
         range("prbs_seconds", self.prbs_seconds, 0.0, MAX_SWEEP_SECONDS)?;
+        range("time_budget_s", self.time_budget_s, 0.0, MAX_SWEEP_SECONDS)?;
         range("dither", self.dither, 0.0, MAX_SWEEP_DITHER)?;
         range("acquisition_divider", self.acquisition_divider as f32, 1.0, MAX_SWEEP_DIVIDER as f32)?;
         range("prbs_divider", self.prbs_divider as f32, 1.0, MAX_SWEEP_DIVIDER as f32)?;

@@ -63,10 +63,10 @@ pub struct SweepArgs {
     pub min_measure: f64,
     /// Phase step 2π/shifts between repeats
     #[arg(long, default_value_t = 3)]
-    pub shifts: u32,
+    pub shifts: u16,
     /// Records per frequency at and above the threshold
     #[arg(long, default_value_t = 3)]
-    pub repeats: u32,
+    pub repeats: u16,
     /// Phase shifting from this frequency (Hz) up; 0 = the acquisition Nyquist frequency
     #[arg(long, default_value_t = 0.0)]
     pub threshold: f64,
@@ -92,6 +92,13 @@ pub struct SweepArgs {
     /// --min-measure) per record, and twice as many half blocks discarded while settling
     #[arg(long, default_value_t = 8)]
     pub max_extensions: u32,
+    /// Let a frequency's records go past --max-extensions (up to 64 blocks) while the whole
+    /// sweep still ends within this time from its start, every later frequency counted at its
+    /// own longest (s; 0 = never): frequencies that finish early leave their time to the top,
+    /// where the response is a few encoder counts. The default keeps 10 Hz–3 kHz within 10 s
+    /// with a tenth to spare (a trace sees the end up to a communication step late)
+    #[arg(long, default_value_t = 9.9)]
+    pub time_budget: f64,
     /// Constant speed the sweep rides on (rad/s; keeps friction on one side)
     #[arg(long, default_value_t = 50.0)]
     pub velocity: f64,

@@ -74,6 +74,7 @@ pub fn sweep_settings(args: &SweepArgs) -> Result<control_core::phase_shifted_sw
         acquisition_divider,
         precision_db: precision_db as f32,
         max_extensions,
+        time_budget_s: args.time_budget as f32,
         dither: args.dither as f32,
         ..Default::default()
     })
