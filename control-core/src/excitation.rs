@@ -95,6 +95,18 @@ impl SineGenerator {
         ((distance as u64 + (self.increment as u64 >> 1)) / self.increment as u64) as u32
     }
 
+    /// The most [`Self::ticks_to_peak`] can return at this frequency, from any phase: half a
+    /// turn over the increment, rounded as it rounds (at least one tick: a stage lasts one).
+    /// Not `ceil(fs/(2f)) + 1`: the increment is rounded to an integer, and at 0.01 Hz and
+    /// 16 kHz (2 684 rounded down from 2 684.35) the wait reaches 113 ticks more than that.
+    pub fn longest_wait_to_peak(&self) -> u32 {
+        if self.increment == 0 {
+            return 1;
+        }
+        let most = ((1u64 << 31) - 1 + (self.increment as u64 >> 1)) / self.increment as u64;
+        most.clamp(1, u32::MAX as u64) as u32
+    }
+
     /// The generator `ticks` samples on (the phase wraps as the accumulator does).
     pub fn advanced(self, ticks: u64) -> Self {
         let phase = self.phase.wrapping_add((self.increment as u64).wrapping_mul(ticks) as u32);

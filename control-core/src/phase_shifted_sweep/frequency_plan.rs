@@ -92,6 +92,9 @@ impl SweepParams {
     /// record at f: the longer of `measure_cycles` and the shortest measurement, which is
     /// `min_measure_s` from half the threshold up and half of it below while precision control
     /// runs (see `min_measure_at`).
+    // Once per stage, and per frequency where the time budget counts: out of line, one copy
+    // for its callers (the drive image's flash is within a few hundred bytes of its goal).
+    #[inline(never)]
     pub fn record_length(&self, f: f32, base_rate_hz: f32) -> (u64, u64) {
         let d = self.acquisition_divider as f32;
         let settle = libm::ceilf(self.min_settle_s.max(self.settle_cycles / f) * base_rate_hz / d) as u64;
@@ -131,15 +134,16 @@ impl SweepParams {
     pub(super) fn half_blocks_in(&self, extensions: u32, samples: u64, f: f32, base_rate_hz: f32) -> u32 {
         let full = self.block_samples(f, base_rate_hz, self.min_measure_s);
         if samples == full {
-            return 2 * extensions;
+            return (2 * extensions as u64).min(u32::MAX as u64) as u32;
         }
         ((2 * extensions as u64).saturating_mul(full) / samples).min(u32::MAX as u64) as u32
     }
 
-    /// Base ticks of the time budget (`time_budget_s`; 0 without one, or without precision
-    /// control, which alone uses it).
+    /// Base ticks of the time budget (`time_budget_s`; 0 without one, or without a stepped
+    /// sine's precision control, which alone uses it).
     pub fn budget_ticks(&self, base_rate_hz: f32) -> u64 {
-        if self.precision_db > 0.0 && self.max_extensions > 0 && self.time_budget_s > 0.0 {
+        let precision_control = self.precision_db > 0.0 && self.max_extensions > 0;
+        if self.signal == SweepSignal::SteppedSine && precision_control && self.time_budget_s > 0.0 {
             libm::floorf(self.time_budget_s * base_rate_hz) as u64
         } else {
             0
@@ -216,10 +220,19 @@ impl SweepParams {
         })
     }
 
-    /// The longest wait for the next frequency's start at the sine's next peak (half a
-    /// period and a tick; see `PhaseShiftedSweep::next_frequency`).
+    /// A bound of the wait for the next frequency's start at the sine's next peak (see
+    /// `PhaseShiftedSweep::next_frequency`): half a turn over the smallest increment the
+    /// generator's rounding can give, at least one tick. Not `ceil(fs/2f) + 1`: the increment is
+    /// rounded to an integer, and at 0.01 Hz and 16 kHz (2 684, rounded down from 2 684.35) the
+    /// wait reaches 113 ticks more than that (a review's finding). In f32 and 32-bit integers,
+    /// not the generator's f64 (software on the Cortex-M4, and taken for every frequency when
+    /// a sweep is built): the estimate's rounding is taken off the increment first, so the
+    /// bound holds against [`SineGenerator::longest_wait_to_peak`] (a unit test).
     pub(super) fn peak_wait_bound(&self, f: f32, base_rate_hz: f32) -> u64 {
-        libm::ceilf(0.5 * base_rate_hz / f) as u64 + 1
+        // The increment is round(f/fs·2³²) ≥ this (the f32 quotient is within 2⁻²⁴ of it).
+        let increment = libm::floorf(f / base_rate_hz * 4_294_967_296.0 * (1.0 - 1.0 / 1_048_576.0) - 1.0);
+        let increment = if increment >= 1.0 { increment.min(u32::MAX as f32) as u32 } else { 1 };
+        ((1u32 << 31) / increment) as u64 + 1
     }
 
     /// With `longest`, every record lengthened by its cap of half blocks and as many half
@@ -307,6 +320,38 @@ mod tests {
                 assert_eq!(p.frequency_in(&plan, i), *f, "{points} {extra} #{i}");
             }
         }
+    }
+
+    /// The wait bound holds against the generator's own longest wait (exact, from its rounded
+    /// increment) over frequencies from 1 mHz to just under the Nyquist frequency at the loop
+    /// rates the drive takes, and stays within 0.1 % (and two ticks) of it where the increment
+    /// is 10⁴ or more.
+    #[test]
+    fn the_peak_wait_bound_holds_against_the_generators_rounded_increment() {
+        let p = SweepParams::default();
+        let mut checked = 0;
+        for rate in [4_000.0f32, 16_000.0, 32_000.0, 200_000.0] {
+            let mut f = 0.001f32;
+            while f < 0.5 * rate {
+                let exact = SineGenerator::new(1.0, f, rate, 0.0).longest_wait_to_peak() as u64;
+                let bound = p.peak_wait_bound(f, rate);
+                assert!(bound >= exact, "{f} Hz at {rate} Hz: bound {bound} < {exact}");
+                // One increment and a part in a million taken off: tight where the increment is
+                // large (from 0.04 Hz at 16 kHz), loose only for mHz sines at fast loops.
+                if f / rate * 4_294_967_296.0 >= 10_000.0 {
+                    assert!(
+                        bound as f64 <= exact as f64 * 1.001 + 2.0,
+                        "{f} Hz at {rate} Hz: bound {bound} vs {exact}"
+                    );
+                }
+                f *= 1.0173;
+                checked += 1;
+            }
+        }
+        // The review's case: 0.01 Hz at 16 kHz waits up to 800 115 ticks, past ceil(fs/2f) + 1.
+        let exact = SineGenerator::new(1.0, 0.01, 16_000.0, 0.0).longest_wait_to_peak();
+        assert!(exact as f32 > libm::ceilf(0.5 * 16_000.0 / 0.01) + 1.0, "{exact}");
+        assert!(checked > 2000);
     }
 
     /// A fixed-capacity list for the test (the core has no allocator).

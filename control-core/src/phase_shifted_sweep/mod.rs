@@ -614,7 +614,8 @@ impl PhaseShiftedSweep {
                             return;
                         }
                     }
-                    self.extensions = self.halves_needed(records, self.extension_cap(records));
+                    self.extensions =
+                        self.halves_needed(records, self.extension_cap(records), self.budget_grant(records));
                     if self.spread.half_blocks > 0 {
                         // Measured on in half blocks, each checked (see `next_half_block`).
                         if self.extensions > 0 {

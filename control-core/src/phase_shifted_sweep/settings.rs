@@ -74,10 +74,12 @@ pub struct SweepParams {
     /// ([`SweepParams::half_block_cap`]: `max_extensions`), up to the cap of
     /// [`MAX_EXTENSIONS`], when the sweep still ends within this time (s, from its start)
     /// with every later frequency at its own longest (0: never). The frequencies that finish
-    /// early leave their time to those that need more, so the top of the sweep, where the
-    /// response is a few encoder counts and the cap leaves about 0.04 dB of spread, is
-    /// measured longer when the lower frequencies were quick; a sweep whose longest schedule
-    /// already fits goes no further than before (see `PhaseShiftedSweep::extension_cap`).
+    /// early leave their time to the later ones that need more (the first to ask): in
+    /// practice the top of the sweep, where the response is a few encoder counts and the cap
+    /// left about 0.04 dB of spread, is measured longer when the lower frequencies were quick.
+    /// A sweep granted nothing runs as without a budget (and may take longer than it: the
+    /// budget bounds only a sweep that was granted more); a short one (a few points) has room
+    /// to run its noisy points to the precision (see `PhaseShiftedSweep::extension_cap`).
     pub time_budget_s: f32,
     /// Stepped sine: a pseudo-random ±dither (N·m) added to the torque command on every base
     /// tick of the frequencies at and above the threshold, or 2 kHz where the threshold is

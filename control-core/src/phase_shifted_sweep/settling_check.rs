@@ -190,7 +190,7 @@ impl PhaseShiftedSweep {
         // The cap without the budget's room: fewer half blocks dilute a ring less, so the wait
         // for it stays on the safe side whatever the budget grants later.
         let cap = self.params.half_block_cap(self.status.frequency, self.base_rate_hz);
-        let per_record = 2 + self.halves_needed(records, cap);
+        let per_record = 2 + self.halves_needed(records, cap, 0);
         let per_record = if self.averaging { per_record.min(EARLY_HALF_BLOCKS) } else { per_record };
         records.saturating_mul(per_record).max(2)
     }

@@ -547,7 +547,9 @@ fn a_ring_told_by_its_ratios_is_waited_for_under_noise_the_residuals_over_read()
 /// The time budget (`time_budget_s`): at a noisy top frequency (3 kHz, three phase-shifted
 /// records, whose prediction asks for more than the cap of `max_extensions`) the records go
 /// past the cap only while the sweep ends within the budget, and measure closer for it; a
-/// budget the fixed schedule (the records at their base length) fills grants nothing.
+/// budget the fixed schedule (the records at their base length) fills grants nothing; where the
+/// precision needs fewer half blocks than the cap, the budget's room takes the records on to
+/// 1/1.25 of it.
 #[test]
 fn the_time_budget_lengthens_a_capped_top_frequency_within_the_budget() {
     const NOISE: f32 = 0.15;
@@ -575,6 +577,19 @@ fn the_time_budget_lengthens_a_capped_top_frequency_within_the_budget() {
     // White noise: the error falls as 1/√(time), 0.38 times for 7 times the ticks
     // (measured: 0.14 dB RMS at the cap, 0.055 dB with the budget).
     assert!(rms_budget < 0.6 * rms_capped, "RMS {rms_budget} dB with the budget, {rms_capped} dB at the cap");
+    // Less noise: the precision needs fewer half blocks than the cap, and with the budget's
+    // room the records run on to 1/1.25 of it (about 1.56 times the half blocks).
+    let half_ticks = top.record_length(3000.0, FS).1 / 2 * top.acquisition_divider as u64;
+    let at_cap = top.total_ticks(FS) + 3 * top.half_block_cap(3000.0, FS) as u64 * half_ticks;
+    for seed in [1, 3, 5, 7] {
+        let (_, t_capped) = noisy(capped, 0.06, 0.025, seed);
+        let (_, t_budget) = noisy(top, 0.06, 0.025, seed);
+        assert!(
+            t_capped > top.total_ticks(FS) && t_capped < at_cap,
+            "seed {seed}: {t_capped} ticks, {at_cap} at the cap"
+        );
+        assert!(t_budget > t_capped && t_budget <= at_cap, "seed {seed}: {t_budget} vs {t_capped}");
+    }
     // Two noisy frequencies and a budget between the capped and the uncapped length: the first
     // takes what the second's longest leaves, and the sweep still ends within the budget.
     let two = SweepParams { start_hz: 2500.0, stop_hz: 3000.0, points: 2, time_budget_s: 3.0, ..top };

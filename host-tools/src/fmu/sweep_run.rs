@@ -51,7 +51,8 @@ impl SweepRun {
         Ok(self.settings.total_ticks(fs) as f64 / fs as f64)
     }
 
-    /// The longest the sweep can take: every record lengthened by `max_extensions` blocks.
+    /// The longest the sweep can take: every record lengthened by `max_extensions` blocks, or
+    /// the time budget where that is longer (`SweepParams::max_total_ticks`).
     pub fn max_measurement_time(&self) -> Result<f64> {
         let fs = self.rates()?.current_loop_hz;
         Ok(self.settings.max_total_ticks(fs) as f64 / fs as f64)

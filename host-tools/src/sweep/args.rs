@@ -94,9 +94,10 @@ pub struct SweepArgs {
     pub max_extensions: u32,
     /// Let a frequency's records go past --max-extensions (up to 64 blocks) while the whole
     /// sweep still ends within this time from its start, every later frequency counted at its
-    /// own longest (s; 0 = never): frequencies that finish early leave their time to the top,
-    /// where the response is a few encoder counts. The default keeps 10 Hz–3 kHz within 10 s
-    /// with a tenth to spare (a trace sees the end up to a communication step late)
+    /// own longest (s; 0 = never): frequencies that finish early leave their time to later ones
+    /// that need more, in practice the top, where the response is a few encoder counts. A
+    /// sweep granted nothing runs as without it. The default: a tenth under the 10 s of
+    /// `servo bench sweep`'s goal (a trace sees the end up to a communication step late)
     #[arg(long, default_value_t = 9.9)]
     pub time_budget: f64,
     /// Constant speed the sweep rides on (rad/s; keeps friction on one side)
