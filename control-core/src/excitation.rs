@@ -98,7 +98,7 @@ impl SineGenerator {
     /// The most [`Self::ticks_to_peak`] can return at this frequency, from any phase: half a
     /// turn over the increment, rounded as it rounds (at least one tick: a stage lasts one).
     /// Not `ceil(fs/(2f)) + 1`: the increment is rounded to an integer, and at 0.01 Hz and
-    /// 16 kHz (2 684 rounded down from 2 684.35) the wait reaches 113 ticks more than that.
+    /// 16 kHz (2 684 rounded down from 2 684.35) the wait reaches 105 ticks more than that.
     pub fn longest_wait_to_peak(&self) -> u32 {
         if self.increment == 0 {
             return 1;
@@ -141,6 +141,29 @@ fn to_accumulator(turns: f64) -> u32 {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// The longest wait is what `ticks_to_peak` returns from the worst phase (half a turn less
+    /// one from the peak), and no phase waits longer.
+    #[test]
+    fn the_longest_wait_to_peak_is_the_worst_phases_wait() {
+        let mut state = 0x9E37_79B9u32;
+        for (f, rate) in
+            [(0.01f32, 16_000.0f32), (0.001, 200_000.0), (10.0, 16_000.0), (2999.0, 8_000.0), (3.7, 32_000.0)]
+        {
+            let g = SineGenerator::new(1.0, f, rate, 0.0);
+            let longest = g.longest_wait_to_peak();
+            // Distance (2³¹ − 1) from the quarter turn, modulo half a turn.
+            let worst = SineGenerator { phase: (1u32 << 30).wrapping_sub((1 << 31) - 1), ..g };
+            assert_eq!(worst.ticks_to_peak(), longest, "{f} Hz at {rate} Hz");
+            for _ in 0..10_000 {
+                state ^= state << 13;
+                state ^= state >> 17;
+                state ^= state << 5;
+                let any = SineGenerator { phase: state, ..g };
+                assert!(any.ticks_to_peak() <= longest, "{f} Hz at {rate} Hz, phase {state}");
+            }
+        }
+    }
 
     #[test]
     fn the_phase_reaches_a_peak_after_ticks_to_peak() {

@@ -224,7 +224,7 @@ impl SweepParams {
     /// `PhaseShiftedSweep::next_frequency`): half a turn over the smallest increment the
     /// generator's rounding can give, at least one tick. Not `ceil(fs/2f) + 1`: the increment is
     /// rounded to an integer, and at 0.01 Hz and 16 kHz (2 684, rounded down from 2 684.35) the
-    /// wait reaches 113 ticks more than that (a review's finding). In f32 and 32-bit integers,
+    /// wait reaches 105 ticks more than that (a review's finding). In f32 and 32-bit integers,
     /// not the generator's f64 (software on the Cortex-M4, and taken for every frequency when
     /// a sweep is built): the estimate's rounding is taken off the increment first, so the
     /// bound holds against [`SineGenerator::longest_wait_to_peak`] (a unit test).
@@ -322,6 +322,15 @@ mod tests {
         }
     }
 
+    /// The PRBS mode takes no time budget: its longest is its fixed length.
+    #[test]
+    fn the_prbs_mode_has_no_budget() {
+        let p = SweepParams { signal: SweepSignal::Prbs, ..SweepParams::default() };
+        assert!(p.time_budget_s > 0.0 && p.precision_db > 0.0);
+        assert_eq!(p.budget_ticks(16_000.0), 0);
+        assert_eq!(p.max_total_ticks(16_000.0), p.total_ticks(16_000.0));
+    }
+
     /// The wait bound holds against the generator's own longest wait (exact, from its rounded
     /// increment) over frequencies from 1 mHz to just under the Nyquist frequency at the loop
     /// rates the drive takes, and stays within 0.1 % (and two ticks) of it where the increment
@@ -348,7 +357,7 @@ mod tests {
                 checked += 1;
             }
         }
-        // The review's case: 0.01 Hz at 16 kHz waits up to 800 115 ticks, past ceil(fs/2f) + 1.
+        // The review's case: 0.01 Hz at 16 kHz waits up to 800 106 ticks, past ceil(fs/2f) + 1.
         let exact = SineGenerator::new(1.0, 0.01, 16_000.0, 0.0).longest_wait_to_peak();
         assert!(exact as f32 > libm::ceilf(0.5 * 16_000.0 / 0.01) + 1.0, "{exact}");
         assert!(checked > 2000);

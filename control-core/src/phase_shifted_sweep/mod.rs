@@ -270,7 +270,7 @@ pub struct PhaseShiftedSweep {
 const NO_BUDGET: i32 = i32::MIN;
 
 /// The most ticks a time budget, or the longest the sweep can take with one, may count.
-const MAX_BUDGET_TICKS: u64 = 1 << 30;
+pub(crate) const MAX_BUDGET_TICKS: u64 = 1 << 30;
 
 impl PhaseShiftedSweep {
     pub fn new(params: SweepParams, base_rate_hz: f32) -> Self {

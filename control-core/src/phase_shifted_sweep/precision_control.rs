@@ -120,8 +120,9 @@ impl PhaseShiftedSweep {
     /// budget has room for them: the frequency's remaining half blocks, its later records (at
     /// their base length, with their settling) and the wait for the next frequency's peak fit in
     /// what is left of the budget once every later frequency is given its own longest
-    /// (`budget_left`). So a grant never costs a later frequency its cap, and the sweep ends
-    /// within the budget whenever a record went past its cap. Called at the end of the first
+    /// (`budget_left`). So a grant never costs a later frequency its cap, and a sweep that was
+    /// granted anything (past a cap, or the finer target of [`BUDGET_MARGIN`]) ends within the
+    /// budget. Called at the end of the first
     /// record's base block (`records` of them) and, below the threshold, at the end of each
     /// of its half blocks (one record; those already measured count as taken).
     pub(super) fn extension_cap(&self, records: u32) -> u32 {

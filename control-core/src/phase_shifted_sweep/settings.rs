@@ -68,7 +68,8 @@ pub struct SweepParams {
     /// At most so many extra blocks (each as long as one record's base measurement with the
     /// full `min_measure_s`) per record of a frequency, and at most twice as many half blocks
     /// discarded while its first record settles; where the base block is halved the cap stays
-    /// the same in time (twice as many half blocks: see [`SweepParams::half_block_cap`]).
+    /// the same in time (twice as many half blocks: see [`SweepParams::half_block_cap`]). The
+    /// records go past it only with the time budget's room (`time_budget_s`).
     pub max_extensions: u32,
     /// Stepped sine with precision control: a record may take more half blocks than its cap
     /// ([`SweepParams::half_block_cap`]: `max_extensions`), up to the cap of
@@ -80,6 +81,9 @@ pub struct SweepParams {
     /// A sweep granted nothing runs as without a budget (and may take longer than it: the
     /// budget bounds only a sweep that was granted more); a short one (a few points) has room
     /// to run its noisy points to the precision (see `PhaseShiftedSweep::extension_cap`).
+    /// Where there is room, an extended frequency also measures to 1/1.25 of the precision
+    /// (`BUDGET_MARGIN` in `precision_control`). At most 2³⁰ base ticks (18.6 h at 16 kHz:
+    /// refused above, when the sweep starts).
     pub time_budget_s: f32,
     /// Stepped sine: a pseudo-random ±dither (N·m) added to the torque command on every base
     /// tick of the frequencies at and above the threshold, or 2 kHz where the threshold is
@@ -247,6 +251,11 @@ impl SweepParams {
     /// against the axis's other parameters in [`crate::Params::validate_sweep`]).
     pub fn validate(&self, base_rate_hz: f32, velocity_divider: u32) -> Result<(), SweepError> {
         self.validate_settings(velocity_divider)?;
+        // The budget's ticks are counted in 32 bits (see `PhaseShiftedSweep::budget_left`).
+        if self.budget_ticks(base_rate_hz) >= super::MAX_BUDGET_TICKS {
+            let max = (super::MAX_BUDGET_TICKS - 1) as f32 / base_rate_hz;
+            return Err(SweepError::Range { field: "time_budget_s", value: self.time_budget_s, min: 0.0, max });
+        }
         // The sine is updated at the velocity-loop rate for velocity-loop points.
         if self.point == InjectionPoint::TorqueCommand {
             self.below_nyquist(0.5 * base_rate_hz, "current_loop_hz")?;
@@ -500,6 +509,14 @@ mod tests {
             Err(SweepError::Range { field: "dither", .. })
         ));
         assert_eq!(v(SweepParams::default()), Ok(()));
+        // A budget past 2³⁰ ticks is refused at the rate that makes it so, not ignored.
+        let long = SweepParams { time_budget_s: 9000.0, ..Default::default() };
+        assert_eq!(v(long), Ok(()));
+        assert!(matches!(
+            long.validate(200_000.0, 2),
+            Err(SweepError::Range { field: "time_budget_s", value: 9000.0, .. })
+        ));
+        assert_eq!(SweepParams { time_budget_s: 0.0, ..long }.validate(200_000.0, 2), Ok(()));
     }
 
     #[test]

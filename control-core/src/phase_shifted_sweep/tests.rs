@@ -582,8 +582,11 @@ fn the_time_budget_lengthens_a_capped_top_frequency_within_the_budget() {
     let half_ticks = top.record_length(3000.0, FS).1 / 2 * top.acquisition_divider as u64;
     let at_cap = top.total_ticks(FS) + 3 * top.half_block_cap(3000.0, FS) as u64 * half_ticks;
     for seed in [1, 3, 5, 7] {
-        let (_, t_capped) = noisy(capped, 0.06, 0.025, seed);
+        let (r_capped, t_capped) = noisy(capped, 0.06, 0.025, seed);
         let (_, t_budget) = noisy(top, 0.06, 0.025, seed);
+        // A budget the fixed schedule fills: no finer target either, the same run.
+        let tight = SweepParams { time_budget_s: top.total_ticks(FS) as f32 / FS, ..top };
+        assert_eq!(noisy(tight, 0.06, 0.025, seed), (r_capped, t_capped), "seed {seed}");
         assert!(
             t_capped > top.total_ticks(FS) && t_capped < at_cap,
             "seed {seed}: {t_capped} ticks, {at_cap} at the cap"

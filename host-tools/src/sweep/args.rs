@@ -90,14 +90,16 @@ pub struct SweepArgs {
     pub dither: f64,
     /// At most so many extra blocks (each one record's base measurement with the full
     /// --min-measure) per record, and twice as many half blocks discarded while settling
+    /// (past it only with --time-budget's room)
     #[arg(long, default_value_t = 8)]
     pub max_extensions: u32,
     /// Let a frequency's records go past --max-extensions (up to 64 blocks) while the whole
     /// sweep still ends within this time from its start, every later frequency counted at its
     /// own longest (s; 0 = never): frequencies that finish early leave their time to later ones
-    /// that need more, in practice the top, where the response is a few encoder counts. A
-    /// sweep granted nothing runs as without it. The default: a tenth under the 10 s of
-    /// `servo bench sweep`'s goal (a trace sees the end up to a communication step late)
+    /// that need more, in practice the top, where the response is a few encoder counts; with
+    /// room an extended frequency also measures to 1/1.25 of --precision-db. A sweep granted
+    /// nothing runs as without it. The default: a tenth under the 10 s of `servo bench
+    /// sweep`'s goal (a trace sees the end up to a communication step late)
     #[arg(long, default_value_t = 9.9)]
     pub time_budget: f64,
     /// Constant speed the sweep rides on (rad/s; keeps friction on one side)
