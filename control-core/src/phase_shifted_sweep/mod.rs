@@ -257,9 +257,9 @@ pub struct PhaseShiftedSweep {
     /// it runs, the budget's ticks left after the stages begun so far and the longest of the
     /// frequencies after the present one: what the present one may take in all (see
     /// `SweepParams::time_budget_s`). 32-bit: the budget and the sum are kept below 2³⁰ ticks
-    /// (18 h at 16 kHz), so that neither can overflow; and a 64-bit field would align the
-    /// sweep to 8 bytes and move the axis's fields (the tick's loads went 36 instructions
-    /// longer on the Cortex-M4, `servo bench firmware`).
+    /// (18 h at 16 kHz), so that neither can overflow; a 64-bit field would also align the
+    /// sweep to 8 bytes, and the axis's layout moves the tick's instruction count by tens
+    /// (see `SweepParams::shifts`; not measured for this field alone).
     budget_over_longest: i32,
     budget_left: i32,
 }
