@@ -1072,11 +1072,15 @@ fn sweep_reports_each_results_standard_error_and_names_the_imprecise_ones() {
         assert!(close(&j["gain_db"], g) && close(&j["phase_deg"], p), "{j} vs {g}, {p}");
     }
     assert_eq!(quiet_json["imprecise_hz"], serde_json::json!([]));
+    // The budget the sweep ran with is said, and where --time-budget 0 turns it off, not.
+    assert!(quiet_text.contains("(time budget 9.9 s: --time-budget 0 for the caps alone)"), "{quiet_text}");
+    assert_eq!(quiet_json["time_budget_s"], serde_json::json!(9.9));
     // Without the time budget: three points leave it nearly all of its 9.9 s, and the
     // records it grants past their cap bring every result within the precision.
     let unsettled = ["--min-measure", "0.003", "--min-settle", "0", "--settle-cycles", "0", "--time-budget", "0"];
     let (text, csv, json) = sweep(&[&unsettled[..], &["--set", "plant.current_noise_std=0.05"]].concat());
     let noisy = se(&csv);
+    assert!(!text.contains("time budget") && json["time_budget_s"] == serde_json::json!(0.0), "{text}");
     let as_db = |deg: f64| deg.to_radians() * 20.0 / std::f64::consts::LN_10;
     let named: Vec<f64> = noisy.iter().filter(|&&(_, g, p)| g.max(as_db(p)) > 0.06).map(|&(f, _, _)| f).collect();
     assert!(!named.is_empty(), "{noisy:?}");

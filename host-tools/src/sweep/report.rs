@@ -124,6 +124,10 @@ pub const AGREEMENT_LIMIT: (f64, f64) = (0.01, 0.1);
 #[derive(Clone, Debug, Serialize)]
 pub struct SweepReport {
     pub measurement_time_s: f64,
+    /// The sweep's time budget (s; `--time-budget`), 0 where none applies (no precision
+    /// control, the PRBS mode): the time the records may take past their caps, and for the
+    /// finer target, where the sweep has room (see `SweepParams::time_budget_s`).
+    pub time_budget_s: f32,
     pub acquisition_hz: f64,
     pub threshold_hz: f64,
     pub stream: Vec<ResponsePoint>,
@@ -329,6 +333,7 @@ pub fn run(
     let limited_share = limited.iter().map(|&(_, share)| share).collect();
     let report = SweepReport {
         measurement_time_s: measurement_time,
+        time_budget_s: if sweep.settings.budget_ticks(fs) > 0 { sweep.settings.time_budget_s } else { 0.0 },
         acquisition_hz,
         threshold_hz: sweep.settings.threshold(fs) as f64,
         stream,
@@ -370,8 +375,14 @@ impl SweepReport {
     }
 
     pub fn print(&self) {
+        // Why a sweep takes longer than its caps: what the budget let it spend on precision.
+        let budget = if self.time_budget_s > 0.0 {
+            format!(" (time budget {} s: --time-budget 0 for the caps alone)", self.time_budget_s)
+        } else {
+            String::new()
+        };
         println!(
-            "servo sweep — {} frequencies, {:.3} s of measurement, acquisition {} Hz, phase shifting from {} Hz",
+            "servo sweep — {} frequencies, {:.3} s of measurement{budget}, acquisition {} Hz, phase shifting from {} Hz",
             self.stream.len(),
             self.measurement_time_s,
             self.acquisition_hz,
