@@ -323,7 +323,8 @@ impl PhaseShiftedSweep {
     #[inline(never)]
     fn budget_over_longest(params: &SweepParams, plan: &FrequencyPlan, base_rate_hz: f32) -> i32 {
         let budget = params.budget_ticks(base_rate_hz);
-        if params.signal != SweepSignal::SteppedSine || budget == 0 || budget >= MAX_BUDGET_TICKS {
+        // `budget_ticks` is 0 for the PRBS mode and without precision control.
+        if budget == 0 || budget >= MAX_BUDGET_TICKS {
             return NO_BUDGET;
         }
         let longest = params.longest_ticks(plan, base_rate_hz);
@@ -614,8 +615,7 @@ impl PhaseShiftedSweep {
                             return;
                         }
                     }
-                    self.extensions =
-                        self.halves_needed(records, self.extension_cap(records), self.budget_grant(records));
+                    self.extensions = self.halves_needed(records, self.budget_grant(records));
                     if self.spread.half_blocks > 0 {
                         // Measured on in half blocks, each checked (see `next_half_block`).
                         if self.extensions > 0 {

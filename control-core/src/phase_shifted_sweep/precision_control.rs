@@ -42,15 +42,15 @@ impl PhaseShiftedSweep {
     /// Extra half blocks per record for the standard errors of the response, gain's and
     /// phase's, to reach `precision_db` (the phase's: the same relative size,
     /// `precision_db·ln10/20` rad, 0.2° at 0.03 dB) over all `records`, predicted from the
-    /// first base block (error ∝ 1/√samples), at most `cap` ([`Self::extension_cap`], or the
-    /// cap of `max_extensions` for a prediction that must not count on the budget); or, where
-    /// more, those for 1/[`BUDGET_MARGIN`] of the precision, at most `finer_cap` (the time
-    /// budget's room, [`Self::budget_grant`]; 0: none).
+    /// first base block (error ∝ 1/√samples), at most the cap of `max_extensions` or `grant`,
+    /// the time budget's room ([`Self::budget_grant`]; 0 for none, or for a prediction that
+    /// must not count on the budget), where that is more; or, where more, those for
+    /// 1/[`BUDGET_MARGIN`] of the precision, at most `grant`.
     // Once per record or frequency, and at the settling check's comparisons while a ring is
     // told or followed (`record_half_blocks`): kept out of line so that the every-tick path
     // stays small.
     #[inline(never)]
-    pub(super) fn halves_needed(&self, records: u32, cap: u32, finer_cap: u32) -> u32 {
+    pub(super) fn halves_needed(&self, records: u32, grant: u32) -> u32 {
         let p = &self.params;
         if !(p.precision_db > 0.0) || p.max_extensions == 0 {
             return 0;
@@ -72,7 +72,8 @@ impl PhaseShiftedSweep {
                 halves as u32 - 2
             }
         };
-        halves(ratio, cap).max(halves(ratio * BUDGET_MARGIN, finer_cap))
+        let cap = p.half_block_cap(self.status.frequency, self.base_rate_hz).max(grant);
+        halves(ratio, cap).max(halves(ratio * BUDGET_MARGIN, grant))
     }
 
     /// The end of a half block of a settled record below the threshold (measured on in half

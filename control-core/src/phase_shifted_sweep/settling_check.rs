@@ -187,10 +187,9 @@ impl PhaseShiftedSweep {
     /// gap and a phase step of 2π/shifts: there the figure is the model's, not a bound.
     fn record_half_blocks(&self) -> u32 {
         let records = self.params.records(self.status.frequency, self.base_rate_hz);
-        // The cap without the budget's room: fewer half blocks dilute a ring less, so the wait
-        // for it stays on the safe side whatever the budget grants later.
-        let cap = self.params.half_block_cap(self.status.frequency, self.base_rate_hz);
-        let per_record = 2 + self.halves_needed(records, cap, 0);
+        // Without the budget's room (grant 0): fewer half blocks dilute a ring less, so the
+        // wait for it stays on the safe side whatever the budget grants later.
+        let per_record = 2 + self.halves_needed(records, 0);
         let per_record = if self.averaging { per_record.min(EARLY_HALF_BLOCKS) } else { per_record };
         records.saturating_mul(per_record).max(2)
     }
