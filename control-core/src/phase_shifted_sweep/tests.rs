@@ -556,14 +556,15 @@ fn the_time_budget_lengthens_a_capped_top_frequency_within_the_budget() {
     let top = SweepParams { start_hz: 3000.0, stop_hz: 3000.0, points: 1, extra_hz: 0.0, ..Default::default() };
     let capped = SweepParams { time_budget_s: 0.0, ..top };
     let longest = capped.max_total_ticks(FS);
+    // A budget the fixed schedule (no half block added) fills.
+    let tight = SweepParams { time_budget_s: top.total_ticks(FS) as f32 / FS, ..top };
     let db = |r: SweepResult| (20.0 * libm::log10f(libm::hypotf(r.re, r.im) / 0.06)).abs();
     let (mut squares_capped, mut squares_budget) = (0.0f32, 0.0f32);
     let seeds = 24;
     for seed in (0..seeds).map(|k| 2 * k + 1) {
         let (r_capped, t_capped) = noisy(capped, 0.06, NOISE, seed);
         assert!(t_capped <= longest, "{t_capped} ticks beyond the cap's {longest}");
-        // A budget the fixed schedule (no half block added) fills: the same run.
-        let tight = SweepParams { time_budget_s: top.total_ticks(FS) as f32 / FS, ..top };
+        // The tight budget: the same run.
         assert_eq!(noisy(tight, 0.06, NOISE, seed), (r_capped, t_capped), "seed {seed}");
         // Room: past the cap, within the budget.
         let (r_budget, t_budget) = noisy(top, 0.06, NOISE, seed);
@@ -584,8 +585,7 @@ fn the_time_budget_lengthens_a_capped_top_frequency_within_the_budget() {
     for seed in [1, 3, 5, 7] {
         let (r_capped, t_capped) = noisy(capped, 0.06, 0.025, seed);
         let (_, t_budget) = noisy(top, 0.06, 0.025, seed);
-        // A budget the fixed schedule fills: no finer target either, the same run.
-        let tight = SweepParams { time_budget_s: top.total_ticks(FS) as f32 / FS, ..top };
+        // The tight budget: no finer target either, the same run.
         assert_eq!(noisy(tight, 0.06, 0.025, seed), (r_capped, t_capped), "seed {seed}");
         assert!(
             t_capped > top.total_ticks(FS) && t_capped < at_cap,
