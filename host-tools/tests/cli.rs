@@ -874,6 +874,45 @@ fn bench_sweep_runs_random_plants_named_by_their_seed() {
     }
 }
 
+/// `servo bench ident --absorber`/`--random`: the chosen anti-resonances alone, each checked
+/// against the plant's truth (frequency and damping), the same draw for the same seed; an
+/// anti-resonance outside the measured band or no seeds refused before any FMU runs.
+#[test]
+fn bench_ident_runs_chosen_and_random_anti_resonances() {
+    let run = |args: &[&str]| {
+        let o = servo()
+            .args(["bench", "ident", "--seeds", "1", "--json", "--fmu"])
+            .arg(fmu_path())
+            .args(args)
+            .output()
+            .unwrap();
+        assert!(matches!(o.status.code(), Some(0 | 1)), "{}", String::from_utf8_lossy(&o.stderr));
+        let r: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+        (o.status.code(), r)
+    };
+    let (code, r) = run(&["--absorber", "45.5"]);
+    let grid = r["grid"].as_array().unwrap();
+    assert_eq!((code, grid.len()), (Some(0), 1), "{r}");
+    let truth = grid[0]["truth"]["hz"].as_f64().unwrap();
+    let found = grid[0]["found"]["hz"].as_f64().unwrap();
+    // The absorber's √(k/J) is 45.5 Hz; the load moves with it, so the zero lies a little off.
+    assert!((truth - 45.5).abs() < 1.0 && (found - truth).abs() <= 0.01 * truth, "{truth} {found}");
+    assert!(r.get("tunings").is_none(), "the grid alone: {r}");
+    let hz = |r: &serde_json::Value| {
+        r["grid"].as_array().unwrap().iter().map(|c| c["hz"].as_f64().unwrap()).collect::<Vec<_>>()
+    };
+    let a = hz(&run(&["--random", "2", "--plant-seed", "7"]).1);
+    assert_eq!(a.len(), 2);
+    assert!(a.iter().all(|f| (15.0..=300.0).contains(f)), "{a:?}");
+    assert_eq!(hz(&run(&["--random", "2", "--plant-seed", "7"]).1), a, "a seed names a draw");
+    for bad in [&["--absorber", "1000"][..], &["--absorber", "NaN"][..], &["--random", "2", "--seeds", "0"][..]] {
+        let o = servo().args(["bench", "ident"]).args(bad).output().unwrap();
+        let err = String::from_utf8_lossy(&o.stderr);
+        assert_eq!(o.status.code(), Some(2), "{bad:?}: {err}");
+        assert!(err.contains(bad[0]) || err.contains(bad[2]), "{bad:?}: {err}");
+    }
+}
+
 /// A stop time whose trace would not fit memory (4·10¹² steps here) is refused when the file
 /// is loaded, naming stop_time and the limit: not an allocation failure (rc 134) after the
 /// FMU started.

@@ -31,6 +31,8 @@ pub const GRID_HZ: [f64; 16] =
 pub const MASKED_NOTCH_DB: f64 = 4.0;
 /// Noise seeds per anti-resonance.
 pub const SEEDS: u32 = 10;
+/// The range of anti-resonances the goals cover (Hz): `--random` draws from it.
+pub const RANGE_HZ: (f64, f64) = (15.0, 300.0);
 pub const SNR_DB: f64 = 20.0;
 /// Damping of every absorber of the grid and the demo.
 pub const DAMPING: f64 = 0.05;
@@ -82,17 +84,32 @@ impl GridCase {
     }
 }
 
-/// Identify every anti-resonance of the grid with every seed.
-pub fn run_grid(fmu: &Fmu, out: &Path, mut progress: impl FnMut(f64)) -> Result<Vec<GridCase>> {
+/// `n` anti-resonances drawn with `seed`, log-uniform over [`RANGE_HZ`], in rising order
+/// (three significant digits, so that a printed one can be run again with `--absorber`).
+pub fn random_absorbers(n: u32, seed: u64) -> Vec<f64> {
+    let mut rng = crate::random::XorShift64Star(seed.wrapping_mul(0x9E37_79B9_7F4A_7C15) | 1);
+    let mut hz: Vec<f64> = (0..n).map(|_| rng.log_uniform_3_digits(RANGE_HZ.0, RANGE_HZ.1)).collect();
+    hz.sort_by(f64::total_cmp);
+    hz
+}
+
+/// Identify every anti-resonance of `grid` (Hz) with noise seeds 1..=`seeds`.
+pub fn run_grid(
+    fmu: &Fmu,
+    out: &Path,
+    grid: &[f64],
+    seeds: u32,
+    mut progress: impl FnMut(f64),
+) -> Result<Vec<GridCase>> {
     let load = PlantParams::default().load_inertia;
     let mut cases = Vec::new();
-    let total = GRID_HZ.len() * SEEDS as usize;
-    for (i, &hz) in GRID_HZ.iter().enumerate() {
+    let total = grid.len() * seeds as usize;
+    for (i, &hz) in grid.iter().enumerate() {
         let w = std::f64::consts::TAU * hz;
         let truth = true_anti_resonance(load, load * w * w, 2.0 * DAMPING * load * w);
         let plant_notch_db = plant_notch(hz).map_or(0.0, |n| n.depth_db);
-        for seed in 1..=SEEDS {
-            progress((i * SEEDS as usize + seed as usize - 1) as f64 / total as f64);
+        for seed in 1..=seeds {
+            progress((i * seeds as usize + seed as usize - 1) as f64 / total.max(1) as f64);
             let mut parameters = absorber_parameters(hz, DAMPING, load);
             parameters.insert("plant.noise_seed".into(), Value::Int(seed as i64));
             let dir = out.join(format!("grid/{hz}hz_seed{seed}"));
@@ -218,6 +235,20 @@ pub fn record_check(fmu: &Fmu, hz: f64, bands: &[(f64, f64)]) -> Result<RecordCh
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn random_absorbers_cover_the_goals_range_in_order_and_a_seed_names_a_draw() {
+        let draw = random_absorbers(400, 3);
+        assert!(draw.windows(2).all(|w| w[0] <= w[1]));
+        assert!(draw.iter().all(|&hz| (RANGE_HZ.0..=RANGE_HZ.1).contains(&hz)), "{draw:?}");
+        // Log-uniform: about half below the range's geometric middle (67 Hz), and both ends reached.
+        let middle = (RANGE_HZ.0 * RANGE_HZ.1).sqrt();
+        let below = draw.iter().filter(|&&hz| hz < middle).count();
+        assert!((150..250).contains(&below), "{below} of 400 below {middle} Hz");
+        assert!(draw[0] < 17.0 && draw[399] > 260.0, "{} .. {}", draw[0], draw[399]);
+        assert_eq!(random_absorbers(400, 3), draw);
+        assert_ne!(random_absorbers(400, 4), draw);
+    }
 
     /// The closed form against the two- and three-mass limits worked by hand: the response
     /// (nearly) vanishes at a lightly damped absorber's √(k/J) and has its rigid-body value

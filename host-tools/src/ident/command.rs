@@ -211,8 +211,12 @@ fn bench_ident(args: &IdentBenchArgs) -> Result<bool> {
     let common = &args.common;
     use crate::ident::identification::{absorber_parameters, true_anti_resonance, AxisModel};
     use crate::ident::tuning::{circle_check, tune, Method};
+    let selection = selected_absorbers(args)?;
     let fmu = Fmu::load(&common.fmu.clone().unwrap_or_else(default_fmu))?;
     let out = common.out.clone().unwrap_or_else(|| default_out("bench/ident"));
+    if let Some(absorbers) = selection {
+        return bench_ident_grid_alone(args, &fmu, &out, &absorbers);
+    }
     let load = configuration(&Default::default())?.plant.load_inertia;
     // (case, [(axis, anti-resonance in Hz or none)])
     type Axes<'a> = Vec<(&'a str, Option<f64>)>;
@@ -226,7 +230,9 @@ fn bench_ident(args: &IdentBenchArgs) -> Result<bool> {
     let pb = progress_bar("ident bench", common.json);
     // The grid: every anti-resonance × every noise seed at 20 dB SNR.
     pb.set_prefix("grid");
-    let grid = crate::ident::bench::run_grid(&fmu, &out, |x| pb.set_position((x * 800.0) as u64))?;
+    let grid = crate::ident::bench::run_grid(&fmu, &out, &crate::ident::bench::GRID_HZ, args.seeds, |x| {
+        pb.set_position((x * 800.0) as u64)
+    })?;
     let record_bands = [(5.0, 8.0), (8.0, 15.0), (15.0, 25.0), (25.0, 100.0), (100.0, 300.0), (300.0, 500.0)];
     let record = crate::ident::bench::record_check(&fmu, 15.0, &record_bands)?;
     let mut ok = grid.iter().all(|c| c.passed());
@@ -297,7 +303,7 @@ fn bench_ident(args: &IdentBenchArgs) -> Result<bool> {
         );
         return Ok(ok);
     }
-    print_grid(&grid, &record);
+    print_grid(&grid, Some(&record), args.seeds);
     println!("  demo axes:");
     println!(
         "  {:<11} {:<5} {:>12} {:>12} {:>12} {:>12} {:>10} {:>10}",
@@ -349,11 +355,67 @@ fn bench_ident(args: &IdentBenchArgs) -> Result<bool> {
 }
 
 /// The grid's table: per anti-resonance, each seed's errors; then the worst case.
-fn print_grid(grid: &[crate::ident::bench::GridCase], record: &crate::ident::bench::RecordCheck) {
-    use crate::ident::bench::{DAMPING, SEEDS, SNR_DB};
+/// The anti-resonances `--absorber` or `--random` chose (None: the shipped grid), checked:
+/// each a finite frequency inside the band the response is measured over.
+fn selected_absorbers(args: &IdentBenchArgs) -> Result<Option<Vec<f64>>> {
+    if args.seeds == 0 {
+        bail!("--seeds must be at least 1");
+    }
+    let absorbers = match args.random {
+        Some(0) => bail!("--random must draw at least one anti-resonance"),
+        Some(n) => crate::ident::bench::random_absorbers(n, args.plant_seed),
+        None if args.absorbers.is_empty() => return Ok(None),
+        None => args.absorbers.clone(),
+    };
+    let (lo, hi) = crate::ident::report::BAND;
+    if let Some(bad) = absorbers.iter().find(|hz| !(**hz >= lo && **hz <= hi)) {
+        bail!(
+            "--absorber {bad}: the anti-resonance must lie in the measured band, {lo}–{hi} Hz (the goals cover {}–{} Hz)",
+            crate::ident::bench::RANGE_HZ.0,
+            crate::ident::bench::RANGE_HZ.1
+        );
+    }
+    let mut absorbers = absorbers;
+    absorbers.sort_by(f64::total_cmp);
+    absorbers.dedup();
+    Ok(Some(absorbers))
+}
+
+/// `servo bench ident --absorber …` or `--random N`: those anti-resonances × the noise seeds,
+/// without the demo axes and the correction; true when every identification meets the goals.
+fn bench_ident_grid_alone(args: &IdentBenchArgs, fmu: &Fmu, out: &std::path::Path, absorbers: &[f64]) -> Result<bool> {
+    let pb = progress_bar("ident bench", args.common.json);
+    pb.set_prefix("grid");
+    let grid =
+        crate::ident::bench::run_grid(fmu, out, absorbers, args.seeds, |x| pb.set_position((x * 1000.0) as u64))?;
+    pb.finish_and_clear();
+    let ok = grid.iter().all(|c| c.passed());
+    if args.common.json {
+        println!(
+            "{}",
+            serde_json::to_string_pretty(
+                &serde_json::json!({"bench": "ident", "grid": grid, "measurement_time_s": crate::ident::identification::measurement_time_s(), "passed": ok})
+            )?
+        );
+        return Ok(ok);
+    }
+    if let Some(n) = args.random {
+        println!(
+            "  {} anti-resonances ({n} drawn at random, plant seed {}, repeats run once): cases the project does not ship",
+            absorbers.len(),
+            args.plant_seed
+        );
+    }
+    print_grid(&grid, None, args.seeds);
+    println!("  goal: at most 1 % in frequency and 20 % in damping: {}", if ok { "met" } else { "MISSED" });
+    Ok(ok)
+}
+
+fn print_grid(grid: &[crate::ident::bench::GridCase], record: Option<&crate::ident::bench::RecordCheck>, seeds: u32) {
+    use crate::ident::bench::{DAMPING, SNR_DB};
     use crate::ident::identification::{measurement_time_s, period_s, PERIODS, TRANSIENT_S};
     println!(
-        "servo bench ident — seed 001: absorbers {}–{} Hz (damping {DAMPING}) × {SEEDS} noise seeds, accelerometer noise at {SNR_DB} dB SNR of the record",
+        "servo bench ident — seed 001: absorbers {}–{} Hz (damping {DAMPING}) × {seeds} noise seeds, accelerometer noise at {SNR_DB} dB SNR of the record",
         grid.first().map_or(0.0, |c| c.hz),
         grid.last().map_or(0.0, |c| c.hz)
     );
@@ -412,6 +474,7 @@ fn print_grid(grid: &[crate::ident::bench::GridCase], record: &crate::ident::ben
     }
     let missed = grid.iter().filter(|c| !c.passed()).count();
     println!("  identifications missing a goal: {missed} of {} (found off the goals, or none found where the plant shows its notch)", grid.len());
+    let Some(record) = record else { return };
     println!(
         "  the record against the analytic plant, noise-free, {} Hz absorber (largest relative error; point samples / means over each acquisition period):",
         record.hz

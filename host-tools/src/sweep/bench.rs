@@ -100,12 +100,7 @@ pub fn interior_plants() -> Vec<PlantCase> {
 /// printed plant can be run again by hand (`servo sweep --set plant.…`).
 pub fn random_plants(n: u32, seed: u64) -> Vec<PlantCase> {
     let mut rng = crate::random::XorShift64Star(seed.wrapping_mul(0x9E37_79B9_7F4A_7C15) | 1);
-    let mut log_uniform = |lo: f64, hi: f64| {
-        let u = (rng.next() >> 11) as f64 / (1u64 << 53) as f64;
-        let x = (lo.ln() + u * (hi.ln() - lo.ln())).exp();
-        let scale = 10f64.powi(2 - x.log10().floor() as i32);
-        (x * scale).round() / scale
-    };
+    let mut log_uniform = |lo: f64, hi: f64| rng.log_uniform_3_digits(lo, hi);
     (0..n)
         .map(|_| {
             let inertia_ratio = log_uniform(0.2, 5.0);
