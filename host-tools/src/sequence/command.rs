@@ -1,6 +1,6 @@
 //! `servo sequence` and `servo bench sequence` (seed 004).
 
-use anyhow::Result;
+use anyhow::{bail, Result};
 
 use crate::cli::progress_bar;
 use crate::fmu::fmpy;
@@ -94,6 +94,35 @@ fn bench_sequence(args: &SequenceBenchArgs) -> Result<bool> {
     let (zero_speed, common) = (&args.zero_speed, &args.common);
     let fmu = Fmu::load(&common.fmu.clone().unwrap_or_else(default_fmu))?;
     let pb = progress_bar("sequence bench", common.json);
+    if let Some(n) = args.random {
+        if n == 0 {
+            bail!("--random must draw at least one stop");
+        }
+        let grid =
+            crate::sequence::bench::bench_random(&fmu, n, args.plant_seed, |f| pb.set_position((f * 1000.0) as u64))?;
+        pb.finish_and_clear();
+        let g = crate::sequence::bench::grid_figures(&grid);
+        if common.json {
+            println!(
+                "{}",
+                serde_json::to_string_pretty(
+                    &serde_json::json!({"bench": "sequence", "random": n, "plant_seed": args.plant_seed, "grid": grid, "grid_figures": g})
+                )?
+            );
+            return Ok(g.holds);
+        }
+        println!(
+            "servo bench sequence --random — {n} stops drawn with seed {}, each on its own plant (inertia ratio 0.2–5 × shaft resonance 50–500 Hz, log-uniform), run speed 10–200 rad/s, zero-speed level 0.5–20 rad/s, width 1–100 counts (log-uniform), a gain of the table: cases the project does not ship",
+            args.plant_seed
+        );
+        let misses: Vec<_> = grid.iter().filter(|x| !crate::sequence::bench::stop_holds(x)).collect();
+        if !misses.is_empty() {
+            println!("  stops that miss (toggles, no completion, or a swing over its bound):");
+            print_stops(misses.into_iter());
+        }
+        print_grid_figures(&g);
+        return Ok(g.holds);
+    }
     let r = crate::sequence::bench::bench(&fmu, zero_speed, |f| pb.set_position((f * 1000.0) as u64))?;
     pb.finish_and_clear();
     if common.json {
@@ -110,34 +139,8 @@ fn bench_sequence(args: &SequenceBenchArgs) -> Result<bool> {
         control_core::Params::default().sequence.completion_hysteresis,
         g.runs
     );
-    println!(
-        "  {:>8} {:>8} {:>6} {:>6} {:>10} {:>12} {:>10} {:>12} {:>10} {:>8}",
-        "speed", "level", "width", "gain", "v@acc", "stop dist", "swing", "overshoot", "settle ms", "toggles"
-    );
-    for x in &r.grid {
-        println!(
-            "  {:>8} {:>8} {:>6} {:>5}x {:>10.3} {:>12.0} {:>10} {:>12} {:>10.1} {:>8}",
-            x.speed,
-            x.zero_speed,
-            x.width,
-            x.multiplier,
-            x.speed_at_acceptance,
-            x.stopping_counts,
-            x.swing_counts,
-            x.overshoot_counts,
-            x.settle * 1e3,
-            x.toggles
-        );
-    }
-    println!("  worst case over the grid: completion toggles after the first raise {} (goal 0); runs never complete {}; overshoot beyond the width after completion {} counts; settle time (acceptance to completion) {:.1} ms",
-        g.max_toggles, g.never_complete, g.max_overshoot_counts, g.max_settle * 1e3);
-    if let Some(w) = &g.worst_swing {
-        println!(
-            "  swing after acceptance / bound ({}·v²/(2a) + {} counts + width + hysteresis): worst {:.2} (goal <= 1) at {} rad/s, level {} rad/s, width {}, gain {}x: swing {} counts, v@acc {:.3} rad/s, stopping distance {:.0} counts",
-            crate::sequence::bench::SWING_BOUND_FACTOR, crate::sequence::bench::SWING_FLOOR_COUNTS, g.worst_swing_ratio, w.speed, w.zero_speed, w.width, w.multiplier, w.swing_counts, w.speed_at_acceptance, w.stopping_counts
-        );
-    }
-    println!("  figure holds over the grid: {}", if g.holds { "yes" } else { "NO" });
+    print_stops(r.grid.iter());
+    print_grid_figures(g);
     println!("servo bench sequence — seed 004, default axis and friction, run at 100 rad/s, gradient 2000 rad/s², base gain 20/s, completion width 8 counts");
     println!("  stop at speed (run off + stop key at 0.3 s, zero-speed level 2 rad/s) and a 1 rad fine adjustment, per gain multiplier:");
     println!(
@@ -174,4 +177,42 @@ fn bench_sequence(args: &SequenceBenchArgs) -> Result<bool> {
         println!("  {:>12} {:>14.2} {:>22.2}", a.zero_speed, a.measured * 1e3, a.ramp * 1e3);
     }
     Ok(r.settle_falls_with_gain && r.grid_figures.holds)
+}
+
+/// One table row per stop (see [`crate::sequence::bench::GridStop`]); the plant where a stop
+/// has its own.
+fn print_stops<'a>(stops: impl Iterator<Item = &'a crate::sequence::bench::GridStop>) {
+    println!(
+        "  {:>8} {:>8} {:>6} {:>6} {:>10} {:>12} {:>10} {:>12} {:>10} {:>8}",
+        "speed", "level", "width", "gain", "v@acc", "stop dist", "swing", "overshoot", "settle ms", "toggles"
+    );
+    for x in stops {
+        let plant = if x.plant == "default" { String::new() } else { format!("   {}", x.plant) };
+        println!(
+            "  {:>8} {:>8} {:>6} {:>5}x {:>10.3} {:>12.0} {:>10} {:>12} {:>10.1} {:>8}{plant}",
+            x.speed,
+            x.zero_speed,
+            x.width,
+            x.multiplier,
+            x.speed_at_acceptance,
+            x.stopping_counts,
+            x.swing_counts,
+            x.overshoot_counts,
+            x.settle * 1e3,
+            x.toggles
+        );
+    }
+}
+
+fn print_grid_figures(g: &crate::sequence::bench::GridFigures) {
+    println!("  worst case over the grid: completion toggles after the first raise {} (goal 0); runs never complete {}; overshoot beyond the width after completion {} counts; settle time (acceptance to completion) {:.1} ms",
+        g.max_toggles, g.never_complete, g.max_overshoot_counts, g.max_settle * 1e3);
+    if let Some(w) = &g.worst_swing {
+        let plant = if w.plant == "default" { String::new() } else { format!(" ({})", w.plant) };
+        println!(
+            "  swing after acceptance / bound ({}·v²/(2a) + {:.2}·J_L·a/k (the shaft's wind-up) + width + hysteresis): worst {:.2} (goal <= 1) at {} rad/s, level {} rad/s, width {}, gain {}x{plant}: swing {} counts, v@acc {:.3} rad/s, stopping distance {:.0} counts, wind-up {:.0} counts",
+            crate::sequence::bench::SWING_BOUND_FACTOR, crate::sequence::bench::SWING_WINDUP_FACTOR, g.worst_swing_ratio, w.speed, w.zero_speed, w.width, w.multiplier, w.swing_counts, w.speed_at_acceptance, w.stopping_counts, w.windup_counts
+        );
+    }
+    println!("  figure holds over the grid: {}", if g.holds { "yes" } else { "NO" });
 }

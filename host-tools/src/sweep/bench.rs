@@ -114,14 +114,10 @@ impl PlantCase {
     /// resonance `f_r = √(k·(1/J_M + 1/J_L))/2π` and damping for 5 % at the anti-resonance
     /// (as the default axis). A light load's friction needs finer integration sub-steps.
     pub fn parameters(&self) -> BTreeMap<String, Value> {
-        let plant = servo_axis::plant::PlantParams::default();
-        let jm = plant.motor_inertia;
-        let jl = jm * self.inertia_ratio;
+        let (jl, k) = self.load_inertia_and_stiffness();
         let mut p = BTreeMap::new();
         p.insert(name::plant_load_inertia.to_string(), Value::Float(jl));
-        if let Some(fr) = self.resonance_hz {
-            let w = std::f64::consts::TAU * fr;
-            let k = w * w / (1.0 / jm + 1.0 / jl);
+        if self.resonance_hz.is_some() {
             p.insert(name::plant_shaft_stiffness.to_string(), Value::Float(k));
             p.insert(name::plant_shaft_damping.to_string(), Value::Float(2.0 * 0.05 * (k * jl).sqrt()));
         }
@@ -131,6 +127,19 @@ impl PlantCase {
             p.insert(name::plant_substeps.to_string(), Value::Int(8));
         }
         p
+    }
+
+    /// The load's inertia (kg·m²) and the shaft's stiffness (N·m/rad): the default axis's
+    /// stiffness without a resonance.
+    pub fn load_inertia_and_stiffness(&self) -> (f64, f64) {
+        let plant = servo_axis::plant::PlantParams::default();
+        let jm = plant.motor_inertia;
+        let jl = jm * self.inertia_ratio;
+        let k = self.resonance_hz.map_or(plant.shaft_stiffness, |fr| {
+            let w = std::f64::consts::TAU * fr;
+            w * w / (1.0 / jm + 1.0 / jl)
+        });
+        (jl, k)
     }
 
     pub fn label(&self) -> String {
