@@ -187,6 +187,12 @@ fn stop_and_move(fmu: &Fmu, index: usize, multiplier: f64) -> Result<GainFigures
     })
 }
 
+/// Length of a grid stop's run (s): the stop key at 0.3 s, at most 0.1 s of deceleration
+/// (200 rad/s at 2 000 rad/s²), and 2.1 s for completion, about twice the longest settle
+/// seen (1.05 s, a 1-count width on a 4.3:1 load and a 151 Hz shaft); a stop that completes
+/// later counts as never complete, and a toggle up to the end counts.
+const GRID_STOP_TIME: f64 = 2.5;
+
 /// One stop (see [`GridStop`]) on the default axis, or on `plant` where given.
 fn grid_stop(
     fmu: &Fmu,
@@ -205,7 +211,7 @@ fn grid_stop(
         plant_parameters.push_str(&format!("\"{name}\"={value}\n"));
     }
     let text = format!(
-        "name='bench_grid'\nstop_time=1.5\n[parameters]\n\"seq.target_speed\"={speed:?}\n\"seq.zero_speed\"={vh:?}\n\"seq.completion_counts\"={width}\n{plant_parameters}\
+        "name='bench_grid'\nstop_time={GRID_STOP_TIME}\n[parameters]\n\"seq.target_speed\"={speed:?}\n\"seq.zero_speed\"={vh:?}\n\"seq.completion_counts\"={width}\n{plant_parameters}\
          [[events]]\ntime=0.0\nevent='run'\n[[events]]\ntime=0.0\nevent='gain'\nindex={index}\n\
          [[events]]\ntime={STOP_AT}\nevent='run_off'\n[[events]]\ntime={STOP_AT}\nevent='stop'\n"
     );
