@@ -913,6 +913,28 @@ fn bench_ident_runs_chosen_and_random_anti_resonances() {
     }
 }
 
+/// `servo bench accdec --random`: drawn moves through the drive's filter against the f64
+/// filter, within a count and no pulse lost; the same draw for the same seed, another for
+/// another.
+#[test]
+fn bench_accdec_runs_random_moves_named_by_their_seed() {
+    let run = |seed: &str| {
+        let o = servo().args(["bench", "accdec", "--random", "300", "--plant-seed", seed, "--json"]).output().unwrap();
+        assert_eq!(o.status.code(), Some(0), "{}", String::from_utf8_lossy(&o.stderr));
+        let r: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+        assert_eq!((r["runs"].as_u64(), r["unbalanced_runs"].as_u64()), (Some(300), Some(0)), "{r}");
+        let worst = r["worst"]["worst"].as_f64().unwrap();
+        assert!(worst <= 1.0 && r["passed"] == true, "{r}");
+        (r["ticks"].as_u64().unwrap(), worst)
+    };
+    let (a, b, c) = (run("5"), run("5"), run("6"));
+    assert_eq!(a, b, "a seed names a draw");
+    assert_ne!(a, c);
+    let o = servo().args(["bench", "accdec", "--random", "0"]).output().unwrap();
+    assert_eq!(o.status.code(), Some(2));
+    assert!(String::from_utf8_lossy(&o.stderr).contains("--random"));
+}
+
 /// A stop time whose trace would not fit memory (4·10¹² steps here) is refused when the file
 /// is loaded, naming stop_time and the limit: not an allocation failure (rc 134) after the
 /// FMU started.

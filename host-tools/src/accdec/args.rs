@@ -87,6 +87,16 @@ pub struct AccdecBenchArgs {
     /// Skip the instruction count (needs valgrind)
     #[arg(long)]
     pub no_cost: bool,
+    /// N moves drawn at random instead of the checks above, each through the drive's filter
+    /// against the same filter in f64 (order 1–6, period 0.125–2 ms, cut-off 0.5 Hz to a
+    /// quarter of the rate, 1–10⁹ counts of either sign, a step or a rectangle or trapezoid of
+    /// 1 ms–2 s, each log-uniform): cases the project does not ship (the seed names the draw).
+    /// Prints the worst deviation and exits 1 above one count or on a lost pulse
+    #[arg(long, value_name = "N")]
+    pub random: Option<u32>,
+    /// Seed of the --random draw
+    #[arg(long, default_value_t = 1, requires = "random")]
+    pub plant_seed: u64,
     #[command(flatten)]
     pub common: Common,
 }

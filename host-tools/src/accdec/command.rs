@@ -95,6 +95,49 @@ fn accdec(args: &AccdecArgs) -> Result<bool> {
     Ok(report.butterworth.shape.pulse_balance == 0 && report.moving_average.shape.pulse_balance == 0)
 }
 
+/// `servo bench accdec --random N`: drawn moves against the f64 filter, worst deviation.
+fn bench_accdec_random(args: &AccdecBenchArgs, n: u32) -> Result<bool> {
+    use crate::accdec::deviation::{random_cases, run_cases};
+    if n == 0 {
+        anyhow::bail!("--random must draw at least one move");
+    }
+    let cases = random_cases(n, args.plant_seed);
+    let pb = progress_bar("f64 reference, drawn moves", args.common.json);
+    let rows = run_cases(&cases, |f| pb.set_position((f * 1000.0) as u64)).map_err(|e| anyhow::anyhow!("{e}"))?;
+    pb.finish_and_clear();
+    let worst = rows.iter().max_by(|a, b| a.worst.total_cmp(&b.worst)).context("no moves")?.clone();
+    let unbalanced = rows.iter().filter(|r| r.pulse_balance != 0).count();
+    let ticks: usize = rows.iter().map(|r| r.ticks).sum();
+    let ok = worst.worst <= 1.0 && unbalanced == 0;
+    if args.common.json {
+        println!(
+            "{}",
+            serde_json::to_string_pretty(&serde_json::json!({
+                "bench": "accdec", "random": n, "plant_seed": args.plant_seed, "runs": rows.len(), "ticks": ticks,
+                "worst": worst, "unbalanced_runs": unbalanced, "passed": ok
+            }))?
+        );
+        return Ok(ok);
+    }
+    println!(
+        "servo bench accdec --random — {n} moves drawn with seed {} (order 1-6, period 0.125-2 ms, cut-off 0.5 Hz to a quarter of the rate, 1-10^9 counts, step/rectangle/trapezoid of 1 ms-2 s): cases the project does not ship",
+        args.plant_seed
+    );
+    println!("  {} ticks; output sum != input sum in {unbalanced} of them", ticks);
+    println!(
+        "  worst |position - reference position|: {:.4} counts (goal <= 1: {}) at order {}, {} Hz, T = {} ms, {} counts, {}, tick {}",
+        worst.worst,
+        if worst.worst <= 1.0 { "met" } else { "MISSED" },
+        worst.order,
+        worst.cutoff_hz,
+        worst.sample_period * 1e3,
+        worst.distance,
+        worst.profile.label(),
+        worst.worst_tick
+    );
+    Ok(ok)
+}
+
 impl AccdecBenchArgs {
     pub fn run(&self) -> Result<bool> {
         bench_accdec(self)
@@ -102,6 +145,9 @@ impl AccdecBenchArgs {
 }
 
 fn bench_accdec(args: &AccdecBenchArgs) -> Result<bool> {
+    if let Some(n) = args.random {
+        return bench_accdec_random(args, n);
+    }
     let (sequences, resonance, no_cost, common) = (args.sequences, &args.resonance, args.no_cost, &args.common);
     use crate::accdec::bench as b;
     let fmu_path = common.fmu.clone().unwrap_or_else(default_fmu);

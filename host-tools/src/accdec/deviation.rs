@@ -38,8 +38,9 @@ impl Profile {
     pub fn label(self) -> String {
         match self {
             Self::Step => "step (one tick)".into(),
-            Self::Rectangle(d) => format!("rectangle {} ms", d * 1e3),
-            Self::Trapezoid(d) => format!("trapezoid {} ms", d * 1e3),
+            // To the microsecond: 26.6 ms, not 26.599999999999998.
+            Self::Rectangle(d) => format!("rectangle {} ms", (d * 1e6).round() / 1e3),
+            Self::Trapezoid(d) => format!("trapezoid {} ms", (d * 1e6).round() / 1e3),
         }
     }
 }
@@ -174,15 +175,48 @@ pub fn grid() -> Vec<(u32, f32, f32, i64, Profile)> {
     cases
 }
 
+/// `n` cases drawn with `seed` (cases the project does not ship): order 1–6; sample period
+/// log-uniform over 0.125–2 ms; cut-off log-uniform from 0.5 Hz to a quarter of the sampling
+/// rate; a move log-uniform over 1–10⁹ counts of either sign; a step, or a rectangle or
+/// trapezoid of velocity lasting log-uniform 1 ms–2 s.
+pub fn random_cases(n: u32, seed: u64) -> Vec<(u32, f32, f32, i64, Profile)> {
+    let mut rng = crate::random::XorShift64Star(seed.wrapping_mul(0x9E37_79B9_7F4A_7C15) | 1);
+    (0..n)
+        .map(|_| {
+            let order = 1 + rng.below(MAX_ORDER as u64) as u32;
+            let period = rng.log_uniform_3_digits(PERIODS[0] as f64, PERIODS[PERIODS.len() - 1] as f64) as f32;
+            let cutoff = rng.log_uniform_3_digits(CUTOFFS_HZ[0] as f64, 0.25 / period as f64) as f32;
+            // Three digits may round the top cut-off just past a quarter of the rate.
+            let cutoff = cutoff.min(0.25 / period);
+            let distance = rng.log_uniform_3_digits(1.0, DISTANCES[DISTANCES.len() - 1] as f64).round() as i64;
+            let sign = if rng.below(2) == 0 { 1 } else { -1 };
+            let duration = rng.log_uniform_3_digits(0.001, 2.0);
+            let profile = match rng.below(3) {
+                0 => Profile::Step,
+                1 => Profile::Rectangle(duration),
+                _ => Profile::Trapezoid(duration),
+            };
+            (order, cutoff, period, sign * distance.max(1), profile)
+        })
+        .collect()
+}
+
 /// Run the whole grid (on every core); the rows in grid order.
 pub fn run_grid(progress: impl Fn(f64) + Sync) -> Result<Vec<Deviation>, String> {
-    let cases = grid();
+    run_cases(&grid(), progress)
+}
+
+/// Run `cases` (on every core); the rows in their order.
+pub fn run_cases(
+    cases: &[(u32, f32, f32, i64, Profile)],
+    progress: impl Fn(f64) + Sync,
+) -> Result<Vec<Deviation>, String> {
     let threads = std::thread::available_parallelism().map_or(1, |n| n.get()).min(8);
     let done = std::sync::atomic::AtomicUsize::new(0);
     let chunks: Vec<Result<Vec<Deviation>, String>> = std::thread::scope(|s| {
         let handles: Vec<_> = (0..threads)
             .map(|t| {
-                let (cases, done, progress) = (&cases, &done, &progress);
+                let (done, progress) = (&done, &progress);
                 s.spawn(move || {
                     cases
                         .iter()
