@@ -18,11 +18,12 @@ impl XorShift64Star {
     }
 
     /// A number log-uniform over lo..hi (0 < lo < hi), rounded to three significant digits so
-    /// that a printed draw can be run again by hand.
+    /// that a printed draw can be run again by hand, and kept within lo..=hi (where a bound has
+    /// more digits the rounding could step past it).
     pub fn log_uniform_3_digits(&mut self, lo: f64, hi: f64) -> f64 {
         let u = (self.next() >> 11) as f64 / (1u64 << 53) as f64;
         let x = (lo.ln() + u * (hi.ln() - lo.ln())).exp();
         let scale = 10f64.powi(2 - x.log10().floor() as i32);
-        (x * scale).round() / scale
+        ((x * scale).round() / scale).clamp(lo, hi)
     }
 }

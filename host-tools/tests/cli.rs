@@ -901,15 +901,27 @@ fn bench_ident_runs_chosen_and_random_anti_resonances() {
     let hz = |r: &serde_json::Value| {
         r["grid"].as_array().unwrap().iter().map(|c| c["hz"].as_f64().unwrap()).collect::<Vec<_>>()
     };
-    let a = hz(&run(&["--random", "2", "--plant-seed", "7"]).1);
-    assert_eq!(a.len(), 2);
+    // The draw itself (ranges, a seed naming it) is `random_absorbers`' unit test.
+    let (_, r) = run(&["--random", "2", "--plant-seed", "7"]);
+    let a = hz(&r);
+    assert_eq!((a.len(), r["plant_seed"].as_u64(), r["seeds"].as_u64()), (2, Some(7), Some(1)), "{r}");
     assert!(a.iter().all(|f| (15.0..=300.0).contains(f)), "{a:?}");
-    assert_eq!(hz(&run(&["--random", "2", "--plant-seed", "7"]).1), a, "a seed names a draw");
-    for bad in [&["--absorber", "1000"][..], &["--absorber", "NaN"][..], &["--random", "2", "--seeds", "0"][..]] {
-        let o = servo().args(["bench", "ident"]).args(bad).output().unwrap();
+    // Refused before the FMU is loaded (the path given does not exist), naming the option.
+    let refusals: [(&str, &[&str], &str); 8] = [
+        ("ident", &["--absorber", "1000"], "--absorber 1000"),
+        ("ident", &["--absorber", "NaN"], "--absorber NaN"),
+        ("ident", &["--random", "2", "--seeds", "0"], "--seeds"),
+        ("ident", &["--random", "0"], "--random"),
+        ("ident", &["--random", "2", "--absorber", "40"], "--absorber"),
+        ("ident", &["--plant-seed", "3"], "--random"),
+        ("sequence", &["--random", "0"], "--random"),
+        ("sequence", &["--random", "2", "--zero-speed", "1"], "--zero-speed"),
+    ];
+    for (bench, bad, named) in refusals {
+        let o = servo().args(["bench", bench, "--fmu", "/nonexistent/axis.fmu"]).args(bad).output().unwrap();
         let err = String::from_utf8_lossy(&o.stderr);
-        assert_eq!(o.status.code(), Some(2), "{bad:?}: {err}");
-        assert!(err.contains(bad[0]) || err.contains(bad[2]), "{bad:?}: {err}");
+        assert_eq!(o.status.code(), Some(2), "{bench} {bad:?}: {err}");
+        assert!(err.contains(named) && !err.contains("nonexistent"), "{bench} {bad:?}: {err}");
     }
 }
 
@@ -930,9 +942,13 @@ fn bench_accdec_runs_random_moves_named_by_their_seed() {
     let (a, b, c) = (run("5"), run("5"), run("6"));
     assert_eq!(a, b, "a seed names a draw");
     assert_ne!(a, c);
-    let o = servo().args(["bench", "accdec", "--random", "0"]).output().unwrap();
-    assert_eq!(o.status.code(), Some(2));
-    assert!(String::from_utf8_lossy(&o.stderr).contains("--random"));
+    for (bad, named) in
+        [(&["--random", "0"][..], "--random"), (&["--random", "3", "--sequences", "5"][..], "--sequences")]
+    {
+        let o = servo().args(["bench", "accdec"]).args(bad).output().unwrap();
+        assert_eq!(o.status.code(), Some(2), "{bad:?}");
+        assert!(String::from_utf8_lossy(&o.stderr).contains(named), "{bad:?}");
+    }
 }
 
 /// A stop time whose trace would not fit memory (4·10¹² steps here) is refused when the file

@@ -79,20 +79,21 @@ pub struct AccdecArgs {
 #[derive(clap::Args)]
 pub struct AccdecBenchArgs {
     /// Random pulse sequences for the conservation property
-    #[arg(long, default_value_t = 10_000)]
+    #[arg(long, default_value_t = 10_000, conflicts_with = "random")]
     pub sequences: usize,
     /// Load resonances for the equal-delay vibration comparison (Hz)
-    #[arg(long, value_delimiter = ',', default_values_t = [20.0, 60.0])]
+    #[arg(long, value_delimiter = ',', default_values_t = [20.0, 60.0], conflicts_with = "random")]
     pub resonance: Vec<f64>,
     /// Skip the instruction count (needs valgrind)
-    #[arg(long)]
+    #[arg(long, conflicts_with = "random")]
     pub no_cost: bool,
     /// N moves drawn at random instead of the checks above, each through the drive's filter
-    /// against the same filter in f64 (order 1–6, period 0.125–2 ms, cut-off 0.5 Hz to a
-    /// quarter of the rate, 1–10⁹ counts of either sign, a step or a rectangle or trapezoid of
-    /// 1 ms–2 s, each log-uniform): cases the project does not ship (the seed names the draw).
-    /// Prints the worst deviation and exits 1 above one count or on a lost pulse
-    #[arg(long, value_name = "N")]
+    /// against the same filter in f64: order 1–6, either sign and a step, rectangle or
+    /// trapezoid, each uniform; period 0.125–2 ms, cut-off 0.5 Hz to a quarter of the rate,
+    /// 1–10⁹ counts and a duration of 1 ms–2 s, each log-uniform. Cases the project does not
+    /// ship (the seed names the draw). Prints the worst deviation and exits 1 above one count
+    /// or on a lost pulse
+    #[arg(long, value_name = "N", value_parser = clap::value_parser!(u32).range(1..))]
     pub random: Option<u32>,
     /// Seed of the --random draw
     #[arg(long, default_value_t = 1, requires = "random")]

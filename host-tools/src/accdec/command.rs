@@ -98,9 +98,6 @@ fn accdec(args: &AccdecArgs) -> Result<bool> {
 /// `servo bench accdec --random N`: drawn moves against the f64 filter, worst deviation.
 fn bench_accdec_random(args: &AccdecBenchArgs, n: u32) -> Result<bool> {
     use crate::accdec::deviation::{random_cases, run_cases};
-    if n == 0 {
-        anyhow::bail!("--random must draw at least one move");
-    }
     let cases = random_cases(n, args.plant_seed);
     let pb = progress_bar("f64 reference, drawn moves", args.common.json);
     let rows = run_cases(&cases, |f| pb.set_position((f * 1000.0) as u64)).map_err(|e| anyhow::anyhow!("{e}"))?;
@@ -125,7 +122,7 @@ fn bench_accdec_random(args: &AccdecBenchArgs, n: u32) -> Result<bool> {
     );
     println!("  {} ticks; output sum != input sum in {unbalanced} of them", ticks);
     println!(
-        "  worst |position - reference position|: {:.4} counts (goal <= 1: {}) at order {}, {} Hz, T = {} ms, {} counts, {}, tick {}",
+        "  worst |position - reference position|: {:.4} counts (goal <= 1: {}) at order {}, {} Hz, T = {:.3} ms, {} counts, {}, tick {}",
         worst.worst,
         if worst.worst <= 1.0 { "met" } else { "MISSED" },
         worst.order,

@@ -175,10 +175,10 @@ pub fn grid() -> Vec<(u32, f32, f32, i64, Profile)> {
     cases
 }
 
-/// `n` cases drawn with `seed` (cases the project does not ship): order 1–6; sample period
-/// log-uniform over 0.125–2 ms; cut-off log-uniform from 0.5 Hz to a quarter of the sampling
-/// rate; a move log-uniform over 1–10⁹ counts of either sign; a step, or a rectangle or
-/// trapezoid of velocity lasting log-uniform 1 ms–2 s.
+/// `n` cases drawn with `seed` (cases the project does not ship): order 1–6, either sign and
+/// a step, rectangle or trapezoid, each uniform; sample period (0.125–2 ms), cut-off (0.5 Hz to
+/// a quarter of the sampling rate), move (1–10⁹ counts) and duration (1 ms–2 s), each
+/// log-uniform.
 pub fn random_cases(n: u32, seed: u64) -> Vec<(u32, f32, f32, i64, Profile)> {
     let mut rng = crate::random::XorShift64Star(seed.wrapping_mul(0x9E37_79B9_7F4A_7C15) | 1);
     (0..n)
@@ -186,8 +186,6 @@ pub fn random_cases(n: u32, seed: u64) -> Vec<(u32, f32, f32, i64, Profile)> {
             let order = 1 + rng.below(MAX_ORDER as u64) as u32;
             let period = rng.log_uniform_3_digits(PERIODS[0] as f64, PERIODS[PERIODS.len() - 1] as f64) as f32;
             let cutoff = rng.log_uniform_3_digits(CUTOFFS_HZ[0] as f64, 0.25 / period as f64) as f32;
-            // Three digits may round the top cut-off just past a quarter of the rate.
-            let cutoff = cutoff.min(0.25 / period);
             let distance = rng.log_uniform_3_digits(1.0, DISTANCES[DISTANCES.len() - 1] as f64).round() as i64;
             let sign = if rng.below(2) == 0 { 1 } else { -1 };
             let duration = rng.log_uniform_3_digits(0.001, 2.0);

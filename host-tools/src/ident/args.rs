@@ -74,14 +74,14 @@ pub struct IdentBenchArgs {
     /// N anti-resonances drawn at random instead of the shipped grid, log-uniform over
     /// 15–300 Hz (cases the project does not ship; the seed names the draw); the grid alone,
     /// as --absorber
-    #[arg(long, value_name = "N", conflicts_with = "absorbers")]
+    #[arg(long, value_name = "N", conflicts_with = "absorbers", value_parser = clap::value_parser!(u32).range(1..))]
     pub random: Option<u32>,
     /// Seed of the --random draw
     #[arg(long, default_value_t = 1, requires = "random")]
     pub plant_seed: u64,
     /// Noise seeds 1..=N per anti-resonance (a figure that holds on one noise realisation may
     /// not on the next)
-    #[arg(long, default_value_t = crate::ident::bench::SEEDS)]
+    #[arg(long, default_value_t = crate::ident::bench::SEEDS, value_parser = clap::value_parser!(u32).range(1..))]
     pub seeds: u32,
     #[command(flatten)]
     pub common: Common,

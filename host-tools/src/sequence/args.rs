@@ -35,14 +35,14 @@ pub struct SequenceArgs {
 #[derive(clap::Args)]
 pub struct SequenceBenchArgs {
     /// Zero-speed levels to try (rad/s, comma separated)
-    #[arg(long, value_delimiter = ',', default_values_t = [0.5, 1.0, 2.0, 5.0, 10.0, 20.0, 50.0])]
+    #[arg(long, value_delimiter = ',', default_values_t = [0.5, 1.0, 2.0, 5.0, 10.0, 20.0, 50.0], conflicts_with = "random")]
     pub zero_speed: Vec<f64>,
     /// N stops drawn at random instead of the shipped grid, each on its own plant (inertia
     /// ratio log-uniform over 0.2–5, shaft resonance over 50–500 Hz) with a run speed (10–200
     /// rad/s), zero-speed level (0.5–20 rad/s) and completion width (1–100 counts) each
     /// log-uniform and a gain of the table: cases the project does not ship (the seed names
     /// the draw). Prints the grid's figures over them and the stops that miss (exit 1)
-    #[arg(long, value_name = "N")]
+    #[arg(long, value_name = "N", value_parser = clap::value_parser!(u32).range(1..))]
     pub random: Option<u32>,
     /// Seed of the --random draw
     #[arg(long, default_value_t = 1, requires = "random")]

@@ -1,6 +1,6 @@
 //! `servo sequence` and `servo bench sequence` (seed 004).
 
-use anyhow::{bail, Result};
+use anyhow::Result;
 
 use crate::cli::progress_bar;
 use crate::fmu::fmpy;
@@ -95,9 +95,6 @@ fn bench_sequence(args: &SequenceBenchArgs) -> Result<bool> {
     let fmu = Fmu::load(&common.fmu.clone().unwrap_or_else(default_fmu))?;
     let pb = progress_bar("sequence bench", common.json);
     if let Some(n) = args.random {
-        if n == 0 {
-            bail!("--random must draw at least one stop");
-        }
         let grid =
             crate::sequence::bench::bench_random(&fmu, n, args.plant_seed, |f| pb.set_position((f * 1000.0) as u64))?;
         pb.finish_and_clear();
@@ -120,7 +117,7 @@ fn bench_sequence(args: &SequenceBenchArgs) -> Result<bool> {
             println!("  stops that miss (toggles, no completion, or a swing over its bound):");
             print_stops(misses.into_iter());
         }
-        print_grid_figures(&g);
+        print_grid_figures(&g, "the drawn stops");
         return Ok(g.holds);
     }
     let r = crate::sequence::bench::bench(&fmu, zero_speed, |f| pb.set_position((f * 1000.0) as u64))?;
@@ -140,7 +137,7 @@ fn bench_sequence(args: &SequenceBenchArgs) -> Result<bool> {
         g.runs
     );
     print_stops(r.grid.iter());
-    print_grid_figures(g);
+    print_grid_figures(g, "the grid");
     println!("servo bench sequence — seed 004, default axis and friction, run at 100 rad/s, gradient 2000 rad/s², base gain 20/s, completion width 8 counts");
     println!("  stop at speed (run off + stop key at 0.3 s, zero-speed level 2 rad/s) and a 1 rad fine adjustment, per gain multiplier:");
     println!(
@@ -204,15 +201,15 @@ fn print_stops<'a>(stops: impl Iterator<Item = &'a crate::sequence::bench::GridS
     }
 }
 
-fn print_grid_figures(g: &crate::sequence::bench::GridFigures) {
-    println!("  worst case over the grid: completion toggles after the first raise {} (goal 0); runs never complete {}; overshoot beyond the width after completion {} counts; settle time (acceptance to completion) {:.1} ms",
+fn print_grid_figures(g: &crate::sequence::bench::GridFigures, over: &str) {
+    println!("  worst case over {over}: completion toggles after the first raise {} (goal 0); runs never complete {}; overshoot beyond the width after completion {} counts; settle time (acceptance to completion) {:.1} ms",
         g.max_toggles, g.never_complete, g.max_overshoot_counts, g.max_settle * 1e3);
     if let Some(w) = &g.worst_swing {
         let plant = if w.plant == "default" { String::new() } else { format!(" ({})", w.plant) };
         println!(
             "  swing after acceptance / bound ({}·v²/(2a) + {:.2}·J_L·a/k (the shaft's wind-up) + width + hysteresis): worst {:.2} (goal <= 1) at {} rad/s, level {} rad/s, width {}, gain {}x{plant}: swing {} counts, v@acc {:.3} rad/s, stopping distance {:.0} counts, wind-up {:.0} counts",
-            crate::sequence::bench::SWING_BOUND_FACTOR, crate::sequence::bench::SWING_WINDUP_FACTOR, g.worst_swing_ratio, w.speed, w.zero_speed, w.width, w.multiplier, w.swing_counts, w.speed_at_acceptance, w.stopping_counts, w.windup_counts
+            crate::sequence::bench::SWING_STOP_FACTOR, crate::sequence::bench::SWING_WINDUP_FACTOR, g.worst_swing_ratio, w.speed, w.zero_speed, w.width, w.multiplier, w.swing_counts, w.speed_at_acceptance, w.stopping_counts, w.windup_counts
         );
     }
-    println!("  figure holds over the grid: {}", if g.holds { "yes" } else { "NO" });
+    println!("  figure holds over {over}: {}", if g.holds { "yes" } else { "NO" });
 }
