@@ -93,11 +93,13 @@ pub fn random_absorbers(n: u32, seed: u64) -> Vec<f64> {
     hz
 }
 
-/// Identify every anti-resonance of `grid` (Hz) with noise seeds 1..=`seeds`.
+/// Identify every anti-resonance of `grid` (Hz), absorbers of damping ratio `damping`, with
+/// noise seeds 1..=`seeds`.
 pub fn run_grid(
     fmu: &Fmu,
     out: &Path,
     grid: &[f64],
+    damping: f64,
     seeds: u32,
     mut progress: impl FnMut(f64),
 ) -> Result<Vec<GridCase>> {
@@ -106,11 +108,11 @@ pub fn run_grid(
     let total = grid.len() * seeds as usize;
     for (i, &hz) in grid.iter().enumerate() {
         let w = std::f64::consts::TAU * hz;
-        let truth = true_anti_resonance(load, load * w * w, 2.0 * DAMPING * load * w);
-        let plant_notch_db = plant_notch(hz).map_or(0.0, |n| n.depth_db);
+        let truth = true_anti_resonance(load, load * w * w, 2.0 * damping * load * w);
+        let plant_notch_db = plant_notch(hz, damping).map_or(0.0, |n| n.depth_db);
         for seed in 1..=seeds {
             progress((i * seeds as usize + seed as usize - 1) as f64 / total.max(1) as f64);
-            let mut parameters = absorber_parameters(hz, DAMPING, load);
+            let mut parameters = absorber_parameters(hz, damping, load);
             parameters.insert("plant.noise_seed".into(), Value::Int(seed as i64));
             let dir = out.join(format!("grid/{hz}hz_seed{seed}"));
             let r = identify_axis(fmu, "x", &parameters, AMPLITUDE, Some(SNR_DB), &dir)?;
@@ -136,28 +138,29 @@ pub fn run_grid(
     Ok(cases)
 }
 
-/// Whether the bench's axis with a `hz` absorber masks its anti-resonance: the plant's own
-/// notch is under [`MASKED_NOTCH_DB`].
+/// Whether the bench's axis with a `hz` absorber ([`DAMPING`]) masks its anti-resonance: the
+/// plant's own notch is under [`MASKED_NOTCH_DB`].
 pub fn masked_by_plant(hz: f64) -> bool {
-    plant_notch(hz).is_none_or(|n| n.depth_db < MASKED_NOTCH_DB)
+    plant_notch(hz, DAMPING).is_none_or(|n| n.depth_db < MASKED_NOTCH_DB)
 }
 
-/// The bench's axis with an absorber at `hz` ([`DAMPING`], inertia equal to the load's).
-fn axis_with_absorber(hz: f64) -> PlantParams {
+/// The bench's axis with an absorber at `hz` (damping ratio `damping`, inertia equal to the
+/// load's).
+fn axis_with_absorber(hz: f64, damping: f64) -> PlantParams {
     let load = PlantParams::default().load_inertia;
     let w = std::f64::consts::TAU * hz;
     PlantParams {
         absorber_inertia: load,
         absorber_stiffness: load * w * w,
-        absorber_damping: 2.0 * DAMPING * load * w,
+        absorber_damping: 2.0 * damping * load * w,
         ..PlantParams::default()
     }
 }
 
 /// The notch search on the exact response of the bench's axis with a `hz` absorber, on the
 /// measurement's frequencies (how deep the plant itself shows its anti-resonance).
-pub fn plant_notch(hz: f64) -> Option<Notch> {
-    let plant = axis_with_absorber(hz);
+pub fn plant_notch(hz: f64, damping: f64) -> Option<Notch> {
+    let plant = axis_with_absorber(hz, damping);
     let rate =
         control_core::Params::default().rates.current_loop_hz as f64 / crate::ident::identification::DIVIDER as f64;
     let df = rate / crate::ident::identification::samples_per_period() as f64;
@@ -218,7 +221,7 @@ pub struct RecordCheck {
 pub fn record_check(fmu: &Fmu, hz: f64, bands: &[(f64, f64)]) -> Result<RecordCheck> {
     let load = PlantParams::default().load_inertia;
     let parameters: BTreeMap<String, Value> = absorber_parameters(hz, DAMPING, load);
-    let plant = axis_with_absorber(hz);
+    let plant = axis_with_absorber(hz, DAMPING);
     let span = (bands.iter().map(|b| b.0).fold(f64::INFINITY, f64::min), bands.iter().map(|b| b.1).fold(0.0, f64::max));
     let point = measure_records(fmu, &parameters, AMPLITUDE, span, ("electromagnetic_torque", "load_acceleration"))?;
     let mean = measure_records(

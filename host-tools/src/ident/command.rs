@@ -230,9 +230,10 @@ fn bench_ident(args: &IdentBenchArgs) -> Result<bool> {
     let pb = progress_bar("ident bench", common.json);
     // The grid: every anti-resonance × every noise seed at 20 dB SNR.
     pb.set_prefix("grid");
-    let grid = crate::ident::bench::run_grid(&fmu, &out, &crate::ident::bench::GRID_HZ, args.seeds, |x| {
-        pb.set_position((x * 800.0) as u64)
-    })?;
+    let grid =
+        crate::ident::bench::run_grid(&fmu, &out, &crate::ident::bench::GRID_HZ, args.damping, args.seeds, |x| {
+            pb.set_position((x * 800.0) as u64)
+        })?;
     let record_bands = [(5.0, 8.0), (8.0, 15.0), (15.0, 25.0), (25.0, 100.0), (100.0, 300.0), (300.0, 500.0)];
     let record = crate::ident::bench::record_check(&fmu, 15.0, &record_bands)?;
     let mut ok = grid.iter().all(|c| c.passed());
@@ -303,7 +304,7 @@ fn bench_ident(args: &IdentBenchArgs) -> Result<bool> {
         );
         return Ok(ok);
     }
-    print_grid(&grid, Some(&record), args.seeds);
+    print_grid(&grid, Some(&record), args.seeds, args.damping);
     println!("  demo axes:");
     println!(
         "  {:<11} {:<5} {:>12} {:>12} {:>12} {:>12} {:>10} {:>10}",
@@ -358,6 +359,9 @@ fn bench_ident(args: &IdentBenchArgs) -> Result<bool> {
 /// The anti-resonances `--absorber` or `--random` chose (None: the shipped grid), checked:
 /// each a finite frequency inside the band the response is measured over.
 fn selected_absorbers(args: &IdentBenchArgs) -> Result<Option<Vec<f64>>> {
+    if !(args.damping > 0.0 && args.damping < 1.0) {
+        bail!("--damping {}: an absorber's damping ratio lies between 0 and 1 (exclusive)", args.damping);
+    }
     let absorbers = match args.random {
         Some(n) => crate::ident::bench::random_absorbers(n, args.plant_seed),
         None if args.absorbers.is_empty() => return Ok(None),
@@ -382,15 +386,16 @@ fn selected_absorbers(args: &IdentBenchArgs) -> Result<Option<Vec<f64>>> {
 fn bench_ident_grid_alone(args: &IdentBenchArgs, fmu: &Fmu, out: &std::path::Path, absorbers: &[f64]) -> Result<bool> {
     let pb = progress_bar("ident bench", args.common.json);
     pb.set_prefix("grid");
-    let grid =
-        crate::ident::bench::run_grid(fmu, out, absorbers, args.seeds, |x| pb.set_position((x * 1000.0) as u64))?;
+    let grid = crate::ident::bench::run_grid(fmu, out, absorbers, args.damping, args.seeds, |x| {
+        pb.set_position((x * 1000.0) as u64)
+    })?;
     pb.finish_and_clear();
     let ok = grid.iter().all(|c| c.passed());
     if args.common.json {
         println!(
             "{}",
             serde_json::to_string_pretty(
-                &serde_json::json!({"bench": "ident", "absorbers_hz": absorbers, "random": args.random, "plant_seed": args.random.map(|_| args.plant_seed), "seeds": args.seeds, "grid": grid, "measurement_time_s": crate::ident::identification::measurement_time_s(), "passed": ok})
+                &serde_json::json!({"bench": "ident", "absorbers_hz": absorbers, "random": args.random, "plant_seed": args.random.map(|_| args.plant_seed), "seeds": args.seeds, "damping": args.damping, "grid": grid, "measurement_time_s": crate::ident::identification::measurement_time_s(), "passed": ok})
             )?
         );
         return Ok(ok);
@@ -402,16 +407,21 @@ fn bench_ident_grid_alone(args: &IdentBenchArgs, fmu: &Fmu, out: &std::path::Pat
             args.plant_seed
         );
     }
-    print_grid(&grid, None, args.seeds);
+    print_grid(&grid, None, args.seeds, args.damping);
     println!("  goal: at most 1 % in frequency and 20 % in damping: {}", if ok { "met" } else { "MISSED" });
     Ok(ok)
 }
 
-fn print_grid(grid: &[crate::ident::bench::GridCase], record: Option<&crate::ident::bench::RecordCheck>, seeds: u32) {
-    use crate::ident::bench::{DAMPING, SNR_DB};
+fn print_grid(
+    grid: &[crate::ident::bench::GridCase],
+    record: Option<&crate::ident::bench::RecordCheck>,
+    seeds: u32,
+    damping: f64,
+) {
+    use crate::ident::bench::SNR_DB;
     use crate::ident::identification::{measurement_time_s, period_s, PERIODS, TRANSIENT_S};
     println!(
-        "servo bench ident — seed 001: absorbers {}–{} Hz (damping {DAMPING}) × {seeds} noise seeds, accelerometer noise at {SNR_DB} dB SNR of the record",
+        "servo bench ident — seed 001: absorbers {}–{} Hz (damping {damping}) × {seeds} noise seeds, accelerometer noise at {SNR_DB} dB SNR of the record",
         grid.first().map_or(0.0, |c| c.hz),
         grid.last().map_or(0.0, |c| c.hz)
     );
@@ -458,7 +468,7 @@ fn print_grid(grid: &[crate::ident::bench::GridCase], record: Option<&crate::ide
     if !masked.is_empty() {
         let count = |p: fn(&crate::ident::bench::GridCase) -> bool| masked.iter().filter(|c| p(c)).count();
         println!(
-            "  where a resonance masks the anti-resonance (the plant's own notch under {} dB; {} identifications): {} found within the goals, {} off, {} undetermined (the refits' spread), {} refused, {} without a clear notch",
+            "  where the plant's own notch is under {} dB (a resonance masks the anti-resonance or the absorber's damping flattens it; {} identifications): {} found within the goals, {} off, {} undetermined (the refits' spread), {} refused, {} without a clear notch",
             crate::ident::bench::MASKED_NOTCH_DB,
             masked.len(),
             count(|c| c.found.is_some() && c.passed()),
