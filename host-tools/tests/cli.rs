@@ -907,7 +907,9 @@ fn bench_ident_runs_chosen_and_random_anti_resonances() {
     assert_eq!((a.len(), r["plant_seed"].as_u64(), r["seeds"].as_u64()), (2, Some(7), Some(1)), "{r}");
     assert!(a.iter().all(|f| (15.0..=300.0).contains(f)), "{a:?}");
     // Refused before the FMU is loaded (the path given does not exist), naming the option.
-    let refusals: [(&str, &[&str], &str); 10] = [
+    let refusals: [(&str, &[&str], &str); 12] = [
+        ("sequence", &["--random", "2", "--gradient", "-5"], "--gradient -5"),
+        ("sequence", &["--gradient", "500"], "--random"),
         ("ident", &["--damping", "0"], "--damping 0"),
         ("ident", &["--random", "2", "--damping", "NaN"], "--damping NaN"),
         ("ident", &["--absorber", "1000"], "--absorber 1000"),

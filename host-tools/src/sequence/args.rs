@@ -47,6 +47,11 @@ pub struct SequenceBenchArgs {
     /// Seed of the --random draw
     #[arg(long, default_value_t = 1, requires = "random")]
     pub plant_seed: u64,
+    /// Gradient of the drawn stops (rad/s², seq.acceleration; the grid runs the default, 2000).
+    /// The swing's bound assumes a velocity loop that follows the ramp: at 5000–10000 rad/s²
+    /// the default loop lags it (see the README)
+    #[arg(long, default_value_t = crate::sequence::bench::ACCELERATION, requires = "random")]
+    pub gradient: f64,
     #[command(flatten)]
     pub common: Common,
 }

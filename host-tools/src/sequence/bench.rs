@@ -12,13 +12,14 @@ use control_core::stop_sequence::SequenceState;
 use serde::Serialize;
 
 use crate::fmu::runner::Fmu;
-use crate::fmu::scenario::DEFAULT_STEP;
+use crate::fmu::scenario::{Value, DEFAULT_STEP};
 use crate::fmu::trace::Trace;
 use crate::sequence::timeline::SequenceScenario;
 use crate::sweep::bench::PlantCase;
 
 const RUN_SPEED: f64 = 100.0;
-const ACCELERATION: f64 = 2000.0;
+/// The grid's gradient (rad/s²): the default.
+pub const ACCELERATION: f64 = 2000.0;
 const STOP_AT: f64 = 0.3;
 
 #[derive(Clone, Debug, Serialize)]
@@ -201,6 +202,7 @@ fn grid_stop(
     (speed, vh, width): (f64, f64, u32),
     index: usize,
     multiplier: f64,
+    acceleration: f64,
 ) -> Result<GridStop> {
     let text = format!(
         "name='bench_grid'\nstop_time={GRID_STOP_TIME:?}\n[parameters]\n\"seq.target_speed\"={speed:?}\n\"seq.zero_speed\"={vh:?}\n\"seq.completion_counts\"={width}\n\
@@ -209,6 +211,7 @@ fn grid_stop(
     );
     let mut scenario: SequenceScenario = toml::from_str(&text)?;
     scenario.parameters.extend(plant.map(PlantCase::parameters).unwrap_or_default());
+    scenario.parameters.insert("seq.acceleration".into(), Value::Float(acceleration));
     scenario.validate()?;
     let t = fmu.run(&scenario.to_scenario(), |_| {})?;
     let (state, complete, dev, time, v) = (
@@ -250,8 +253,8 @@ fn grid_stop(
         width,
         multiplier,
         speed_at_acceptance: va,
-        stopping_counts: va * va / (2.0 * ACCELERATION) * counts_per_rad,
-        windup_counts: jl * ACCELERATION / k * counts_per_rad,
+        stopping_counts: va * va / (2.0 * acceleration) * counts_per_rad,
+        windup_counts: jl * acceleration / k * counts_per_rad,
         swing_counts: dev[accepted..].iter().fold(0.0f64, |m, d| m.max(d.abs())) as i64,
         overshoot_counts: first
             .map_or(0, |f| dev[f..].iter().fold(0.0f64, |m, d| m.max(d.abs() - width as f64)) as i64),
@@ -300,7 +303,7 @@ pub fn bench_grid(fmu: &Fmu, mut progress: impl FnMut(f64)) -> Result<Vec<GridSt
             for &width in &GRID_WIDTHS {
                 for i in 0..defaults.gain_count {
                     progress(grid.len() as f64 / total as f64);
-                    grid.push(grid_stop(fmu, None, (speed, vh, width), i, defaults.gains[i] as f64)?);
+                    grid.push(grid_stop(fmu, None, (speed, vh, width), i, defaults.gains[i] as f64, ACCELERATION)?);
                 }
             }
         }
@@ -330,14 +333,21 @@ pub fn random_stops(n: u32, seed: u64) -> Vec<(PlantCase, (f64, f64, u32), usize
         .collect()
 }
 
-/// The drawn stops of [`random_stops`], each run once.
-pub fn bench_random(fmu: &Fmu, n: u32, seed: u64, mut progress: impl FnMut(f64)) -> Result<Vec<GridStop>> {
+/// The drawn stops of [`random_stops`], each run once at the gradient `acceleration`
+/// (rad/s²; the grid's is [`ACCELERATION`], the default).
+pub fn bench_random(
+    fmu: &Fmu,
+    n: u32,
+    seed: u64,
+    acceleration: f64,
+    mut progress: impl FnMut(f64),
+) -> Result<Vec<GridStop>> {
     let gains = control_core::Params::default().sequence.gains;
     let stops = random_stops(n, seed);
     let mut grid = Vec::with_capacity(stops.len());
     for (k, (plant, stop, gain)) in stops.iter().enumerate() {
         progress(k as f64 / stops.len() as f64);
-        grid.push(grid_stop(fmu, Some(plant), *stop, *gain, gains[*gain] as f64)?);
+        grid.push(grid_stop(fmu, Some(plant), *stop, *gain, gains[*gain] as f64, acceleration)?);
     }
     Ok(grid)
 }

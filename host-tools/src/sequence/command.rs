@@ -92,25 +92,29 @@ impl SequenceBenchArgs {
 
 fn bench_sequence(args: &SequenceBenchArgs) -> Result<bool> {
     let (zero_speed, common) = (&args.zero_speed, &args.common);
+    if !(args.gradient.is_finite() && args.gradient > 0.0) {
+        anyhow::bail!("--gradient {}: a deceleration gradient is a positive number (rad/s²)", args.gradient);
+    }
     let fmu = Fmu::load(&common.fmu.clone().unwrap_or_else(default_fmu))?;
     let pb = progress_bar("sequence bench", common.json);
     if let Some(n) = args.random {
-        let grid =
-            crate::sequence::bench::bench_random(&fmu, n, args.plant_seed, |f| pb.set_position((f * 1000.0) as u64))?;
+        let grid = crate::sequence::bench::bench_random(&fmu, n, args.plant_seed, args.gradient, |f| {
+            pb.set_position((f * 1000.0) as u64)
+        })?;
         pb.finish_and_clear();
         let g = crate::sequence::bench::grid_figures(&grid);
         if common.json {
             println!(
                 "{}",
                 serde_json::to_string_pretty(
-                    &serde_json::json!({"bench": "sequence", "random": n, "plant_seed": args.plant_seed, "grid": grid, "grid_figures": g})
+                    &serde_json::json!({"bench": "sequence", "random": n, "plant_seed": args.plant_seed, "gradient": args.gradient, "grid": grid, "grid_figures": g})
                 )?
             );
             return Ok(g.holds);
         }
         println!(
-            "servo bench sequence --random — {n} stops drawn with seed {}, each on its own plant (inertia ratio 0.2–5 × shaft resonance 50–500 Hz, log-uniform), run speed 10–200 rad/s, zero-speed level 0.5–20 rad/s, width 1–100 counts (log-uniform), a gain of the table: cases the project does not ship",
-            args.plant_seed
+            "servo bench sequence --random — {n} stops drawn with seed {}, each on its own plant (inertia ratio 0.2–5 × shaft resonance 50–500 Hz, log-uniform), run speed 10–200 rad/s, zero-speed level 0.5–20 rad/s, width 1–100 counts (log-uniform), a gain of the table, gradient {} rad/s²: cases the project does not ship",
+            args.plant_seed, args.gradient
         );
         let misses: Vec<_> = grid.iter().filter(|x| !crate::sequence::bench::stop_holds(x)).collect();
         if !misses.is_empty() {
