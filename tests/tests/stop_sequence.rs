@@ -6,7 +6,7 @@ use cross_checks::{fmu_path, load_fmu};
 use host_tools::fmu::fmpy::run_fmpy;
 use host_tools::fmu::trace::{compare_exact, Trace};
 use host_tools::paths::workspace_root;
-use host_tools::sequence::bench::{bench, bench_random, grid_figures, swing_ratio};
+use host_tools::sequence::bench::{bench, bench_random, grid_figures, swing_ratio, ACCELERATION};
 use host_tools::sequence::timeline::SequenceScenario;
 
 fn shipped() -> Vec<SequenceScenario> {
@@ -89,7 +89,7 @@ fn hand_over_to_position_control_does_not_jump_the_torque() {
 #[test]
 fn stops_on_drawn_plants_complete_once_and_swing_within_the_shaft_wind_up_bound() {
     let fmu = load_fmu();
-    let stops = bench_random(&fmu, 100, 1, 2000.0, |_| {}).unwrap();
+    let stops = bench_random(&fmu, 100, 1, ACCELERATION, |_| {}).unwrap();
     let g = grid_figures(&stops);
     assert!(g.holds && g.max_toggles == 0 && g.never_complete == 0, "{g:?}");
     let counts_per_rad = (1u64 << 20) as f64 / std::f64::consts::TAU;

@@ -68,7 +68,8 @@ pub struct IdentArgs {
 pub struct IdentBenchArgs {
     /// Only these anti-resonances (Hz, repeatable) instead of the shipped grid of 15–300 Hz:
     /// the grid alone, without the demo axes and the correction (exit 1 on a miss). The
-    /// bench's axis carries an absorber of the load's inertia and damping 0.05 tuned to it.
+    /// bench's axis carries an absorber of the load's inertia and damping 0.05 (--damping)
+    /// tuned to it.
     #[arg(long = "absorber", value_name = "HZ")]
     pub absorbers: Vec<f64>,
     /// N anti-resonances drawn at random instead of the shipped grid, log-uniform over
@@ -80,7 +81,8 @@ pub struct IdentBenchArgs {
     #[arg(long, default_value_t = 1, requires = "random")]
     pub plant_seed: u64,
     /// Damping ratio of the grid's absorbers (the demo axes keep 0.05). A more damped
-    /// absorber shows a shallower notch: from about 0.1 the plant's own is under 4 dB
+    /// absorber shows a shallower notch: at 0.15 the plant's own is under 4 dB everywhere, and
+    /// a case reported without an anti-resonance then counts as right
     #[arg(long, default_value_t = crate::ident::bench::DAMPING)]
     pub damping: f64,
     /// Noise seeds 1..=N per anti-resonance (a figure that holds on one noise realisation may

@@ -34,7 +34,7 @@ pub const SEEDS: u32 = 10;
 /// The range of anti-resonances the goals cover (Hz): `--random` draws from it.
 pub const RANGE_HZ: (f64, f64) = (15.0, 300.0);
 pub const SNR_DB: f64 = 20.0;
-/// Damping of every absorber of the grid and the demo.
+/// Damping of the grid's absorbers (unless `--damping`) and of the demo's.
 pub const DAMPING: f64 = 0.05;
 pub const AMPLITUDE: f64 = 0.05;
 /// Goals: relative error of the frequency and of the damping.

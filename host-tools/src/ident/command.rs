@@ -299,7 +299,7 @@ fn bench_ident(args: &IdentBenchArgs) -> Result<bool> {
         println!(
             "{}",
             serde_json::to_string_pretty(
-                &serde_json::json!({"bench": "ident", "grid": grid, "record": record, "measurement_time_s": crate::ident::identification::measurement_time_s(), "rows": rows, "tunings": tunings, "passed": ok})
+                &serde_json::json!({"bench": "ident", "damping": args.damping, "seeds": args.seeds, "grid": grid, "record": record, "measurement_time_s": crate::ident::identification::measurement_time_s(), "rows": rows, "tunings": tunings, "passed": ok})
             )?
         );
         return Ok(ok);
@@ -355,7 +355,6 @@ fn bench_ident(args: &IdentBenchArgs) -> Result<bool> {
     Ok(ok)
 }
 
-/// The grid's table: per anti-resonance, each seed's errors; then the worst case.
 /// The anti-resonances `--absorber` or `--random` chose (None: the shipped grid), checked:
 /// each a finite frequency inside the band the response is measured over.
 fn selected_absorbers(args: &IdentBenchArgs) -> Result<Option<Vec<f64>>> {
@@ -412,6 +411,7 @@ fn bench_ident_grid_alone(args: &IdentBenchArgs, fmu: &Fmu, out: &std::path::Pat
     Ok(ok)
 }
 
+/// The grid's table: per anti-resonance, each seed's errors; then the worst case.
 fn print_grid(
     grid: &[crate::ident::bench::GridCase],
     record: Option<&crate::ident::bench::RecordCheck>,
@@ -439,7 +439,7 @@ fn print_grid(
         let masked = row
             .first()
             .filter(|c| c.masked_by_plant())
-            .map_or(String::new(), |c| format!("   (masked: the plant's notch {:.1} dB)", c.plant_notch_db));
+            .map_or(String::new(), |c| format!("   (the plant's own notch {:.1} dB: not clear)", c.plant_notch_db));
         println!("  {f:>6.1} Hz {}{masked}", cells.join(""));
     }
     // Over the anti-resonances found (a case without one has no error to rank).
@@ -482,8 +482,9 @@ fn print_grid(
     println!("  identifications missing a goal: {missed} of {} (found off the goals, or none found where the plant shows its notch)", grid.len());
     let Some(record) = record else { return };
     println!(
-        "  the record against the analytic plant, noise-free, {} Hz absorber (largest relative error; point samples / means over each acquisition period):",
-        record.hz
+        "  the record against the analytic plant, noise-free, {} Hz absorber, damping {} (largest relative error; point samples / means over each acquisition period):",
+        record.hz,
+        crate::ident::bench::DAMPING
     );
     for ((lo, hi), point, mean) in &record.bands {
         println!("    {lo:>5.0}–{hi:<5.0} Hz: {:>8.2} % / {:>6.2} %", point * 100.0, mean * 100.0);

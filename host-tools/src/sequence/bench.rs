@@ -189,11 +189,23 @@ fn stop_and_move(fmu: &Fmu, index: usize, multiplier: f64) -> Result<GainFigures
     })
 }
 
-/// Length of a grid stop's run (s): the stop key at 0.3 s, at most 0.1 s of deceleration
-/// (200 rad/s at 2 000 rad/s²), and 2.1 s for completion, about twice the longest settle
-/// seen (1.05 s, a 1-count width on a 4.3:1 load and a 151 Hz shaft); a stop that completes
-/// later counts as never complete, and a toggle up to the end counts.
-const GRID_STOP_TIME: f64 = 2.5;
+/// Time a grid stop's run leaves for completion after the deceleration (s; the deceleration
+/// counted as at least 0.1 s, 200 rad/s at 2 000 rad/s², so that every grid run lasts 2.5 s):
+/// about twice the longest settle seen (1.05 s, a 1-count width on a 4.3:1 load and a 151 Hz
+/// shaft). A stop that completes later counts as never complete, and a toggle up to the end
+/// counts.
+const COMPLETION_WINDOW: f64 = 2.1;
+
+/// The stop key of a run at `speed` with the gradient `acceleration`: at 0.3 s, or once the
+/// ramp has reached the speed (and 50 ms more) where it takes longer; on the step grid.
+fn stop_key_time(speed: f64, acceleration: f64) -> f64 {
+    on_step_grid(STOP_AT.max(speed / acceleration + 0.05))
+}
+
+/// `t` rounded up to a whole number of the scenario's steps.
+fn on_step_grid(t: f64) -> f64 {
+    (t / DEFAULT_STEP - 1e-9).ceil() * DEFAULT_STEP
+}
 
 /// One stop (see [`GridStop`]) on the default axis, or on `plant` where given.
 fn grid_stop(
@@ -204,10 +216,13 @@ fn grid_stop(
     multiplier: f64,
     acceleration: f64,
 ) -> Result<GridStop> {
+    let key = stop_key_time(speed, acceleration);
+    let decelerating = speed / acceleration;
+    let stop_time = on_step_grid(key + decelerating.max(0.1) + COMPLETION_WINDOW);
     let text = format!(
-        "name='bench_grid'\nstop_time={GRID_STOP_TIME:?}\n[parameters]\n\"seq.target_speed\"={speed:?}\n\"seq.zero_speed\"={vh:?}\n\"seq.completion_counts\"={width}\n\
+        "name='bench_grid'\nstop_time={stop_time:?}\n[parameters]\n\"seq.target_speed\"={speed:?}\n\"seq.zero_speed\"={vh:?}\n\"seq.completion_counts\"={width}\n\
          [[events]]\ntime=0.0\nevent='run'\n[[events]]\ntime=0.0\nevent='gain'\nindex={index}\n\
-         [[events]]\ntime={STOP_AT}\nevent='run_off'\n[[events]]\ntime={STOP_AT}\nevent='stop'\n"
+         [[events]]\ntime={key:?}\nevent='run_off'\n[[events]]\ntime={key:?}\nevent='stop'\n"
     );
     let mut scenario: SequenceScenario = toml::from_str(&text)?;
     scenario.parameters.extend(plant.map(PlantCase::parameters).unwrap_or_default());

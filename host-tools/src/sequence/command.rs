@@ -92,8 +92,11 @@ impl SequenceBenchArgs {
 
 fn bench_sequence(args: &SequenceBenchArgs) -> Result<bool> {
     let (zero_speed, common) = (&args.zero_speed, &args.common);
-    if !(args.gradient.is_finite() && args.gradient > 0.0) {
-        anyhow::bail!("--gradient {}: a deceleration gradient is a positive number (rad/s²)", args.gradient);
+    if !(args.gradient >= 1e-3 && args.gradient <= 1e8) {
+        anyhow::bail!(
+            "--gradient {}: the deceleration gradient (seq.acceleration) lies in 0.001–1e8 rad/s²",
+            args.gradient
+        );
     }
     let fmu = Fmu::load(&common.fmu.clone().unwrap_or_else(default_fmu))?;
     let pb = progress_bar("sequence bench", common.json);
