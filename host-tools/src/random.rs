@@ -5,6 +5,12 @@
 pub struct XorShift64Star(pub u64);
 
 impl XorShift64Star {
+    /// The generator a bench's `--plant-seed` names (any seed, 0 included: the state is
+    /// spread over the word and kept odd, never the all-zero state xorshift cannot leave).
+    pub fn from_seed(seed: u64) -> Self {
+        Self(seed.wrapping_mul(0x9E37_79B9_7F4A_7C15) | 1)
+    }
+
     pub fn next(&mut self) -> u64 {
         self.0 ^= self.0 >> 12;
         self.0 ^= self.0 << 25;

@@ -180,7 +180,7 @@ pub fn grid() -> Vec<(u32, f32, f32, i64, Profile)> {
 /// a quarter of the sampling rate), move (1–10⁹ counts) and duration (1 ms–2 s), each
 /// log-uniform.
 pub fn random_cases(n: u32, seed: u64) -> Vec<(u32, f32, f32, i64, Profile)> {
-    let mut rng = crate::random::XorShift64Star(seed.wrapping_mul(0x9E37_79B9_7F4A_7C15) | 1);
+    let mut rng = crate::random::XorShift64Star::from_seed(seed);
     (0..n)
         .map(|_| {
             let order = 1 + rng.below(MAX_ORDER as u64) as u32;

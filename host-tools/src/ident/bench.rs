@@ -87,7 +87,7 @@ impl GridCase {
 /// `n` anti-resonances drawn with `seed`, log-uniform over [`RANGE_HZ`], in rising order
 /// (three significant digits, so that a printed one can be run again with `--absorber`).
 pub fn random_absorbers(n: u32, seed: u64) -> Vec<f64> {
-    let mut rng = crate::random::XorShift64Star(seed.wrapping_mul(0x9E37_79B9_7F4A_7C15) | 1);
+    let mut rng = crate::random::XorShift64Star::from_seed(seed);
     let mut hz: Vec<f64> = (0..n).map(|_| rng.log_uniform_3_digits(RANGE_HZ.0, RANGE_HZ.1)).collect();
     hz.sort_by(f64::total_cmp);
     hz

@@ -361,7 +361,7 @@ fn selected_absorbers(args: &IdentBenchArgs) -> Result<Option<Vec<f64>>> {
     if !(args.damping > 0.0 && args.damping < 1.0) {
         bail!("--damping {}: an absorber's damping ratio lies between 0 and 1 (exclusive)", args.damping);
     }
-    let absorbers = match args.random {
+    let mut absorbers = match args.random {
         Some(n) => crate::ident::bench::random_absorbers(n, args.plant_seed),
         None if args.absorbers.is_empty() => return Ok(None),
         None => args.absorbers.clone(),
@@ -374,7 +374,6 @@ fn selected_absorbers(args: &IdentBenchArgs) -> Result<Option<Vec<f64>>> {
             crate::ident::bench::RANGE_HZ.1
         );
     }
-    let mut absorbers = absorbers;
     absorbers.sort_by(f64::total_cmp);
     absorbers.dedup();
     Ok(Some(absorbers))

@@ -291,11 +291,10 @@ pub fn stop_holds(g: &GridStop) -> bool {
 }
 
 pub fn grid_figures(grid: &[GridStop]) -> GridFigures {
-    let ratio = swing_ratio;
-    let worst = grid.iter().max_by(|a, b| ratio(a).total_cmp(&ratio(b))).cloned();
+    let worst = grid.iter().max_by(|a, b| swing_ratio(a).total_cmp(&swing_ratio(b))).cloned();
     let never_complete = grid.iter().filter(|g| g.settle.is_nan()).count();
     let max_toggles = grid.iter().map(|g| g.toggles).max().unwrap_or(0);
-    let worst_swing_ratio = worst.as_ref().map_or(0.0, ratio);
+    let worst_swing_ratio = worst.as_ref().map_or(0.0, swing_ratio);
     GridFigures {
         runs: grid.len(),
         never_complete,

@@ -99,7 +99,7 @@ pub fn interior_plants() -> Vec<PlantCase> {
 /// ranges users work in (0.2–5, 50–500 Hz), rounded to three significant digits so that a
 /// printed plant can be run again by hand (`servo sweep --set plant.…`).
 pub fn random_plants(n: u32, seed: u64) -> Vec<PlantCase> {
-    let mut rng = crate::random::XorShift64Star(seed.wrapping_mul(0x9E37_79B9_7F4A_7C15) | 1);
+    let mut rng = crate::random::XorShift64Star::from_seed(seed);
     let mut log_uniform = |lo: f64, hi: f64| rng.log_uniform_3_digits(lo, hi);
     (0..n)
         .map(|_| {
