@@ -87,19 +87,35 @@ impl PhaseShiftedSweep {
             return first.then_some(samples - samples / 2);
         };
         let target = p.relative_precision();
-        // The responses differ beyond the precision and beyond three standard deviations of a
-        // difference of two half blocks (twice one's variance).
-        let noise = SETTLING_NOISE_SIGMAS * crate::square_root::sqrt(2.0 * spread);
+        // The log of the ratio of two noise variances of n samples each has a spread of about
+        // 2/√n: three of those bound how far two half blocks' noise can differ.
+        let n = half.n;
+        let variance_ratio = libm::expf(6.0 / crate::square_root::sqrt(n));
+        // The responses differ beyond the precision and beyond `SETTLING_NOISE_SIGMAS` times
+        // the size of a difference of two half blocks under the noise (twice one's variance).
+        // At the first comparison this half block's variance counts only up to the square of
+        // that ratio over the earlier one's: a half block whose residual grew beyond what noise
+        // does (a mode building up, or an input swung through zero) says nothing about
+        // settling and must not widen the allowance. On a 0.576:1, 59.3 Hz axis at 57.8 Hz the
+        // torque command of the second half block was a twenty-fifth of the first's; its
+        // relative noise (62 times the first's) let a difference of 100 % pass at the first
+        // comparison and left 0.6 dB and 3.6° in the result. Later comparisons have the
+        // previous one's excess (`SETTLED_TREND`) and the ring's ratios against such a pass.
+        // Squared, and the first comparison only, because quantisation and noise through
+        // lightly damped modes vary between half blocks more than Gaussian noise does: the
+        // ratio itself at every comparison held `servo bench sweep`'s 30 rows 3.5 % longer in
+        // all (2.1 % squared; 0.3 % squared at the first comparison only, with the Nyquist
+        // record's fix of `response_error`), and the time it took from the top's precision
+        // showed as results over 0.1 dB at 1.9–2.6 kHz on the other grids.
+        let most = variance_ratio * variance_ratio * spread0;
+        let counted = if spread < most || self.discarded_halves > 0 { spread } else { most };
+        let noise = SETTLING_NOISE_SIGMAS * crate::square_root::sqrt(2.0 * counted);
         let (dre, dim) = (re - re0, im - im0);
         let difference = crate::square_root::sqrt((dre * dre + dim * dim) / (re * re + im * im));
         // Or the earlier half's residual is larger than the noise's variance ratio allows (a
         // decaying transient, which can bias both halves alike when it rings near the
         // excitation: the responses then agree before the loop has settled) and large
-        // enough to matter: its relative size `√(spread·n/2)` above the precision. The log
-        // of the ratio of two noise variances of n samples each has a spread of about 2/√n:
-        // three of those.
-        let n = half.n;
-        let variance_ratio = libm::expf(6.0 / crate::square_root::sqrt(n));
+        // enough to matter: its relative size `√(spread·n/2)` above the precision.
         let decaying = spread0 > variance_ratio * spread && spread0 * 0.5 * n > target * target;
         // A transient seen above the noise in the previous comparison must, besides, have left
         // the base block within the limit (see `tail_over_difference`), and the previous

@@ -157,6 +157,40 @@ fn a_ringing_loop_is_measured_once_it_has_settled() {
     assert!(last_half >= 3, "{last_half} half blocks");
 }
 
+/// [`ringing_response`] with uniform noise of ±`burst` in the first frequency's second half
+/// block only (its residual grows beyond what the first one's allows, as when a mode builds
+/// up or the input swings through zero): the first frequency's result and its last half
+/// block.
+fn ringing_through_a_burst(params: SweepParams, burst: f32) -> (SweepResult, u32) {
+    let mut s = PhaseShiftedSweep::new(params, FS);
+    s.start().unwrap();
+    let (mut tick, mut last_half, mut state) = (0u64, 0u32, 5u32);
+    while s.running() {
+        let (_, u) = s.excitation(true).unwrap();
+        let sample = s.status().sample;
+        let in_burst = sample.point == 0 && sample.half_block() == 1 && s.status().state == SweepState::Measuring;
+        let y = ringing_response(&s, tick) + if in_burst { burst * uniform(&mut state) } else { 0.0 };
+        s.end_tick(tick, tick.is_multiple_of(2), tick.is_multiple_of(params.acquisition_divider as u64), u, y, false);
+        if s.status().sample.point == 0 {
+            last_half = s.status().sample.half_block();
+        }
+        tick += 1;
+    }
+    (s.results()[0], last_half)
+}
+
+#[test]
+fn a_half_block_noisier_than_the_one_before_does_not_pass_the_settling_check() {
+    let p = SweepParams { start_hz: 50.0, stop_hz: 50.05, points: 2, extra_hz: 0.0, ..Default::default() };
+    let error = |r: SweepResult| (r.gain_db() - 20.0 * libm::log10f(1.5), r.phase_deg() + 0.4f32.to_degrees());
+    // A burst of twice the response: the second half block's noise allowance alone would
+    // cover the ring's difference at the first comparison.
+    let (r, last_half) = ringing_through_a_burst(p, 2.0 * 1.5 * p.amplitude);
+    let (db, deg) = error(r);
+    assert!(db.abs() < 0.03 && deg.abs() < 0.2, "{db} dB {deg} deg, last half block {last_half}");
+    assert!(last_half >= 3, "{last_half} half blocks");
+}
+
 #[test]
 fn a_noisy_low_gain_point_is_lengthened_until_precise_and_a_clean_one_is_not() {
     // Base records of 80 ms (not the defaults: the test is about the extension; the threshold
@@ -600,5 +634,36 @@ fn the_time_budget_lengthens_a_capped_top_frequency_within_the_budget() {
     for seed in [1, 3, 5, 7] {
         let ticks = noisy(two, 0.06, NOISE, seed).1;
         assert!(ticks > capped_two.max_total_ticks(FS) && ticks <= two.budget_ticks(FS), "seed {seed}: {ticks}");
+    }
+}
+
+/// A single record at exactly the acquisition's Nyquist frequency (every sample at one phase
+/// or its opposite: 2 kHz acquired at 4 kHz) tells no standard error, wherever the frequency
+/// started: its determinant is rounding. With the earlier threshold (a determinant above
+/// 10⁻⁶·n²) about one start in a hundred told one, and the prediction from it asked for the
+/// cap's extension in every record (1.1 s instead of 0.15 s at 2 kHz on a noisy 0.2:1, 50 Hz
+/// torque-command sweep, 10.6 s in all). Slightly off fs/2 (1 934.5 Hz, the sweep's point
+/// below 2 kHz) the phases turn and the error is told.
+#[test]
+fn a_record_at_the_acquisition_nyquist_frequency_predicts_no_error_from_any_start() {
+    use crate::trigonometry::ReducedAngle;
+    let fit_at = |start: u32, increment: u32| {
+        let mut fit = SineFitSums::default();
+        let mut state = 11u32;
+        for k in 0..160u32 {
+            let (s, c) = ReducedAngle::of_phase_word(start.wrapping_add(k.wrapping_mul(increment))).sin_cos();
+            fit.add(s, 50.0 + 0.3 * s + 0.01 * uniform(&mut state), (s, c));
+        }
+        fit
+    };
+    let below = (1934.52f64 / 4000.0 * 4294967296.0) as u32;
+    let below_step = TAU * below as f32 / 4294967296.0;
+    for i in 0..1000u32 {
+        let start = i.wrapping_mul(4_294_967);
+        let nyquist = fit_at(start, 1 << 31);
+        assert!(nyquist.response_error(core::f32::consts::PI).is_none(), "start {start}");
+        assert!(nyquist.response().is_none(), "start {start}");
+        let error = fit_at(start, below).response_error(below_step).expect("phases that turn tell the error");
+        assert!(error.gain < 0.05 && error.phase < 0.05, "start {start}: {error:?}");
     }
 }
