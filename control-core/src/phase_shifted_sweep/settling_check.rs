@@ -99,16 +99,21 @@ impl PhaseShiftedSweep {
         // settling and must not widen the allowance. On a 0.576:1, 59.3 Hz axis at 57.8 Hz the
         // torque command of the second half block was a twenty-fifth of the first's; its
         // relative noise (62 times the first's) let a difference of 100 % pass at the first
-        // comparison and left 0.6 dB and 3.6° in the result. Later comparisons have the
-        // previous one's excess (`SETTLED_TREND`) and the ring's ratios against such a pass.
+        // comparison and left 0.6 dB and 3.6° in the result. From the second comparison on a
+        // pass needs besides the previous comparison within `SETTLED_TREND` of its limit (and,
+        // where that one's difference was above the noise, the tail it predicts within the
+        // limit), which a build-up that had just swung the input through zero is not likely to
+        // meet; a noisier half block after a calm comparison can still pass there, as before.
         // Squared, and the first comparison only, because quantisation and noise through
         // lightly damped modes vary between half blocks more than Gaussian noise does: the
-        // ratio itself at every comparison held `servo bench sweep`'s 30 rows 3.5 % longer in
-        // all (2.1 % squared; 0.3 % squared at the first comparison only, with the Nyquist
-        // record's fix of `response_error`), and the time it took from the top's precision
-        // showed as results over 0.1 dB at 1.9–2.6 kHz on the other grids.
+        // ratio itself at every comparison held `servo bench sweep`'s 30 rows (one noise seed)
+        // 3.5 % longer in all (2.1 % squared; 0.3 % squared at the first comparison only, with
+        // the fs/2 record's fix of `response_error`), and the time it took from the top's
+        // precision showed as results over 0.1 dB at 1.9–2.6 kHz on the other grids. An
+        // earlier half block whose noise reads 0 (its spectrum's estimate clamped) caps
+        // nothing: it tells no noise to compare with.
         let most = variance_ratio * variance_ratio * spread0;
-        let counted = if spread < most || self.discarded_halves > 0 { spread } else { most };
+        let counted = if spread <= most || spread0 <= 0.0 || self.discarded_halves > 0 { spread } else { most };
         let noise = SETTLING_NOISE_SIGMAS * crate::square_root::sqrt(2.0 * counted);
         let (dre, dim) = (re - re0, im - im0);
         let difference = crate::square_root::sqrt((dre * dre + dim * dim) / (re * re + im * im));

@@ -203,9 +203,13 @@ impl SineFitSums {
         }
         let e = self.normal_equations();
         // Phases as degenerate as `response` refuses tell no error either: a single record at
-        // exactly fs/2 (2 kHz at 4 kHz) has a determinant of f32 rounding, whose prediction
-        // asked, or not, for the cap's 16 half blocks in each of the three records (1.1 s
-        // instead of 0.15 s) by the chance of where the frequency started.
+        // exactly fs/2 (2 kHz at 4 kHz) has a determinant of f32 rounding (a conditioning of up
+        // to 8·10⁻⁶ over 160 samples, 5.6·10⁻⁴ over 20 000: no fixed small threshold is safe),
+        // whose prediction asked, or not, for the cap's 16 half blocks in each of the three
+        // records (1.1 s instead of 0.15 s) by the chance of where the frequency started. A
+        // record within about 1.5 Hz of fs/2 (160 samples) now predicts no extension either;
+        // such a frequency is already measured without the settling check (its half blocks
+        // tell no response) and reported with its quality.
         if !(e.det >= MIN_TELLING_CONDITIONING * 0.25 * e.n * e.n) {
             return None;
         }

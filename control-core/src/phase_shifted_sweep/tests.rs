@@ -167,8 +167,9 @@ fn ringing_through_a_burst(params: SweepParams, burst: f32) -> (SweepResult, u32
     let (mut tick, mut last_half, mut state) = (0u64, 0u32, 5u32);
     while s.running() {
         let (_, u) = s.excitation(true).unwrap();
-        let sample = s.status().sample;
-        let in_burst = sample.point == 0 && sample.half_block() == 1 && s.status().state == SweepState::Measuring;
+        // The runner's own stage (the streamed sample's label is the previous sample's).
+        let in_burst =
+            s.status.point == 0 && s.status.state == SweepState::Measuring && s.checking_settling && s.half_block == 1;
         let y = ringing_response(&s, tick) + if in_burst { burst * uniform(&mut state) } else { 0.0 };
         s.end_tick(tick, tick.is_multiple_of(2), tick.is_multiple_of(params.acquisition_divider as u64), u, y, false);
         if s.status().sample.point == 0 {
@@ -183,8 +184,8 @@ fn ringing_through_a_burst(params: SweepParams, burst: f32) -> (SweepResult, u32
 fn a_half_block_noisier_than_the_one_before_does_not_pass_the_settling_check() {
     let p = SweepParams { start_hz: 50.0, stop_hz: 50.05, points: 2, extra_hz: 0.0, ..Default::default() };
     let error = |r: SweepResult| (r.gain_db() - 20.0 * libm::log10f(1.5), r.phase_deg() + 0.4f32.to_degrees());
-    // A burst of twice the response: the second half block's noise allowance alone would
-    // cover the ring's difference at the first comparison.
+    // A burst of twice the response's peak (1.15 times its RMS): the second half block's noise
+    // allowance alone would cover the ring's difference at the first comparison.
     let (r, last_half) = ringing_through_a_burst(p, 2.0 * 1.5 * p.amplitude);
     let (db, deg) = error(r);
     assert!(db.abs() < 0.03 && deg.abs() < 0.2, "{db} dB {deg} deg, last half block {last_half}");
