@@ -48,8 +48,9 @@ pub struct SequenceBenchArgs {
     #[arg(long, default_value_t = 1, requires = "random")]
     pub plant_seed: u64,
     /// Gradient of the drawn stops (rad/s², seq.acceleration; the grid runs the default, 2000).
-    /// The swing's bound assumes a velocity loop that follows the ramp: at 5000–10000 rad/s²
-    /// the default loop lags it (see the README)
+    /// The swing's bound counts the velocity loop's lag behind the ramp (v·J/k_p), which
+    /// steep gradients bring out; at low ones the swing is the stopping distance itself and
+    /// its ratio to the bound nears 1
     #[arg(long, default_value_t = crate::sequence::bench::ACCELERATION, requires = "random")]
     pub gradient: f64,
     #[command(flatten)]
