@@ -49,8 +49,8 @@ pub struct SequenceBenchArgs {
     pub plant_seed: u64,
     /// Gradient of the drawn stops (rad/s², seq.acceleration; the grid runs the default, 2000).
     /// The swing's bound counts the velocity loop's lag behind the ramp (v·J/k_p), which
-    /// steep gradients bring out; at low ones the swing is the stopping distance itself and
-    /// its ratio to the bound nears 1
+    /// steep gradients bring out, and one count of the speed estimate (v·δv/a), which low ones
+    /// do; there the swing is the stopping distance itself and its ratio to the bound nears 1
     #[arg(long, default_value_t = crate::sequence::bench::ACCELERATION, requires = "random")]
     pub gradient: f64,
     #[command(flatten)]

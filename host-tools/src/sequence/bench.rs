@@ -66,6 +66,9 @@ pub struct GridStop {
     /// How far the velocity loop can run behind its reference, v·J/k_p (counts): the speed at
     /// acceptance times the loop's time constant (J = J_M + J_L, k_p its proportional gain).
     pub lag_counts: f64,
+    /// What one count of the speed estimate moves the stopping distance, v·δv/a (counts; δv
+    /// one count per velocity period): servo lock starts its reference from the estimate.
+    pub resolution_counts: f64,
     /// The shaft's wind-up under the deceleration, J_L·a/k (counts), which its end releases.
     pub windup_counts: f64,
     /// Largest |deviation| after acceptance (counts).
@@ -100,11 +103,15 @@ pub const GRID_SPEEDS: [f64; 7] = [10.0, 17.0, 25.0, 50.0, 100.0, 150.0, 200.0];
 pub const GRID_ZERO_SPEEDS: [f64; 7] = [0.5, 1.0, 2.0, 5.0, 10.0, 15.0, 20.0];
 pub const GRID_WIDTHS: [u32; 6] = [1, 3, 8, 30, 60, 100];
 /// Bound of the swing after acceptance: the stopping distance v²/(2a) of the speed v measured
-/// at acceptance, plus how far the velocity loop runs behind the reference that ramps it down,
-/// v·J/k_p (the speed times the loop's time constant: all of it when the ramp is shorter than
-/// the loop, at steep gradients), plus `SWING_WINDUP_FACTOR` × the shaft's wind-up under the
-/// deceleration, J_L·a/k (the motion while the velocity loop lets go of the deceleration
-/// torque and the compliant shaft gives back its energy), plus the width and the hysteresis.
+/// at acceptance, plus how far the velocity loop can run behind the reference that ramps it
+/// down, v·J/k_p (the speed times the loop's time constant: what a proportional loop lags by;
+/// the PI loop recovers part of it, 0.6 of it on the worst stop at steep gradients), plus what
+/// one count of the speed estimate moves that stopping distance, v·δv/a (servo lock starts its
+/// reference from the estimate, read to δv, one count per velocity period: 214 counts at
+/// 1.3 rad/s and 50 rad/s², where it decides), plus `SWING_WINDUP_FACTOR` × the shaft's
+/// wind-up under the deceleration, J_L·a/k (the motion while the velocity loop lets go of the
+/// deceleration torque and the compliant shaft gives back its energy), plus the width and the
+/// hysteresis.
 /// The wind-up's factor was measured where v²/(2a) is nil on the default axis: 500 counts
 /// there, 4/3 of its 376-count wind-up (2.25 mrad). Before the loop's lag was a term the bound
 /// read 1.5·v²/(2a): it held at the default 2 000 rad/s² and not at 5 000 and 10 000 (1.07 and
@@ -255,6 +262,7 @@ fn grid_stop(
             speed_at_acceptance: f64::NAN,
             stopping_counts: f64::NAN,
             lag_counts: f64::NAN,
+            resolution_counts: f64::NAN,
             windup_counts: f64::NAN,
             swing_counts: 0,
             overshoot_counts: 0,
@@ -265,7 +273,9 @@ fn grid_stop(
     let counts_per_rad = defaults.encoder_counts_per_rev as f64 / std::f64::consts::TAU;
     let (jl, k) =
         plant.map_or((defaults.load_inertia, defaults.shaft_stiffness), PlantCase::load_inertia_and_stiffness);
-    let loop_time_constant = (defaults.motor_inertia + jl) / control_core::Params::default().velocity.kp as f64;
+    let params = control_core::Params::default();
+    let loop_time_constant = (defaults.motor_inertia + jl) / params.velocity.kp as f64;
+    let velocity_period = params.rates.velocity_period() as f64;
     let va = v[accepted].abs();
     let first = (accepted..complete.len()).find(|&i| complete[i] != 0.0);
     let toggles = first.map_or(0, |f| complete[f..].windows(2).filter(|w| w[0] != w[1]).count() as u32);
@@ -278,6 +288,7 @@ fn grid_stop(
         speed_at_acceptance: va,
         stopping_counts: va * va / (2.0 * acceleration) * counts_per_rad,
         lag_counts: va * loop_time_constant * counts_per_rad,
+        resolution_counts: va / (acceleration * velocity_period),
         windup_counts: jl * acceleration / k * counts_per_rad,
         swing_counts: dev[accepted..].iter().fold(0.0f64, |m, d| m.max(d.abs())) as i64,
         overshoot_counts: first
@@ -291,7 +302,12 @@ fn grid_stop(
 pub fn swing_ratio(g: &GridStop) -> f64 {
     let hysteresis = control_core::Params::default().sequence.completion_hysteresis as f64;
     g.swing_counts as f64
-        / (g.stopping_counts + g.lag_counts + SWING_WINDUP_FACTOR * g.windup_counts + g.width as f64 + hysteresis)
+        / (g.stopping_counts
+            + g.lag_counts
+            + g.resolution_counts
+            + SWING_WINDUP_FACTOR * g.windup_counts
+            + g.width as f64
+            + hysteresis)
 }
 
 /// The stop meets the figure: completion raised, never toggled, the swing within its bound.

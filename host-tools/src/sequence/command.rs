@@ -214,8 +214,8 @@ fn print_grid_figures(g: &crate::sequence::bench::GridFigures, over: &str) {
     if let Some(w) = &g.worst_swing {
         let plant = if w.plant == "default" { String::new() } else { format!(" ({})", w.plant) };
         println!(
-            "  swing after acceptance / bound (v²/(2a) + v·J/k_p (the velocity loop's lag) + {:.2}·J_L·a/k (the shaft's wind-up) + width + hysteresis): worst {:.2} (goal <= 1) at {} rad/s, level {} rad/s, width {}, gain {}x{plant}: swing {} counts, v@acc {:.3} rad/s, stopping distance {:.0} counts, lag {:.0} counts, wind-up {:.0} counts",
-            crate::sequence::bench::SWING_WINDUP_FACTOR, g.worst_swing_ratio, w.speed, w.zero_speed, w.width, w.multiplier, w.swing_counts, w.speed_at_acceptance, w.stopping_counts, w.lag_counts, w.windup_counts
+            "  swing after acceptance / bound (v²/(2a) + v·J/k_p (the velocity loop's lag) + v·δv/a (one count of the speed estimate) + {:.2}·J_L·a/k (the shaft's wind-up) + width + hysteresis): worst {:.2} (goal <= 1) at {} rad/s, level {} rad/s, width {}, gain {}x{plant}: swing {} counts, v@acc {:.3} rad/s, stopping distance {:.0} counts, lag {:.0} counts, resolution {:.0} counts, wind-up {:.0} counts",
+            crate::sequence::bench::SWING_WINDUP_FACTOR, g.worst_swing_ratio, w.speed, w.zero_speed, w.width, w.multiplier, w.swing_counts, w.speed_at_acceptance, w.stopping_counts, w.lag_counts, w.resolution_counts, w.windup_counts
         );
     }
     println!("  figure holds over {over}: {}", if g.holds { "yes" } else { "NO" });
