@@ -107,8 +107,8 @@ pub fn run_grid(
     let mut cases = Vec::new();
     let total = grid.len() * seeds as usize;
     for (i, &hz) in grid.iter().enumerate() {
-        let w = std::f64::consts::TAU * hz;
-        let truth = true_anti_resonance(load, load * w * w, 2.0 * damping * load * w);
+        let axis = axis_with_absorber(hz, damping);
+        let truth = true_anti_resonance(axis.absorber_inertia, axis.absorber_stiffness, axis.absorber_damping);
         let plant_notch_db = plant_notch(hz, damping).map_or(0.0, |n| n.depth_db);
         for seed in 1..=seeds {
             progress((i * seeds as usize + seed as usize - 1) as f64 / total.max(1) as f64);

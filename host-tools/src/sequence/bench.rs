@@ -133,7 +133,11 @@ pub struct SequenceBench {
 }
 
 fn run(fmu: &Fmu, toml_text: &str) -> Result<Trace> {
-    let s: SequenceScenario = toml::from_str(toml_text)?;
+    run_scenario(fmu, &toml::from_str(toml_text)?)
+}
+
+/// A sequence scenario, validated, on the FMU.
+fn run_scenario(fmu: &Fmu, s: &SequenceScenario) -> Result<Trace> {
     s.validate()?;
     fmu.run(&s.to_scenario(), |_| {})
 }
@@ -240,8 +244,7 @@ fn grid_stop(
     let mut scenario: SequenceScenario = toml::from_str(&text)?;
     scenario.parameters.extend(plant.map(PlantCase::parameters).unwrap_or_default());
     scenario.parameters.insert("seq.acceleration".into(), Value::Float(acceleration));
-    scenario.validate()?;
-    let t = fmu.run(&scenario.to_scenario(), |_| {})?;
+    let t = run_scenario(fmu, &scenario)?;
     let (state, complete, dev, time, v) = (
         col(&t, "seq_state")?,
         col(&t, "seq_complete")?,
