@@ -4,6 +4,7 @@
 //! changed, so the host sees a gap it can detect (the tick numbers) and a drop count.
 
 use crate::phase_shifted_sweep::AcquisitionSample;
+use core::mem::MaybeUninit;
 
 /// Samples per link frame.
 pub const BATCH: usize = 16;
@@ -174,6 +175,30 @@ impl Default for AcquisitionStream {
 }
 
 impl AcquisitionStream {
+    /// [`Self::default`] built in `slot`, where it lives (the ring is kilobytes: a drive never
+    /// holds one on a stack).
+    #[allow(unsafe_code)]
+    pub fn new_in(slot: &mut MaybeUninit<Self>) -> &mut Self {
+        let stream = slot.as_mut_ptr();
+        // SAFETY: `slot` is valid for writes and aligned; every sample of the ring and every
+        // other field is written.
+        unsafe {
+            let ring = core::ptr::addr_of_mut!((*stream).ring).cast::<AcquisitionSample>();
+            for i in 0..CAPACITY {
+                ring.add(i).write(AcquisitionSample::default());
+            }
+            write_fields!(stream, AcquisitionStream {
+                head: 0,
+                len: 0,
+                dropped: 0,
+                last_tick: None,
+                enabled: false,
+                ; ring
+            });
+            slot.assume_init_mut()
+        }
+    }
+
     /// Switch streaming on (clears what was held and the drop count) or off.
     pub fn set_enabled(&mut self, on: bool) {
         // The ring's contents are left as they are (only `len` samples from `head` are ever

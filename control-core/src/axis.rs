@@ -1,5 +1,6 @@
 //! One servo axis: the three cascaded loops, called once per base tick.
 
+use core::mem::MaybeUninit;
 use core::num::NonZeroU32;
 
 use crate::acc_dec::AccDecFilter;
@@ -256,44 +257,90 @@ pub struct Axis {
 }
 
 impl Axis {
-    /// Build an axis; refuses parameters that do not validate. Each loop is built from its
-    /// settings here, with what its tick derives from them (periods, scales, filter
-    /// coefficients), so the tick reads them and computes none.
-    pub fn new(params: Params) -> Result<Self, ParamError> {
+    /// Build an axis in `slot`, where it will live: refuses parameters that do not validate,
+    /// writing nothing. No axis value passes through any stack frame (an axis is 16 KiB, most
+    /// of it the acc/dec filter's windows, zeroed in place). Each loop is built from its
+    /// settings here, with what its tick derives from them (periods, scales, reciprocals,
+    /// filter coefficients), so the tick reads them and computes none.
+    #[allow(unsafe_code)]
+    pub fn new_in<'a>(slot: &'a mut MaybeUninit<Self>, params: &Params) -> Result<&'a mut Self, ParamError> {
         params.validate()?;
+        // SAFETY: `slot` is valid for writes and aligned; `init` writes every field.
+        unsafe {
+            Self::init(slot.as_mut_ptr(), params)?;
+            Ok(slot.assume_init_mut())
+        }
+    }
+
+    /// This axis built again from `params`, in place, as [`Self::new_in`] builds one (the loops
+    /// from rest, no fault, no sweep result); refused, changing nothing, when they do not
+    /// validate.
+    #[allow(unsafe_code)]
+    pub fn rebuild(&mut self, params: &Params) -> Result<(), ParamError> {
+        params.validate()?;
+        // SAFETY: `self` is valid for writes; an axis owns no resource (nothing to drop), and
+        // `init` either refuses before its first write or writes every field.
+        unsafe { Self::init(self, params) }
+    }
+
+    /// [`Self::new_in`] returning the axis by value: for a host, whose stack has room for one
+    /// (a drive builds its axes in place).
+    #[allow(unsafe_code)]
+    pub fn new(params: Params) -> Result<Self, ParamError> {
+        let mut slot = MaybeUninit::uninit();
+        Self::new_in(&mut slot, &params)?;
+        // SAFETY: built above.
+        Ok(unsafe { slot.assume_init() })
+    }
+
+    /// Write every field of the axis of validated `params` at `axis`. What can refuse runs
+    /// before the first write (so a refusal writes nothing): never once `params` validated.
+    ///
+    /// # Safety
+    /// `axis` is valid for writes and aligned.
+    #[inline(never)]
+    #[allow(unsafe_code)]
+    unsafe fn init(axis: *mut Self, params: &Params) -> Result<(), ParamError> {
+        use core::ptr::addr_of_mut;
         let position_period = params.rates.position_period();
-        let acc_dec = AccDecFilter::new(&params.acc_dec, position_period).map_err(ParamError::AccDec)?;
         let cpr = params.encoder_counts_per_rev;
         let counts_per_rev = NonZeroU32::new(cpr).ok_or(ParamError::Zero { field: "encoder_counts_per_rev" })?;
-        Ok(Self {
-            params,
-            settings: TickSettings::new(&params),
-            current_loop: CurrentLoop::new(&params.current, &params.motor, params.rates.tick_period()),
-            velocity_loop: VelocityLoop::new(&params.velocity, &params.filters, &params.rates),
-            position_loop: PositionLoop::new(&params.position, cpr, position_period),
-            command_path: CommandPath::with_correction(
-                acc_dec,
-                ResponseCorrection::new(&params.correction, position_period).map_err(ParamError::Correction)?,
-            ),
-            sequence: StopSequence::new(&params.sequence, cpr, position_period),
-            friction: FrictionCompensation::new(&params.friction, params.rates.velocity_period()),
-            sweep: PhaseShiftedSweep::new(params.sweep, params.rates.current_loop_hz),
-            sweep_check: params.validate_sweep(),
-            velocity_loop_inputs: (0.0, 0.0),
-            position_injection: 0,
-            last_acceleration: 0.0,
-            phases: [0; 4],
-            encoder: EncoderTracker::new(counts_per_rev, params.motor.pole_pairs),
-            excitation: None,
-            tick: 0,
-            mode: None,
-            position_at_velocity_tick: 0,
-            velocity_estimate: 0.0,
-            velocity_reference: 0.0,
-            torque_command: 0.0,
-            output_limited: false,
-            telemetry: Telemetry::default(),
-        })
+        AccDecFilter::check(&params.acc_dec, position_period).map_err(ParamError::AccDec)?;
+        let correction =
+            ResponseCorrection::new(&params.correction, position_period).map_err(ParamError::Correction)?;
+        // SAFETY: the caller's; every field below is written once, the big ones (the command
+        // path's filter, the sweep's result table) where they are.
+        unsafe {
+            CommandPath::init(addr_of_mut!((*axis).command_path), &params.acc_dec, position_period, &correction)
+                .map_err(ParamError::AccDec)?;
+            PhaseShiftedSweep::init(addr_of_mut!((*axis).sweep), params.sweep, params.rates.current_loop_hz);
+            write_fields!(axis, Axis {
+                params: *params,
+                settings: TickSettings::new(params),
+                current_loop: CurrentLoop::new(&params.current, &params.motor, params.rates.tick_period()),
+                velocity_loop: VelocityLoop::new(&params.velocity, &params.filters, &params.rates),
+                position_loop: PositionLoop::new(&params.position, cpr, position_period),
+                sequence: StopSequence::new(&params.sequence, cpr, position_period),
+                friction: FrictionCompensation::new(&params.friction, params.rates.velocity_period()),
+                sweep_check: params.validate_sweep(),
+                velocity_loop_inputs: (0.0, 0.0),
+                position_injection: 0,
+                last_acceleration: 0.0,
+                phases: [0; 4],
+                encoder: EncoderTracker::new(counts_per_rev, params.motor.pole_pairs),
+                excitation: None,
+                tick: 0,
+                mode: None,
+                position_at_velocity_tick: 0,
+                velocity_estimate: 0.0,
+                velocity_reference: 0.0,
+                torque_command: 0.0,
+                output_limited: false,
+                telemetry: Telemetry::default(),
+                ; command_path, sweep
+            });
+        }
+        Ok(())
     }
 
     pub fn params(&self) -> &Params {
@@ -743,6 +790,77 @@ mod tests {
 
     fn inputs() -> AxisInputs {
         AxisInputs { phase_currents: [0.0, 0.0], encoder_count: 0, bus_voltage: 48.0, load_acceleration: 0.0 }
+    }
+
+    /// A position move of `ticks` base ticks on `axis` with a moving encoder and currents:
+    /// every tick's telemetry and PWM.
+    fn run(axis: &mut Axis, ticks: u32) -> ([f32; 3], Telemetry) {
+        let commands = Commands { mode: Mode::Position, position: 40_000, move_speed: 30.0, ..Commands::default() };
+        let mut last = ([0.0; 3], Telemetry::default());
+        for k in 0..ticks {
+            let i = AxisInputs {
+                phase_currents: [0.3 * libm::sinf(k as f32 * 0.01), -0.1],
+                encoder_count: (k / 3) as i32,
+                bus_voltage: 48.0,
+                load_acceleration: 0.0,
+            };
+            let pwm = axis.step(&i, &commands);
+            last = (pwm.duties, *axis.telemetry());
+        }
+        last
+    }
+
+    /// Every acc/dec kind, and every feature of the golden vectors at once.
+    fn param_sets() -> [Params; 4] {
+        use crate::acc_dec::AccDecKind;
+        let with = |kind| {
+            let mut p = Params::default();
+            p.acc_dec.kind = kind;
+            p.acc_dec.ma_stages = 2;
+            p.acc_dec.ma_lengths = [7, 300, 16];
+            p
+        };
+        [
+            with(AccDecKind::None),
+            with(AccDecKind::MovingAverage),
+            with(AccDecKind::Butterworth),
+            crate::golden_vectors::preset(crate::golden_vectors::ALL_FEATURES).unwrap(),
+        ]
+    }
+
+    #[test]
+    fn an_axis_built_in_a_slot_of_garbage_runs_as_one_built_by_value() {
+        extern crate std;
+        for p in param_sets() {
+            let mut by_value = Axis::new(p).unwrap();
+            let mut slot = std::boxed::Box::new(MaybeUninit::<Axis>::uninit());
+            // Whatever the slot held before (here a byte pattern) must not show through.
+            // SAFETY: a MaybeUninit may hold any bytes.
+            #[allow(unsafe_code)]
+            unsafe {
+                slot.as_mut_ptr().write_bytes(0xA5, 1)
+            };
+            let in_place = Axis::new_in(&mut slot, &p).unwrap();
+            assert_eq!(run(in_place, 3000), run(&mut by_value, 3000), "{:?}", p.acc_dec.kind);
+        }
+    }
+
+    #[test]
+    fn an_axis_rebuilt_in_place_runs_as_a_new_one_and_a_refusal_changes_nothing() {
+        for p in param_sets() {
+            let mut fresh = Axis::new(p).unwrap();
+            let mut rebuilt = Axis::new(Params::default()).unwrap();
+            run(&mut rebuilt, 1234);
+            rebuilt.rebuild(&p).unwrap();
+            assert_eq!(run(&mut rebuilt, 3000), run(&mut fresh, 3000), "{:?}", p.acc_dec.kind);
+            // Refused: the axis runs on as if nothing had been asked.
+            let mut bad = p;
+            bad.acc_dec.ma_lengths[0] = 0;
+            bad.acc_dec.ma_stages = 3;
+            assert!(rebuilt.rebuild(&bad).is_err());
+            let mut twin = fresh.clone();
+            assert_eq!(run(&mut rebuilt, 500), run(&mut twin, 500));
+        }
     }
 
     #[test]

@@ -14,7 +14,9 @@
 //! Positions and speeds are bounded where they enter (`crate::ranges`); the sums here
 //! saturate, so no input, accepted or not, can make them wrap.
 
-use crate::acc_dec::AccDecFilter;
+use core::mem::MaybeUninit;
+
+use crate::acc_dec::{AccDecError, AccDecFilter, AccDecParams};
 use crate::response_correction::{CorrectionError, CorrectionParams, ResponseCorrection};
 
 /// What the interpolator does this tick.
@@ -53,16 +55,48 @@ impl CommandPath {
         Self { interpolated: 0, last_stream_input: 0, carry: 0.0, filter, correction, position: 0, pulses: 0 }
     }
 
-    /// Start from rest at `position` (counts): empty filter, no carry.
+    /// [`Self::with_correction`] built at `path`, its acc/dec filter of `acc_dec` at the
+    /// position-loop `period` built in place (no filter value on any stack); refused, with
+    /// nothing written, as [`AccDecFilter::new`].
+    ///
+    /// # Safety
+    /// `path` is valid for writes and aligned.
+    #[allow(unsafe_code)]
+    pub unsafe fn init(
+        path: *mut Self,
+        acc_dec: &AccDecParams,
+        period: f32,
+        correction: &ResponseCorrection,
+    ) -> Result<(), AccDecError> {
+        use core::ptr::addr_of_mut;
+        // SAFETY: the caller's; the filter's slot is a field of `path` (a `MaybeUninit` has
+        // its type's layout), and every field is written once the filter is.
+        unsafe {
+            let filter = &mut *addr_of_mut!((*path).filter).cast::<MaybeUninit<AccDecFilter>>();
+            AccDecFilter::new_in(filter, acc_dec, period)?;
+            write_fields!(path, CommandPath {
+                correction: *correction,
+                interpolated: 0,
+                last_stream_input: 0,
+                carry: 0.0,
+                position: 0,
+                pulses: 0,
+                ; filter
+            });
+        }
+        Ok(())
+    }
+
+    /// Start from rest at `position` (counts): empty filter, no carry (field by field: the
+    /// filter is kilobytes and stays where it is).
     pub fn reset(&mut self, position: i64) {
         self.filter.reset();
         self.correction.reset();
-        *self = Self {
-            interpolated: position,
-            last_stream_input: position,
-            position,
-            ..Self::with_correction(self.filter, self.correction)
-        };
+        self.interpolated = position;
+        self.last_stream_input = position;
+        self.position = position;
+        self.carry = 0.0;
+        self.pulses = 0;
     }
 
     /// Position the interpolator has reached, before the filter (counts).

@@ -8,7 +8,27 @@
 //! `position_divider` ticks (defaults 16 kHz / 8 kHz / 4 kHz).
 #![no_std]
 #![cfg_attr(feature = "fpu-sqrt", feature(core_float_math))]
-#![forbid(unsafe_code)]
+// Unsafe code only where a drive's state is built in place (`Axis::new_in` and the parts it
+// builds where they live: kilobytes never pass through a stack), each use allowed by name.
+#![deny(unsafe_code)]
+
+/// Write every field of the struct at `$at` (a `*mut $ty`, valid for writes and aligned) in
+/// place: `$field: value` pairs, then, after `;`, the fields the caller has written itself.
+/// A struct pattern without `..` names every field, so a field left out (or added to the
+/// struct later and not written here) fails to compile instead of staying uninitialised.
+/// Expands to unsafe code: use it inside the caller's `unsafe` block (the drive application
+/// builds its shared state with it too).
+#[macro_export]
+macro_rules! write_fields {
+    ($at:expr, $ty:ident { $($field:ident: $value:expr),* $(,)? ; $($written:ident),* $(,)? }) => {{
+        let at: *mut $ty = $at;
+        $(core::ptr::addr_of_mut!((*at).$field).write($value);)*
+        #[allow(unreachable_code, clippy::diverging_sub_expression)]
+        if false {
+            let $ty { $($field: _,)* $($written: _,)* } = &*at;
+        }
+    }};
+}
 
 pub mod acc_dec;
 pub mod accelerometer;

@@ -380,11 +380,9 @@ pub fn handle(axis: &mut Axis, commands: &mut Commands, stream: &mut Acquisition
                 return refused(RefusalReason::Busy);
             }
             // A drive's rate is its board's: a sweep its parameters cannot run is refused now.
-            match p.validate_for_drive().and_then(|()| Axis::new(p)) {
-                Ok(new) => {
-                    *axis = new;
-                    Response::Done
-                }
+            // Built again in place (no second axis on the stack); a refusal changes nothing.
+            match p.validate_for_drive().and_then(|()| axis.rebuild(&p)) {
+                Ok(()) => Response::Done,
                 Err(e) => refused(RefusalReason::InvalidParams(FieldName::new(e.field()))),
             }
         }

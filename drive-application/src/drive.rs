@@ -73,10 +73,9 @@ struct Slot {
 /// in a `static` (uninitialised until [`Drive::install`], so its kilobytes go to `.bss`).
 pub struct Drive {
     shared: Mutex<RefCell<Slot>>,
-    /// The two axis slots, each the whole result of `Axis::new` so that it is built in place
-    /// (an `Axis` slot would need the result on the stack first, 20 KiB, then a copy): an
-    /// installed slot always holds `Ok`.
-    axes: [UnsafeCell<MaybeUninit<Result<Axis, ParamError>>>; 2],
+    /// The two axis slots, each built in place by `Axis::new_in` (no axis ever on a stack):
+    /// the active one always holds a built axis.
+    axes: [UnsafeCell<MaybeUninit<Axis>>; 2],
     /// Ticks since start (health, the heartbeat).
     ticks: AtomicU32,
     /// [`Drive::install`] has begun (it hands out the one [`Host`]).
@@ -142,7 +141,7 @@ impl Drive {
         let slot = unsafe { &mut *self.axes[0].get() };
         loop {
             let built = match at_board_rate(&params, board_hz) {
-                Ok(()) => build_axis(slot, params),
+                Ok(()) => build_axis(slot, &params),
                 Err(field) => Err(field),
             };
             match built {
@@ -178,16 +177,23 @@ impl Drive {
     fn share(&self, sensing: CurrentSensing<CURRENT_CHANNELS>, accelerometer: AccelerometerInput) {
         critical_section::with(|cs| {
             let mut slot = self.shared.borrow_ref_mut(cs);
-            slot.value.write(Shared {
-                active: 0,
-                commands: Commands::default(),
-                sensing,
-                accelerometer,
-                stream: AcquisitionStream::default(),
-                duties_in_force: [0.0; 3],
-                bus_voltage: 0.0,
-                storing: false,
-            });
+            let shared = slot.value.as_mut_ptr();
+            // SAFETY: `shared` points into the slot, valid for writes and aligned (a
+            // `MaybeUninit` has its type's layout); the stream is built where it is, then
+            // every other field is written.
+            unsafe {
+                AcquisitionStream::new_in(&mut *core::ptr::addr_of_mut!((*shared).stream).cast());
+                control_core::write_fields!(shared, Shared {
+                    active: 0,
+                    commands: Commands::default(),
+                    sensing: sensing,
+                    accelerometer: accelerometer,
+                    duties_in_force: [0.0; 3],
+                    bus_voltage: 0.0,
+                    storing: false,
+                    ; stream
+                });
+            }
             slot.installed = true;
         });
     }
@@ -203,10 +209,7 @@ impl Drive {
             // SAFETY: installed, so the value and the active axis slot are initialised; the
             // active slot is touched only under this critical section.
             let shared = unsafe { slot.value.assume_init_mut() };
-            match unsafe { (*self.axes[shared.active].get()).assume_init_mut() } {
-                Ok(axis) => Some(f(shared, axis)),
-                Err(_) => None, // never: only a slot holding an axis becomes the active one
-            }
+            Some(f(shared, unsafe { (*self.axes[shared.active].get()).assume_init_mut() }))
         })
     }
 
@@ -287,19 +290,9 @@ fn core_handle(axis: &mut Axis, s: &mut Shared, request: &Request) -> Response {
     handle(axis, &mut s.commands, &mut s.stream, *request)
 }
 
-/// `Axis::new(params)` built straight into `slot`; the first refused field if it refuses.
-#[inline(never)]
-fn build_axis(slot: &mut MaybeUninit<Result<Axis, ParamError>>, params: Params) -> Result<(), &'static str> {
-    let slot = slot.as_mut_ptr();
-    // SAFETY: `slot` is valid for writes; the result goes straight into it (the call's
-    // return slot), then is read there.
-    unsafe {
-        slot.write(Axis::new(params));
-        match &*slot {
-            Ok(_) => Ok(()),
-            Err(e) => Err(e.field()),
-        }
-    }
+/// The axis of `params` built in `slot`, where it lives; the first refused field if refused.
+fn build_axis(slot: &mut MaybeUninit<Axis>, params: &Params) -> Result<(), &'static str> {
+    Axis::new_in(slot, params).map(|_| ()).map_err(|e| e.field())
 }
 
 /// The parameters run the tick at the board's PWM rate (the field that says otherwise).
@@ -418,7 +411,7 @@ impl Host<'_> {
         // SAFETY: the spare slot is not the active one, and only this `Host` (there is one)
         // changes which is active.
         let slot = unsafe { &mut *self.drive.axes[spare].get() };
-        if let Err(field) = build_axis(slot, p) {
+        if let Err(field) = build_axis(slot, &p) {
             return Response::Refused(RefusalReason::InvalidParams(FieldName::new(field)));
         }
         // The board's rate is fixed: a sweep these parameters cannot run is refused now, by

@@ -47,14 +47,15 @@ fn the_drive_firmware_builds_within_its_flash_and_ram_budget() {
     let size = drive_image_size().unwrap();
     eprintln!("drive-g474: flash {} bytes, static RAM {} bytes", size.flash, size.ram);
     assert!(size.flash > 16 * 1024, "an image with the core in it: {size:?}");
-    assert!(size.flash <= 128 * 1024, "flash {} bytes", size.flash);
-    assert!(size.ram <= 48 * 1024, "RAM {} bytes", size.ram);
+    assert!(size.flash <= 256 * 1024, "flash {} bytes", size.flash);
+    assert!(size.ram <= 64 * 1024, "RAM {} bytes", size.ram);
 }
 
-/// The drive image's worst-case stack (read from its ELF) fits its stack, and the path it
-/// finds is the boot's: the axis built in its slot. The same analysis of the interrupts-off
-/// image must cover how deep that program's painted stack went in QEMU: an analysis that
-/// missed frames would read below the run.
+/// The drive image's worst-case stack (read from its ELF) fits its stack and its goal (16 KiB,
+/// no frame over 4 KiB: the axis is built in its slot, never on a stack), and the path it finds
+/// is the boot's. The same analysis of the interrupts-off image must cover how deep that
+/// program's painted stack went in QEMU (an analysis that missed frames would read below the
+/// run), and that run leaves 40 KiB of RAM untouched.
 #[test]
 fn the_drive_images_stack_bound_fits_and_covers_a_painted_run() {
     drive_image_size().unwrap();
@@ -62,12 +63,15 @@ fn the_drive_images_stack_bound_fits_and_covers_a_painted_run() {
     eprintln!("drive-g474 stack: worst path {} of {} bytes (thread {})", bound.worst, bound.stack, bound.thread.bytes);
     assert!(bound.fits(), "{bound:?}");
     let names: Vec<&str> = bound.thread.functions.iter().map(|(n, _)| n.as_str()).collect();
-    assert!(names.contains(&"<control_core::axis::Axis>::new"), "{names:?}");
+    assert!(names.iter().any(|n| n.contains("Drive>::install")), "{names:?}");
+    assert!(bound.worst <= 16 * 1024, "{bound:?}");
+    assert!(bound.thread.functions.iter().all(|(_, b)| *b <= 4 * 1024), "{:?}", bound.thread);
     assert!(!bound.handlers.is_empty(), "the interrupt handlers are counted: {bound:?}");
     let off = interrupts_off_on_cortex_m4().unwrap();
     let running = off.stack_bound.running_bound("systick");
     eprintln!("interrupts-off: the deepest the run went {} bytes, the bound {running}", off.stack_used);
-    assert!(off.stack_used > 16 * 1024, "the run builds axes on its stack: {} bytes", off.stack_used);
+    assert!(off.stack_used > 1024, "a run that used its stack: {} bytes", off.stack_used);
+    assert!(off.untouched_ram >= 40 * 1024, "{} bytes untouched", off.untouched_ram);
     // The thread and the one handler that fires there (SysTick), not the whole bound.
     assert!(running < off.stack_bound.worst, "SysTick is one of several handlers: {:?}", off.stack_bound.handlers);
     assert!(running >= off.stack_used, "{running} < {}", off.stack_used);

@@ -20,6 +20,7 @@ pub use moving_average::{MovingAverageCascade, MAX_MOVING_AVERAGE_LENGTH, MAX_MO
 pub use pulse_filter::{ButterworthPulseFilter, MAX_FILTERED_PULSES};
 
 use core::fmt;
+use core::mem::MaybeUninit;
 
 /// Which acc/dec filter sits between the interpolator and the position loop.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
@@ -76,9 +77,12 @@ impl Default for AccDecParams {
 /// The configured filter, running on pulses per position tick.
 ///
 /// Sized for the largest variant (three 512-tick windows, 12 KB): without an allocator the
-/// axis must hold room for any filter the parameters may select.
+/// axis must hold room for any filter the parameters may select. Built where it lives with
+/// [`Self::new_in`] (a drive's axis never holds one on a stack); `#[repr(u32)]` gives the
+/// enum the layout that makes that possible (see `MovingAverageVariant`).
 #[allow(clippy::large_enum_variant)]
 #[derive(Clone, Copy, Debug, PartialEq)]
+#[repr(u32)]
 pub enum AccDecFilter {
     None,
     MovingAverage(MovingAverageCascade),
@@ -97,6 +101,36 @@ impl AccDecFilter {
             AccDecKind::MovingAverage => Self::MovingAverage(ma),
             AccDecKind::Butterworth => Self::Butterworth(ButterworthPulseFilter::new(bw)),
         })
+    }
+
+    /// [`Self::new`] built in `slot` (no filter value on the stack: the moving averages'
+    /// windows, 12 KB, are zeroed where they live). Refused, writing nothing, as `new`.
+    #[allow(unsafe_code)]
+    pub fn new_in<'a>(
+        slot: &'a mut MaybeUninit<Self>,
+        p: &AccDecParams,
+        sample_period: f32,
+    ) -> Result<&'a mut Self, AccDecError> {
+        let stages = moving_average_stages(p)?;
+        MovingAverageCascade::check(&p.ma_lengths[..stages])?;
+        let bw = ButterworthDesign::new(p.order, p.cutoff_hz, sample_period)?;
+        match p.kind {
+            AccDecKind::None => Ok(slot.write(Self::None)),
+            AccDecKind::Butterworth => Ok(slot.write(Self::Butterworth(ButterworthPulseFilter::new(bw)))),
+            AccDecKind::MovingAverage => {
+                let variant = slot.as_mut_ptr().cast::<MovingAverageVariant>();
+                // SAFETY: `#[repr(u32)]` lays the enum out as a union of `#[repr(C)]` structs,
+                // each the tag followed by one variant's fields (the Rust reference, "Primitive
+                // representation of enums with fields"): `MovingAverageVariant` is the
+                // moving-average variant's, so writing its tag and building its cascade (the
+                // lengths checked above) initialises `slot` as that variant.
+                unsafe {
+                    core::ptr::addr_of_mut!((*variant).tag).write(Tag::MovingAverage);
+                    MovingAverageCascade::init(core::ptr::addr_of_mut!((*variant).cascade), &p.ma_lengths[..stages]);
+                    Ok(slot.assume_init_mut())
+                }
+            }
+        }
     }
 
     /// [`Self::new`]'s checks, in its order, without building the filter: a parameter check
@@ -126,6 +160,25 @@ impl AccDecFilter {
             Self::Butterworth(b) => b.step(pulses),
         }
     }
+}
+
+/// [`AccDecFilter`]'s tags under `#[repr(u32)]`: its variants' discriminants, in the order
+/// they are declared.
+#[allow(dead_code)] // only `MovingAverage` is written by name; the others keep the order
+#[derive(Clone, Copy)]
+#[repr(u32)]
+enum Tag {
+    None,
+    MovingAverage,
+    Butterworth,
+}
+
+/// The moving-average variant of [`AccDecFilter`] as `#[repr(u32)]` lays it out: its tag, then
+/// its field.
+#[repr(C)]
+struct MovingAverageVariant {
+    tag: Tag,
+    cascade: MovingAverageCascade,
 }
 
 /// The number of moving-average stages, 1 to [`MAX_MOVING_AVERAGE_STAGES`].

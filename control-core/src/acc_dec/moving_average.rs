@@ -62,6 +62,33 @@ impl MovingAverageCascade {
         Ok(Self { stages, count: lengths.len() })
     }
 
+    /// [`Self::new`] of checked `lengths`, built at `cascade` (the windows zeroed where they
+    /// are, never on a stack).
+    ///
+    /// # Safety
+    /// `cascade` is valid for writes and aligned; `lengths` passed [`Self::check`].
+    #[allow(unsafe_code)]
+    pub(super) unsafe fn init(cascade: *mut Self, lengths: &[u32]) {
+        use core::ptr::addr_of_mut;
+        // SAFETY: the caller's; every field of every stage is written (a window of zeros is
+        // valid `i64`s), and the count.
+        unsafe {
+            let stages = addr_of_mut!((*cascade).stages).cast::<Stage>();
+            for i in 0..MAX_MOVING_AVERAGE_STAGES {
+                let s = stages.add(i);
+                addr_of_mut!((*s).window).write_bytes(0, 1);
+                write_fields!(s, Stage {
+                    length: lengths.get(i).copied().unwrap_or(1),
+                    next: 0,
+                    sum: 0,
+                    remainder: 0,
+                    ; window
+                });
+            }
+            write_fields!(cascade, MovingAverageCascade { count: lengths.len(); stages });
+        }
+    }
+
     /// Total delay to the middle of the response: Σ (n − 1)/2 samples.
     pub fn group_delay_samples(&self) -> f32 {
         self.stages[..self.count].iter().map(|s| (s.length - 1) as f32 / 2.0).sum()

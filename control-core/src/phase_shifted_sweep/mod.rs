@@ -70,6 +70,7 @@ use crate::excitation::{phase_angle, InjectionPoint, SineGenerator};
 use crate::m_sequence::MSequence;
 use crate::trigonometry::ReducedAngle;
 use crate::TAU;
+use core::mem::MaybeUninit;
 use half_block_spread::HalfBlockSpread;
 use settling_check::{TrackedRing, MIN_CHECKED_SAMPLES};
 use sine_fit::SineFitSums;
@@ -273,46 +274,69 @@ const NO_BUDGET: i32 = i32::MIN;
 pub(crate) const MAX_BUDGET_TICKS: u64 = 1 << 30;
 
 impl PhaseShiftedSweep {
+    #[allow(unsafe_code)]
     pub fn new(params: SweepParams, base_rate_hz: f32) -> Self {
+        let mut slot = MaybeUninit::uninit();
+        // SAFETY: `init` writes every field.
+        unsafe {
+            Self::init(slot.as_mut_ptr(), params, base_rate_hz);
+            slot.assume_init()
+        }
+    }
+
+    /// [`Self::new`] written at `sweep`, field by field (the result table, 2 KiB, where it
+    /// is: the drive's axis is built in place).
+    ///
+    /// # Safety
+    /// `sweep` is valid for writes and aligned.
+    #[allow(unsafe_code)]
+    pub(crate) unsafe fn init(sweep: *mut Self, params: SweepParams, base_rate_hz: f32) {
         let plan = params.plan();
         let budget_over_longest = Self::budget_over_longest(&params, &plan, base_rate_hz);
-        Self {
-            plan,
-            budget_over_longest,
-            budget_left: NO_BUDGET,
-            params,
-            base_rate_hz,
-            status: SweepStatus::default(),
-            generator: SineGenerator::default(),
-            left: 0,
-            left_high: 0,
-            extensions: 0,
-            acc: SineFitSums::default(),
-            half_start: SineFitSums::default(),
-            previous_half: None,
-            discarded_halves: 0,
-            previous_difference: (0.0, 0.0),
-            previous_above_noise: false,
-            previous_excess: 0.0,
-            previous_ratio: (f32::NAN, f32::NAN),
-            ring: TrackedRing::default(),
-            checking_settling: false,
-            spread: HalfBlockSpread::default(),
-            half_block: 0,
-            segment: 0,
-            period_sums: (0.0, 0.0, 0.0),
-            averaging: false,
-            dither_state: DITHER_SEED,
-            dither: 0.0,
-            dithering: false,
-            aligning: false,
-            // Validated with the parameters; the fallback only keeps this constructor total.
-            sequence: MSequence::new(params.prbs_degree).unwrap_or(MSequence::DEGREE_15),
-            chip: 0.0,
-            value: 0.0,
-            phase_word: 0,
-            angle: ReducedAngle::default(),
-            results: [SweepResult::default(); MAX_SWEEP_POINTS],
+        // SAFETY: the caller's; every field is written once.
+        unsafe {
+            let results = core::ptr::addr_of_mut!((*sweep).results).cast::<SweepResult>();
+            for i in 0..MAX_SWEEP_POINTS {
+                results.add(i).write(SweepResult::default());
+            }
+            write_fields!(sweep, PhaseShiftedSweep {
+                plan: plan,
+                budget_over_longest: budget_over_longest,
+                budget_left: NO_BUDGET,
+                params: params,
+                base_rate_hz: base_rate_hz,
+                status: SweepStatus::default(),
+                generator: SineGenerator::default(),
+                left: 0,
+                left_high: 0,
+                extensions: 0,
+                acc: SineFitSums::default(),
+                half_start: SineFitSums::default(),
+                previous_half: None,
+                discarded_halves: 0,
+                previous_difference: (0.0, 0.0),
+                previous_above_noise: false,
+                previous_excess: 0.0,
+                previous_ratio: (f32::NAN, f32::NAN),
+                ring: TrackedRing::default(),
+                checking_settling: false,
+                spread: HalfBlockSpread::default(),
+                half_block: 0,
+                segment: 0,
+                period_sums: (0.0, 0.0, 0.0),
+                averaging: false,
+                dither_state: DITHER_SEED,
+                dither: 0.0,
+                dithering: false,
+                aligning: false,
+                // Validated with the parameters; the fallback only keeps this constructor total.
+                sequence: MSequence::new(params.prbs_degree).unwrap_or(MSequence::DEGREE_15),
+                chip: 0.0,
+                value: 0.0,
+                phase_word: 0,
+                angle: ReducedAngle::default(),
+                ; results
+            });
         }
     }
 

@@ -96,20 +96,46 @@ fn log_boot_params(origin: control_core::protocol::ParamsOrigin) {
 static TX: StaticCell<[u8; 1024]> = StaticCell::new();
 static RX: StaticCell<[u8; 1024]> = StaticCell::new();
 
+/// Boot in three steps, each out of line: the task's own frame (its future's poll) then holds
+/// only the board and the link side between them, and each step's temporaries (the clock
+/// configuration, the defaults, the link task's arguments) are on the stack only while it runs,
+/// never under the drive's install.
 #[embassy_executor::main]
 async fn main(spawner: Spawner) {
-    let p = embassy_stm32::init(board::clocks());
-    interrupt::TIM4.set_priority(Priority::P3);
-    interrupt::USART2.set_priority(Priority::P3);
-    let mut board = board::init(p, TX.init([0; 1024]), RX.init([0; 1024]));
-    let defaults = board::with_board_limits(control_core::Params::default());
-    let mut host = match control::DRIVE.install::<board::Stage, _>(defaults, &mut board.flash) {
+    let mut board = start_board();
+    let mut host = match install_drive(&mut board.flash) {
         Ok(host) => host,
         Err(e) => {
             defmt::error!("drive not installed: {=str}", install_error(e));
             return;
         }
     };
+    report_boot(&mut host);
+    start_tasks(spawner, board, host);
+}
+
+/// Clocks, interrupt priorities, the board's peripherals.
+#[inline(never)]
+fn start_board() -> board::Board {
+    let p = embassy_stm32::init(board::clocks());
+    interrupt::TIM4.set_priority(Priority::P3);
+    interrupt::USART2.set_priority(Priority::P3);
+    board::init(p, TX.init([0; 1024]), RX.init([0; 1024]))
+}
+
+/// The drive installed with the stored parameters (or the board's defaults): its link side,
+/// returned straight from the install (no copy of it here).
+#[inline(never)]
+fn install_drive(
+    flash: &mut board::ParamPages,
+) -> Result<drive_application::Host<'static>, drive_application::InstallError> {
+    control::DRIVE.install::<board::Stage, _>(board::with_board_limits(control_core::Params::default()), flash)
+}
+
+/// Where the parameters came from, the stack the boot left untouched; the telemetry reports
+/// the stack's measure from now on.
+#[inline(never)]
+fn report_boot(host: &mut drive_application::Host<'static>) {
     log_boot_params(host.boot_params());
     // The boot's deepest calls (the axis built and checked) are behind us: their mark stands.
     defmt::info!(
@@ -118,6 +144,11 @@ async fn main(spawner: Spawner) {
         stack::stack_bytes()
     );
     host.report_stack_with(stack::unused_stack_bytes);
+}
+
+/// The housekeeping and link tasks, the watchdog and the control interrupt.
+#[inline(never)]
+fn start_tasks(spawner: Spawner, board: board::Board, host: drive_application::Host<'static>) {
     interrupt::UART4.set_priority(Priority::P1);
     let housekeeping = CONTROL_EXECUTOR.start(interrupt::UART4);
     housekeeping.spawn(control::position_tick_task().expect("position-tick task"));

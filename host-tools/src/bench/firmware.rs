@@ -273,18 +273,19 @@ pub fn drive_image_stack() -> Result<StackBound> {
 
 /// The drive application's critical sections on the Cortex-M4 (QEMU, instructions): the
 /// longest during a parameter change (SetParams, LoadCorrection, SaveParams), the longest
-/// over every request and which, the tick's own section, and the old SetParams (the axis
-/// built and copied inside the section) for reference.
+/// over every request and which, the tick's own section; and the RAM the run never touched.
 #[derive(Clone, Debug, Serialize)]
 pub struct InterruptsOff {
     pub parameter_changes: f64,
     pub longest: f64,
     pub longest_request: String,
     pub tick: f64,
-    pub old_set_params: f64,
     /// The deepest the run's stack went (bytes, from its paint), and the bound the image's
     /// analysis gives (`stack_depth`): a bound below the measured depth would be wrong.
     pub stack_used: u32,
+    /// Bytes of the RAM (128 KiB, as the G474's) the run never touched: the paint left
+    /// between the end of the statics and the deepest the stack went.
+    pub untouched_ram: u32,
     pub stack_bound: StackBound,
     /// The program's line per request.
     pub requests: Vec<String>,
@@ -327,8 +328,8 @@ pub fn interrupts_off_on_cortex_m4() -> Result<InterruptsOff> {
         longest: number("longest")?,
         longest_request: w.get(longest_at + 2).unwrap_or(&"?").to_string(),
         tick: number("tick")?,
-        old_set_params: number("old-set-params")?,
         stack_used: bound.stack - free_stack,
+        untouched_ram: free_stack,
         stack_bound: bound,
         requests: text.lines().filter(|l| l.starts_with("interrupts-off request")).map(String::from).collect(),
     })

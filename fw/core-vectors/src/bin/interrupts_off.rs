@@ -6,7 +6,7 @@
 //! the SysTick counter read at entry and exit. Prints, over semihosting, the longest section
 //! the link side held, per request, in instructions (QEMU `-icount`: the clock counts
 //! instructions; the cost of the reads themselves, measured on empty sections, subtracted),
-//! and for reference the old `SetParams` (`Axis::new` and the copy inside the section).
+//! and the stack the run left untouched (painted at the start, read at the end).
 
 #![no_std]
 #![no_main]
@@ -16,7 +16,7 @@ use control_core::golden_vectors::{preset, ALL_FEATURES};
 use control_core::params::Params;
 use control_core::protocol::{Request, Response, VERSION};
 use control_core::stop_sequence::SequenceEvent;
-use control_core::{Axis, Commands, Mode};
+use control_core::{Commands, Mode};
 use core_vectors::semihosting::print;
 use core_vectors::{clock, semihosting};
 use drive_application::board::{FlashError, ParamFlash, PowerStage, Sample};
@@ -110,7 +110,6 @@ fn take() -> u32 {
 
 static DRIVE: Drive = Drive::new();
 static mut FLASH: RamFlash = RamFlash { pages: [[0xFF; PAGE]; 2] };
-static mut OLD_AXIS: core::mem::MaybeUninit<Axis> = core::mem::MaybeUninit::uninit();
 
 extern "C" {
     static mut _ebss: u32;
@@ -164,24 +163,6 @@ fn request(i: usize, heavy: &Params) -> Option<(&'static str, Request)> {
         15 => ("SetCommands", Request::SetCommands(Commands::default())),
         _ => return None,
     })
-}
-
-/// The old SetParams: the new axis built and copied inside the section; its length.
-#[inline(never)]
-fn old_set_params(params: &Params) -> u32 {
-    // SAFETY: single-threaded; the slot is written here only.
-    let old = unsafe { &mut *core::ptr::addr_of_mut!(OLD_AXIS) };
-    if let Ok(axis) = Axis::new(Params::default()) {
-        old.write(axis);
-    }
-    let _ = take();
-    critical_section::with(|_| {
-        if let Ok(new) = Axis::new(*params) {
-            // SAFETY: written just above.
-            unsafe { *old.assume_init_mut() = new };
-        }
-    });
-    take()
 }
 
 #[no_mangle]
@@ -247,7 +228,6 @@ fn program() -> bool {
             longest = (batch, "stream batch");
         }
     }
-    let old_way = old_set_params(&heavy);
     print(format_args!(
         "stack: {} bytes free at the deepest, .bss ends at {:#x}\n",
         stack_low_water() - core::ptr::addr_of_mut!(_ebss) as usize,
@@ -255,12 +235,11 @@ fn program() -> bool {
     ));
     let instructions = |clocks: u32| to_instructions(clocks.saturating_sub(empty));
     print(format_args!(
-        "interrupts-off summary changes {:.0} longest {:.0} {} tick {:.0} old-set-params {:.0} empty {:.0}\n",
+        "interrupts-off summary changes {:.0} longest {:.0} {} tick {:.0} empty {:.0}\n",
         instructions(changes),
         instructions(longest.0),
         longest.1,
         instructions(tick_section),
-        instructions(old_way),
         to_instructions(empty)
     ));
     true
