@@ -97,7 +97,10 @@ impl CurrentLoop {
         // d-axis has priority inside the circle; q gets what is left.
         let vmax = voltage_circle_radius(bus_voltage);
         let vd = crate::limit(vd_total, -vmax, vmax);
-        let vq_max = crate::square_root::sqrt((vmax * vmax - vd * vd).max(0.0));
+        // What the circle leaves for q, never below 0 (nor NaN: `f32::max`'s result, without
+        // its NaN handling's instructions).
+        let room = vmax * vmax - vd * vd;
+        let vq_max = crate::square_root::sqrt(if room > 0.0 { room } else { 0.0 });
         let vq = crate::limit(vq_total, -vq_max, vq_max);
         let sat_d = vd != vd_total;
         let sat_q = vq != vq_total;

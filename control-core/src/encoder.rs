@@ -59,20 +59,26 @@ impl EncoderTracker {
             self.within_rev = self.position.rem_euclid(cpr) as u32;
             return EncoderUpdate::Ok;
         }
-        let delta = raw.wrapping_sub(self.last_raw) as i64;
+        let delta = raw.wrapping_sub(self.last_raw);
         self.last_raw = raw;
-        self.position = self.position.saturating_add(delta);
-        let w = self.within_rev as i64 + delta;
-        self.within_rev = if (0..cpr).contains(&w) {
-            w as u32
-        } else if (-cpr..0).contains(&w) {
-            (w + cpr) as u32
-        } else if (cpr..2 * cpr).contains(&w) {
-            (w - cpr) as u32
+        self.position = self.position.saturating_add(delta as i64);
+        // Half a revolution or less (every tick of a working encoder), in 32-bit arithmetic:
+        // `within_rev + delta` lies in (−cpr/2, 3·cpr/2), one wrap at most (cpr ≤ 2³⁰ keeps it
+        // in a u32 read as wrapping). Further, a jump: the remainder of the position.
+        let jump = delta.unsigned_abs() > counts_per_rev / 2;
+        self.within_rev = if !jump && counts_per_rev <= 1 << 30 {
+            let w = self.within_rev.wrapping_add(delta as u32);
+            if delta < 0 && w > self.within_rev {
+                w.wrapping_add(counts_per_rev)
+            } else if w >= counts_per_rev {
+                w - counts_per_rev
+            } else {
+                w
+            }
         } else {
             self.position.rem_euclid(cpr) as u32
         };
-        if delta.unsigned_abs() > (counts_per_rev / 2) as u64 {
+        if jump {
             EncoderUpdate::Jump
         } else {
             EncoderUpdate::Ok
@@ -94,6 +100,35 @@ mod tests {
 
     fn tracker(counts_per_rev: u32, pole_pairs: u32) -> EncoderTracker {
         EncoderTracker::new(NonZeroU32::new(counts_per_rev).unwrap(), pole_pairs)
+    }
+
+    /// The revolution's count follows the position's remainder over any steps: small ones
+    /// both ways, wraps of the counter, jumps of any size, on encoders of 4 to 2²⁴ counts.
+    #[test]
+    fn the_count_within_the_revolution_is_the_positions_remainder_for_any_steps() {
+        let mut state = 0x9E37_79B9_7F4A_7C15u64;
+        let mut next = || {
+            state ^= state << 13;
+            state ^= state >> 7;
+            state ^= state << 17;
+            state
+        };
+        for cpr in [4u32, 5, 1000, 4096, 10_000, 1 << 24] {
+            let mut t = tracker(cpr, 1);
+            let mut raw = (next() as i32).wrapping_mul(7);
+            for _ in 0..20_000 {
+                let r = next();
+                let step = match r % 4 {
+                    0 => (r >> 8) as i32 % (cpr as i32 / 2 + 1),
+                    1 => -((r >> 8) as i32 % (cpr as i32 / 2 + 1)),
+                    2 => (r >> 8) as i32, // anything, jumps included
+                    _ => 1,
+                };
+                raw = raw.wrapping_add(step);
+                t.update(raw);
+                assert_eq!(t.within_rev as i64, t.position().rem_euclid(cpr as i64), "cpr {cpr}");
+            }
+        }
     }
 
     #[test]
