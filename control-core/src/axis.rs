@@ -185,6 +185,17 @@ struct Due {
     prbs_chip: bool,
 }
 
+/// What the inner loop applied on the last tick: the telemetry's per-tick part.
+#[derive(Clone, Copy, Debug, Default)]
+struct Applied {
+    /// Torque command with the injections (Nm).
+    torque_command: f32,
+    current_reference: Dq,
+    current: Dq,
+    voltage: Dq,
+    voltage_saturated: bool,
+}
+
 /// What sensing found on this tick.
 struct Sensed {
     faults: Faults,
@@ -249,7 +260,12 @@ pub struct Axis {
     params: Params,
     command_path: CommandPath,
     sequence: StopSequence,
-    telemetry: Telemetry,
+    /// The faults latched (the bridge is off while any is).
+    faults: Faults,
+    /// The position loop's following error on its last tick (counts; 0 outside position mode).
+    following_error: f32,
+    /// What the last tick's inner loop applied (the telemetry's per-tick part).
+    applied: Applied,
     sweep: PhaseShiftedSweep,
     /// [`Params::validate_sweep`] of `params`, computed when the axis is built: a drive starts
     /// a sweep with its interrupts off, and builds its axis outside that section.
@@ -336,7 +352,9 @@ impl Axis {
                 velocity_reference: 0.0,
                 torque_command: 0.0,
                 output_limited: false,
-                telemetry: Telemetry::default(),
+                faults: Faults::default(),
+                following_error: 0.0,
+                applied: Applied::default(),
                 ; command_path, sweep
             });
         }
@@ -347,23 +365,44 @@ impl Axis {
         &self.params
     }
 
-    pub fn telemetry(&self) -> &Telemetry {
-        &self.telemetry
+    /// The record of the last tick, built from the axis's state when asked (the tick keeps
+    /// no copy of what the axis already holds: a record written on every tick cost the
+    /// Cortex-M4 about 40 instructions of its budget).
+    pub fn telemetry(&self) -> Telemetry {
+        let a = &self.applied;
+        Telemetry {
+            tick: self.tick.saturating_sub(1),
+            mode: self.mode.unwrap_or_default(),
+            position: self.encoder.position(),
+            position_command: self.command_path.position(),
+            command_pulses: self.command_path.pulses(),
+            velocity_estimate: self.velocity_estimate,
+            velocity_reference: self.velocity_reference,
+            following_error: self.following_error,
+            torque_command: a.torque_command,
+            current_reference: a.current_reference,
+            current: a.current,
+            voltage: a.voltage,
+            voltage_saturated: a.voltage_saturated,
+            faults: self.faults,
+            sequence: *self.sequence.status(),
+            sweep: *self.sweep.status(),
+        }
     }
 
     pub fn faults(&self) -> Faults {
-        self.telemetry.faults
+        self.faults
     }
 
     /// Latch a fault found outside the core (the power stage's break input, current sensing):
     /// the next [`Axis::step`] switches the PWM off, like any fault, until cleared.
     pub fn latch_fault(&mut self, bit: u32) {
-        self.telemetry.faults.latch(bit);
+        self.faults.latch(bit);
     }
 
     /// Clear latched faults; the loops restart from rest.
     pub fn clear_faults(&mut self) {
-        self.telemetry.faults = Faults::default();
+        self.faults = Faults::default();
         self.friction.reset();
         self.current_loop.reset();
         self.velocity_loop.reset();
@@ -377,9 +416,7 @@ impl Axis {
         if self.mode != Some(Mode::Sequence) {
             return self.sequence.refuse(Refusal::NotInSequenceMode);
         }
-        let r = self.sequence.event(e);
-        self.telemetry.sequence = *self.sequence.status();
-        r
+        self.sequence.event(e)
     }
 
     /// Switch to `commands.mode` now if it differs (the next [`Axis::step`] would do it):
@@ -406,9 +443,8 @@ impl Axis {
             self.velocity_reference = self.velocity_estimate;
         }
         if commands.mode != Mode::Position {
-            self.telemetry.following_error = 0.0;
+            self.following_error = 0.0;
         }
-        self.telemetry.sequence = *self.sequence.status();
         self.mode = Some(commands.mode);
     }
 
@@ -516,23 +552,28 @@ impl Axis {
 
         // Inner loop: torque to current to PWM; then the record of the tick.
         let inner = self.inner_loop(inputs, commands, excitation, due, &mut sensed.faults);
-        self.record(commands.mode, &sensed, &inner, due)
+        self.record(&sensed, &inner)
     }
 
     /// Sensing: the inputs and set-points checked (faults latched), the encoder followed.
     #[inline(always)]
     fn sense(&mut self, inputs: &AxisInputs, commands: &Commands) -> Sensed {
-        let mut faults = self.telemetry.faults;
+        let mut faults = self.faults;
         if !inputs.phase_currents.iter().all(|x| x.is_finite()) || !inputs.bus_voltage.is_finite() {
             faults.latch(Faults::NOT_FINITE);
         }
-        // Set-points: a NaN or infinity is a non-finite fault as before; a finite value
-        // outside its range (`crate::ranges`) a range fault. The detailed check only when the
-        // quick one fails.
-        let speeds_in_range = commands.move_speed.abs() <= MAX_SPEED && commands.jog_velocity.abs() <= MAX_SPEED;
+        // Set-points: a NaN or infinity is a non-finite fault; a finite value outside its
+        // range (`crate::ranges`) a range fault. The detailed check only when the quick one
+        // fails. `|x| ≤ limit` on the magnitudes' bit patterns, exactly: the limits are
+        // positive and finite, non-negative floats order as their patterns do, and a NaN's or
+        // an infinity's pattern lies above every finite one (integer compares cost the
+        // Cortex-M4 fewer instructions than the FPU's compare, flag transfer and move).
+        let magnitude = |x: f32| x.to_bits() & 0x7FFF_FFFF;
+        let speed_bits = MAX_SPEED.to_bits();
+        let speeds_in_range = magnitude(commands.move_speed).max(magnitude(commands.jog_velocity)) <= speed_bits;
         if !(speeds_in_range
-            && commands.velocity.abs() <= MAX_SPEED
-            && commands.torque.abs() <= crate::ranges::MAX_TORQUE
+            && magnitude(commands.velocity) <= speed_bits
+            && magnitude(commands.torque) <= crate::ranges::MAX_TORQUE.to_bits()
             && position_in_range(commands))
         {
             let finite = [commands.move_speed, commands.jog_velocity, commands.velocity, commands.torque]
@@ -623,7 +664,7 @@ impl Axis {
         };
         let out = self.position_loop.step(command, sensed.position);
         self.velocity_reference = out.velocity_reference;
-        self.telemetry.following_error = out.following_error;
+        self.following_error = out.following_error;
         if out.following_error.abs() > self.settings.limits.following_error {
             sensed.faults.latch(Faults::FOLLOWING_ERROR);
         }
@@ -700,7 +741,7 @@ impl Axis {
             InjectionPoint::TorqueCommand if self.settings.measured_torque_constant != 0.0 => {
                 let acceleration = self.last_acceleration;
                 self.last_acceleration = inputs.load_acceleration;
-                (self.settings.measured_torque_constant * self.telemetry.current.q, acceleration)
+                (self.settings.measured_torque_constant * self.applied.current.q, acceleration)
             }
             _ => (torque, self.velocity_estimate),
         };
@@ -741,7 +782,7 @@ impl Axis {
     /// Record the tick in the telemetry, move the slower ticks' phases on; the PWM command
     /// (off while a fault is latched, the loops reset).
     #[inline(always)]
-    fn record(&mut self, mode: Mode, sensed: &Sensed, inner: &InnerLoop, due: Due) -> PwmOutput {
+    fn record(&mut self, sensed: &Sensed, inner: &InnerLoop) -> PwmOutput {
         let faults = sensed.faults;
         let enabled = !faults.any();
         if !enabled {
@@ -749,36 +790,15 @@ impl Axis {
             self.velocity_loop.reset();
             self.torque_command = 0.0;
         }
-        // In place, field by field: building a new record copied all of it every tick.
-        let t = &mut self.telemetry;
-        t.tick = self.tick;
-        t.mode = mode;
-        t.position = sensed.position;
-        t.position_command = self.command_path.position();
-        t.command_pulses = self.command_path.pulses();
-        t.velocity_estimate = self.velocity_estimate;
-        t.velocity_reference = self.velocity_reference;
-        t.torque_command = inner.torque;
-        t.current_reference = inner.current_reference;
-        t.current = inner.out.current;
-        t.voltage = inner.out.voltage;
-        t.voltage_saturated = inner.out.saturated;
-        t.faults = faults;
-        // The sequence changes on position ticks (and events, which copy it themselves); the
-        // sweep while it runs and on the tick it ends.
-        if due.position {
-            t.sequence = *self.sequence.status();
-        }
-        // The sweep's status changes on acquisition ticks (the sample only) and when its
-        // state, point or record moves on (frequency, result and count move with them). A
-        // whole copy is a memcpy call on the M4 (about 200 instructions): only the sample on
-        // acquisition ticks.
-        let s = self.sweep.status();
-        if t.sweep.state != s.state || t.sweep.point != s.point || t.sweep.record != s.record {
-            t.sweep = *s;
-        } else if due.acquisition && self.sweep.running() {
-            t.sweep.sample = s.sample;
-        }
+        // The inner loop's part of the record (the rest the telemetry reads from the axis).
+        self.applied = Applied {
+            torque_command: inner.torque,
+            current_reference: inner.current_reference,
+            current: inner.out.current,
+            voltage: inner.out.voltage,
+            voltage_saturated: inner.out.saturated,
+        };
+        self.faults = faults;
         self.tick += 1;
         for (phase, divider) in self.phases.iter_mut().zip(self.settings.dividers) {
             *phase = if *phase + 1 >= divider { 0 } else { *phase + 1 };
@@ -808,7 +828,7 @@ mod tests {
                 load_acceleration: 0.0,
             };
             let pwm = axis.step(&i, &commands);
-            last = (pwm.duties, *axis.telemetry());
+            last = (pwm.duties, axis.telemetry());
         }
         last
     }
@@ -829,6 +849,59 @@ mod tests {
             with(AccDecKind::Butterworth),
             crate::golden_vectors::preset(crate::golden_vectors::ALL_FEATURES).unwrap(),
         ]
+    }
+
+    /// The set-points' range check on bit patterns says what `|x| ≤ limit` says for every
+    /// kind of value: zeros of both signs, the limits and the floats just beyond them,
+    /// subnormals, infinities and NaNs.
+    #[test]
+    fn a_set_point_is_in_range_exactly_when_its_magnitude_is_within_the_limit() {
+        use crate::ranges::{MAX_SPEED, MAX_TORQUE};
+        let beyond = |x: f32| f32::from_bits(x.to_bits() + 1);
+        let values = |max: f32| {
+            [
+                0.0,
+                -0.0,
+                1e-45,
+                -1e-45,
+                1.0,
+                max,
+                -max,
+                beyond(max),
+                -beyond(max),
+                f32::INFINITY,
+                -f32::INFINITY,
+                f32::NAN,
+                -f32::NAN,
+            ]
+        };
+        for field in 0..4 {
+            let max = if field == 3 { MAX_TORQUE } else { MAX_SPEED };
+            for x in values(max) {
+                let mut c = Commands::default();
+                match field {
+                    0 => c.move_speed = x,
+                    1 => c.jog_velocity = x,
+                    2 => c.velocity = x,
+                    _ => c.torque = x,
+                }
+                let mut axis = Axis::new(Params::default()).unwrap();
+                axis.step(&inputs(), &c);
+                let expected = if !x.is_finite() {
+                    Faults::NOT_FINITE
+                } else if x.abs() > max {
+                    Faults::COMMAND_RANGE
+                } else {
+                    0
+                };
+                let got = axis.faults();
+                assert_eq!(
+                    (got.contains(Faults::NOT_FINITE), got.contains(Faults::COMMAND_RANGE)),
+                    (expected == Faults::NOT_FINITE, expected == Faults::COMMAND_RANGE),
+                    "field {field}, {x:e}: {got:?}"
+                );
+            }
+        }
     }
 
     #[test]

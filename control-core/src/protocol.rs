@@ -422,7 +422,7 @@ pub fn handle(axis: &mut Axis, commands: &mut Commands, stream: &mut Acquisition
             Response::Done
         }
         Request::GetTelemetry => {
-            Response::Telemetry(DriveTelemetry { axis: *axis.telemetry(), params_record: None, stack_free_bytes: None })
+            Response::Telemetry(DriveTelemetry { axis: axis.telemetry(), params_record: None, stack_free_bytes: None })
         }
         Request::Stream { enabled } => {
             stream.set_enabled(enabled);
@@ -479,7 +479,7 @@ mod tests {
     #[test]
     fn the_record_number_survives_a_frame_and_the_core_has_none() {
         let (axis, t) = core_telemetry();
-        assert_eq!((t.axis, t.params_record), (*axis.telemetry(), None));
+        assert_eq!((t.axis, t.params_record), (axis.telemetry(), None));
         for r in [
             Response::Saved { sequence: u32::MAX },
             Response::Telemetry(DriveTelemetry { params_record: Some(7), ..t }),

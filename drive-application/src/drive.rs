@@ -248,12 +248,11 @@ impl Drive {
                 stage.write_duties(pwm.duties);
                 stage.set_outputs(pwm.enabled && !s.storing);
                 s.duties_in_force = pwm.duties;
-                // The axis's own telemetry, read in place: no per-tick copy.
-                let t = axis.telemetry();
-                s.stream.offer(&t.sweep.sample);
+                // The sweep's sample and the faults read in place: no per-tick record.
+                s.stream.offer(&axis.sweep().status().sample);
                 let divider = axis.params().rates.position_divider;
                 // A u32 counter: a 64-bit modulo is a library call on the Cortex-M4.
-                ticks.is_multiple_of(divider).then_some(t.faults)
+                ticks.is_multiple_of(divider).then(|| axis.faults())
             })
             .unwrap_or_else(|| {
                 stage.set_outputs(false);
@@ -377,7 +376,7 @@ impl Host<'_> {
             // One copy of the telemetry inside the section; the answer is built outside, with the
             // newest record of the parameter store (the link side's own state) and the stack's
             // measure (a scan with interrupts on).
-            Request::GetTelemetry => match self.drive.with(|_, axis| *axis.telemetry()) {
+            Request::GetTelemetry => match self.drive.with(|_, axis| axis.telemetry()) {
                 Some(axis) => Response::Telemetry(DriveTelemetry {
                     axis,
                     params_record: self.params_record(),

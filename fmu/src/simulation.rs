@@ -152,7 +152,7 @@ impl AxisSimulation {
         self.pending
     }
 
-    pub fn telemetry(&self) -> &Telemetry {
+    pub fn telemetry(&self) -> Telemetry {
         self.axis.telemetry()
     }
 

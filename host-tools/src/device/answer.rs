@@ -272,7 +272,7 @@ mod tests {
                     self.acted.push(Request::GetTelemetry);
                     let params_record = (self.records > 0).then_some(self.records);
                     Response::Telemetry(DriveTelemetry {
-                        axis: *self.axis.telemetry(),
+                        axis: self.axis.telemetry(),
                         params_record,
                         stack_free_bytes: None,
                     })
