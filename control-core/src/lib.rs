@@ -36,6 +36,7 @@ pub mod acquisition_stream;
 pub mod axis;
 pub mod biquad;
 pub mod command_path;
+pub mod commissioning;
 pub mod current_loop;
 pub mod current_sensing;
 pub mod encoder;

@@ -1,0 +1,185 @@
+//! The encoder against the electrical angle: while a current vector turns slowly forward and
+//! back, the rotor follows it and the counter moves `counts_per_rev / pole_pairs` counts per
+//! electrical turn, up or down. A straight-line fit of the counts against the vector's angle
+//! on each pass gives the counts per electrical radian (its sign the encoder's direction, its
+//! size the pole pairs); the rotor lags the vector by the same angle on both passes, one way
+//! and then the other, so the mean of the two passes' intercepts is where the rotor's d axis
+//! sits: the electrical angle at count 0.
+
+use core::f32::consts::TAU;
+
+/// Running sums of one pass: the vector's angle (rad, from the pass's start) against the
+/// counts (from the sequence's first count).
+#[derive(Clone, Copy, Debug, Default)]
+pub struct Pass {
+    n: f32,
+    angle: f32,
+    counts: f32,
+    angle2: f32,
+    angle_counts: f32,
+    /// The vector's angle at the pass's start (rad).
+    start: f32,
+    /// Smallest and largest count seen.
+    lowest: i32,
+    highest: i32,
+}
+
+impl Pass {
+    pub fn new(start: f32) -> Self {
+        Self { start, lowest: i32::MAX, highest: i32::MIN, ..Self::default() }
+    }
+
+    pub fn add(&mut self, angle: f32, counts: i32) {
+        let x = angle - self.start;
+        let y = counts as f32;
+        self.n += 1.0;
+        self.angle += x;
+        self.counts += y;
+        self.angle2 += x * x;
+        self.angle_counts += x * y;
+        self.lowest = self.lowest.min(counts);
+        self.highest = self.highest.max(counts);
+    }
+
+    /// Counts per electrical radian and the counts at the vector's angle 0 (the fitted line).
+    fn line(&self) -> Option<(f32, f32)> {
+        if self.n < 2.0 {
+            return None;
+        }
+        let (mx, my) = (self.angle / self.n, self.counts / self.n);
+        let sxx = self.angle2 / self.n - mx * mx;
+        if !(sxx > 0.0) {
+            return None;
+        }
+        let slope = (self.angle_counts / self.n - mx * my) / sxx;
+        // At the vector's angle 0: x = −start.
+        Some((slope, my + slope * (-self.start - mx)))
+    }
+
+    /// Counts the rotor moved over the pass.
+    pub fn travel(&self) -> i32 {
+        self.highest.saturating_sub(self.lowest)
+    }
+}
+
+/// What the two passes found.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Alignment {
+    pub pole_pairs: u32,
+    /// The counter counts down when the rotor turns the way the electrical angle increases.
+    pub reversed: bool,
+    /// The electrical angle (rad, in [0, 2π)) at count 0 of the direction-corrected counter.
+    pub offset: f32,
+}
+
+/// Why the passes give no alignment.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum AlignmentError {
+    /// The counter hardly moved: an encoder not connected, or a rotor that cannot turn.
+    EncoderStill { counts: i32 },
+    /// The counts per electrical turn are not `counts_per_rev` over a whole number of pole
+    /// pairs in range: a wrong counts-per-revolution setting, or a slipping rotor.
+    CountsPerTurn { counts_per_electrical_turn: f32 },
+    /// The two passes disagree on the counts per turn (by more than a fifth): the rotor did
+    /// not follow the vector (a load too heavy or too stiff for the test current).
+    RotorDidNotFollow { forward: f32, backward: f32 },
+}
+
+/// Direction, pole pairs and offset from a forward and a backward pass over the same angles,
+/// for an encoder of `counts_per_rev`; the pole pairs must lie in `1..=max_pole_pairs`.
+/// `start_count` is the raw count the passes' counts are taken from.
+pub fn align(
+    forward: &Pass,
+    backward: &Pass,
+    counts_per_rev: u32,
+    max_pole_pairs: u32,
+    start_count: i32,
+) -> Result<Alignment, AlignmentError> {
+    let travel = forward.travel().min(backward.travel());
+    let (Some((k1, c1)), Some((k2, c2))) = (forward.line(), backward.line()) else {
+        return Err(AlignmentError::EncoderStill { counts: travel });
+    };
+    // Less than an eighth of the counts a single pole pair's turn would give.
+    let swept = forward.angle2 / forward.n.max(1.0);
+    if (travel as f32) < 0.125 * counts_per_rev as f32 / max_pole_pairs as f32 || !(swept > 0.0) {
+        return Err(AlignmentError::EncoderStill { counts: travel });
+    }
+    if !(k1 * k2 > 0.0 && (k1 - k2).abs() <= 0.2 * k1.abs().max(k2.abs())) {
+        return Err(AlignmentError::RotorDidNotFollow { forward: k1 * TAU, backward: k2 * TAU });
+    }
+    let slope = 0.5 * (k1 + k2);
+    let per_turn = slope * TAU;
+    let pole_pairs_estimate = counts_per_rev as f32 / per_turn.abs();
+    let pole_pairs = libm::roundf(pole_pairs_estimate);
+    if !(pole_pairs >= 1.0 && pole_pairs <= max_pole_pairs as f32 && (pole_pairs_estimate - pole_pairs).abs() < 0.1) {
+        return Err(AlignmentError::CountsPerTurn { counts_per_electrical_turn: per_turn });
+    }
+    let reversed = slope < 0.0;
+    // Counts (direction-corrected, from the raw count 0) where the electrical angle is 0:
+    // the passes' mean intercept, with the exact counts per radian.
+    let exact = counts_per_rev as f32 / (pole_pairs * TAU);
+    let sign = if reversed { -1.0 } else { 1.0 };
+    let cpr = counts_per_rev as i64;
+    // The start count within a revolution keeps the numbers small.
+    let start = (start_count as i64).rem_euclid(cpr) as f32;
+    // A count n stands for the interval [n, n + 1) in the counter's own direction: its middle.
+    let at_zero = sign * (start + 0.5 * (c1 + c2) + 0.5);
+    // Electrical angle at direction-corrected count 0: −at_zero / exact, within a turn.
+    let offset = -at_zero / exact;
+    let offset = offset - TAU * libm::floorf(offset / TAU);
+    Ok(Alignment { pole_pairs: pole_pairs as u32, reversed, offset: if offset >= TAU { 0.0 } else { offset } })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A rotor that follows the vector with a lag: every direction, pole-pair count and offset
+    /// comes back.
+    #[test]
+    fn direction_pole_pairs_and_offset_come_back_from_a_lagging_rotor() {
+        for &(cpr, pp) in &[(4000u32, 4u32), (1024, 1), (16384, 12), (2000, 7)] {
+            for reversed in [false, true] {
+                for offset in [0.0f32, 1.0, 3.0, 6.0] {
+                    let start_count: i32 = -123_457;
+                    let counts_at = |theta: f32, lag: f32| {
+                        // Direction-corrected counts where the rotor's electrical angle is θ − lag.
+                        let corrected = (theta - lag - offset) * cpr as f32 / (pp as f32 * TAU);
+                        let raw = if reversed { -corrected } else { corrected };
+                        libm::floorf(raw) as i32 - start_count.rem_euclid(cpr as i32)
+                    };
+                    let (mut f, mut b) = (Pass::new(0.0), Pass::new(4.0 * TAU));
+                    for k in 0..4000 {
+                        let theta = 4.0 * TAU * k as f32 / 4000.0;
+                        f.add(theta, counts_at(theta, 0.1));
+                        let back = 4.0 * TAU - theta;
+                        b.add(back, counts_at(back, -0.1));
+                    }
+                    let a = align(&f, &b, cpr, 64, start_count).unwrap();
+                    assert_eq!((a.pole_pairs, a.reversed), (pp, reversed));
+                    let error = libm::remainderf(a.offset - offset, TAU).abs();
+                    assert!(error < 0.5f32.to_radians(), "cpr {cpr} pp {pp} rev {reversed} offset {offset}: {a:?}");
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn a_still_counter_and_a_wrong_count_per_turn_are_named() {
+        let (mut f, mut b) = (Pass::new(0.0), Pass::new(TAU));
+        for k in 0..100 {
+            let theta = TAU * k as f32 / 100.0;
+            f.add(theta, 0);
+            b.add(TAU - theta, 1);
+        }
+        assert!(matches!(align(&f, &b, 4000, 64, 0), Err(AlignmentError::EncoderStill { .. })));
+        // 4000 counts per revolution told, 4000 / 2.5 = 1 600 per electrical turn seen.
+        let (mut f, mut b) = (Pass::new(0.0), Pass::new(TAU));
+        for k in 0..100 {
+            let theta = TAU * k as f32 / 100.0;
+            f.add(theta, (1600.0 * theta / TAU) as i32);
+            b.add(TAU - theta, (1600.0 * (TAU - theta) / TAU) as i32);
+        }
+        assert!(matches!(align(&f, &b, 4000, 64, 0), Err(AlignmentError::CountsPerTurn { .. })));
+    }
+}
