@@ -88,11 +88,14 @@ pub struct AccdecBenchArgs {
     #[arg(long, conflicts_with = "random")]
     pub no_cost: bool,
     /// N moves drawn at random instead of the checks above, each through the drive's filter
-    /// against the same filter in f64: order 1–6, either sign and a step, rectangle or
-    /// trapezoid, each uniform; period 0.125–2 ms, cut-off 0.5 Hz to a quarter of the rate,
-    /// 1–10⁹ counts and a duration of 1 ms–2 s, each log-uniform. Cases the project does not
-    /// ship (the seed names the draw). Prints the worst deviation and exits 1 above one count
-    /// or on a lost pulse
+    /// against the same filter in f64. Two in three: order 1–6, either sign and a step,
+    /// rectangle or trapezoid, each uniform; period 0.125–2 ms, cut-off 0.5 Hz to a quarter of
+    /// the rate, 1–10⁹ counts and a duration of 1 ms–2 s, each log-uniform. One in three large
+    /// and fast at a low cut-off × period: order 4–6, sign and shape uniform; period 5 µs–0.25
+    /// ms, cut-off from the design's minimum (0.5 Hz and 6e-5 / period) to 4 times it,
+    /// 10⁶–2·10⁹ counts and a duration of 0.1 ms–0.2 s, each log-uniform. Cases the project
+    /// does not ship (the seed names the draw). Prints the worst deviation (and that of the
+    /// large, fast moves) and exits 1 above one count or on a lost pulse
     #[arg(long, value_name = "N", value_parser = clap::value_parser!(u32).range(1..))]
     pub random: Option<u32>,
     /// Seed of the --random draw

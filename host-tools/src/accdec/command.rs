@@ -97,12 +97,17 @@ fn accdec(args: &AccdecArgs) -> Result<bool> {
 
 /// `servo bench accdec --random N`: drawn moves against the f64 filter, worst deviation.
 fn bench_accdec_random(args: &AccdecBenchArgs, n: u32) -> Result<bool> {
-    use crate::accdec::deviation::{random_cases, run_cases};
-    let cases = random_cases(n, args.plant_seed);
+    use crate::accdec::deviation::{random_cases_marked, run_cases};
+    let marked = random_cases_marked(n, args.plant_seed);
+    let cases: Vec<_> = marked.iter().map(|&(case, _)| case).collect();
     let pb = progress_bar("f64 reference, drawn moves", args.common.json);
     let rows = run_cases(&cases, |f| pb.set_position((f * 1000.0) as u64)).map_err(|e| anyhow::anyhow!("{e}"))?;
     pb.finish_and_clear();
     let worst = rows.iter().max_by(|a, b| a.worst.total_cmp(&b.worst)).context("no moves")?.clone();
+    // The large, fast moves at a low cut-off × period on their own (none when N is small).
+    let hard: Vec<_> = rows.iter().zip(&marked).filter(|(_, (_, h))| *h).map(|(r, _)| r).collect();
+    let worst_hard = hard.iter().max_by(|a, b| a.worst.total_cmp(&b.worst)).map(|r| (*r).clone());
+    let worst_lag_error = rows.iter().map(|r| r.lag_error).fold(0.0, f64::max);
     let unbalanced = rows.iter().filter(|r| r.pulse_balance != 0).count();
     let ticks: usize = rows.iter().map(|r| r.ticks).sum();
     let ok = worst.worst <= 1.0 && unbalanced == 0;
@@ -111,14 +116,17 @@ fn bench_accdec_random(args: &AccdecBenchArgs, n: u32) -> Result<bool> {
             "{}",
             serde_json::to_string_pretty(&serde_json::json!({
                 "bench": "accdec", "random": n, "plant_seed": args.plant_seed, "runs": rows.len(), "ticks": ticks,
-                "worst": worst, "unbalanced_runs": unbalanced, "passed": ok
+                "worst": worst, "hard_runs": hard.len(), "worst_hard": worst_hard,
+                "worst_lag_error": worst_lag_error, "unbalanced_runs": unbalanced, "passed": ok
             }))?
         );
         return Ok(ok);
     }
     println!(
-        "servo bench accdec --random — {n} moves drawn with seed {} (order 1-6, period 0.125-2 ms, cut-off 0.5 Hz to a quarter of the rate, 1-10^9 counts, step/rectangle/trapezoid of 1 ms-2 s): cases the project does not ship",
-        args.plant_seed
+        "servo bench accdec --random — {n} moves drawn with seed {} (two in three: order 1-6, period 0.125-2 ms, cut-off 0.5 Hz to a quarter of the rate, 1-10^9 counts, step/rectangle/trapezoid of 1 ms-2 s; one in three large and fast at a low cut-off x period: order 4-6, period 5 us-0.25 ms, cut-off from the design's minimum (0.5 Hz and {} / period) to {} times it, 10^6-2x10^9 counts, step/rectangle/trapezoid of 0.1 ms-0.2 s): cases the project does not ship",
+        args.plant_seed,
+        control_core::acc_dec::MIN_CUTOFF_TIMES_PERIOD,
+        crate::accdec::deviation::hard::CUTOFF_SPAN
     );
     println!("  {} ticks; output sum != input sum in {unbalanced} of them", ticks);
     println!(
@@ -132,6 +140,21 @@ fn bench_accdec_random(args: &AccdecBenchArgs, n: u32) -> Result<bool> {
         worst.profile.label(),
         worst.worst_tick
     );
+    if let Some(h) = &worst_hard {
+        println!(
+            "  of them {} large and fast at a low cut-off x period: worst {:.4} counts at order {}, {} Hz, T = {:.4} ms (cut-off x period {:.3e}), {} counts, {}, tick {}",
+            hard.len(),
+            h.worst,
+            h.order,
+            h.cutoff_hz,
+            h.sample_period * 1e3,
+            h.cutoff_hz as f64 * h.sample_period as f64,
+            h.distance,
+            h.profile.label(),
+            h.worst_tick
+        );
+    }
+    println!("  worst lag error before rounding to whole pulses: {worst_lag_error:.2e} counts");
     Ok(ok)
 }
 

@@ -7,7 +7,9 @@
 //! trapezoid of velocity (short and long).
 
 use control_core::acc_dec::reference::ReferenceFilter;
-use control_core::acc_dec::{ButterworthDesign, ButterworthPulseFilter, ZeroPlacement, MAX_ORDER};
+use control_core::acc_dec::{
+    ButterworthDesign, ButterworthPulseFilter, ZeroPlacement, MAX_ORDER, MIN_CUTOFF_HZ, MIN_CUTOFF_TIMES_PERIOD,
+};
 use serde::Serialize;
 
 /// How the move's pulses are spread over the ticks.
@@ -175,14 +177,49 @@ pub fn grid() -> Vec<(u32, f32, f32, i64, Profile)> {
     cases
 }
 
-/// `n` cases drawn with `seed` (cases the project does not ship): order 1–6, either sign and
-/// a step, rectangle or trapezoid, each uniform; sample period (0.125–2 ms), cut-off (0.5 Hz to
-/// a quarter of the sampling rate), move (1–10⁹ counts) and duration (1 ms–2 s), each
-/// log-uniform.
+/// The drive's shortest position-loop period (s): a 200 kHz current loop (the most
+/// `Params::validate` accepts) with a position divider of 1.
+pub const SHORTEST_PERIOD: f32 = 5.0e-6;
+
+/// The region the grid reaches only at its corner, drawn in one case of three by
+/// [`random_cases`]: large, fast moves through orders 4–6 with the cut-off × period product
+/// near the design's minimum ([`MIN_CUTOFF_TIMES_PERIOD`]), where the poles sit closest to
+/// `z = 1` and the lag is largest (up to 2·10⁹ counts, near the states' 2³¹).
+pub mod hard {
+    /// Orders drawn (uniform).
+    pub const ORDERS: (u32, u32) = (4, 6);
+    /// Periods (s, log-uniform): the drive's shortest to twice the grid's shortest.
+    pub const PERIODS: (f32, f32) = (super::SHORTEST_PERIOD, 0.00025);
+    /// Cut-off (log-uniform) from the design's minimum at the period to this many times it.
+    pub const CUTOFF_SPAN: f64 = 4.0;
+    /// Moves (counts, log-uniform).
+    pub const DISTANCES: (f64, f64) = (1.0e6, 2.0e9);
+    /// Durations of the rectangles and trapezoids (s, log-uniform; at least one tick).
+    pub const DURATIONS: (f64, f64) = (0.0001, 0.2);
+}
+
+/// `n` cases drawn with `seed` (cases the project does not ship). Two cases in three: order
+/// 1–6, either sign and a step, rectangle or trapezoid, each uniform; sample period (0.125–2
+/// ms), cut-off (0.5 Hz to a quarter of the sampling rate), move (1–10⁹ counts) and duration
+/// (1 ms–2 s), each log-uniform. One in three from the [`hard`] region: order 4–6, either sign
+/// and shape uniform; period 5 µs–0.25 ms, cut-off from the design's minimum at that period
+/// (0.5 Hz and 6·10⁻⁵ / period) to 4 times it, move 10⁶–2·10⁹ counts and duration 0.1 ms–0.2
+/// s, each log-uniform.
 pub fn random_cases(n: u32, seed: u64) -> Vec<(u32, f32, f32, i64, Profile)> {
+    random_cases_marked(n, seed).into_iter().map(|(case, _)| case).collect()
+}
+
+/// A case: (order, cut-off, period, distance, profile).
+pub type Case = (u32, f32, f32, i64, Profile);
+
+/// [`random_cases`], each with whether it was drawn from the [`hard`] region.
+pub fn random_cases_marked(n: u32, seed: u64) -> Vec<(Case, bool)> {
     let mut rng = crate::random::XorShift64Star::from_seed(seed);
     (0..n)
         .map(|_| {
+            if rng.below(3) == 0 {
+                return (hard_case(&mut rng), true);
+            }
             let order = 1 + rng.below(MAX_ORDER as u64) as u32;
             let period = rng.log_uniform_3_digits(PERIODS[0] as f64, PERIODS[PERIODS.len() - 1] as f64) as f32;
             let cutoff = rng.log_uniform_3_digits(CUTOFFS_HZ[0] as f64, 0.25 / period as f64) as f32;
@@ -194,9 +231,28 @@ pub fn random_cases(n: u32, seed: u64) -> Vec<(u32, f32, f32, i64, Profile)> {
                 1 => Profile::Rectangle(duration),
                 _ => Profile::Trapezoid(duration),
             };
-            (order, cutoff, period, sign * distance.max(1), profile)
+            ((order, cutoff, period, sign * distance.max(1), profile), false)
         })
         .collect()
+}
+
+/// One case of the [`hard`] region.
+fn hard_case(rng: &mut crate::random::XorShift64Star) -> Case {
+    let order = hard::ORDERS.0 + rng.below((hard::ORDERS.1 - hard::ORDERS.0 + 1) as u64) as u32;
+    let period = rng.log_uniform_3_digits(hard::PERIODS.0 as f64, hard::PERIODS.1 as f64) as f32;
+    // The design's own minimum, computed as it computes it (f32), so that every draw is
+    // accepted; the three-digit draw keeps within its bounds.
+    let minimum = MIN_CUTOFF_HZ.max(MIN_CUTOFF_TIMES_PERIOD / period) as f64;
+    let cutoff = rng.log_uniform_3_digits(minimum, minimum * hard::CUTOFF_SPAN) as f32;
+    let distance = rng.log_uniform_3_digits(hard::DISTANCES.0, hard::DISTANCES.1).round() as i64;
+    let sign = if rng.below(2) == 0 { 1 } else { -1 };
+    let duration = rng.log_uniform_3_digits(hard::DURATIONS.0, hard::DURATIONS.1);
+    let profile = match rng.below(3) {
+        0 => Profile::Step,
+        1 => Profile::Rectangle(duration),
+        _ => Profile::Trapezoid(duration),
+    };
+    (order, cutoff, period, sign * distance, profile)
 }
 
 /// Run the whole grid (on every core); the rows in grid order.

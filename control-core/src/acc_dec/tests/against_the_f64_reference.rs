@@ -87,6 +87,32 @@ fn a_billion_counts_at_the_lowest_cut_off_and_shortest_period() {
 }
 
 #[test]
+fn large_fast_moves_at_the_lowest_cut_off_times_period_stay_within_a_count() {
+    // Orders 4-6 at exactly the design's minimum cut-off (0.5 Hz and 6·10⁻⁵ / period) from the
+    // drive's shortest position period (5 µs: 200 kHz, divider 1) to the grid's shortest
+    // (0.125 ms), where the poles sit closest to z = 1 (ωc·T = 3.8·10⁻⁴): moves of up to
+    // 2·10⁹ counts (lags near the states' 2³¹) in one tick, a 1 ms rectangle and a 20 ms
+    // trapezoid, either sign. The lag's error is held well below the half count of room the
+    // rounding leaves, so that a regression shows before a move crosses one count.
+    let (mut worst, mut worst_lag) = (0.0f64, 0.0f64);
+    for order in 4..=MAX_ORDER {
+        for period in [5.0e-6f32, 1.79e-5, 6.25e-5, 0.00012, 0.000125] {
+            let cutoff = MIN_CUTOFF_HZ.max(MIN_CUTOFF_TIMES_PERIOD / period);
+            for (distance, kind, seconds) in
+                [(2_000_000_000i64, 0, 0.0), (-1_000_000_000, 1, 0.001), (1_500_000_000, 2, 0.02)]
+            {
+                let ticks = ((seconds / period as f64).round() as usize).max(1);
+                let (w, l) = run(order, cutoff, period, &move_pulses(distance, kind, ticks));
+                assert!(w <= 1.0, "order {order}, {cutoff} Hz, {period} s, {distance} counts, shape {kind}: {w}");
+                (worst, worst_lag) = (worst.max(w), worst_lag.max(l));
+            }
+        }
+    }
+    assert!(worst_lag < 0.05, "lag error {worst_lag}");
+    std::eprintln!("lowest cut-off × period: worst position difference {worst:.4} counts, lag error {worst_lag:.2e}");
+}
+
+#[test]
 fn the_reference_equals_a_direct_form_simulation_where_that_is_accurate() {
     // The reference's modal form against y = (B(z)/A(z))·u in f64 from the printed polynomials
     // at 300 Hz and 0.5 ms (poles far from z = 1): output and lag (input sum − output sum).
