@@ -140,6 +140,11 @@ pub struct Telemetry {
 struct TickSettings {
     /// Base ticks per velocity, position, acquisition and PRBS-chip tick.
     dividers: [u32; 4],
+    /// Every divider a power of two (the defaults: 2, 4, 4, 1): each slower tick is due when
+    /// the tick count's low bits under its mask (`divider − 1`) are zero, and no phase is
+    /// counted. Otherwise the phases are counted (`counted_phases`).
+    due_masks: [u32; 4],
+    counted_phases: bool,
     /// Encoder count to rad.
     rad_per_count: f32,
     /// Velocity-loop period (s).
@@ -156,13 +161,12 @@ struct TickSettings {
 
 impl TickSettings {
     fn new(p: &Params) -> Self {
+        let dividers =
+            [p.rates.velocity_divider, p.rates.position_divider, p.sweep.acquisition_divider, p.sweep.prbs_divider];
         Self {
-            dividers: [
-                p.rates.velocity_divider,
-                p.rates.position_divider,
-                p.sweep.acquisition_divider,
-                p.sweep.prbs_divider,
-            ],
+            dividers,
+            due_masks: dividers.map(|d| d.wrapping_sub(1)),
+            counted_phases: !dividers.iter().all(|d| d.is_power_of_two()),
             rad_per_count: TAU / p.encoder_counts_per_rev as f32,
             velocity_period: p.rates.velocity_period(),
             counts_per_position_tick: p.counts_per_position_tick(),
@@ -209,7 +213,10 @@ struct Sensed {
 /// The position set-point within its range (`crate::ranges`).
 #[inline(always)]
 fn position_in_range(commands: &Commands) -> bool {
-    commands.position.unsigned_abs() <= crate::ranges::MAX_POSITION_COUNTS as u64
+    // −MAX ≤ x ≤ MAX as one unsigned compare of x + MAX (every value outside wraps above
+    // 2·MAX, far below 2⁶³): fewer instructions than the 64-bit absolute value.
+    const MAX: i64 = crate::ranges::MAX_POSITION_COUNTS;
+    commands.position.wrapping_add(MAX) as u64 <= 2 * MAX as u64
 }
 
 /// What the inner loop produced on this tick.
@@ -231,7 +238,8 @@ struct InnerLoop {
 #[repr(C)]
 pub struct Axis {
     /// Ticks since the last velocity, position, acquisition and PRBS-chip tick (`tick` modulo
-    /// each divider, counted: a 64-bit modulo is software on a Cortex-M4).
+    /// each divider, counted: a 64-bit modulo is software on a Cortex-M4), where a divider is
+    /// not a power of two (see `TickSettings::due_masks`; unused otherwise).
     phases: [u32; 4],
     tick: u64,
     position_at_velocity_tick: i64,
@@ -466,7 +474,12 @@ impl Axis {
             // The sine starts on the next position tick (the command path takes it there):
             // the same samples of the same sine wherever the request falls between two.
             let divider = self.settings.dividers[1];
-            return self.sweep.start_after((divider - self.phases[1]) % divider);
+            let phase = if self.settings.counted_phases {
+                self.phases[1]
+            } else {
+                self.tick as u32 & self.settings.due_masks[1]
+            };
+            return self.sweep.start_after((divider - phase) % divider);
         }
         let velocity_loop = matches!(self.mode, Some(Mode::Velocity | Mode::Position | Mode::Sequence));
         if point == InjectionPoint::Off || (point != InjectionPoint::TorqueCommand && !velocity_loop) {
@@ -605,12 +618,16 @@ impl Axis {
     #[inline(always)]
     fn due(&self) -> Due {
         // Four plain comparisons (an array `map` here cost several times as much).
-        Due {
-            velocity: self.phases[0] == 0,
-            position: self.phases[1] == 0,
-            acquisition: self.phases[2] == 0,
-            prbs_chip: self.phases[3] == 0,
+        if self.settings.counted_phases {
+            return Due {
+                velocity: self.phases[0] == 0,
+                position: self.phases[1] == 0,
+                acquisition: self.phases[2] == 0,
+                prbs_chip: self.phases[3] == 0,
+            };
         }
+        let (t, m) = (self.tick as u32, &self.settings.due_masks);
+        Due { velocity: t & m[0] == 0, position: t & m[1] == 0, acquisition: t & m[2] == 0, prbs_chip: t & m[3] == 0 }
     }
 
     /// The velocity estimate from the encoder counts of the last velocity period.
@@ -800,8 +817,10 @@ impl Axis {
         };
         self.faults = faults;
         self.tick += 1;
-        for (phase, divider) in self.phases.iter_mut().zip(self.settings.dividers) {
-            *phase = if *phase + 1 >= divider { 0 } else { *phase + 1 };
+        if self.settings.counted_phases {
+            for (phase, divider) in self.phases.iter_mut().zip(self.settings.dividers) {
+                *phase = if *phase + 1 >= divider { 0 } else { *phase + 1 };
+            }
         }
         PwmOutput { duties: if enabled { inner.out.duties } else { [0.0; 3] }, enabled }
     }
@@ -900,6 +919,41 @@ mod tests {
                     (expected == Faults::NOT_FINITE, expected == Faults::COMMAND_RANGE),
                     "field {field}, {x:e}: {got:?}"
                 );
+            }
+        }
+    }
+
+    #[test]
+    fn the_position_range_check_is_the_magnitudes() {
+        let max = crate::ranges::MAX_POSITION_COUNTS;
+        for x in [0, 1, -1, max, -max, max + 1, -max - 1, max - 1, -max + 1, i64::MAX, i64::MIN, i64::MIN + 1] {
+            let c = Commands { position: x, ..Commands::default() };
+            assert_eq!(position_in_range(&c), x.unsigned_abs() <= max as u64, "{x}");
+        }
+    }
+
+    /// Power-of-two dividers (due from the tick count's low bits) and others (counted phases)
+    /// put the slower ticks on the same base ticks: a velocity loop at 1/3 and a position loop
+    /// at 1/6 of the rate against the same loops at 1/2 and 1/4, each tick's due flags against
+    /// `tick mod divider`.
+    #[test]
+    fn slower_ticks_fall_on_the_tick_count_modulo_their_dividers_either_way() {
+        for (v, p, a, c) in [(2u32, 4u32, 4u32, 1u32), (3, 6, 3, 5), (1, 8, 2, 16), (4, 4, 8, 3)] {
+            let mut params = Params::default();
+            params.rates.velocity_divider = v;
+            params.rates.position_divider = p;
+            params.sweep.acquisition_divider = a;
+            params.sweep.prbs_divider = c;
+            let mut axis = Axis::new(params).unwrap();
+            for tick in 0..200u64 {
+                let due = axis.due();
+                let expect = |d: u32| tick % d as u64 == 0;
+                assert_eq!(
+                    (due.velocity, due.position, due.acquisition, due.prbs_chip),
+                    (expect(v), expect(p), expect(a), expect(c)),
+                    "dividers {v} {p} {a} {c}, tick {tick}"
+                );
+                axis.step(&inputs(), &Commands::default());
             }
         }
     }
