@@ -263,20 +263,15 @@ impl AxisModel {
     /// produced one, the axis latches its non-finite fault (the bridge goes off) and the step
     /// is an error naming the output.
     fn check_outputs_finite(&mut self) -> Result<(), String> {
-        static FLOAT_OUTPUTS: std::sync::OnceLock<Vec<u32>> = std::sync::OnceLock::new();
-        let outputs = FLOAT_OUTPUTS.get_or_init(|| {
-            crate::variables::DECLARATIONS
-                .iter()
-                .filter(|d| d.causality == Causality::Output && d.kind == Kind::Float64)
-                .map(|d| d.vr)
-                .collect()
-        });
         let values = &self.state.values;
-        let finite = |vr: &u32| values.float64(*vr).is_some_and(f64::is_finite);
-        if outputs.iter().fold(true, |ok, vr| ok & finite(vr)) {
+        if values.float64_outputs_finite() {
             return Ok(());
         }
-        let Some(d) = outputs.iter().find(|vr| !finite(vr)).and_then(|vr| crate::variables::declaration(*vr)) else {
+        let finite = |vr: u32| values.float64(vr).is_some_and(f64::is_finite);
+        let Some(d) = crate::variables::DECLARATIONS
+            .iter()
+            .find(|d| d.causality == Causality::Output && d.kind == Kind::Float64 && !finite(d.vr))
+        else {
             return Ok(());
         };
         let t = self.time();

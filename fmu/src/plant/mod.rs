@@ -113,7 +113,8 @@ impl Plant {
     /// Advance one base tick (`params.tick`) with the inputs held.
     // Inlined into the tick so that the inputs arrive in registers: read back from memory just
     // after being stored, they stalled the load (store forwarding fails on the paired loads).
-    #[inline]
+    // Always: the tick has more than one variant (with the step's means, with a sensor fault).
+    #[inline(always)]
     pub fn advance(&mut self, u: &PlantInputs) {
         let mut x = self.state;
         let voltage = if u.bridge_enabled {

@@ -233,6 +233,18 @@ mod tests {
     }
 
     #[test]
+    fn the_finite_check_covers_every_float64_output_and_nothing_else() {
+        assert!(Values::start().float64_outputs_finite());
+        for d in DECLARATIONS.iter().filter(|d| d.kind == Kind::Float64) {
+            for bad in [f64::NAN, f64::INFINITY, f64::NEG_INFINITY] {
+                let mut v = Values::start();
+                v.set(d.vr, Value::Float64(bad)).unwrap();
+                assert_eq!(v.float64_outputs_finite(), d.causality != Causality::Output, "{} = {bad}", d.name);
+            }
+        }
+    }
+
+    #[test]
     fn the_shortest_decimal_rounds_back_to_the_f32() {
         for x in [4.7124_f32, 0.0942, 11.84, 1.0 / 3.0, 1.0e-5, 2827.4] {
             assert_eq!(from_f32(x) as f32, x);

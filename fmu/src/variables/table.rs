@@ -91,6 +91,17 @@ macro_rules! declare_variables {
                 }
             }
 
+            /// Whether every Float64 output is finite: each output's field read directly (no
+            /// table lookup; the check after every communication step). The other rows fold
+            /// to `true` at compile time.
+            #[inline]
+            pub fn float64_outputs_finite(&self) -> bool {
+                let mut finite = true;
+                $( finite &= !matches!((Kind::$kind, Causality::$caus), (Kind::Float64, Causality::Output))
+                    || FiniteOutput::finite(self.$field); )*
+                finite
+            }
+
             fn compute_start() -> Self {
                 Self { $( $field: $start, )* }
             }
@@ -118,6 +129,32 @@ macro_rules! declare_variables {
             }
         }
     };
+}
+
+/// Whether a value is finite, for any variable type (integers and booleans always are).
+trait FiniteOutput {
+    fn finite(self) -> bool;
+}
+
+impl FiniteOutput for f64 {
+    #[inline(always)]
+    fn finite(self) -> bool {
+        self.is_finite()
+    }
+}
+
+impl FiniteOutput for i32 {
+    #[inline(always)]
+    fn finite(self) -> bool {
+        true
+    }
+}
+
+impl FiniteOutput for bool {
+    #[inline(always)]
+    fn finite(self) -> bool {
+        true
+    }
 }
 
 impl Values {

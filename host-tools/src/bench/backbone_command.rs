@@ -13,6 +13,10 @@ impl FmuBenchArgs {
     }
 }
 
+/// The most the FMI boundary and the recording of every output may cost, as a share of the
+/// bare simulation (median of the per-repeat ratios).
+pub const BOUNDARY_GOAL: f64 = 0.10;
+
 fn bench_fmu(args: &FmuBenchArgs) -> Result<bool> {
     let (seconds, no_fmpy, goal, common) = (args.seconds, args.no_fmpy, args.goal, &args.common);
     if !(seconds.is_finite() && seconds > 0.0) {
@@ -23,14 +27,24 @@ fn bench_fmu(args: &FmuBenchArgs) -> Result<bool> {
     let pb = progress_bar("Rust host", common.json);
     let r = bench::bench_fmu(&fmu_path, &out, seconds, !no_fmpy, |f| pb.set_position((f * 1000.0) as u64))?;
     pb.finish_and_clear();
-    let speed_ok = r.rust_real_time_factor >= goal;
-    let ok = speed_ok && r.boundary_overhead <= 0.10;
+    // Goals: the run recording every output through the Rust host at `goal` x real time or
+    // faster, and the FMI boundary with the recording at most BOUNDARY_GOAL of the bare
+    // simulation; either one missed fails the bench.
+    let speed_ok = r.all_outputs_real_time_factor >= goal;
+    let boundary_ok = r.boundary_overhead <= BOUNDARY_GOAL;
+    let ok = speed_ok && boundary_ok;
     if common.json {
         println!(
             "{}",
-            serde_json::to_string_pretty(
-                &serde_json::json!({"bench": "fmu", "result": r, "goal": goal, "passed": ok})
-            )?
+            serde_json::to_string_pretty(&serde_json::json!({
+                "bench": "fmu",
+                "result": r,
+                "goal": goal,
+                "boundary_goal": BOUNDARY_GOAL,
+                "speed_met": speed_ok,
+                "boundary_met": boundary_ok,
+                "passed": ok
+            }))?
         );
     } else {
         println!(
@@ -72,13 +86,16 @@ fn bench_fmu(args: &FmuBenchArgs) -> Result<bool> {
             100.0 * r.read_only_overhead
         );
         println!(
-            "  the FMI boundary and recording all {} outputs cost {:+.1} % of the bare simulation (goal ≤ 10 %): {}",
+            "  goal: the FMI boundary and recording all {} outputs ≤ {:.0} % of the bare simulation: {:+.1} %, {}",
             r.all_outputs,
+            100.0 * BOUNDARY_GOAL,
             100.0 * r.boundary_overhead,
-            if r.boundary_overhead <= 0.10 { "met" } else { "NOT met" }
+            if boundary_ok { "met" } else { "NOT met" }
         );
         println!(
-            "  goal ≥ {goal} x real time through the Rust host (the specification's outputs): {}",
+            "  goal: ≥ {goal} x real time through the Rust host recording all {} outputs: {:.1} x, {}",
+            r.all_outputs,
+            r.all_outputs_real_time_factor,
             if speed_ok { "met" } else { "NOT met" }
         );
     }

@@ -79,6 +79,12 @@ fn base_units_for_fmi_schema(xml: &str) -> String {
 
 /// A loaded FMU (unpacked once, instantiated per run).
 pub struct Fmu {
+    /// The FMU's library, opened once and held for the `Fmu`'s life: the `fmi` crate opens it
+    /// again for every instance and closes it when the instance goes, so without this handle
+    /// every run loaded the library anew (mapping, relocation, and the library's lazily
+    /// computed statics such as its instantiation token: about 2 million instructions).
+    /// Declared first: closed before `import` deletes the unpacked archive.
+    _library: <Fmi3Import as FmiImport>::Binding,
     import: Fmi3Import,
     variables: BTreeMap<String, VariableInfo>,
 }
@@ -105,7 +111,16 @@ impl Fmu {
                 VariableInfo { name: v.name().to_string(), vr: v.value_reference(), kind, causality: v.causality() },
             );
         }
-        Ok(Self { import, variables })
+        let model_identifier = import
+            .model_description()
+            .co_simulation
+            .as_ref()
+            .map(|cs| cs.model_identifier.clone())
+            .ok_or_else(|| anyhow!("{} is not a co-simulation FMU", path.display()))?;
+        let library = import
+            .binding(&model_identifier)
+            .map_err(|e| anyhow!("cannot load the library of {}: {e}", path.display()))?;
+        Ok(Self { _library: library, import, variables })
     }
 
     pub fn variable(&self, name: &str) -> Result<&VariableInfo> {
@@ -259,40 +274,43 @@ impl Fmu {
         // of memory its run never fills; files are refused beyond it when loaded.
         let budget_rows = (crate::fmu::trace_budget::MAX_TRACE_BYTES / (8.0 * (outputs.len() + 1) as f64)) as usize;
         trace.rows.reserve_exact(if keep_rows { (n + 1).min(budget_rows) } else { 1 });
-        // Outputs are read in one call per type, then put back in column order.
+        // Outputs are read in one call per type into one buffer, `[time, Float64 outputs,
+        // Int32 outputs, Boolean outputs]`, then copied into the row in column order.
         let of_kind = |kind: Kind| -> (Vec<usize>, Vec<u32>) {
             outputs.iter().enumerate().filter(|(_, v)| v.kind == kind).map(|(i, v)| (i, v.vr)).unzip()
         };
         let (f64_cols, f64_vrs) = of_kind(Kind::Float64);
         let (i32_cols, i32_vrs) = of_kind(Kind::Int32);
         let (bool_cols, bool_vrs) = of_kind(Kind::Boolean);
-        let (mut f64_buf, mut i32_buf, mut bool_buf) =
-            (vec![0.0; f64_vrs.len()], vec![0; i32_vrs.len()], vec![false; bool_vrs.len()]);
+        // The buffer index of each column (column 0 is the time, buffer index 0).
+        let mut sources = vec![0; outputs.len() + 1];
+        for (k, &c) in f64_cols.iter().chain(&i32_cols).chain(&bool_cols).enumerate() {
+            sources[c + 1] = k + 1;
+        }
+        let (f64_end, i32_end) = (1 + f64_vrs.len(), 1 + f64_vrs.len() + i32_vrs.len());
+        let mut buffer = vec![0.0; outputs.len() + 1];
+        let (mut i32_buf, mut bool_buf) = (vec![0; i32_vrs.len()], vec![false; bool_vrs.len()]);
         let mut record = |inst: &mut InstanceCS, t: f64, trace: &mut Trace| -> Result<()> {
+            buffer[0] = t;
             if !f64_vrs.is_empty() {
-                inst.get_float64(&f64_vrs, &mut f64_buf).map_err(|e| anyhow!("get outputs: {e:?}"))?;
+                inst.get_float64(&f64_vrs, &mut buffer[1..f64_end]).map_err(|e| anyhow!("get outputs: {e:?}"))?;
             }
             if !i32_vrs.is_empty() {
                 inst.get_int32(&i32_vrs, &mut i32_buf).map_err(|e| anyhow!("get outputs: {e:?}"))?;
+                for (b, &v) in buffer[f64_end..i32_end].iter_mut().zip(&i32_buf) {
+                    *b = v as f64;
+                }
             }
             if !bool_vrs.is_empty() {
                 inst.get_boolean(&bool_vrs, &mut bool_buf).map_err(|e| anyhow!("get outputs: {e:?}"))?;
+                for (b, &v) in buffer[i32_end..].iter_mut().zip(&bool_buf) {
+                    *b = v as i32 as f64;
+                }
             }
             if !keep_rows {
                 trace.rows.clear();
             }
-            trace.rows.push_with(|row| {
-                row[0] = t;
-                for (&c, &v) in f64_cols.iter().zip(&f64_buf) {
-                    row[c + 1] = v;
-                }
-                for (&c, &v) in i32_cols.iter().zip(&i32_buf) {
-                    row[c + 1] = v as f64;
-                }
-                for (&c, &v) in bool_cols.iter().zip(&bool_buf) {
-                    row[c + 1] = v as i32 as f64;
-                }
-            });
+            trace.rows.push_gathered(&buffer, &sources);
             Ok(())
         };
         record(&mut inst, 0.0, &mut trace)?;

@@ -42,6 +42,12 @@ impl Rows {
         assert_eq!(self.values.len() - before, self.width, "a trace row must have {} values", self.width);
     }
 
+    /// Append the row `values[sources[0]], values[sources[1]], …` (one value per column).
+    pub fn push_gathered(&mut self, values: &[f64], sources: &[usize]) {
+        assert_eq!(sources.len(), self.width, "a trace row must have {} values", self.width);
+        self.values.extend(sources.iter().map(|&k| values[k]));
+    }
+
     /// Append a row of zeros and let `fill` write it (columns in any order).
     pub fn push_with(&mut self, fill: impl FnOnce(&mut [f64])) {
         let start = self.values.len();
