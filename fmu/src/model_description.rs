@@ -296,6 +296,39 @@ pub fn markdown_table() -> String {
     out
 }
 
+fn kind_text(d: &Declaration) -> &'static str {
+    match d.kind {
+        Kind::Float64 => "Float64",
+        Kind::Int32 => "Int32",
+        Kind::Boolean => "Boolean",
+    }
+}
+
+/// The output table (Markdown) of the book's FMU variables reference: every output (and the
+/// independent variable `time`) with its value reference, type, unit and description.
+pub fn markdown_outputs_table() -> String {
+    let mut out =
+        String::from("| variable | value reference | type | unit | description |\n| --- | --- | --- | --- | --- |\n");
+    for d in DECLARATIONS.iter().filter(|d| !d.settable()) {
+        let _ = writeln!(
+            out,
+            "| `{}` | {} | {} | {} | {} |",
+            d.name,
+            d.vr,
+            kind_text(d),
+            d.unit.map_or("", |u| u.name()),
+            d.description.replace('|', "\\|")
+        );
+    }
+    out
+}
+
+/// Counts for the book's FMU variables reference: (parameters, inputs, outputs).
+pub fn variable_counts() -> (usize, usize, usize) {
+    let count = |c: Causality| DECLARATIONS.iter().filter(|d| d.causality == c).count();
+    (count(Causality::Parameter), count(Causality::Input), count(Causality::Output))
+}
+
 /// documentation/index.html: quick start and every variable with unit and range.
 pub fn documentation_html() -> String {
     let start = Values::start();

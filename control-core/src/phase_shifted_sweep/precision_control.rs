@@ -23,7 +23,7 @@ const SPREAD_MARGIN: f32 = 1.25;
 /// 1 %, somewhat more over the repeated looks (one per half block), and more again because
 /// the first two are the settled pair, kept because their difference was small (the spread
 /// reads low with few half blocks: the early end asks for half the precision, the extension
-/// for 1.25 times it). Measured on the benches, not only argued: see the README. The
+/// for 1.25 times it). Measured on the benches, not only argued: see the book's sweep page. The
 /// settling check's ring rule counts at most this many half blocks in a record below the
 /// threshold, which the early end can stop there.
 pub(super) const EARLY_HALF_BLOCKS: u32 = 6;

@@ -418,7 +418,7 @@ declare_variables! {
     172 sweep_last_phase_deg: Float64 "sweep_last_phase_deg" Output Discrete = 0.0; DEG; ANY; "Its phase";
     173 sweep_last_quality: Float64 "sweep_last_quality" Output Discrete = 0.0; NONE; ANY; "Its quality: fraction of U's AC power at the excitation frequency (0: no result, or none the excitation defines; gain and phase then read 0)";
     174 acq_time: Float64 "acq_time" Output Discrete = 0.0; S; ANY; "Time of the last acquisition sample (the base tick it was taken at)";
-    175 acq_u: Float64 "acq_u" Output Discrete = 0.0; NONE; ANY; "Acquired U (see the README for what it is per injection point)";
+    175 acq_u: Float64 "acq_u" Output Discrete = 0.0; NONE; ANY; "Acquired U: the loop signal the sweep relates Y to, per injection point (the book: How it works, the sweep)";
     176 acq_y: Float64 "acq_y" Output Discrete = 0.0; RAD_S; ANY; "Acquired Y (the velocity estimate; the position in rad, from position_command, for a position-command injection)";
     177 acq_phase: Float64 "acq_phase" Output Discrete = 0.0; RAD; ANY; "Excitation phase at that sample";
     178 acq_measuring: Int32 "acq_measuring" Output Discrete = 0; NONE; ANY; "1 if the sample belongs to a measured record";

@@ -34,6 +34,9 @@ enum Command {
     Device(device::args::DeviceArgs),
     VirtualDrive(virtual_drive::args::VirtualDriveArgs),
     Index(index::IndexArgs),
+    /// Print this command-line reference as Markdown: every command and option (the book's
+    /// docs/src/reference/cli.md; `cargo run -p xtask -- references` writes it)
+    CliReference,
     /// Benchmarks: each prints its figures against their goals (worst case over the range users
     /// work in) and exits 1 when a goal is missed.
     #[command(subcommand)]
@@ -83,6 +86,10 @@ fn main() -> ExitCode {
         Command::Device(args) => args.run(),
         Command::VirtualDrive(args) => args.run(),
         Command::Index(args) => args.run(),
+        Command::CliReference => {
+            print!("{}", host_tools::cli::markdown_reference(&with_negative_numbers(Cli::command())));
+            Ok(true)
+        }
         Command::Bench(BenchCommand::Robustness(args)) => args.run(),
         Command::Bench(BenchCommand::Firmware(args)) => args.run(),
         Command::Bench(BenchCommand::Fmu(args)) => args.run(),
