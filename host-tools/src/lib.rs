@@ -18,6 +18,7 @@ pub mod analysis;
 pub mod bench;
 pub mod circle;
 pub mod cli;
+pub mod command_line;
 pub mod correction;
 pub mod device;
 pub mod fmu;

@@ -72,7 +72,8 @@ pub fn cli_section(markdown: String) -> Section {
     Section { page: "docs/src/reference/cli.md", name: "servo CLI", content: markdown }
 }
 
-/// `servo cli-reference`'s output, built and run through cargo from the workspace at `root`.
+/// `servo cli-reference`'s output, built and run through cargo from the workspace at `root`
+/// (the xtask's way; the test takes the same text from `host_tools::command_line` directly).
 pub fn cli_markdown(root: &Path) -> Result<String, String> {
     let cargo = std::env::var("CARGO").unwrap_or_else(|_| "cargo".into());
     let out = std::process::Command::new(cargo)
