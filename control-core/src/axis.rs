@@ -398,6 +398,12 @@ impl Axis {
         }
     }
 
+    /// The torque command the last tick applied, with its injections (N·m): the telemetry's
+    /// `torque_command` without building the whole record.
+    pub fn applied_torque(&self) -> f32 {
+        self.applied.torque_command
+    }
+
     pub fn faults(&self) -> Faults {
         self.faults
     }

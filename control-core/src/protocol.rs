@@ -360,7 +360,7 @@ pub fn decode_response(frame: &mut [u8]) -> Result<Response, FrameError> {
 pub fn parameters_may_change(commands: &Commands, axis: &Axis) -> bool {
     commands.mode == Mode::Torque
         && commands.torque == 0.0
-        && axis.telemetry().torque_command == 0.0
+        && axis.applied_torque() == 0.0
         && !axis.faults().any()
         && !axis.sweep().running()
 }

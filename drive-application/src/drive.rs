@@ -134,8 +134,8 @@ impl Drive {
             Ok(sequence) => ParamsOrigin::Stored { sequence },
             Err(reason) => ParamsOrigin::Defaults(reason),
         };
-        // One call site of `Axis::new`, building straight into slot 0: the stored set, or the
-        // defaults if it is refused (a second call site would keep room for a second axis).
+        // The axis built in slot 0, where it lives: the stored set, or the defaults if it is
+        // refused.
         // SAFETY: claimed above, by this call alone, and not installed yet: nothing reads slot
         // 0 (the tick waits for `installed`, set below under the critical section).
         let slot = unsafe { &mut *self.axes[0].get() };
@@ -279,9 +279,9 @@ impl Drive {
     }
 }
 
-/// The core's own request handling, for the requests the drive does not handle itself. Never
-/// inlined: the core's `SetParams` arm (never taken here) keeps room for an axis in its
-/// frame, which the link task's frame must not carry. The request by reference: taken by
+/// The core's own request handling, for the requests the drive does not handle itself (its
+/// `SetParams` arm, never taken here, rebuilds the axis in place). Never inlined, so that the
+/// link task's frame does not carry the core's. The request by reference: taken by
 /// value, its copy into the argument (480 bytes, part of it byte by byte) could be placed
 /// inside the critical section (1 470 instructions with interrupts off on the Cortex-M4).
 #[inline(never)]

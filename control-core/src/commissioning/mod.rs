@@ -1,7 +1,8 @@
 //! Commissioning a motor and encoder the drive has never seen: the phase resistance, the
 //! encoder's direction, the pole pairs and the electrical angle at count 0, and the d- and
 //! q-axis inductances, measured by the drive itself, one tick at a time, the current kept
-//! below the test current throughout.
+//! within the test current throughout (a tenth over it at most, in the current loop's
+//! transients) and the voltage within the highest voltage and the bus's circle.
 //!
 //! The sequence, each stage on the previous one's result:
 //! 1. **Probe.** Pseudo-random voltage chips of zero mean on a fixed angle (0), their size
@@ -14,8 +15,9 @@
 //!    then half of it; `R = ΔV/ΔI` between the two holds (the sensors' offsets and the
 //!    inverter's dead-time voltage, the same at both, drop out). The third phase's current not
 //!    the other two's mean: a phase is missing.
-//! 3. **d-axis inductance.** Chips around the held voltage (the current keeps its sign, so the
-//!    inverter's error stays constant) and the fit again, now on the rotor's d axis.
+//! 3. **d-axis inductance.** Chips around the voltage of half the test current (the current
+//!    keeps its sign, so the inverter's error stays constant) and the fit again, on the
+//!    rotor's d axis.
 //! 4. **Encoder.** The loop holds the test current on a vector that turns slowly forward by a
 //!    few electrical turns and back; the rotor follows. Counts against the vector's angle give
 //!    the direction, the pole pairs and the electrical angle at count 0 (`encoder_alignment`).
@@ -67,6 +69,37 @@ pub struct CommissioningSettings {
 }
 
 impl CommissioningSettings {
+    /// Every setting finite and in range: the first that is not, by name.
+    pub fn validate(&self) -> Result<(), &'static str> {
+        let positive = |x: f32| x.is_finite() && x > 0.0;
+        if !positive(self.test_current) {
+            return Err("test_current");
+        }
+        if !positive(self.max_voltage) {
+            return Err("max_voltage");
+        }
+        // The chips swing the current by up to the test current around half of it.
+        if !(positive(self.overcurrent) && self.overcurrent >= 2.0 * self.test_current) {
+            return Err("overcurrent");
+        }
+        if self.counts_per_rev < 4 || self.counts_per_rev > 1 << 24 {
+            return Err("counts_per_rev");
+        }
+        if self.max_pole_pairs == 0 || self.max_pole_pairs > 64 {
+            return Err("max_pole_pairs");
+        }
+        if !(positive(self.alignment_turns) && self.alignment_turns <= 16.0) {
+            return Err("alignment_turns");
+        }
+        if !(positive(self.alignment_speed) && self.alignment_speed <= 50.0) {
+            return Err("alignment_speed");
+        }
+        if !(positive(self.tick_period) && self.tick_period <= 1e-2) {
+            return Err("tick_period");
+        }
+        Ok(())
+    }
+
     /// A test current of 2 A, at most 12 V, one and a half electrical turns each way at two
     /// turns a second.
     pub fn for_encoder(counts_per_rev: u32, tick_period: f32) -> Self {
@@ -160,6 +193,8 @@ const STILL_WAIT_S: f32 = 1.0;
 const PROBE_START_V: f32 = 1e-3;
 const PROBE_GROWTH: f32 = 1.25;
 const PROBE_SHARE: f32 = 0.3;
+/// At the highest voltage, the least current (a share of the test current) the probe fits.
+const PROBE_FLOOR: f32 = 0.02;
 const PROBE_DEGREE: u32 = 8;
 const PROBE_FIT_PERIODS: u32 = 8;
 /// Chips of each inductance stage (an M-sequence of degree 12), after a few ticks' start.
@@ -213,6 +248,8 @@ pub struct Commissioning {
     peak: f32,
     /// The held voltage that drives the test current (V) and the averages of the two holds.
     held: f32,
+    /// The voltage that drives half the test current (V): the chips' centre.
+    held_low: f32,
     /// The test current this winding allows (A; the settings' unless the voltage limits it).
     test_current: f32,
     /// The encoder's last count and the ticks it has kept it; the ticks waited for it.
@@ -253,8 +290,10 @@ pub struct CommissioningInputs {
 }
 
 impl Commissioning {
-    pub fn new(settings: CommissioningSettings) -> Self {
-        Self {
+    /// The sequence for `settings`; refused, by the setting's name, when they do not validate.
+    pub fn new(settings: CommissioningSettings) -> Result<Self, &'static str> {
+        settings.validate()?;
+        Ok(Self {
             settings,
             status: CommissioningStatus::Running(Stage::Probe),
             ticks: 0,
@@ -263,6 +302,7 @@ impl Commissioning {
             chip_size: PROBE_START_V,
             peak: 0.0,
             held: 0.0,
+            held_low: 0.0,
             test_current: settings.test_current,
             last_count: 0,
             still_ticks: 0,
@@ -288,7 +328,7 @@ impl Commissioning {
             last_chip: 0.0,
             applied_chip: 0.0,
             last_current: None,
-        }
+        })
     }
 
     pub fn status(&self) -> CommissioningStatus {
@@ -371,12 +411,15 @@ impl Commissioning {
                         self.next_stage(Stage::Ramp);
                     }
                 } else if self.ticks.is_multiple_of(period) {
-                    // A whole period under the share: larger chips; there, the fit's periods.
-                    if self.peak < PROBE_SHARE * s.test_current {
-                        if self.chip_size > s.max_voltage {
-                            return self.fail(CommissioningFault::OpenPhase { amps: self.peak });
-                        }
-                        self.chip_size *= PROBE_GROWTH;
+                    // A whole period under the share: larger chips, up to the highest voltage;
+                    // there, the fit's periods. At the highest voltage a current the sensors
+                    // can read (a high resistance, a long time constant) is fitted as it is;
+                    // none at all is an open phase.
+                    let at_most = self.chip_size >= s.max_voltage;
+                    if self.peak < PROBE_SHARE * s.test_current && !at_most {
+                        self.chip_size = (self.chip_size * PROBE_GROWTH).min(s.max_voltage);
+                    } else if self.peak < PROBE_FLOOR * s.test_current {
+                        return self.fail(CommissioningFault::OpenPhase { amps: self.peak });
                     } else {
                         self.fit = WindingFit::default();
                         self.last_current = None;
@@ -436,6 +479,7 @@ impl Commissioning {
                         self.held = mean_v;
                         self.next_stage(Stage::HoldLow);
                     } else {
+                        self.held_low = mean_v;
                         let (dv, di) = (self.high.0 - mean_v, self.high.1 - mean_i);
                         let r = dv / di;
                         if !(r > 1e-3 && r < 100.0) {
@@ -528,29 +572,35 @@ impl Commissioning {
                         return None;
                     }
                 }
-                // A chip around the held voltage on the measured axis. Its size: the held
-                // voltage where the winding follows a chip within a few ticks (the current then
-                // swings by up to the held current and keeps its sign, so the inverter's error
-                // stays constant); up to four times it on a slow winding, whose current moves
-                // by a small share of a chip (its random walk over the record, about
-                // `sqrt(T/2τ)` of the chip's current), so that the ripple stands above the
-                // sensors' noise.
+                // A chip around the voltage that holds half the test current, on the measured
+                // axis. Its size: the resistive voltage of half the test current where the
+                // winding follows a chip within a few ticks (the current then swings between
+                // none and the test current and keeps its sign, so the inverter's error stays
+                // constant); up to four times it on a slow winding, whose current moves by a
+                // small share of a chip (its random walk over the record, about `sqrt(T/2τ)` of
+                // the chip's current), so that the ripple stands above the sensors' noise.
                 let ticks_per_tau = self.probe_inductance / (self.resistance * s.tick_period);
                 let size = crate::limit(0.25 * libm::sqrtf(ticks_per_tau), 1.0, 4.0);
-                let chip = size * self.held * self.chips.next_chip() as f32;
+                // The resistive part of half the test current (the held voltage also carries
+                // the inverter's dead-time voltage, which a chip's swing must not scale).
+                let chip = size * 0.5 * self.resistance * self.test_current * self.chips.next_chip() as f32;
                 self.applied_chip = self.last_chip;
                 self.last_chip = chip;
                 if stage == Stage::InductanceD {
-                    self.voltage = self.held + chip;
+                    self.voltage = self.held_low + chip;
                 } else {
-                    self.voltage = self.held;
+                    self.voltage = self.held_low;
                     q_voltage = chip;
                 }
             }
         }
         // The vector for the next tick: on the fixed angle until aligned, then the rotor's.
+        // Within the highest voltage and the bus's circle, the direction kept.
+        let limit = s.max_voltage.min(crate::reference_frames::voltage_circle_radius(i.bus_voltage));
+        let magnitude = libm::sqrtf(self.voltage * self.voltage + q_voltage * q_voltage);
+        let scale = if magnitude > limit { limit / magnitude } else { 1.0 };
         let (sin, cos) = sin_cos(self.angle);
-        Some(inverse_park(Dq { d: self.voltage, q: q_voltage }, sin, cos))
+        Some(inverse_park(Dq { d: self.voltage * scale, q: q_voltage * scale }, sin, cos))
     }
 
     /// The vector's turn under a current loop designed from the resistance and the d-axis
@@ -584,7 +634,7 @@ impl Commissioning {
         self.last_chip = 0.0;
         self.applied_chip = 0.0;
         self.last_current = None;
-        self.voltage = self.held;
+        self.voltage = self.held_low;
         self.next_stage(stage);
     }
 }

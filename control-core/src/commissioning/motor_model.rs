@@ -41,6 +41,8 @@ pub struct MotorTruth {
     pub open_phase_b: bool,
     /// The rotor cannot turn.
     pub locked: bool,
+    /// No winding at all (the motor's cable unplugged): no current flows.
+    pub disconnected: bool,
 }
 
 impl MotorTruth {
@@ -63,6 +65,7 @@ impl MotorTruth {
             noise: 0.0,
             open_phase_b: false,
             locked: false,
+            disconnected: false,
         }
     }
 }
@@ -81,6 +84,9 @@ pub struct MotorModel {
     /// Largest |mechanical angle| moved from the start (rad), and the largest |speed|.
     pub excursion: f64,
     pub top_speed: f64,
+    /// Largest phase current (A) and largest stator voltage asked for (V).
+    pub peak_current: f64,
+    pub peak_voltage: f64,
 }
 
 impl MotorModel {
@@ -96,6 +102,8 @@ impl MotorModel {
             rng: 0x2545_F491_4F6C_DD1D,
             excursion: 0.0,
             top_speed: 0.0,
+            peak_current: 0.0,
+            peak_voltage: 0.0,
         }
     }
 
@@ -144,6 +152,7 @@ impl MotorModel {
     pub fn apply(&mut self, alpha: f32, beta: f32) {
         let applied = self.pending;
         self.pending = (alpha as f64, beta as f64);
+        self.peak_voltage = self.peak_voltage.max((alpha as f64).hypot(beta as f64));
         let t = self.truth;
         let n = 32;
         let h = self.tick / n as f64;
@@ -203,6 +212,11 @@ impl MotorModel {
                 self.iq = -alpha * s + beta * c;
             }
         }
+        if t.disconnected {
+            (self.id, self.iq) = (0.0, 0.0);
+        }
+        let [a, b, c] = self.phase_currents();
+        self.peak_current = self.peak_current.max(a.abs().max(b.abs()).max(c.abs()));
         self.excursion = self.excursion.max((self.angle - t.start_angle).abs());
         self.top_speed = self.top_speed.max(self.speed.abs());
     }

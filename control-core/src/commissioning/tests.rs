@@ -12,7 +12,7 @@ const TICK: f32 = 1.0 / 16_000.0;
 /// Run the sequence to its end (at most 10 s of ticks): its status and the ticks it took.
 fn commission(truth: MotorTruth, settings: CommissioningSettings) -> (CommissioningStatus, u32, MotorModel) {
     let mut motor = MotorModel::new(truth, TICK as f64);
-    let mut c = Commissioning::new(settings);
+    let mut c = Commissioning::new(settings).unwrap();
     for tick in 0..160_000u32 {
         let (phase_currents, encoder_count) = motor.sample();
         let out = c.step(&CommissioningInputs { phase_currents, encoder_count, bus_voltage: 48.0 });
@@ -29,7 +29,8 @@ fn settings(truth: &MotorTruth) -> CommissioningSettings {
 }
 
 fn check(truth: MotorTruth) {
-    let (status, ticks, motor) = commission(truth, settings(&truth));
+    let settings = settings(&truth);
+    let (status, ticks, motor) = commission(truth, settings);
     let CommissioningStatus::Done(m) = status else { panic!("{status:?} for {truth:?}") };
     let close = |got: f32, want: f64, what: &str| {
         assert!((got as f64 / want - 1.0).abs() < 0.03, "{what}: {got} vs {want} ({m:?}, {truth:?})");
@@ -56,6 +57,10 @@ fn check(truth: MotorTruth) {
     // The rotor followed the vector: a few electrical turns, no run-away.
     let turns = motor.excursion * truth.pole_pairs as f64 / std::f64::consts::TAU;
     assert!(turns < 2.0, "{turns} electrical turns ({truth:?})");
+    // The current under the test current (a tenth over it for the current loop's transients
+    // and the chips' swing), the voltage within the highest voltage.
+    assert!(motor.peak_current < 1.1 * settings.test_current as f64, "{} A ({truth:?})", motor.peak_current);
+    assert!(motor.peak_voltage <= settings.max_voltage as f64 * 1.0001, "{} V ({truth:?})", motor.peak_voltage);
 }
 
 #[test]
@@ -116,8 +121,17 @@ fn an_open_phase_a_locked_rotor_and_a_wrong_count_are_refused_by_name_with_the_b
         ),
         "{status:?}"
     );
+    // No winding at all: the probe reaches the highest voltage with no current.
+    let (status, _, m) = commission(MotorTruth { disconnected: true, ..motor }, settings(&motor));
+    assert!(matches!(status, CommissioningStatus::Failed(CommissioningFault::OpenPhase { .. })), "{status:?}");
+    assert!(m.peak_voltage <= settings(&motor).max_voltage as f64 * 1.0001, "{} V", m.peak_voltage);
+    // A current beyond the trip level on any tick stops it.
+    let mut c = Commissioning::new(settings(&motor)).unwrap();
+    let over = CommissioningInputs { phase_currents: [7.0, -3.5], encoder_count: 0, bus_voltage: 48.0 };
+    assert_eq!(c.step(&over), None);
+    assert!(matches!(c.status(), CommissioningStatus::Failed(CommissioningFault::Overcurrent { .. })));
     // Once failed, the bridge stays off.
-    let mut c = Commissioning::new(settings(&motor));
+    let mut c = Commissioning::new(settings(&motor)).unwrap();
     let bad = CommissioningInputs { phase_currents: [f32::NAN, 0.0], encoder_count: 0, bus_voltage: 48.0 };
     assert_eq!(c.step(&bad), None);
     assert_eq!(c.status(), CommissioningStatus::Failed(CommissioningFault::Reading));
@@ -176,5 +190,27 @@ fn drawn_motors_with_sensor_errors_are_found() {
         };
         check(truth);
         drawn += 1;
+    }
+}
+
+/// Settings that would keep the bridge on for ever, or drive it without a bound, are refused
+/// by name before anything runs.
+#[test]
+fn settings_out_of_range_are_refused_by_name() {
+    let good = CommissioningSettings::for_encoder(4000, TICK);
+    assert!(Commissioning::new(good).is_ok());
+    type Spoil = fn(&mut CommissioningSettings);
+    let cases: [(&str, Spoil); 6] = [
+        ("alignment_speed", |s| s.alignment_speed = 0.0),
+        ("alignment_speed", |s| s.alignment_speed = -1.0),
+        ("tick_period", |s| s.tick_period = 0.0),
+        ("max_voltage", |s| s.max_voltage = f32::NAN),
+        ("overcurrent", |s| s.overcurrent = s.test_current),
+        ("counts_per_rev", |s| s.counts_per_rev = 0),
+    ];
+    for (field, spoil) in cases {
+        let mut s = good;
+        spoil(&mut s);
+        assert_eq!(Commissioning::new(s).err(), Some(field));
     }
 }
