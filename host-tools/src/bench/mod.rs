@@ -10,4 +10,5 @@ pub mod firmware_command;
 pub mod fmi_campaign;
 pub mod fmu_speed;
 pub mod plant;
+pub mod raw_traces;
 pub mod stack_depth;

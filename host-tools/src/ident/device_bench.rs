@@ -40,6 +40,11 @@ const ANSWER_TIMEOUT: std::time::Duration = std::time::Duration::from_secs(10);
 pub struct IdentDeviceBenchArgs {
     #[command(flatten)]
     pub common: Common,
+    /// Keep each case's raw per-sample traces (the drive's streamed samples and the twin's:
+    /// hundreds of megabytes over the bench); by default they are removed once the case's
+    /// figures, tables and plots are written
+    #[arg(long)]
+    pub keep_raw: bool,
 }
 
 /// One identification over the virtual drive.
@@ -125,6 +130,7 @@ impl IdentDeviceBenchArgs {
         let pb = progress_bar("ident-device bench", c.json);
         let cases = bench(&fmu, &out, |f| pb.set_position((f * 1000.0) as u64))?;
         pb.finish_and_clear();
+        crate::bench::raw_traces::tidy(&out, self.keep_raw)?;
         let ok = cases.iter().all(DeviceCase::passed);
         if c.json {
             let j = serde_json::json!({"bench": "ident-device", "cases": cases, "passed": ok});

@@ -57,6 +57,11 @@ pub const NOISE_STD: f64 = 2.0;
 pub struct TuneDeviceBenchArgs {
     #[command(flatten)]
     pub common: Common,
+    /// Keep each case's raw per-sample traces (the drive's streamed samples and the twin's:
+    /// hundreds of megabytes over the bench); by default they are removed once the case's
+    /// figures, tables and plots are written
+    #[arg(long)]
+    pub keep_raw: bool,
 }
 
 /// One axis's check.
@@ -173,6 +178,7 @@ impl TuneDeviceBenchArgs {
         let pb = progress_bar("tune-device bench", c.json);
         let cases = bench(&fmu, &out, |f| pb.set_position((f * 1000.0) as u64))?;
         pb.finish_and_clear();
+        crate::bench::raw_traces::tidy(&out, self.keep_raw)?;
         let ok = cases.iter().all(|c| c.report.passed);
         if c.json {
             let j = serde_json::json!({"bench": "tune-device", "cases": cases, "passed": ok});
