@@ -3,7 +3,6 @@
 use core::mem::MaybeUninit;
 use core::num::NonZeroU32;
 
-use crate::acc_dec::AccDecFilter;
 use crate::command_path::{CommandPath, Move};
 use crate::current_loop::{CurrentLoop, CurrentLoopOutput};
 use crate::encoder::{EncoderTracker, EncoderUpdate};
@@ -329,11 +328,11 @@ impl Axis {
         let position_period = params.rates.position_period();
         let cpr = params.encoder_counts_per_rev;
         let counts_per_rev = NonZeroU32::new(cpr).ok_or(ParamError::Zero { field: "encoder_counts_per_rev" })?;
-        AccDecFilter::check(&params.acc_dec, position_period).map_err(ParamError::AccDec)?;
         let correction =
             ResponseCorrection::new(&params.correction, position_period).map_err(ParamError::Correction)?;
         // SAFETY: the caller's; every field below is written once, the big ones (the command
-        // path's filter, the sweep's result table) where they are.
+        // path's filter, the sweep's result table) where they are. The command path comes
+        // first: its filter's checks run before anything is written.
         unsafe {
             CommandPath::init(addr_of_mut!((*axis).command_path), &params.acc_dec, position_period, &correction)
                 .map_err(ParamError::AccDec)?;

@@ -92,15 +92,12 @@ pub enum AccDecFilter {
 impl AccDecFilter {
     /// Build from settings at the position-loop period (s). Every setting is checked, also
     /// those of the kinds not selected, so that switching kind later cannot fail.
+    #[allow(unsafe_code)]
     pub fn new(p: &AccDecParams, sample_period: f32) -> Result<Self, AccDecError> {
-        let stages = moving_average_stages(p)?;
-        let ma = MovingAverageCascade::new(&p.ma_lengths[..stages])?;
-        let bw = ButterworthDesign::new(p.order, p.cutoff_hz, sample_period)?;
-        Ok(match p.kind {
-            AccDecKind::None => Self::None,
-            AccDecKind::MovingAverage => Self::MovingAverage(ma),
-            AccDecKind::Butterworth => Self::Butterworth(ButterworthPulseFilter::new(bw)),
-        })
+        let mut slot = MaybeUninit::uninit();
+        Self::new_in(&mut slot, p, sample_period)?;
+        // SAFETY: built above.
+        Ok(unsafe { slot.assume_init() })
     }
 
     /// [`Self::new`] built in `slot` (no filter value on the stack: the moving averages'

@@ -42,6 +42,7 @@ pub use winding_fit::Winding;
 use core::f32::consts::TAU;
 
 use crate::m_sequence::MSequence;
+use crate::pi_controller::{PiController, PiGains};
 use crate::reference_frames::{clarke, inverse_park, park, AlphaBeta, Dq};
 use crate::trigonometry::sin_cos;
 use encoder_alignment::{align, Pass};
@@ -205,32 +206,23 @@ const CHIP_SETTLING_TICKS: u32 = 64;
 /// delay), far above the vector's turn.
 const ALIGNMENT_BANDWIDTH_HZ: f32 = 300.0;
 
-/// A PI on one axis, its output within `±limit`, the integrator held while the output is.
-#[derive(Clone, Copy, Debug, Default)]
-struct SimplePi {
-    kp: f32,
-    ki: f32,
-    period: f32,
-    limit: f32,
-    integral: f32,
-}
-
-impl SimplePi {
-    fn update(&mut self, error: f32) -> f32 {
-        let candidate = self.integral + self.ki * error * self.period;
-        let out = self.kp * error + candidate;
-        let limited = crate::limit(out, -self.limit, self.limit);
-        if limited == out {
-            self.integral = candidate;
-        }
-        limited
-    }
-}
-
+/// The sequence's d and q current loops (the drive's PI, its output within the highest
+/// voltage).
 #[derive(Clone, Copy, Debug, Default)]
 struct DqPi {
-    d: SimplePi,
-    q: SimplePi,
+    d: PiController,
+    q: PiController,
+    limit: f32,
+}
+
+impl DqPi {
+    fn d(&mut self, error: f32) -> f32 {
+        self.d.update(error, self.limit).value
+    }
+
+    fn q(&mut self, error: f32) -> f32 {
+        self.q.update(error, self.limit).value
+    }
 }
 
 /// The commissioning sequence.
@@ -434,16 +426,16 @@ impl Commissioning {
             }
             Stage::Ramp => {
                 let share = self.ticks as f32 / self.ticks_of(RAMP_S) as f32;
-                self.voltage = self.current_pi.d.update(self.test_current * share.min(1.0) - current.d);
-                q_voltage = self.current_pi.q.update(-current.q);
+                self.voltage = self.current_pi.d(self.test_current * share.min(1.0) - current.d);
+                q_voltage = self.current_pi.q(-current.q);
                 if share >= 1.0 {
                     self.next_stage(Stage::HoldHigh);
                 }
             }
             Stage::HoldHigh | Stage::HoldLow => {
                 let target = if stage == Stage::HoldHigh { self.test_current } else { 0.5 * self.test_current };
-                let voltage = self.current_pi.d.update(target - current.d);
-                q_voltage = self.current_pi.q.update(-current.q);
+                let voltage = self.current_pi.d(target - current.d);
+                q_voltage = self.current_pi.q(-current.q);
                 let (hold, averaged) = (self.ticks_of(HOLD_S), self.ticks_of(AVERAGED_S));
                 // The back-EMF of a rotor still swinging on the vector would bias the voltage:
                 // the first hold waits for it to stop before it averages.
@@ -493,8 +485,8 @@ impl Commissioning {
             Stage::Forward | Stage::Backward => {
                 // The test current on the vector's d axis, none on its q axis: the turning
                 // rotor's back-EMF is the loop's to reject, not the current's to follow.
-                let vd = self.current_pi.d.update(self.test_current - current.d);
-                q_voltage = self.current_pi.q.update(-current.q);
+                let vd = self.current_pi.d(self.test_current - current.d);
+                q_voltage = self.current_pi.q(-current.q);
                 self.voltage = vd;
                 // A trapezoid of speed: the rotor's lag is the same on both passes only at the
                 // full speed, so only those ticks are fitted (the swing that starting and
@@ -622,10 +614,10 @@ impl Commissioning {
         let (kp, ki) = (inductance * w, resistance * w);
         let limit = self.settings.max_voltage;
         let period = self.settings.tick_period;
-        self.current_pi = DqPi {
-            d: SimplePi { kp, ki, period, limit, integral: held },
-            q: SimplePi { kp, ki, period, limit, integral: 0.0 },
-        };
+        let gains = PiGains { kp, ki, period };
+        let (mut d, q) = (PiController::new(gains), PiController::new(gains));
+        d.preset(held);
+        self.current_pi = DqPi { d, q, limit };
     }
 
     fn start_chips(&mut self, stage: Stage) {
