@@ -70,6 +70,9 @@ pub struct Alignment {
     pub reversed: bool,
     /// The electrical angle (rad, in [0, 2π)) at count 0 of the direction-corrected counter.
     pub offset: f32,
+    /// How far the rotor lagged the turning vector (rad, electrical): half the two passes'
+    /// intercepts apart.
+    pub lag: f32,
 }
 
 /// Why the passes give no alignment.
@@ -127,7 +130,8 @@ pub fn align(
     // Electrical angle at direction-corrected count 0: −at_zero / exact, within a turn.
     let offset = -at_zero / exact;
     let offset = offset - TAU * libm::floorf(offset / TAU);
-    Ok(Alignment { pole_pairs: pole_pairs as u32, reversed, offset: if offset >= TAU { 0.0 } else { offset } })
+    let lag = 0.5 * (c2 - c1).abs() / exact;
+    Ok(Alignment { pole_pairs: pole_pairs as u32, reversed, offset: if offset >= TAU { 0.0 } else { offset }, lag })
 }
 
 #[cfg(test)]
@@ -157,6 +161,7 @@ mod tests {
                     }
                     let a = align(&f, &b, cpr, 64, start_count).unwrap();
                     assert_eq!((a.pole_pairs, a.reversed), (pp, reversed));
+                    assert!((a.lag - 0.1).abs() < 0.01, "lag {}", a.lag);
                     let error = libm::remainderf(a.offset - offset, TAU).abs();
                     assert!(error < 0.5f32.to_radians(), "cpr {cpr} pp {pp} rev {reversed} offset {offset}: {a:?}");
                 }

@@ -21,13 +21,32 @@
 //! 4. **Encoder.** The loop holds the test current on a vector that turns slowly forward by a
 //!    few electrical turns and back; the rotor follows. Counts against the vector's angle give
 //!    the direction, the pole pairs and the electrical angle at count 0 (`encoder_alignment`).
+//!    The q voltage the loop needs at full speed, forward and back, is the back-EMF:
+//!    `v_q = ω·(L_d·i·cos²δ + L_q·i·sin²δ + ψ·cos δ)` in the vector's frame, the rotor lagging
+//!    by `δ` either way, so half their difference over `ω` gives the flux linkage `ψ` once the
+//!    inductances are known (stage 5). The inverter's dead-time voltage (what the holds'
+//!    voltage carries beyond `R·I`) is fed forward, so the loop has no steps of it to follow
+//!    as the phase currents change sign (their lag, opposite on the two passes, would bias
+//!    the difference). The inductive term `ω·L_d·I` stands beside the back-EMF: the flux
+//!    linkage's error is the d-axis inductance's times `L_d·I/ψ`, small on servo motors
+//!    (their armature's flux at the test current is a fraction of the magnet's) and large on
+//!    a motor whose armature's flux at the test current exceeds its magnet's.
+//!    The rotor swings on the vector (the magnet's torque a spring on its inertia); the lines'
+//!    intercepts and the back-EMF's mean need a few of its periods in a pass (4 Hz or more at
+//!    the test current: a heavy load on a weak magnet needs a higher test current).
 //! 5. **q-axis inductance.** Chips on the rotor's q axis (now known from the encoder) beside
 //!    the held d-axis voltage, and the fit.
+//! 6. **Current loop.** The PI for the stated bandwidth from `R` and `L_q` (the torque's axis;
+//!    `current_loop_design`), the drive's gains for both axes. The design is checked on the d
+//!    axis, the rotor's own (where a current makes no torque and the rotor stays still), with
+//!    the same design from `R` and `L_d`: steps of the d current around half the test
+//!    current, the measured bandwidth within a tenth of the target and an overshoot under a
+//!    tenth, or the sequence fails.
 //!
 //! Any fault (an overcurrent, a reading that is not finite, a failed stage) ends the sequence
-//! with the bridge off and its reason; nothing is kept. The flux linkage and the current
-//! loop's gains and step check follow in later stages.
+//! with the bridge off and its reason; nothing is kept.
 
+mod current_loop_design;
 mod encoder_alignment;
 mod winding_fit;
 
@@ -36,6 +55,7 @@ mod motor_model;
 #[cfg(test)]
 mod tests;
 
+pub use current_loop_design::{design as design_current_loop, StepCheck};
 pub use encoder_alignment::{Alignment, AlignmentError};
 pub use winding_fit::Winding;
 
@@ -45,6 +65,7 @@ use crate::m_sequence::MSequence;
 use crate::pi_controller::{PiController, PiGains};
 use crate::reference_frames::{clarke, inverse_park, park, AlphaBeta, Dq};
 use crate::trigonometry::sin_cos;
+use current_loop_design::{BandwidthSearch, StepResponse, STEP_SAMPLES};
 use encoder_alignment::{align, Pass};
 use winding_fit::WindingFit;
 
@@ -67,6 +88,9 @@ pub struct CommissioningSettings {
     pub alignment_speed: f32,
     /// The base tick (s).
     pub tick_period: f32,
+    /// The current loop's closed-loop bandwidth the gains are designed for (Hz): from 0.02 to
+    /// 0.1 of the tick rate (320 Hz to 1.6 kHz at 16 kHz).
+    pub current_bandwidth_hz: f32,
 }
 
 impl CommissioningSettings {
@@ -98,11 +122,15 @@ impl CommissioningSettings {
         if !(positive(self.tick_period) && self.tick_period <= 1e-2) {
             return Err("tick_period");
         }
+        let share = self.current_bandwidth_hz * self.tick_period;
+        if !(share >= 0.02 && share <= 0.1) {
+            return Err("current_bandwidth_hz");
+        }
         Ok(())
     }
 
     /// A test current of 2 A, at most 12 V, one and a half electrical turns each way at two
-    /// turns a second.
+    /// turns a second, a current loop of a sixteenth of the tick rate (1 kHz at 16 kHz).
     pub fn for_encoder(counts_per_rev: u32, tick_period: f32) -> Self {
         Self {
             test_current: 2.0,
@@ -113,6 +141,7 @@ impl CommissioningSettings {
             alignment_turns: 1.5,
             alignment_speed: 2.0,
             tick_period,
+            current_bandwidth_hz: 0.0625 / tick_period,
         }
     }
 }
@@ -125,7 +154,14 @@ pub struct MeasuredMotor {
     /// d- and q-axis inductances (H).
     pub ld: f32,
     pub lq: f32,
+    /// Permanent-magnet flux linkage (Wb).
+    pub flux_linkage: f32,
     pub alignment: Alignment,
+    /// The current loop's gains (V/A, V/(A·s)), designed for the settings' bandwidth, and what
+    /// their step measured.
+    pub current_kp: f32,
+    pub current_ki: f32,
+    pub current_step: StepCheck,
 }
 
 /// Why commissioning stopped; the bridge is off and nothing is kept.
@@ -147,6 +183,12 @@ pub enum CommissioningFault {
     /// A winding's response that no resistance and inductance give (axis 'd' or 'q').
     Inductance {
         axis: char,
+    },
+    /// The designed current loop's step: its bandwidth (Hz) not within a tenth of the target,
+    /// or an overshoot over a tenth.
+    CurrentLoop {
+        bandwidth_hz: f32,
+        overshoot: f32,
     },
     /// A value outside what the drive can run.
     OutOfRange {
@@ -174,6 +216,8 @@ pub enum Stage {
     Backward,
     InductanceD,
     InductanceQ,
+    CurrentStep,
+    StepAnalysis,
 }
 
 /// The vector's acceleration to the alignment speed and its braking (s).
@@ -202,9 +246,37 @@ const PROBE_FIT_PERIODS: u32 = 8;
 const CHIP_DEGREE: u32 = 12;
 const CHIP_SETTLING_TICKS: u32 = 64;
 
-/// The sequence's current-loop bandwidth (Hz): well inside a 16 kHz tick's reach (one tick of
-/// delay), far above the vector's turn.
-const ALIGNMENT_BANDWIDTH_HZ: f32 = 300.0;
+/// Each level of the current step (ticks): the step's samples; levels 0, +1, 0, −1 in turn,
+/// `STEP_CYCLES` times.
+const STEP_CYCLES: u32 = 8;
+
+
+/// The q voltage asked for and the d current (vector's frame) over one pass's full-speed
+/// ticks, and the vector's angle and the encoder's count on the first and the last of them.
+#[derive(Clone, Copy, Debug, Default)]
+struct BackEmf {
+    voltage: f32,
+    current: f32,
+    ticks: u32,
+    first: Option<(f32, i32)>,
+    last: (f32, i32),
+}
+
+impl BackEmf {
+    fn add(&mut self, q_voltage: f32, d_current: f32, angle: f32, count: i32) {
+        self.voltage += q_voltage;
+        self.current += d_current;
+        self.ticks += 1;
+        self.first.get_or_insert((angle, count));
+        self.last = (angle, count);
+    }
+
+    /// The mean q voltage (V) and d current (A), and the window's length (s).
+    fn means(&self, tick: f32) -> (f32, f32, f32) {
+        let n = self.ticks.max(2) as f32;
+        (self.voltage / n, self.current / n, (n - 1.0) * tick)
+    }
+}
 
 /// The sequence's d and q current loops (the drive's PI, its output within the highest
 /// voltage).
@@ -255,11 +327,25 @@ pub struct Commissioning {
     start_count: Option<i32>,
     forward: Pass,
     backward: Pass,
-    /// The present pass's angle turned and its speed (rad, rad per tick).
+    /// Full-speed ticks of each pass (forward, backward).
+    back_emf: [BackEmf; 2],
+    flux_linkage: f32,
+    /// The current step: its response, the q-current step's size (A), the gains designed and
+    /// the bandwidth's search.
+    step: StepResponse,
+    step_size: f32,
+    designed: (f32, f32),
+    search: Option<BandwidthSearch>,
+    /// The present pass's angle turned and its speed (rad, rad per tick); the output's angle
+    /// ahead of the vector's (rad).
+    advance: f32,
     travelled: f32,
     speed: f32,
     alignment: Option<Alignment>,
     ld: f32,
+    lq: f32,
+    /// The inverter's dead-time voltage per phase (V), from the holds.
+    dead_time: f32,
     /// The probe's inductance (H): the alignment's current loop is designed with it.
     probe_inductance: f32,
     /// The current loop of the alignment (in the vector's frame).
@@ -306,10 +392,19 @@ impl Commissioning {
             start_count: None,
             forward: Pass::new(0.0),
             backward: Pass::new(0.0),
+            back_emf: [BackEmf::default(); 2],
+            flux_linkage: 0.0,
+            step: StepResponse::default(),
+            step_size: 0.0,
+            designed: (0.0, 0.0),
+            search: None,
+            advance: 0.0,
             travelled: 0.0,
             speed: 0.0,
             alignment: None,
             ld: 0.0,
+            lq: 0.0,
+            dead_time: 0.0,
             probe_inductance: 0.0,
             current_pi: DqPi::default(),
             chips: match MSequence::new(PROBE_DEGREE) {
@@ -478,6 +573,10 @@ impl Commissioning {
                             return self.fail(CommissioningFault::OutOfRange { quantity: "resistance", value: r });
                         }
                         self.resistance = r;
+                        // What the held voltage carries beyond `R·I`: the inverter's dead-time
+                        // voltage, `4/3` of each phase's on the vector at phase a.
+                        let error = self.high.0 - r * self.high.1;
+                        self.dead_time = crate::limit(0.75 * error, 0.0, 0.25 * s.max_voltage);
                         self.start_alignment();
                     }
                 }
@@ -485,9 +584,13 @@ impl Commissioning {
             Stage::Forward | Stage::Backward => {
                 // The test current on the vector's d axis, none on its q axis: the turning
                 // rotor's back-EMF is the loop's to reject, not the current's to follow.
+                // The inverter's dead-time voltage fed forward: the loop then has no steps of it
+                // to follow as the phase currents change sign, whose lag, opposite on the two
+                // passes, would bias the back-EMF.
+                let compensation = self.dead_time_compensation(self.angle);
                 let vd = self.current_pi.d(self.test_current - current.d);
-                q_voltage = self.current_pi.q(-current.q);
-                self.voltage = vd;
+                q_voltage = self.current_pi.q(-current.q) + compensation.q;
+                self.voltage = vd + compensation.d;
                 // A trapezoid of speed: the rotor's lag is the same on both passes only at the
                 // full speed, so only those ticks are fitted (the swing that starting and
                 // stopping excite would bias the intercepts).
@@ -500,6 +603,25 @@ impl Commissioning {
                 let at_full_speed = self.speed == full;
                 self.travelled += self.speed;
                 let done = self.travelled >= end;
+                // The voltage asked for now is applied over the next tick but one's reading:
+                // placed half a tick's turn ahead of the vector's next angle, it sits where the
+                // vector is in the middle of that tick (else it lags it by `ω·T/2`, which the
+                // loop makes up with a q voltage of `v_d·ω·T/2` of the pass's sign).
+                self.advance = if done {
+                    0.0
+                } else if stage == Stage::Forward {
+                    0.5 * self.speed
+                } else {
+                    -0.5 * self.speed
+                };
+                if at_full_speed {
+                    self.back_emf[(stage == Stage::Backward) as usize].add(
+                        q_voltage,
+                        current.d,
+                        self.angle,
+                        i.encoder_count,
+                    );
+                }
                 if stage == Stage::Forward {
                     if at_full_speed {
                         self.forward.add(self.angle, relative);
@@ -553,15 +675,13 @@ impl Commissioning {
                         self.ld = w.inductance;
                         self.start_chips(Stage::InductanceQ);
                     } else {
-                        let alignment =
-                            self.alignment.unwrap_or(Alignment { pole_pairs: 1, reversed: false, offset: 0.0 });
-                        self.status = CommissioningStatus::Done(MeasuredMotor {
-                            resistance: self.resistance,
-                            ld: self.ld,
-                            lq: w.inductance,
-                            alignment,
-                        });
-                        return None;
+                        self.lq = w.inductance;
+                        match self.flux_from_back_emf() {
+                            Ok(psi) => self.flux_linkage = psi,
+                            Err(fault) => return self.fail(fault),
+                        }
+                        self.start_current_step();
+                        return self.output(i.bus_voltage, 0.0);
                     }
                 }
                 // A chip around the voltage that holds half the test current, on the measured
@@ -585,39 +705,178 @@ impl Commissioning {
                     q_voltage = chip;
                 }
             }
+            Stage::CurrentStep => {
+                let (hold, cycle) = (STEP_SAMPLES as u32, 4 * STEP_SAMPLES as u32);
+                // The level this tick's reading answers: the ticks before the first step
+                // settle the held d current.
+                let t = self.ticks - 1;
+                let held = 0.5 * self.test_current;
+                let level = |t: u32| [0.0f32, 1.0, 0.0, -1.0][((t / hold) % 4) as usize];
+                let (k, edge) = ((t % hold) as usize, t >= hold);
+                if edge {
+                    let (before, after) = (level(t - hold), level(t));
+                    let size = (after - before) * self.step_size;
+                    self.step.add(k, (current.d - (held + before * self.step_size)) / size);
+                    if k == STEP_SAMPLES - 1 {
+                        self.step.end_step();
+                    }
+                }
+                if t + 1 >= hold + STEP_CYCLES * cycle {
+                    self.search = Some(BandwidthSearch::new(s.current_bandwidth_hz, s.tick_period));
+                    self.next_stage(Stage::StepAnalysis);
+                    self.voltage = 0.0;
+                    return self.output(i.bus_voltage, 0.0);
+                }
+                // The level's reference from its first tick on (its sample 0: the reading the
+                // new reference first meets).
+                let reference = level(t) * self.step_size;
+                self.voltage = self.current_pi.d(held + reference - current.d);
+                q_voltage = self.current_pi.q(-current.q);
+            }
+            Stage::StepAnalysis => {
+                // No voltage while the search runs, one evaluation a tick.
+                self.voltage = 0.0;
+                let found = self.search.as_mut().and_then(|search| search.step(&self.step, s.tick_period));
+                match found {
+                    None => {}
+                    Some(Err(())) => {
+                        let overshoot = self.step.overshoot();
+                        return self.fail(CommissioningFault::CurrentLoop { bandwidth_hz: f32::NAN, overshoot });
+                    }
+                    Some(Ok(bandwidth_hz)) => {
+                        let overshoot = self.step.overshoot();
+                        let target = s.current_bandwidth_hz;
+                        if !((bandwidth_hz / target - 1.0).abs() <= 0.1 && overshoot <= 0.1) {
+                            return self.fail(CommissioningFault::CurrentLoop { bandwidth_hz, overshoot });
+                        }
+                        let alignment = self.alignment.unwrap_or(Alignment {
+                            pole_pairs: 1,
+                            reversed: false,
+                            offset: 0.0,
+                            lag: 0.0,
+                        });
+                        self.status = CommissioningStatus::Done(MeasuredMotor {
+                            resistance: self.resistance,
+                            ld: self.ld,
+                            lq: self.lq,
+                            flux_linkage: self.flux_linkage,
+                            alignment,
+                            current_kp: self.designed.0,
+                            current_ki: self.designed.1,
+                            current_step: StepCheck { bandwidth_hz, overshoot },
+                        });
+                        return None;
+                    }
+                }
+            }
         }
-        // The vector for the next tick: on the fixed angle until aligned, then the rotor's.
-        // Within the highest voltage and the bus's circle, the direction kept.
-        let limit = s.max_voltage.min(crate::reference_frames::voltage_circle_radius(i.bus_voltage));
+        self.output(i.bus_voltage, q_voltage)
+    }
+
+    /// The vector for the next tick, `self.voltage` on its d axis and `q_voltage` on its q
+    /// axis: on the fixed angle until aligned, then the rotor's. Within the highest voltage
+    /// and the bus's circle, the direction kept.
+    fn output(&self, bus_voltage: f32, q_voltage: f32) -> Option<AlphaBeta> {
+        let s = &self.settings;
+        let limit = s.max_voltage.min(crate::reference_frames::voltage_circle_radius(bus_voltage));
         let magnitude = libm::sqrtf(self.voltage * self.voltage + q_voltage * q_voltage);
         let scale = if magnitude > limit { limit / magnitude } else { 1.0 };
-        let (sin, cos) = sin_cos(self.angle);
+        let (sin, cos) = sin_cos(self.angle + self.advance);
         Some(inverse_park(Dq { d: self.voltage * scale, q: q_voltage * scale }, sin, cos))
     }
 
-    /// The vector's turn under a current loop designed from the resistance and the d-axis
-    /// inductance just measured (its zero on the winding's pole, `ALIGNMENT_BANDWIDTH_HZ`),
-    /// its integrators starting from the held voltage.
+    /// The vector's turn under a current loop designed from the resistance and the probe's
+    /// inductance (`start_current_loop`), its integrators starting from the held voltage.
     fn start_alignment(&mut self) {
-        self.start_current_loop(self.resistance, self.probe_inductance, self.held);
-        self.voltage = self.held;
+        let compensation = self.dead_time_compensation(0.0);
+        // From the low hold's voltage (the one applied now): the loop's own step to the test
+        // current, without the kick a preset for the test current would add to it.
+        self.start_current_loop(self.resistance, self.probe_inductance, self.held_low - compensation.d);
+        self.voltage = self.held_low;
         self.travelled = 0.0;
         self.speed = 0.0;
         self.forward = Pass::new(0.0);
         self.next_stage(Stage::Forward);
     }
 
-    /// A current loop for a winding of `resistance` and `inductance`: its zero on the winding's
-    /// pole, `ALIGNMENT_BANDWIDTH_HZ`; its d integrator starting from `held` (V).
+    /// A current loop for a winding of `resistance` and `inductance` at the stated bandwidth
+    /// (`current_loop_design`); its d integrator from `held` (V).
     fn start_current_loop(&mut self, resistance: f32, inductance: f32, held: f32) {
-        let w = TAU * ALIGNMENT_BANDWIDTH_HZ;
-        let (kp, ki) = (inductance * w, resistance * w);
-        let limit = self.settings.max_voltage;
-        let period = self.settings.tick_period;
-        let gains = PiGains { kp, ki, period };
+        let s = &self.settings;
+        let (kp, ki) = current_loop_design::design(resistance, inductance, s.tick_period, s.current_bandwidth_hz);
+        let gains = PiGains { kp, ki, period: s.tick_period };
         let (mut d, q) = (PiController::new(gains), PiController::new(gains));
         d.preset(held);
-        self.current_pi = DqPi { d, q, limit };
+        self.current_pi = DqPi { d, q, limit: s.max_voltage };
+    }
+
+    /// The voltage (vector's frame, V) that makes up the inverter's dead-time error for a
+    /// current on the vector at `angle` (each phase short by `dead_time` against its current's
+    /// sign; the common mode drops out).
+    fn dead_time_compensation(&self, angle: f32) -> Dq {
+        let sign = |x: f32| if x >= 0.0 { 1.0 } else { -1.0 };
+        let third = TAU / 3.0;
+        let (sa, sb, sc) = (
+            sign(libm::cosf(angle)),
+            sign(libm::cosf(angle - third)),
+            sign(libm::cosf(angle + third)),
+        );
+        let v = self.dead_time;
+        let alpha = v * (2.0 * sa - sb - sc) / 3.0;
+        let beta = v * (sb - sc) * 0.577_350_26;
+        let (sin, cos) = sin_cos(angle);
+        park(AlphaBeta { alpha, beta }, sin, cos)
+    }
+
+    /// The flux linkage from the passes' q voltages (stage 4) and the inductances.
+    fn flux_from_back_emf(&self) -> Result<f32, CommissioningFault> {
+        let Some(a) = self.alignment else {
+            return Err(CommissioningFault::OutOfRange { quantity: "flux_linkage", value: f32::NAN });
+        };
+        let s = &self.settings;
+        let omega = TAU * s.alignment_speed;
+        let [f, b] = self.back_emf.map(|p| p.means(s.tick_period));
+        let current = 0.5 * (f.1 + b.1);
+        let (sin, cos) = (libm::sinf(a.lag), libm::cosf(a.lag));
+        // In the vector's frame the magnet's flux is `ψ·e^{−jδ}`, the rotor lagging by `δ`:
+        // its q voltage is `ψ·(ω − dδ/dt)·cos δ`, whose mean over a window is `ψ·(ω·cos δ −
+        // Δsin δ/T)`. The rotor swings on the vector (a spring of the magnet's torque), so the
+        // lag's change over each window counts (the swing's own share of cos δ is of second
+        // order).
+        let swing = |p: &BackEmf, window: f32| {
+            let lag_at = |(angle, count): (f32, i32)| angle - self.rotor_angle(&a, count);
+            let first = p.first.unwrap_or(p.last);
+            (libm::sinf(lag_at(p.last)) - libm::sinf(lag_at(first))) / window
+        };
+        let (swing_f, swing_b) = (swing(&self.back_emf[0], f.2), swing(&self.back_emf[1], b.2));
+        let inductive = 2.0 * omega * current * (self.ld * cos * cos + self.lq * sin * sin);
+        let psi = (f.0 - b.0 - inductive) / (2.0 * omega * cos - swing_f + swing_b);
+        if !(psi > 1e-4 && psi < 10.0) {
+            return Err(CommissioningFault::OutOfRange { quantity: "flux_linkage", value: psi });
+        }
+        Ok(psi)
+    }
+
+    /// The drive's current loop designed from the resistance and the q-axis inductance; its
+    /// check's, from the d-axis inductance, on the rotor's d axis (the q-axis stage's frame),
+    /// its d integrator from the held voltage; the d step's size within what the voltage
+    /// leaves beside the held d voltage.
+    fn start_current_step(&mut self) {
+        let s = self.settings;
+        let bandwidth = s.current_bandwidth_hz;
+        self.designed = current_loop_design::design(self.resistance, self.lq, s.tick_period, bandwidth);
+        let (kp, ki) = current_loop_design::design(self.resistance, self.ld, s.tick_period, bandwidth);
+        let gains = PiGains { kp, ki, period: s.tick_period };
+        let (mut d, q) = (PiController::new(gains), PiController::new(gains));
+        d.preset(self.held_low);
+        self.current_pi = DqPi { d, q, limit: s.max_voltage };
+        // The first tick's voltage of a step is `(kp + ki·T)·size`: within half what the held
+        // voltage leaves.
+        let room = s.max_voltage - self.held_low.abs();
+        self.step_size = (0.25 * self.test_current).min(0.5 * room.max(0.0) / (kp + ki * s.tick_period));
+        self.step = StepResponse::default();
+        self.voltage = self.held_low;
+        self.next_stage(Stage::CurrentStep);
     }
 
     fn start_chips(&mut self, stage: Stage) {
