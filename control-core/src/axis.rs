@@ -350,7 +350,7 @@ impl Axis {
                 position_injection: 0,
                 last_acceleration: 0.0,
                 phases: [0; 4],
-                encoder: EncoderTracker::new(counts_per_rev, params.motor.pole_pairs),
+                encoder: EncoderTracker::new(counts_per_rev, params.motor.pole_pairs, &params.encoder_mounting),
                 excitation: None,
                 tick: 0,
                 mode: None,
@@ -413,9 +413,13 @@ impl Axis {
         self.faults.latch(bit);
     }
 
-    /// Clear latched faults; the loops restart from rest.
+    /// Clear latched faults; the loops restart from rest. An axis not commissioned keeps its
+    /// `NOT_COMMISSIONED` fault (nothing clears it but commissioned parameters).
     pub fn clear_faults(&mut self) {
         self.faults = Faults::default();
+        if !self.params.commissioned && self.mode.is_some() {
+            self.faults.latch(Faults::NOT_COMMISSIONED);
+        }
         self.friction.reset();
         self.current_loop.reset();
         self.velocity_loop.reset();
@@ -435,8 +439,20 @@ impl Axis {
     /// Switch to `commands.mode` now if it differs (the next [`Axis::step`] would do it):
     /// lets events for the new mode be applied before that step.
     pub fn apply_mode(&mut self, commands: &Commands) {
-        if self.mode == Some(commands.mode) {
-            return;
+        if self.mode != Some(commands.mode) {
+            self.switch_mode(commands);
+        }
+    }
+
+    /// The change of mode [`Axis::apply_mode`] makes (out of line: the tick's path, where the
+    /// mode stays, keeps only the compare).
+    #[inline(never)]
+    fn switch_mode(&mut self, commands: &Commands) {
+        // Every mode closes the current loop on the encoder's angle: refused (the bridge kept
+        // off) until the motor is commissioned. Checked on a change of mode only (the first
+        // tick's among them), not on every tick.
+        if !self.params.commissioned {
+            self.faults.latch(Faults::NOT_COMMISSIONED);
         }
         // Bumpless mode changes: the outer loops take over the torque now commanded.
         self.velocity_loop.preset(self.torque_command);
@@ -534,7 +550,11 @@ impl Axis {
     pub fn step(&mut self, inputs: &AxisInputs, commands: &Commands) -> PwmOutput {
         // Sense: inputs checked, encoder followed, the mode switched, the velocity estimated.
         let mut sensed = self.sense(inputs, commands);
-        self.apply_mode(commands);
+        if self.mode != Some(commands.mode) {
+            self.switch_mode(commands);
+            // A refusal latched there is this tick's too.
+            sensed.faults.latch(self.faults.0);
+        }
         let due = self.due();
         self.estimate_velocity(due.velocity, sensed.position);
         let excitation = self.excitation(due.prbs_chip);
@@ -834,6 +854,36 @@ impl Axis {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::params::EncoderMounting;
+
+    /// The default parameters, commissioned on a motor whose encoder starts at electrical zero.
+    fn commissioned() -> Params {
+        Params::default().commissioned_as(EncoderMounting::default())
+    }
+
+    /// An axis whose motor is not commissioned refuses every mode (each closes the current
+    /// loop on the encoder's angle): the bridge stays off from the first tick, clearing the
+    /// faults does not lift it, commissioned parameters do.
+    #[test]
+    fn an_axis_not_commissioned_refuses_every_mode_from_its_first_tick() {
+        for mode in [Mode::Torque, Mode::Velocity, Mode::Position, Mode::Sequence] {
+            let mut axis = Axis::new(Params::default()).unwrap();
+            let commands = Commands { mode, torque: 0.5, velocity: 10.0, ..Commands::default() };
+            for _ in 0..3 {
+                let pwm = axis.step(&inputs(), &commands);
+                assert!(!pwm.enabled && pwm.duties == [0.0; 3], "{mode:?}");
+                assert!(axis.faults().contains(Faults::NOT_COMMISSIONED), "{mode:?}");
+            }
+            axis.clear_faults();
+            assert!(!axis.step(&inputs(), &commands).enabled);
+            let other = Commands { mode: Mode::Torque, ..commands };
+            axis.step(&inputs(), &other);
+            assert!(axis.faults().contains(Faults::NOT_COMMISSIONED));
+            axis.rebuild(&commissioned()).unwrap();
+            assert!(axis.step(&inputs(), &commands).enabled, "{mode:?}");
+            assert_eq!(axis.faults(), Faults::default());
+        }
+    }
 
     fn inputs() -> AxisInputs {
         AxisInputs { phase_currents: [0.0, 0.0], encoder_count: 0, bus_voltage: 48.0, load_acceleration: 0.0 }
@@ -861,7 +911,7 @@ mod tests {
     fn param_sets() -> [Params; 4] {
         use crate::acc_dec::AccDecKind;
         let with = |kind| {
-            let mut p = Params::default();
+            let mut p = commissioned();
             p.acc_dec.kind = kind;
             p.acc_dec.ma_stages = 2;
             p.acc_dec.ma_lengths = [7, 300, 16];
@@ -909,7 +959,7 @@ mod tests {
                     2 => c.velocity = x,
                     _ => c.torque = x,
                 }
-                let mut axis = Axis::new(Params::default()).unwrap();
+                let mut axis = Axis::new(commissioned()).unwrap();
                 axis.step(&inputs(), &c);
                 let expected = if !x.is_finite() {
                     Faults::NOT_FINITE
@@ -944,7 +994,7 @@ mod tests {
     #[test]
     fn slower_ticks_fall_on_the_tick_count_modulo_their_dividers_either_way() {
         for (v, p, a, c) in [(2u32, 4u32, 4u32, 1u32), (3, 6, 3, 5), (1, 8, 2, 16), (4, 4, 8, 3)] {
-            let mut params = Params::default();
+            let mut params = commissioned();
             params.rates.velocity_divider = v;
             params.rates.position_divider = p;
             params.sweep.acquisition_divider = a;
@@ -984,7 +1034,7 @@ mod tests {
     fn an_axis_rebuilt_in_place_runs_as_a_new_one_and_a_refusal_changes_nothing() {
         for p in param_sets() {
             let mut fresh = Axis::new(p).unwrap();
-            let mut rebuilt = Axis::new(Params::default()).unwrap();
+            let mut rebuilt = Axis::new(commissioned()).unwrap();
             run(&mut rebuilt, 1234);
             rebuilt.rebuild(&p).unwrap();
             assert_eq!(run(&mut rebuilt, 3000), run(&mut fresh, 3000), "{:?}", p.acc_dec.kind);
@@ -1000,14 +1050,14 @@ mod tests {
 
     #[test]
     fn refuses_invalid_params() {
-        let mut p = Params::default();
+        let mut p = commissioned();
         p.motor.resistance = f32::NAN;
         assert!(Axis::new(p).is_err());
     }
 
     #[test]
     fn nan_input_latches_a_fault_and_switches_pwm_off() {
-        let mut axis = Axis::new(Params::default()).unwrap();
+        let mut axis = Axis::new(commissioned()).unwrap();
         let mut i = inputs();
         i.phase_currents[0] = f32::NAN;
         let out = axis.step(&i, &Commands::default());
@@ -1021,7 +1071,7 @@ mod tests {
 
     #[test]
     fn an_outside_fault_switches_the_pwm_off_at_the_next_tick_until_cleared() {
-        let mut axis = Axis::new(Params::default()).unwrap();
+        let mut axis = Axis::new(commissioned()).unwrap();
         assert!(axis.step(&inputs(), &Commands::default()).enabled);
         axis.latch_fault(Faults::HARDWARE_BREAK);
         let out = axis.step(&inputs(), &Commands::default());
@@ -1034,7 +1084,7 @@ mod tests {
 
     #[test]
     fn bus_limits_trip() {
-        let mut axis = Axis::new(Params::default()).unwrap();
+        let mut axis = Axis::new(commissioned()).unwrap();
         let mut i = inputs();
         i.bus_voltage = 70.0;
         axis.step(&i, &Commands::default());
@@ -1043,7 +1093,7 @@ mod tests {
 
     #[test]
     fn torque_command_becomes_q_current_reference() {
-        let mut axis = Axis::new(Params::default()).unwrap();
+        let mut axis = Axis::new(commissioned()).unwrap();
         let c = Commands { mode: Mode::Torque, torque: 0.5, ..Default::default() };
         axis.step(&inputs(), &c);
         let kt = Params::default().motor.torque_constant();
@@ -1052,7 +1102,7 @@ mod tests {
 
     #[test]
     fn mode_switch_from_torque_to_velocity_keeps_the_torque() {
-        let mut axis = Axis::new(Params::default()).unwrap();
+        let mut axis = Axis::new(commissioned()).unwrap();
         let c = Commands { mode: Mode::Torque, torque: 0.3, ..Default::default() };
         axis.step(&inputs(), &c);
         axis.step(&inputs(), &c);

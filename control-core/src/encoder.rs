@@ -1,8 +1,10 @@
 //! Incremental-encoder tracking: a wrapping hardware counter turned into an unbounded
-//! position and the electrical angle.
+//! position and the electrical angle, in the motor's direction and from its electrical zero
+//! (the encoder's mounting, which commissioning measures).
 
 use core::num::NonZeroU32;
 
+use crate::params::EncoderMounting;
 use crate::TAU;
 
 #[derive(Clone, Copy, Debug)]
@@ -18,6 +20,10 @@ pub struct EncoderTracker {
     /// `counts_per_rev` as f32 (for the electrical angle).
     revolution: f32,
     pole_pairs: u32,
+    /// All ones for a reversed counter (its counts negated: `(raw ^ m) − m`), else 0.
+    reverse_mask: i32,
+    /// The electrical offset in counts of an electrical turn (`counts_per_rev` of them).
+    offset_counts: u32,
 }
 
 /// What one encoder update found.
@@ -29,9 +35,12 @@ pub enum EncoderUpdate {
 }
 
 impl EncoderTracker {
-    /// A tracker for an encoder of `counts_per_rev` on a motor of `pole_pairs`; its first
-    /// update sets the position.
-    pub fn new(counts_per_rev: NonZeroU32, pole_pairs: u32) -> Self {
+    /// A tracker for an encoder of `counts_per_rev` mounted as `mounting` on a motor of
+    /// `pole_pairs`; its first update sets the position. The offset is kept to a count of an
+    /// electrical turn (`2π/counts_per_rev`: finer than the angle's own step, `2π·p/cpr`).
+    pub fn new(counts_per_rev: NonZeroU32, pole_pairs: u32, mounting: &EncoderMounting) -> Self {
+        let cpr = counts_per_rev.get();
+        let offset = libm::roundf(mounting.electrical_offset / TAU * cpr as f32) as u32 % cpr;
         Self {
             last_raw: 0,
             position: 0,
@@ -40,6 +49,8 @@ impl EncoderTracker {
             counts_per_rev,
             revolution: counts_per_rev.get() as f32,
             pole_pairs,
+            reverse_mask: if mounting.reversed { -1 } else { 0 },
+            offset_counts: offset,
         }
     }
 
@@ -48,8 +59,9 @@ impl EncoderTracker {
         self.position
     }
 
-    /// Feed the raw (wrapping 32-bit) counter value.
+    /// Feed the raw (wrapping 32-bit) counter value (negated for a reversed counter).
     pub fn update(&mut self, raw: i32) -> EncoderUpdate {
+        let raw = (raw ^ self.reverse_mask).wrapping_sub(self.reverse_mask);
         let counts_per_rev = self.counts_per_rev.get();
         let cpr = counts_per_rev as i64;
         if !self.started {
@@ -85,11 +97,11 @@ impl EncoderTracker {
         }
     }
 
-    /// Electrical angle in `[0, 2π)`, assuming count 0 is electrical zero.
+    /// Electrical angle in `[0, 2π)`: the mounting's offset at count 0.
     pub fn electrical_angle(&self) -> f32 {
-        // (count · p) mod cpr stays exact in integers: within_rev < 2²⁴ and p ≤ 64 (validated),
-        // so the product fits 32 bits.
-        let e = (self.within_rev * self.pole_pairs) % self.counts_per_rev;
+        // (count · p + offset) mod cpr stays exact in integers: within_rev and the offset are
+        // under 2²⁴ and p ≤ 64 (validated), so the sum fits 32 bits.
+        let e = (self.within_rev * self.pole_pairs + self.offset_counts) % self.counts_per_rev;
         TAU * (e as f32 / self.revolution)
     }
 }
@@ -99,7 +111,7 @@ mod tests {
     use super::*;
 
     fn tracker(counts_per_rev: u32, pole_pairs: u32) -> EncoderTracker {
-        EncoderTracker::new(NonZeroU32::new(counts_per_rev).unwrap(), pole_pairs)
+        EncoderTracker::new(NonZeroU32::new(counts_per_rev).unwrap(), pole_pairs, &EncoderMounting::default())
     }
 
     /// The revolution's count follows the position's remainder over any steps: small ones
@@ -137,6 +149,31 @@ mod tests {
         e.update(i32::MAX - 5);
         assert_eq!(e.update(i32::MIN + 4), EncoderUpdate::Ok);
         assert_eq!(e.position(), i32::MAX as i64 + 5);
+    }
+
+    /// A mounting's direction and offset: the angle is `±count·p·2π/cpr + offset` (mod 2π)
+    /// within the offset's step of a count of an electrical turn, the position in the motor's
+    /// direction.
+    #[test]
+    fn a_mounting_turns_the_counts_into_the_motor_s_direction_and_electrical_zero() {
+        for (cpr, p) in [(4000u32, 4u32), (1 << 20, 4), (1024, 12), (16384, 1)] {
+            for reversed in [false, true] {
+                for offset in [0.0f32, 0.5, 2.0, 6.2] {
+                    let m = EncoderMounting { reversed, electrical_offset: offset };
+                    let mut t = EncoderTracker::new(NonZeroU32::new(cpr).unwrap(), p, &m);
+                    for raw in [0i32, 1, 17, -5, 1234, -99_999, 7_777_777] {
+                        t.update(raw);
+                        let counts = if reversed { -(raw as f64) } else { raw as f64 };
+                        assert_eq!(t.position() as f64, counts);
+                        let want = (counts * p as f64 / cpr as f64 * core::f64::consts::TAU + offset as f64)
+                            .rem_euclid(core::f64::consts::TAU);
+                        let error = libm::remainder(t.electrical_angle() as f64 - want, core::f64::consts::TAU);
+                        let step = core::f64::consts::TAU / cpr as f64;
+                        assert!(error.abs() <= 0.5 * step + 1e-5, "cpr {cpr} p {p} {m:?} raw {raw}: {error}");
+                    }
+                }
+            }
+        }
     }
 
     #[test]

@@ -17,6 +17,8 @@ impl Faults {
     pub const SENSING: u32 = 1 << 7;
     /// A set-point outside its range (`crate::ranges`) reached the loop.
     pub const COMMAND_RANGE: u32 = 1 << 8;
+    /// A mode was asked of an axis whose motor is not commissioned (`Params::commissioned`).
+    pub const NOT_COMMISSIONED: u32 = 1 << 9;
 
     pub fn any(self) -> bool {
         self.0 != 0
@@ -29,7 +31,7 @@ impl Faults {
     }
     /// Names of the set bits, for logs and reports.
     pub fn names(self) -> impl Iterator<Item = &'static str> {
-        const NAMES: [(u32, &str); 9] = [
+        const NAMES: [(u32, &str); 10] = [
             (Faults::OVERCURRENT, "overcurrent"),
             (Faults::BUS_UNDERVOLTAGE, "bus undervoltage"),
             (Faults::BUS_OVERVOLTAGE, "bus overvoltage"),
@@ -39,6 +41,7 @@ impl Faults {
             (Faults::HARDWARE_BREAK, "hardware break input"),
             (Faults::SENSING, "current sensing not calibrated"),
             (Faults::COMMAND_RANGE, "command out of range"),
+            (Faults::NOT_COMMISSIONED, "motor not commissioned"),
         ];
         NAMES.into_iter().filter(move |(b, _)| self.0 & b != 0).map(|(_, n)| n)
     }

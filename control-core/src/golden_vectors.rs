@@ -11,7 +11,7 @@ use core::fmt;
 
 use crate::acc_dec::AccDecKind;
 use crate::axis::{Axis, AxisInputs, Commands, Mode};
-use crate::params::Params;
+use crate::params::{EncoderMounting, Params};
 use crate::response_correction::{CorrectionSection, SecondOrder};
 use crate::stop_sequence::SequenceEvent;
 
@@ -22,9 +22,11 @@ pub const EVENT_BYTES: usize = 13;
 /// The preset with every feature on (for the per-tick cost with everything at once).
 pub const ALL_FEATURES: u32 = 5;
 
-/// Parameter sets the vectors may use (both sides build them the same way).
+/// Parameter sets the vectors may use (both sides build them the same way): the default
+/// motor, commissioned (the vectors' encoder counts start at its electrical zero; the
+/// every-feature set's electrical zero is offset).
 pub fn preset(id: u32) -> Option<Params> {
-    let mut p = Params::default();
+    let mut p = Params::default().commissioned_as(EncoderMounting::default());
     match id {
         0 => {}
         1 => p.acc_dec.kind = AccDecKind::Butterworth,
@@ -46,6 +48,7 @@ pub fn preset(id: u32) -> Option<Params> {
         // correction sections, friction compensation, torque low-pass and notch, and (with a
         // sweep start event) a sweep injecting on the torque while the position loop runs.
         ALL_FEATURES => {
+            p.encoder_mounting.electrical_offset = 2.0;
             p.acc_dec.kind = AccDecKind::Butterworth;
             p.acc_dec.order = 6;
             p.friction.amplitude = 0.06;
