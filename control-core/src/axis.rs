@@ -4,6 +4,9 @@ use core::mem::MaybeUninit;
 use core::num::NonZeroU32;
 
 use crate::command_path::{CommandPath, Move};
+use crate::commissioning::{
+    Commissioning, CommissioningFault, CommissioningInputs, CommissioningSettings, CommissioningStatus,
+};
 use crate::current_loop::{CurrentLoop, CurrentLoopOutput};
 use crate::encoder::{EncoderTracker, EncoderUpdate};
 use crate::excitation::{InjectionPoint, SineGenerator};
@@ -131,6 +134,8 @@ pub struct Telemetry {
     pub sequence: SequenceStatus,
     /// Frequency-response sweep status and last acquisition sample.
     pub sweep: SweepStatus,
+    /// The commissioning sequence's state, from its start until the axis is built again.
+    pub commissioning: Option<CommissioningStatus>,
 }
 
 /// What the tick needs of the parameters outside the loops, derived once by [`Axis::new`].
@@ -257,6 +262,9 @@ pub struct Axis {
     last_acceleration: f32,
     settings: TickSettings,
     mode: Option<Mode>,
+    /// `commissioning` is here: the tick's one test (a flag beside the hot fields, not the
+    /// option's tag at the struct's end).
+    commissioning_started: bool,
     encoder: EncoderTracker,
     current_loop: CurrentLoop,
     velocity_loop: VelocityLoop,
@@ -277,6 +285,18 @@ pub struct Axis {
     /// [`Params::validate_sweep`] of `params`, computed when the axis is built: a drive starts
     /// a sweep with its interrupts off, and builds its axis outside that section.
     sweep_check: Result<(), SweepError>,
+    /// The commissioning sequence, from [`Axis::start_commissioning`] until the axis is built
+    /// again: while it is here, it drives the bridge instead of the loops.
+    commissioning: Option<Commissioning>,
+}
+
+/// Why [`Axis::start_commissioning`] refused.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum CommissioningRefusal {
+    /// A setting out of range, or not this axis's (its encoder's counts, its tick): by name.
+    Setting(&'static str),
+    /// The axis is not at rest (a torque applied, a sweep running), or a sequence is running.
+    Busy,
 }
 
 impl Axis {
@@ -362,6 +382,8 @@ impl Axis {
                 faults: Faults::default(),
                 following_error: 0.0,
                 applied: Applied::default(),
+                commissioning: None,
+                commissioning_started: false,
                 ; command_path, sweep
             });
         }
@@ -394,6 +416,80 @@ impl Axis {
             faults: self.faults,
             sequence: *self.sequence.status(),
             sweep: *self.sweep.status(),
+            commissioning: self.commissioning.as_ref().map(Commissioning::status),
+        }
+    }
+
+    /// Start commissioning the motor (`crate::commissioning`): from the next tick the sequence
+    /// drives the bridge, the loops rest, whatever the mode, until the axis is built again
+    /// ([`Axis::rebuild`], with [`Params::with_commissioned`] once it is done). Only at rest:
+    /// no torque applied (the bridge off counts as none), no sweep, no sequence running. A fault the axis latches meanwhile
+    /// (bus limits, an outside fault) stops it with the bridge off.
+    pub fn start_commissioning(&mut self, settings: &CommissioningSettings) -> Result<(), CommissioningRefusal> {
+        settings.validate().map_err(CommissioningRefusal::Setting)?;
+        if settings.counts_per_rev != self.params.encoder_counts_per_rev {
+            return Err(CommissioningRefusal::Setting("counts_per_rev"));
+        }
+        if settings.tick_period != self.params.rates.tick_period() {
+            return Err(CommissioningRefusal::Setting("tick_period"));
+        }
+        let running = matches!(self.commissioning(), Some(CommissioningStatus::Running(_)));
+        // A torque the last tick applied with the bridge on (off, nothing was applied).
+        let pushing = self.applied.torque_command != 0.0 && !self.faults.any();
+        if running || pushing || self.sweep.running() {
+            return Err(CommissioningRefusal::Busy);
+        }
+        self.commissioning = Some(Commissioning::new(*settings).map_err(CommissioningRefusal::Setting)?);
+        self.commissioning_started = true;
+        self.current_loop.reset();
+        self.velocity_loop.reset();
+        self.torque_command = 0.0;
+        Ok(())
+    }
+
+    /// Stop a running commissioning sequence (the bridge off from the next tick).
+    pub fn stop_commissioning(&mut self) {
+        if let Some(c) = self.commissioning.as_mut() {
+            c.stop(CommissioningFault::Stopped);
+        }
+    }
+
+    /// The commissioning sequence's state since it started (None: never started since the
+    /// axis was built).
+    pub fn commissioning(&self) -> Option<CommissioningStatus> {
+        self.commissioning.as_ref().map(Commissioning::status)
+    }
+
+    /// A tick of the commissioning sequence: the readings checked as on any tick (a fault
+    /// the axis latches stops the sequence), its vector to the bridge. Out of line: the
+    /// loops' tick keeps only the test that sends it here.
+    #[inline(never)]
+    fn commissioning_tick(&mut self, inputs: &AxisInputs) -> PwmOutput {
+        let limits = &self.settings.limits;
+        let bus = inputs.bus_voltage;
+        if bus < limits.bus_undervoltage {
+            self.faults.latch(Faults::BUS_UNDERVOLTAGE);
+        }
+        if bus > limits.bus_overvoltage {
+            self.faults.latch(Faults::BUS_OVERVOLTAGE);
+        }
+        self.tick += 1;
+        let Some(c) = self.commissioning.as_mut() else {
+            return PwmOutput::default();
+        };
+        // Any fault but the one that says the motor is not commissioned yet.
+        let faults = self.faults.0 & !Faults::NOT_COMMISSIONED;
+        if faults != 0 {
+            c.stop(CommissioningFault::DriveFault { faults });
+        }
+        let readings = CommissioningInputs {
+            phase_currents: inputs.phase_currents,
+            encoder_count: inputs.encoder_count,
+            bus_voltage: bus,
+        };
+        match c.step(&readings) {
+            Some(v) => PwmOutput { duties: crate::reference_frames::space_vector_duties(v, bus), enabled: true },
+            None => PwmOutput::default(),
         }
     }
 
@@ -548,6 +644,16 @@ impl Axis {
     /// One base tick: sense, run the commanded mode's outer loops that are due, run the inner
     /// (current) loop, record; returns the PWM command.
     pub fn step(&mut self, inputs: &AxisInputs, commands: &Commands) -> PwmOutput {
+        if self.commissioning_started {
+            return self.commissioning_tick(inputs);
+        }
+        self.loops_tick(inputs, commands)
+    }
+
+    /// [`Axis::step`] of the loops (out of line: the commissioning's test in front of it
+    /// left in the caller cost the Cortex-M4 about 20 instructions a tick of spilled registers).
+    #[inline(never)]
+    fn loops_tick(&mut self, inputs: &AxisInputs, commands: &Commands) -> PwmOutput {
         // Sense: inputs checked, encoder followed, the mode switched, the velocity estimated.
         let mut sensed = self.sense(inputs, commands);
         if self.mode != Some(commands.mode) {

@@ -345,6 +345,21 @@ impl Params {
         self
     }
 
+    /// These parameters with what commissioning measured: the motor's constants, the encoder's
+    /// mounting and the current loop's gains, marked commissioned (every other setting kept).
+    pub fn with_commissioned(mut self, m: &crate::commissioning::MeasuredMotor) -> Self {
+        self.motor = MotorModel {
+            pole_pairs: m.alignment.pole_pairs,
+            resistance: m.resistance,
+            ld: m.ld,
+            lq: m.lq,
+            flux_linkage: m.flux_linkage,
+        };
+        self.current.kp = m.current_kp;
+        self.current.ki = m.current_ki;
+        self.commissioned_as(EncoderMounting { reversed: m.alignment.reversed, electrical_offset: m.alignment.offset })
+    }
+
     /// Encoder counts per position tick at 1 rad/s: the scale from a speed to the
     /// interpolator's pulses per tick.
     pub fn counts_per_position_tick(&self) -> f32 {

@@ -20,13 +20,17 @@ use core::fmt;
 use serde::{de::DeserializeOwned, Deserialize, Serialize};
 
 use crate::acquisition_stream::{AcquisitionStream, SampleBatch, BATCH};
-use crate::axis::{Axis, Commands, Mode, Telemetry};
+use crate::axis::{Axis, Commands, CommissioningRefusal, Mode, Telemetry};
+use crate::commissioning::{CommissioningSettings, CommissioningStatus};
+use crate::faults::Faults;
 use crate::params::Params;
 use crate::ranges::{check_position, Quantity, RangeError};
 use crate::response_correction::CorrectionParams;
 use crate::stop_sequence::{Refusal, SequenceEvent};
 
-/// Protocol version 10: the parameters carry the sweep's time budget
+/// Protocol version 11: commissioning ([`Request::Commission`], [`Request::StopCommissioning`],
+/// the telemetry's `commissioning` state) and the parameters' encoder mounting and
+/// `commissioned` flag. Version 10: the parameters carry the sweep's time budget
 /// (`SweepParams::time_budget_s`). Version 9: the telemetry carries the drive's unused stack
 /// ([`DriveTelemetry::stack_free_bytes`]: the bytes of its painted stack never touched since
 /// boot), so that a stack about to run into the statics shows before it does. Version 8: each
@@ -46,7 +50,7 @@ use crate::stop_sequence::{Refusal, SequenceEvent};
 /// board's PWM rate are refused with that rate; version 4: `SaveParams`, and the answer to `Hello` says where the
 /// drive's parameters came from at boot; version 3: CRC-32C instead of CRC-16, trailing bytes
 /// refused, range refusals).
-pub const VERSION: u16 = 10;
+pub const VERSION: u16 = 11;
 /// Largest encoded frame, COBS body without its terminator (a full parameter set fits with
 /// room to spare).
 pub const MAX_FRAME: usize = 1024;
@@ -88,6 +92,13 @@ pub enum Request {
     /// the axis stands still in torque mode at zero torque: the gate drive is off meanwhile).
     /// Answered with [`Response::Saved`].
     SaveParams,
+    /// Commission the motor (`crate::commissioning`; only at rest): the sequence drives the
+    /// bridge until it ends, its state in the telemetry. Its result reaches the parameters
+    /// when the host sends them back (`Params::with_commissioned`, `SetParams`), and the
+    /// drive's flash with `SaveParams`.
+    Commission(CommissioningSettings),
+    /// Stop a running commissioning sequence (the bridge off).
+    StopCommissioning,
 }
 
 /// The answer to `GetTelemetry`: the axis's telemetry, and what the drive's parameter store
@@ -207,6 +218,10 @@ pub enum RefusalReason {
     /// The parameters' current-loop rate is not the board's: its PWM timer samples and runs
     /// the tick at `board_hz`, fixed when the drive starts.
     LoopRate { board_hz: f32 },
+    /// A commissioning setting out of range or not this drive's: by name.
+    CommissioningSetting(FieldName),
+    /// Commissioning only at rest (no torque, no sweep, none running).
+    CommissioningBusy,
 }
 
 impl fmt::Display for RefusalReason {
@@ -228,6 +243,11 @@ impl fmt::Display for RefusalReason {
             Self::Storage(StorageError::Unavailable) => write!(f, "this drive has no parameter storage"),
             Self::Storage(StorageError::Flash) => write!(f, "the flash refused the write or read back something else"),
             Self::Storage(StorageError::TooLarge) => write!(f, "the parameter set does not fit a flash page"),
+            Self::CommissioningSetting(field) => write!(f, "commissioning setting refused: {}", field.as_str()),
+            Self::CommissioningBusy => write!(
+                f,
+                "commissioning only at rest: torque mode at zero torque, no sweep and no commissioning running"
+            ),
             Self::LoopRate { board_hz } => write!(
                 f,
                 "rates.current_loop_hz must be the board's PWM rate, {board_hz} Hz (the tick runs at the timer's rate)"
@@ -358,11 +378,15 @@ pub fn decode_response(frame: &mut [u8]) -> Result<Response, FrameError> {
 /// faults (a latched fault must be cleared by `ClearFaults`, never by a parameter change) and
 /// without the sweep's results.
 pub fn parameters_may_change(commands: &Commands, axis: &Axis) -> bool {
+    // An axis not yet commissioned has that fault latched from its first tick: parameters
+    // (a commissioned set among them) are what lifts it.
+    let faults = axis.faults().0 & !Faults::NOT_COMMISSIONED;
     commands.mode == Mode::Torque
         && commands.torque == 0.0
         && axis.applied_torque() == 0.0
-        && !axis.faults().any()
+        && faults == 0
         && !axis.sweep().running()
+        && !matches!(axis.commissioning(), Some(CommissioningStatus::Running(_)))
 }
 
 /// The drive's side: carry out one request on `axis` (its `commands`, its sample `stream`).
@@ -430,6 +454,22 @@ pub fn handle(axis: &mut Axis, commands: &mut Commands, stream: &mut Acquisition
         }
         // The drive's application saves (it owns the flash); here there is nothing to save to.
         Request::SaveParams => refused(RefusalReason::Storage(StorageError::Unavailable)),
+        Request::Commission(settings) => {
+            if !(commands.mode == Mode::Torque && commands.torque == 0.0) {
+                return refused(RefusalReason::CommissioningBusy);
+            }
+            match axis.start_commissioning(&settings) {
+                Ok(()) => Response::Done,
+                Err(CommissioningRefusal::Setting(field)) => {
+                    refused(RefusalReason::CommissioningSetting(FieldName::new(field)))
+                }
+                Err(CommissioningRefusal::Busy) => refused(RefusalReason::CommissioningBusy),
+            }
+        }
+        Request::StopCommissioning => {
+            axis.stop_commissioning();
+            Response::Done
+        }
     }
 }
 

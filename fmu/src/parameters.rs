@@ -69,6 +69,9 @@ pub fn simulation_config(v: &Values) -> Result<SimulationConfig, String> {
     let control = Params {
         motor,
         encoder_counts_per_rev: counts,
+        // The plant's encoder starts at its rotor's electrical zero, counting forward.
+        encoder_mounting: control_core::params::EncoderMounting::default(),
+        commissioned: true,
         rates: Rates {
             current_loop_hz: v.ctrl_current_loop_hz as f32,
             velocity_divider: count("ctrl.velocity_divider", v.ctrl_velocity_divider)?,

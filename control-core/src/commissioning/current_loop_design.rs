@@ -49,7 +49,7 @@ impl Default for StepResponse {
 }
 
 /// What the step found.
-#[derive(Clone, Copy, Debug, PartialEq)]
+#[derive(Clone, Copy, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct StepCheck {
     /// The closed loop's bandwidth (Hz).
     pub bandwidth_hz: f32,

@@ -63,7 +63,7 @@ impl Pass {
 }
 
 /// What the two passes found.
-#[derive(Clone, Copy, Debug, PartialEq)]
+#[derive(Clone, Copy, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct Alignment {
     pub pole_pairs: u32,
     /// The counter counts down when the rotor turns the way the electrical angle increases.
@@ -76,7 +76,7 @@ pub struct Alignment {
 }
 
 /// Why the passes give no alignment.
-#[derive(Clone, Copy, Debug, PartialEq)]
+#[derive(Clone, Copy, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
 pub enum AlignmentError {
     /// The counter hardly moved: an encoder not connected, or a rotor that cannot turn.
     EncoderStill { counts: i32 },

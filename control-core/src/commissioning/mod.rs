@@ -70,7 +70,7 @@ use encoder_alignment::{align, Pass};
 use winding_fit::WindingFit;
 
 /// What the sequence needs to know before it starts: nothing of the motor.
-#[derive(Clone, Copy, Debug, PartialEq)]
+#[derive(Clone, Copy, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct CommissioningSettings {
     /// The current the measurements drive (A): within the drive's and the motor's ratings.
     pub test_current: f32,
@@ -123,7 +123,7 @@ impl CommissioningSettings {
             return Err("tick_period");
         }
         let share = self.current_bandwidth_hz * self.tick_period;
-        if !(share >= 0.02 && share <= 0.1) {
+        if !(0.02..=0.1).contains(&share) {
             return Err("current_bandwidth_hz");
         }
         Ok(())
@@ -147,7 +147,7 @@ impl CommissioningSettings {
 }
 
 /// What commissioning found.
-#[derive(Clone, Copy, Debug, PartialEq)]
+#[derive(Clone, Copy, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct MeasuredMotor {
     /// Phase resistance (Ω).
     pub resistance: f32,
@@ -165,7 +165,7 @@ pub struct MeasuredMotor {
 }
 
 /// Why commissioning stopped; the bridge is off and nothing is kept.
-#[derive(Clone, Copy, Debug, PartialEq)]
+#[derive(Clone, Copy, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
 pub enum CommissioningFault {
     /// A phase current above the trip level (A).
     Overcurrent {
@@ -192,20 +192,37 @@ pub enum CommissioningFault {
     },
     /// A value outside what the drive can run.
     OutOfRange {
-        quantity: &'static str,
+        quantity: MeasuredQuantity,
         value: f32,
     },
+    /// The drive latched a fault of its own (a bus voltage out of its limits, the power
+    /// stage's break input) while the sequence ran.
+    DriveFault {
+        faults: u32,
+    },
+    /// Stopped from the outside (the host asked, or its link was lost).
+    Stopped,
+}
+
+/// What a value out of range was.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+pub enum MeasuredQuantity {
+    /// The probe's first-order fit (its resistance).
+    Winding,
+    Resistance,
+    Inductance,
+    FluxLinkage,
 }
 
 /// Where the sequence is.
-#[derive(Clone, Copy, Debug, PartialEq)]
+#[derive(Clone, Copy, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
 pub enum CommissioningStatus {
     Running(Stage),
     Done(MeasuredMotor),
     Failed(CommissioningFault),
 }
 
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
 pub enum Stage {
     Probe,
     ProbeFit,
@@ -249,7 +266,6 @@ const CHIP_SETTLING_TICKS: u32 = 64;
 /// Each level of the current step (ticks): the step's samples; levels 0, +1, 0, −1 in turn,
 /// `STEP_CYCLES` times.
 const STEP_CYCLES: u32 = 8;
-
 
 /// The q voltage asked for and the d current (vector's frame) over one pass's full-speed
 /// ticks, and the vector's angle and the encoder's count on the first and the last of them.
@@ -422,6 +438,14 @@ impl Commissioning {
         self.status
     }
 
+    /// End a running sequence from the outside (the bridge goes off at once: the next step
+    /// returns `None`); a finished one keeps its result.
+    pub fn stop(&mut self, fault: CommissioningFault) {
+        if matches!(self.status, CommissioningStatus::Running(_)) {
+            self.status = CommissioningStatus::Failed(fault);
+        }
+    }
+
     fn ticks_of(&self, seconds: f32) -> u32 {
         libm::ceilf(seconds / self.settings.tick_period) as u32
     }
@@ -487,8 +511,10 @@ impl Commissioning {
                             return self.fail(CommissioningFault::Inductance { axis: 'd' });
                         };
                         if !(w.resistance > 1e-3 && w.resistance < 100.0 && w.inductance > 1e-6 && w.inductance < 1.0) {
-                            return self
-                                .fail(CommissioningFault::OutOfRange { quantity: "winding", value: w.resistance });
+                            return self.fail(CommissioningFault::OutOfRange {
+                                quantity: MeasuredQuantity::Winding,
+                                value: w.resistance,
+                            });
                         }
                         self.probe_inductance = w.inductance;
                         self.start_current_loop(w.resistance, w.inductance, 0.0);
@@ -570,7 +596,10 @@ impl Commissioning {
                         let (dv, di) = (self.high.0 - mean_v, self.high.1 - mean_i);
                         let r = dv / di;
                         if !(r > 1e-3 && r < 100.0) {
-                            return self.fail(CommissioningFault::OutOfRange { quantity: "resistance", value: r });
+                            return self.fail(CommissioningFault::OutOfRange {
+                                quantity: MeasuredQuantity::Resistance,
+                                value: r,
+                            });
                         }
                         self.resistance = r;
                         // What the held voltage carries beyond `R·I`: the inverter's dead-time
@@ -668,8 +697,10 @@ impl Commissioning {
                         return self.fail(CommissioningFault::Inductance { axis });
                     };
                     if !(w.inductance > 1e-6 && w.inductance < 1.0) {
-                        return self
-                            .fail(CommissioningFault::OutOfRange { quantity: "inductance", value: w.inductance });
+                        return self.fail(CommissioningFault::OutOfRange {
+                            quantity: MeasuredQuantity::Inductance,
+                            value: w.inductance,
+                        });
                     }
                     if stage == Stage::InductanceD {
                         self.ld = w.inductance;
@@ -816,11 +847,7 @@ impl Commissioning {
     fn dead_time_compensation(&self, angle: f32) -> Dq {
         let sign = |x: f32| if x >= 0.0 { 1.0 } else { -1.0 };
         let third = TAU / 3.0;
-        let (sa, sb, sc) = (
-            sign(libm::cosf(angle)),
-            sign(libm::cosf(angle - third)),
-            sign(libm::cosf(angle + third)),
-        );
+        let (sa, sb, sc) = (sign(libm::cosf(angle)), sign(libm::cosf(angle - third)), sign(libm::cosf(angle + third)));
         let v = self.dead_time;
         let alpha = v * (2.0 * sa - sb - sc) / 3.0;
         let beta = v * (sb - sc) * 0.577_350_26;
@@ -831,7 +858,7 @@ impl Commissioning {
     /// The flux linkage from the passes' q voltages (stage 4) and the inductances.
     fn flux_from_back_emf(&self) -> Result<f32, CommissioningFault> {
         let Some(a) = self.alignment else {
-            return Err(CommissioningFault::OutOfRange { quantity: "flux_linkage", value: f32::NAN });
+            return Err(CommissioningFault::OutOfRange { quantity: MeasuredQuantity::FluxLinkage, value: f32::NAN });
         };
         let s = &self.settings;
         let omega = TAU * s.alignment_speed;
@@ -852,7 +879,7 @@ impl Commissioning {
         let inductive = 2.0 * omega * current * (self.ld * cos * cos + self.lq * sin * sin);
         let psi = (f.0 - b.0 - inductive) / (2.0 * omega * cos - swing_f + swing_b);
         if !(psi > 1e-4 && psi < 10.0) {
-            return Err(CommissioningFault::OutOfRange { quantity: "flux_linkage", value: psi });
+            return Err(CommissioningFault::OutOfRange { quantity: MeasuredQuantity::FluxLinkage, value: psi });
         }
         Ok(psi)
     }

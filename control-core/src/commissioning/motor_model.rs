@@ -107,6 +107,11 @@ impl MotorModel {
         }
     }
 
+    /// The rotor's mechanical speed (rad/s).
+    pub fn speed(&self) -> f64 {
+        self.speed
+    }
+
     fn electrical_angle(&self) -> f64 {
         self.truth.pole_pairs as f64 * self.angle
     }

@@ -185,8 +185,8 @@ fn drawn_motors_with_sensor_errors_are_found() {
         // torque, `1.5·p²·ψ·I` per mechanical radian, on the rotor's inertia) at 4 Hz or more:
         // slower, the passes (about a second each) hold too few of its periods for the lines'
         // intercepts, and the offset misses by degrees (see the module's notes).
-        let swing_hz = (1.5 * (pole_pairs * pole_pairs) as f64 * flux_linkage * 2.0 / inertia).sqrt()
-            / std::f64::consts::TAU;
+        let swing_hz =
+            (1.5 * (pole_pairs * pole_pairs) as f64 * flux_linkage * 2.0 / inertia).sqrt() / std::f64::consts::TAU;
         if swing_hz < 4.0 {
             continue;
         }
@@ -239,4 +239,59 @@ fn settings_out_of_range_are_refused_by_name() {
     }
 }
 
-
+/// The axis end to end on the test motor: an axis not commissioned refuses torque mode,
+/// commissions (the sequence driving the bridge through `Axis::step`), is built again with
+/// what it measured, and then makes torque the right way round: a positive torque command
+/// turns the rotor forward by the motor's own torque constant, from any start angle and
+/// either direction of the encoder.
+#[test]
+fn an_axis_commissions_its_motor_and_then_makes_torque_the_right_way_round() {
+    use crate::axis::{Axis, AxisInputs, Commands, Mode};
+    use crate::faults::Faults;
+    use crate::params::Params;
+    for (start_angle, reversed) in [(0.3, false), (2.5, true), (-1.9, false), (4.4, true)] {
+        let truth = MotorTruth { start_angle, reversed, ..MotorTruth::default_motor() };
+        let mut motor = MotorModel::new(truth, TICK as f64);
+        let params = Params { encoder_counts_per_rev: truth.counts_per_rev, ..Params::default() };
+        let mut axis = Axis::new(params).unwrap();
+        let rest = Commands { mode: Mode::Torque, ..Commands::default() };
+        let bus = 48.0f32;
+        let tick = |axis: &mut Axis, motor: &mut MotorModel, commands: &Commands| {
+            let (phase_currents, encoder_count) = motor.sample();
+            let inputs = AxisInputs { phase_currents, encoder_count, bus_voltage: bus, load_acceleration: 0.0 };
+            let pwm = axis.step(&inputs, commands);
+            let v = pwm.duties.map(|d| d * bus);
+            let (alpha, beta) =
+                if pwm.enabled { ((2.0 * v[0] - v[1] - v[2]) / 3.0, (v[1] - v[2]) / 3f32.sqrt()) } else { (0.0, 0.0) };
+            motor.apply(alpha, beta);
+            pwm
+        };
+        // Not commissioned: the bridge stays off in torque mode.
+        let pushing = Commands { mode: Mode::Torque, torque: 0.05, ..Commands::default() };
+        assert!(!tick(&mut axis, &mut motor, &pushing).enabled);
+        assert!(axis.faults().contains(Faults::NOT_COMMISSIONED));
+        let settings = CommissioningSettings::for_encoder(truth.counts_per_rev, TICK);
+        axis.start_commissioning(&settings).unwrap();
+        let measured = loop {
+            tick(&mut axis, &mut motor, &rest);
+            match axis.commissioning() {
+                Some(CommissioningStatus::Running(_)) => {}
+                Some(CommissioningStatus::Done(m)) => break m,
+                other => panic!("{other:?}"),
+            }
+        };
+        axis.rebuild(&params.with_commissioned(&measured)).unwrap();
+        // A positive torque for 50 ms: the rotor speeds up forward at about torque/inertia.
+        let ticks = 800;
+        let speed_before = motor.speed();
+        for _ in 0..ticks {
+            assert!(tick(&mut axis, &mut motor, &pushing).enabled, "{:?}", axis.faults());
+        }
+        let t = ticks as f64 * TICK as f64;
+        let expected = speed_before + (0.05 - truth.coulomb) / truth.inertia * t;
+        let got = motor.speed();
+        assert!(got > 0.0 && (got / expected - 1.0).abs() < 0.15, "{got} rad/s vs {expected} ({truth:?})");
+        // The axis's own count follows the motor's direction.
+        assert!(axis.telemetry().position > 0, "{}", axis.telemetry().position);
+    }
+}
