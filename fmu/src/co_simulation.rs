@@ -4,7 +4,7 @@
 //! state machine, the logger and the panic barrier around it.
 
 use control_core::stop_sequence::SequenceEvent;
-use control_core::Mode;
+use control_core::{Commands, Mode};
 
 use crate::parameters::simulation_config;
 use crate::simulation::{AxisSimulation, UserInputs};
@@ -241,7 +241,10 @@ impl AxisModel {
             sim.axis.clear_faults();
         }
         s.last_fault_reset = s.values.fault_reset;
-        self.sequence_events(&inputs);
+        // The commands are converted once for the mode and the ticks (the events in between
+        // change neither the inputs nor the encoder resolution they are converted with).
+        let commands = sim.commands(&inputs);
+        self.sequence_events(&commands);
         let s = &mut self.state;
         let sim = s.sim.as_mut().ok_or("model not initialized")?;
         if s.values.sweep_start > s.seen_sweep_start {
@@ -254,7 +257,7 @@ impl AxisModel {
             }
             s.seen_sweep_start = s.values.sweep_start;
         }
-        sim.run_ticks(n, &inputs);
+        sim.run_ticks_with(n, &commands, inputs.disturbance_torque);
         self.update_outputs();
         self.check_outputs_finite()
     }
@@ -288,10 +291,10 @@ impl AxisModel {
 
     /// Turn changes of the sequence inputs into events, in a fixed order: gain, run, stop,
     /// release, move, return. A refused event is reported (logged), not an FMI error.
-    fn sequence_events(&mut self, inputs: &UserInputs) {
+    fn sequence_events(&mut self, commands: &Commands) {
         let s = &mut self.state;
         let Some(sim) = s.sim.as_mut() else { return };
-        sim.apply_mode(inputs);
+        sim.apply_mode_of(commands);
         let v = &s.values;
         let seen = s.seen;
         let pressed = |now: i32, before: i32| now > before;
@@ -353,9 +356,9 @@ impl AxisModel {
         o.velocity_estimate = t.velocity_estimate as f64;
         o.following_error = t.following_error as f64;
         let params = sim.axis.params();
-        let rad_per_count = std::f64::consts::TAU / params.encoder_counts_per_rev as f64;
+        let rad_per_count = sim.radians_per_count();
         o.position_command_out = t.position_command as f64 * rad_per_count;
-        o.command_velocity = t.command_pulses as f64 * rad_per_count / params.rates.position_period() as f64;
+        o.command_velocity = t.command_pulses as f64 * rad_per_count / sim.position_period();
         let q = &t.sequence;
         o.seq_state = q.state.code();
         o.seq_complete = q.complete as i32;

@@ -83,8 +83,15 @@ impl StepMeans {
     /// tick ends; None before the first step.
     pub fn means(&self) -> Option<(f64, f64)> {
         (self.ticks > 0).then(|| {
-            let n = self.ticks as f64;
-            (self.torque / n, self.accelerometer / n)
+            if self.ticks.is_power_of_two() {
+                // 2^-k exactly (k ≤ 63): `x·2^-k` is `x / 2^k` bit for bit (both round the
+                // same exact value once), without the two divisions per step.
+                let inverse = f64::from_bits((1023 - self.ticks.trailing_zeros() as u64) << 52);
+                (self.torque * inverse, self.accelerometer * inverse)
+            } else {
+                let n = self.ticks as f64;
+                (self.torque / n, self.accelerometer / n)
+            }
         })
     }
 }
@@ -114,6 +121,10 @@ pub struct AxisSimulation {
     tick_period: f64,
     ticks: u64,
     step_means: StepMeans,
+    /// Motor radians per encoder count and the position-loop period (s), from the axis's
+    /// parameters (fixed once built): the outputs' conversions, computed once.
+    radians_per_count: f64,
+    position_period: f64,
 }
 
 impl AxisSimulation {
@@ -146,6 +157,9 @@ impl AxisSimulation {
             SineGenerator::new(e.amplitude, e.frequency_hz, config.control.rates.current_loop_hz, 0.0),
         );
         let plant = Plant::new(plant_params).map_err(ConfigError::Plant)?;
+        let params = axis.params();
+        let radians_per_count = std::f64::consts::TAU / params.encoder_counts_per_rev as f64;
+        let position_period = params.rates.position_period() as f64;
         Ok(Self {
             axis,
             plant,
@@ -153,7 +167,20 @@ impl AxisSimulation {
             tick_period: plant_params.tick,
             ticks: 0,
             step_means: StepMeans::default(),
+            radians_per_count,
+            position_period,
         })
+    }
+
+    /// Motor radians per encoder count: `2π / encoder_counts_per_rev`.
+    pub fn radians_per_count(&self) -> f64 {
+        self.radians_per_count
+    }
+
+    /// The position-loop period (s): `position_divider / current_loop_hz` (in f32, as the
+    /// core computes it).
+    pub fn position_period(&self) -> f64 {
+        self.position_period
     }
 
     pub fn tick_period(&self) -> f64 {
@@ -178,7 +205,9 @@ impl AxisSimulation {
         round_to_i64(angle / std::f64::consts::TAU * self.axis.params().encoder_counts_per_rev as f64)
     }
 
-    fn commands(&self, u: &UserInputs) -> Commands {
+    /// The core's commands for the inputs (a communication step converts them once, for
+    /// [`Self::apply_mode_of`] and [`Self::run_ticks_with`]).
+    pub fn commands(&self, u: &UserInputs) -> Commands {
         Commands {
             mode: u.mode,
             position: self.counts_for(u.position_command),
@@ -192,7 +221,12 @@ impl AxisSimulation {
     /// Enter the inputs' mode now (before events meant for it); see `Axis::apply_mode`.
     pub fn apply_mode(&mut self, u: &UserInputs) {
         let commands = self.commands(u);
-        self.axis.apply_mode(&commands);
+        self.apply_mode_of(&commands);
+    }
+
+    /// [`Self::apply_mode`] with the commands already converted.
+    pub fn apply_mode_of(&mut self, commands: &Commands) {
+        self.axis.apply_mode(commands);
     }
 
     /// One base tick.
@@ -204,9 +238,14 @@ impl AxisSimulation {
     /// [`Self::step_means`] then holds the means over these ticks.
     pub fn run_ticks(&mut self, n: u64, u: &UserInputs) {
         let commands = self.commands(u);
+        self.run_ticks_with(n, &commands, u.disturbance_torque);
+    }
+
+    /// [`Self::run_ticks`] with the commands already converted.
+    pub fn run_ticks_with(&mut self, n: u64, commands: &Commands, disturbance_torque: f64) {
         self.step_means = StepMeans::default();
         for _ in 0..n {
-            self.tick_adding_means(&commands, u.disturbance_torque);
+            self.tick_adding_means(commands, disturbance_torque);
         }
     }
 
@@ -277,7 +316,29 @@ impl AxisSimulation {
 
 #[cfg(test)]
 mod tests {
-    use super::round_to_i64;
+    use super::{round_to_i64, StepMeans};
+
+    #[test]
+    fn the_means_over_a_power_of_two_of_ticks_are_the_quotients_bit_for_bit() {
+        let mut state = 0x2545_F491_4F6C_DD1Du64;
+        let mut values =
+            vec![0.0, -0.0, 1.0, -3.5, f64::MIN_POSITIVE, 5e-324, -5e-324, 1e-310, f64::MAX, f64::INFINITY];
+        for _ in 0..100_000 {
+            state ^= state << 13;
+            state ^= state >> 7;
+            state ^= state << 17;
+            values.push(f64::from_bits(state));
+        }
+        for ticks in [1u64, 2, 3, 4, 5, 8, 12, 16, 1 << 20, 1 << 40, 1 << 63, 16_000_000] {
+            for &x in &values {
+                let means = StepMeans { torque: x, accelerometer: -x, ticks }.means().unwrap();
+                let n = ticks as f64;
+                let (a, b) = (x / n, -x / n);
+                assert!(means.0.to_bits() == a.to_bits() || (a.is_nan() && means.0.is_nan()), "{x:e} / {ticks}");
+                assert!(means.1.to_bits() == b.to_bits() || (b.is_nan() && means.1.is_nan()), "{x:e} / {ticks}");
+            }
+        }
+    }
 
     #[test]
     fn rounding_to_an_integer_matches_the_standard_library() {

@@ -17,6 +17,21 @@ use super::{PlantParams, PlantState};
 /// equations. Velocities are at indices 1 and 2 in both layouts.
 const CORRECTOR_PASSES: usize = 1;
 
+/// The smallest |x| for which `libm::tanh` takes its saturated branch (the high word of |x|
+/// above 0x4034_0000, |x| > 20): there it returns `±(1 − 0/|x|)`, exactly ±1.
+const TANH_SATURATED: f64 = f64::from_bits(0x4034_0001_0000_0000);
+
+/// `libm::tanh`, bit for bit, without its call and its division where it is ±1 (the
+/// friction's argument at any working speed: ω/ω_s > 20 above 1 rad/s by default).
+#[inline(always)]
+fn tanh(x: f64) -> f64 {
+    if x.abs() >= TANH_SATURATED {
+        1.0f64.copysign(x)
+    } else {
+        libm::tanh(x)
+    }
+}
+
 /// The optional second mode on the load.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Absorber {
@@ -113,8 +128,8 @@ impl TwoInertia {
     /// Smoothed Coulomb friction torques `Fc·tanh(ω/ω_s)` on the motor and the load.
     pub fn coulomb(&self, motor_velocity: f64, load_velocity: f64) -> [f64; 2] {
         [
-            self.motor_coulomb * libm::tanh(motor_velocity * self.inverse_coulomb_velocity),
-            self.load_coulomb * libm::tanh(load_velocity * self.inverse_coulomb_velocity),
+            self.motor_coulomb * tanh(motor_velocity * self.inverse_coulomb_velocity),
+            self.load_coulomb * tanh(load_velocity * self.inverse_coulomb_velocity),
         ]
     }
 
@@ -186,5 +201,41 @@ impl TwoInertia {
             }
         }
         y_end
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_saturated_tanh_is_libm_tanh_bit_for_bit() {
+        let edge = TANH_SATURATED;
+        let mut cases = vec![
+            0.0,
+            -0.0,
+            1e-300,
+            0.3,
+            0.6,
+            19.999,
+            20.0,
+            f64::from_bits(0x4034_0000_ffff_ffff),
+            edge,
+            f64::from_bits(edge.to_bits() + 1),
+            f64::from_bits(edge.to_bits() - 1),
+            21.0,
+            1e3,
+            1e300,
+            f64::MAX,
+            f64::INFINITY,
+            f64::NAN,
+            f64::MIN_POSITIVE,
+        ];
+        cases.extend((0..200_000).map(|i| (i as f64 - 100_000.0) * 3.7e-4));
+        for x in cases {
+            for x in [x, -x] {
+                assert_eq!(tanh(x).to_bits(), libm::tanh(x).to_bits(), "{x:e}");
+            }
+        }
     }
 }
