@@ -379,7 +379,8 @@ impl Axis {
                 velocity_reference: 0.0,
                 torque_command: 0.0,
                 output_limited: false,
-                faults: Faults::default(),
+                // Not commissioned: refused from the start (see `switch_mode`).
+                faults: Faults(if params.commissioned { 0 } else { Faults::NOT_COMMISSIONED }),
                 following_error: 0.0,
                 applied: Applied::default(),
                 commissioning: None,
@@ -513,7 +514,7 @@ impl Axis {
     /// `NOT_COMMISSIONED` fault (nothing clears it but commissioned parameters).
     pub fn clear_faults(&mut self) {
         self.faults = Faults::default();
-        if !self.params.commissioned && self.mode.is_some() {
+        if !self.params.commissioned {
             self.faults.latch(Faults::NOT_COMMISSIONED);
         }
         self.friction.reset();

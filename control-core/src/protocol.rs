@@ -29,6 +29,7 @@ use crate::response_correction::CorrectionParams;
 use crate::stop_sequence::{Refusal, SequenceEvent};
 
 /// Protocol version 11: commissioning ([`Request::Commission`], [`Request::StopCommissioning`],
+/// [`Request::GetParams`],
 /// the telemetry's `commissioning` state) and the parameters' encoder mounting and
 /// `commissioned` flag. Version 10: the parameters carry the sweep's time budget
 /// (`SweepParams::time_budget_s`). Version 9: the telemetry carries the drive's unused stack
@@ -99,6 +100,8 @@ pub enum Request {
     Commission(CommissioningSettings),
     /// Stop a running commissioning sequence (the bridge off).
     StopCommissioning,
+    /// The parameters in force: answered with [`Response::Params`].
+    GetParams,
 }
 
 /// The answer to `GetTelemetry`: the axis's telemetry, and what the drive's parameter store
@@ -306,6 +309,8 @@ pub enum Response {
     Saved {
         sequence: u32,
     },
+    /// The parameters in force (the answer to `GetParams`).
+    Params(Params),
 }
 
 impl Response {
@@ -470,6 +475,7 @@ pub fn handle(axis: &mut Axis, commands: &mut Commands, stream: &mut Acquisition
             axis.stop_commissioning();
             Response::Done
         }
+        Request::GetParams => Response::Params(*axis.params()),
     }
 }
 

@@ -373,6 +373,8 @@ impl Host<'_> {
             Request::SetParams(p) => self.set_params(p),
             Request::LoadCorrection(c) => self.load_correction(&c),
             Request::SaveParams => self.save_params(flash),
+            // The link side's copy: no section.
+            Request::GetParams => Response::Params(self.params),
             // One copy of the telemetry inside the section; the answer is built outside, with the
             // newest record of the parameter store (the link side's own state) and the stack's
             // measure (a scan with interrupts on).

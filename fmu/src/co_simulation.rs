@@ -158,6 +158,20 @@ impl AxisModel {
         let config = simulation_config(&self.state.values).map_err(|e| format!("invalid parameters: {e}"))?;
         let sim = AxisSimulation::new(&config).map_err(|e| format!("invalid parameters: {e}"))?;
         let s = &mut self.state;
+        // What commissioning at power-up found: outputs fixed from here on (0 without it).
+        if let Some(c) = sim.commissioned {
+            let (m, seconds) = (c.measured, c.seconds);
+            let o = &mut s.values;
+            o.commissioned_resistance = m.resistance as f64;
+            o.commissioned_ld = m.ld as f64;
+            o.commissioned_lq = m.lq as f64;
+            o.commissioned_flux_linkage = m.flux_linkage as f64;
+            o.commissioned_pole_pairs = m.alignment.pole_pairs as i32;
+            o.commissioned_encoder_offset = m.alignment.offset as f64;
+            o.commissioned_encoder_reversed = m.alignment.reversed as i32;
+            o.commissioned_current_bandwidth = m.current_step.bandwidth_hz as f64;
+            o.commissioning_time = seconds;
+        }
         s.sim = Some(sim);
         s.last_fault_reset = s.values.fault_reset;
         // Every sequence input acts from its declared start value (0): a key counter set to

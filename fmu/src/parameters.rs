@@ -13,8 +13,9 @@ use control_core::stop_sequence::SequenceParams;
 use control_core::Params;
 
 use crate::plant::PlantParams;
-use crate::simulation::{ExcitationConfig, SimulationConfig};
+use crate::simulation::{CommissioningConfig, ExcitationConfig, SimulationConfig};
 use crate::variables::{name, Value, Values};
+use control_core::commissioning::CommissioningSettings;
 
 /// A count parameter (its declared range keeps it non-negative; checked again here).
 fn count(name: &str, v: i32) -> Result<u32, String> {
@@ -24,6 +25,17 @@ fn count(name: &str, v: i32) -> Result<u32, String> {
 /// A count the core keeps in 16 bits (the sweep's shifts and repeats, at most 16).
 fn short_count(name: &str, v: i32) -> Result<u16, String> {
     u16::try_from(v).map_err(|_| format!("{name} must be 0 to 65535 (got {v})"))
+}
+
+/// The plant's true encoder mounting: the electrical angle at count 0 is `p · rotor_start_angle`.
+fn plant_mounting(plant: &PlantParams) -> control_core::params::EncoderMounting {
+    let tau = std::f64::consts::TAU;
+    let offset = (plant.pole_pairs as f64 * plant.rotor_start_angle).rem_euclid(tau) as f32;
+    control_core::params::EncoderMounting {
+        reversed: plant.encoder_reversed,
+        // Within [0, 2π) after the rounding to f32.
+        electrical_offset: if offset >= std::f32::consts::TAU { 0.0 } else { offset },
+    }
 }
 
 /// The whole configuration of the simulated axis.
@@ -57,6 +69,11 @@ pub fn simulation_config(v: &Values) -> Result<SimulationConfig, String> {
         absorber_damping: v.plant_absorber_damping,
         coulomb_velocity: v.plant_coulomb_velocity,
         encoder_counts_per_rev: counts,
+        rotor_start_angle: v.plant_rotor_start_angle,
+        encoder_reversed: v.plant_encoder_reversed,
+        current_offset: [v.plant_current_offset_a, v.plant_current_offset_b],
+        current_gain: [v.plant_current_gain_a, v.plant_current_gain_b],
+        dead_time_voltage: v.plant_dead_time_voltage,
         current_noise_std: v.plant_current_noise_std,
         acceleration_noise_std: v.plant_acceleration_noise_std,
         noise_seed: v.plant_noise_seed as u32 as u64,
@@ -69,9 +86,13 @@ pub fn simulation_config(v: &Values) -> Result<SimulationConfig, String> {
     let control = Params {
         motor,
         encoder_counts_per_rev: counts,
-        // The plant's encoder starts at its rotor's electrical zero, counting forward.
-        encoder_mounting: control_core::params::EncoderMounting::default(),
-        commissioned: true,
+        // Measured at power-up (`commissioning`), or given: the plant's own.
+        encoder_mounting: if v.commissioning_at_start {
+            control_core::params::EncoderMounting::default()
+        } else {
+            plant_mounting(&plant)
+        },
+        commissioned: !v.commissioning_at_start,
         rates: Rates {
             current_loop_hz: v.ctrl_current_loop_hz as f32,
             velocity_divider: count("ctrl.velocity_divider", v.ctrl_velocity_divider)?,
@@ -118,7 +139,21 @@ pub fn simulation_config(v: &Values) -> Result<SimulationConfig, String> {
             sensitivity: v.accelerometer_sensitivity as f32,
         },
     };
+    let auto = CommissioningSettings::for_encoder(counts, control.rates.tick_period()).current_bandwidth_hz;
+    let bandwidth =
+        if v.commissioning_current_bandwidth == 0.0 { auto } else { v.commissioning_current_bandwidth as f32 };
+    let commissioning = v.commissioning_at_start.then(|| CommissioningConfig {
+        settings: CommissioningSettings {
+            test_current: v.commissioning_test_current as f32,
+            max_voltage: v.commissioning_max_voltage as f32,
+            overcurrent: (3.0 * v.commissioning_test_current as f32).min(control.limits.overcurrent),
+            current_bandwidth_hz: bandwidth,
+            ..CommissioningSettings::for_encoder(counts, control.rates.tick_period())
+        },
+        apply_motor: v.commissioning_apply_motor,
+    });
     Ok(SimulationConfig {
+        commissioning,
         control,
         plant,
         excitation: ExcitationConfig {

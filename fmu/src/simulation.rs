@@ -4,6 +4,7 @@
 //! let the plant evolve over the tick with the PWM computed in the previous tick (the duty
 //! registers are reloaded at the next PWM period: one tick of computation delay).
 
+use control_core::commissioning::{CommissioningFault, CommissioningSettings, CommissioningStatus, MeasuredMotor};
 use control_core::excitation::{InjectionPoint, SineGenerator};
 use control_core::{Axis, AxisInputs, Commands, Mode, ParamError, Params, PwmOutput, Telemetry};
 
@@ -22,7 +23,35 @@ pub struct SimulationConfig {
     pub control: Params,
     pub plant: PlantParams,
     pub excitation: ExcitationConfig,
+    /// Commission the motor when the axis is built (the drive's power-up), or not: `control`
+    /// is then a commissioned set.
+    pub commissioning: Option<CommissioningConfig>,
 }
+
+/// The commissioning at power-up.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct CommissioningConfig {
+    pub settings: CommissioningSettings,
+    /// Run with everything measured (the motor's constants and the current loop's gains
+    /// designed from them); otherwise with the encoder's mounting measured and the constants
+    /// and gains of `control`.
+    pub apply_motor: bool,
+}
+
+/// What commissioning at power-up found, and how the machine fared meanwhile.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct CommissioningOutcome {
+    pub measured: MeasuredMotor,
+    /// The drive's time it took (s).
+    pub seconds: f64,
+    /// The largest mechanical angle the motor turned from where it stood (rad) and the largest
+    /// phase current the plant carried (A, true, not as sensed).
+    pub excursion: f64,
+    pub peak_current: f64,
+}
+
+/// The longest a commissioning may take (s of the drive's time).
+const COMMISSIONING_LIMIT_S: f64 = 20.0;
 
 #[derive(Debug)]
 pub enum ConfigError {
@@ -30,6 +59,8 @@ pub enum ConfigError {
     Plant(PlantError),
     /// Controller and plant disagree on something both must share.
     Mismatch(String),
+    /// Commissioning at power-up failed (the bridge is off; nothing was kept).
+    Commissioning(CommissioningFault),
 }
 
 impl std::fmt::Display for ConfigError {
@@ -38,6 +69,7 @@ impl std::fmt::Display for ConfigError {
             Self::Control(e) => write!(f, "controller parameter: {e}"),
             Self::Plant(e) => write!(f, "{e}"),
             Self::Mismatch(s) => f.write_str(s),
+            Self::Commissioning(fault) => write!(f, "commissioning the motor failed: {fault:?}"),
         }
     }
 }
@@ -125,6 +157,8 @@ pub struct AxisSimulation {
     /// parameters (fixed once built): the outputs' conversions, computed once.
     radians_per_count: f64,
     position_period: f64,
+    /// What commissioning at power-up measured, and how it went.
+    pub commissioned: Option<CommissioningOutcome>,
 }
 
 impl AxisSimulation {
@@ -169,7 +203,66 @@ impl AxisSimulation {
             step_means: StepMeans::default(),
             radians_per_count,
             position_period,
+            commissioned: None,
         })
+        .and_then(|mut sim: Self| {
+            if let Some(c) = config.commissioning {
+                sim.commission(&c, config)?;
+            }
+            Ok(sim)
+        })
+    }
+
+    /// Commission the motor as a drive does at power-up: the sequence runs on the plant, then
+    /// the axis is built again with what it measured (`c.apply_motor`) or with the encoder's
+    /// mounting only; the excitation is set again, the tick count starts from 0.
+    fn commission(&mut self, c: &CommissioningConfig, config: &SimulationConfig) -> Result<(), ConfigError> {
+        let mut settings = c.settings;
+        settings.counts_per_rev = config.control.encoder_counts_per_rev;
+        settings.tick_period = config.control.rates.tick_period();
+        let fault = |e: &'static str| ConfigError::Mismatch(format!("commissioning setting {e} is out of range"));
+        self.axis.start_commissioning(&settings).map_err(|e| match e {
+            control_core::axis::CommissioningRefusal::Setting(name) => fault(name),
+            control_core::axis::CommissioningRefusal::Busy => fault("(the axis is busy)"),
+        })?;
+        let rest = Commands { mode: Mode::Torque, ..Commands::default() };
+        let limit = (COMMISSIONING_LIMIT_S / self.tick_period) as u64;
+        let mut ticks = 0u64;
+        let (start, mut excursion, mut peak_current) = (self.plant.state.motor_angle, 0.0f64, 0.0f64);
+        let measured = loop {
+            self.tick_inner(&rest, 0.0, |_| {});
+            ticks += 1;
+            excursion = excursion.max((self.plant.state.motor_angle - start).abs());
+            peak_current = peak_current.max(self.plant.phase_current_peak());
+            match self.axis.commissioning() {
+                Some(CommissioningStatus::Running(_)) if ticks < limit => {}
+                Some(CommissioningStatus::Running(_)) => {
+                    return Err(ConfigError::Commissioning(CommissioningFault::Stopped));
+                }
+                Some(CommissioningStatus::Done(m)) => break m,
+                Some(CommissioningStatus::Failed(f)) => return Err(ConfigError::Commissioning(f)),
+                None => return Err(ConfigError::Commissioning(CommissioningFault::Stopped)),
+            }
+        };
+        let params = if c.apply_motor {
+            config.control.with_commissioned(&measured)
+        } else {
+            let mounting = control_core::params::EncoderMounting {
+                reversed: measured.alignment.reversed,
+                electrical_offset: measured.alignment.offset,
+            };
+            config.control.commissioned_as(mounting)
+        };
+        self.axis.rebuild(&params).map_err(ConfigError::Control)?;
+        let e = config.excitation;
+        let rate = config.control.rates.current_loop_hz;
+        self.axis.set_excitation(e.point, SineGenerator::new(e.amplitude, e.frequency_hz, rate, 0.0));
+        self.pending = PwmOutput::default();
+        self.ticks = 0;
+        self.step_means = StepMeans::default();
+        let seconds = ticks as f64 * self.tick_period;
+        self.commissioned = Some(CommissioningOutcome { measured, seconds, excursion, peak_current });
+        Ok(())
     }
 
     /// Motor radians per encoder count: `2π / encoder_counts_per_rev`.

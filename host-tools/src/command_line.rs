@@ -4,7 +4,7 @@
 
 use clap::{CommandFactory, Parser, Subcommand};
 
-use crate::{accdec, bench, circle, device, ident, index, run, sequence, sweep, virtual_drive};
+use crate::{accdec, bench, circle, commission, device, ident, index, run, sequence, sweep, virtual_drive};
 
 #[derive(Parser)]
 #[command(
@@ -23,6 +23,7 @@ pub struct Cli {
 
 #[derive(Subcommand)]
 pub enum Command {
+    Commission(commission::CommissionArgs),
     Run(run::args::RunArgs),
     Accdec(accdec::args::AccdecArgs),
     Sequence(sequence::args::SequenceArgs),
@@ -34,17 +35,20 @@ pub enum Command {
     Device(device::args::DeviceArgs),
     VirtualDrive(virtual_drive::args::VirtualDriveArgs),
     Index(index::IndexArgs),
+    Figures(bench::figures_page::FiguresArgs),
     /// Print this command-line reference as Markdown: every command and option (the book's
     /// docs/src/reference/cli.md; `cargo run -p xtask -- references` writes it)
     CliReference,
     /// Benchmarks: each prints its figures against their goals (worst case over the range users
-    /// work in) and exits 1 when a goal is missed.
+    /// work in), writes them to out/bench/<bench>.json (with --out, into that folder; `servo
+    /// figures` and `servo index` read them) and exits 1 when a goal is missed.
     #[command(subcommand)]
     Bench(BenchCommand),
 }
 
 #[derive(Subcommand)]
 pub enum BenchCommand {
+    Commission(bench::commission_bench::CommissionBenchArgs),
     Robustness(bench::args::RobustnessBenchArgs),
     Firmware(bench::args::FirmwareBenchArgs),
     Fmu(bench::args::FmuBenchArgs),

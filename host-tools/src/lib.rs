@@ -19,6 +19,7 @@ pub mod bench;
 pub mod circle;
 pub mod cli;
 pub mod command_line;
+pub mod commission;
 pub mod correction;
 pub mod device;
 pub mod fmu;

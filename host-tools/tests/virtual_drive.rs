@@ -28,7 +28,18 @@ struct VirtualDrive {
 }
 
 impl VirtualDrive {
+    /// A drive whose motor is then commissioned (`servo commission`), as a user does once.
     fn start(dir: &Path, speed: &str, extra: &[&str]) -> Self {
+        Self::start_with(dir, speed, extra, true)
+    }
+
+    /// A drive left as it boots: its motor not commissioned (what a save, a scheduled fault or
+    /// a missing commissioning needs).
+    fn start_uncommissioned(dir: &Path, speed: &str, extra: &[&str]) -> Self {
+        Self::start_with(dir, speed, extra, false)
+    }
+
+    fn start_with(dir: &Path, speed: &str, extra: &[&str], commission: bool) -> Self {
         let port_file = dir.join("port");
         let _ = std::fs::remove_file(&port_file);
         let child = servo()
@@ -48,6 +59,13 @@ impl VirtualDrive {
         }
         std::thread::sleep(Duration::from_millis(50));
         let port = std::fs::read_to_string(&port_file).unwrap();
+        // A new machine: the drive measures its motor before anything runs (the plant hides
+        // its encoder's mounting, as a real one does), kept in its RAM (not saved).
+        if commission {
+            let o =
+                output_within(servo().args(["commission", "--device", &port, "--out"]).arg(dir.join("commission")), 60);
+            assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+        }
         Self { child, port }
     }
 
@@ -239,7 +257,7 @@ fn a_save_whose_answer_the_line_loses_succeeds_and_writes_one_record() {
     let _serial = one_at_a_time();
     let dir = tmp("lost-save");
     let _ = std::fs::remove_file(dir.join("flash.bin"));
-    let vd = VirtualDrive::start(&dir, "max", &["--corrupt-rate", "5e-3", "--seed", "1"]);
+    let vd = VirtualDrive::start_uncommissioned(&dir, "max", &["--corrupt-rate", "5e-3", "--seed", "1"]);
     let o = device(&vd.port, &["save-params"]);
     let e = String::from_utf8_lossy(&o.stderr);
     assert_eq!(json(&o)["record"], 1, "{e}");
@@ -457,7 +475,7 @@ fn faults_a_missing_device_and_a_dying_drive_end_in_clear_errors() {
     let _serial = one_at_a_time();
     let dir = tmp("faults");
     // A break at 0.2 s: the sweep refuses to start and names the fault.
-    let vd = VirtualDrive::start(&dir, "max", &["--fault", "break@0.2"]);
+    let vd = VirtualDrive::start_uncommissioned(&dir, "max", &["--fault", "break@0.2"]);
     std::thread::sleep(Duration::from_millis(300));
     let o = output_within(servo().args(["sweep", "--device", &vd.port, "--fmu"]).arg(fmu_path()), 60);
     let e = String::from_utf8_lossy(&o.stderr);
@@ -610,7 +628,7 @@ fn ident_over_the_virtual_drive_finds_the_plants_anti_resonance_and_matches_its_
 fn ident_over_a_faulted_or_dying_drive_ends_in_a_clear_error() {
     let _serial = one_at_a_time();
     let dir = tmp("ident-faults");
-    let vd = VirtualDrive::start(&dir, "max", &["--fault", "break@0.2"]);
+    let vd = VirtualDrive::start_uncommissioned(&dir, "max", &["--fault", "break@0.2"]);
     std::thread::sleep(Duration::from_millis(300));
     let ident = |port: &str| output_within(servo().args(["ident", "--device", port]).on_fmu(dir.join("out")), 60);
     let o = ident(&vd.port);

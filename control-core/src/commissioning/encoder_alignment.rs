@@ -114,7 +114,11 @@ pub fn align(
     let per_turn = slope * TAU;
     let pole_pairs_estimate = counts_per_rev as f32 / per_turn.abs();
     let pole_pairs = libm::roundf(pole_pairs_estimate);
-    if !(pole_pairs >= 1.0 && pole_pairs <= max_pole_pairs as f32 && (pole_pairs_estimate - pole_pairs).abs() < 0.1) {
+    // Within a quarter of a pole pair: a rotor that swings on a soft coupling (a load behind
+    // a compliant shaft, little friction) bends the lines' slopes by several percent, while a
+    // wrong counts-per-revolution setting is off by a factor (quadrature ×4, 1000 for 1024 on
+    // a many-pole motor) that lands between whole numbers.
+    if !(pole_pairs >= 1.0 && pole_pairs <= max_pole_pairs as f32 && (pole_pairs_estimate - pole_pairs).abs() < 0.25) {
         return Err(AlignmentError::CountsPerTurn { counts_per_electrical_turn: per_turn });
     }
     let reversed = slope < 0.0;

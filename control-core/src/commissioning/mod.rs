@@ -129,6 +129,11 @@ impl CommissioningSettings {
         Ok(())
     }
 
+    /// [`Self::for_encoder`] of an axis's parameters (its encoder, its tick).
+    pub fn for_params(p: &crate::params::Params) -> Self {
+        Self::for_encoder(p.encoder_counts_per_rev, p.rates.tick_period())
+    }
+
     /// A test current of 2 A, at most 12 V, one and a half electrical turns each way at two
     /// turns a second, a current loop of a sixteenth of the tick rate (1 kHz at 16 kHz).
     pub fn for_encoder(counts_per_rev: u32, tick_period: f32) -> Self {
@@ -493,6 +498,14 @@ impl Commissioning {
         // The current in the frame of the vector's angle: on the q-axis stage, the rotor's
         // angle where the stage began (held there: a frame that followed the rotor's small
         // swings would turn the held d current into the measured q current).
+        // The d-axis chips and the current step run on the rotor's own frame, read from the
+        // encoder each tick (as the drive's loop does): a rotor that drifts or swings (a load on
+        // a soft shaft, no friction) then takes no torque from the d current.
+        if matches!(stage, Stage::CurrentStep | Stage::InductanceD) {
+            if let Some(a) = self.alignment {
+                self.angle = self.rotor_angle(&a, i.encoder_count);
+            }
+        }
         let frame = self.angle;
         let (sin, cos) = sin_cos(frame);
         let current = park(clarke(ia, ib), sin, cos);

@@ -272,3 +272,57 @@ fn range_extremes_never_give_a_non_finite_output_with_an_ok_step() {
     assert!(runs > 150, "{runs} runs, {refused} refused");
     println!("{runs} runs at range ends, {refused} refused at initialisation, {stopped_by_error} stopped by a latched non-finite fault");
 }
+
+/// The FMU commissions its motor at initialisation as a drive at power-up: the plant hides
+/// where its rotor stands, the encoder's direction, sensor offsets and gain errors and the
+/// inverter's dead time; the outputs report what was measured (within 3 % and 1° of the
+/// plant's truth) and the axis then follows a velocity command forward.
+#[test]
+fn the_axis_commissions_a_hidden_mounting_at_initialisation_and_then_runs() {
+    for (start, reversed) in [(0.7, false), (2.9, true), (-1.3, true)] {
+        let mut m = AxisModel::new();
+        set(&mut m, "plant.rotor_start_angle", Value::Float64(start)).unwrap();
+        set(&mut m, "plant.encoder_reversed", Value::Boolean(reversed)).unwrap();
+        set(&mut m, "plant.current_offset_a", Value::Float64(0.004)).unwrap();
+        set(&mut m, "plant.current_gain_b", Value::Float64(0.995)).unwrap();
+        set(&mut m, "plant.dead_time_voltage", Value::Float64(0.2)).unwrap();
+        set(&mut m, "plant.current_noise_std", Value::Float64(0.002)).unwrap();
+        m.initialize().unwrap();
+        let o = *m.values();
+        let plant = crate::plant::PlantParams::default();
+        let close = |got: f64, want: f64, what: &str| {
+            assert!((got / want - 1.0).abs() < 0.03, "{what}: {got} vs {want} (start {start}, reversed {reversed})")
+        };
+        close(o.commissioned_resistance, plant.resistance, "R");
+        close(o.commissioned_ld, plant.ld, "Ld");
+        close(o.commissioned_lq, plant.lq, "Lq");
+        close(o.commissioned_flux_linkage, plant.flux_linkage, "flux linkage");
+        assert_eq!(o.commissioned_pole_pairs, plant.pole_pairs as i32);
+        assert_eq!(o.commissioned_encoder_reversed, reversed as i32);
+        let truth = (plant.pole_pairs as f64 * start).rem_euclid(std::f64::consts::TAU);
+        let error = (o.commissioned_encoder_offset - truth + std::f64::consts::PI).rem_euclid(std::f64::consts::TAU)
+            - std::f64::consts::PI;
+        assert!(error.abs() < 1f64.to_radians(), "offset {} vs {truth}", o.commissioned_encoder_offset);
+        assert!(o.commissioning_time > 0.5 && o.commissioning_time < 5.0, "{} s", o.commissioning_time);
+        // Then a velocity command: the motor turns forward at it, no fault.
+        set(&mut m, "mode", Value::Int32(1)).unwrap();
+        set(&mut m, "velocity_command", Value::Float64(20.0)).unwrap();
+        for k in 0..200 {
+            m.do_step(k as f64 * 0.001, 0.001).unwrap();
+        }
+        let o = m.values();
+        assert_eq!(o.faults, 0);
+        assert!((o.motor_velocity - 20.0).abs() < 1.0, "{} rad/s", o.motor_velocity);
+    }
+}
+
+/// A machine the drive cannot commission (too little test current to turn it against its
+/// friction) is refused at initialisation by the fault's name, and nothing is built.
+#[test]
+fn a_failed_commissioning_refuses_the_initialisation_by_name() {
+    let mut m = AxisModel::new();
+    set(&mut m, "commissioning.test_current", Value::Float64(0.01)).unwrap();
+    let e = m.initialize().unwrap_err();
+    assert!(e.contains("commissioning the motor failed") && e.contains("EncoderStill"), "{e}");
+    assert!(!m.initialized());
+}

@@ -118,7 +118,12 @@ impl Plant {
     pub fn advance(&mut self, u: &PlantInputs) {
         let mut x = self.state;
         let voltage = if u.bridge_enabled {
-            Pmsm::stator_voltage(u.duties, self.params.bus_voltage)
+            let v = Pmsm::stator_voltage(u.duties, self.params.bus_voltage);
+            if self.params.dead_time_voltage > 0.0 {
+                self.dead_time_error(v, &x)
+            } else {
+                v
+            }
         } else {
             // Bridge off: the windings are open, the current is gone within the tick.
             x.id = 0.0;
@@ -155,22 +160,61 @@ impl Plant {
         self.electromagnetic_torque = torque;
     }
 
-    /// Sample the sensors (advances the noise generators).
+    /// The stator voltage `v` less the inverter's dead-time error: each phase short by
+    /// `dead_time_voltage` against its current's sign at the tick's start (the common mode
+    /// drops out), held over the tick.
+    #[inline(never)]
+    fn dead_time_error(&self, (v_alpha, v_beta): (f64, f64), x: &PlantState) -> (f64, f64) {
+        let theta_e = self.params.pole_pairs as f64 * x.motor_angle + self.motor.electrical_offset;
+        let (s, c) = discretisation::sin_cos(theta_e);
+        let alpha = x.id * c - x.iq * s;
+        let beta = x.id * s + x.iq * c;
+        let (ia, ib) = (alpha, -0.5 * alpha + 0.5 * 3f64.sqrt() * beta);
+        let ic = -ia - ib;
+        let error = |i: f64| {
+            if i > 0.0 {
+                -self.params.dead_time_voltage
+            } else if i < 0.0 {
+                self.params.dead_time_voltage
+            } else {
+                0.0
+            }
+        };
+        let (ea, eb, ec) = (error(ia), error(ib), error(ic));
+        (v_alpha + (2.0 * ea - eb - ec) / 3.0, v_beta + (eb - ec) / 3f64.sqrt())
+    }
+
+    /// The largest of the three phase currents' magnitudes now (A, true values).
+    pub fn phase_current_peak(&self) -> f64 {
+        let theta_e = self.params.pole_pairs as f64 * self.state.motor_angle + self.motor.electrical_offset;
+        let (s, c) = discretisation::sin_cos(theta_e);
+        let alpha = self.state.id * c - self.state.iq * s;
+        let beta = self.state.id * s + self.state.iq * c;
+        let (ia, ib) = (alpha, -0.5 * alpha + 0.5 * 3f64.sqrt() * beta);
+        ia.abs().max(ib.abs()).max((ia + ib).abs())
+    }
+
+    /// Sample the sensors (advances the noise generators): the currents through the sensors'
+    /// offsets and gains, the encoder's counter from its start in its own direction.
     pub fn measure(&mut self) -> Measurements {
         let p = &self.params;
-        let theta_e = p.pole_pairs as f64 * self.state.motor_angle;
+        let theta_e = p.pole_pairs as f64 * self.state.motor_angle + self.motor.electrical_offset;
         let (s, c) = discretisation::sin_cos(theta_e);
         self.measured_rotor = Some((self.state.motor_angle, s, c));
         let alpha = self.state.id * c - self.state.iq * s;
         let beta = self.state.id * s + self.state.iq * c;
         let ia = alpha;
         let ib = -0.5 * alpha + 0.5 * 3f64.sqrt() * beta;
-        let counts = self.state.motor_angle * self.counts_per_radian;
+        let turned = self.state.motor_angle * self.counts_per_radian;
+        let counts = if p.encoder_reversed { -turned } else { turned };
         // floor() by truncation: the library call costs more than the rest of this function.
         let truncated = counts as i64;
         let floor = if (truncated as f64) > counts { truncated - 1 } else { truncated };
         Measurements {
-            phase_currents: [ia + self.current_noise.sample(), ib + self.current_noise.sample()],
+            phase_currents: [
+                ia * p.current_gain[0] + p.current_offset[0] + self.current_noise.sample(),
+                ib * p.current_gain[1] + p.current_offset[1] + self.current_noise.sample(),
+            ],
             encoder_count: floor as i32,
             bus_voltage: p.bus_voltage,
         }

@@ -26,6 +26,17 @@ pub struct PlantParams {
     /// Velocity scale of the smoothed Coulomb friction `Fc·tanh(ω/ω_s)` (rad/s).
     pub coulomb_velocity: f64,
     pub encoder_counts_per_rev: u32,
+    /// What a real machine hides from its drive, which commissioning finds out: the rotor's
+    /// mechanical angle from its electrical zero at power-up (rad; the encoder's counter starts
+    /// at 0 there), and whether the counter counts down when the rotor turns forward.
+    pub rotor_start_angle: f64,
+    pub encoder_reversed: bool,
+    /// The current sensors' offsets (A) and gains (1 = exact) of phases a and b.
+    pub current_offset: [f64; 2],
+    pub current_gain: [f64; 2],
+    /// The inverter's dead-time voltage: each phase's voltage short by this against its
+    /// current's sign (V; 0 = an ideal inverter).
+    pub dead_time_voltage: f64,
     pub current_noise_std: f64,
     pub acceleration_noise_std: f64,
     pub noise_seed: u64,
@@ -58,6 +69,12 @@ impl Default for PlantParams {
             absorber_damping: 0.0,
             coulomb_velocity: 0.05,
             encoder_counts_per_rev: 1 << 20,
+            // Any angle: the drive commissions before anything moves.
+            rotor_start_angle: 0.7,
+            encoder_reversed: false,
+            current_offset: [0.0; 2],
+            current_gain: [1.0; 2],
+            dead_time_voltage: 0.0,
             current_noise_std: 0.0,
             acceleration_noise_std: 0.0,
             noise_seed: 1,
@@ -158,6 +175,18 @@ impl PlantParams {
             non_negative("absorber_stiffness", self.absorber_stiffness)?;
         }
         positive("encoder_counts_per_rev", self.encoder_counts_per_rev as f64)?;
+        if !self.rotor_start_angle.is_finite() {
+            return Err(PlantError::NotFinite { field: "rotor_start_angle" });
+        }
+        for (field, v) in [("current_offset_a", self.current_offset[0]), ("current_offset_b", self.current_offset[1])] {
+            if !v.is_finite() {
+                return Err(PlantError::NotFinite { field });
+            }
+        }
+        for (field, v) in [("current_gain_a", self.current_gain[0]), ("current_gain_b", self.current_gain[1])] {
+            positive(field, v)?;
+        }
+        non_negative("dead_time_voltage", self.dead_time_voltage)?;
         non_negative("current_noise_std", self.current_noise_std)?;
         non_negative("acceleration_noise_std", self.acceleration_noise_std)?;
         positive("tick", self.tick)?;

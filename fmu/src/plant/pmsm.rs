@@ -13,6 +13,8 @@ use super::{PlantParams, PlantState};
 #[derive(Clone, Copy, Debug)]
 pub struct Pmsm {
     pub pole_pairs: f64,
+    /// The rotor's electrical angle at motor angle 0 (rad): `p · rotor_start_angle`.
+    pub electrical_offset: f64,
     pub resistance: f64,
     pub ld: f64,
     pub lq: f64,
@@ -38,6 +40,7 @@ impl Pmsm {
         let mean_rate = -0.5 * (r / ld + r / lq);
         Self {
             pole_pairs: p.pole_pairs as f64,
+            electrical_offset: p.pole_pairs as f64 * p.rotor_start_angle,
             resistance: r,
             ld,
             lq,
@@ -84,7 +87,7 @@ impl Pmsm {
         let half_turn = 0.5 * h * p * (x.motor_velocity + 0.5 * h * motor_acceleration);
         let (s, c) = match start_rotor {
             Some(rotor) if (p * advance).abs() < MAX_ROTATION => rotate(rotor, p * advance),
-            _ => sin_cos(p * (x.motor_angle + advance)),
+            _ => sin_cos(p * (x.motor_angle + advance) + self.electrical_offset),
         };
         let shrink = cosh_sinhc(-half_turn * half_turn).1; // sin(x)/x
         let vd = shrink * (v_alpha * c + v_beta * s);

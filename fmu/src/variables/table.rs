@@ -448,4 +448,27 @@ declare_variables! {
     191 acq_limited: Int32 "acq_limited" Output Discrete = 0; NONE; ANY; "1 if the drive's output was limited (the voltage circle cut what the current loop asked for) on a tick of the sample's acquisition period: the share of a result's kept samples (those its fit uses, see acq_half_block) is sweep_last_limited, counted from the stream";
     // The sweep's time budget (issue 15), appended likewise.
     192 sweep_time_budget_s: Float64 "sweep.time_budget_s" Parameter Fixed = core(|p| p.sweep.time_budget_s); S; r(0.0, 1.0e4); "Stepped sine with precision control: a frequency's records may take more half blocks than sweep.max_extensions allows (up to 64 blocks) while the whole sweep still ends within this time from its start, every later frequency counted at its own longest; frequencies that finish early leave their time to later ones that need more (in practice the top of the sweep, where the response is a few encoder counts); a sweep granted nothing runs as without it; where there is room an extended frequency also measures to 1/1.25 of sweep.precision_db (0 = never)";
+    // What a real machine hides from its drive, and the drive's commissioning at power-up
+    // (issue 37), appended so that every earlier value reference stays.
+    193 plant_rotor_start_angle: Float64 "plant.rotor_start_angle" Parameter Fixed = plant(|p| p.rotor_start_angle); RAD; r(-1.0e3, 1.0e3); "The rotor's mechanical angle from its electrical zero at power-up, where the encoder's counter starts at 0: hidden from the drive, which finds the electrical offset by commissioning";
+    194 plant_encoder_reversed: Boolean "plant.encoder_reversed" Parameter Fixed = PlantParams::default().encoder_reversed; NONE; ANY; "The encoder's counter counts down when the rotor turns forward (hidden from the drive: commissioning finds it)";
+    195 plant_current_offset_a: Float64 "plant.current_offset_a" Parameter Fixed = plant(|p| p.current_offset[0]); A; r(-1.0e3, 1.0e3); "Phase-a current sensor's offset";
+    196 plant_current_offset_b: Float64 "plant.current_offset_b" Parameter Fixed = plant(|p| p.current_offset[1]); A; r(-1.0e3, 1.0e3); "Phase-b current sensor's offset";
+    197 plant_current_gain_a: Float64 "plant.current_gain_a" Parameter Fixed = plant(|p| p.current_gain[0]); NONE; r(0.5, 2.0); "Phase-a current sensor's gain (1 = exact)";
+    198 plant_current_gain_b: Float64 "plant.current_gain_b" Parameter Fixed = plant(|p| p.current_gain[1]); NONE; r(0.5, 2.0); "Phase-b current sensor's gain (1 = exact)";
+    199 plant_dead_time_voltage: Float64 "plant.dead_time_voltage" Parameter Fixed = plant(|p| p.dead_time_voltage); V; r(0.0, 100.0); "Inverter dead-time error: each phase's voltage short by this against its current's sign (0 = ideal inverter)";
+    200 commissioning_at_start: Boolean "commissioning.at_start" Parameter Fixed = true; NONE; ANY; "Commission the motor at initialisation, as a drive at power-up (the encoder's direction and electrical offset measured and used; see commissioning.apply_motor). Off: the drive is given the plant's true mounting (a commissioned set)";
+    201 commissioning_apply_motor: Boolean "commissioning.apply_motor" Parameter Fixed = false; NONE; ANY; "Also run with the measured resistance, inductances, flux linkage, pole pairs and the current-loop gains designed for commissioning.current_bandwidth (off: the plant's constants and ctrl.current_kp/ki, the measured values only reported)";
+    202 commissioning_test_current: Float64 "commissioning.test_current" Parameter Fixed = 2.0; A; r(1.0e-3, 1.0e3); "Current the commissioning drives (within the motor's and the drive's ratings)";
+    203 commissioning_max_voltage: Float64 "commissioning.max_voltage" Parameter Fixed = 12.0; V; r(1.0e-3, 1.0e3); "Highest voltage the commissioning applies";
+    204 commissioning_current_bandwidth: Float64 "commissioning.current_bandwidth" Parameter Fixed = 0.0; HZ; r(0.0, 1.0e5); "Closed-loop bandwidth the current-loop gains are designed for (0.02 to 0.1 of the loop rate; 0 = a sixteenth of it, 1 kHz at 16 kHz)";
+    205 commissioned_resistance: Float64 "commissioned_resistance" Output Discrete = 0.0; OHM; ANY; "Phase resistance commissioning measured (0: not commissioned at start)";
+    206 commissioned_ld: Float64 "commissioned_ld" Output Discrete = 0.0; H; ANY; "d-axis inductance commissioning measured";
+    207 commissioned_lq: Float64 "commissioned_lq" Output Discrete = 0.0; H; ANY; "q-axis inductance commissioning measured";
+    208 commissioned_flux_linkage: Float64 "commissioned_flux_linkage" Output Discrete = 0.0; WB; ANY; "Flux linkage commissioning measured (from the back-EMF)";
+    209 commissioned_pole_pairs: Int32 "commissioned_pole_pairs" Output Discrete = 0; NONE; ANY; "Pole pairs commissioning found";
+    210 commissioned_encoder_offset: Float64 "commissioned_encoder_offset" Output Discrete = 0.0; RAD; ANY; "Electrical angle at encoder count 0 commissioning found";
+    211 commissioned_encoder_reversed: Int32 "commissioned_encoder_reversed" Output Discrete = 0; NONE; ANY; "1 if commissioning found the encoder counting down as the rotor turns forward";
+    212 commissioned_current_bandwidth: Float64 "commissioned_current_bandwidth" Output Discrete = 0.0; HZ; ANY; "Current-loop bandwidth the commissioning's step measured with its designed gains";
+    213 commissioning_time: Float64 "commissioning_time" Output Discrete = 0.0; S; ANY; "Drive time the commissioning took at initialisation";
 }

@@ -111,6 +111,24 @@ fn bench_accdec_random(args: &AccdecBenchArgs, n: u32) -> Result<bool> {
     let unbalanced = rows.iter().filter(|r| r.pulse_balance != 0).count();
     let ticks: usize = rows.iter().map(|r| r.ticks).sum();
     let ok = worst.worst <= 1.0 && unbalanced == 0;
+    let mut figures = crate::bench::figures::Recorder::new("accdec-random");
+    figures
+        .at_most(
+            &format!(
+                "acc/dec on {} drawn moves (seed {}), one in three large and fast at the lowest cut-off × period: worst |position − f64 filter|",
+                crate::bench::figures::number(rows.len() as f64),
+                args.plant_seed
+            ),
+            worst.worst,
+            1.0,
+            "count",
+        )
+        .equal("moves whose pulses out differ from the pulses in", unbalanced as f64, 0.0, "")
+        .info("worst lag error before rounding to whole pulses", worst_lag_error, "count");
+    if let Some(h) = &worst_hard {
+        figures.info("worst of the large, fast moves", h.worst, "count");
+    }
+    figures.write(args.common.out.as_deref(), ok)?;
     if args.common.json {
         println!(
             "{}",
@@ -212,6 +230,27 @@ fn bench_accdec(args: &AccdecBenchArgs) -> Result<bool> {
         && props.zero_input_nonzero_outputs == 0
         && worst_position.worst <= 1.0
         && unbalanced == 0;
+    crate::bench::figures::Recorder::new("accdec")
+        .at_most(
+            &format!(
+                "acc/dec commanded position vs the f64 filter, {} moves of the grid: worst |error|",
+                crate::bench::figures::number(grid.len() as f64)
+            ),
+            worst_position.worst,
+            1.0,
+            "count",
+        )
+        .equal("moves whose pulses out differ from the pulses in", unbalanced as f64, 0.0, "")
+        .equal("random whole-pulse sequences: output sum ≠ input sum", props.conservation_failures as f64, 0.0, "")
+        .equal(
+            "the seed example's printed digits that differ",
+            digits.iter().filter(|d| !d.equal).count() as f64,
+            0.0,
+            "",
+        )
+        .at_most("poles against python-control's matched method: largest error", pole, 1e-7, "")
+        .info("worst lag error before rounding to whole pulses", worst_lag_error.lag_error, "count")
+        .write(common.out.as_deref(), ok)?;
     if common.json {
         println!(
             "{}",

@@ -3,6 +3,7 @@
 use anyhow::{bail, Result};
 
 use crate::bench::args::{FmuBenchArgs, PlantBenchArgs};
+use crate::bench::figures::Recorder;
 use crate::bench::fmu_speed as bench;
 use crate::cli::progress_bar;
 use crate::paths::{default_fmu, default_out};
@@ -33,6 +34,30 @@ fn bench_fmu(args: &FmuBenchArgs) -> Result<bool> {
     let speed_ok = r.all_outputs_real_time_factor >= goal;
     let boundary_ok = r.boundary_overhead <= BOUNDARY_GOAL;
     let ok = speed_ok && boundary_ok;
+    let mut figures = Recorder::new("fmu");
+    figures
+        .at_least(
+            &format!("speed through the Rust host, recording all {} outputs (real-time factor)", r.all_outputs),
+            r.all_outputs_real_time_factor,
+            goal,
+            "×",
+        )
+        .at_most(
+            &format!("the FMI boundary and recording all {} outputs, against the bare simulation", r.all_outputs),
+            100.0 * r.boundary_overhead,
+            100.0 * BOUNDARY_GOAL,
+            "%",
+        )
+        .info(
+            &format!("speed recording the specification's {} outputs", r.recorded_outputs.len()),
+            r.rust_real_time_factor,
+            "×",
+        )
+        .info("speed of the bare simulation (core and plant, no FMI)", r.bare_real_time_factor, "×");
+    if let Some(f) = r.fmpy_real_time_factor {
+        figures.info("speed through fmpy", f, "×");
+    }
+    figures.write(common.out.as_deref(), ok)?;
     if common.json {
         println!(
             "{}",
@@ -111,6 +136,14 @@ impl PlantBenchArgs {
 fn bench_plant(args: &PlantBenchArgs) -> Result<bool> {
     let common = &args.common;
     let r = crate::bench::plant::step_error()?;
+    Recorder::new("plant")
+        .at_most(
+            "plant step error against a ten times finer step, relative to the signal's peak",
+            r.worst_relative,
+            crate::bench::plant::GOAL,
+            "",
+        )
+        .write(common.out.as_deref(), r.passed)?;
     if common.json {
         println!("{}", serde_json::to_string_pretty(&r)?);
     } else {

@@ -4,6 +4,7 @@
 use anyhow::{bail, Context, Result};
 
 use crate::bench::args::{FaultCampaignArgs, FmiCampaignArgs, RobustnessBenchArgs};
+use crate::bench::figures::Recorder;
 use crate::bench::{fault_campaign, fmi_campaign};
 use crate::cli::{progress_bar, Common};
 use crate::paths::{default_fmu, workspace_root};
@@ -35,6 +36,13 @@ fn bench_fmi_campaign(args: &FmiCampaignArgs) -> Result<bool> {
         results.push(fmi_campaign::run_archive(&archive, seconds, seed)?);
     }
     let passed = results.iter().all(|r| r.passed());
+    let sum = |f: fn(&fmi_campaign::ArchiveResult) -> u64| results.iter().map(f).sum::<u64>() as f64;
+    Recorder::new("fmi-campaign")
+        .equal("random FMI call sequences through fmpy (FMI 3.0 and 2.0): crashes", sum(|r| r.crashes), 0.0, "")
+        .equal("hangs", sum(|r| r.hangs), 0.0, "")
+        .equal("OK steps with a non-finite output", sum(|r| r.ok_with_non_finite_output), 0.0, "")
+        .info("calls made", sum(|r| r.calls), "")
+        .write(common.out.as_deref(), passed)?;
     if common.json {
         println!(
             "{}",
@@ -97,6 +105,22 @@ fn bench_fault_campaign(args: &FaultCampaignArgs) -> Result<bool> {
     let pb = progress_bar("fault campaign", common.json);
     let r = fault_campaign::run(runs, seed, |f| pb.set_position((f * 1000.0) as u64))?;
     pb.finish_and_clear();
+    let undetected: usize = r.kinds.iter().map(|k| k.runs - k.detected).sum();
+    Recorder::new("fault-campaign")
+        .equal(
+            &format!("injected faults ({} kinds × {} runs): faults not detected", r.kinds.len(), r.runs_per_kind),
+            undetected as f64,
+            0.0,
+            "",
+        )
+        .at_most(
+            "worst reaction, from the fault to the bridge off",
+            r.worst_reaction_ticks as f64,
+            fault_campaign::REACTION_GOAL_TICKS as f64,
+            "ticks",
+        )
+        .equal("ticks with the bridge on again before ClearFaults", r.restarts_without_clear as f64, 0.0, "")
+        .write(common.out.as_deref(), r.passed)?;
     if common.json {
         println!("{}", serde_json::to_string_pretty(&serde_json::json!({"bench": "fault-campaign", "result": r}))?);
     } else {

@@ -62,6 +62,38 @@ fn bench_firmware(args: &FirmwareBenchArgs) -> Result<bool> {
         && untouched_goal
         && bound_holds;
     let tick_goal = per_tick_all <= TICK_GOAL - TICK_MARGIN;
+    let kib = |b: u32| b as f64 / 1024.0;
+    crate::bench::figures::Recorder::new("firmware")
+        .at_most("drive image: flash", kib(size.flash), kib(FLASH_GOAL), "KiB")
+        .at_most("drive image: static RAM", kib(size.ram), kib(RAM_GOAL), "KiB")
+        .at_most("stack, worst path from the image", stack.worst as f64, STACK_GOAL as f64, "bytes")
+        .at_most("the largest frame on the thread's path", largest_frame as f64, FRAME_GOAL as f64, "bytes")
+        .at_least(
+            "RAM never touched in the painted-stack run (128 KiB)",
+            kib(off.untouched_ram),
+            kib(UNTOUCHED_GOAL),
+            "KiB",
+        )
+        .equal(
+            "golden vectors and the every-feature run, Cortex-M4 (QEMU) vs host: runs that differ",
+            [&vectors, &all].iter().filter(|r| !r.identical).count() as f64,
+            0.0,
+            "",
+        )
+        .at_most(
+            "instructions per 16 kHz tick, every feature on (1 000 with 100 kept as margin)",
+            per_tick_all,
+            TICK_GOAL - TICK_MARGIN,
+            "",
+        )
+        .at_most(
+            "longest interrupts-off section during parameter changes",
+            off.parameter_changes,
+            INTERRUPTS_OFF_GOAL,
+            "instructions",
+        )
+        .equal("the analysed stack bound below the painted-stack run", if bound_holds { 0.0 } else { 1.0 }, 0.0, "")
+        .write(common.out.as_deref(), ok)?;
     if common.json {
         println!(
             "{}",
@@ -78,7 +110,6 @@ fn bench_firmware(args: &FirmwareBenchArgs) -> Result<bool> {
     println!(
         "servo bench firmware — drive-g474 (STM32G474RE) and the control core on a Cortex-M4F (QEMU netduinoplus2)"
     );
-    let kib = |b: u32| b as f64 / 1024.0;
     let verdict = |met: bool| if met { "met" } else { "NOT met" };
     println!(
         "  drive image: flash {} bytes ({:.1} KiB, goal ≤ {:.0} KiB: {}), static RAM {} bytes ({:.1} KiB, goal ≤ {:.0} KiB: {}; stack not included)",

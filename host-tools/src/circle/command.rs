@@ -153,6 +153,16 @@ fn bench_circle(args: &CircleBenchArgs) -> Result<bool> {
     let fmu = Fmu::load(&common.fmu.clone().unwrap_or_else(default_fmu))?;
     let r = crate::circle::bench::bench(&fmu)?;
     let ok = r.pseudo_vs_two_axis_relative <= 1e-3 && r.protrusion_ratio < 1.0;
+    crate::bench::figures::Recorder::new("circle")
+        .at_most(
+            "pseudo-circle vs two-axis circle, friction-free axis: largest radial difference, share of the radius",
+            100.0 * r.pseudo_vs_two_axis_relative,
+            0.1,
+            "%",
+        )
+        .at_most("largest quadrant protrusion with friction compensation over without", r.protrusion_ratio, 1.0, "")
+        .verdict(r.protrusion_ratio < 1.0)
+        .write(common.out.as_deref(), ok)?;
     if common.json {
         println!(
             "{}",

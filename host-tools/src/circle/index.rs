@@ -18,6 +18,15 @@ pub fn section(root: &Path) -> Option<Section> {
         for name in ["circle.json", "pseudo_circle.json"] {
             let path = d.join(name);
             let Some(json) = s.read_result(root, &path) else { continue };
+            let run = relative(root, d).display().to_string();
+            for (key, what) in [("roundness_ratio", "roundness"), ("protrusion_ratio", "quadrant protrusion")] {
+                if let Some(r) = json[key].as_f64() {
+                    s.numbers.push((
+                        format!("{run}: {what}, second run against the first"),
+                        crate::circle::report::ratio_words(r),
+                    ));
+                }
+            }
             if let Some(i) = json["fmpy"]["identical"].as_bool() {
                 s.verdicts
                     .push((format!("{}: fmpy gives the same feedback bit for bit", relative(root, d).display()), i));

@@ -155,6 +155,9 @@ pub fn request_kind(request: &Request) -> &'static str {
         Request::GetTelemetry => "GetTelemetry",
         Request::Stream { .. } => "Stream",
         Request::SaveParams => "SaveParams",
+        Request::Commission(_) => "Commission",
+        Request::StopCommissioning => "StopCommissioning",
+        Request::GetParams => "GetParams",
     }
 }
 
@@ -171,6 +174,9 @@ pub fn request_name(request: &Request) -> String {
         Request::GetTelemetry => "the telemetry request",
         Request::Stream { .. } => "the streaming switch (Stream)",
         Request::SaveParams => "the parameter save (SaveParams)",
+        Request::Commission(_) => "the commissioning's start (Commission)",
+        Request::StopCommissioning => "the commissioning's stop (StopCommissioning)",
+        Request::GetParams => "the parameters' request (GetParams)",
     };
     name.to_string()
 }

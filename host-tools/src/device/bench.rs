@@ -79,6 +79,7 @@ pub fn bench(fmu: &Fmu, baud: u32, mut progress: impl FnMut(f64)) -> Result<Vec<
         let capacity = drive.line_capacity();
         let mut session = DriveSession::open(DeviceLink::new(InProcessDrive::new(drive), ANSWER_TIMEOUT))?;
         session.baud = baud;
+        session.commission_with_defaults()?;
         let base = k as f64 / points.len() as f64;
         let share = 1.0 / points.len() as f64;
         let d = sweep_on_drive(&mut session, &run, |f| progress(base + share * 0.5 * f))?;
@@ -107,6 +108,17 @@ impl DeviceBenchArgs {
         let rows = bench(&fmu, self.baud, |f| pb.set_position((f * 1000.0) as u64))?;
         pb.finish_and_clear();
         let ok = rows.iter().all(|r| r.met);
+        let worst = |f: fn(&LinkRow) -> f64| rows.iter().map(f).fold(0.0, f64::max);
+        crate::bench::figures::Recorder::new("device")
+            .equal(
+                "the default sweep over the link to the virtual drive: samples dropped",
+                rows.iter().map(|r| r.dropped as f64).sum(),
+                GOAL_DROPPED as f64,
+                "",
+            )
+            .at_most("drive vs its FMU twin at every point: gain", worst(|r| r.difference_db), GOAL_DB, "dB")
+            .at_most("phase", worst(|r| r.difference_deg), GOAL_DEG, "°")
+            .write(c.out.as_deref(), ok)?;
         if c.json {
             let j = serde_json::json!({"bench": "device", "rows": rows, "passed": ok});
             println!("{}", serde_json::to_string_pretty(&j)?);

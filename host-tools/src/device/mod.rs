@@ -4,6 +4,7 @@ pub mod answer;
 pub mod args;
 pub mod bench;
 pub mod command;
+pub mod commission;
 pub mod frame_stream;
 pub mod index;
 pub mod link;

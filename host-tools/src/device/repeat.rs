@@ -63,8 +63,10 @@ pub fn repeat_of(request: &Request) -> Repeat {
         | Request::LoadCorrection(_)
         | Request::ClearFaults
         | Request::GetTelemetry
-        | Request::Stream { .. } => Repeat::Harmless,
-        Request::StartSweep | Request::Sequence(_) | Request::SaveParams => Repeat::Verify,
+        | Request::Stream { .. }
+        | Request::StopCommissioning
+        | Request::GetParams => Repeat::Harmless,
+        Request::StartSweep | Request::Sequence(_) | Request::SaveParams | Request::Commission(_) => Repeat::Verify,
     }
 }
 
@@ -92,7 +94,23 @@ pub fn verify(request: &Request, before: &DriveTelemetry, after: &DriveTelemetry
     }
     match request {
         Request::StartSweep => start_sweep(before.sweep.state, after.sweep.state),
+        Request::Commission(_) => commission(before.commissioning, after.commissioning),
         Request::Sequence(e) => sequence_event(e, before, after),
+        _ => Verdict::SendAgain,
+    }
+}
+
+/// A sequence running now that was not before: the start acted (a second copy would be refused
+/// as busy). Not running: it did not start (or ended within the lost answer's time, which a
+/// sequence of seconds does not).
+fn commission(
+    before: Option<control_core::commissioning::CommissioningStatus>,
+    after: Option<control_core::commissioning::CommissioningStatus>,
+) -> Verdict {
+    use control_core::commissioning::CommissioningStatus::Running;
+    match (before, after) {
+        (Some(Running(_)), _) => Verdict::Unknown("a commissioning sequence was already running"),
+        (_, Some(Running(_))) => Verdict::Acted(Response::Done),
         _ => Verdict::SendAgain,
     }
 }

@@ -94,6 +94,7 @@ fn run(rate: f64, seed: u64) -> Result<SaveRow> {
     let flash = CountingFlash { flash: FileFlash::in_memory(), commits: 0 };
     let drive = VirtualDrive::power_on(&settings, flash)?;
     let mut s = DriveSession::open(DeviceLink::new(InProcessDrive::new(drive), ANSWER_TIMEOUT))?;
+    s.commission_with_defaults()?;
     s.rest()?;
     let mut row = SaveRow {
         corrupt_rate: rate,
@@ -170,6 +171,15 @@ impl SaveBenchArgs {
         let rows = bench(|f| pb.set_position((f * 1000.0) as u64))?;
         pb.finish_and_clear();
         let ok = rows.iter().all(|r| r.met);
+        crate::bench::figures::Recorder::new("saves")
+            .equal(
+                &format!("parameter saves over a corrupting line ({SAVES} in a row per rate and seed): runs missing the goal"),
+                rows.iter().filter(|r| !r.met).count() as f64,
+                0.0,
+                "",
+            )
+            .equal("wrong records committed", rows.iter().map(|r| r.wrong_records as f64).sum(), 0.0, "")
+            .write(c.out.as_deref(), ok)?;
         if c.json {
             let j = serde_json::json!({"bench": "saves", "rows": rows, "passed": ok});
             println!("{}", serde_json::to_string_pretty(&j)?);

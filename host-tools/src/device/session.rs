@@ -130,6 +130,12 @@ impl<T: DrivePort> DriveSession<T> {
     pub fn rest(&mut self) -> Result<Telemetry> {
         self.order(Request::SetCommands(Commands { mode: Mode::Torque, ..Commands::default() }), "the rest command")?;
         let t = self.telemetry()?;
+        if t.faults.0 == control_core::faults::Faults::NOT_COMMISSIONED {
+            bail!(
+                "the drive's motor is not commissioned: it refuses every mode until it is (run `servo commission \
+                 --device PORT`; --save keeps the result in the drive's flash)"
+            );
+        }
         if t.faults.any() {
             bail!(
                 "the drive has faults latched: {} (look at them, then `servo device --port … clear-faults`)",
@@ -139,9 +145,12 @@ impl<T: DrivePort> DriveSession<T> {
         Ok(t)
     }
 
-    /// Give the drive `params` (at rest).
+    /// Give the drive `params` (at rest), completed with the drive's commissioned set where
+    /// they are not one (`DriveSession::with_drive_commissioning`).
     pub fn set_params(&mut self, params: &Params) -> Result<()> {
+        // Faults first (they name what is wrong with the drive), then its commissioning.
         self.rest()?;
+        let params = &self.with_drive_commissioning(params)?;
         self.order(Request::SetParams(*params), "the parameters")?;
         self.tick_hz = params.rates.current_loop_hz as f64;
         Ok(())

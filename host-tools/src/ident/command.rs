@@ -227,6 +227,7 @@ fn bench_ident(args: &IdentBenchArgs) -> Result<bool> {
     ];
     let mut rows = Vec::new();
     let mut tunings = Vec::new();
+    let (mut spreads, mut roundness) = (Vec::new(), None);
     let pb = progress_bar("ident bench", common.json);
     // The grid: every anti-resonance × every noise seed at 20 dB SNR.
     pb.set_prefix("grid");
@@ -289,12 +290,44 @@ fn bench_ident(args: &IdentBenchArgs) -> Result<bool> {
         };
         let (b, a) = (response.spread_before.unwrap_or_default(), response.spread_after.unwrap_or_default());
         ok &= a.0 < b.0 && a.1 < b.1;
+        spreads.push((case.to_string(), b, a));
         if let Some(c) = &circle {
             ok &= c.roundness_without / c.roundness_with >= 20.0;
+            roundness = Some(c.roundness_without / c.roundness_with);
         }
         tunings.push(serde_json::json!({"case": case, "response": response, "zeros": zeros, "circle": circle}));
     }
     pb.finish_and_clear();
+    let mut figures = record_grid("ident", &grid, args.seeds);
+    let demo_worst =
+        |key: &str| rows.iter().map(|r| r[key].as_f64().unwrap_or(f64::INFINITY).abs()).fold(0.0, f64::max);
+    figures
+        .at_most(
+            "demo axes (two, three and a rigid axis): worst |frequency error|",
+            100.0 * demo_worst("frequency_error"),
+            1.0,
+            "%",
+        )
+        .at_most("demo axes: worst |damping error|", 100.0 * demo_worst("damping_error"), 20.0, "%");
+    for (case, before, after) in &spreads {
+        figures
+            .at_most(
+                &format!("{case}: command → machine-end responses apart after the correction, up to the position-loop bandwidth (gain)"),
+                after.0,
+                before.0,
+                "dB",
+            )
+            .at_most("phase (goal: less than uncorrected)", after.1, before.1, "°");
+    }
+    if let Some(r) = roundness {
+        figures.at_least(
+            &format!("the two axes' {CIRCLE_HZ} Hz circle: times rounder than uncorrected (machine end)"),
+            r,
+            20.0,
+            "×",
+        );
+    }
+    figures.write(common.out.as_deref(), ok)?;
     if common.json {
         println!(
             "{}",
@@ -389,6 +422,7 @@ fn bench_ident_grid_alone(args: &IdentBenchArgs, fmu: &Fmu, out: &std::path::Pat
     })?;
     pb.finish_and_clear();
     let ok = grid.iter().all(|c| c.passed());
+    record_grid("ident-grid", &grid, args.seeds).write(args.common.out.as_deref(), ok)?;
     if args.common.json {
         println!(
             "{}",
@@ -408,6 +442,34 @@ fn bench_ident_grid_alone(args: &IdentBenchArgs, fmu: &Fmu, out: &std::path::Pat
     print_grid(&grid, None, args.seeds, args.damping);
     println!("  goal: at most 1 % in frequency and 20 % in damping: {}", if ok { "met" } else { "MISSED" });
     Ok(ok)
+}
+
+/// The identification grid's figures: the worst errors over the anti-resonances found and the
+/// identifications outside the goals.
+fn record_grid(bench: &str, grid: &[crate::ident::bench::GridCase], seeds: u32) -> crate::bench::figures::Recorder {
+    use crate::ident::bench::{DAMPING_GOAL, FREQUENCY_GOAL, SNR_DB};
+    let worst = |key: fn(&crate::ident::bench::GridCase) -> f64| {
+        grid.iter().filter(|c| c.found.is_some()).map(|c| key(c).abs()).fold(0.0, f64::max)
+    };
+    let (lo, hi) = grid.iter().fold((f64::INFINITY, 0.0f64), |(a, b), c| (a.min(c.hz), b.max(c.hz)));
+    let mut figures = crate::bench::figures::Recorder::new(bench);
+    figures
+        .at_most(
+            &format!(
+                "anti-resonance identification, {lo}–{hi} Hz × {seeds} noise seeds at {SNR_DB} dB SNR: worst |frequency error|"
+            ),
+            100.0 * worst(|c| c.frequency_error),
+            100.0 * FREQUENCY_GOAL,
+            "%",
+        )
+        .at_most("worst |damping error|", 100.0 * worst(|c| c.damping_error), 100.0 * DAMPING_GOAL, "%")
+        .equal(
+            "identifications outside the goals (a wrong value, or none where no mode masks the zero)",
+            grid.iter().filter(|c| !c.passed()).count() as f64,
+            0.0,
+            "",
+        );
+    figures
 }
 
 /// The grid's table: per anti-resonance, each seed's errors; then the worst case.

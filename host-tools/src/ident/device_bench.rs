@@ -87,6 +87,7 @@ fn identify_case(fmu: &Fmu, parameters: &BTreeMap<String, Value>, out: &Path) ->
     let drive = VirtualDrive::power_on(&vd, FileFlash::in_memory())?;
     let mut session = DriveSession::open(DeviceLink::new(InProcessDrive::new(drive), ANSWER_TIMEOUT))?;
     session.baud = LineSettings::default().baud;
+    session.commission_with_defaults()?;
     let request = DeviceIdentRequest { axis: "x", parameters, amplitude: AMPLITUDE };
     identify_on_device(fmu, &request, ("in-process virtual drive", &mut session), out, |_, _| {})
 }
@@ -132,6 +133,22 @@ impl IdentDeviceBenchArgs {
         pb.finish_and_clear();
         crate::bench::raw_traces::tidy(&out, self.keep_raw)?;
         let ok = cases.iter().all(DeviceCase::passed);
+        let worst = |f: &dyn Fn(&DeviceCase) -> f64| cases.iter().map(f).fold(0.0, f64::max);
+        crate::bench::figures::Recorder::new("ident-device")
+            .at_most(
+                "identification over the link to the virtual drive: drive vs twin per point",
+                worst(&|c| c.report.largest_standard_errors),
+                GOAL_STANDARD_ERRORS,
+                "standard errors",
+            )
+            .equal(
+                "samples lost or corrupt",
+                cases.iter().map(|c| c.report.link.dropped as f64 + c.report.link.corrupt_frames as f64).sum(),
+                0.0,
+                "",
+            )
+            .equal("cases missing a goal", cases.iter().filter(|c| !c.passed()).count() as f64, 0.0, "")
+            .write(c.out.as_deref(), ok)?;
         if c.json {
             let j = serde_json::json!({"bench": "ident-device", "cases": cases, "passed": ok});
             println!("{}", serde_json::to_string_pretty(&j)?);

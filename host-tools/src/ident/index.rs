@@ -17,7 +17,26 @@ pub fn section(root: &Path) -> Option<Section> {
     files.extend(tune_json.iter().map(|p| relative(root, p)));
     let mut s = Section::default();
     for path in models.iter().chain(&tune_json) {
-        s.read_result(root, path);
+        let Some(json) = s.read_result(root, path) else { continue };
+        if let Some(axis) = json["axis"].as_str() {
+            let zero = &json["anti_resonance"];
+            let value = match (zero["hz"].as_f64(), zero["damping"].as_f64()) {
+                (Some(hz), Some(d)) => format!("{hz:.2} Hz, damping {d:.3}"),
+                _ => "none (a rigid axis)".into(),
+            };
+            s.numbers.push((format!("axis {axis}: anti-resonance"), value));
+            if let Some(e) = json["fit_error"].as_f64() {
+                s.numbers.push((format!("axis {axis}: fit error"), format!("{e:.3}")));
+            }
+        }
+        let pair = |v: &serde_json::Value| match (v[0].as_f64(), v[1].as_f64()) {
+            (Some(db), Some(deg)) => Some(format!("{db:.4} dB, {deg:.3}°")),
+            _ => None,
+        };
+        if let (Some(before), Some(after)) = (pair(&json["spread_before"]), pair(&json["spread_after"])) {
+            s.numbers.push(("the axes' responses apart up to the position-loop bandwidth, before".into(), before));
+            s.numbers.push(("after the correction".into(), after));
+        }
     }
     Some(Section {
         title: "Identification and response correction (seed 001)".into(),

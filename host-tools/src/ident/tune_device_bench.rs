@@ -126,6 +126,7 @@ fn check_axis(
     let drive = VirtualDrive::power_on(&vd, FileFlash::in_memory())?;
     let mut session = DriveSession::open(DeviceLink::new(InProcessDrive::new(drive), ANSWER_TIMEOUT))?;
     session.baud = LineSettings::default().baud;
+    session.commission_with_defaults()?;
     let frame = out.join(format!("{}.corr.frame", axis.axis));
     let device = out.join(format!("device_{}_{}", axis.axis, if noise_std > 0.0 { "noise" } else { "clean" }));
     check_on_device(fmu, tuning, axis, ("in-process virtual drive", &mut session), &frame, &device, |_, _| {})
@@ -180,6 +181,21 @@ impl TuneDeviceBenchArgs {
         pb.finish_and_clear();
         crate::bench::raw_traces::tidy(&out, self.keep_raw)?;
         let ok = cases.iter().all(|c| c.report.passed);
+        let worst = |f: &dyn Fn(&TuneDeviceCase) -> f64| cases.iter().map(f).fold(0.0, f64::max);
+        crate::bench::figures::Recorder::new("tune-device")
+            .at_most(
+                "pseudo-circle over the link to the virtual drive: drive vs twin",
+                worst(&|c| c.circle_counts),
+                GOAL_COUNTS,
+                "counts",
+            )
+            .info(
+                "machine end, drive vs twin, largest share of the response",
+                100.0 * worst(&|c| c.machine_end_relative.0),
+                "%",
+            )
+            .equal("cases missing a goal", cases.iter().filter(|c| !c.report.passed).count() as f64, 0.0, "")
+            .write(c.out.as_deref(), ok)?;
         if c.json {
             let j = serde_json::json!({"bench": "tune-device", "cases": cases, "passed": ok});
             println!("{}", serde_json::to_string_pretty(&j)?);

@@ -8,7 +8,7 @@ use std::path::Path;
 use anyhow::{Context, Result};
 
 use crate::analysis::response_point::ResponsePoint;
-use crate::plot::signals::{escape, svg_opening, tick_step};
+use crate::plot::signals::{escape, fitted_text, svg_opening, tick_step};
 
 const WIDTH: f64 = 900.0;
 const PANEL_H: f64 = 220.0;
@@ -16,6 +16,12 @@ const LEFT: f64 = 70.0;
 const RIGHT: f64 = 20.0;
 const TOP: f64 = 60.0;
 const GAP: f64 = 40.0;
+const LEGEND_ROW: f64 = 15.0;
+/// A legend entry: its line sample and the gap before its label, the gap after the label, and a
+/// character's width at the plot's 11 px font (estimated at 0.6 em, a little wide for safety).
+const LEGEND_SAMPLE: f64 = 24.0;
+const LEGEND_GAP: f64 = 22.0;
+const LEGEND_CHAR: f64 = 7.0;
 const COLOURS: [&str; 6] = ["#444444", "#d62728", "#1f77b4", "#2ca02c", "#9467bd", "#ff7f0e"];
 
 /// `curves`: (label, points); non-finite values are skipped.
@@ -25,8 +31,10 @@ pub fn plot_bode(
     curves: &[(&str, &[ResponsePoint])],
     marker: Option<(f64, &str)>,
 ) -> Result<()> {
-    // Room for the legend's rows above the panels.
-    let top = TOP.max(30.0 + curves.len().div_ceil(3) as f64 * 14.0 + 16.0);
+    // The legend above the panels, its entries flowed into rows by their labels' widths.
+    let legend = legend_positions(curves.iter().map(|(label, _)| *label));
+    let rows = legend.iter().map(|&(_, row)| row + 1).max().unwrap_or(0);
+    let top = TOP.max(30.0 + rows as f64 * LEGEND_ROW + 16.0);
     let all = || curves.iter().flat_map(|(_, c)| c.iter()).filter(|p| p.gain_db.is_finite() && p.phase_deg.is_finite());
     let fmin = all().map(|p| p.frequency).fold(f64::INFINITY, f64::min);
     let fmax = all().map(|p| p.frequency).fold(f64::NEG_INFINITY, f64::max);
@@ -36,17 +44,15 @@ pub fn plot_bode(
     let height = top + 2.0 * (PANEL_H + GAP) + 10.0;
     let mut svg = String::new();
     svg.push_str(&svg_opening(WIDTH, height, title, 18.0, 14.0));
-    for (i, (label, _)) in curves.iter().enumerate() {
-        let lx = LEFT + (i % 3) as f64 * 270.0;
-        let ly = 34.0 + (i / 3) as f64 * 14.0;
+    for (i, ((label, _), &(lx, row))) in curves.iter().zip(&legend).enumerate() {
+        let ly = 34.0 + row as f64 * LEGEND_ROW;
+        // A label wider than the plot (on a row of its own) is squeezed to fit.
         writeln!(
             svg,
-            r#"<line x1="{lx}" y1="{ly}" x2="{}" y2="{ly}" stroke="{}" stroke-width="2"/><text x="{}" y="{}">{}</text>"#,
+            r#"<line x1="{lx}" y1="{ly}" x2="{}" y2="{ly}" stroke="{}" stroke-width="2"/>{}"#,
             lx + 20.0,
             COLOURS[i % 6],
-            lx + 24.0,
-            ly + 4.0,
-            escape(label)
+            fitted_text(lx + LEGEND_SAMPLE, ly + 4.0, 11.0, "start", WIDTH - RIGHT - lx - LEGEND_SAMPLE, label)
         )?;
     }
     for (panel, name) in [(0, "gain (dB)"), (1, "phase (deg)")] {
@@ -154,4 +160,50 @@ pub fn plot_bode(
     )?;
     svg.push_str("</svg>\n");
     std::fs::write(path, svg).with_context(|| format!("cannot write {}", path.display()))
+}
+
+/// Where each legend entry goes: (left edge, row). Entries are laid left to right and wrap to
+/// a new row when the next one would run past the right edge, so no label overlaps the next
+/// (a label wider than the plot gets a row of its own).
+fn legend_positions<'a>(labels: impl Iterator<Item = &'a str>) -> Vec<(f64, usize)> {
+    let (mut x, mut row) = (LEFT, 0);
+    let mut out = Vec::new();
+    for label in labels {
+        let width = LEGEND_SAMPLE + label.chars().count() as f64 * LEGEND_CHAR;
+        if x > LEFT && x + width > WIDTH - RIGHT {
+            x = LEFT;
+            row += 1;
+        }
+        out.push((x, row));
+        x += width + LEGEND_GAP;
+    }
+    out
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The sweep's legend (long labels) wraps instead of overlapping: every entry ends before
+    /// the next one on its row starts.
+    #[test]
+    fn legend_labels_do_not_overlap() {
+        let labels = [
+            "oracle (8 kHz acquisition, 10x longer, 2^24-count encoder, no noise)",
+            "analytic linear model",
+            "equivalent time (acquisition stream)",
+            "on-line correlator (drive)",
+            "x before",
+            "x after",
+        ];
+        let at = legend_positions(labels.iter().copied());
+        for (i, (&(x, row), label)) in at.iter().zip(labels).enumerate() {
+            let end = x + LEGEND_SAMPLE + label.chars().count() as f64 * LEGEND_CHAR;
+            assert!(end <= WIDTH - RIGHT || x == LEFT, "{label} runs past the edge");
+            if let Some(&(next, next_row)) = at.get(i + 1) {
+                assert!(next_row > row || next >= end + LEGEND_GAP, "{label} overlaps the next entry");
+            }
+        }
+        assert!(at.iter().any(|&(_, row)| row > 0), "long labels wrap");
+    }
 }

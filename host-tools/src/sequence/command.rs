@@ -106,6 +106,8 @@ fn bench_sequence(args: &SequenceBenchArgs) -> Result<bool> {
         })?;
         pb.finish_and_clear();
         let g = crate::sequence::bench::grid_figures(&grid);
+        record_grid_figures("sequence-random", &format!("{n} drawn stops (seed {})", args.plant_seed), &g, None)
+            .write(common.out.as_deref(), g.holds)?;
         if common.json {
             println!(
                 "{}",
@@ -129,11 +131,18 @@ fn bench_sequence(args: &SequenceBenchArgs) -> Result<bool> {
     }
     let r = crate::sequence::bench::bench(&fmu, zero_speed, |f| pb.set_position((f * 1000.0) as u64))?;
     pb.finish_and_clear();
+    let g = &r.grid_figures;
+    record_grid_figures(
+        "sequence",
+        &format!("the stop grid, {} stops", crate::bench::figures::number(g.runs as f64)),
+        g,
+        Some(r.settle_falls_with_gain),
+    )
+    .write(common.out.as_deref(), r.settle_falls_with_gain && g.holds)?;
     if common.json {
         println!("{}", serde_json::to_string_pretty(&serde_json::json!({"bench": "sequence", "result": r}))?);
         return Ok(r.settle_falls_with_gain && r.grid_figures.holds);
     }
-    let g = &r.grid_figures;
     println!(
         "servo bench sequence — stop grid: run speeds {:?} rad/s, zero-speed levels {:?} rad/s, widths {:?} counts, every gain of the table; gradient 2000 rad/s², completion hold {} ms, hysteresis {} counts ({} runs)",
         crate::sequence::bench::GRID_SPEEDS,
@@ -181,6 +190,36 @@ fn bench_sequence(args: &SequenceBenchArgs) -> Result<bool> {
         println!("  {:>12} {:>14.2} {:>22.2}", a.zero_speed, a.measured * 1e3, a.ramp * 1e3);
     }
     Ok(r.settle_falls_with_gain && r.grid_figures.holds)
+}
+
+/// The figures of a set of stops (and, on the shipped grid, whether the settle time falls as
+/// the gain rises).
+fn record_grid_figures(
+    bench: &str,
+    stops: &str,
+    g: &crate::sequence::bench::GridFigures,
+    settle_falls: Option<bool>,
+) -> crate::bench::figures::Recorder {
+    let mut figures = crate::bench::figures::Recorder::new(bench);
+    figures
+        .equal(
+            &format!("stop sequence, {stops}: completion toggles after the first raise"),
+            g.max_toggles as f64,
+            0.0,
+            "",
+        )
+        .equal("stops that never complete", g.never_complete as f64, 0.0, "")
+        .at_most("swing after acceptance over its bound", g.worst_swing_ratio, 1.0, "")
+        .info("settle time, acceptance to completion", g.max_settle * 1e3, "ms");
+    if let Some(falls) = settle_falls {
+        figures.equal(
+            "settle time not falling as the gain rises (stop and move)",
+            if falls { 0.0 } else { 1.0 },
+            0.0,
+            "",
+        );
+    }
+    figures
 }
 
 /// One table row per stop (see [`crate::sequence::bench::GridStop`]); the plant where a stop

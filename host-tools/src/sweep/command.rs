@@ -106,6 +106,8 @@ impl SweepBenchArgs {
         let rows = crate::sweep::bench::grid(&fmu, &selection, |f| pb.set_position((f * 1000.0) as u64))?;
         pb.finish_and_clear();
         let ok = rows.iter().all(|r| r.met);
+        let bench = if random.is_some() { "sweep-random" } else { "sweep-grid" };
+        record_rows(bench, &rows, "").write(self.common.out.as_deref(), ok)?;
         if self.common.json {
             println!(
                 "{}",
@@ -125,6 +127,29 @@ impl SweepBenchArgs {
         }
         Ok(ok)
     }
+}
+
+/// The sweep grid's figures: the worst gain error, phase error and measurement time over its
+/// rows against the goals, and the rows that miss one.
+fn record_rows(bench: &str, rows: &[crate::sweep::bench::GridRow], what: &str) -> crate::bench::figures::Recorder {
+    use crate::sweep::bench::{GOAL_DB, GOAL_DEG, GOAL_SECONDS};
+    let worst = |f: fn(&crate::sweep::bench::GridRow) -> f64| rows.iter().map(f).fold(0.0, f64::max);
+    let seeds = rows.iter().map(|r| r.seeds).max().unwrap_or(0);
+    let mut figures = crate::bench::figures::Recorder::new(bench);
+    figures
+        .at_most(
+            &format!(
+                "frequency response vs the oracle, 10 Hz–3 kHz, {} rows{what}, {seeds} noise seed(s): gain",
+                rows.len()
+            ),
+            worst(|r| r.gain_db),
+            GOAL_DB,
+            "dB",
+        )
+        .at_most("phase", worst(|r| r.phase_deg), GOAL_DEG, "°")
+        .at_most("time per sweep", worst(|r| r.measurement_time_s), GOAL_SECONDS, "s")
+        .equal("rows missing a goal", rows.iter().filter(|r| !r.met).count() as f64, 0.0, "");
+    figures
 }
 
 /// The injection point of a `--point` word and its default amplitude.
@@ -243,6 +268,17 @@ fn bench_sweep(common: &Common, detail: bool, seeds: u32) -> Result<bool> {
     let r = crate::sweep::bench::bench(&fmu, seeds, |f| pb.set_position((f * 1000.0) as u64))?;
     pb.finish_and_clear();
     let ok = r.goals_met();
+    let mut figures = record_rows("sweep", &r.grid, ", 3 injection points × 5 plants × 2 noise levels");
+    figures
+        .equal(
+            "results measured with the drive's output limited and not flagged, outside the goals",
+            r.limit_detection.iter().filter(|c| !c.met).count() as f64,
+            0.0,
+            "",
+        )
+        .info("the oracle against itself, gain", r.oracle_self_check.0, "dB")
+        .info("equivalent-time stream vs the drive's on-line correlator, gain", r.stream_vs_online.0, "dB")
+        .write(common.out.as_deref(), ok)?;
     // With --detail, how well the sweep's standard errors predict its errors (not a goal).
     let calibration = if detail {
         let pb = progress_bar("standard error calibration", common.json);

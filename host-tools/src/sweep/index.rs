@@ -20,6 +20,24 @@ pub fn section(root: &Path) -> Option<Section> {
         files: ["sweep.csv", "sweep.json"].iter().map(|f| relative(root, &dir.join(f))).collect(),
         ..Default::default()
     };
+    if let Some(t) = json["measurement_time_s"].as_f64() {
+        s.numbers.push(("measurement time".into(), format!("{t:.2} s")));
+    }
+    if let Some(points) = json["stream"].as_array() {
+        s.numbers.push(("points measured".into(), points.len().to_string()));
+    }
+    if let Some(hz) = json["acquisition_hz"].as_f64() {
+        s.numbers.push(("acquisition rate".into(), format!("{hz} Hz")));
+    }
+    for (key, what) in [
+        ("imprecise_hz", "points above the precision target"),
+        ("limited_hz", "points measured with the output limited"),
+        ("unmeasured_hz", "points not measured"),
+    ] {
+        if let Some(v) = json[key].as_array() {
+            s.numbers.push((what.into(), v.len().to_string()));
+        }
+    }
     if let (Some(db), Some(deg)) = (json["stream_vs_online"][0].as_f64(), json["stream_vs_online"][1].as_f64()) {
         s.verdicts.push((
             format!(

@@ -119,6 +119,12 @@ impl<F: ParamFlash> VirtualDrive<F> {
         })
     }
 
+    /// Schedule one more fault (its time from power-on, as the settings' are).
+    pub fn schedule_fault(&mut self, fault: ScheduledFault) {
+        self.faults.push(fault);
+        self.faults.sort_by(|a, b| b.at.total_cmp(&a.at));
+    }
+
     /// Power off: the flash, to power on again with.
     pub fn power_off(self) -> F {
         self.flash

@@ -26,9 +26,53 @@ fn session(drive: VirtualDrive<FileFlash>) -> DriveSession<InProcessDrive<FileFl
     DriveSession::open(link).unwrap()
 }
 
+/// A session on a drive whose motor is commissioned (the plant hides its mounting: the drive
+/// measures it over the link, as on a board).
+fn commissioned(drive: VirtualDrive<FileFlash>) -> DriveSession<InProcessDrive<FileFlash>> {
+    let mut s = session(drive);
+    commission(&mut s);
+    s
+}
+
+fn commission<T: crate::device::link::DrivePort>(s: &mut DriveSession<T>) {
+    let p = s.params().unwrap();
+    s.commission(&control_core::commissioning::CommissioningSettings::for_params(&p)).unwrap();
+}
+
+/// Schedule `fault` on the session's drive `after` seconds from now.
+fn fault_after(s: &mut DriveSession<InProcessDrive<FileFlash>>, fault: BoardFault, after: f64) {
+    let drive = &mut s.link.port_mut().drive;
+    let at = drive.time() + after;
+    drive.schedule_fault(ScheduledFault { fault, at });
+}
+
+/// A drive fresh from the factory refuses every mode until its motor is commissioned over the
+/// link; the commissioning measures the plant's hidden mounting (direction, electrical offset)
+/// and constants, and the drive then runs.
+#[test]
+fn a_drive_refuses_to_run_until_commissioned_over_the_link_and_then_runs() {
+    let st = settings();
+    let mut s = session(VirtualDrive::power_on(&st, FileFlash::in_memory()).unwrap());
+    let e = s.rest().unwrap_err().to_string();
+    assert!(e.contains("not commissioned") && e.contains("servo commission"), "{e}");
+    let defaults = s.params().unwrap();
+    let e = s.set_params(&defaults).unwrap_err().to_string();
+    assert!(e.contains("servo commission"), "{e}");
+    let p = s.params().unwrap();
+    let c = s.commission(&control_core::commissioning::CommissioningSettings::for_params(&p)).unwrap();
+    let truth = st.plant;
+    let close = |got: f32, want: f64| (got as f64 / want - 1.0).abs() < 0.03;
+    assert!(close(c.measured.resistance, truth.resistance), "{:?}", c.measured);
+    assert!(close(c.measured.flux_linkage, truth.flux_linkage), "{:?}", c.measured);
+    assert_eq!(c.measured.alignment.pole_pairs, truth.pole_pairs);
+    assert!(c.seconds < 5.0, "{} s", c.seconds);
+    assert!(s.params().unwrap().commissioned);
+    s.rest().unwrap();
+}
+
 #[test]
 fn calibrates_then_follows_a_velocity_command_like_the_fmu() {
-    let mut s = session(VirtualDrive::power_on(&settings(), FileFlash::in_memory()).unwrap());
+    let mut s = commissioned(VirtualDrive::power_on(&settings(), FileFlash::in_memory()).unwrap());
     assert_eq!(s.boot_params, ParamsOrigin::Defaults(DefaultsReason::NothingStored));
     s.rest().unwrap();
     let velocity = Commands { mode: Mode::Velocity, velocity: 20.0, ..Commands::default() };
@@ -40,7 +84,7 @@ fn calibrates_then_follows_a_velocity_command_like_the_fmu() {
 
 #[test]
 fn saved_parameters_survive_a_power_cycle_and_a_foreign_rate_is_refused() {
-    let mut s = session(VirtualDrive::power_on(&settings(), FileFlash::in_memory()).unwrap());
+    let mut s = commissioned(VirtualDrive::power_on(&settings(), FileFlash::in_memory()).unwrap());
     let mut p = power_stage::ratings::with_board_limits(Params::default());
     p.velocity.kp *= 1.25;
     s.set_params(&p).unwrap();
@@ -61,9 +105,8 @@ fn saved_parameters_survive_a_power_cycle_and_a_foreign_rate_is_refused() {
 
 #[test]
 fn an_injected_break_latches_its_fault_and_an_experiment_refuses_to_start() {
-    let mut st = settings();
-    st.faults = vec![ScheduledFault { fault: BoardFault::Break, at: 0.2 }];
-    let mut s = session(VirtualDrive::power_on(&st, FileFlash::in_memory()).unwrap());
+    let mut s = commissioned(VirtualDrive::power_on(&settings(), FileFlash::in_memory()).unwrap());
+    fault_after(&mut s, BoardFault::Break, 0.2);
     let t = s.wait(0.3).unwrap();
     assert!(t.faults.contains(Faults::HARDWARE_BREAK), "{:?}", t.faults);
     let e = s.rest().unwrap_err().to_string();
@@ -108,10 +151,9 @@ fn a_corrupting_line_gives_a_clear_error_not_a_wrong_answer() {
 
 #[test]
 fn a_fault_during_a_sweep_stops_it_with_the_fault_named_and_the_samples_kept() {
-    let mut st = settings();
-    // The sweep starts at START_AT (0.5 s): the break comes about 1.4 s into it.
-    st.faults = vec![ScheduledFault { fault: BoardFault::Break, at: crate::fmu::sweep_run::START_AT + 1.4 }];
-    let mut s = session(VirtualDrive::power_on(&st, FileFlash::in_memory()).unwrap());
+    let mut s = commissioned(VirtualDrive::power_on(&settings(), FileFlash::in_memory()).unwrap());
+    // The sweep starts at START_AT (0.5 s) from now: the break comes about 1.4 s into it.
+    fault_after(&mut s, BoardFault::Break, crate::fmu::sweep_run::START_AT + 1.4);
     let run = crate::fmu::sweep_run::SweepRun {
         settings: control_core::phase_shifted_sweep::SweepParams::default(),
         parameters: Default::default(),
@@ -215,6 +257,7 @@ fn a_save_whose_answer_is_lost_is_told_from_the_telemetry_and_writes_one_record(
         let drive = VirtualDrive::power_on(&settings(), FileFlash::in_memory()).unwrap();
         let link = DeviceLink::new(LosesSaveAnswer::new(drive, at_the_end), Duration::from_millis(300));
         let mut s = DriveSession::open(link).unwrap();
+        commission(&mut s);
         s.rest().unwrap();
         assert_eq!(s.save_params().unwrap(), 1);
         assert_eq!(s.link.port().lost, 1, "the save's answer was not hit: the test proves nothing");
@@ -230,6 +273,7 @@ fn a_save_whose_answer_is_lost_is_told_from_the_telemetry_and_writes_one_record(
         let drive = VirtualDrive::power_on(&settings(), FileFlash::in_memory()).unwrap();
         let link = DeviceLink::new(LosesSaveAnswer::new(drive, at_the_end), Duration::from_millis(300));
         let mut s = DriveSession::open(link).unwrap();
+        commission(&mut s);
         s.rest().unwrap();
         s.order(Request::SetCommands(Commands { mode: Mode::Velocity, velocity: 20.0, ..Commands::default() }), "v")
             .unwrap();

@@ -10,6 +10,7 @@ fn main() -> ExitCode {
     let matches = command().get_matches();
     let cli = Cli::from_arg_matches(&matches).unwrap_or_else(|e| e.exit());
     let result = match &cli.command {
+        Command::Commission(args) => args.run(),
         Command::Run(args) => args.run(),
         Command::Accdec(args) => args.run(),
         Command::Sequence(args) => args.run(),
@@ -21,10 +22,12 @@ fn main() -> ExitCode {
         Command::Device(args) => args.run(),
         Command::VirtualDrive(args) => args.run(),
         Command::Index(args) => args.run(),
+        Command::Figures(args) => args.run(),
         Command::CliReference => {
             print!("{}", host_tools::cli::markdown_reference(&command()));
             Ok(true)
         }
+        Command::Bench(BenchCommand::Commission(args)) => args.run(),
         Command::Bench(BenchCommand::Robustness(args)) => args.run(),
         Command::Bench(BenchCommand::Firmware(args)) => args.run(),
         Command::Bench(BenchCommand::Fmu(args)) => args.run(),

@@ -1,0 +1,107 @@
+//! Commissioning a drive's motor over the link: the sequence started, waited on in the drive's
+//! time, its result sent back as the drive's parameters (`Params::with_commissioned`); and an
+//! experiment's parameters completed with the commissioned set the drive holds.
+
+use anyhow::{bail, Result};
+use control_core::commissioning::{CommissioningSettings, CommissioningStatus, MeasuredMotor};
+use control_core::faults::Faults;
+use control_core::protocol::{Request, Response};
+use control_core::{Commands, Mode, Params};
+
+use crate::device::link::DrivePort;
+use crate::device::session::DriveSession;
+
+/// The longest a commissioning may take (s of the drive's time).
+pub const COMMISSIONING_LIMIT_S: f64 = 20.0;
+
+/// What the drive told of a finished commissioning.
+#[derive(Clone, Copy, Debug)]
+pub struct Commissioned {
+    pub measured: MeasuredMotor,
+    /// The drive's time it took (s).
+    pub seconds: f64,
+    /// The parameters the drive runs with from now on.
+    pub params: Params,
+}
+
+impl<T: DrivePort> DriveSession<T> {
+    /// The parameters in force on the drive.
+    pub fn params(&mut self) -> Result<Params> {
+        match self.answer(&Request::GetParams)? {
+            Response::Params(p) => Ok(p),
+            Response::Refused(why) => bail!("the drive refused the parameters' request: {why}"),
+            Response::FrameError(e) => bail!("the drive could not read the parameters' request: {e}"),
+            other => bail!("unexpected answer to the parameters' request: {other:?}"),
+        }
+    }
+
+    /// Commission the drive's motor with `settings` (its encoder's counts and its tick filled
+    /// in from the drive's parameters): the sequence's result becomes the drive's parameters
+    /// (not saved: [`DriveSession::save_params`] does that). A failure is an error with the
+    /// sequence's reason; the drive keeps the bridge off and its parameters.
+    pub fn commission(&mut self, settings: &CommissioningSettings) -> Result<Commissioned> {
+        let before = self.params()?;
+        let mut settings = *settings;
+        settings.counts_per_rev = before.encoder_counts_per_rev;
+        settings.tick_period = before.rates.tick_period();
+        self.tick_hz = before.rates.current_loop_hz as f64;
+        self.order(Request::SetCommands(Commands { mode: Mode::Torque, ..Commands::default() }), "the rest command")?;
+        let t = self.telemetry()?;
+        let faults = Faults(t.faults.0 & !Faults::NOT_COMMISSIONED);
+        if faults.any() {
+            bail!("the drive has faults latched: {faults} (look at them, then `servo device --port … clear-faults`)");
+        }
+        self.order(Request::Commission(settings), "the commissioning's start")?;
+        let start = self.telemetry()?.tick;
+        let end = self.wait_until(COMMISSIONING_LIMIT_S, |t| {
+            Ok(!matches!(t.commissioning, Some(CommissioningStatus::Running(_))))
+        });
+        let end = match end {
+            Ok(t) => t,
+            Err(e) => {
+                // Never leave a sequence running behind an error.
+                let _ = self.order(Request::StopCommissioning, "the commissioning's stop");
+                return Err(e);
+            }
+        };
+        let seconds = end.tick.saturating_sub(start) as f64 / self.tick_hz;
+        let measured = match end.commissioning {
+            Some(CommissioningStatus::Done(m)) => m,
+            Some(CommissioningStatus::Failed(fault)) => {
+                bail!("commissioning failed after {seconds:.2} s: {fault:?} (the bridge is off; nothing was kept)")
+            }
+            other => bail!("the drive reports no finished commissioning ({other:?})"),
+        };
+        let params = before.with_commissioned(&measured);
+        self.order(Request::SetParams(params), "the commissioned parameters")?;
+        Ok(Commissioned { measured, seconds, params })
+    }
+
+    /// [`DriveSession::commission`] with the default settings for the drive's encoder and tick
+    /// (2 A, 12 V, a sixteenth of the loop rate): what the in-process virtual drive's benches
+    /// do before their experiments, as a user does once on a new machine.
+    pub fn commission_with_defaults(&mut self) -> Result<Commissioned> {
+        let p = self.params()?;
+        self.commission(&CommissioningSettings::for_params(&p))
+    }
+
+    /// `params` as the drive can run them: a set that is not commissioned takes the motor's
+    /// constants and the encoder's mounting of the drive's own commissioned set (its loop
+    /// gains stay the run's, as its twin runs them); a drive that has none is an error that
+    /// says what to do.
+    pub fn with_drive_commissioning(&mut self, params: &Params) -> Result<Params> {
+        if params.commissioned {
+            return Ok(*params);
+        }
+        let drive = self.params()?;
+        if !drive.commissioned {
+            bail!(
+                "the drive's motor is not commissioned: run `servo commission --device PORT` first (it measures the \
+                 motor and the encoder's mounting; --save keeps them in the drive's flash)"
+            );
+        }
+        // The run's own loop gains (its current loop's among them: the twin runs with them),
+        // the drive's measured motor and mounting.
+        Ok(Params { motor: drive.motor, encoder_mounting: drive.encoder_mounting, commissioned: true, ..*params })
+    }
+}
