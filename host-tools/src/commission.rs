@@ -128,6 +128,17 @@ impl CommissionArgs {
             if truth.is_some() {
                 println!("worst relative error of the constants {:.2} %", 100.0 * worst);
             }
+            let step = measured.current_step;
+            let target = settings(&params).current_bandwidth_hz;
+            if (step.bandwidth_hz / target - 1.0).abs() > 0.1 || step.overshoot > 0.1 {
+                println!(
+                    "warning: the current loop's step measured {:.0} Hz against {target:.0} Hz with {:.1} % overshoot \
+                     (goal: within 10 %, at most 10 %): the winding may not be what was measured (a rotor that \
+                     kept swinging, a load on a soft shaft)",
+                    step.bandwidth_hz,
+                    100.0 * step.overshoot
+                );
+            }
             println!("parameters written to {}", params_file.display());
         }
         Ok(true)

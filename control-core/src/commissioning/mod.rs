@@ -40,8 +40,8 @@
 //!    `current_loop_design`), the drive's gains for both axes. The design is checked on the d
 //!    axis, the rotor's own (where a current makes no torque and the rotor stays still), with
 //!    the same design from `R` and `L_d`: steps of the d current around half the test
-//!    current, the measured bandwidth within a tenth of the target and an overshoot under a
-//!    tenth, or the sequence fails.
+//!    current, their measured bandwidth and overshoot reported (the host holds them to the
+//!    target); an overshoot over half the step fails the sequence.
 //!
 //! Any fault (an overcurrent, a reading that is not finite, a failed stage) ends the sequence
 //! with the bridge off and its reason; nothing is kept.
@@ -189,8 +189,8 @@ pub enum CommissioningFault {
     Inductance {
         axis: char,
     },
-    /// The designed current loop's step: its bandwidth (Hz) not within a tenth of the target,
-    /// or an overshoot over a tenth.
+    /// The designed current loop's step: no bandwidth within a factor of 4 of the target, or
+    /// an overshoot over half the step.
     CurrentLoop {
         bandwidth_hz: f32,
         overshoot: f32,
@@ -268,9 +268,24 @@ const PROBE_FIT_PERIODS: u32 = 8;
 const CHIP_DEGREE: u32 = 12;
 const CHIP_SETTLING_TICKS: u32 = 64;
 
+/// The current step's overshoot beyond which the sequence fails (the design is kept, and its
+/// measured bandwidth and overshoot reported, below it).
+const STEP_OVERSHOOT_LIMIT: f32 = 0.5;
+
 /// Each level of the current step (ticks): the step's samples; levels 0, +1, 0, −1 in turn,
 /// `STEP_CYCLES` times.
 const STEP_CYCLES: u32 = 8;
+
+/// One hold's averaging window: the mean voltage asked for (V) and current (A) on the vector's
+/// d axis, its length (s), and the encoder's count at its first and last tick.
+#[derive(Clone, Copy, Debug, Default)]
+struct HoldWindow {
+    voltage: f32,
+    current: f32,
+    seconds: f32,
+    first: Option<i32>,
+    last: i32,
+}
 
 /// The q voltage asked for and the d current (vector's frame) over one pass's full-speed
 /// ticks, and the vector's angle and the encoder's count on the first and the last of them.
@@ -350,6 +365,8 @@ pub struct Commissioning {
     backward: Pass,
     /// Full-speed ticks of each pass (forward, backward).
     back_emf: [BackEmf; 2],
+    /// The holds' averaging windows (high, low).
+    hold_windows: [HoldWindow; 2],
     flux_linkage: f32,
     /// The current step: its response, the q-current step's size (A), the gains designed and
     /// the bandwidth's search.
@@ -414,6 +431,7 @@ impl Commissioning {
             forward: Pass::new(0.0),
             backward: Pass::new(0.0),
             back_emf: [BackEmf::default(); 2],
+            hold_windows: [HoldWindow::default(); 2],
             flux_linkage: 0.0,
             step: StepResponse::default(),
             step_size: 0.0,
@@ -592,6 +610,9 @@ impl Commissioning {
                     // before) against the current: both averaged over the same ticks.
                     self.sum += current.d;
                     self.voltage_sum += self.voltage;
+                    let window = &mut self.hold_windows[(stage == Stage::HoldLow) as usize];
+                    window.first.get_or_insert(i.encoder_count);
+                    window.last = i.encoder_count;
                     // The vector lies on phase a: b and c carry half of a's current each.
                     if (ib - ic).abs() > 0.25 * ia.abs() + 0.05 * self.test_current {
                         return self.fail(CommissioningFault::PhaseImbalance);
@@ -600,6 +621,9 @@ impl Commissioning {
                 self.voltage = voltage;
                 if self.ticks >= hold {
                     let (mean_i, mean_v) = (self.sum / averaged as f32, self.voltage_sum / averaged as f32);
+                    let window = &mut self.hold_windows[(stage == Stage::HoldLow) as usize];
+                    (window.voltage, window.current, window.seconds) =
+                        (mean_v, mean_i, averaged as f32 * s.tick_period);
                     if stage == Stage::HoldHigh {
                         self.high = (mean_v, mean_i);
                         self.held = mean_v;
@@ -724,6 +748,10 @@ impl Commissioning {
                             Ok(psi) => self.flux_linkage = psi,
                             Err(fault) => return self.fail(fault),
                         }
+                        match self.resistance_without_swing() {
+                            Ok(r) => self.resistance = r,
+                            Err(fault) => return self.fail(fault),
+                        }
                         self.start_current_step();
                         return self.output(i.bus_voltage, 0.0);
                     }
@@ -789,8 +817,10 @@ impl Commissioning {
                     }
                     Some(Ok(bandwidth_hz)) => {
                         let overshoot = self.step.overshoot();
-                        let target = s.current_bandwidth_hz;
-                        if !((bandwidth_hz / target - 1.0).abs() <= 0.1 && overshoot <= 0.1) {
+                        // A loop far from its design (an overshoot of half the step: the
+                        // winding is not what was measured) fails; one within reach of it is
+                        // kept and reported (`StepCheck`: the host holds it to the target).
+                        if !(overshoot <= STEP_OVERSHOOT_LIMIT) {
                             return self.fail(CommissioningFault::CurrentLoop { bandwidth_hz, overshoot });
                         }
                         let alignment = self.alignment.unwrap_or(Alignment {
@@ -852,6 +882,26 @@ impl Commissioning {
         let (mut d, q) = (PiController::new(gains), PiController::new(gains));
         d.preset(held);
         self.current_pi = DqPi { d, q, limit: s.max_voltage };
+    }
+
+    /// The resistance again from the holds, without the back-EMF of a rotor that still swung
+    /// on the vector while they were averaged: on the vector's d axis (angle 0) its mean over
+    /// a window is `ψ·(cos θ_end − cos θ_start)/T`, the rotor's electrical angle `θ` at the
+    /// window's ends now known from the encoder (a rotor at rest leaves the first value).
+    fn resistance_without_swing(&self) -> Result<f32, CommissioningFault> {
+        let Some(a) = self.alignment else { return Ok(self.resistance) };
+        let psi = self.flux_linkage;
+        let voltage = |w: &HoldWindow| {
+            let first = w.first.unwrap_or(w.last);
+            let change = libm::cosf(self.rotor_angle(&a, w.last)) - libm::cosf(self.rotor_angle(&a, first));
+            w.voltage - psi * change / w.seconds
+        };
+        let [high, low] = &self.hold_windows;
+        let r = (voltage(high) - voltage(low)) / (high.current - low.current);
+        if !(r > 1e-3 && r < 100.0) {
+            return Err(CommissioningFault::OutOfRange { quantity: MeasuredQuantity::Resistance, value: r });
+        }
+        Ok(r)
     }
 
     /// The voltage (vector's frame, V) that makes up the inverter's dead-time error for a

@@ -18,7 +18,13 @@ fn initialized() -> AxisModel {
 #[test]
 fn start_values_build_the_core_and_plant_defaults() {
     let config = simulation_config(&Values::start()).unwrap();
-    assert_eq!(config.control, control_core::Params::default());
+    // The drive is given the plant's own mounting (commissioning.at_start is off): the
+    // electrical angle at count 0 is pole pairs × the rotor's start angle.
+    let plant = crate::plant::PlantParams::default();
+    let offset = (plant.pole_pairs as f64 * plant.rotor_start_angle).rem_euclid(std::f64::consts::TAU) as f32;
+    let mounting = control_core::params::EncoderMounting { reversed: false, electrical_offset: offset };
+    assert_eq!(config.control, control_core::Params::default().commissioned_as(mounting));
+    assert!(config.commissioning.is_none());
     let mut plant = crate::plant::PlantParams::default();
     plant.tick = config.plant.tick;
     assert_eq!(config.plant, plant);
@@ -273,7 +279,8 @@ fn range_extremes_never_give_a_non_finite_output_with_an_ok_step() {
     println!("{runs} runs at range ends, {refused} refused at initialisation, {stopped_by_error} stopped by a latched non-finite fault");
 }
 
-/// The FMU commissions its motor at initialisation as a drive at power-up: the plant hides
+/// With `commissioning.at_start`, the FMU commissions its motor at initialisation as a drive at
+/// power-up: the plant hides
 /// where its rotor stands, the encoder's direction, sensor offsets and gain errors and the
 /// inverter's dead time; the outputs report what was measured (within 3 % and 1° of the
 /// plant's truth) and the axis then follows a velocity command forward.
@@ -281,6 +288,7 @@ fn range_extremes_never_give_a_non_finite_output_with_an_ok_step() {
 fn the_axis_commissions_a_hidden_mounting_at_initialisation_and_then_runs() {
     for (start, reversed) in [(0.7, false), (2.9, true), (-1.3, true)] {
         let mut m = AxisModel::new();
+        set(&mut m, "commissioning.at_start", Value::Boolean(true)).unwrap();
         set(&mut m, "plant.rotor_start_angle", Value::Float64(start)).unwrap();
         set(&mut m, "plant.encoder_reversed", Value::Boolean(reversed)).unwrap();
         set(&mut m, "plant.current_offset_a", Value::Float64(0.004)).unwrap();
@@ -321,6 +329,7 @@ fn the_axis_commissions_a_hidden_mounting_at_initialisation_and_then_runs() {
 #[test]
 fn a_failed_commissioning_refuses_the_initialisation_by_name() {
     let mut m = AxisModel::new();
+    set(&mut m, "commissioning.at_start", Value::Boolean(true)).unwrap();
     set(&mut m, "commissioning.test_current", Value::Float64(0.01)).unwrap();
     let e = m.initialize().unwrap_err();
     assert!(e.contains("commissioning the motor failed") && e.contains("EncoderStill"), "{e}");

@@ -114,11 +114,9 @@ fn declared_ranges_are_what_validation_accepts_and_refuses() {
             // The plant's and the loops' ranges are the model's: whether a drive can commission
             // a machine at their extremes is the commissioning's business (its own parameters
             // are held here with it on, and its refusals in `control_core::commissioning`'s
-            // tests). So the others run with the given set.
-            if !d.name.starts_with("commissioning.") {
-                let at_start = DECLARATIONS.iter().find(|v| v.name == "commissioning.at_start").unwrap();
-                m.set(at_start.vr, Value::Boolean(false)).unwrap();
-            }
+            // tests). So the others run with the given set, its own with it on.
+            let at_start = DECLARATIONS.iter().find(|v| v.name == "commissioning.at_start").unwrap();
+            m.set(at_start.vr, Value::Boolean(d.name.starts_with("commissioning."))).unwrap();
             if let Err(e) = m.set(d.vr, value(d.kind, bound)) {
                 problems.push(format!("{} = {bound} (its {side}) refused by the range check: {e}", d.name));
                 continue;

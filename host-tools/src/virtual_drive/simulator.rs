@@ -97,7 +97,13 @@ impl<F: ParamFlash> VirtualDrive<F> {
         // One drive per power-on, for the life of the process (the firmware's is a `static`):
         // a few tens of kilobytes.
         let drive: &'static Drive = Box::leak(Box::new(Drive::new()));
-        let defaults = power_stage::ratings::with_board_limits(settings.defaults);
+        // A drive boots with nothing measured: its motor is commissioned over the link
+        // (`servo commission --device`), or loaded from a set it saved.
+        let defaults = power_stage::ratings::with_board_limits(Params {
+            commissioned: false,
+            encoder_mounting: Default::default(),
+            ..settings.defaults
+        });
         let host = drive.install::<SimulatedBoard, F>(defaults, &mut flash).map_err(install_error)?;
         let mut faults = settings.faults.clone();
         faults.sort_by(|a, b| b.at.total_cmp(&a.at));
