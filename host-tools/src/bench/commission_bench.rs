@@ -192,8 +192,10 @@ impl CommissionBenchArgs {
             })
             .collect();
         pb.finish_and_clear();
+        // The worst over the motors the sequence finished (the others are counted apart).
         let worst = |f: &dyn Fn(&MotorRow) -> f64| {
-            rows.iter().map(f).fold(0.0f64, |a, b| if b.is_nan() { f64::INFINITY } else { a.max(b) })
+            let finished = rows.iter().filter(|r| r.failed.is_none());
+            finished.map(f).fold(0.0f64, |a, b| if b.is_nan() { f64::INFINITY } else { a.max(b) })
         };
         let failed = rows.iter().filter(|r| r.failed.is_some()).count();
         let wrong = rows.iter().filter(|r| r.failed.is_none() && !r.found_right).count();
