@@ -424,7 +424,7 @@ impl Axis {
     /// Start commissioning the motor (`crate::commissioning`): from the next tick the sequence
     /// drives the bridge, the loops rest, whatever the mode, until the axis is built again
     /// ([`Axis::rebuild`], with [`Params::with_commissioned`] once it is done). Only at rest:
-    /// no torque applied (the bridge off counts as none), no sweep, no sequence running. A fault the axis latches meanwhile
+    /// no torque applied (the bridge off counts as none), the rotor still, no sweep, no sequence running. A fault the axis latches meanwhile
     /// (bus limits, an outside fault) stops it with the bridge off.
     pub fn start_commissioning(&mut self, settings: &CommissioningSettings) -> Result<(), CommissioningRefusal> {
         settings.validate().map_err(CommissioningRefusal::Setting)?;
@@ -434,10 +434,17 @@ impl Axis {
         if settings.tick_period != self.params.rates.tick_period() {
             return Err(CommissioningRefusal::Setting("tick_period"));
         }
+        // The sequence's own trip level within the drive's (its only current trip meanwhile).
+        if !(settings.overcurrent <= self.params.limits.overcurrent) {
+            return Err(CommissioningRefusal::Setting("overcurrent"));
+        }
         let running = matches!(self.commissioning(), Some(CommissioningStatus::Running(_)));
         // A torque the last tick applied with the bridge on (off, nothing was applied).
         let pushing = self.applied.torque_command != 0.0 && !self.faults.any();
-        if running || pushing || self.sweep.running() {
+        // A rotor still turning (coasting, or stopped by a fault while moving) is not at rest:
+        // a tenth of a radian a second at most.
+        let turning = !(self.velocity_estimate.abs() <= 0.1);
+        if running || pushing || turning || self.sweep.running() {
             return Err(CommissioningRefusal::Busy);
         }
         self.commissioning = Some(Commissioning::new(*settings).map_err(CommissioningRefusal::Setting)?);
@@ -966,6 +973,28 @@ mod tests {
     /// The default parameters, commissioned on a motor whose encoder starts at electrical zero.
     fn commissioned() -> Params {
         Params::default().commissioned_as(EncoderMounting::default())
+    }
+
+    /// Commissioning starts only with a trip level within the drive's own and a rotor at rest.
+    #[test]
+    fn commissioning_is_refused_above_the_drive_s_trip_level_and_on_a_turning_rotor() {
+        let p = commissioned();
+        let mut axis = Axis::new(p).unwrap();
+        let mut settings = crate::commissioning::CommissioningSettings::for_params(&p);
+        settings.overcurrent = 2.0 * p.limits.overcurrent;
+        assert_eq!(axis.start_commissioning(&settings), Err(CommissioningRefusal::Setting("overcurrent")));
+        settings.overcurrent = p.limits.overcurrent;
+        // The encoder moving: the velocity estimate is not at rest.
+        let rest = Commands { mode: Mode::Torque, ..Commands::default() };
+        for k in 0..8 {
+            axis.step(&AxisInputs { encoder_count: 50 * k, ..inputs() }, &rest);
+        }
+        assert_eq!(axis.start_commissioning(&settings), Err(CommissioningRefusal::Busy));
+        for _ in 0..8 {
+            axis.step(&AxisInputs { encoder_count: 400, ..inputs() }, &rest);
+        }
+        assert_eq!(axis.start_commissioning(&settings), Ok(()));
+        assert!(matches!(axis.commissioning(), Some(crate::commissioning::CommissioningStatus::Running(_))));
     }
 
     /// An axis whose motor is not commissioned refuses every mode (each closes the current

@@ -75,7 +75,7 @@ impl StepResponse {
     }
 
     /// The settled value: the mean of the last eighth.
-    fn settled(&self) -> f32 {
+    pub fn settled(&self) -> f32 {
         let tail = STEP_SAMPLES / 8;
         (STEP_SAMPLES - tail..STEP_SAMPLES).map(|k| self.mean(k)).sum::<f32>() / tail as f32
     }
@@ -125,13 +125,17 @@ impl BandwidthSearch {
     /// target).
     pub fn step(&mut self, response: &StepResponse, tick: f32) -> Option<Result<f32, ()>> {
         let half_power = core::f32::consts::FRAC_1_SQRT_2;
+        // No response at all (nothing settled), or one that is not a number: no bandwidth.
+        if !(response.settled().is_finite() && response.settled() > 0.0) {
+            return Some(Err(()));
+        }
         if self.evaluations == 0 {
             self.evaluations = 1;
-            return (response.gain_at(self.low) < half_power).then_some(Err(()));
+            return (!(response.gain_at(self.low) >= half_power)).then_some(Err(()));
         }
         if self.evaluations == 1 {
             self.evaluations = 2;
-            return (response.gain_at(self.high) > half_power).then_some(Err(()));
+            return (!(response.gain_at(self.high) <= half_power)).then_some(Err(()));
         }
         let middle = 0.5 * (self.low + self.high);
         if response.gain_at(middle) > half_power {

@@ -788,7 +788,9 @@ impl Commissioning {
                 if edge {
                     let (before, after) = (level(t - hold), level(t));
                     let size = (after - before) * self.step_size;
-                    self.step.add(k, (current.d - (held + before * self.step_size)) / size);
+                    if size != 0.0 {
+                        self.step.add(k, (current.d - (held + before * self.step_size)) / size);
+                    }
                     if k == STEP_SAMPLES - 1 {
                         self.step.end_step();
                     }
@@ -964,6 +966,11 @@ impl Commissioning {
         // voltage leaves.
         let room = s.max_voltage - self.held_low.abs();
         self.step_size = (0.25 * self.test_current).min(0.5 * room.max(0.0) / (kp + ki * s.tick_period));
+        // No room beside the held voltage (or gains that are not numbers): a step of 0 would
+        // measure nothing; the analysis then finds no bandwidth and the sequence fails.
+        if !(self.step_size > 0.0) {
+            self.step_size = 0.0;
+        }
         self.step = StepResponse::default();
         self.voltage = self.held_low;
         self.next_stage(Stage::CurrentStep);

@@ -51,15 +51,18 @@ impl<T: DrivePort> DriveSession<T> {
         if faults.any() {
             bail!("the drive has faults latched: {faults} (look at them, then `servo device --port … clear-faults`)");
         }
-        self.order(Request::Commission(settings), "the commissioning's start")?;
-        let start = self.telemetry()?.tick;
-        let end = self.wait_until(COMMISSIONING_LIMIT_S, |t| {
-            Ok(!matches!(t.commissioning, Some(CommissioningStatus::Running(_))))
+        // From the start request on, every error stops the sequence (best effort: the request
+        // may have acted although its answer was lost).
+        let started = self.order(Request::Commission(settings), "the commissioning's start").and_then(|()| {
+            let start = self.telemetry()?.tick;
+            let end = self.wait_until(COMMISSIONING_LIMIT_S, |t| {
+                Ok(!matches!(t.commissioning, Some(CommissioningStatus::Running(_))))
+            })?;
+            Ok((start, end))
         });
-        let end = match end {
-            Ok(t) => t,
+        let (start, end) = match started {
+            Ok(both) => both,
             Err(e) => {
-                // Never leave a sequence running behind an error.
                 let _ = self.order(Request::StopCommissioning, "the commissioning's stop");
                 return Err(e);
             }

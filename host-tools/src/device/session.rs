@@ -145,11 +145,28 @@ impl<T: DrivePort> DriveSession<T> {
         Ok(t)
     }
 
+    /// [`DriveSession::rest`], a drive whose only fault is that its motor is not commissioned
+    /// accepted.
+    fn rest_allowing_no_commissioning(&mut self) -> Result<Telemetry> {
+        self.order(Request::SetCommands(Commands { mode: Mode::Torque, ..Commands::default() }), "the rest command")?;
+        let t = self.telemetry()?;
+        let faults = control_core::faults::Faults(t.faults.0 & !control_core::faults::Faults::NOT_COMMISSIONED);
+        if faults.any() {
+            bail!("the drive has faults latched: {faults} (look at them, then `servo device --port … clear-faults`)");
+        }
+        Ok(t)
+    }
+
     /// Give the drive `params` (at rest), completed with the drive's commissioned set where
     /// they are not one (`DriveSession::with_drive_commissioning`).
     pub fn set_params(&mut self, params: &Params) -> Result<()> {
-        // Faults first (they name what is wrong with the drive), then its commissioning.
-        self.rest()?;
+        // Faults first (they name what is wrong with the drive), then its commissioning; a
+        // commissioned set is what lifts a drive's lone NOT_COMMISSIONED fault.
+        if params.commissioned {
+            self.rest_allowing_no_commissioning()?;
+        } else {
+            self.rest()?;
+        }
         let params = &self.with_drive_commissioning(params)?;
         self.order(Request::SetParams(*params), "the parameters")?;
         self.tick_hz = params.rates.current_loop_hz as f64;
