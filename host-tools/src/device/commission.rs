@@ -4,9 +4,8 @@
 
 use anyhow::{bail, Result};
 use control_core::commissioning::{CommissioningSettings, CommissioningStatus, MeasuredMotor};
-use control_core::faults::Faults;
 use control_core::protocol::{Request, Response};
-use control_core::{Commands, Mode, Params};
+use control_core::Params;
 
 use crate::device::link::DrivePort;
 use crate::device::session::DriveSession;
@@ -45,12 +44,7 @@ impl<T: DrivePort> DriveSession<T> {
         settings.counts_per_rev = before.encoder_counts_per_rev;
         settings.tick_period = before.rates.tick_period();
         self.tick_hz = before.rates.current_loop_hz as f64;
-        self.order(Request::SetCommands(Commands { mode: Mode::Torque, ..Commands::default() }), "the rest command")?;
-        let t = self.telemetry()?;
-        let faults = Faults(t.faults.0 & !Faults::NOT_COMMISSIONED);
-        if faults.any() {
-            bail!("the drive has faults latched: {faults} (look at them, then `servo device --port … clear-faults`)");
-        }
+        self.rest_allowing_no_commissioning()?;
         // From the start request on, every error stops the sequence (best effort: the request
         // may have acted although its answer was lost).
         let started = self.order(Request::Commission(settings), "the commissioning's start").and_then(|()| {

@@ -128,26 +128,19 @@ impl<T: DrivePort> DriveSession<T> {
     /// Torque mode at zero torque; refuses to go on with faults latched (they are the
     /// user's to look at and clear, never an experiment's).
     pub fn rest(&mut self) -> Result<Telemetry> {
-        self.order(Request::SetCommands(Commands { mode: Mode::Torque, ..Commands::default() }), "the rest command")?;
-        let t = self.telemetry()?;
+        let t = self.rest_allowing_no_commissioning()?;
         if t.faults.0 == control_core::faults::Faults::NOT_COMMISSIONED {
             bail!(
                 "the drive's motor is not commissioned: it refuses every mode until it is (run `servo commission \
                  --device PORT`; --save keeps the result in the drive's flash)"
             );
         }
-        if t.faults.any() {
-            bail!(
-                "the drive has faults latched: {} (look at them, then `servo device --port … clear-faults`)",
-                t.faults
-            );
-        }
         Ok(t)
     }
 
     /// [`DriveSession::rest`], a drive whose only fault is that its motor is not commissioned
-    /// accepted.
-    fn rest_allowing_no_commissioning(&mut self) -> Result<Telemetry> {
+    /// accepted (what commissioning it, or giving it a commissioned set, lifts).
+    pub fn rest_allowing_no_commissioning(&mut self) -> Result<Telemetry> {
         self.order(Request::SetCommands(Commands { mode: Mode::Torque, ..Commands::default() }), "the rest command")?;
         let t = self.telemetry()?;
         let faults = control_core::faults::Faults(t.faults.0 & !control_core::faults::Faults::NOT_COMMISSIONED);
