@@ -41,8 +41,8 @@ impl Pass {
         self.highest = self.highest.max(counts);
     }
 
-    /// Counts per electrical radian and the counts at the vector's angle 0 (the fitted line).
-    fn line(&self) -> Option<(f32, f32)> {
+    /// Counts per electrical radian: the fitted line's slope.
+    fn slope(&self) -> Option<f32> {
         if self.n < 2.0 {
             return None;
         }
@@ -51,9 +51,14 @@ impl Pass {
         if !(sxx > 0.0) {
             return None;
         }
-        let slope = (self.angle_counts / self.n - mx * my) / sxx;
-        // At the vector's angle 0: x = −start.
-        Some((slope, my + slope * (-self.start - mx)))
+        Some((self.angle_counts / self.n - mx * my) / sxx)
+    }
+
+    /// The counts at the vector's angle 0 on a line of `slope` (counts per electrical radian)
+    /// through the pass's means.
+    fn intercept(&self, slope: f32) -> f32 {
+        let n = self.n.max(1.0);
+        self.counts / n + slope * (-self.start - self.angle / n)
     }
 
     /// Counts the rotor moved over the pass.
@@ -99,7 +104,7 @@ pub fn align(
     start_count: i32,
 ) -> Result<Alignment, AlignmentError> {
     let travel = forward.travel().min(backward.travel());
-    let (Some((k1, c1)), Some((k2, c2))) = (forward.line(), backward.line()) else {
+    let (Some(k1), Some(k2)) = (forward.slope(), backward.slope()) else {
         return Err(AlignmentError::EncoderStill { counts: travel });
     };
     // Less than an eighth of the counts a single pole pair's turn would give.
@@ -123,9 +128,12 @@ pub fn align(
     }
     let reversed = slope < 0.0;
     // Counts (direction-corrected, from the raw count 0) where the electrical angle is 0:
-    // the passes' mean intercept, with the exact counts per radian.
+    // the passes' mean intercept, each on the line of the exact counts per radian through its
+    // pass's means (a swing that bends a fitted slope by a few percent would move a fitted
+    // intercept, extrapolated to the angle 0 turns away, by as much of the pass's angle).
     let exact = counts_per_rev as f32 / (pole_pairs * TAU);
     let sign = if reversed { -1.0 } else { 1.0 };
+    let (c1, c2) = (forward.intercept(sign * exact), backward.intercept(sign * exact));
     let cpr = counts_per_rev as i64;
     // The start count within a revolution keeps the numbers small.
     let start = (start_count as i64).rem_euclid(cpr) as f32;

@@ -12,7 +12,8 @@
 //!    voltage: an open phase.
 //! 2. **Resistance.** The current loop, on the same fixed angle, ramps the current to the test
 //!    current (the rotor, wherever it stands, is pulled to the vector gradually), holds it and
-//!    then half of it; `R = ΔV/ΔI` between the two holds (the sensors' offsets and the
+//!    then half of it, the rotor's swing on the vector damped until the first hold averages
+//!    (`swing_damping`); `R = ΔV/ΔI` between the two holds (the sensors' offsets and the
 //!    inverter's dead-time voltage, the same at both, drop out). The third phase's current not
 //!    the other two's mean: a phase is missing.
 //! 3. **d-axis inductance.** Chips around the voltage of half the test current (the current
@@ -48,6 +49,7 @@
 
 mod current_loop_design;
 mod encoder_alignment;
+mod swing_damping;
 mod winding_fit;
 
 #[cfg(test)]
@@ -67,6 +69,7 @@ use crate::reference_frames::{clarke, inverse_park, park, AlphaBeta, Dq};
 use crate::trigonometry::sin_cos;
 use current_loop_design::{BandwidthSearch, StepResponse, STEP_SAMPLES};
 use encoder_alignment::{align, Pass};
+use swing_damping::SwingDamping;
 use winding_fit::WindingFit;
 
 /// What the sequence needs to know before it starts: nothing of the motor.
@@ -293,24 +296,26 @@ struct HoldWindow {
 struct BackEmf {
     voltage: f32,
     current: f32,
+    q_current: f32,
     ticks: u32,
     first: Option<(f32, i32)>,
     last: (f32, i32),
 }
 
 impl BackEmf {
-    fn add(&mut self, q_voltage: f32, d_current: f32, angle: f32, count: i32) {
+    fn add(&mut self, q_voltage: f32, current: Dq, angle: f32, count: i32) {
         self.voltage += q_voltage;
-        self.current += d_current;
+        self.current += current.d;
+        self.q_current += current.q;
         self.ticks += 1;
         self.first.get_or_insert((angle, count));
         self.last = (angle, count);
     }
 
-    /// The mean q voltage (V) and d current (A), and the window's length (s).
-    fn means(&self, tick: f32) -> (f32, f32, f32) {
+    /// The mean q voltage (V), d and q currents (A), and the window's length (s).
+    fn means(&self, tick: f32) -> (f32, f32, f32, f32) {
         let n = self.ticks.max(2) as f32;
-        (self.voltage / n, self.current / n, (n - 1.0) * tick)
+        (self.voltage / n, self.current / n, self.q_current / n, (n - 1.0) * tick)
     }
 }
 
@@ -386,8 +391,10 @@ pub struct Commissioning {
     dead_time: f32,
     /// The probe's inductance (H): the alignment's current loop is designed with it.
     probe_inductance: f32,
-    /// The current loop of the alignment (in the vector's frame).
+    /// The current loop of the alignment (in the vector's frame) and the damping of the
+    /// rotor's swing on its vector (the q current it asks for).
     current_pi: DqPi,
+    swing: SwingDamping,
     chips: MSequence,
     fit: WindingFit,
     /// The chip voltage asked for on the last tick (applied over this one) and the one
@@ -446,6 +453,7 @@ impl Commissioning {
             dead_time: 0.0,
             probe_inductance: 0.0,
             current_pi: DqPi::default(),
+            swing: SwingDamping::default(),
             chips: match MSequence::new(PROBE_DEGREE) {
                 Ok(m) => m,
                 Err(_) => MSequence::DEGREE_15,
@@ -548,10 +556,10 @@ impl Commissioning {
                             });
                         }
                         self.probe_inductance = w.inductance;
-                        self.start_current_loop(w.resistance, w.inductance, 0.0);
                         // Within what the voltage allows on this winding, with room for the
                         // loop to act.
                         self.test_current = s.test_current.min(0.7 * s.max_voltage / w.resistance);
+                        self.start_current_loop(w.resistance, w.inductance, 0.0);
                         self.next_stage(Stage::Ramp);
                     }
                 } else if self.ticks.is_multiple_of(period) {
@@ -579,7 +587,8 @@ impl Commissioning {
             Stage::Ramp => {
                 let share = self.ticks as f32 / self.ticks_of(RAMP_S) as f32;
                 self.voltage = self.current_pi.d(self.test_current * share.min(1.0) - current.d);
-                q_voltage = self.current_pi.q(-current.q);
+                let damping = self.swing.reference(current.q, s.tick_period);
+                q_voltage = self.current_pi.q(damping - current.q);
                 if share >= 1.0 {
                     self.next_stage(Stage::HoldHigh);
                 }
@@ -587,8 +596,11 @@ impl Commissioning {
             Stage::HoldHigh | Stage::HoldLow => {
                 let target = if stage == Stage::HoldHigh { self.test_current } else { 0.5 * self.test_current };
                 let voltage = self.current_pi.d(target - current.d);
-                q_voltage = self.current_pi.q(-current.q);
                 let (hold, averaged) = (self.ticks_of(HOLD_S), self.ticks_of(AVERAGED_S));
+                // The swing damped until the first hold's averaging (`swing_damping`).
+                let damping = self.swing.reference(current.q, s.tick_period);
+                let damped = stage == Stage::HoldHigh && self.ticks < hold - averaged;
+                q_voltage = self.current_pi.q(if damped { damping } else { 0.0 } - current.q);
                 // The back-EMF of a rotor still swinging on the vector would bias the voltage:
                 // the first hold waits for it to stop before it averages.
                 if i.encoder_count != self.last_count {
@@ -683,7 +695,7 @@ impl Commissioning {
                 if at_full_speed {
                     self.back_emf[(stage == Stage::Backward) as usize].add(
                         q_voltage,
-                        current.d,
+                        current,
                         self.angle,
                         i.encoder_count,
                     );
@@ -846,6 +858,7 @@ impl Commissioning {
                 }
             }
         }
+        self.swing.asked(q_voltage);
         self.output(i.bus_voltage, q_voltage)
     }
 
@@ -884,6 +897,7 @@ impl Commissioning {
         let (mut d, q) = (PiController::new(gains), PiController::new(gains));
         d.preset(held);
         self.current_pi = DqPi { d, q, limit: s.max_voltage };
+        self.swing = SwingDamping::new(resistance, inductance, self.test_current);
     }
 
     /// The resistance again from the holds, without the back-EMF of a rotor that still swung
@@ -929,6 +943,10 @@ impl Commissioning {
         let omega = TAU * s.alignment_speed;
         let [f, b] = self.back_emf.map(|p| p.means(s.tick_period));
         let current = 0.5 * (f.1 + b.1);
+        // The damping's q current (its mean over a window: what is left of its transients)
+        // takes its resistive voltage from the q voltage.
+        let r = self.resistance;
+        let (f_voltage, b_voltage) = (f.0 - r * f.2, b.0 - r * b.2);
         let (sin, cos) = (libm::sinf(a.lag), libm::cosf(a.lag));
         // In the vector's frame the magnet's flux is `ψ·e^{−jδ}`, the rotor lagging by `δ`:
         // its q voltage is `ψ·(ω − dδ/dt)·cos δ`, whose mean over a window is `ψ·(ω·cos δ −
@@ -940,9 +958,9 @@ impl Commissioning {
             let first = p.first.unwrap_or(p.last);
             (libm::sinf(lag_at(p.last)) - libm::sinf(lag_at(first))) / window
         };
-        let (swing_f, swing_b) = (swing(&self.back_emf[0], f.2), swing(&self.back_emf[1], b.2));
+        let (swing_f, swing_b) = (swing(&self.back_emf[0], f.3), swing(&self.back_emf[1], b.3));
         let inductive = 2.0 * omega * current * (self.ld * cos * cos + self.lq * sin * sin);
-        let psi = (f.0 - b.0 - inductive) / (2.0 * omega * cos - swing_f + swing_b);
+        let psi = (f_voltage - b_voltage - inductive) / (2.0 * omega * cos - swing_f + swing_b);
         if !(psi > 1e-4 && psi < 10.0) {
             return Err(CommissioningFault::OutOfRange { quantity: MeasuredQuantity::FluxLinkage, value: psi });
         }

@@ -78,6 +78,15 @@ fn the_default_motor_is_found_from_any_start_angle_and_either_direction() {
     }
 }
 
+/// No friction at all: the rotor pulled to the vector from its start angle would swing on the
+/// magnet's spring for ever; the damping while the vector is held brings it to rest.
+#[test]
+fn a_rotor_without_friction_is_found() {
+    for start_angle in [0.7, 2.9] {
+        check(MotorTruth { start_angle, coulomb: 0.0, viscous: 0.0, inertia: 1.5e-4, ..MotorTruth::default_motor() });
+    }
+}
+
 #[test]
 fn sensor_errors_dead_time_and_noise_do_not_bias_the_constants() {
     check(MotorTruth {
