@@ -42,7 +42,9 @@
 //!    axis, the rotor's own (where a current makes no torque and the rotor stays still), with
 //!    the same design from `R` and `L_d`: steps of the d current around half the test
 //!    current, their measured bandwidth and overshoot reported (the host holds them to the
-//!    target); an overshoot over half the step fails the sequence.
+//!    target); an overshoot over half the step fails the sequence. Then the winding, shorted,
+//!    brakes the rotor to rest (what the q chips left of its motion; a machine without
+//!    friction would drift on) before the sequence ends.
 //!
 //! Any fault (an overcurrent, a reading that is not finite, a failed stage) ends the sequence
 //! with the bridge off and its reason; nothing is kept.
@@ -402,6 +404,8 @@ pub struct Commissioning {
     last_chip: f32,
     applied_chip: f32,
     last_current: Option<f32>,
+    /// What was measured, kept while the rotor is braked to rest.
+    result: Option<MeasuredMotor>,
 }
 
 /// One tick's readings.
@@ -462,6 +466,7 @@ impl Commissioning {
             last_chip: 0.0,
             applied_chip: 0.0,
             last_current: None,
+            result: None,
         })
     }
 
@@ -822,7 +827,12 @@ impl Commissioning {
             Stage::StepAnalysis => {
                 // No voltage while the search runs, one evaluation a tick.
                 self.voltage = 0.0;
-                let found = self.search.as_mut().and_then(|search| search.step(&self.step, s.tick_period));
+                let searching = self.result.is_none();
+                let found = self
+                    .search
+                    .as_mut()
+                    .filter(|_| searching)
+                    .and_then(|search| search.step(&self.step, s.tick_period));
                 match found {
                     None => {}
                     Some(Err(())) => {
@@ -843,7 +853,10 @@ impl Commissioning {
                             offset: 0.0,
                             lag: 0.0,
                         });
-                        self.status = CommissioningStatus::Done(MeasuredMotor {
+                        self.still_ticks = 0;
+                        self.last_count = i.encoder_count;
+                        self.waited = 0;
+                        self.result = Some(MeasuredMotor {
                             resistance: self.resistance,
                             ld: self.ld,
                             lq: self.lq,
@@ -853,6 +866,21 @@ impl Commissioning {
                             current_ki: self.designed.1,
                             current_step: StepCheck { bandwidth_hz, overshoot },
                         });
+                    }
+                }
+                // Found: the winding shorted (no voltage) brakes what the chips left of the
+                // rotor's motion (a machine without friction would drift on), until the
+                // encoder is still or for at most a second.
+                if let Some(measured) = self.result {
+                    if i.encoder_count != self.last_count {
+                        self.last_count = i.encoder_count;
+                        self.still_ticks = 0;
+                    } else {
+                        self.still_ticks += 1;
+                    }
+                    self.waited += 1;
+                    if self.still_ticks >= self.ticks_of(STILL_S) || self.waited >= self.ticks_of(STILL_WAIT_S) {
+                        self.status = CommissioningStatus::Done(measured);
                         return None;
                     }
                 }

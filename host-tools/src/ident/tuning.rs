@@ -104,9 +104,8 @@ pub fn command_to_load(
 ) -> Result<Vec<(f64, Complex64)>> {
     let period = (1.0 / DEFAULT_STEP).round() as usize; // one second
     let command = multisine(frequencies, MULTISINE_AMPLITUDE, (1 + MEASURED_PERIODS) * period);
-    // The model's own response to the correction, with its encoder's mounting given (what the
-    // check judges is the correction's design on the model; a commissioning of a model whose
-    // friction is off, swinging on its soft shaft, would bend it).
+    // The model's own response to the correction, with its encoder's mounting given: what the
+    // check judges is the correction's design on the identified model, not a commissioning.
     let mut parameters = parameters.clone();
     parameters.insert("commissioning.at_start".to_string(), Value::Bool(false));
     let scenario = Scenario::streamed_position("command_to_load", &parameters, &command);
