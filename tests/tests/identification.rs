@@ -59,15 +59,15 @@ fn saturated_torque_is_refused_with_the_reason() {
 
 /// Absorbers tuned next to the axis's own mode (208–215 Hz on this axis): the resonance masks
 /// the zero, the notch is 2–3 dB deep, and at 20 dB SNR the fit cannot place the zero. The
-/// identification says so (undetermined, with the refits' spread, or refused because the
-/// fitted zero lies outside the notch) and never reports a value off the truth: before, a
+/// identification says so (undetermined, with the refits' spread, refused because the fitted
+/// zero lies outside the notch, or no clear notch at all) and never reports a value off the truth: before, a
 /// 208 Hz absorber was reported at 362 Hz and a 218 Hz one at 265 Hz, both with exit status 0.
 #[test]
 fn a_masked_anti_resonance_is_reported_as_such_never_as_a_wrong_value() {
     let fmu = load_fmu();
     let out = std::env::temp_dir().join(format!("servo-ident-masked-{}", std::process::id()));
     let mut told = (0, 0);
-    for (hz, seed) in [(205.0, 1), (208.0, 1), (218.0, 2), (220.0, 3)] {
+    for (hz, seed) in [(205.0, 1), (208.0, 1), (208.0, 3), (218.0, 1), (218.0, 2), (220.0, 3)] {
         let mut p = absorber_parameters(hz, 0.05, LOAD);
         p.insert("plant.noise_seed".into(), Value::Int(seed));
         let r = identify_axis(&fmu, "x", &p, 0.05, Some(20.0), &out).unwrap();
@@ -85,7 +85,11 @@ fn a_masked_anti_resonance_is_reported_as_such_never_as_a_wrong_value() {
                 assert!(why.contains("does not determine") && why.contains("masks it"), "{hz} Hz: {why}");
                 told.1 += 1;
             }
-            (None, None, None) => panic!("{hz} Hz: a clear notch expected at 20 dB SNR: {:?}", r.notch),
+            // A notch at the clarity threshold (2–3 dB deep under 20 dB SNR) may also be
+            // read as no clear notch: a statement, not a wrong value.
+            (None, None, None) => {
+                assert!(r.notch.is_none_or(|n| !n.is_clear()), "{hz} Hz: a clear notch with no outcome: {:?}", r.notch);
+            }
         }
     }
     assert!(told.0 >= 1 && told.1 >= 1, "both outcomes exercised: {told:?}");

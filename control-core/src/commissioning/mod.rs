@@ -12,7 +12,7 @@
 //!    voltage: an open phase.
 //! 2. **Resistance.** The current loop, on the same fixed angle, ramps the current to the test
 //!    current (the rotor, wherever it stands, is pulled to the vector gradually), holds it and
-//!    then half of it, the rotor's swing on the vector damped until the first hold averages
+//!    then half of it, the rotor's swing on the vector damped until the first hold has settled
 //!    (`swing_damping`); `R = ΔV/ΔI` between the two holds (the sensors' offsets and the
 //!    inverter's dead-time voltage, the same at both, drop out). The third phase's current not
 //!    the other two's mean: a phase is missing.
@@ -602,7 +602,9 @@ impl Commissioning {
                 let target = if stage == Stage::HoldHigh { self.test_current } else { 0.5 * self.test_current };
                 let voltage = self.current_pi.d(target - current.d);
                 let (hold, averaged) = (self.ticks_of(HOLD_S), self.ticks_of(AVERAGED_S));
-                // The swing damped until the first hold's averaging (`swing_damping`).
+                // The swing damped until the first hold's settling ends (`swing_damping`): the
+                // wait for a still rotor and the averaging run undamped, so a rotor creeping
+                // under a damping far beyond critical takes the rest of its way at once.
                 let damping = self.swing.reference(current.q, s.tick_period);
                 let damped = stage == Stage::HoldHigh && self.ticks < hold - averaged;
                 q_voltage = self.current_pi.q(if damped { damping } else { 0.0 } - current.q);
@@ -886,7 +888,8 @@ impl Commissioning {
                 }
             }
         }
-        self.swing.asked(q_voltage);
+        // The q voltage the bridge will apply (scaled as `output` scales it).
+        self.swing.asked(q_voltage * self.output_scale(i.bus_voltage, q_voltage));
         self.output(i.bus_voltage, q_voltage)
     }
 
@@ -894,12 +897,22 @@ impl Commissioning {
     /// axis: on the fixed angle until aligned, then the rotor's. Within the highest voltage
     /// and the bus's circle, the direction kept.
     fn output(&self, bus_voltage: f32, q_voltage: f32) -> Option<AlphaBeta> {
+        let scale = self.output_scale(bus_voltage, q_voltage);
+        let (sin, cos) = sin_cos(self.angle + self.advance);
+        Some(inverse_park(Dq { d: self.voltage * scale, q: q_voltage * scale }, sin, cos))
+    }
+
+    /// What `output` scales the vector by to keep it within the highest voltage and the bus's
+    /// circle.
+    fn output_scale(&self, bus_voltage: f32, q_voltage: f32) -> f32 {
         let s = &self.settings;
         let limit = s.max_voltage.min(crate::reference_frames::voltage_circle_radius(bus_voltage));
         let magnitude = libm::sqrtf(self.voltage * self.voltage + q_voltage * q_voltage);
-        let scale = if magnitude > limit { limit / magnitude } else { 1.0 };
-        let (sin, cos) = sin_cos(self.angle + self.advance);
-        Some(inverse_park(Dq { d: self.voltage * scale, q: q_voltage * scale }, sin, cos))
+        if magnitude > limit {
+            limit / magnitude
+        } else {
+            1.0
+        }
     }
 
     /// The vector's turn under a current loop designed from the resistance and the probe's
@@ -925,7 +938,8 @@ impl Commissioning {
         let (mut d, q) = (PiController::new(gains), PiController::new(gains));
         d.preset(held);
         self.current_pi = DqPi { d, q, limit: s.max_voltage };
-        self.swing = SwingDamping::new(resistance, inductance, self.test_current);
+        self.swing =
+            SwingDamping::new(resistance, inductance, self.test_current, s.current_bandwidth_hz, s.tick_period);
     }
 
     /// The resistance again from the holds, without the back-EMF of a rotor that still swung
@@ -971,8 +985,8 @@ impl Commissioning {
         let omega = TAU * s.alignment_speed;
         let [f, b] = self.back_emf.map(|p| p.means(s.tick_period));
         let current = 0.5 * (f.1 + b.1);
-        // The damping's q current (its mean over a window: what is left of its transients)
-        // takes its resistive voltage from the q voltage.
+        // The q current the loop leaves (its mean over a window, about 0) takes its resistive
+        // voltage from the q voltage.
         let r = self.resistance;
         let (f_voltage, b_voltage) = (f.0 - r * f.2, b.0 - r * b.2);
         let (sin, cos) = (libm::sinf(a.lag), libm::cosf(a.lag));

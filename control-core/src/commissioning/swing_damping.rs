@@ -12,7 +12,8 @@
 //! test current (the loop keeps the current within it however fast the rotor swings).
 //! A winding's damping can be far beyond critical (a strong magnet on a small resistance and
 //! a light rotor): the rotor then creeps to the vector for tenths of a second, and a creeping
-//! rotor's back-EMF would bias the holds. So the damping stops before the holds average: a
+//! rotor's back-EMF would bias the holds. So the damping stops once the first hold has
+//! settled, before its wait for a still rotor and its average: a
 //! rotor still creeping then takes the rest of the way at once, and friction or the damping
 //! before has left it nothing to swing with. The passes that turn the vector start from a
 //! rotor at rest and are not damped: their smooth start and stop excite little swing, and a
@@ -20,8 +21,12 @@
 
 use core::f32::consts::TAU;
 
-/// The estimate's low-pass (Hz): above the swing, below the current loop.
+/// The estimate's low-pass (Hz): above the swing, below the current loop (at most a fifth of
+/// its bandwidth) and below half the winding's corner `R/L` (an inductance misread by the
+/// probe then leaves the estimate's own loop a gain under one).
 const ESTIMATE_HZ: f32 = 200.0;
+const ESTIMATE_SHARE_OF_LOOP: f32 = 0.2;
+const ESTIMATE_SHARE_OF_WINDING: f32 = 0.5;
 /// The damping current's limit (a share of the test current).
 const CURRENT_SHARE: f32 = 0.4;
 
@@ -30,20 +35,27 @@ pub(super) struct SwingDamping {
     resistance: f32,
     inductance: f32,
     limit: f32,
-    /// The q voltage applied over the tick just read (asked for a tick before), the one asked
-    /// for since, and the q current read a tick before.
+    /// The q voltage that drove the current from the last reading to this one (asked for two
+    /// calls before), the one asked for on the last call, and the last reading's q current.
     applied: f32,
     asked: f32,
     last_current: Option<f32>,
-    /// The filtered back-EMF estimate (V).
+    /// The low-pass's gain per tick and the filtered back-EMF estimate (V).
+    smoothing: f32,
     estimate: f32,
 }
 
 impl SwingDamping {
-    /// For a winding of `resistance` and `inductance`, the damping current within a share of
+    /// For a winding of `resistance` and `inductance` under a current loop of
+    /// `loop_bandwidth_hz` ticking every `tick` s, the damping current within a share of
     /// `test_current`.
-    pub(super) fn new(resistance: f32, inductance: f32, test_current: f32) -> Self {
-        Self { resistance, inductance, limit: CURRENT_SHARE * test_current, ..Self::default() }
+    pub(super) fn new(resistance: f32, inductance: f32, test_current: f32, loop_bandwidth_hz: f32, tick: f32) -> Self {
+        let corner = (TAU * ESTIMATE_HZ)
+            .min(TAU * ESTIMATE_SHARE_OF_LOOP * loop_bandwidth_hz)
+            .min(ESTIMATE_SHARE_OF_WINDING * resistance / inductance);
+        // The exact first-order step (stable at any tick).
+        let smoothing = 1.0 - libm::expf(-corner * tick);
+        Self { resistance, inductance, limit: CURRENT_SHARE * test_current, smoothing, ..Self::default() }
     }
 
     /// The q current to ask for this tick (A) from the q current read now.
@@ -54,7 +66,7 @@ impl SwingDamping {
         let back_emf = self.applied
             - self.resistance * 0.5 * (q_current + previous)
             - self.inductance * (q_current - previous) / tick;
-        self.estimate += TAU * ESTIMATE_HZ * tick * (back_emf - self.estimate);
+        self.estimate += self.smoothing * (back_emf - self.estimate);
         let reference = -self.estimate / self.resistance;
         // No winding measured (a resistance of 0): no damping.
         if !reference.is_finite() {
@@ -63,7 +75,8 @@ impl SwingDamping {
         crate::limit(reference, -self.limit, self.limit)
     }
 
-    /// The q voltage asked for this tick (applied over the next one).
+    /// The q voltage asked for on this call (it drives the current between the next reading
+    /// and the one after).
     pub(super) fn asked(&mut self, q_voltage: f32) {
         self.applied = self.asked;
         self.asked = q_voltage;
@@ -82,7 +95,7 @@ mod tests {
         // Electrical angle of the rotor (rad), speed (rad/s); the vector at 0 with 2 A on d.
         let (p, psi, r, l, j, i_d, t) = (4.0f32, 1.0 / 60.0, 0.3, 0.5e-3, 1.5e-4, 2.0, 1.0 / 16_000.0);
         let run = |damped: bool| {
-            let mut damping = SwingDamping::new(r, l, 2.0);
+            let mut damping = SwingDamping::new(r, l, 2.0, 1000.0, t);
             let gains = crate::pi_controller::PiGains { kp: 1.8, ki: 1100.0, period: t };
             let mut pi = crate::pi_controller::PiController::new(gains);
             let (mut theta, mut omega, mut i_q) = (2.8f32, 0.0f32, 0.0f32);
