@@ -601,13 +601,18 @@ pub fn identify(axis: &str, m: &Measured) -> Result<Identified> {
             zero.hz, zero.damping
         )));
     }
-    if let Some(p) = poles.iter().find(|p| p.damping <= 0.0) {
+    // Within the fitted band the data determine the poles: an unstable one there is a model
+    // that cannot be used. Beyond it the fit only extrapolates (a 15 Hz notch is fitted up to
+    // 90 Hz: a pole at the shaft's 260 Hz is whatever the noise leaves), so such a pole is
+    // neither a refusal nor the model's resonance.
+    let in_band = |p: &Factor| p.hz >= band.0 && p.hz <= band.1;
+    if let Some(p) = poles.iter().find(|p| p.damping <= 0.0 && in_band(p)) {
         return Err(refuse(format!(
             "the fitted model has unstable poles at {:.1} Hz (damping {:.3})",
             p.hz, p.damping
         )));
     }
-    let pole = poles.iter().copied().filter(|p| p.hz > zero.hz).min_by(|a, b| a.hz.total_cmp(&b.hz));
+    let pole = poles.iter().copied().filter(|p| p.hz > zero.hz && p.damping > 0.0).min_by(|a, b| a.hz.total_cmp(&b.hz));
     let error = anti_resonance_error(m, band, orders, zero);
     if let Some(e) = error.filter(|e| !determined(e, zero.damping)) {
         let nearest = poles.iter().min_by(|a, b| (a.hz / zero.hz - 1.0).abs().total_cmp(&(b.hz / zero.hz - 1.0).abs()));
