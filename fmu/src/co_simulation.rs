@@ -356,9 +356,11 @@ impl AxisModel {
         let x = sim.plant.state;
         let t = sim.telemetry();
         o.time = s.start_time + sim.ticks() as f64 * sim.tick_period();
-        o.motor_position = x.motor_angle;
+        // From where the rotor stood at time 0 (after commissioning), as the drive counts.
+        let origin = sim.position_origin();
+        o.motor_position = x.motor_angle - origin;
         o.motor_velocity = x.motor_velocity;
-        o.load_position = x.load_angle;
+        o.load_position = x.load_angle - origin;
         o.load_velocity = x.load_velocity;
         o.load_acceleration = sim.plant.accelerometer;
         o.iq = t.current.q as f64;

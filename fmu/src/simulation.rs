@@ -159,6 +159,12 @@ pub struct AxisSimulation {
     position_period: f64,
     /// What commissioning at power-up measured, and how it went.
     pub commissioned: Option<CommissioningOutcome>,
+    /// The motor's angle where time 0 starts (rad): where commissioning left the rotor, 0
+    /// without it; and the encoder's count there, the drive's counter zeroed at it (a drive
+    /// homes its counter where the axis stands once commissioned: position commands count
+    /// from where the axis stands at time 0).
+    position_origin: f64,
+    count_origin: i32,
 }
 
 impl AxisSimulation {
@@ -204,6 +210,8 @@ impl AxisSimulation {
             radians_per_count,
             position_period,
             commissioned: None,
+            position_origin: 0.0,
+            count_origin: 0,
         })
         .and_then(|mut sim: Self| {
             if let Some(c) = config.commissioning {
@@ -244,12 +252,24 @@ impl AxisSimulation {
                 None => return Err(ConfigError::Commissioning(CommissioningFault::Stopped)),
             }
         };
+        // The counter zeroed where the rotor stands: the electrical angle at the new count 0
+        // is the one at the old count `origin` (in the direction-corrected counter).
+        let origin = self.plant.encoder_count();
+        let mut zeroed = measured;
+        let a = &mut zeroed.alignment;
+        let corrected = if a.reversed { -(origin as f64) } else { origin as f64 };
+        let counts_per_rev = config.control.encoder_counts_per_rev as f64;
+        let turn = (corrected * a.pole_pairs as f64).rem_euclid(counts_per_rev) / counts_per_rev;
+        a.offset = (a.offset as f64 + std::f64::consts::TAU * turn).rem_euclid(std::f64::consts::TAU) as f32;
+        if a.offset >= std::f32::consts::TAU {
+            a.offset = 0.0;
+        }
         let params = if c.apply_motor {
-            config.control.with_commissioned(&measured)
+            config.control.with_commissioned(&zeroed)
         } else {
             let mounting = control_core::params::EncoderMounting {
-                reversed: measured.alignment.reversed,
-                electrical_offset: measured.alignment.offset,
+                reversed: zeroed.alignment.reversed,
+                electrical_offset: zeroed.alignment.offset,
             };
             config.control.commissioned_as(mounting)
         };
@@ -262,7 +282,14 @@ impl AxisSimulation {
         self.step_means = StepMeans::default();
         let seconds = ticks as f64 * self.tick_period;
         self.commissioned = Some(CommissioningOutcome { measured, seconds, excursion, peak_current });
+        self.position_origin = self.plant.state.motor_angle;
+        self.count_origin = origin;
         Ok(())
+    }
+
+    /// The motor's angle where time 0 starts (rad): the origin of the position outputs.
+    pub fn position_origin(&self) -> f64 {
+        self.position_origin
     }
 
     /// Motor radians per encoder count: `2π / encoder_counts_per_rev`.
@@ -386,7 +413,7 @@ impl AxisSimulation {
         let m = self.plant.measure();
         let mut inputs = AxisInputs {
             phase_currents: [m.phase_currents[0] as f32, m.phase_currents[1] as f32],
-            encoder_count: m.encoder_count,
+            encoder_count: m.encoder_count.wrapping_sub(self.count_origin),
             bus_voltage: m.bus_voltage as f32,
             // The plant's accelerometer (with its noise), read at the sampling instant as the
             // currents: what a drive's accelerometer input gives the core.

@@ -194,6 +194,16 @@ impl Plant {
         ia.abs().max(ib.abs()).max((ia + ib).abs())
     }
 
+    /// The encoder's counter now: from its start, in its own direction.
+    pub fn encoder_count(&self) -> i32 {
+        let turned = self.state.motor_angle * self.counts_per_radian;
+        let counts = if self.params.encoder_reversed { -turned } else { turned };
+        // floor() by truncation: the library call costs more than the rest of this function.
+        let truncated = counts as i64;
+        let floor = if (truncated as f64) > counts { truncated - 1 } else { truncated };
+        floor as i32
+    }
+
     /// Sample the sensors (advances the noise generators): the currents through the sensors'
     /// offsets and gains, the encoder's counter from its start in its own direction.
     pub fn measure(&mut self) -> Measurements {
@@ -205,17 +215,13 @@ impl Plant {
         let beta = self.state.id * s + self.state.iq * c;
         let ia = alpha;
         let ib = -0.5 * alpha + 0.5 * 3f64.sqrt() * beta;
-        let turned = self.state.motor_angle * self.counts_per_radian;
-        let counts = if p.encoder_reversed { -turned } else { turned };
-        // floor() by truncation: the library call costs more than the rest of this function.
-        let truncated = counts as i64;
-        let floor = if (truncated as f64) > counts { truncated - 1 } else { truncated };
+        let encoder_count = self.encoder_count();
         Measurements {
             phase_currents: [
                 ia * p.current_gain[0] + p.current_offset[0] + self.current_noise.sample(),
                 ib * p.current_gain[1] + p.current_offset[1] + self.current_noise.sample(),
             ],
-            encoder_count: floor as i32,
+            encoder_count,
             bus_voltage: p.bus_voltage,
         }
     }

@@ -387,9 +387,9 @@ declare_variables! {
     143 seq_gain_index: Int32 "seq_gain_index" Input Discrete = 0; NONE; I32; "Selected gain-table entry (0-based); a change selects it (outside the table: a logged refusal)";
 
     // Outputs.
-    144 motor_position: Float64 "motor_position" Output Continuous = 0.0; RAD; ANY; "Motor angle (true, not quantised)";
+    144 motor_position: Float64 "motor_position" Output Continuous = 0.0; RAD; ANY; "Motor angle (true, not quantised), from where the rotor stood at time 0 (after the commissioning at initialisation)";
     145 motor_velocity: Float64 "motor_velocity" Output Continuous = 0.0; RAD_S; ANY; "Motor velocity (true)";
-    146 load_position: Float64 "load_position" Output Continuous = 0.0; RAD; ANY; "Load (machine-end) angle";
+    146 load_position: Float64 "load_position" Output Continuous = 0.0; RAD; ANY; "Load (machine-end) angle, from where the rotor stood at time 0";
     147 load_velocity: Float64 "load_velocity" Output Continuous = 0.0; RAD_S; ANY; "Load (machine-end) velocity";
     148 load_acceleration: Float64 "load_acceleration" Output Continuous = 0.0; RAD_S2; ANY; "Load (machine-end) acceleration, as the accelerometer reads it (with its noise)";
     149 iq: Float64 "iq" Output Continuous = 0.0; A; ANY; "Measured q-axis current";
