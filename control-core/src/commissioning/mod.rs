@@ -684,7 +684,11 @@ impl Commissioning {
                 let end = TAU * s.alignment_turns;
                 let remaining = end - self.travelled;
                 let braking = libm::sqrtf(2.0 * accel * remaining.max(0.0));
-                self.speed = (self.speed + accel).min(full).min(braking).max(accel.min(remaining));
+                // The last ticks' crawl at least a few of the turn's f32 steps (a fast tick's
+                // acceleration per tick, 1e-8 rad at 64 kHz, would add nothing to the angle
+                // turned and the pass would never end).
+                let crawl = accel.max(4.0 * f32::EPSILON * end);
+                self.speed = (self.speed + accel).min(full).min(braking).max(crawl.min(remaining));
                 let at_full_speed = self.speed == full;
                 self.travelled += self.speed;
                 let done = self.travelled >= end;
