@@ -142,11 +142,15 @@ pub fn simulation_config(v: &Values) -> Result<SimulationConfig, String> {
     let auto = CommissioningSettings::for_encoder(counts, control.rates.tick_period()).current_bandwidth_hz;
     let bandwidth =
         if v.commissioning_current_bandwidth == 0.0 { auto } else { v.commissioning_current_bandwidth as f32 };
+    // The test current at most the parameter's, and within the drive's own limits: a third of
+    // its trip level (the sequence trips at three times the test current) and its current limit.
+    let test_current =
+        (v.commissioning_test_current as f32).min(control.limits.overcurrent / 3.0).min(control.current.max_current);
     let commissioning = v.commissioning_at_start.then(|| CommissioningConfig {
         settings: CommissioningSettings {
-            test_current: v.commissioning_test_current as f32,
+            test_current,
             max_voltage: v.commissioning_max_voltage as f32,
-            overcurrent: (3.0 * v.commissioning_test_current as f32).min(control.limits.overcurrent),
+            overcurrent: 3.0 * test_current,
             current_bandwidth_hz: bandwidth,
             ..CommissioningSettings::for_encoder(counts, control.rates.tick_period())
         },

@@ -290,6 +290,8 @@ struct HoldWindow {
     seconds: f32,
     first: Option<i32>,
     last: i32,
+    /// Sums of the phase a and b currents over the window (A).
+    phases: [f32; 2],
 }
 
 /// The q voltage asked for and the d current (vector's frame) over one pass's full-speed
@@ -632,10 +634,8 @@ impl Commissioning {
                     let window = &mut self.hold_windows[(stage == Stage::HoldLow) as usize];
                     window.first.get_or_insert(i.encoder_count);
                     window.last = i.encoder_count;
-                    // The vector lies on phase a: b and c carry half of a's current each.
-                    if (ib - ic).abs() > 0.25 * ia.abs() + 0.05 * self.test_current {
-                        return self.fail(CommissioningFault::PhaseImbalance);
-                    }
+                    window.phases[0] += ia;
+                    window.phases[1] += ib;
                 }
                 self.voltage = voltage;
                 if self.ticks >= hold {
@@ -643,6 +643,13 @@ impl Commissioning {
                     let window = &mut self.hold_windows[(stage == Stage::HoldLow) as usize];
                     (window.voltage, window.current, window.seconds) =
                         (mean_v, mean_i, averaged as f32 * s.tick_period);
+                    // The vector lies on phase a: b and c carry half of a's current each (on
+                    // the window's means: the sensors' noise of single samples is not a phase).
+                    let (ma, mb) = (window.phases[0] / averaged as f32, window.phases[1] / averaged as f32);
+                    let mc = -(ma + mb);
+                    if (mb - mc).abs() > 0.25 * ma.abs() + 0.05 * self.test_current {
+                        return self.fail(CommissioningFault::PhaseImbalance);
+                    }
                     if stage == Stage::HoldHigh {
                         self.high = (mean_v, mean_i);
                         self.held = mean_v;
