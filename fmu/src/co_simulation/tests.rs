@@ -17,25 +17,24 @@ fn initialized() -> AxisModel {
 
 #[test]
 fn start_values_build_the_core_and_plant_defaults() {
-    // The drive commissions at initialisation (commissioning.at_start): it starts from the
-    // core's defaults, not commissioned, the encoder's mounting unknown.
+    // The drive is given the plant's own mounting (commissioning.at_start is off): the
+    // electrical angle at count 0 is pole pairs × the rotor's start angle.
     let config = simulation_config(&Values::start()).unwrap();
-    assert_eq!(config.control, control_core::Params::default());
-    assert!(!config.control.commissioned);
-    let c = config.commissioning.expect("commissioning at start");
-    assert!(!c.apply_motor);
     let mut plant = crate::plant::PlantParams::default();
     plant.tick = config.plant.tick;
     assert_eq!(config.plant, plant);
-    // Off, the drive is given the plant's own mounting: the electrical angle at count 0 is
-    // pole pairs × the rotor's start angle.
-    let mut values = Values::start();
-    values.commissioning_at_start = false;
-    let config = simulation_config(&values).unwrap();
     let offset = (plant.pole_pairs as f64 * plant.rotor_start_angle).rem_euclid(std::f64::consts::TAU) as f32;
     let mounting = control_core::params::EncoderMounting { reversed: false, electrical_offset: offset };
     assert_eq!(config.control, control_core::Params::default().commissioned_as(mounting));
     assert!(config.commissioning.is_none());
+    // On, the drive commissions at initialisation: it starts from the core's defaults, not
+    // commissioned, the encoder's mounting unknown.
+    let mut values = Values::start();
+    values.commissioning_at_start = true;
+    let config = simulation_config(&values).unwrap();
+    assert_eq!(config.control, control_core::Params::default());
+    let c = config.commissioning.expect("commissioning at start");
+    assert!(!c.apply_motor);
 }
 
 #[test]
