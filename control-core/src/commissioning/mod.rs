@@ -500,6 +500,16 @@ impl Commissioning {
         self.voltage_sum = 0.0;
     }
 
+    /// The ticks the encoder has kept its count, with this tick's `count`.
+    fn count_still(&mut self, count: i32) {
+        if count != self.last_count {
+            self.last_count = count;
+            self.still_ticks = 0;
+        } else {
+            self.still_ticks += 1;
+        }
+    }
+
     /// The rotor's electrical angle from the encoder, once aligned.
     fn rotor_angle(&self, a: &Alignment, count: i32) -> f32 {
         let cpr = self.settings.counts_per_rev as i64;
@@ -612,12 +622,7 @@ impl Commissioning {
                 q_voltage = self.current_pi.q(if damped { damping } else { 0.0 } - current.q);
                 // The back-EMF of a rotor still swinging on the vector would bias the voltage:
                 // the first hold waits for it to stop before it averages.
-                if i.encoder_count != self.last_count {
-                    self.last_count = i.encoder_count;
-                    self.still_ticks = 0;
-                } else {
-                    self.still_ticks += 1;
-                }
+                self.count_still(i.encoder_count);
                 if stage == Stage::HoldHigh
                     && self.ticks == hold - averaged
                     && self.still_ticks < self.ticks_of(STILL_S)
@@ -885,12 +890,7 @@ impl Commissioning {
                 // rotor's motion (a machine without friction would drift on), until the
                 // encoder is still or for at most a second.
                 if let Some(measured) = self.result {
-                    if i.encoder_count != self.last_count {
-                        self.last_count = i.encoder_count;
-                        self.still_ticks = 0;
-                    } else {
-                        self.still_ticks += 1;
-                    }
+                    self.count_still(i.encoder_count);
                     self.waited += 1;
                     if self.still_ticks >= self.ticks_of(STILL_S) || self.waited >= self.ticks_of(STILL_WAIT_S) {
                         self.status = CommissioningStatus::Done(measured);
