@@ -51,6 +51,8 @@
 
 mod current_loop_design;
 mod encoder_alignment;
+mod free_rotor_fit;
+mod regression;
 mod swing_damping;
 mod winding_fit;
 
@@ -71,6 +73,7 @@ use crate::reference_frames::{clarke, inverse_park, park, AlphaBeta, Dq};
 use crate::trigonometry::sin_cos;
 use current_loop_design::{BandwidthSearch, StepResponse, STEP_SAMPLES};
 use encoder_alignment::{align, Pass};
+use free_rotor_fit::FreeRotorFit;
 use swing_damping::SwingDamping;
 use winding_fit::WindingFit;
 
@@ -401,6 +404,10 @@ pub struct Commissioning {
     swing: SwingDamping,
     chips: MSequence,
     fit: WindingFit,
+    q_fit: FreeRotorFit,
+    /// The dead-time voltage along the measured axis for the phase currents' signs at the
+    /// last reading (V).
+    dead_time_along_axis: f32,
     /// The chip voltage asked for on the last tick (applied over this one) and the one
     /// before, and the last tick's current on the injected axis.
     last_chip: f32,
@@ -465,6 +472,8 @@ impl Commissioning {
                 Err(_) => MSequence::DEGREE_15,
             },
             fit: WindingFit::default(),
+            q_fit: FreeRotorFit::default(),
+            dead_time_along_axis: 0.0,
             last_chip: 0.0,
             applied_chip: 0.0,
             last_current: None,
@@ -757,15 +766,46 @@ impl Commissioning {
                 // The fit's model holds through the transient of the chips' start: a few ticks
                 // only, for the delayed voltage's bookkeeping.
                 let settling = CHIP_SETTLING_TICKS;
+                // The q current turns the rotor: its fit takes the rotor's back-EMF
+                // (`free_rotor_fit`); the d current makes no torque on the rotor it is
+                // aligned with.
+                // The voltage the winding had over the tick just read: the chip asked for, short
+                // of the inverter's dead-time voltage for the phase currents' signs at that
+                // tick's start (the chips swing some phase currents through zero, where it
+                // flips; its constant part goes to the fits' intercepts).
+                let applied = self.applied_chip - self.dead_time_along_axis;
                 if self.ticks > settling {
+                    if stage == Stage::InductanceQ {
+                        self.q_fit.add(axis_current, applied);
+                    }
                     if let Some(previous) = self.last_current {
-                        self.fit.add(previous, axis_current, self.applied_chip);
+                        self.fit.add(previous, axis_current, applied);
                     }
                 }
+                let dead_time = self.phase_dead_time([ia, ib, ic], frame);
+                self.dead_time_along_axis = if stage == Stage::InductanceD { dead_time.d } else { dead_time.q };
                 self.last_current = Some(axis_current);
                 if self.ticks >= settling + self.chips.period() {
                     let axis = if stage == Stage::InductanceD { 'd' } else { 'q' };
-                    let Some(w) = self.fit.winding(s.tick_period) else {
+                    let first_order = self.fit.winding(s.tick_period);
+                    let fitted = if stage == Stage::InductanceQ {
+                        // Of the two models, the one whose resistance agrees with the holds'
+                        // (a rotor's swing the first-order fit cannot take reads as extra
+                        // resistance; on a slow winding whose rotor a few hertz of pull and
+                        // friction hold, the free rotor's model is the one that errs).
+                        let off = |w: &Option<Winding>| {
+                            w.map_or(f32::INFINITY, |w| libm::fabsf(w.resistance / self.resistance - 1.0))
+                        };
+                        let free_rotor = self.q_fit.winding(s.tick_period);
+                        if off(&free_rotor) < off(&first_order) {
+                            free_rotor
+                        } else {
+                            first_order
+                        }
+                    } else {
+                        first_order
+                    };
+                    let Some(w) = fitted else {
                         return self.fail(CommissioningFault::Inductance { axis });
                     };
                     if !(w.inductance > 1e-6 && w.inductance < 1.0) {
@@ -987,6 +1027,18 @@ impl Commissioning {
         park(AlphaBeta { alpha, beta }, sin, cos)
     }
 
+    /// The inverter's dead-time voltage (what each phase falls short by against its current)
+    /// for phase currents of the signs of `phases` (A), in the frame at `angle`.
+    fn phase_dead_time(&self, phases: [f32; 3], angle: f32) -> Dq {
+        let sign = |x: f32| if x >= 0.0 { 1.0 } else { -1.0 };
+        let (sa, sb, sc) = (sign(phases[0]), sign(phases[1]), sign(phases[2]));
+        let v = self.dead_time;
+        let alpha = v * (2.0 * sa - sb - sc) / 3.0;
+        let beta = v * (sb - sc) * 0.577_350_26;
+        let (sin, cos) = sin_cos(angle);
+        park(AlphaBeta { alpha, beta }, sin, cos)
+    }
+
     /// The flux linkage from the passes' q voltages (stage 4) and the inductances.
     fn flux_from_back_emf(&self) -> Result<f32, CommissioningFault> {
         let Some(a) = self.alignment else {
@@ -1050,6 +1102,8 @@ impl Commissioning {
     fn start_chips(&mut self, stage: Stage) {
         self.chips = MSequence::new(CHIP_DEGREE).unwrap_or(MSequence::DEGREE_15);
         self.fit = WindingFit::default();
+        self.q_fit = FreeRotorFit::default();
+        self.dead_time_along_axis = 0.0;
         self.last_chip = 0.0;
         self.applied_chip = 0.0;
         self.last_current = None;

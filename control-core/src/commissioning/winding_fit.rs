@@ -8,18 +8,16 @@
 //! + b·v[k−1] + c`: near `a = 1` that keeps `1 − a` to the sums' precision, where fitting
 //! `a` itself would lose it.
 
+use super::regression::Regression;
+
 /// Running sums of a first-order fit, the samples taken relative to the first ones (the
 /// ripple is small beside the currents' and voltages' means: f32 sums of raw values would
 /// lose it).
 #[derive(Clone, Copy, Debug, Default)]
 pub struct WindingFit {
     origin: Option<(f32, f32)>,
-    n: f32,
-    /// Sums of the regressors x = (i[k], v[k−1]), of y = i[k+1] − i[k] and their products.
-    sx: [f32; 2],
-    sy: f32,
-    sxx: [[f32; 2]; 2],
-    sxy: [f32; 2],
+    /// Regressors x = (i[k], v[k−1]) against y = i[k+1] − i[k].
+    sums: Regression,
 }
 
 /// What a fit found.
@@ -36,37 +34,17 @@ impl WindingFit {
     /// voltage applied in between (asked for a tick before `previous` was read).
     pub fn add(&mut self, previous: f32, next: f32, voltage: f32) {
         let (i0, v0) = *self.origin.get_or_insert((previous, voltage));
-        let x = [previous - i0, voltage - v0];
-        let y = next - previous;
-        self.n += 1.0;
-        self.sy += y;
-        for j in 0..2 {
-            self.sx[j] += x[j];
-            self.sxy[j] += x[j] * y;
-            for k in 0..2 {
-                self.sxx[j][k] += x[j] * x[k];
-            }
-        }
+        self.sums.add([previous - i0, voltage - v0, 0.0], next - previous);
     }
 
     /// The winding at `tick` (s) from the sums; `None` when they do not determine one (too
     /// few samples, no excitation, or a response no resistance–inductance branch gives).
     pub fn winding(&self, tick: f32) -> Option<Winding> {
-        if self.n < 16.0 {
+        if self.sums.samples() < 16.0 {
             return None;
         }
-        let n = self.n;
-        // The centred normal equations (covariances), solved by Cramer's rule.
-        let mean = |s: f32| s / n;
-        let c = |j: usize, k: usize| mean(self.sxx[j][k]) - mean(self.sx[j]) * mean(self.sx[k]);
-        let cy = |j: usize| mean(self.sxy[j]) - mean(self.sx[j]) * mean(self.sy);
-        let (c11, c22, c12) = (c(0, 0), c(1, 1), c(0, 1));
-        let det = c11 * c22 - c12 * c12;
-        if !(det > 1e-6 * c11 * c22) {
-            return None;
-        }
-        let decay = -(cy(0) * c22 - cy(1) * c12) / det;
-        let b = (cy(1) * c11 - cy(0) * c12) / det;
+        let [minus_decay, b, _] = self.sums.coefficients(2)?;
+        let decay = -minus_decay;
         if !(decay > 0.0 && decay < 1.0 && b > 0.0) {
             return None;
         }

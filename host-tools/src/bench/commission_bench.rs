@@ -41,6 +41,8 @@ pub struct MotorRow {
     pub resistance: f64,
     pub inductance: f64,
     pub flux_linkage: f64,
+    /// The rotor's inertia (kg·m²).
+    pub inertia: f64,
     pub reversed: bool,
     pub failed: Option<String>,
     pub errors: [f64; 4],
@@ -130,6 +132,7 @@ pub fn commission_one(plant: &PlantParams) -> MotorRow {
         resistance: plant.resistance,
         inductance: plant.ld,
         flux_linkage: plant.flux_linkage,
+        inertia: plant.motor_inertia,
         reversed: plant.encoder_reversed,
         failed: None,
         errors: [f64::NAN; 4],
