@@ -21,8 +21,9 @@ use super::winding_fit::Winding;
 pub struct FreeRotorFit {
     /// The first current (the samples are taken relative to it).
     origin: Option<f32>,
-    /// The two currents before the newest one, and the voltage over the tick before it.
-    history: Option<(f32, f32)>,
+    /// The two currents read before (the older one once there were two), and the voltage
+    /// over the tick before.
+    history: (Option<f32>, Option<f32>),
     last_voltage: f32,
     /// Regressors (i[k], i[k] − i[k−1], v[k] − v[k−1]) against y = i[k+1] − i[k].
     sums: Regression,
@@ -33,10 +34,11 @@ impl FreeRotorFit {
     /// this reading.
     pub fn add(&mut self, current: f32, voltage: f32) {
         let i0 = *self.origin.get_or_insert(current);
-        if let Some((before, previous)) = self.history {
+        // A row once three currents are known.
+        if let (Some(before), Some(previous)) = self.history {
             self.sums.add([previous - i0, previous - before, voltage - self.last_voltage], current - previous);
         }
-        self.history = Some((self.history.map_or(current, |(_, p)| p), current));
+        self.history = (self.history.1, Some(current));
         self.last_voltage = voltage;
     }
 

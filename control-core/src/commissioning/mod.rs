@@ -793,8 +793,11 @@ impl Commissioning {
                         // (a rotor's swing the first-order fit cannot take reads as extra
                         // resistance; on a slow winding whose rotor a few hertz of pull and
                         // friction hold, the free rotor's model is the one that errs).
-                        let off = |w: &Option<Winding>| {
-                            w.map_or(f32::INFINITY, |w| libm::fabsf(w.resistance / self.resistance - 1.0))
+                        let off = |w: &Option<Winding>| match w {
+                            Some(w) if w.inductance > 1e-6 && w.inductance < 1.0 => {
+                                libm::fabsf(w.resistance / self.resistance - 1.0)
+                            }
+                            _ => f32::INFINITY,
                         };
                         let free_rotor = self.q_fit.winding(s.tick_period);
                         if off(&free_rotor) < off(&first_order) {

@@ -69,6 +69,11 @@ pub fn bench_scenario(seconds: f64, record: &[&str]) -> String {
 description = "Default axis, velocity mode, steps up and down with a load disturbance"
 stop_time = {seconds:?}
 {record}
+# The simulation's speed, not the commissioning's at initialisation: the drive is given the
+# plant's mounting, as the bare run below.
+[parameters]
+"commissioning.at_start" = false
+
 [[events]]
 time = 0.0
 mode = 1
@@ -99,7 +104,8 @@ pub fn bare_simulation_wall(seconds: f64) -> Result<f64> {
     use servo_axis::parameters::simulation_config;
     use servo_axis::simulation::{AxisSimulation, UserInputs};
     use servo_axis::variables::Values;
-    let config = simulation_config(&Values::start()).map_err(anyhow::Error::msg)?;
+    let values = Values { commissioning_at_start: false, ..Values::start() };
+    let config = simulation_config(&values).map_err(anyhow::Error::msg)?;
     let h = crate::fmu::scenario::DEFAULT_STEP;
     let steps = (seconds / h).round() as usize;
     let (t1, t2, t3) = (grid(0.1 * seconds), grid(0.4 * seconds), grid(0.6 * seconds));

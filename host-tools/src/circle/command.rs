@@ -94,10 +94,16 @@ fn circle(args: &CircleArgs) -> Result<bool> {
     if let Some(mut session) = args.target.session()? {
         let port = args.target.device.as_deref().unwrap_or_default();
         let pb = progress_bar("circle", common.json);
-        let r = crate::circle::device::run_on_device(&fmu, &request, (port, &mut session), &out, |label, f| {
-            pb.set_prefix(label.to_string());
-            pb.set_position((f * 1000.0) as u64)
-        })?;
+        let r = crate::circle::device::run_on_device(
+            &fmu.as_drive_twin(),
+            &request,
+            (port, &mut session),
+            &out,
+            |label, f| {
+                pb.set_prefix(label.to_string());
+                pb.set_position((f * 1000.0) as u64)
+            },
+        )?;
         pb.finish_and_clear();
         if common.json {
             println!("{}", serde_json::to_string_pretty(&serde_json::json!({ "circle": r }))?);

@@ -83,7 +83,7 @@ pub fn bench(fmu: &Fmu, baud: u32, mut progress: impl FnMut(f64)) -> Result<Vec<
         let base = k as f64 / points.len() as f64;
         let share = 1.0 / points.len() as f64;
         let d = sweep_on_drive(&mut session, &run, |f| progress(base + share * 0.5 * f))?;
-        let (twin, _) = twin_sweep(fmu, &run, |f| progress(base + share * (0.5 + 0.5 * f)))?;
+        let (twin, _) = twin_sweep(&fmu.as_drive_twin(), &run, |f| progress(base + share * (0.5 + 0.5 * f)))?;
         let (_, (db, deg)) = compare_with_twin(&d, &twin);
         rows.push(LinkRow {
             point: name.to_string(),

@@ -77,6 +77,22 @@ fn base_units_for_fmi_schema(xml: &str) -> String {
     out
 }
 
+/// [`Fmu::as_drive_twin`]'s guard: the FMU's runs are a drive's twin until it is dropped.
+pub struct DriveTwin<'a>(&'a Fmu, bool);
+
+impl std::ops::Deref for DriveTwin<'_> {
+    type Target = Fmu;
+    fn deref(&self) -> &Fmu {
+        self.0
+    }
+}
+
+impl Drop for DriveTwin<'_> {
+    fn drop(&mut self) {
+        self.0.drive_twin.set(self.1);
+    }
+}
+
 /// A loaded FMU (unpacked once, instantiated per run).
 pub struct Fmu {
     /// The FMU's library, opened once and held for the `Fmu`'s life: the `fmi` crate opens it
@@ -87,6 +103,8 @@ pub struct Fmu {
     _library: <Fmi3Import as FmiImport>::Binding,
     import: Fmi3Import,
     variables: BTreeMap<String, VariableInfo>,
+    /// Runs are a drive's twin ([`Fmu::as_drive_twin`]).
+    drive_twin: std::cell::Cell<bool>,
 }
 
 impl Fmu {
@@ -120,7 +138,7 @@ impl Fmu {
         let library = import
             .binding(&model_identifier)
             .map_err(|e| anyhow!("cannot load the library of {}: {e}", path.display()))?;
-        Ok(Self { _library: library, import, variables })
+        Ok(Self { _library: library, import, variables, drive_twin: std::cell::Cell::new(false) })
     }
 
     pub fn variable(&self, name: &str) -> Result<&VariableInfo> {
@@ -181,6 +199,16 @@ impl Fmu {
     }
 
     /// Run `scenario`; `progress` is called with the fraction done.
+    /// This FMU as the twin of a drive that is already commissioned, for as long as the
+    /// returned guard lives: `commissioning.at_start` off unless a scenario sets it, so the
+    /// twin's drive starts with the plant's own motor and mounting at time 0, as the drive
+    /// starts with the set it measured (the FMU's default commissions at initialisation, as a
+    /// drive at power-up, and its time 0 would then be where that left the axis).
+    pub fn as_drive_twin(&self) -> DriveTwin<'_> {
+        let before = self.drive_twin.replace(true);
+        DriveTwin(self, before)
+    }
+
     pub fn run(&self, scenario: &Scenario, progress: impl FnMut(f64)) -> Result<Trace> {
         self.run_until(scenario, progress, |_| false)
     }
@@ -209,7 +237,7 @@ impl Fmu {
         mut done: impl FnMut(&[f64]) -> bool,
         keep_rows: bool,
     ) -> Result<Trace> {
-        let params: Vec<(&VariableInfo, Value)> = scenario
+        let mut params: Vec<(&VariableInfo, Value)> = scenario
             .parameters
             .iter()
             .map(|(n, v)| {
@@ -220,6 +248,10 @@ impl Fmu {
                 Ok((var, *v))
             })
             .collect::<Result<_>>()?;
+        const AT_START: &str = "commissioning.at_start";
+        if self.drive_twin.get() && !scenario.parameters.contains_key(AT_START) {
+            params.push((self.variable(AT_START)?, Value::Bool(false)));
+        }
         // Inputs are set when they change, not at every step.
         let changes: Vec<(usize, Vec<(&VariableInfo, Value)>)> = scenario
             .changes()

@@ -187,7 +187,7 @@ fn ident_on_device(
     };
     let pb = progress_bar("identification", args.common.json);
     let request = DeviceIdentRequest { axis: &axis, parameters: axis_parameters, amplitude: args.amplitude };
-    let r = identify_on_device(fmu, &request, (port, &mut session), out, |label, f| {
+    let r = identify_on_device(&fmu.as_drive_twin(), &request, (port, &mut session), out, |label, f| {
         pb.set_prefix(label.to_string());
         pb.set_position((f * 1000.0) as u64)
     })?;
@@ -583,8 +583,11 @@ fn tune(args: &TuneArgs) -> Result<bool> {
     }
     let fmu = Fmu::load(&common.fmu.clone().unwrap_or_else(default_fmu))?;
     let pb = progress_bar("tune", common.json);
+    // With --device the tuning's runs on the models are the drive's twin's, as its check's.
+    let twin = args.target.device.is_some().then(|| fmu.as_drive_twin());
     let tuning =
         crate::ident::tuning::tune(&fmu, &models, method, !no_check, |x| pb.set_position((x * 1000.0) as u64))?;
+    drop(twin);
     pb.finish_and_clear();
     let mut files = crate::ident::tuning::write(&tuning, &out)?;
     let improved = match (tuning.spread_before, tuning.spread_after) {
@@ -641,10 +644,18 @@ fn device_check(
     };
     let pb = progress_bar("tune on the drive", args.common.json);
     let frame = out.join(format!("{}.corr.frame", axis.axis));
-    let check = check_on_device(fmu, tuning, axis, (port, &mut session), &frame, &out.join("device"), |label, f| {
-        pb.set_prefix(label.to_string());
-        pb.set_position((f * 1000.0) as u64)
-    })?;
+    let check = check_on_device(
+        &fmu.as_drive_twin(),
+        tuning,
+        axis,
+        (port, &mut session),
+        &frame,
+        &out.join("device"),
+        |label, f| {
+            pb.set_prefix(label.to_string());
+            pb.set_position((f * 1000.0) as u64)
+        },
+    )?;
     pb.finish_and_clear();
     Ok(Some(check))
 }

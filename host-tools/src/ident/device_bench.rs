@@ -89,7 +89,7 @@ fn identify_case(fmu: &Fmu, parameters: &BTreeMap<String, Value>, out: &Path) ->
     session.baud = LineSettings::default().baud;
     session.commission_with_defaults()?;
     let request = DeviceIdentRequest { axis: "x", parameters, amplitude: AMPLITUDE };
-    identify_on_device(fmu, &request, ("in-process virtual drive", &mut session), out, |_, _| {})
+    identify_on_device(&fmu.as_drive_twin(), &request, ("in-process virtual drive", &mut session), out, |_, _| {})
 }
 
 pub fn bench(fmu: &Fmu, out: &Path, mut progress: impl FnMut(f64)) -> Result<Vec<DeviceCase>> {
@@ -107,7 +107,7 @@ pub fn bench(fmu: &Fmu, out: &Path, mut progress: impl FnMut(f64)) -> Result<Vec
             let noise_std = match snr_db {
                 None => 0.0,
                 Some(snr) => {
-                    let rms = acceleration_rms(fmu, &parameters, AMPLITUDE)?;
+                    let rms = acceleration_rms(&fmu.as_drive_twin(), &parameters, AMPLITUDE)?;
                     let ticks = (crate::fmu::scenario::DEFAULT_STEP
                         * control_core::Params::default().rates.current_loop_hz as f64)
                         .round();

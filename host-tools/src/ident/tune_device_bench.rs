@@ -129,7 +129,15 @@ fn check_axis(
     session.commission_with_defaults()?;
     let frame = out.join(format!("{}.corr.frame", axis.axis));
     let device = out.join(format!("device_{}_{}", axis.axis, if noise_std > 0.0 { "noise" } else { "clean" }));
-    check_on_device(fmu, tuning, axis, ("in-process virtual drive", &mut session), &frame, &device, |_, _| {})
+    check_on_device(
+        &fmu.as_drive_twin(),
+        tuning,
+        axis,
+        ("in-process virtual drive", &mut session),
+        &frame,
+        &device,
+        |_, _| {},
+    )
 }
 
 pub fn bench(fmu: &Fmu, out: &Path, mut progress: impl FnMut(f64)) -> Result<Vec<TuneDeviceCase>> {
@@ -140,7 +148,8 @@ pub fn bench(fmu: &Fmu, out: &Path, mut progress: impl FnMut(f64)) -> Result<Vec
         let label = |h: Option<f64>| h.map_or("rigid".into(), |h| format!("{h}"));
         let dir = out.join(format!("{}_{}", label(x), label(y)));
         let models = [model("x", x), model("y", y)];
-        let tuning = tune(fmu, &models, Method::Response, true, |_| {})?;
+        // The tuning's runs on the models are the drive's twin's (its check then runs both).
+        let tuning = tune(&fmu.as_drive_twin(), &models, Method::Response, true, |_| {})?;
         write(&tuning, &dir)?;
         for axis in &tuning.axes {
             for noise_std in [0.0, NOISE_STD] {

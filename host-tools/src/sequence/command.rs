@@ -30,7 +30,13 @@ fn sequence(args: &SequenceArgs) -> Result<bool> {
     let fmu = Fmu::load(&fmu_path)?;
     if let Some(mut session) = args.target.session()? {
         let port = args.target.device.as_deref().unwrap_or_default();
-        return crate::sequence::device_report::run_on_device(&fmu, (port, &mut session), &files, &out, common.json);
+        return crate::sequence::device_report::run_on_device(
+            &fmu.as_drive_twin(),
+            (port, &mut session),
+            &files,
+            &out,
+            common.json,
+        );
     }
     let mut all_ok = true;
     let mut summary = Vec::new();

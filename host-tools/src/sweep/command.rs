@@ -413,10 +413,16 @@ impl SweepArgs {
         if let Some(mut session) = self.target.session()? {
             let port = self.target.device.as_deref().unwrap_or_default();
             let pb = progress_bar("sweep", common.json);
-            let r = crate::sweep::device_report::run_on_device(&fmu, &run, (port, &mut session), &out, |label, f| {
-                pb.set_prefix(label.to_string());
-                pb.set_position((f * 1000.0) as u64)
-            })?;
+            let r = crate::sweep::device_report::run_on_device(
+                &fmu.as_drive_twin(),
+                &run,
+                (port, &mut session),
+                &out,
+                |label, f| {
+                    pb.set_prefix(label.to_string());
+                    pb.set_position((f * 1000.0) as u64)
+                },
+            )?;
             pb.finish_and_clear();
             if common.json {
                 println!("{}", serde_json::to_string_pretty(&r)?);
