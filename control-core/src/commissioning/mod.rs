@@ -1020,14 +1020,8 @@ impl Commissioning {
     /// current on the vector at `angle` (each phase short by `dead_time` against its current's
     /// sign; the common mode drops out).
     fn dead_time_compensation(&self, angle: f32) -> Dq {
-        let sign = |x: f32| if x >= 0.0 { 1.0 } else { -1.0 };
         let third = TAU / 3.0;
-        let (sa, sb, sc) = (sign(libm::cosf(angle)), sign(libm::cosf(angle - third)), sign(libm::cosf(angle + third)));
-        let v = self.dead_time;
-        let alpha = v * (2.0 * sa - sb - sc) / 3.0;
-        let beta = v * (sb - sc) * 0.577_350_26;
-        let (sin, cos) = sin_cos(angle);
-        park(AlphaBeta { alpha, beta }, sin, cos)
+        self.phase_dead_time([libm::cosf(angle), libm::cosf(angle - third), libm::cosf(angle + third)], angle)
     }
 
     /// The inverter's dead-time voltage (what each phase falls short by against its current)
