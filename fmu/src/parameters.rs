@@ -38,17 +38,40 @@ fn plant_mounting(plant: &PlantParams) -> control_core::params::EncoderMounting 
     }
 }
 
+/// The motor the drive is given (`ctrl.motor_*`, each 0 = the plant's own): a commissioned
+/// drive's measured set for its twin. A drive that applies what it measures at initialisation
+/// is given none: both at once is refused.
+fn drive_motor(v: &Values, plant_pole_pairs: u32) -> Result<MotorModel, String> {
+    let given = [v.ctrl_motor_resistance, v.ctrl_motor_ld, v.ctrl_motor_lq, v.ctrl_motor_flux_linkage];
+    if v.commissioning_at_start
+        && v.commissioning_apply_motor
+        && (v.ctrl_motor_pole_pairs != 0 || given.iter().any(|&x| x != 0.0))
+    {
+        return Err(
+            "ctrl.motor_* give the drive a motor, while commissioning.at_start with commissioning.apply_motor \
+                    runs it with the one it measures: set one or the other"
+                .to_string(),
+        );
+    }
+    let or_plant = |x: f64, plant: f64| if x == 0.0 { plant } else { x } as f32;
+    Ok(MotorModel {
+        pole_pairs: if v.ctrl_motor_pole_pairs == 0 {
+            plant_pole_pairs
+        } else {
+            count("ctrl.motor_pole_pairs", v.ctrl_motor_pole_pairs)?
+        },
+        resistance: or_plant(v.ctrl_motor_resistance, v.plant_resistance),
+        ld: or_plant(v.ctrl_motor_ld, v.plant_ld),
+        lq: or_plant(v.ctrl_motor_lq, v.plant_lq),
+        flux_linkage: or_plant(v.ctrl_motor_flux_linkage, v.plant_flux_linkage),
+    })
+}
+
 /// The whole configuration of the simulated axis.
 pub fn simulation_config(v: &Values) -> Result<SimulationConfig, String> {
     let pole_pairs = count("plant.pole_pairs", v.plant_pole_pairs)?;
     let counts = count("plant.encoder_counts_per_rev", v.plant_encoder_counts_per_rev)?;
-    let motor = MotorModel {
-        pole_pairs,
-        resistance: v.plant_resistance as f32,
-        ld: v.plant_ld as f32,
-        lq: v.plant_lq as f32,
-        flux_linkage: v.plant_flux_linkage as f32,
-    };
+    let motor = drive_motor(v, pole_pairs)?;
     let plant = PlantParams {
         pole_pairs,
         resistance: v.plant_resistance,

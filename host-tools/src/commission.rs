@@ -29,7 +29,7 @@ pub struct CommissionArgs {
     #[arg(long, default_value_t = 12.0)]
     pub max_voltage: f32,
     /// Current-loop bandwidth the gains are designed for (Hz; 0.02 to 0.1 of the loop rate;
-    /// default a sixteenth of it, 1 kHz at 16 kHz)
+    /// default 3/32 of it, 1.5 kHz at 16 kHz, as the default gains)
     #[arg(long)]
     pub bandwidth: Option<f32>,
     /// Save the result in the drive's flash (with --device)

@@ -118,6 +118,35 @@ fn sweep_over(port: &str, dir: &std::path::Path) -> std::process::Output {
     output_within(servo().args(["sweep", "--device", port, "--json"]).on_fmu(dir.join("out")), 120)
 }
 
+/// Every point of a device sweep's report within its bound, checked here from the points'
+/// differences and standard errors (not only from the report's verdict): the goal where the
+/// drive's standard error is within the precision target, 5 standard errors where it is not;
+/// and most points held to the goal itself.
+fn assert_within_bounds(r: &serde_json::Value, context: &str) {
+    use host_tools::device::bench::{GOAL_DB, GOAL_DEG, PRECISION};
+    let points = r["points"].as_array().unwrap();
+    let mut at_goal = 0;
+    for p in points {
+        let f = |v: &serde_json::Value| v.as_f64().unwrap_or(f64::INFINITY);
+        let (se_db, se_deg) = (f(&p["standard_error"]["gain_db"]), f(&p["standard_error"]["phase_deg"]));
+        let bound =
+            |goal: f64, target: f64, se: f64| if se.is_finite() && se > target { goal * se / target } else { goal };
+        let (db, deg) = (f(&p["difference_db"]).abs(), f(&p["difference_deg"]).abs());
+        assert!(
+            db <= bound(GOAL_DB, PRECISION.0, se_db) && deg <= bound(GOAL_DEG, PRECISION.1, se_deg),
+            "drive vs twin at {} Hz: {db} dB, {deg} deg (standard errors {se_db} dB, {se_deg} deg){context}",
+            p["frequency"]
+        );
+        at_goal += (se_db <= PRECISION.0 && se_deg <= PRECISION.1) as usize;
+    }
+    assert!(
+        4 * at_goal >= 3 * points.len(),
+        "{at_goal} of {} points measured to the precision target{context}",
+        points.len()
+    );
+    assert_eq!(r["beyond_bound_hz"].as_array().unwrap().len(), 0, "{}", r["beyond_bound_hz"]);
+}
+
 #[test]
 fn a_sweep_over_the_virtual_drive_matches_its_twin_and_parameters_survive_a_restart() {
     let _serial = one_at_a_time();
@@ -138,12 +167,10 @@ fn a_sweep_over_the_virtual_drive_matches_its_twin_and_parameters_survive_a_rest
     }
     let csv = std::fs::read_to_string(dir.join("out").join("sweep.csv")).unwrap();
     assert!(csv.lines().next().unwrap().contains(",quality,gain_se_db,phase_se_deg,"), "{csv}");
-    // Two measurements of the same response (see `device::bench::GOAL_DB`).
-    let (db, deg) = (r["largest_difference"][0].as_f64().unwrap(), r["largest_difference"][1].as_f64().unwrap());
-    assert!(
-        db <= host_tools::device::bench::GOAL_DB && deg <= host_tools::device::bench::GOAL_DEG,
-        "drive vs twin {db} dB, {deg} deg"
-    );
+    // Two measurements of the same response (see `device::bench::GOAL_DB`), each point within
+    // the goal, or within 5 of its standard errors where the drive could not measure it to the
+    // precision target (`device::bench::difference_bound`).
+    assert_within_bounds(&r, "");
     // The sweep gave the drive its parameters: save them, power-cycle, and they are loaded.
     assert_eq!(json(&device(&vd.port, &["save-params"]))["done"], true);
     drop(vd);
@@ -216,11 +243,7 @@ fn a_sweep_and_a_save_over_a_corrupting_line_complete_and_act_once() {
     assert!(matches!(o.status.code(), Some(0 | 1)), "{e}");
     let r: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
     assert_eq!(r["points"].as_array().unwrap().len(), 41);
-    let (db, deg) = (r["largest_difference"][0].as_f64().unwrap(), r["largest_difference"][1].as_f64().unwrap());
-    assert!(
-        db <= host_tools::device::bench::GOAL_DB && deg <= host_tools::device::bench::GOAL_DEG,
-        "drive vs twin {db} dB, {deg} deg over the corrupting line"
-    );
+    assert_within_bounds(&r, " over the corrupting line");
     let (corrupt, resent) = line_costs(&e);
     assert!(corrupt > 0 && resent > 0, "nothing on the line was hit: the test proves nothing ({e})");
     // A save: done, with the record it wrote (its answer lost or not), and only that record.
@@ -266,8 +289,9 @@ fn a_save_whose_answer_the_line_loses_succeeds_and_writes_one_record() {
     assert_eq!(records_in(&dir.join("flash.bin")), [Some(1), None]);
 }
 
-/// Riding at 200 rad/s the back-EMF leaves too little of the bus for 0.2 N·m at the top of a
-/// torque-command sweep: the stream's per-sample flags give every result its share of limited
+/// Riding at 250 rad/s the back-EMF leaves too little of the bus for 0.4 N·m from about 800 Hz
+/// up (the current loop's commissioned gains ask the most voltage between 0.8 and 3 kHz), none
+/// at the sweep's low frequencies: the stream's per-sample flags give every result its share of limited
 /// samples, also those that finish between two telemetry polls (most do, the drive being
 /// simulated faster than real time), and name each limited one.
 #[test]
@@ -277,8 +301,8 @@ fn a_sweep_over_the_virtual_drive_names_every_result_measured_with_the_output_li
     let vd = VirtualDrive::start(&dir, "max", &[]);
     let o = output_within(
         servo()
-            .args(["sweep", "--device", &vd.port, "--json", "--point", "torque", "--amplitude", "0.2"])
-            .args(["--velocity", "200", "--start", "100", "--stop", "3000", "--points", "6"])
+            .args(["sweep", "--device", &vd.port, "--json", "--point", "torque", "--amplitude", "0.4"])
+            .args(["--velocity", "250", "--start", "100", "--stop", "3000", "--points", "6"])
             .on_fmu(dir.join("out")),
         120,
     );
@@ -302,7 +326,7 @@ fn a_sweep_over_the_virtual_drive_names_every_result_measured_with_the_output_li
         assert!((0.0..=1.0).contains(&share), "{f} Hz: {share}");
         assert_eq!(share > 0.0, named.contains(&f), "{f} Hz share {share}, named {named:?}");
     }
-    assert!(named.contains(&3000.0) && !named.iter().any(|&f| f < 1000.0), "{named:?}");
+    assert!(named.contains(&3000.0) && !named.iter().any(|&f| f < 500.0), "{named:?}");
     // The table's rows carry the same shares.
     let csv = std::fs::read_to_string(dir.join("out").join("sweep.csv")).unwrap();
     assert!(csv.lines().next().unwrap().ends_with(",limited_share"), "{csv}");

@@ -143,7 +143,8 @@ impl CommissioningSettings {
     }
 
     /// A test current of 2 A, at most 12 V, one and a half electrical turns each way at two
-    /// turns a second, a current loop of a sixteenth of the tick rate (1 kHz at 16 kHz).
+    /// turns a second, a current loop of 3/32 of the tick rate (1.5 kHz at 16 kHz, the
+    /// bandwidth the default gains are tuned for).
     pub fn for_encoder(counts_per_rev: u32, tick_period: f32) -> Self {
         Self {
             test_current: 2.0,
@@ -154,7 +155,7 @@ impl CommissioningSettings {
             alignment_turns: 1.5,
             alignment_speed: 2.0,
             tick_period,
-            current_bandwidth_hz: 0.0625 / tick_period,
+            current_bandwidth_hz: 0.09375 / tick_period,
         }
     }
 }

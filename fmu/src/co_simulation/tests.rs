@@ -17,24 +17,54 @@ fn initialized() -> AxisModel {
 
 #[test]
 fn start_values_build_the_core_and_plant_defaults() {
-    // The drive is given the plant's own mounting (commissioning.at_start is off): the
-    // electrical angle at count 0 is pole pairs × the rotor's start angle.
+    // By default the drive commissions at initialisation, as at power-up: it starts from the
+    // core's defaults, not commissioned, the encoder's mounting unknown.
     let config = simulation_config(&Values::start()).unwrap();
     let mut plant = crate::plant::PlantParams::default();
     plant.tick = config.plant.tick;
     assert_eq!(config.plant, plant);
+    assert_eq!(config.control, control_core::Params::default());
+    let c = config.commissioning.expect("commissioning at start");
+    assert!(!c.apply_motor);
+    // Off, the drive is given the plant's own mounting: the electrical angle at count 0 is
+    // pole pairs × the rotor's start angle.
+    let mut values = Values::start();
+    values.commissioning_at_start = false;
+    let config = simulation_config(&values).unwrap();
     let offset = (plant.pole_pairs as f64 * plant.rotor_start_angle).rem_euclid(std::f64::consts::TAU) as f32;
     let mounting = control_core::params::EncoderMounting { reversed: false, electrical_offset: offset };
     assert_eq!(config.control, control_core::Params::default().commissioned_as(mounting));
     assert!(config.commissioning.is_none());
-    // On, the drive commissions at initialisation: it starts from the core's defaults, not
-    // commissioned, the encoder's mounting unknown.
+}
+
+#[test]
+fn a_drive_given_a_motor_runs_with_it_and_not_with_the_plants() {
+    // A commissioned drive's measured set, given to its twin: each value replaces the plant's,
+    // the plant itself unchanged.
     let mut values = Values::start();
-    values.commissioning_at_start = true;
+    values.commissioning_at_start = false;
+    values.ctrl_motor_pole_pairs = 5;
+    values.ctrl_motor_resistance = 0.31;
+    values.ctrl_motor_lq = 0.52e-3;
+    values.ctrl_motor_flux_linkage = 0.017;
     let config = simulation_config(&values).unwrap();
-    assert_eq!(config.control, control_core::Params::default());
-    let c = config.commissioning.expect("commissioning at start");
-    assert!(!c.apply_motor);
+    let m = config.control.motor;
+    assert_eq!((m.pole_pairs, m.resistance, m.ld, m.lq, m.flux_linkage), (5, 0.31, 0.5e-3, 0.52e-3, 0.017));
+    assert_eq!(config.plant.pole_pairs, 4);
+    assert_eq!(config.plant.resistance, 0.3);
+    // A drive that applies what it measures is given none: both at once is refused by name.
+    values.commissioning_at_start = true;
+    values.commissioning_apply_motor = true;
+    let e = simulation_config(&values).unwrap_err();
+    assert!(e.contains("ctrl.motor_") && e.contains("apply_motor"), "{e}");
+    // Without apply_motor the given motor is the one it runs with (the measured one reported).
+    values.commissioning_apply_motor = false;
+    assert_eq!(simulation_config(&values).unwrap().control.motor, m);
+    // Over FMI: out of its range, refused when set, the value before kept.
+    let mut model = AxisModel::new();
+    assert!(set(&mut model, "ctrl.motor_resistance", Value::Float64(-1.0)).is_err());
+    assert!(set(&mut model, "ctrl.motor_lq", Value::Float64(f64::NAN)).is_err());
+    assert_eq!(model.get(vr("ctrl.motor_resistance")).unwrap(), Value::Float64(0.0));
 }
 
 #[test]

@@ -95,7 +95,7 @@ fn circle(args: &CircleArgs) -> Result<bool> {
         let port = args.target.device.as_deref().unwrap_or_default();
         let pb = progress_bar("circle", common.json);
         let r = crate::circle::device::run_on_device(
-            &fmu.as_drive_twin(),
+            &*fmu.as_twin_of(&session.params_for_twin()?)?,
             &request,
             (port, &mut session),
             &out,

@@ -1,9 +1,10 @@
 //! Commissioning a drive's motor over the link: the sequence started, waited on in the drive's
 //! time, its result sent back as the drive's parameters (`Params::with_commissioned`); and an
-//! experiment's parameters completed with the commissioned set the drive holds.
+//! experiment's parameters given the commissioned set the drive holds.
 
 use anyhow::{bail, Result};
 use control_core::commissioning::{CommissioningSettings, CommissioningStatus, MeasuredMotor};
+use control_core::params::CurrentLoopGains;
 use control_core::protocol::{Request, Response};
 use control_core::Params;
 
@@ -75,21 +76,20 @@ impl<T: DrivePort> DriveSession<T> {
     }
 
     /// [`DriveSession::commission`] with the default settings for the drive's encoder and tick
-    /// (2 A, 12 V, a sixteenth of the loop rate): what the in-process virtual drive's benches
+    /// (2 A, 12 V, 3/32 of the loop rate): what the in-process virtual drive's benches
     /// do before their experiments, as a user does once on a new machine.
     pub fn commission_with_defaults(&mut self) -> Result<Commissioned> {
         let p = self.params()?;
         self.commission(&CommissioningSettings::for_params(&p))
     }
 
-    /// `params` as the drive can run them: a set that is not commissioned takes the motor's
-    /// constants and the encoder's mounting of the drive's own commissioned set (its loop
-    /// gains stay the run's, as its twin runs them); a drive that has none is an error that
-    /// says what to do.
+    /// `params` as the drive runs them: the motor's constants, the encoder's mounting and the
+    /// current loop's gains are always the drive's own commissioned set, whatever `params`
+    /// says (a plan's set is its twin's plant's, and the twin of a real machine does not know
+    /// how the machine's encoder sits: its mounting given to the drive could reverse the
+    /// torque); the twin runs with the same motor and gains ([`crate::fmu::runner::Fmu::as_twin_of`]).
+    /// A drive that has no commissioned set is an error that says what to do.
     pub fn with_drive_commissioning(&mut self, params: &Params) -> Result<Params> {
-        if params.commissioned {
-            return Ok(*params);
-        }
         let drive = self.params()?;
         if !drive.commissioned {
             bail!(
@@ -97,8 +97,13 @@ impl<T: DrivePort> DriveSession<T> {
                  motor and the encoder's mounting; --save keeps them in the drive's flash)"
             );
         }
-        // The run's own loop gains (its current loop's among them: the twin runs with them),
-        // the drive's measured motor and mounting.
-        Ok(Params { motor: drive.motor, encoder_mounting: drive.encoder_mounting, commissioned: true, ..*params })
+        let current = CurrentLoopGains { kp: drive.current.kp, ki: drive.current.ki, ..params.current };
+        Ok(Params {
+            motor: drive.motor,
+            encoder_mounting: drive.encoder_mounting,
+            commissioned: true,
+            current,
+            ..*params
+        })
     }
 }

@@ -138,6 +138,14 @@ impl<T: DrivePort> DriveSession<T> {
         Ok(t)
     }
 
+    /// The drive's parameters, for its twin ([`crate::fmu::runner::Fmu::as_twin_of`]), the
+    /// drive put at rest: latched faults are named first (they say what is wrong with the
+    /// drive), then a motor that is not commissioned.
+    pub fn params_for_twin(&mut self) -> Result<Params> {
+        self.rest()?;
+        self.params()
+    }
+
     /// [`DriveSession::rest`], a drive whose only fault is that its motor is not commissioned
     /// accepted (what commissioning it, or giving it a commissioned set, lifts).
     pub fn rest_allowing_no_commissioning(&mut self) -> Result<Telemetry> {
@@ -150,16 +158,12 @@ impl<T: DrivePort> DriveSession<T> {
         Ok(t)
     }
 
-    /// Give the drive `params` (at rest), completed with the drive's commissioned set where
-    /// they are not one (`DriveSession::with_drive_commissioning`).
+    /// Give the drive `params` (at rest), with the drive's own commissioned motor, encoder
+    /// mounting and current-loop gains in place of theirs
+    /// (`DriveSession::with_drive_commissioning`).
     pub fn set_params(&mut self, params: &Params) -> Result<()> {
-        // Faults first (they name what is wrong with the drive), then its commissioning; a
-        // commissioned set is what lifts a drive's lone NOT_COMMISSIONED fault.
-        if params.commissioned {
-            self.rest_allowing_no_commissioning()?;
-        } else {
-            self.rest()?;
-        }
+        // Faults first (they name what is wrong with the drive), then its commissioning.
+        self.rest()?;
         let params = &self.with_drive_commissioning(params)?;
         self.order(Request::SetParams(*params), "the parameters")?;
         self.tick_hz = params.rates.current_loop_hz as f64;

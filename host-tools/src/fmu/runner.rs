@@ -77,8 +77,9 @@ fn base_units_for_fmi_schema(xml: &str) -> String {
     out
 }
 
-/// [`Fmu::as_drive_twin`]'s guard: the FMU's runs are a drive's twin until it is dropped.
-pub struct DriveTwin<'a>(&'a Fmu, bool);
+/// [`Fmu::as_drive_twin`]'s and [`Fmu::as_twin_of`]'s guard: the FMU's runs are a drive's
+/// twin until it is dropped (the twin before it restored).
+pub struct DriveTwin<'a>(&'a Fmu, Option<TwinParameters>);
 
 impl std::ops::Deref for DriveTwin<'_> {
     type Target = Fmu;
@@ -89,8 +90,32 @@ impl std::ops::Deref for DriveTwin<'_> {
 
 impl Drop for DriveTwin<'_> {
     fn drop(&mut self) {
-        self.0.drive_twin.set(self.1);
+        *self.0.drive_twin.borrow_mut() = self.1.take();
     }
+}
+
+/// The parameters a twin's runs take in place of the FMU's: `commissioning.at_start` off, and
+/// the motor and current-loop gains of the drive it is the twin of.
+type TwinParameters = Vec<(&'static str, Value)>;
+
+/// A twin's parameters: a drive commissioned already (no commissioning at initialisation,
+/// the plant's true mounting), with `drive`'s motor and current-loop gains where given.
+fn twin_parameters(drive: Option<&control_core::Params>) -> TwinParameters {
+    use servo_axis::variables::name;
+    let mut p = vec![(name::commissioning_at_start, Value::Bool(false))];
+    if let Some(d) = drive {
+        let m = &d.motor;
+        p.extend([
+            (name::ctrl_motor_pole_pairs, Value::Int(m.pole_pairs as i64)),
+            (name::ctrl_motor_resistance, Value::Float(m.resistance as f64)),
+            (name::ctrl_motor_ld, Value::Float(m.ld as f64)),
+            (name::ctrl_motor_lq, Value::Float(m.lq as f64)),
+            (name::ctrl_motor_flux_linkage, Value::Float(m.flux_linkage as f64)),
+            (name::ctrl_current_kp, Value::Float(d.current.kp as f64)),
+            (name::ctrl_current_ki, Value::Float(d.current.ki as f64)),
+        ]);
+    }
+    p
 }
 
 /// A loaded FMU (unpacked once, instantiated per run).
@@ -103,8 +128,8 @@ pub struct Fmu {
     _library: <Fmi3Import as FmiImport>::Binding,
     import: Fmi3Import,
     variables: BTreeMap<String, VariableInfo>,
-    /// Runs are a drive's twin ([`Fmu::as_drive_twin`]).
-    drive_twin: std::cell::Cell<bool>,
+    /// Runs are a drive's twin, with these parameters ([`Fmu::as_twin_of`]).
+    drive_twin: std::cell::RefCell<Option<TwinParameters>>,
 }
 
 impl Fmu {
@@ -138,7 +163,7 @@ impl Fmu {
         let library = import
             .binding(&model_identifier)
             .map_err(|e| anyhow!("cannot load the library of {}: {e}", path.display()))?;
-        Ok(Self { _library: library, import, variables, drive_twin: std::cell::Cell::new(false) })
+        Ok(Self { _library: library, import, variables, drive_twin: std::cell::RefCell::new(None) })
     }
 
     pub fn variable(&self, name: &str) -> Result<&VariableInfo> {
@@ -203,10 +228,27 @@ impl Fmu {
     /// returned guard lives: `commissioning.at_start` off unless a scenario sets it, so the
     /// twin's drive starts with the plant's own motor and mounting at time 0, as the drive
     /// starts with the set it measured (the FMU's default commissions at initialisation, as a
-    /// drive at power-up, and its time 0 would then be where that left the axis).
+    /// drive at power-up, and its time 0 would then be where that left the axis). For runs
+    /// planned before a drive is at hand; [`Fmu::as_twin_of`] once it is.
     pub fn as_drive_twin(&self) -> DriveTwin<'_> {
-        let before = self.drive_twin.replace(true);
+        let before = self.drive_twin.replace(Some(twin_parameters(None)));
         DriveTwin(self, before)
+    }
+
+    /// This FMU as the twin of the drive whose parameters are `drive` (read from it), for as
+    /// long as the returned guard lives: as [`Fmu::as_drive_twin`], and the twin's drive runs
+    /// with `drive`'s commissioned motor and current-loop gains (what the drive runs every
+    /// experiment with), not with the plant's truth. A drive that is not commissioned has no
+    /// such set: refused, saying what to do.
+    pub fn as_twin_of(&self, drive: &control_core::Params) -> Result<DriveTwin<'_>> {
+        if !drive.commissioned {
+            bail!(
+                "the drive's motor is not commissioned: run `servo commission --device PORT` first (it measures the \
+                 motor and the encoder's mounting; --save keeps them in the drive's flash)"
+            );
+        }
+        let before = self.drive_twin.replace(Some(twin_parameters(Some(drive))));
+        Ok(DriveTwin(self, before))
     }
 
     pub fn run(&self, scenario: &Scenario, progress: impl FnMut(f64)) -> Result<Trace> {
@@ -248,9 +290,23 @@ impl Fmu {
                 Ok((var, *v))
             })
             .collect::<Result<_>>()?;
-        const AT_START: &str = "commissioning.at_start";
-        if self.drive_twin.get() && !scenario.parameters.contains_key(AT_START) {
-            params.push((self.variable(AT_START)?, Value::Bool(false)));
+        if let Some(twin) = self.drive_twin.borrow().as_ref() {
+            for &(name, value) in twin {
+                let given = scenario.parameters.contains_key(name);
+                if name == servo_axis::variables::name::commissioning_at_start {
+                    if !given {
+                        params.push((self.variable(name)?, value));
+                    }
+                } else if given {
+                    bail!(
+                        "{name} is the drive's: with --device the twin runs the motor and current-loop gains the \
+                         drive's commissioning measured and designed (`servo commission --device PORT`, with \
+                         --bandwidth for other gains), so it cannot be set for one experiment"
+                    );
+                } else {
+                    params.push((self.variable(name)?, value));
+                }
+            }
         }
         // Inputs are set when they change, not at every step.
         let changes: Vec<(usize, Vec<(&VariableInfo, Value)>)> = scenario

@@ -187,10 +187,16 @@ fn ident_on_device(
     };
     let pb = progress_bar("identification", args.common.json);
     let request = DeviceIdentRequest { axis: &axis, parameters: axis_parameters, amplitude: args.amplitude };
-    let r = identify_on_device(&fmu.as_drive_twin(), &request, (port, &mut session), out, |label, f| {
-        pb.set_prefix(label.to_string());
-        pb.set_position((f * 1000.0) as u64)
-    })?;
+    let r = identify_on_device(
+        &*fmu.as_twin_of(&session.params_for_twin()?)?,
+        &request,
+        (port, &mut session),
+        out,
+        |label, f| {
+            pb.set_prefix(label.to_string());
+            pb.set_position((f * 1000.0) as u64)
+        },
+    )?;
     pb.finish_and_clear();
     if args.common.json {
         println!("{}", serde_json::to_string_pretty(&r)?);
@@ -583,8 +589,11 @@ fn tune(args: &TuneArgs) -> Result<bool> {
     }
     let fmu = Fmu::load(&common.fmu.clone().unwrap_or_else(default_fmu))?;
     let pb = progress_bar("tune", common.json);
-    // With --device the tuning's runs on the models are the drive's twin's, as its check's.
-    let twin = args.target.device.is_some().then(|| fmu.as_drive_twin());
+    // With --device the tuning's runs on the models are the drive's twin's, as its check's:
+    // the drive's commissioned motor and current loop, read from it first.
+    let mut session = args.target.session()?;
+    let drive = session.as_mut().map(|s| s.params_for_twin()).transpose()?;
+    let twin = drive.as_ref().map(|d| fmu.as_twin_of(d)).transpose()?;
     let tuning =
         crate::ident::tuning::tune(&fmu, &models, method, !no_check, |x| pb.set_position((x * 1000.0) as u64))?;
     drop(twin);
@@ -594,7 +603,10 @@ fn tune(args: &TuneArgs) -> Result<bool> {
         (Some(b), Some(a)) => a.0 < b.0 && a.1 < b.1,
         _ => true,
     };
-    let device = device_check(args, &fmu, &tuning, &out)?;
+    let device = match (session, drive) {
+        (Some(session), Some(drive)) => Some(device_check(args, (&fmu, &drive), session, &tuning, &out)?),
+        _ => None,
+    };
     if let Some(d) = &device {
         // tune.json gets the check over the drive as its "device" section.
         let json = out.join("tune.json");
@@ -626,26 +638,23 @@ fn tune(args: &TuneArgs) -> Result<bool> {
     Ok(improved && device_ok)
 }
 
-/// With --device: the chosen axis's correction loaded into the drive and checked there.
+/// With --device: the chosen axis's correction loaded into the drive and checked there, the
+/// FMU as the twin of the drive whose parameters are `drive`.
 fn device_check(
     args: &TuneArgs,
-    fmu: &Fmu,
+    (fmu, drive): (&Fmu, &control_core::Params),
+    mut session: crate::device::session::DriveSession<Box<dyn serialport::SerialPort>>,
     tuning: &crate::ident::tuning::Tuning,
     out: &std::path::Path,
-) -> Result<Option<crate::ident::device_check::TuneDeviceCheck>> {
+) -> Result<crate::ident::device_check::TuneDeviceCheck> {
     use crate::ident::device_check::{check_on_device, check_request, tuned_axis};
-    let Some(port) = args.target.device.as_deref() else {
-        return Ok(None);
-    };
+    let port = args.target.device.as_deref().unwrap_or_default();
     let axis = tuned_axis(tuning, args.axis.as_deref())?;
     check_request(tuning, axis)?;
-    let Some(mut session) = args.target.session()? else {
-        return Ok(None);
-    };
     let pb = progress_bar("tune on the drive", args.common.json);
     let frame = out.join(format!("{}.corr.frame", axis.axis));
     let check = check_on_device(
-        &fmu.as_drive_twin(),
+        &*fmu.as_twin_of(drive)?,
         tuning,
         axis,
         (port, &mut session),
@@ -657,5 +666,5 @@ fn device_check(
         },
     )?;
     pb.finish_and_clear();
-    Ok(Some(check))
+    Ok(check)
 }

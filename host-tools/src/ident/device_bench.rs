@@ -89,7 +89,13 @@ fn identify_case(fmu: &Fmu, parameters: &BTreeMap<String, Value>, out: &Path) ->
     session.baud = LineSettings::default().baud;
     session.commission_with_defaults()?;
     let request = DeviceIdentRequest { axis: "x", parameters, amplitude: AMPLITUDE };
-    identify_on_device(&fmu.as_drive_twin(), &request, ("in-process virtual drive", &mut session), out, |_, _| {})
+    identify_on_device(
+        &*fmu.as_twin_of(&session.params_for_twin()?)?,
+        &request,
+        ("in-process virtual drive", &mut session),
+        out,
+        |_, _| {},
+    )
 }
 
 pub fn bench(fmu: &Fmu, out: &Path, mut progress: impl FnMut(f64)) -> Result<Vec<DeviceCase>> {

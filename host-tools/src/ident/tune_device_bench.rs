@@ -130,7 +130,7 @@ fn check_axis(
     let frame = out.join(format!("{}.corr.frame", axis.axis));
     let device = out.join(format!("device_{}_{}", axis.axis, if noise_std > 0.0 { "noise" } else { "clean" }));
     check_on_device(
-        &fmu.as_drive_twin(),
+        &*fmu.as_twin_of(&session.params_for_twin()?)?,
         tuning,
         axis,
         ("in-process virtual drive", &mut session),

@@ -44,7 +44,7 @@ fn run(args: &RunArgs) -> Result<bool> {
     if let Some(mut session) = args.target.session()? {
         let port = args.target.device.as_deref().unwrap_or_default();
         return crate::run::device_report::run_on_device(
-            &fmu.as_drive_twin(),
+            &*fmu.as_twin_of(&session.params_for_twin()?)?,
             (port, &mut session),
             &scenario_files(files)?,
             &out,

@@ -31,7 +31,7 @@ fn sequence(args: &SequenceArgs) -> Result<bool> {
     if let Some(mut session) = args.target.session()? {
         let port = args.target.device.as_deref().unwrap_or_default();
         return crate::sequence::device_report::run_on_device(
-            &fmu.as_drive_twin(),
+            &*fmu.as_twin_of(&session.params_for_twin()?)?,
             (port, &mut session),
             &files,
             &out,

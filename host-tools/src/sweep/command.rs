@@ -414,7 +414,7 @@ impl SweepArgs {
             let port = self.target.device.as_deref().unwrap_or_default();
             let pb = progress_bar("sweep", common.json);
             let r = crate::sweep::device_report::run_on_device(
-                &fmu.as_drive_twin(),
+                &*fmu.as_twin_of(&session.params_for_twin()?)?,
                 &run,
                 (port, &mut session),
                 &out,

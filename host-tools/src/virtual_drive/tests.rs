@@ -70,6 +70,36 @@ fn a_drive_refuses_to_run_until_commissioned_over_the_link_and_then_runs() {
     s.rest().unwrap();
 }
 
+/// An experiment's parameters never move the drive's commissioned set: a plan made on a twin
+/// carries the twin's plant's mounting and motor (on a real machine a mounting the twin cannot
+/// know, which would reverse the torque) and the FMU's current-loop gains; the drive keeps its
+/// own and takes the rest.
+#[test]
+fn an_experiments_parameters_keep_the_drives_commissioned_motor_mounting_and_current_gains() {
+    let mut s = commissioned(VirtualDrive::power_on(&settings(), FileFlash::in_memory()).unwrap());
+    let own = s.params().unwrap();
+    let mut plan = own;
+    plan.encoder_mounting.reversed = !own.encoder_mounting.reversed;
+    plan.encoder_mounting.electrical_offset = (own.encoder_mounting.electrical_offset + 3.0) % control_core::TAU;
+    plan.motor.flux_linkage *= 1.5;
+    plan.motor.pole_pairs += 1;
+    plan.current.kp *= 2.0;
+    plan.current.ki *= 0.5;
+    plan.velocity.kp *= 1.25;
+    s.set_params(&plan).unwrap();
+    let now = s.params().unwrap();
+    assert_eq!(now.encoder_mounting, own.encoder_mounting);
+    assert_eq!(now.motor, own.motor);
+    assert_eq!((now.current.kp, now.current.ki), (own.current.kp, own.current.ki));
+    assert_eq!(now.velocity.kp, plan.velocity.kp);
+    assert!(now.commissioned);
+    // It then runs: a velocity command followed, not a reversed torque's run-away.
+    let velocity = Commands { mode: Mode::Velocity, velocity: 20.0, ..Commands::default() };
+    s.order(Request::SetCommands(velocity), "velocity").unwrap();
+    let t = s.wait(0.5).unwrap();
+    assert!(!t.faults.any() && (t.velocity_estimate - 20.0).abs() < 0.5, "{:?} {}", t.faults, t.velocity_estimate);
+}
+
 #[test]
 fn calibrates_then_follows_a_velocity_command_like_the_fmu() {
     let mut s = commissioned(VirtualDrive::power_on(&settings(), FileFlash::in_memory()).unwrap());
