@@ -1,0 +1,54 @@
+//! `servo bench commission` on a small draw of motors the bench does not ship (its own seed):
+//! one row per motor, each refusal named, and on every motor it commissions the figures that
+//! hold over the bench's grid checked row by row against the plant's truth the bench drew.
+//! The figures the bench still misses on some motors (see the notes) are held here at
+//! the levels measured over seeds 1 and 7 (100 motors each), so that they cannot get worse
+//! unnoticed: the q-axis inductance within 10 % (goal 3 %), the peak current within 3 times the
+//! test current (goal 1.1), at most a sixth of the motors refused (goal none).
+
+mod common;
+
+use common::{servo, tmp};
+
+const MOTORS: usize = 16;
+
+#[test]
+fn a_small_draw_commissions_within_the_figures_row_by_row_and_names_each_refusal() {
+    let out = tmp("commission-bench");
+    let o = servo()
+        .args(["bench", "commission", "--motors", &MOTORS.to_string(), "--seed", "2026", "--json", "--out"])
+        .arg(&out)
+        .output()
+        .unwrap();
+    let stderr = String::from_utf8_lossy(&o.stderr);
+    assert!(matches!(o.status.code(), Some(0 | 1)), "{stderr}");
+    let j: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+    let rows = j["rows"].as_array().unwrap();
+    assert_eq!(rows.len(), MOTORS);
+    let f = |r: &serde_json::Value, k: &str| r[k].as_f64().unwrap_or(f64::NAN);
+    let mut refused = 0;
+    for (k, r) in rows.iter().enumerate() {
+        if let Some(why) = r["failed"].as_str() {
+            // Named: a fault the drive reports, not an empty or generic string.
+            assert!(why.len() > 3 && !why.contains("unknown"), "motor {k}: {why}");
+            refused += 1;
+            continue;
+        }
+        let e: Vec<f64> = r["errors"].as_array().unwrap().iter().map(|v| v.as_f64().unwrap()).collect();
+        let at = format!("motor {k}: {r}");
+        assert_eq!(r["found_right"], true, "direction or pole pairs wrong, {at}");
+        assert!(f(r, "offset_deg") <= 1.0, "offset, {at}");
+        assert!(e[0] <= 0.03 && e[1] <= 0.03 && e[3] <= 0.03, "R, Ld or flux linkage beyond 3 %, {at}");
+        assert!(e[2] <= 0.10, "Lq beyond 10 %, {at}");
+        assert!(f(r, "bandwidth_error") <= 0.10 && f(r, "overshoot") <= 0.10, "current loop, {at}");
+        assert!(f(r, "seconds") <= 5.0, "drive time, {at}");
+        assert!(f(r, "turns") <= 2.0, "travel, {at}");
+        assert!(f(r, "current_ratio") <= 3.0, "peak current, {at}");
+    }
+    assert!(6 * refused <= MOTORS, "{refused} of {MOTORS} motors refused");
+    // The exit status says whether every figure met its goal, as the figures do.
+    let all_met = j["figures"]["figures"].as_array().unwrap().iter().all(|g| g["met"] == true);
+    assert_eq!(o.status.code(), Some(if all_met { 0 } else { 1 }), "{stderr}");
+    // The figures are also written for the book's figures page.
+    assert!(out.join("commission.json").exists());
+}
