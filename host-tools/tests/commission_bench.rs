@@ -6,6 +6,7 @@
 //! unnoticed: the q-axis inductance within 10 % (goal 3 %), the peak current within 3 times the
 //! test current (goal 1.1), at most a sixth of the motors refused (goal none).
 
+#[allow(dead_code)] // the helpers other tests use
 mod common;
 
 use common::{servo, tmp};

@@ -26,7 +26,7 @@ pub struct FreeRotorFit {
     history: (Option<f32>, Option<f32>),
     last_voltage: f32,
     /// Regressors (i[k], i[k] − i[k−1], v[k] − v[k−1]) against y = i[k+1] − i[k].
-    sums: Regression,
+    sums: Regression<3>,
 }
 
 impl FreeRotorFit {

@@ -409,6 +409,9 @@ pub struct Commissioning {
     /// The dead-time voltage along the measured axis for the phase currents' signs at the
     /// last reading (V).
     dead_time_along_axis: f32,
+    /// The probe's dead-time regressor at the last reading: the voltage along its axis per
+    /// volt of dead time, for the phase currents' signs then.
+    dead_time_shape: f32,
     /// The chip voltage asked for on the last tick (applied over this one) and the one
     /// before, and the last tick's current on the injected axis.
     last_chip: f32,
@@ -475,6 +478,7 @@ impl Commissioning {
             fit: WindingFit::default(),
             q_fit: FreeRotorFit::default(),
             dead_time_along_axis: 0.0,
+            dead_time_shape: 0.0,
             last_chip: 0.0,
             applied_chip: 0.0,
             last_current: None,
@@ -569,9 +573,12 @@ impl Commissioning {
                 self.peak = self.peak.max(current.d.abs());
                 if stage == Stage::ProbeFit {
                     if let Some(previous) = self.last_current {
-                        self.fit.add(previous, current.d, self.applied_chip);
+                        self.fit.add_with_dead_time(previous, current.d, self.applied_chip, self.dead_time_shape);
                     }
                     self.last_current = Some(current.d);
+                    // Per volt of dead time (its size is not known yet: the fit finds it), for
+                    // the phase currents' signs at the next tick's start.
+                    self.dead_time_shape = dead_time_per_volt([ia, ib, ic], frame).d;
                     if self.ticks >= PROBE_FIT_PERIODS * period {
                         let Some(w) = self.fit.winding(s.tick_period) else {
                             return self.fail(CommissioningFault::Inductance { axis: 'd' });
@@ -780,11 +787,14 @@ impl Commissioning {
                         self.q_fit.add(axis_current, applied);
                     }
                     if let Some(previous) = self.last_current {
-                        self.fit.add(previous, axis_current, applied);
+                        // What the holds' dead time leaves (a winding faster than a tick flips
+                        // it within the tick) fitted where the first-order fit alone fails.
+                        self.fit.add_with_dead_time(previous, axis_current, applied, self.dead_time_shape);
                     }
                 }
-                let dead_time = self.phase_dead_time([ia, ib, ic], frame);
-                self.dead_time_along_axis = if stage == Stage::InductanceD { dead_time.d } else { dead_time.q };
+                let unit = dead_time_per_volt([ia, ib, ic], frame);
+                self.dead_time_shape = if stage == Stage::InductanceD { unit.d } else { unit.q };
+                self.dead_time_along_axis = self.dead_time * self.dead_time_shape;
                 self.last_current = Some(axis_current);
                 if self.ticks >= settling + self.chips.period() {
                     let axis = if stage == Stage::InductanceD { 'd' } else { 'q' };
@@ -1028,13 +1038,8 @@ impl Commissioning {
     /// The inverter's dead-time voltage (what each phase falls short by against its current)
     /// for phase currents of the signs of `phases` (A), in the frame at `angle`.
     fn phase_dead_time(&self, phases: [f32; 3], angle: f32) -> Dq {
-        let sign = |x: f32| if x >= 0.0 { 1.0 } else { -1.0 };
-        let (sa, sb, sc) = (sign(phases[0]), sign(phases[1]), sign(phases[2]));
-        let v = self.dead_time;
-        let alpha = v * (2.0 * sa - sb - sc) / 3.0;
-        let beta = v * (sb - sc) * 0.577_350_26;
-        let (sin, cos) = sin_cos(angle);
-        park(AlphaBeta { alpha, beta }, sin, cos)
+        let unit = dead_time_per_volt(phases, angle);
+        Dq { d: self.dead_time * unit.d, q: self.dead_time * unit.q }
     }
 
     /// The flux linkage from the passes' q voltages (stage 4) and the inductances.
@@ -1102,10 +1107,23 @@ impl Commissioning {
         self.fit = WindingFit::default();
         self.q_fit = FreeRotorFit::default();
         self.dead_time_along_axis = 0.0;
+        self.dead_time_shape = 0.0;
         self.last_chip = 0.0;
         self.applied_chip = 0.0;
         self.last_current = None;
         self.voltage = self.held_low;
         self.next_stage(stage);
     }
+}
+
+/// The inverter's dead-time voltage per volt of dead time (each phase short by it against its
+/// current's sign; the common mode drops out) for phase currents of the signs of `phases`,
+/// in the frame at `angle`.
+fn dead_time_per_volt(phases: [f32; 3], angle: f32) -> Dq {
+    let sign = |x: f32| if x >= 0.0 { 1.0 } else { -1.0 };
+    let (sa, sb, sc) = (sign(phases[0]), sign(phases[1]), sign(phases[2]));
+    let alpha = (2.0 * sa - sb - sc) / 3.0;
+    let beta = (sb - sc) * 0.577_350_26;
+    let (sin, cos) = sin_cos(angle);
+    park(AlphaBeta { alpha, beta }, sin, cos)
 }

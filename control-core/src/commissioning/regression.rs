@@ -3,23 +3,30 @@
 //! (covariances). Callers take their samples relative to a first one: f32 sums of raw values
 //! would lose a small ripple on a large mean.
 
-#[derive(Clone, Copy, Debug, Default)]
-pub struct Regression {
+/// Least squares of `N` regressors and an intercept.
+#[derive(Clone, Copy, Debug)]
+pub struct Regression<const N: usize> {
     n: f32,
-    sx: [f32; 3],
+    sx: [f32; N],
     sy: f32,
-    sxx: [[f32; 3]; 3],
-    sxy: [f32; 3],
+    sxx: [[f32; N]; N],
+    sxy: [f32; N],
 }
 
-impl Regression {
-    pub fn add(&mut self, x: [f32; 3], y: f32) {
+impl<const N: usize> Default for Regression<N> {
+    fn default() -> Self {
+        Self { n: 0.0, sx: [0.0; N], sy: 0.0, sxx: [[0.0; N]; N], sxy: [0.0; N] }
+    }
+}
+
+impl<const N: usize> Regression<N> {
+    pub fn add(&mut self, x: [f32; N], y: f32) {
         self.n += 1.0;
         self.sy += y;
-        for j in 0..3 {
+        for j in 0..N {
             self.sx[j] += x[j];
             self.sxy[j] += x[j] * y;
-            for k in 0..3 {
+            for k in 0..N {
                 self.sxx[j][k] += x[j] * x[k];
             }
         }
@@ -31,33 +38,36 @@ impl Regression {
 
     /// The coefficients of the first `terms` regressors (the rest 0); `None` when a regressor
     /// does not vary independently of the others (a pivot a millionth of its own variance).
-    pub fn coefficients(&self, terms: usize) -> Option<[f32; 3]> {
+    pub fn coefficients(&self, terms: usize) -> Option<[f32; N]> {
+        let terms = terms.min(N);
         let n = self.n;
         let mean = |s: f32| s / n;
-        let mut m = [[0.0f32; 4]; 3];
+        let mut m = [[0.0f32; N]; N];
+        let mut rhs = [0.0f32; N];
         for j in 0..terms {
             for k in 0..terms {
                 m[j][k] = mean(self.sxx[j][k]) - mean(self.sx[j]) * mean(self.sx[k]);
             }
-            m[j][3] = mean(self.sxy[j]) - mean(self.sx[j]) * mean(self.sy);
+            rhs[j] = mean(self.sxy[j]) - mean(self.sx[j]) * mean(self.sy);
         }
         // A covariance matrix is symmetric and positive definite: elimination needs no pivots.
-        let own: [f32; 3] = core::array::from_fn(|j| m[j][j].abs());
+        let own: [f32; N] = core::array::from_fn(|j| m[j][j].abs());
         for col in 0..terms {
             if !(m[col][col] > 1e-6 * own[col]) {
                 return None;
             }
             for row in col + 1..terms {
                 let f = m[row][col] / m[col][col];
-                for k in col..4 {
+                for k in col..terms {
                     m[row][k] -= f * m[col][k];
                 }
+                rhs[row] -= f * rhs[col];
             }
         }
-        let mut x = [0.0f32; 3];
+        let mut x = [0.0f32; N];
         for row in (0..terms).rev() {
             let tail: f32 = (row + 1..terms).map(|k| m[row][k] * x[k]).sum();
-            x[row] = (m[row][3] - tail) / m[row][row];
+            x[row] = (rhs[row] - tail) / m[row][row];
         }
         Some(x)
     }
@@ -71,8 +81,8 @@ mod tests {
     /// a regressor that copies another: refused.
     #[test]
     fn a_linear_model_is_recovered_and_a_copied_regressor_refused() {
-        let mut r = Regression::default();
-        let mut copied = Regression::default();
+        let mut r = Regression::<3>::default();
+        let mut copied = Regression::<3>::default();
         let mut s = 12345u32;
         let mut u = || {
             s = s.wrapping_mul(1_664_525).wrapping_add(1_013_904_223);
