@@ -48,6 +48,8 @@ pub struct CommissioningOutcome {
     /// phase current the plant carried (A, true, not as sensed).
     pub excursion: f64,
     pub peak_current: f64,
+    /// The sequence's stage when the phase current peaked.
+    pub peak_stage: Option<control_core::commissioning::Stage>,
 }
 
 /// The longest a commissioning may take (s of the drive's time).
@@ -237,11 +239,18 @@ impl AxisSimulation {
         let limit = (COMMISSIONING_LIMIT_S / self.tick_period) as u64;
         let mut ticks = 0u64;
         let (start, mut excursion, mut peak_current) = (self.plant.state.motor_angle, 0.0f64, 0.0f64);
+        let mut peak_stage = None;
         let measured = loop {
             self.tick_inner(&rest, 0.0, |_| {});
             ticks += 1;
             excursion = excursion.max((self.plant.state.motor_angle - start).abs());
-            peak_current = peak_current.max(self.plant.phase_current_peak());
+            let current = self.plant.phase_current_peak();
+            if current > peak_current {
+                peak_current = current;
+                if let Some(CommissioningStatus::Running(stage)) = self.axis.commissioning() {
+                    peak_stage = Some(stage);
+                }
+            }
             match self.axis.commissioning() {
                 Some(CommissioningStatus::Running(_)) if ticks < limit => {}
                 Some(CommissioningStatus::Running(_)) => {
@@ -281,7 +290,7 @@ impl AxisSimulation {
         self.ticks = 0;
         self.step_means = StepMeans::default();
         let seconds = ticks as f64 * self.tick_period;
-        self.commissioned = Some(CommissioningOutcome { measured, seconds, excursion, peak_current });
+        self.commissioned = Some(CommissioningOutcome { measured, seconds, excursion, peak_current, peak_stage });
         self.position_origin = self.plant.state.motor_angle;
         self.count_origin = origin;
         Ok(())

@@ -53,6 +53,8 @@ pub struct MotorRow {
     pub seconds: f64,
     pub turns: f64,
     pub current_ratio: f64,
+    /// The sequence's stage when the current peaked.
+    pub peak_stage: Option<control_core::commissioning::Stage>,
 }
 
 const TEST_CURRENT: f64 = 2.0;
@@ -143,6 +145,7 @@ pub fn commission_one(plant: &PlantParams) -> MotorRow {
         seconds: f64::NAN,
         turns: f64::NAN,
         current_ratio: f64::NAN,
+        peak_stage: None,
     };
     let sim = match AxisSimulation::new(&config) {
         Ok(sim) => sim,
@@ -175,6 +178,7 @@ pub fn commission_one(plant: &PlantParams) -> MotorRow {
     row.seconds = c.seconds;
     row.turns = c.excursion * plant.pole_pairs as f64 / tau;
     row.current_ratio = c.peak_current / TEST_CURRENT;
+    row.peak_stage = c.peak_stage;
     row
 }
 
