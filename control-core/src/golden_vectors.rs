@@ -3,6 +3,9 @@
 //! natively; the firmware's `core-vectors` binary replays the same bytes on a Cortex-M4F
 //! (QEMU). Equal digests mean the core computes the same bits on both.
 //!
+//! Large files (a whole commissioning) are streamed: [`replay_from`] reads them through a
+//! [`VectorSource`] (on the target, semihosting's file calls) instead of a slice in flash.
+//!
 //! Format (little-endian): `b"SVV1"`, scenario count (u32); per scenario: parameter preset
 //! (u32), tick count (u32), event count (u32), the events (tick u32, kind u8, value i64), then
 //! per tick the sensor inputs and the commands ([`TICK_BYTES`] bytes).
@@ -11,6 +14,7 @@ use core::fmt;
 
 use crate::acc_dec::AccDecKind;
 use crate::axis::{Axis, AxisInputs, Commands, Mode};
+use crate::commissioning::{CommissioningSettings, CommissioningStatus};
 use crate::params::{EncoderMounting, Params};
 use crate::response_correction::{CorrectionSection, SecondOrder};
 use crate::stop_sequence::SequenceEvent;
@@ -77,6 +81,9 @@ pub fn preset(id: u32) -> Option<Params> {
 pub enum VectorEvent {
     Sequence(SequenceEvent),
     StartSweep,
+    /// Commissioning with the default settings for the axis's encoder and tick
+    /// ([`CommissioningSettings::for_params`]).
+    StartCommissioning,
 }
 
 impl VectorEvent {
@@ -90,6 +97,7 @@ impl VectorEvent {
             Self::Sequence(SequenceEvent::ReturnToStart) => (6, 0),
             Self::Sequence(SequenceEvent::SelectGain(i)) => (7, i as i64),
             Self::StartSweep => (8, 0),
+            Self::StartCommissioning => (9, 0),
         }
     }
 
@@ -103,6 +111,7 @@ impl VectorEvent {
             6 => Self::Sequence(SequenceEvent::ReturnToStart),
             7 => Self::Sequence(SequenceEvent::SelectGain(usize::try_from(value).ok()?)),
             8 => Self::StartSweep,
+            9 => Self::StartCommissioning,
             _ => return None,
         })
     }
@@ -135,17 +144,47 @@ impl Writer<'_> {
     }
 }
 
-struct Reader<'a> {
-    buf: &'a [u8],
+/// Where the vector bytes come from, in order.
+pub trait VectorSource {
+    /// Fill `buf` with the next bytes; `false` when there are not that many left.
+    fn fill(&mut self, buf: &mut [u8]) -> bool;
+}
+
+/// A vector file in memory.
+pub struct SliceSource<'a> {
+    bytes: &'a [u8],
     at: usize,
 }
 
-impl<'a> Reader<'a> {
+impl<'a> SliceSource<'a> {
+    pub fn new(bytes: &'a [u8]) -> Self {
+        Self { bytes, at: 0 }
+    }
+}
+
+impl VectorSource for SliceSource<'_> {
+    fn fill(&mut self, buf: &mut [u8]) -> bool {
+        let Some(b) = self.bytes.get(self.at..self.at + buf.len()) else {
+            return false;
+        };
+        buf.copy_from_slice(b);
+        self.at += buf.len();
+        true
+    }
+}
+
+struct Reader<S> {
+    source: S,
+    at: usize,
+}
+
+impl<S: VectorSource> Reader<S> {
     fn take<const N: usize>(&mut self) -> Result<[u8; N], VectorError> {
-        let b = self.buf.get(self.at..self.at + N).ok_or(VectorError::Truncated(self.at))?;
-        self.at += N;
         let mut out = [0u8; N];
-        out.copy_from_slice(b);
+        if !self.source.fill(&mut out) {
+            return Err(VectorError::Truncated(self.at));
+        }
+        self.at += N;
         Ok(out)
     }
     fn u32(&mut self) -> Result<u32, VectorError> {
@@ -156,6 +195,9 @@ impl<'a> Reader<'a> {
     }
 }
 
+/// The most events a scenario may carry (read ahead of its ticks).
+pub const MAX_EVENTS: usize = 32;
+
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum VectorError {
     Magic,
@@ -163,6 +205,7 @@ pub enum VectorError {
     Preset(u32),
     Mode(u8),
     Event(u8),
+    Events(u32),
 }
 
 impl fmt::Display for VectorError {
@@ -173,6 +216,7 @@ impl fmt::Display for VectorError {
             Self::Preset(p) => write!(f, "unknown parameter preset {p}"),
             Self::Mode(m) => write!(f, "unknown mode {m}"),
             Self::Event(e) => write!(f, "unknown event kind {e}"),
+            Self::Events(n) => write!(f, "{n} events in a scenario (at most {MAX_EVENTS})"),
         }
     }
 }
@@ -201,17 +245,22 @@ impl Digest {
 
 /// Replay every scenario; returns (ticks, digest). Events apply before the tick they carry.
 pub fn replay(bytes: &[u8]) -> Result<(u64, u64), VectorError> {
-    replay_with(bytes, Work::StepAndDigest)
+    replay_with(SliceSource::new(bytes), Work::StepAndDigest)
+}
+
+/// [`replay`] of the bytes `source` gives.
+pub fn replay_from(source: impl VectorSource) -> Result<(u64, u64), VectorError> {
+    replay_with(source, Work::StepAndDigest)
 }
 
 /// Replay without digesting the outputs (to measure what the core itself costs).
 pub fn replay_only(bytes: &[u8]) -> Result<u64, VectorError> {
-    replay_with(bytes, Work::Step).map(|(ticks, _)| ticks)
+    replay_with(SliceSource::new(bytes), Work::Step).map(|(ticks, _)| ticks)
 }
 
 /// Decode the inputs without stepping the axis (the decoding's share of the cost).
 pub fn decode_only(bytes: &[u8]) -> Result<u64, VectorError> {
-    replay_with(bytes, Work::Decode).map(|(ticks, _)| ticks)
+    replay_with(SliceSource::new(bytes), Work::Decode).map(|(ticks, _)| ticks)
 }
 
 #[derive(Clone, Copy, PartialEq, Eq)]
@@ -221,8 +270,8 @@ enum Work {
     StepAndDigest,
 }
 
-fn replay_with(bytes: &[u8], work: Work) -> Result<(u64, u64), VectorError> {
-    let mut r = Reader { buf: bytes, at: 0 };
+fn replay_with(source: impl VectorSource, work: Work) -> Result<(u64, u64), VectorError> {
+    let mut r = Reader { source, at: 0 };
     if &r.take::<4>()? != MAGIC {
         return Err(VectorError::Magic);
     }
@@ -235,8 +284,13 @@ fn replay_with(bytes: &[u8], work: Work) -> Result<(u64, u64), VectorError> {
         let mut axis = Axis::new(params).map_err(|_| VectorError::Preset(id))?;
         let ticks = r.u32()?;
         let events = r.u32()?;
-        let events_at = r.at;
-        r.at += events as usize * EVENT_BYTES;
+        if events as usize > MAX_EVENTS {
+            return Err(VectorError::Events(events));
+        }
+        let mut scheduled = [(0u32, 0u8, 0i64); MAX_EVENTS];
+        for e in scheduled.iter_mut().take(events as usize) {
+            *e = (r.u32()?, r.take::<1>()?[0], i64::from_le_bytes(r.take()?));
+        }
         let mut next_event = 0u32;
         for tick in 0..ticks {
             let inputs = AxisInputs {
@@ -259,16 +313,17 @@ fn replay_with(bytes: &[u8], work: Work) -> Result<(u64, u64), VectorError> {
             };
             axis.apply_mode(&commands);
             while next_event < events {
-                let mut e = Reader { buf: bytes, at: events_at + next_event as usize * EVENT_BYTES };
-                if e.u32()? != tick {
+                let (at, kind, value) = scheduled[next_event as usize];
+                if at != tick {
                     break;
                 }
-                let kind = e.take::<1>()?[0];
-                let value = i64::from_le_bytes(e.take()?);
                 // A refused event is part of the behaviour being compared, not an error.
                 let result = match VectorEvent::decode(kind, value).ok_or(VectorError::Event(kind))? {
                     VectorEvent::Sequence(s) => axis.sequence_event(s).is_ok(),
                     VectorEvent::StartSweep => axis.start_sweep().is_ok(),
+                    VectorEvent::StartCommissioning => {
+                        axis.start_commissioning(&CommissioningSettings::for_params(axis.params())).is_ok()
+                    }
                 };
                 digest.bytes(&[result as u8]);
                 next_event += 1;
@@ -310,6 +365,19 @@ fn replay_with(bytes: &[u8], work: Work) -> Result<(u64, u64), VectorError> {
             {
                 digest.f32(x);
             }
+        }
+        // What a commissioning measured (or why it stopped), every bit of it.
+        match axis.commissioning() {
+            Some(CommissioningStatus::Done(m)) => {
+                for x in [m.resistance, m.ld, m.lq, m.flux_linkage, m.alignment.offset, m.current_kp, m.current_ki] {
+                    digest.f32(x);
+                }
+                digest.bytes(&[m.alignment.pole_pairs as u8, m.alignment.reversed as u8]);
+                digest.f32(m.current_step.bandwidth_hz);
+            }
+            Some(CommissioningStatus::Failed(_)) => digest.bytes(&[0xFF]),
+            Some(CommissioningStatus::Running(_)) => digest.bytes(&[0xFE]),
+            None => {}
         }
         total += ticks as u64;
     }

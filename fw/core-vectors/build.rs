@@ -6,6 +6,7 @@ fn main() {
     println!("cargo:rustc-link-arg-bins=-Tcore-vectors.ld");
     println!("cargo:rerun-if-changed=core-vectors.ld");
     println!("cargo:rerun-if-env-changed=CORE_VECTORS_FILE");
+    println!("cargo:rerun-if-env-changed=CORE_VECTORS_STREAM");
     if let Ok(f) = std::env::var("CORE_VECTORS_FILE") {
         println!("cargo:rerun-if-changed={f}");
     }

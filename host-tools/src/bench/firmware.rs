@@ -10,6 +10,7 @@ use std::path::{Path, PathBuf};
 use std::process::Command;
 
 use anyhow::{bail, Context, Result};
+use control_core::commissioning::{CommissioningSettings, CommissioningStatus};
 use control_core::golden_vectors::{
     encode_tick, preset, replay, VectorEvent, ALL_FEATURES, EVENT_BYTES, MAGIC, TICK_BYTES,
 };
@@ -49,6 +50,10 @@ pub fn record(
                 let _ = match e {
                     VectorEvent::Sequence(s) => sim.axis.sequence_event(*s).is_ok(),
                     VectorEvent::StartSweep => sim.axis.start_sweep().is_ok(),
+                    VectorEvent::StartCommissioning => {
+                        let settings = CommissioningSettings::for_params(sim.axis.params());
+                        sim.axis.start_commissioning(&settings).is_ok()
+                    }
                 };
             }
         }
@@ -161,6 +166,29 @@ pub fn all_features_recordings() -> Vec<Recording> {
     ]
 }
 
+/// A whole commissioning of the default motor on the default plant (the encoder's mounting,
+/// the sensors' errors and the dead time hidden in it), from its start to a little after its
+/// end, and how it ended on the host: about 3 MB of vectors, streamed to the target
+/// ([`replay_streamed_on_cortex_m4`]).
+pub fn commissioning_recording() -> Result<(Recording, CommissioningStatus)> {
+    const SECONDS: f64 = 5.2;
+    let config = SimulationConfig { control: preset(0).unwrap(), ..Default::default() };
+    let mut sim = AxisSimulation::new(&config).map_err(|e| anyhow::anyhow!("{e}"))?;
+    let rest = inputs(Mode::Torque);
+    sim.apply_mode(&rest);
+    let settings = CommissioningSettings::for_params(sim.axis.params());
+    sim.axis.start_commissioning(&settings).map_err(|e| anyhow::anyhow!("{e:?}"))?;
+    let mut rec = Recording { preset: 0, ticks: Vec::new(), events: vec![(0, VectorEvent::StartCommissioning)] };
+    for _ in 0..(SECONDS / sim.tick_period()).round() as u32 {
+        let (i, c) = sim.tick_traced(&rest);
+        let mut bytes = [0u8; TICK_BYTES];
+        encode_tick(&i, &c, &mut bytes);
+        rec.ticks.push(bytes);
+    }
+    let status = sim.axis.commissioning().context("no commissioning")?;
+    Ok((rec, status))
+}
+
 /// Run `scripts/fw` with these cargo arguments (and environment).
 pub fn build(args: &[&str], env: &[(&str, &Path)]) -> Result<()> {
     let mut cmd = Command::new(workspace_root().join("scripts/fw"));
@@ -189,21 +217,49 @@ pub struct CoreReplay {
     pub instructions_per_tick_with_digest: Option<f64>,
 }
 
+/// One vector file is built into the binary at a time: callers in parallel (tests) take turns
+/// from the build to the end of the run.
+static ONE_AT_A_TIME: std::sync::Mutex<()> = std::sync::Mutex::new(());
+
 /// Replay `bytes` on the host and on the Cortex-M4 in QEMU (`name` keeps the files apart).
 pub fn replay_on_cortex_m4(bytes: &[u8], name: &str) -> Result<CoreReplay> {
     if bytes.len() >= 960 * 1024 {
         bail!("{} bytes of vectors do not fit the target's flash", bytes.len());
     }
-    let (ticks, digest) = replay(bytes).map_err(|e| anyhow::anyhow!("host replay: {e}"))?;
-    // One vector file is built into the binary at a time: callers in parallel (tests) take
-    // turns from the build to the end of the run.
-    static ONE_AT_A_TIME: std::sync::Mutex<()> = std::sync::Mutex::new(());
     let _turn = ONE_AT_A_TIME.lock().unwrap_or_else(|e| e.into_inner());
+    let file = vector_file(bytes, name)?;
+    build(&["--release", "-q", "-p", "core-vectors"], &[("CORE_VECTORS_FILE", &file)])?;
+    run_replay(bytes)
+}
+
+/// [`replay_on_cortex_m4`] for a vector file larger than the target's flash: the target reads
+/// it from the host through semihosting as it replays (the digest only, no cost figures).
+pub fn replay_streamed_on_cortex_m4(bytes: &[u8], name: &str) -> Result<CoreReplay> {
+    let _turn = ONE_AT_A_TIME.lock().unwrap_or_else(|e| e.into_inner());
+    let file = vector_file(bytes, name)?;
+    // The binary's built-in vectors: none (a file of no scenarios).
+    let empty = vector_file(&encode(&[]), "no-vectors")?;
+    build(
+        &["--release", "-q", "-p", "core-vectors"],
+        &[("CORE_VECTORS_FILE", &empty), ("CORE_VECTORS_STREAM", &file)],
+    )?;
+    // (The next embedded replay builds without the stream: its variable is unset there.)
+    run_replay(bytes)
+}
+
+/// `bytes` written to `target/fw/<name>.bin` (its absolute path).
+fn vector_file(bytes: &[u8], name: &str) -> Result<PathBuf> {
     let dir = workspace_root().join("target/fw");
     std::fs::create_dir_all(&dir)?;
     let file: PathBuf = dir.join(format!("{name}.bin"));
     std::fs::write(&file, bytes)?;
-    build(&["--release", "-q", "-p", "core-vectors"], &[("CORE_VECTORS_FILE", &file)])?;
+    Ok(std::path::absolute(&file)?)
+}
+
+/// The host's replay of `bytes`, and the core-vectors binary just built run in QEMU.
+fn run_replay(bytes: &[u8]) -> Result<CoreReplay> {
+    let (ticks, digest) = replay(bytes).map_err(|e| anyhow::anyhow!("host replay: {e}"))?;
+    let dir = workspace_root().join("target/fw");
     let elf = dir.join("thumbv7em-none-eabihf/release/core-vectors");
     let run = Command::new("timeout")
         .args([

@@ -29,8 +29,8 @@ impl FirmwareBenchArgs {
 fn bench_firmware(args: &FirmwareBenchArgs) -> Result<bool> {
     let common = &args.common;
     use crate::bench::firmware::{
-        all_features_recordings, drive_image_size, drive_image_stack, encode, interrupts_off_on_cortex_m4, recordings,
-        replay_on_cortex_m4,
+        all_features_recordings, commissioning_recording, drive_image_size, drive_image_stack, encode,
+        interrupts_off_on_cortex_m4, recordings, replay_on_cortex_m4, replay_streamed_on_cortex_m4,
     };
     let pb = progress_bar("firmware bench", common.json);
     pb.set_position(50);
@@ -40,6 +40,10 @@ fn bench_firmware(args: &FirmwareBenchArgs) -> Result<bool> {
     let vectors = replay_on_cortex_m4(&encode(&recordings()), "golden-vectors")?;
     pb.set_position(700);
     let all = replay_on_cortex_m4(&encode(&all_features_recordings()), "all-features-vectors")?;
+    pb.set_position(800);
+    let (commissioning, status) = commissioning_recording()?;
+    let commissioned = matches!(status, control_core::commissioning::CommissioningStatus::Done(_));
+    let commissioning = replay_streamed_on_cortex_m4(&encode(&[commissioning]), "commissioning-vectors")?;
     pb.set_position(900);
     let off = interrupts_off_on_cortex_m4()?;
     pb.finish_and_clear();
@@ -55,6 +59,8 @@ fn bench_firmware(args: &FirmwareBenchArgs) -> Result<bool> {
     let untouched_goal = off.untouched_ram >= UNTOUCHED_GOAL;
     let ok = vectors.identical
         && all.identical
+        && commissioning.identical
+        && commissioned
         && size.flash <= FLASH_GOAL
         && size.ram <= RAM_GOAL
         && stack.fits()
@@ -75,8 +81,8 @@ fn bench_firmware(args: &FirmwareBenchArgs) -> Result<bool> {
             "KiB",
         )
         .equal(
-            "golden vectors and the every-feature run, Cortex-M4 (QEMU) vs host: runs that differ",
-            [&vectors, &all].iter().filter(|r| !r.identical).count() as f64,
+            "golden vectors, the every-feature run and a whole commissioning, Cortex-M4 (QEMU) vs host: runs that differ",
+            [&vectors, &all, &commissioning].iter().filter(|r| !r.identical).count() as f64,
             0.0,
             "",
         )
@@ -99,6 +105,7 @@ fn bench_firmware(args: &FirmwareBenchArgs) -> Result<bool> {
             "{}",
             serde_json::to_string_pretty(&serde_json::json!({
                 "bench": "firmware", "image": size, "stack": stack, "golden_vectors": vectors, "all_features": all,
+                "commissioning": commissioning, "commissioning_finished": commissioned,
                 "largest_frame": largest_frame, "stack_goal_met": stack_goal, "untouched_ram_goal_met": untouched_goal,
                 "goals": {"flash": FLASH_GOAL, "static_ram": RAM_GOAL, "stack": STACK_GOAL, "frame": FRAME_GOAL,
                           "untouched_ram": UNTOUCHED_GOAL, "instructions_per_tick": TICK_GOAL - TICK_MARGIN},
@@ -146,6 +153,14 @@ fn bench_firmware(args: &FirmwareBenchArgs) -> Result<bool> {
             r.instructions_per_tick_with_digest.unwrap_or(f64::NAN)
         );
     }
+    println!(
+        "  a whole commissioning of the default motor ({} ticks, {}, streamed from the host): host digest {}, target: {} → {}",
+        commissioning.ticks,
+        if commissioned { "finished" } else { "NOT finished" },
+        commissioning.host_digest,
+        commissioning.target,
+        if commissioning.identical { "identical" } else { "DIFFERENT" }
+    );
     println!(
         "  goal: at most {TICK_GOAL:.0} instructions per tick with every feature on, {TICK_MARGIN:.0} of them kept as margin (≤ {:.0}): {} ({per_tick_all:.0}, {:.0} left)",
         TICK_GOAL - TICK_MARGIN,
