@@ -227,6 +227,7 @@ pub fn run_on_device_loading<T: DrivePort>(
 ) -> Result<DeviceCircleReport> {
     crate::paths::create_out_dir(out)?;
     let run = pseudo_circle_sweep(request)?;
+    crate::fmu::runner::refuse_drive_owned(run.parameters.keys())?;
     let (_, _, n) = request.timing()?;
     let mut drive_run = run.clone();
     if correction.is_some() {

@@ -97,6 +97,17 @@ impl<T: DrivePort> DriveSession<T> {
                  motor and the encoder's mounting; --save keeps them in the drive's flash)"
             );
         }
+        // The measured mounting is in the drive's encoder counts: a plan of another resolution
+        // (its twin's plant's) would turn it into another angle.
+        if params.encoder_counts_per_rev != drive.encoder_counts_per_rev {
+            bail!(
+                "the run's encoder has {} counts per revolution, the drive's {}: set plant.encoder_counts_per_rev={} \
+                 for the run (the drive's commissioning measured its encoder's mounting in its own counts)",
+                params.encoder_counts_per_rev,
+                drive.encoder_counts_per_rev,
+                drive.encoder_counts_per_rev
+            );
+        }
         let current = CurrentLoopGains { kp: drive.current.kp, ki: drive.current.ki, ..params.current };
         Ok(Params {
             motor: drive.motor,

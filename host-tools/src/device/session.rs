@@ -147,7 +147,8 @@ impl<T: DrivePort> DriveSession<T> {
     }
 
     /// [`DriveSession::rest`], a drive whose only fault is that its motor is not commissioned
-    /// accepted (what commissioning it, or giving it a commissioned set, lifts).
+    /// accepted (what commissioning it, or a commissioned set saved in its flash at its next boot,
+    /// lifts).
     pub fn rest_allowing_no_commissioning(&mut self) -> Result<Telemetry> {
         self.order(Request::SetCommands(Commands { mode: Mode::Torque, ..Commands::default() }), "the rest command")?;
         let t = self.telemetry()?;

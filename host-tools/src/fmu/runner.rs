@@ -94,6 +94,31 @@ impl Drop for DriveTwin<'_> {
     }
 }
 
+/// The parameters a drive's commissioning owns: its motor model and its current loop's gains.
+/// An experiment on a drive cannot set them (the drive keeps its own, its twin takes the
+/// drive's); [`refuse_drive_owned`] says so before anything runs.
+pub const DRIVE_OWNED: [&str; 7] = [
+    "ctrl.motor_pole_pairs",
+    "ctrl.motor_resistance",
+    "ctrl.motor_ld",
+    "ctrl.motor_lq",
+    "ctrl.motor_flux_linkage",
+    "ctrl.current_kp",
+    "ctrl.current_ki",
+];
+
+/// An experiment on a drive that sets one of [`DRIVE_OWNED`]: refused by name.
+pub fn refuse_drive_owned<'a>(names: impl IntoIterator<Item = &'a String>) -> Result<()> {
+    if let Some(name) = names.into_iter().find(|n| DRIVE_OWNED.contains(&n.as_str())) {
+        bail!(
+            "{name} is the drive's: with --device the drive runs, and its twin takes, the motor and current-loop \
+             gains its commissioning measured and designed (`servo commission --device PORT`, with --bandwidth for \
+             other gains), so it cannot be set for one experiment"
+        );
+    }
+    Ok(())
+}
+
 /// The parameters a twin's runs take in place of the FMU's: `commissioning.at_start` off, and
 /// the motor and current-loop gains of the drive it is the twin of.
 type TwinParameters = Vec<(&'static str, Value)>;
@@ -291,18 +316,21 @@ impl Fmu {
             })
             .collect::<Result<_>>()?;
         if let Some(twin) = self.drive_twin.borrow().as_ref() {
+            use servo_axis::variables::name;
+            // A scenario that commissions its twin at initialisation measures the twin's motor
+            // itself: the drive's is not given to it.
+            let commissions = scenario.parameters.get(name::commissioning_at_start) == Some(&Value::Bool(true));
             for &(name, value) in twin {
                 let given = scenario.parameters.contains_key(name);
+                if commissions && name.starts_with("ctrl.motor_") {
+                    continue;
+                }
                 if name == servo_axis::variables::name::commissioning_at_start {
                     if !given {
                         params.push((self.variable(name)?, value));
                     }
                 } else if given {
-                    bail!(
-                        "{name} is the drive's: with --device the twin runs the motor and current-loop gains the \
-                         drive's commissioning measured and designed (`servo commission --device PORT`, with \
-                         --bandwidth for other gains), so it cannot be set for one experiment"
-                    );
+                    refuse_drive_owned([&name.to_string()])?;
                 } else {
                     params.push((self.variable(name)?, value));
                 }

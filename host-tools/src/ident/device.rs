@@ -251,6 +251,7 @@ pub fn identify_on_device<T: DrivePort>(
     mut progress: impl FnMut(&str, f64),
 ) -> Result<DeviceIdentification> {
     let (axis, parameters) = (request.axis, request.parameters);
+    crate::fmu::runner::refuse_drive_owned(parameters.keys())?;
     crate::paths::create_out_dir(out)?;
     let run = device_run(parameters, request.amplitude)?;
     let rates = run.rates()?;

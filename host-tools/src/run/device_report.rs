@@ -43,6 +43,7 @@ pub fn run_on_device<T: DrivePort>(
 ) -> Result<bool> {
     let run_one = |file: &Path| -> Result<Option<DeviceScenarioReport>> {
         let scenario = Scenario::load(file)?;
+        crate::fmu::runner::refuse_drive_owned(scenario.parameters.keys())?;
         if let Some(why) = crate::run::device::not_for_a_drive(&scenario) {
             if !json {
                 println!("{}: skipped on the drive: {why}", scenario.name);

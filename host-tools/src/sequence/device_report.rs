@@ -40,6 +40,7 @@ pub fn run_on_device<T: DrivePort>(
 ) -> Result<bool> {
     let run_one = |file: &Path| -> Result<Option<DeviceTimelineReport>> {
         let s = SequenceScenario::load(file)?;
+        crate::fmu::runner::refuse_drive_owned(s.parameters.keys())?;
         one(fmu, (port, &mut *session), &s, out, json).map(Some)
     };
     each_file(files, json, run_one, |r| r.passed, print)
