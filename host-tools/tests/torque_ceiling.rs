@@ -328,3 +328,36 @@ fn a_multisine_cut_by_a_torque_limit_below_the_current_limit_is_refused_naming_i
     assert!(e.contains("near the") && e.contains("velocity.torque_limit = 0.02 N·m"), "{e}");
     command_to_load(&fmu, &BTreeMap::new(), &frequencies).unwrap();
 }
+
+/// A drive's twin runs the drive's measured motor and current loop (`Fmu::as_twin_of`): its
+/// torque limits are built from them (its torque constant, the current a torque takes), not
+/// from the plant's constants the plan has. With the defaults the current limit's torque
+/// (kt · 20 A) equals the 2 N·m torque limit: a flux linkage measured a little off moves
+/// where the current limit lies against it.
+#[test]
+fn a_twins_torque_limits_come_from_the_drives_motor() {
+    let fmu = fmu();
+    let run = host_tools::fmu::sweep_run::SweepRun {
+        settings: SweepParams::default(),
+        parameters: BTreeMap::new(),
+        velocity: 0.0,
+    };
+    let plan = run.drive_params().unwrap();
+    assert_eq!(run.params_on(&fmu).unwrap(), plan);
+    let mut drive = plan.commissioned_as(plan.encoder_mounting);
+    drive.motor.flux_linkage *= 0.999;
+    drive.motor.resistance *= 1.01;
+    drive.current.kp = 2.25;
+    drive.current.ki = 1370.0;
+    {
+        let twin = fmu.as_twin_of(&drive).unwrap();
+        let on_twin = run.params_on(&twin).unwrap();
+        assert_eq!(on_twin.motor, drive.motor);
+        assert_eq!((on_twin.current.kp, on_twin.current.ki), (2.25, 1370.0));
+        let (ours, plans) = (TorqueLimits::of(&on_twin, &run.settings), TorqueLimits::of(&plan, &run.settings));
+        assert_eq!(ours.ceiling.kt, drive.motor.torque_constant(), "{ours:?}");
+        assert_ne!(ours.ceiling.current, plans.ceiling.current, "{ours:?} vs {plans:?}");
+    }
+    // The guard dropped: the plan's own again.
+    assert_eq!(run.params_on(&fmu).unwrap(), plan);
+}

@@ -276,6 +276,17 @@ impl Fmu {
         Ok(DriveTwin(self, before))
     }
 
+    /// The parameters this FMU's runs take in place of a scenario's while it is a drive's twin
+    /// (none otherwise): what plans of a twin's run (its torque and current ceilings) build
+    /// the twin's drive from, as the run does.
+    pub fn twin_parameters(&self) -> BTreeMap<String, Value> {
+        self.drive_twin
+            .borrow()
+            .as_ref()
+            .map(|twin| twin.iter().map(|&(name, value)| (name.to_string(), value)).collect())
+            .unwrap_or_default()
+    }
+
     pub fn run(&self, scenario: &Scenario, progress: impl FnMut(f64)) -> Result<Trace> {
         self.run_until(scenario, progress, |_| false)
     }

@@ -70,6 +70,16 @@ impl SweepRun {
         Ok(control)
     }
 
+    /// [`SweepRun::drive_params`] as `fmu` runs them: a drive's twin with that drive's motor
+    /// and current loop ([`Fmu::twin_parameters`]), the run's own otherwise.
+    pub fn params_on(&self, fmu: &Fmu) -> Result<control_core::Params> {
+        let mut parameters = self.fmu_parameters();
+        for (name, value) in fmu.twin_parameters() {
+            parameters.entry(name).or_insert(value);
+        }
+        Ok(configuration(&parameters)?.control)
+    }
+
     /// The run's FMU parameters with the sweep's settings.
     fn fmu_parameters(&self) -> BTreeMap<String, Value> {
         let mut parameters = self.parameters.clone();

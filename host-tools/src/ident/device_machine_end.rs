@@ -348,7 +348,7 @@ fn twin_run(fmu: &Fmu, run: &SweepRun, progress: &mut impl FnMut(&str, f64)) -> 
         bail!("the twin tripped during the machine-end sweep: {}", trip.sentence());
     }
     let entry = ExcitationEntry::of(run.settings.point);
-    let ceiling = TorqueCeiling::of(&run.drive_params()?, entry, run.settings.dither_in_use());
+    let ceiling = TorqueCeiling::of(&run.params_on(fmu)?, entry, run.settings.dither_in_use());
     if let Some(largest_iq) = current_near_ceiling(&twin_trace, &ceiling)? {
         bail!(
             "the machine-end sweep drove the twin's current to {largest_iq:.2} A, near the {} A limit ({ceiling}): its response would not be linear",

@@ -214,7 +214,7 @@ pub fn measure_records(
     if let Some(trip) = crate::fmu::axis_health::first_trip(&trace)? {
         bail!("the axis tripped during the excitation: {}; lower the amplitude", trip.sentence());
     }
-    excitation_within_ceiling(&TorqueLimits::of(&run.drive_params()?, &run.settings), &col("torque_command_out")?)?;
+    excitation_within_ceiling(&TorqueLimits::of(&run.params_on(fmu)?, &run.settings), &col("torque_command_out")?)?;
     // Rows following a measuring step: one sample of each signal per acquisition period.
     let rows: Vec<usize> = (1..measuring.len()).filter(|&i| measuring[i] != 0.0).collect();
     let u: Vec<f64> = rows.iter().map(|&i| u_all[i]).collect();

@@ -231,7 +231,7 @@ pub fn run(
     let limited = limited_shares(&trace);
     let limited_hz = flagged(&limited);
     let limited_known = trace.column("sweep_last_limited").is_some();
-    let limits = TorqueLimits::of(&sweep.drive_params()?, &sweep.settings);
+    let limits = TorqueLimits::of(&sweep.params_on(fmu)?, &sweep.settings);
     // By frequency index: the on-line results come one per frequency, in order.
     let torque_limited = torque_limited_shares(&trace, &limits)?;
     let torque_limited_share: Vec<f64> =
