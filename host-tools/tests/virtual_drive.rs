@@ -122,8 +122,8 @@ fn sweep_over(port: &str, dir: &std::path::Path) -> std::process::Output {
 /// differences and standard errors (not only from the report's verdict): the goal where the
 /// drive's standard error is within the precision target, 5 standard errors (at most 5 times
 /// the goal) where it is not;
-/// and most points held to the goal itself.
-fn assert_within_bounds(r: &serde_json::Value, context: &str) {
+/// and at least `precise_share` of the points held to the goal itself.
+fn assert_within_bounds(r: &serde_json::Value, context: &str, precise_share: f64) {
     use host_tools::device::bench::{GOAL_DB, GOAL_DEG, PRECISION};
     let points = r["points"].as_array().unwrap();
     let mut at_goal = 0;
@@ -147,7 +147,7 @@ fn assert_within_bounds(r: &serde_json::Value, context: &str) {
         at_goal += (se_db <= PRECISION.0 && se_deg <= PRECISION.1) as usize;
     }
     assert!(
-        4 * at_goal >= 3 * points.len(),
+        at_goal as f64 >= precise_share * points.len() as f64,
         "{at_goal} of {} points measured to the precision target{context}",
         points.len()
     );
@@ -186,7 +186,7 @@ fn a_sweep_over_the_virtual_drive_matches_its_twin_and_parameters_survive_a_rest
     // Two measurements of the same response (see `device::bench::GOAL_DB`), each point within
     // the goal, or within 5 of its standard errors where the drive could not measure it to the
     // precision target (`device::bench::difference_bound`).
-    assert_within_bounds(&r, "");
+    assert_within_bounds(&r, "", 0.75);
     // The sweep gave the drive its parameters: save them, power-cycle, and they are loaded.
     assert_eq!(json(&device(&vd.port, &["save-params"]))["done"], true);
     drop(vd);
@@ -259,7 +259,8 @@ fn a_sweep_and_a_save_over_a_corrupting_line_complete_and_act_once() {
     assert!(matches!(o.status.code(), Some(0 | 1)), "{e}");
     let r: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
     assert_eq!(r["points"].as_array().unwrap().len(), 41);
-    assert_within_bounds(&r, " over the corrupting line");
+    // The line loses about a batch of samples in five: fewer points reach the precision target.
+    assert_within_bounds(&r, " over the corrupting line", 0.5);
     let (corrupt, resent) = line_costs(&e);
     assert!(corrupt > 0 && resent > 0, "nothing on the line was hit: the test proves nothing ({e})");
     // A save: done, with the record it wrote (its answer lost or not), and only that record.
