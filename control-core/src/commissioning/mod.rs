@@ -10,10 +10,13 @@
 //!    the test current; a first-order fit of the response (`winding_fit`) gives a first
 //!    resistance and inductance: enough to close a current loop. No current at the highest
 //!    voltage: an open phase.
-//! 2. **Resistance.** The current loop, on the same fixed angle, ramps the current to the test
-//!    current (the rotor, wherever it stands, is pulled to the vector gradually), holds it and
-//!    then half of it, the rotor's swing on the vector damped until the first hold has settled
-//!    (`swing_damping`); `R = ΔV/ΔI` between the two holds (the sensors' offsets and the
+//! 2. **Resistance.** The current loop ramps the current to the test current while the vector
+//!    turns smoothly half an electrical turn back to the fixed angle (the rotor, wherever it
+//!    stands, is pulled in while the current is small: on a vector that stood still, a rotor
+//!    at its unstable equilibrium would stay there, held by friction, and fall at the full
+//!    current later), holds it and then half of it, the rotor's swing on the vector damped
+//!    until shortly before the first hold has settled (`swing_damping`); `R = ΔV/ΔI` between
+//!    the two holds (the sensors' offsets and the
 //!    inverter's dead-time voltage, the same at both, drop out). The third phase's current not
 //!    the other two's mean: a phase is missing.
 //! 3. **d-axis inductance.** Chips around the voltage of half the test current (the current
@@ -259,10 +262,15 @@ const AVERAGED_S: f32 = 0.05;
 /// The current's ramp to the test current (s): slow beside the rotor's swing on the vector,
 /// which it then follows nearly at rest.
 const RAMP_S: f32 = 0.3;
+/// The vector's turn over the ramp (rad, electrical).
+const RAMP_TURN: f32 = core::f32::consts::PI;
 /// The rotor counts as still when its count has not changed for this long (s); the first
 /// hold waits for it at most `STILL_WAIT_S`.
 const STILL_S: f32 = 0.03;
 const STILL_WAIT_S: f32 = 1.0;
+/// The swing's damping ends this long before the first hold's wait for a still rotor: a rotor
+/// the damping held creeping takes the rest of its way then, and the wait sees it move.
+const RELEASE_S: f32 = 0.04;
 /// The probe's first chip size (V), its growth per period, the share of the test current it
 /// grows to, and its chips' M-sequence degree (255 chips a period: the growth is checked over
 /// whole periods, whose excursions the fit's periods repeat) and the periods it fits over.
@@ -621,9 +629,22 @@ impl Commissioning {
             Stage::Ramp => {
                 let share = self.ticks as f32 / self.ticks_of(RAMP_S) as f32;
                 self.voltage = self.current_pi.d(self.test_current * share.min(1.0) - current.d);
-                let damping = self.swing.reference(current.q, s.tick_period);
+                // The frame's turn (rad per tick, the last tick's) puts `ω·L·i_d` on the q
+                // voltage beside the rotor's back-EMF.
+                let turning = self.speed / s.tick_period * self.probe_inductance * current.d;
+                let damping = self.swing.reference(current.q, turning, s.tick_period);
                 q_voltage = self.current_pi.q(damping - current.q);
+                // The vector turns back one electrical turn as the current grows (smoothly,
+                // to rest at angle 0): a rotor that stood near the vector's unstable
+                // equilibrium would sit there while friction holds it and fall later at the
+                // full current; the turning vector pulls every rotor in while the current is
+                // still small.
+                let x = share.min(1.0);
+                let angle = RAMP_TURN * (1.0 - x * x * (3.0 - 2.0 * x));
+                self.speed = angle - self.angle;
+                self.angle = angle;
                 if share >= 1.0 {
+                    (self.angle, self.speed) = (0.0, 0.0);
                     self.next_stage(Stage::HoldHigh);
                 }
             }
@@ -631,11 +652,12 @@ impl Commissioning {
                 let target = if stage == Stage::HoldHigh { self.test_current } else { 0.5 * self.test_current };
                 let voltage = self.current_pi.d(target - current.d);
                 let (hold, averaged) = (self.ticks_of(HOLD_S), self.ticks_of(AVERAGED_S));
-                // The swing damped until the first hold's settling ends (`swing_damping`): the
-                // wait for a still rotor and the averaging run undamped, so a rotor creeping
-                // under a damping far beyond critical takes the rest of its way at once.
-                let damping = self.swing.reference(current.q, s.tick_period);
-                let damped = stage == Stage::HoldHigh && self.ticks < hold - averaged;
+                // The swing damped until shortly before the first hold's settling ends
+                // (`swing_damping`): a rotor creeping under a damping far beyond critical takes
+                // the rest of its way at once, before the wait for a still rotor; the wait and
+                // the averaging run undamped.
+                let damping = self.swing.reference(current.q, 0.0, s.tick_period);
+                let damped = stage == Stage::HoldHigh && self.ticks + self.ticks_of(RELEASE_S) < hold - averaged;
                 q_voltage = self.current_pi.q(if damped { damping } else { 0.0 } - current.q);
                 // The back-EMF of a rotor still swinging on the vector would bias the voltage:
                 // the first hold waits for it to stop before it averages.
@@ -849,11 +871,12 @@ impl Commissioning {
                 // axis. Its size: the resistive voltage of half the test current where the
                 // winding follows a chip within a few ticks (the current then swings between
                 // none and the test current and keeps its sign, so the inverter's error stays
-                // constant); up to four times it on a slow winding, whose current moves by a
+                // constant); up to sixteen times it on a slow winding, whose current moves by a
                 // small share of a chip (its random walk over the record, about `sqrt(T/2τ)` of
-                // the chip's current), so that the ripple stands above the sensors' noise.
+                // the chip's current), so that the ripple stands above the sensors' noise: a
+                // swing of about a tenth of the test current either way.
                 let ticks_per_tau = self.probe_inductance / (self.resistance * s.tick_period);
-                let size = crate::limit(0.25 * libm::sqrtf(ticks_per_tau), 1.0, 4.0);
+                let size = crate::limit(0.25 * libm::sqrtf(ticks_per_tau), 1.0, 16.0);
                 // The resistive part of half the test current (the held voltage also carries
                 // the inverter's dead-time voltage, which a chip's swing must not scale).
                 let chip = size * 0.5 * self.resistance * self.test_current * self.chips.next_chip() as f32;

@@ -8,14 +8,15 @@
 //! motor). The sequence's current loop is stiff and rejects that back-EMF, so while the vector
 //! is held (the current's ramp and the first hold's settling) the damping is put back: the q
 //! back-EMF is estimated from the loop's own voltage and current (`e_q = v_q − R·i_q −
-//! L·di_q/dt`, low-passed) and the q current asked for is `−e_q/R`, within a share of the
+//! L·di_q/dt`, less the `ω·L·i_d` of a frame that turns, low-passed) and the q current asked
+//! for is `−e_q/R`, within a share of the
 //! test current (the loop keeps the current within it however fast the rotor swings).
 //! A winding's damping can be far beyond critical (a strong magnet on a small resistance and
 //! a light rotor): the rotor then creeps to the vector for tenths of a second, and a creeping
-//! rotor's back-EMF would bias the holds. So the damping stops once the first hold has
-//! settled, before its wait for a still rotor and its average: a
-//! rotor still creeping then takes the rest of the way at once, and friction or the damping
-//! before has left it nothing to swing with. The passes that turn the vector start from a
+//! rotor's back-EMF would bias the holds. So the damping stops shortly before the first hold
+//! waits for a still rotor: a rotor still creeping (held off the vector by the damping's own
+//! current) then takes the rest of the way at once, which the wait sees, and friction or the
+//! damping before has left it little to swing with. The passes that turn the vector start from a
 //! rotor at rest and are not damped: their smooth start and stop excite little swing, and a
 //! damping current's transient as the turn's back-EMF rises would drag the rotor more.
 
@@ -58,12 +59,14 @@ impl SwingDamping {
         Self { resistance, inductance, limit: CURRENT_SHARE * test_current, smoothing, ..Self::default() }
     }
 
-    /// The q current to ask for this tick (A) from the q current read now.
-    pub(super) fn reference(&mut self, q_current: f32, tick: f32) -> f32 {
+    /// The q current to ask for this tick (A) from the q current read now; `turning` (V) is the
+    /// q voltage a turning frame adds (`ω·L·i_d`), not the rotor's.
+    pub(super) fn reference(&mut self, q_current: f32, turning: f32, tick: f32) -> f32 {
         let Some(previous) = self.last_current.replace(q_current) else {
             return 0.0;
         };
         let back_emf = self.applied
+            - turning
             - self.resistance * 0.5 * (q_current + previous)
             - self.inductance * (q_current - previous) / tick;
         self.estimate += self.smoothing * (back_emf - self.estimate);
@@ -103,7 +106,7 @@ mod tests {
             for k in 0..16_000 {
                 // The voltage asked for last tick applies over this one.
                 let applied = v_q;
-                let reference = if damped { damping.reference(i_q, t) } else { 0.0 };
+                let reference = if damped { damping.reference(i_q, 0.0, t) } else { 0.0 };
                 v_q = pi.update(reference - i_q, 12.0).value;
                 damping.asked(v_q);
                 for _ in 0..10 {

@@ -28,6 +28,9 @@ pub struct CommissionBenchArgs {
     /// Seed of the draw (the same seed draws the same motors)
     #[arg(long, default_value_t = 1)]
     pub seed: u64,
+    /// Run only this motor of the draw (its index in the table, from 0), and print its plant
+    #[arg(long)]
+    pub motor: Option<u32>,
     #[command(flatten)]
     pub common: Common,
 }
@@ -188,7 +191,14 @@ impl CommissionBenchArgs {
             anyhow::bail!("--motors must be at least 1");
         }
         let mut rng = XorShift64Star::from_seed(self.seed);
-        let plants: Vec<PlantParams> = (0..self.motors).map(|_| draw(&mut rng)).collect();
+        let mut plants: Vec<PlantParams> = (0..self.motors).map(|_| draw(&mut rng)).collect();
+        if let Some(k) = self.motor {
+            let Some(plant) = plants.get(k as usize).copied() else {
+                anyhow::bail!("--motor {k}: the draw has motors 0 to {}", self.motors - 1);
+            };
+            eprintln!("motor {k} of seed {}: {plant:?}", self.seed);
+            plants = vec![plant];
+        }
         let pb = crate::cli::progress_bar("commissioning", self.common.json);
         let rows: Vec<MotorRow> = plants
             .iter()
