@@ -2,9 +2,10 @@
 //! one row per motor, each refusal named, and on every motor it commissions the figures that
 //! hold over the bench's grid checked row by row against the plant's truth the bench drew.
 //! The figures the bench still misses on some motors (see the notes) are held here at
-//! the levels measured over seeds 1 and 7 (100 motors each), so that they cannot get worse
-//! unnoticed: the q-axis inductance within 10 % (goal 3 %), the peak current within 3 times the
-//! test current (goal 1.1), at most a sixth of the motors refused (goal none).
+//! the levels measured over seeds 1 to 7 and 2026 (100 motors each), so that they cannot get
+//! worse unnoticed: the q-axis inductance within 14 % (goal 3 %), the peak current within 1.5
+//! times the test current (goal 1.1), at most one motor of the sixteen refused (goal none;
+//! 1 to 4 in a hundred over those seeds).
 
 #[allow(dead_code)] // the helpers other tests use
 mod common;
@@ -40,13 +41,13 @@ fn a_small_draw_commissions_within_the_figures_row_by_row_and_names_each_refusal
         assert_eq!(r["found_right"], true, "direction or pole pairs wrong, {at}");
         assert!(f(r, "offset_deg") <= 1.0, "offset, {at}");
         assert!(e[0] <= 0.03 && e[1] <= 0.03 && e[3] <= 0.03, "R, Ld or flux linkage beyond 3 %, {at}");
-        assert!(e[2] <= 0.10, "Lq beyond 10 %, {at}");
+        assert!(e[2] <= 0.14, "Lq beyond 14 %, {at}");
         assert!(f(r, "bandwidth_error") <= 0.10 && f(r, "overshoot") <= 0.10, "current loop, {at}");
         assert!(f(r, "seconds") <= 5.0, "drive time, {at}");
         assert!(f(r, "turns") <= 2.0, "travel, {at}");
-        assert!(f(r, "current_ratio") <= 3.0, "peak current, {at}");
+        assert!(f(r, "current_ratio") <= 1.5, "peak current, {at}");
     }
-    assert!(6 * refused <= MOTORS, "{refused} of {MOTORS} motors refused");
+    assert!(refused <= 1, "{refused} of {MOTORS} motors refused");
     // The exit status says whether every figure met its goal, as the figures do.
     let all_met = j["figures"]["figures"].as_array().unwrap().iter().all(|g| g["met"] == true);
     assert_eq!(o.status.code(), Some(if all_met { 0 } else { 1 }), "{stderr}");

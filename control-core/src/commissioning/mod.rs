@@ -7,9 +7,12 @@
 //! The sequence, each stage on the previous one's result:
 //! 1. **Probe.** Pseudo-random voltage chips of zero mean on a fixed angle (0), their size
 //!    growing from a millivolt by a quarter a period while the current stays under a third of
-//!    the test current; a first-order fit of the response (`winding_fit`) gives a first
-//!    resistance and inductance: enough to close a current loop. No current at the highest
-//!    voltage: an open phase.
+//!    the test current; a fit of the response gives a first resistance and inductance: enough
+//!    to close a current loop. The fit with the rotor's back-EMF as a series capacitance
+//!    (`free_rotor_fit`: the chips make torque on a rotor that is not on the fixed angle, and
+//!    turn a light one) where it finds a winding, else the first-order one (`winding_fit`).
+//!    The resistance is rough: the loop's integral corner is kept to a third of its bandwidth.
+//!    No current at the highest voltage: an open phase.
 //! 2. **Resistance.** The current loop ramps the current to the test current while the vector
 //!    turns smoothly half an electrical turn back to the fixed angle (the rotor, wherever it
 //!    stands, is pulled in while the current is small: on a vector that stood still, a rotor
@@ -583,12 +586,17 @@ impl Commissioning {
                     if let Some(previous) = self.last_current {
                         self.fit.add_with_dead_time(previous, current.d, self.applied_chip, self.dead_time_shape);
                     }
+                    self.q_fit.add(current.d, self.applied_chip);
                     self.last_current = Some(current.d);
                     // Per volt of dead time (its size is not known yet: the fit finds it), for
                     // the phase currents' signs at the next tick's start.
                     self.dead_time_shape = dead_time_per_volt([ia, ib, ic], frame).d;
                     if self.ticks >= PROBE_FIT_PERIODS * period {
-                        let Some(w) = self.fit.winding(s.tick_period) else {
+                        let plausible = |w: &Winding| {
+                            w.resistance > 1e-3 && w.resistance < 100.0 && w.inductance > 1e-6 && w.inductance < 1.0
+                        };
+                        let free_rotor = self.q_fit.winding(s.tick_period).filter(plausible);
+                        let Some(w) = free_rotor.or_else(|| self.fit.winding(s.tick_period)) else {
                             return self.fail(CommissioningFault::Inductance { axis: 'd' });
                         };
                         if !(w.resistance > 1e-3 && w.resistance < 100.0 && w.inductance > 1e-6 && w.inductance < 1.0) {
@@ -601,7 +609,13 @@ impl Commissioning {
                         // Within what the voltage allows on this winding, with room for the
                         // loop to act.
                         self.test_current = s.test_current.min(0.7 * s.max_voltage / w.resistance);
-                        self.start_current_loop(w.resistance, w.inductance, 0.0);
+                        // The probe's resistance is rough (a rotor that jitters on the chips,
+                        // sticking on its friction at each reversal, reads as several times
+                        // the winding's): the loop's integral corner, `R/L` in its design, is
+                        // kept to a third of its bandwidth, where an overestimate cannot make
+                        // it unstable. The holds measure the resistance the passes use.
+                        let corner = TAU * s.current_bandwidth_hz / 3.0;
+                        self.start_current_loop(w.resistance.min(corner * w.inductance), w.inductance, 0.0);
                         self.next_stage(Stage::Ramp);
                     }
                 } else if self.ticks.is_multiple_of(period) {
@@ -616,6 +630,7 @@ impl Commissioning {
                         return self.fail(CommissioningFault::OpenPhase { amps: self.peak });
                     } else {
                         self.fit = WindingFit::default();
+                        self.q_fit = FreeRotorFit::default();
                         self.last_current = None;
                         self.next_stage(Stage::ProbeFit);
                     }
@@ -633,12 +648,15 @@ impl Commissioning {
                 // voltage beside the rotor's back-EMF.
                 let turning = self.speed / s.tick_period * self.probe_inductance * current.d;
                 let damping = self.swing.reference(current.q, turning, s.tick_period);
-                q_voltage = self.current_pi.q(damping - current.q);
-                // The vector turns back one electrical turn as the current grows (smoothly,
-                // to rest at angle 0): a rotor that stood near the vector's unstable
-                // equilibrium would sit there while friction holds it and fall later at the
-                // full current; the turning vector pulls every rotor in while the current is
-                // still small.
+                // The damping grows with the current's square (the spring's energy): at a
+                // small current its full share would hold a rotor on a strong magnet creeping
+                // far behind the turning vector, to break free later at a larger current.
+                q_voltage = self.current_pi.q(damping * share * share - current.q);
+                // The vector turns back half an electrical turn as the current grows
+                // (smoothly, to rest at angle 0): a rotor that stood near the vector's
+                // unstable equilibrium would sit there while friction holds it and fall later
+                // at the full current; the turning vector pulls every rotor in while the
+                // current is still small.
                 let x = share.min(1.0);
                 let angle = RAMP_TURN * (1.0 - x * x * (3.0 - 2.0 * x));
                 self.speed = angle - self.angle;
