@@ -125,7 +125,11 @@ pub fn bench(fmu: &Fmu, baud: u32, mut progress: impl FnMut(f64)) -> Result<Vec<
         })?;
         let (points, (db, deg)) = compare_with_twin(&d, &twin);
         let (share_db, share_deg) = crate::sweep::device_report::largest_share_of_bound(&points);
-        let complete = points.len() == d.stream.len() && points.len() == twin.len();
+        // Every point of the plan (and its extra frequency) compared on both sides.
+        let complete = !points.is_empty()
+            && points.len() >= run.settings.points as usize
+            && points.len() == d.stream.len()
+            && points.len() == twin.len();
         let imprecise = points.iter().filter(|p| !measured_to_target(&p.standard_error)).count();
         let mostly_precise = imprecise as f64 <= IMPRECISE_SHARE * points.len() as f64;
         rows.push(LinkRow {

@@ -125,6 +125,18 @@ type TwinParameters = Vec<(&'static str, Value)>;
 
 /// A twin's parameters: a drive commissioned already (no commissioning at initialisation,
 /// the plant's true mounting), with `drive`'s motor and current-loop gains where given.
+/// A run that commissions at initialisation and applies the measured motor and current loop.
+fn measures_own_motor(parameters: &BTreeMap<String, Value>) -> bool {
+    use servo_axis::variables::name;
+    let on = |n: &str| parameters.get(n) == Some(&Value::Bool(true));
+    on(name::commissioning_at_start) && on(name::commissioning_apply_motor)
+}
+
+/// The drive's motor model and current-loop gains among a twin's parameters.
+fn drive_motor_or_current_loop(name: &str) -> bool {
+    name.starts_with("ctrl.motor_") || name == "ctrl.current_kp" || name == "ctrl.current_ki"
+}
+
 fn twin_parameters(drive: Option<&control_core::Params>) -> TwinParameters {
     use servo_axis::variables::name;
     let mut p = vec![(name::commissioning_at_start, Value::Bool(false))];
@@ -280,10 +292,24 @@ impl Fmu {
     /// (none otherwise): what plans of a twin's run (its torque and current ceilings) build
     /// the twin's drive from, as the run does.
     pub fn twin_parameters(&self) -> BTreeMap<String, Value> {
+        self.twin_parameters_for(&BTreeMap::new())
+    }
+
+    /// [`Self::twin_parameters`] for a run of `parameters`: a run that commissions its twin at
+    /// initialisation and applies what it measured (`commissioning.at_start` and
+    /// `commissioning.apply_motor`) measures the twin's motor and current loop itself and is
+    /// not given the drive's; one that commissions only the mounting runs the drive's.
+    pub fn twin_parameters_for(&self, parameters: &BTreeMap<String, Value>) -> BTreeMap<String, Value> {
+        let measures_motor = measures_own_motor(parameters);
         self.drive_twin
             .borrow()
             .as_ref()
-            .map(|twin| twin.iter().map(|&(name, value)| (name.to_string(), value)).collect())
+            .map(|twin| {
+                twin.iter()
+                    .filter(|(name, _)| !(measures_motor && drive_motor_or_current_loop(name)))
+                    .map(|&(name, value)| (name.to_string(), value))
+                    .collect()
+            })
             .unwrap_or_default()
     }
 
@@ -328,12 +354,13 @@ impl Fmu {
             .collect::<Result<_>>()?;
         if let Some(twin) = self.drive_twin.borrow().as_ref() {
             use servo_axis::variables::name;
-            // A scenario that commissions its twin at initialisation measures the twin's motor
-            // itself: the drive's is not given to it.
-            let commissions = scenario.parameters.get(name::commissioning_at_start) == Some(&Value::Bool(true));
+            // A scenario that commissions its twin at initialisation and applies what it
+            // measured measures the twin's motor and current loop itself: the drive's are not
+            // given to it (one that commissions the mounting only runs the drive's motor).
+            let measures_motor = measures_own_motor(&scenario.parameters);
             for &(name, value) in twin {
                 let given = scenario.parameters.contains_key(name);
-                if commissions && name.starts_with("ctrl.motor_") {
+                if measures_motor && drive_motor_or_current_loop(name) {
                     continue;
                 }
                 if name == servo_axis::variables::name::commissioning_at_start {

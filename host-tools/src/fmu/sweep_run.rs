@@ -74,7 +74,7 @@ impl SweepRun {
     /// and current loop ([`Fmu::twin_parameters`]), the run's own otherwise.
     pub fn params_on(&self, fmu: &Fmu) -> Result<control_core::Params> {
         let mut parameters = self.fmu_parameters();
-        for (name, value) in fmu.twin_parameters() {
+        for (name, value) in fmu.twin_parameters_for(&parameters) {
             parameters.entry(name).or_insert(value);
         }
         Ok(configuration(&parameters)?.control)

@@ -116,7 +116,13 @@ pub fn command_to_load(
     if let Some(trip) = crate::fmu::axis_health::first_trip(&trace)? {
         bail!("the axis tripped during the multisine: {}; its response cannot be measured this way", trip.sentence());
     }
-    let ceiling = torque_ceiling(&parameters)?;
+    // The ceiling of the drive the run had: on a drive's twin, that drive's motor and
+    // current loop (`Fmu::twin_parameters_for`), the scenario's own otherwise.
+    let mut run_parameters = parameters.clone();
+    for (name, value) in fmu.twin_parameters_for(&parameters) {
+        run_parameters.entry(name).or_insert(value);
+    }
+    let ceiling = torque_ceiling(&run_parameters)?;
     if let Some(largest) = current_near_ceiling(&trace, &ceiling)? {
         bail!(
             "the multisine drove the current to {largest:.2} A, near the {} A limit ({ceiling}): the measured response would not be linear (the correction filter lifts the command too much near a lightly damped mode?)",
