@@ -4,7 +4,7 @@
 
 use clap::{CommandFactory, Parser, Subcommand};
 
-use crate::{accdec, bench, circle, commission, device, ident, index, run, sequence, sweep, virtual_drive};
+use crate::{accdec, autotune, bench, circle, commission, device, ident, index, run, sequence, sweep, virtual_drive};
 
 #[derive(Parser)]
 #[command(
@@ -31,6 +31,7 @@ pub enum Command {
     Sweep(sweep::args::SweepArgs),
     Ident(ident::args::IdentArgs),
     Tune(ident::args::TuneArgs),
+    Autotune(autotune::command::AutotuneArgs),
     Compare(run::args::CompareArgs),
     Device(device::args::DeviceArgs),
     VirtualDrive(virtual_drive::args::VirtualDriveArgs),
@@ -49,6 +50,7 @@ pub enum Command {
 #[derive(Subcommand)]
 pub enum BenchCommand {
     Commission(bench::commission_bench::CommissionBenchArgs),
+    Autotune(autotune::bench::AutotuneBenchArgs),
     Robustness(bench::args::RobustnessBenchArgs),
     Firmware(bench::args::FirmwareBenchArgs),
     Fmu(bench::args::FmuBenchArgs),

@@ -15,6 +15,7 @@
 
 pub mod accdec;
 pub mod analysis;
+pub mod autotune;
 pub mod bench;
 pub mod circle;
 pub mod cli;

@@ -33,10 +33,11 @@ pub const SECTIONS: [(&str, &[&str]); 3] = [
             "sequence",
             "sequence-random",
             "plant",
+            "autotune",
         ],
     ),
     ("The FMU", &["fmu", "platforms", "fmi-campaign", "fault-campaign"]),
-    ("The drive", &["firmware", "device", "saves", "ident-device", "tune-device", "robustness"]),
+    ("The drive", &["commission", "firmware", "device", "saves", "ident-device", "tune-device", "robustness"]),
 ];
 const OTHER: &str = "Other benches";
 const HEADER: &str =

@@ -353,7 +353,6 @@ impl Fmu {
             })
             .collect::<Result<_>>()?;
         if let Some(twin) = self.drive_twin.borrow().as_ref() {
-            use servo_axis::variables::name;
             // A scenario that commissions its twin at initialisation and applies what it
             // measured measures the twin's motor and current loop itself: the drive's are not
             // given to it (one that commissions the mounting only runs the drive's motor).

@@ -18,6 +18,7 @@ fn main() -> ExitCode {
         Command::Sweep(args) => args.run(),
         Command::Ident(args) => args.run(),
         Command::Tune(args) => args.run(),
+        Command::Autotune(args) => args.run(),
         Command::Compare(args) => args.run(),
         Command::Device(args) => args.run(),
         Command::VirtualDrive(args) => args.run(),
@@ -28,6 +29,7 @@ fn main() -> ExitCode {
             Ok(true)
         }
         Command::Bench(BenchCommand::Commission(args)) => args.run(),
+        Command::Bench(BenchCommand::Autotune(args)) => args.run(),
         Command::Bench(BenchCommand::Robustness(args)) => args.run(),
         Command::Bench(BenchCommand::Firmware(args)) => args.run(),
         Command::Bench(BenchCommand::Fmu(args)) => args.run(),

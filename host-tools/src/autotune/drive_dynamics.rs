@@ -1,0 +1,139 @@
+//! What the drive puts between the velocity loop's torque command and its velocity estimate,
+//! beside the machine: the current loop (sampled every tick, its voltage applied over the
+//! next one), the torque between current samples, the estimate (the encoder's count change
+//! over one velocity period, the mean velocity over it), and the command's hold over the
+//! velocity period. With the machine's `Mechanics` this is the plant the velocity loop
+//! drives; a torque-point sweep reads it through the loop that runs during the sweep
+//! (`torque_sweep_reading`).
+
+use num_complex::Complex64;
+
+/// The drive's side of the plant, from its parameters and the winding it drives.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct DriveDynamics {
+    /// Base tick and velocity period (s).
+    pub tick: f64,
+    pub velocity_period: f64,
+    /// The current loop's PI (V/A, V/(A·s)).
+    pub current_kp: f64,
+    pub current_ki: f64,
+    /// The winding the current loop drives: resistance (Ω) and q-axis inductance (H).
+    pub resistance: f64,
+    pub inductance: f64,
+    /// Torque made per torque asked for (the motor's torque constant over the drive's).
+    pub torque_gain: f64,
+}
+
+impl DriveDynamics {
+    /// A drive with `params` on a winding of `resistance` and `inductance`.
+    pub fn new(params: &control_core::Params, resistance: f64, inductance: f64, torque_gain: f64) -> Self {
+        Self {
+            tick: params.rates.tick_period() as f64,
+            velocity_period: params.rates.velocity_period() as f64,
+            current_kp: params.current.kp as f64,
+            current_ki: params.current.ki as f64,
+            resistance,
+            inductance,
+            torque_gain,
+        }
+    }
+
+    /// As the drive knows itself: its own (commissioned) motor, a torque gain of 1.
+    pub fn as_configured(params: &control_core::Params) -> Self {
+        Self::new(params, params.motor.resistance as f64, params.motor.lq as f64, 1.0)
+    }
+
+    /// The twin's truth: the plant's winding and torque constant against the drive's.
+    pub fn on_plant(params: &control_core::Params, plant: &servo_axis::plant::PlantParams) -> Self {
+        let kt = |p: f64, psi: f64| 1.5 * p * psi;
+        let gain = kt(plant.pole_pairs as f64, plant.flux_linkage)
+            / kt(params.motor.pole_pairs as f64, params.motor.flux_linkage as f64);
+        Self::new(params, plant.resistance, plant.lq, gain)
+    }
+
+    /// The closed current loop, reference → current, sampled every tick: the winding
+    /// `b/(z − a)` (`a = e^{−RT/L}`, `b = (1 − a)/R`), one tick of computation delay, the PI
+    /// `kp + ki·T·z/(z − 1)`.
+    pub fn current_loop(&self, f: f64) -> Complex64 {
+        let t = self.tick;
+        let z = Complex64::from_polar(1.0, std::f64::consts::TAU * f * t);
+        let a = (-self.resistance * t / self.inductance).exp();
+        let b = (1.0 - a) / self.resistance;
+        let pi = self.current_kp + self.current_ki * t * z / (z - 1.0);
+        let open = pi * b / ((z - a) * z);
+        open / (1.0 + open)
+    }
+
+    /// Velocity estimate over the current loop's torque reference (set every tick), without
+    /// the machine: the current loop, the torque between two current samples (the current
+    /// nearly linear over a tick: the samples' linear interpolation, `sinc²(πfT)` without a
+    /// phase), the estimate's mean over the velocity period (`(1 − e^{−sT_v})/(sT_v)`), the
+    /// torque gain.
+    pub fn around_machine(&self, f: f64) -> Complex64 {
+        let w = std::f64::consts::TAU * f;
+        let mean = |t: f64| {
+            if w * t < 1e-9 {
+                Complex64::new(1.0, 0.0)
+            } else {
+                let s = Complex64::new(0.0, w * t);
+                (1.0 - (-s).exp()) / s
+            }
+        };
+        let x = 0.5 * w * self.tick;
+        let sinc = if x < 1e-9 { 1.0 } else { x.sin() / x };
+        self.current_loop(f) * (sinc * sinc) * mean(self.velocity_period) * self.torque_gain
+    }
+
+    /// The velocity loop's torque command, held over the velocity period's two ticks, as the
+    /// current loop's per-tick reference sees it: `(1 + e^{−sT})/2` (the velocity divider of 2).
+    pub fn command_hold(&self, f: f64) -> Complex64 {
+        let z1 = Complex64::from_polar(1.0, -std::f64::consts::TAU * f * self.tick);
+        let n = (self.velocity_period / self.tick).round().max(1.0);
+        // The mean of the delays 0 … n − 1 ticks.
+        let mut sum = Complex64::new(0.0, 0.0);
+        let mut zk = Complex64::new(1.0, 0.0);
+        for _ in 0..n as usize {
+            sum += zk;
+            zk *= z1;
+        }
+        sum / n
+    }
+
+    /// The plant a torque-point sweep reports, `Y/U`, for the plant `p` (torque reference →
+    /// velocity estimate) under the velocity controller `c` running during the sweep: the
+    /// injected sine changes every tick while U is read on velocity ticks only, so the loop's
+    /// held command closes a path U does not see: `G = P/(1 − g·C·P)` with `g` the held
+    /// command's share the reference misses (`1 − command_hold`).
+    pub fn torque_sweep_reading(&self, f: f64, p: Complex64, c: Complex64) -> Complex64 {
+        let g = 1.0 - self.command_hold(f);
+        p / (1.0 - g * c * p)
+    }
+
+    /// The plant behind a torque-point sweep's reading `reading` under controller `c`:
+    /// `P = G/(1 + g·C·G)` (the inverse of [`Self::torque_sweep_reading`]).
+    pub fn plant_of_torque_sweep(&self, f: f64, reading: Complex64, c: Complex64) -> Complex64 {
+        let g = 1.0 - self.command_hold(f);
+        reading / (1.0 + g * c * reading)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Gains from the commissioning's design for 1.5 kHz (its zero on the winding's pole:
+    /// the closed loop `g/(z² − z + g)`, whose bandwidth the design sets in closed form): the
+    /// model's −3 dB point is that bandwidth, unity at rest.
+    #[test]
+    fn a_loop_designed_for_a_bandwidth_has_it_in_the_model() {
+        let mut p = control_core::Params::default();
+        for (r, l) in [(1.2f32, 4e-4f32), (0.1, 2e-3), (5.0, 1e-4)] {
+            let (kp, ki) = control_core::commissioning::design_current_loop(r, l, p.rates.tick_period(), 1500.0);
+            (p.current.kp, p.current.ki) = (kp, ki);
+            let d = DriveDynamics::new(&p, r as f64, l as f64, 1.0);
+            assert!((d.current_loop(0.5).norm() - 1.0).abs() < 1e-3);
+            let bw = (1..40_000).map(|k| k as f64 * 0.1).find(|&f| d.current_loop(f).norm() < 0.5f64.sqrt()).unwrap();
+            assert!((bw / 1500.0 - 1.0).abs() < 0.01, "R {r} L {l}: {bw} Hz");
+        }
+    }
+}

@@ -1,0 +1,170 @@
+//! Stability margins of a velocity loop from its open loop `L = C·P` on a frequency grid:
+//! the phase margin at each gain crossover, the gain margin at each phase crossover of
+//! −180°, the sensitivity peak `Ms = max |1/(1 + L)|`, the closed loop's bandwidth (where
+//! `|L/(1 + L)|` first falls below −3 dB), and whether the closed loop is stable.
+//!
+//! **Stability.** The loop has two poles at `z = 1` (the PI's integrator and the machine's
+//! rigid body) and no others outside the unit circle; by the argument principle its closed
+//! loop is stable exactly when the phase of `1 + L` turns by +180° from the lowest frequency
+//! (where `L ≈ −K/ω²`, on the negative real axis) to the highest (where `L` is small). The
+//! grid must be fine enough that the phase of `1 + L` moves by less than 90° between
+//! neighbours (checked: a coarser grid is refused), and run from well below the crossover to
+//! the loop's Nyquist frequency.
+
+use num_complex::Complex64;
+use serde::Serialize;
+
+/// What a loop's margins are (degrees, dB, Hz).
+#[derive(Clone, Copy, Debug, PartialEq, Serialize)]
+pub struct Margins {
+    pub stable: bool,
+    /// The smallest phase margin over the gain crossovers, the angle from `L` to −1 there
+    /// (180 where there is none).
+    pub phase_margin_deg: f64,
+    /// The first gain crossover (Hz).
+    pub crossover_hz: f64,
+    /// The smallest gain margin over the phase crossovers with `|L| < 1` (infinite if none).
+    pub gain_margin_db: f64,
+    pub gain_margin_hz: f64,
+    pub sensitivity_peak: f64,
+    pub sensitivity_peak_hz: f64,
+    /// The closed loop's −3 dB frequency (Hz).
+    pub bandwidth_hz: f64,
+}
+
+/// The margins of `loop_gain` sampled at `frequencies` (Hz, increasing); `None` when the grid
+/// is too coarse to follow the phase of `1 + L`.
+pub fn margins(frequencies: &[f64], loop_gain: &[Complex64]) -> Option<Margins> {
+    assert_eq!(frequencies.len(), loop_gain.len());
+    let n = frequencies.len();
+    if n < 2 {
+        return None;
+    }
+    let mut m = Margins {
+        stable: false,
+        phase_margin_deg: 180.0,
+        crossover_hz: f64::NAN,
+        gain_margin_db: f64::INFINITY,
+        gain_margin_hz: f64::NAN,
+        sensitivity_peak: 0.0,
+        sensitivity_peak_hz: f64::NAN,
+        bandwidth_hz: f64::NAN,
+    };
+    // The phase of 1 + L, unwrapped.
+    let mut turned = 0.0f64;
+    let mut last = (1.0 + loop_gain[0]).arg();
+    for k in 0..n {
+        let l = loop_gain[k];
+        let f = frequencies[k];
+        let one_plus = 1.0 + l;
+        if k > 0 {
+            let mut step = one_plus.arg() - last;
+            step = (step + std::f64::consts::PI).rem_euclid(std::f64::consts::TAU) - std::f64::consts::PI;
+            if step.abs() > 0.5 * std::f64::consts::PI {
+                return None;
+            }
+            turned += step;
+            last = one_plus.arg();
+        }
+        let s = 1.0 / one_plus.norm();
+        if !(s <= m.sensitivity_peak) {
+            m.sensitivity_peak = s;
+            m.sensitivity_peak_hz = f;
+        }
+        if m.bandwidth_hz.is_nan() && (l / one_plus).norm() < std::f64::consts::FRAC_1_SQRT_2 {
+            m.bandwidth_hz = f;
+        }
+        if k == 0 {
+            continue;
+        }
+        let (a, b) = (loop_gain[k - 1], l);
+        // A gain crossover between k − 1 and k (either way): the phase there, interpolated
+        // in log |L|.
+        let (ga, gb) = (a.norm().ln(), b.norm().ln());
+        if (ga >= 0.0) != (gb >= 0.0) {
+            let x = ga / (ga - gb);
+            let phase = a.arg() + x * wrap(b.arg() - a.arg());
+            // The angle from L to −1 on the unit circle: 180° − |∠L| (∠L within ±180°; a
+            // crossover in a notch's phase lead lies far from −1, whichever side).
+            let margin = 180.0 - wrap(phase).to_degrees().abs();
+            if m.crossover_hz.is_nan() {
+                m.crossover_hz = frequencies[k - 1] * (frequencies[k] / frequencies[k - 1]).powf(x);
+            }
+            m.phase_margin_deg = m.phase_margin_deg.min(margin);
+        }
+        // A phase crossover of −180° (L crossing the negative real axis).
+        if (a.im >= 0.0) != (b.im >= 0.0) {
+            let x = a.im / (a.im - b.im);
+            let at = a + x * (b - a);
+            if at.re < 0.0 && at.norm() < 1.0 {
+                let db = -20.0 * at.norm().log10();
+                if db < m.gain_margin_db {
+                    m.gain_margin_db = db;
+                    m.gain_margin_hz = frequencies[k - 1] * (frequencies[k] / frequencies[k - 1]).powf(x);
+                }
+            }
+        }
+    }
+    m.stable = (turned - std::f64::consts::PI).abs() < 0.5 * std::f64::consts::PI;
+    Some(m)
+}
+
+fn wrap(x: f64) -> f64 {
+    (x + std::f64::consts::PI).rem_euclid(std::f64::consts::TAU) - std::f64::consts::PI
+}
+
+/// `n` frequencies log-spaced from `low` to `high` Hz.
+pub fn log_grid(low: f64, high: f64, n: usize) -> Vec<f64> {
+    (0..n).map(|k| low * (high / low).powf(k as f64 / (n - 1) as f64)).collect()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A continuous PI on a rigid body with a pure delay: its margins against the closed
+    /// forms (crossover where |L| = 1, phase margin 180° − 90° − 90° + atan(ω/ωi) − ωτ, gain
+    /// margin from the delay's −180° point), stable; with the gain raised past the delay's
+    /// limit it is unstable.
+    #[test]
+    fn margins_of_a_pi_on_a_rigid_body_with_a_delay_match_the_closed_forms() {
+        let (j, wi, tau) = (1e-3f64, 2.0 * std::f64::consts::PI * 10.0, 200e-6);
+        let f = log_grid(0.1, 4000.0, 20_000);
+        let loop_at = |kp: f64| -> Vec<Complex64> {
+            f.iter()
+                .map(|&f| {
+                    let s = Complex64::new(0.0, std::f64::consts::TAU * f);
+                    kp * (1.0 + wi / s) / (j * s) * (-s * tau).exp()
+                })
+                .collect()
+        };
+        let kp = 0.5;
+        let m = margins(&f, &loop_at(kp)).unwrap();
+        assert!(m.stable, "{m:?}");
+        // |L| = 1: kp·√(1 + (ωi/ω)²)/(Jω) = 1.
+        let wc = {
+            let mut w = kp / j;
+            for _ in 0..50 {
+                w = kp * (1.0 + (wi / w).powi(2)).sqrt() / j;
+            }
+            w
+        };
+        assert!((m.crossover_hz / (wc / std::f64::consts::TAU) - 1.0).abs() < 1e-3, "{m:?}");
+        let pm = 90.0 - (wi / wc).atan().to_degrees() - (wc * tau).to_degrees();
+        assert!((m.phase_margin_deg - pm).abs() < 0.05, "{m:?} vs {pm}");
+        assert!(m.gain_margin_db > 6.0 && m.gain_margin_db.is_finite(), "{m:?}");
+        assert!(m.sensitivity_peak > 1.0 && m.bandwidth_hz > m.crossover_hz, "{m:?}");
+        let unstable = margins(&f, &loop_at(kp * 20.0)).unwrap();
+        assert!(!unstable.stable, "{unstable:?}");
+        // Too coarse a grid to follow the phase: refused.
+        let coarse: Vec<f64> = log_grid(0.1, 4000.0, 4);
+        let l: Vec<Complex64> = coarse
+            .iter()
+            .map(|&f| {
+                let s = Complex64::new(0.0, std::f64::consts::TAU * f);
+                kp * (1.0 + wi / s) / (j * s) * (-s * tau).exp()
+            })
+            .collect();
+        assert!(margins(&coarse, &l).is_none());
+    }
+}

@@ -1,0 +1,49 @@
+//! Tuning the user's machine: its mechanics calibrated from a measured plant response
+//! (`calibration`), and the velocity loop's gains and torque filters chosen from the
+//! response for the widest bandwidth that keeps its margins (`design`), checked on the loop
+//! the drive runs (`velocity_controller`, `drive_dynamics`, `margins`).
+
+pub mod bench;
+pub mod calibration;
+pub mod command;
+pub mod design;
+pub mod drive_dynamics;
+pub mod margins;
+pub mod mechanics;
+pub mod velocity_controller;
+
+use num_complex::Complex64;
+
+use drive_dynamics::DriveDynamics;
+use mechanics::Mechanics;
+
+/// The plant from the current loop's per-tick torque reference to the velocity estimate: the
+/// drive's part times the machine's.
+pub fn plant_response(drive: &DriveDynamics, mechanics: &Mechanics, f: f64) -> Complex64 {
+    drive.around_machine(f) * mechanics.motor_velocity_per_torque(f)
+}
+
+/// The plant the velocity loop drives: [`plant_response`] behind the command's hold over the
+/// velocity period.
+pub fn loop_plant(drive: &DriveDynamics, mechanics: &Mechanics, f: f64) -> Complex64 {
+    drive.command_hold(f) * plant_response(drive, mechanics, f)
+}
+
+/// The measured points of a torque-point sweep turned into the plant [`plant_response`]
+/// models, taking out the path the velocity loop running during the sweep (`during`) closes
+/// beside U ([`DriveDynamics::plant_of_torque_sweep`]).
+pub fn plant_points(
+    readings: &[crate::analysis::response_point::ResponsePoint],
+    drive: &DriveDynamics,
+    during: &velocity_controller::VelocityTuning,
+) -> Vec<calibration::PlantPoint> {
+    readings
+        .iter()
+        .filter(|p| p.gain_db.is_finite() && p.phase_deg.is_finite())
+        .map(|p| {
+            let g = Complex64::from_polar(10f64.powf(p.gain_db / 20.0), p.phase_deg.to_radians());
+            let c = during.response(p.frequency, drive.velocity_period);
+            calibration::PlantPoint { hz: p.frequency, response: drive.plant_of_torque_sweep(p.frequency, g, c) }
+        })
+        .collect()
+}
