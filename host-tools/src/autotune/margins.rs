@@ -5,8 +5,8 @@
 //!
 //! **Stability.** The loop has two poles at `z = 1` (the PI's integrator and the machine's
 //! rigid body) and no others outside the unit circle; by the argument principle its closed
-//! loop is stable exactly when the phase of `1 + L` turns by +180° from the lowest frequency
-//! (where `L ≈ −K/ω²`, on the negative real axis) to the highest (where `L` is small). The
+//! loop is stable exactly when the phase of `1 + L` turns by +180° from 0 Hz (where `L ≈
+//! −K/ω²`, on the negative real axis) to the highest frequency (where `L` is small). The
 //! grid must be fine enough that the phase of `1 + L` moves by less than 90° between
 //! neighbours (checked: a coarser grid is refused), and run from well below the crossover to
 //! the loop's Nyquist frequency.
@@ -50,9 +50,11 @@ pub fn margins(frequencies: &[f64], loop_gain: &[Complex64]) -> Option<Margins> 
         sensitivity_peak_hz: f64::NAN,
         bandwidth_hz: f64::NAN,
     };
-    // The phase of 1 + L, unwrapped.
-    let mut turned = 0.0f64;
+    // The phase of 1 + L, unwrapped, counted from −180° (where the two integrators put it as
+    // the frequency goes to 0; below the grid's first point |L| ≫ 1 and it turns from there
+    // to its first value without wrapping).
     let mut last = (1.0 + loop_gain[0]).arg();
+    let mut turned = wrap(last + std::f64::consts::PI);
     for k in 0..n {
         let l = loop_gain[k];
         let f = frequencies[k];
