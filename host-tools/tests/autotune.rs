@@ -9,7 +9,6 @@ use host_tools::autotune::velocity_controller::VelocityTuning;
 use host_tools::autotune::{loop_plant, plant_response};
 use host_tools::fmu::configuration::configuration;
 use host_tools::fmu::runner::Fmu;
-use num_complex::Complex64;
 
 /// The analytic plant (the twin's mechanics through the drive's current loop and velocity
 /// estimate) against the twin's measured torque-point response up to 1 kHz, on machines
@@ -39,7 +38,7 @@ fn the_plant_model_is_the_twins_measured_plant() {
         let (mut away, mut near) = ((0.0f64, 0.0f64), (0.0f64, 0.0f64));
         for p in readings.iter().filter(|p| p.frequency <= 1000.0) {
             let hz = p.frequency;
-            let reading = Complex64::from_polar(10f64.powf(p.gain_db / 20.0), p.phase_deg.to_radians());
+            let reading = p.to_complex();
             let model =
                 drive.torque_sweep_reading(hz, plant_response(&drive, &mechanics, hz), during.response(hz, period));
             let e = (reading / model).ln();

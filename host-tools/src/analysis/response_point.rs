@@ -19,6 +19,11 @@ impl ResponsePoint {
     pub fn from_complex(frequency: f64, g: Complex64, quality: f64) -> Self {
         Self { frequency, gain_db: 20.0 * g.norm().log10(), phase_deg: g.arg().to_degrees(), quality }
     }
+
+    /// The response as a complex number (the inverse of [`Self::from_complex`]).
+    pub fn to_complex(&self) -> Complex64 {
+        Complex64::from_polar(10f64.powf(self.gain_db / 20.0), self.phase_deg.to_radians())
+    }
 }
 
 /// Gain difference (dB) and phase difference (degrees, wrapped to ±180).

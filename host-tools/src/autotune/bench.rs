@@ -25,7 +25,6 @@ use crate::cli::Common;
 use crate::fmu::configuration::configuration;
 use crate::fmu::runner::Fmu;
 use crate::fmu::scenario::Value;
-use crate::fmu::sweep_run::SweepRun;
 use crate::random::XorShift64Star;
 
 /// The velocity loop tuned from a measured response, over drawn machines: inertia ratio
@@ -121,14 +120,8 @@ pub struct MachineRow {
 
 /// The torque-point sweep on the twin: its readings (`Y/U` at each frequency).
 pub fn measure(fmu: &Fmu, parameters: &BTreeMap<String, Value>) -> Result<Vec<ResponsePoint>> {
-    let settings = control_core::phase_shifted_sweep::SweepParams {
-        point: control_core::excitation::InjectionPoint::TorqueCommand,
-        amplitude: 0.2,
-        ..Default::default()
-    };
-    let run = SweepRun { settings, parameters: parameters.clone(), velocity: crate::sweep::bench::VELOCITY };
-    let trace = run.run(fmu, |_| {})?;
-    crate::sweep::measurement::stream_results(&trace, &run.settings)
+    let torque = control_core::excitation::InjectionPoint::TorqueCommand;
+    super::sweep_on_fmu(fmu, torque, 0.2, parameters, crate::sweep::bench::VELOCITY)
 }
 
 /// Design and check one machine.
@@ -272,7 +265,7 @@ impl AutotuneBenchArgs {
         rec.at_most("stiffness error", 100.0 * worst(&|r| r.calibration_errors[2]), 3.0, "%");
         rec.at_most("resonance error", 100.0 * worst(&|r| r.calibration_errors[3]), 1.0, "%");
         rec.at_most("anti-resonance error", 100.0 * worst(&|r| r.calibration_errors[4]), 1.0, "%");
-        let passed = rec.figures().figures.iter().all(|f| f.met != Some(false));
+        let passed = rec.all_met();
         rec.write(self.common.out.as_deref(), passed)?;
         if self.common.json {
             println!(
@@ -317,11 +310,12 @@ impl AutotuneBenchArgs {
                     ),
                 }
             }
-            println!("worst over {} machines (seed {}, {} margins):", rows.len(), self.seed, self.margin);
-            for f in &rec.figures().figures {
-                println!("  {:<40} {:>16}  goal {}", f.name, f.measured_text(), f.goal_text());
-            }
-            println!("{}", if passed { "every goal met" } else { "GOAL NOT MET" });
+            rec.print_worst(&format!(
+                "worst over {} machines (seed {}, {} margins):",
+                rows.len(),
+                self.seed,
+                self.margin
+            ));
         }
         Ok(passed)
     }

@@ -4,7 +4,6 @@
 //! calibrated model for the widest bandwidth within the margins; and the design is verified
 //! on the twin by a feedback-point sweep (the open loop measured with the new gains).
 
-use std::collections::BTreeMap;
 use std::fmt::Write as _;
 
 use anyhow::{Context, Result};
@@ -16,13 +15,12 @@ use super::design::{design, MarginGoal, SearchGrid};
 use super::drive_dynamics::DriveDynamics;
 use super::margins::{crossover_margins, log_grid};
 use super::velocity_controller::VelocityTuning;
-use super::{loop_plant, plant_points, plant_response};
+use super::{loop_plant, plant_points, plant_response, sweep_on_fmu};
 use crate::analysis::response_point::ResponsePoint;
 use crate::cli::{progress_bar, Common};
 use crate::fmu::configuration::configuration;
 use crate::fmu::runner::Fmu;
 use crate::fmu::scenario::Value;
-use crate::fmu::sweep_run::SweepRun;
 use crate::paths::{default_fmu, default_out};
 
 /// Tune the velocity loop from the axis's measured response: a torque-point sweep on the
@@ -57,25 +55,6 @@ pub struct AutotuneArgs {
     pub common: Common,
 }
 
-fn sweep(
-    fmu: &Fmu,
-    point: control_core::excitation::InjectionPoint,
-    amplitude: f64,
-    parameters: &BTreeMap<String, Value>,
-    velocity: f64,
-) -> Result<Vec<ResponsePoint>> {
-    let settings =
-        control_core::phase_shifted_sweep::SweepParams { point, amplitude: amplitude as f32, ..Default::default() };
-    let run = SweepRun { settings, parameters: parameters.clone(), velocity };
-    let trace = run.run(fmu, |_| {})?;
-    let points = crate::sweep::measurement::stream_results(&trace, &run.settings)?;
-    Ok(points.into_iter().filter(|p| p.gain_db.is_finite() && p.phase_deg.is_finite()).collect())
-}
-
-fn complex(p: &ResponsePoint) -> Complex64 {
-    Complex64::from_polar(10f64.powf(p.gain_db / 20.0), p.phase_deg.to_radians())
-}
-
 impl AutotuneArgs {
     pub fn run(&self) -> Result<bool> {
         use control_core::excitation::InjectionPoint;
@@ -94,7 +73,7 @@ impl AutotuneArgs {
         let pb = progress_bar("autotune", self.common.json);
         pb.set_position(50);
         // 1. The plant, measured.
-        let measured = sweep(&fmu, InjectionPoint::TorqueCommand, self.amplitude, &parameters, self.velocity)
+        let measured = sweep_on_fmu(&fmu, InjectionPoint::TorqueCommand, self.amplitude, &parameters, self.velocity)
             .context("the torque-point sweep")?;
         pb.set_position(400);
         // 2. The mechanics, calibrated (from the plant behind the sweep's readings).
@@ -114,11 +93,11 @@ impl AutotuneArgs {
         for (k, v) in d.tuning.parameters() {
             tuned.insert(k, Value::Float(v));
         }
-        let open_loop = sweep(&fmu, InjectionPoint::VelocityFeedback, 2.0, &tuned, self.velocity)
+        let open_loop = sweep_on_fmu(&fmu, InjectionPoint::VelocityFeedback, 2.0, &tuned, self.velocity)
             .context("the feedback-point sweep with the new gains")?;
         pb.finish_and_clear();
         let hz: Vec<f64> = open_loop.iter().map(|p| p.frequency).collect();
-        let l: Vec<Complex64> = open_loop.iter().map(complex).collect();
+        let l: Vec<Complex64> = open_loop.iter().map(ResponsePoint::to_complex).collect();
         // The margins a sparse measured grid can show: the phase margin at its gain crossovers
         // and the sensitivity peak over the measured points (the stability and the gain
         // margin need the model's dense grid).

@@ -60,8 +60,7 @@ pub fn margins(frequencies: &[f64], loop_gain: &[Complex64]) -> Option<Margins> 
         let f = frequencies[k];
         let one_plus = 1.0 + l;
         if k > 0 {
-            let mut step = one_plus.arg() - last;
-            step = (step + std::f64::consts::PI).rem_euclid(std::f64::consts::TAU) - std::f64::consts::PI;
+            let step = wrap(one_plus.arg() - last);
             if step.abs() > 0.5 * std::f64::consts::PI {
                 return None;
             }
@@ -80,15 +79,7 @@ pub fn margins(frequencies: &[f64], loop_gain: &[Complex64]) -> Option<Margins> 
             continue;
         }
         let (a, b) = (loop_gain[k - 1], l);
-        // A gain crossover between k − 1 and k (either way): the phase there, interpolated
-        // in log |L|.
-        let (ga, gb) = (a.norm().ln(), b.norm().ln());
-        if (ga >= 0.0) != (gb >= 0.0) {
-            let x = ga / (ga - gb);
-            let phase = a.arg() + x * wrap(b.arg() - a.arg());
-            // The angle from L to −1 on the unit circle: 180° − |∠L| (∠L within ±180°; a
-            // crossover in a notch's phase lead lies far from −1, whichever side).
-            let margin = 180.0 - wrap(phase).to_degrees().abs();
+        if let Some((x, margin)) = gain_crossover(a, b) {
             if m.crossover_hz.is_nan() {
                 m.crossover_hz = frequencies[k - 1] * (frequencies[k] / frequencies[k - 1]).powf(x);
             }
@@ -118,18 +109,23 @@ pub fn crossover_margins(frequencies: &[f64], loop_gain: &[Complex64]) -> (f64, 
     if loop_gain.is_empty() || frequencies.len() != loop_gain.len() {
         return (f64::NAN, f64::NAN);
     }
-    let mut pm = 180.0f64;
-    for pair in loop_gain.windows(2) {
-        let (a, b) = (pair[0], pair[1]);
-        let (ga, gb) = (a.norm().ln(), b.norm().ln());
-        if (ga >= 0.0) != (gb >= 0.0) {
-            let x = ga / (ga - gb);
-            let phase = a.arg() + x * wrap(b.arg() - a.arg());
-            pm = pm.min(180.0 - wrap(phase).to_degrees().abs());
-        }
-    }
+    let pm = loop_gain.windows(2).filter_map(|p| gain_crossover(p[0], p[1])).map(|(_, m)| m).fold(180.0, f64::min);
     let ms = loop_gain.iter().map(|l| 1.0 / (1.0 + l).norm()).fold(0.0, f64::max);
     (pm, ms)
+}
+
+/// A gain crossover between two neighbouring points `a`, `b` of `L` (either way): where it
+/// lies between them (0 to 1, interpolated in log |L|) and its phase margin, the angle from
+/// `L` to −1 on the unit circle, `180° − |∠L|` (∠L within ±180°: a crossover in a notch's
+/// phase lead lies far from −1, whichever side).
+fn gain_crossover(a: Complex64, b: Complex64) -> Option<(f64, f64)> {
+    let (ga, gb) = (a.norm().ln(), b.norm().ln());
+    if (ga >= 0.0) == (gb >= 0.0) {
+        return None;
+    }
+    let x = ga / (ga - gb);
+    let phase = a.arg() + x * wrap(b.arg() - a.arg());
+    Some((x, 180.0 - wrap(phase).to_degrees().abs()))
 }
 
 fn wrap(x: f64) -> f64 {
@@ -152,8 +148,8 @@ mod tests {
     #[test]
     fn margins_of_a_pi_on_a_rigid_body_with_a_delay_match_the_closed_forms() {
         let (j, wi, tau) = (1e-3f64, 2.0 * std::f64::consts::PI * 10.0, 200e-6);
-        let f = log_grid(0.1, 4000.0, 20_000);
-        let loop_at = |kp: f64| -> Vec<Complex64> {
+        // The loop of gain `kp` on the grid `f`.
+        let loop_on = |f: &[f64], kp: f64| -> Vec<Complex64> {
             f.iter()
                 .map(|&f| {
                     let s = Complex64::new(0.0, std::f64::consts::TAU * f);
@@ -161,8 +157,9 @@ mod tests {
                 })
                 .collect()
         };
+        let f = log_grid(0.1, 4000.0, 20_000);
         let kp = 0.5;
-        let m = margins(&f, &loop_at(kp)).unwrap();
+        let m = margins(&f, &loop_on(&f, kp)).unwrap();
         assert!(m.stable, "{m:?}");
         // |L| = 1: kp·√(1 + (ωi/ω)²)/(Jω) = 1.
         let wc = {
@@ -177,28 +174,14 @@ mod tests {
         assert!((m.phase_margin_deg - pm).abs() < 0.05, "{m:?} vs {pm}");
         assert!(m.gain_margin_db > 6.0 && m.gain_margin_db.is_finite(), "{m:?}");
         assert!(m.sensitivity_peak > 1.0 && m.bandwidth_hz > m.crossover_hz, "{m:?}");
-        let unstable = margins(&f, &loop_at(kp * 20.0)).unwrap();
+        let unstable = margins(&f, &loop_on(&f, kp * 20.0)).unwrap();
         assert!(!unstable.stable, "{unstable:?}");
         // Too coarse a grid to follow the phase: refused.
-        let coarse: Vec<f64> = log_grid(0.1, 4000.0, 4);
-        let l: Vec<Complex64> = coarse
-            .iter()
-            .map(|&f| {
-                let s = Complex64::new(0.0, std::f64::consts::TAU * f);
-                kp * (1.0 + wi / s) / (j * s) * (-s * tau).exp()
-            })
-            .collect();
-        assert!(margins(&coarse, &l).is_none());
+        let coarse = log_grid(0.1, 4000.0, 4);
+        assert!(margins(&coarse, &loop_on(&coarse, kp)).is_none());
         // The sparse grid's crossover margin: the dense one's within the interpolation.
         let sparse = log_grid(0.1, 4000.0, 60);
-        let l: Vec<Complex64> = sparse
-            .iter()
-            .map(|&f| {
-                let s = Complex64::new(0.0, std::f64::consts::TAU * f);
-                kp * (1.0 + wi / s) / (j * s) * (-s * tau).exp()
-            })
-            .collect();
-        let (pm_sparse, ms_sparse) = crossover_margins(&sparse, &l);
+        let (pm_sparse, ms_sparse) = crossover_margins(&sparse, &loop_on(&sparse, kp));
         assert!((pm_sparse - m.phase_margin_deg).abs() < 2.0 && ms_sparse <= m.sensitivity_peak + 1e-9, "{pm_sparse}");
     }
 }

@@ -41,9 +41,26 @@ pub fn plant_points(
         .iter()
         .filter(|p| p.gain_db.is_finite() && p.phase_deg.is_finite())
         .map(|p| {
-            let g = Complex64::from_polar(10f64.powf(p.gain_db / 20.0), p.phase_deg.to_radians());
+            let g = p.to_complex();
             let c = during.response(p.frequency, drive.velocity_period);
             calibration::PlantPoint { hz: p.frequency, response: drive.plant_of_torque_sweep(p.frequency, g, c) }
         })
         .collect()
+}
+
+/// A sweep at `point` with `amplitude` on the FMU (a drive's twin or the plant of
+/// `parameters`), riding at `velocity` rad/s: its measured points with a finite response.
+pub fn sweep_on_fmu(
+    fmu: &crate::fmu::runner::Fmu,
+    point: control_core::excitation::InjectionPoint,
+    amplitude: f64,
+    parameters: &std::collections::BTreeMap<String, crate::fmu::scenario::Value>,
+    velocity: f64,
+) -> anyhow::Result<Vec<crate::analysis::response_point::ResponsePoint>> {
+    let settings =
+        control_core::phase_shifted_sweep::SweepParams { point, amplitude: amplitude as f32, ..Default::default() };
+    let run = crate::fmu::sweep_run::SweepRun { settings, parameters: parameters.clone(), velocity };
+    let trace = run.run(fmu, |_| {})?;
+    let points = crate::sweep::measurement::stream_results(&trace, &run.settings)?;
+    Ok(points.into_iter().filter(|p| p.gain_db.is_finite() && p.phase_deg.is_finite()).collect())
 }

@@ -229,7 +229,7 @@ impl CommissionBenchArgs {
         rec.at_most("drive time", worst(&|r| r.seconds), 5.0, "s");
         rec.at_most("rotor's travel from where it stood", worst(&|r| r.turns), 2.0, "electrical turns");
         rec.at_most("peak current over the test current", worst(&|r| r.current_ratio), 1.1, "x");
-        let passed = rec.figures().figures.iter().all(|f| f.met != Some(false));
+        let passed = rec.all_met();
         rec.write(self.common.out.as_deref(), passed)?;
         if self.common.json {
             println!(
@@ -268,11 +268,7 @@ impl CommissionBenchArgs {
                     ),
                 }
             }
-            println!("worst over {} motors (seed {}):", rows.len(), self.seed);
-            for f in &rec.figures().figures {
-                println!("  {:<40} {:>16}  goal {}", f.name, f.measured_text(), f.goal_text());
-            }
-            println!("{}", if passed { "every goal met" } else { "GOAL NOT MET" });
+            rec.print_worst(&format!("worst over {} motors (seed {}):", rows.len(), self.seed));
         }
         Ok(passed)
     }

@@ -339,6 +339,21 @@ impl Recorder {
     pub fn figures(&self) -> &BenchFigures {
         &self.figures
     }
+
+    /// No figure misses its goal.
+    pub fn all_met(&self) -> bool {
+        !self.figures.figures.iter().any(Figure::not_met)
+    }
+
+    /// The worst case on the console: `heading`, a line per figure against its goal, the
+    /// verdict.
+    pub fn print_worst(&self, heading: &str) {
+        println!("{heading}");
+        for f in &self.figures.figures {
+            println!("  {:<40} {:>16}  goal {}", f.name, f.measured_text(), f.goal_text());
+        }
+        println!("{}", if self.all_met() { "every goal met" } else { "GOAL NOT MET" });
+    }
 }
 
 /// Write `figures` as `<dir>/<bench>.json`.
