@@ -91,8 +91,14 @@ fn autotune_tunes_a_machine_it_does_not_ship_and_the_true_plant_keeps_the_margin
         serde_json::from_value(j["design"]["tuning"].clone()).unwrap();
     let drive = DriveDynamics::on_plant(&config.control, &config.plant);
     let period = config.control.rates.velocity_period() as f64;
-    let m =
-        host_tools::autotune::design::margins_of(&tuning, &|f| loop_plant(&drive, &truth, f), period, 4000).unwrap();
+    let m = host_tools::autotune::design::margins_of(
+        &tuning,
+        &|f| loop_plant(&drive, &truth, f),
+        period,
+        4000,
+        &truth.features_hz(),
+    )
+    .unwrap();
     assert!(m.stable && m.phase_margin_deg >= 44.0 && m.gain_margin_db >= 6.0 && m.sensitivity_peak <= 1.7, "{m:?}");
     let o = servo().arg("autotune").on_fmu(&out).args(["--margin", "reckless"]).output().unwrap();
     assert_eq!(o.status.code(), Some(2));

@@ -173,11 +173,11 @@ fn tune_into(fmu: &Fmu, machine: &Machine, goal: &MarginGoal, row: &mut MachineR
         rel(fa, ta),
     ];
     let model = |f: f64| loop_plant(&drive, &m, f);
-    let d = design(&model, period, &goal.with_reserve(), &SearchGrid::STANDARD)
+    let d = design(&model, period, &goal.with_reserve(), &SearchGrid::STANDARD, &m.features_hz())
         .ok_or_else(|| anyhow::anyhow!("no design keeps the margins on the calibrated model"))?;
     row.tuning = Some(d.tuning);
     // On the truth.
-    let on_truth = margins_of(&d.tuning, &true_plant, period, 4000)
+    let on_truth = margins_of(&d.tuning, &true_plant, period, 4000, &truth.features_hz())
         .ok_or_else(|| anyhow::anyhow!("the true plant's grid is too coarse for the design's loop"))?;
     row.stable = on_truth.stable;
     row.phase_margin_deg = on_truth.phase_margin_deg;
@@ -188,16 +188,20 @@ fn tune_into(fmu: &Fmu, machine: &Machine, goal: &MarginGoal, row: &mut MachineR
     // Its starts: the search's best on the truth, and this design where it keeps the margins
     // on the truth (the oracle is the best design found, whatever the start).
     let mut starts = Vec::new();
-    starts.extend(design(&true_plant, period, goal, &SearchGrid::STANDARD));
+    let features = truth.features_hz();
+    starts.extend(design(&true_plant, period, goal, &SearchGrid::STANDARD, &features));
     if goal.held_by(&on_truth) {
         let j = super::design::rigid_inertia_of(&true_plant, period);
         starts.push(super::design::Design { tuning: d.tuning, margins: on_truth, inertia: j });
     }
-    row.oracle_bandwidth_hz =
-        starts.iter().map(|s| refine(&true_plant, period, goal, s, 4000).margins.bandwidth_hz).fold(f64::NAN, f64::max);
+    row.oracle_bandwidth_hz = starts
+        .iter()
+        .filter_map(|s| refine(&true_plant, period, goal, s, 4000, &features))
+        .map(|d| d.margins.bandwidth_hz)
+        .fold(f64::NAN, f64::max);
     // The shipped default gains on the truth.
     let default = VelocityTuning::of_params(&params);
-    if let Some(dm) = margins_of(&default, &true_plant, period, 4000) {
+    if let Some(dm) = margins_of(&default, &true_plant, period, 4000, &features) {
         row.default_bandwidth_hz = if dm.stable { dm.bandwidth_hz } else { f64::NAN };
         let peak = |t: &VelocityTuning| {
             crate::autotune::margins::log_grid(0.5, 0.999 * 0.5 / period, 4000)

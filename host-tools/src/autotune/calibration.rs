@@ -68,7 +68,7 @@ pub fn calibrate(points: &[PlantPoint], drive: &DriveDynamics) -> anyhow::Result
     let points: Vec<PlantPoint> = points
         .iter()
         .copied()
-        .filter(|p| p.hz > 0.0 && p.response.norm().is_finite() && p.response.norm() > 0.0)
+        .filter(|p| p.hz.is_finite() && p.hz > 0.0 && p.response.norm().is_finite() && p.response.norm() > 0.0)
         .collect();
     if points.len() < 8 {
         anyhow::bail!("{} usable points of the plant's response: the fit needs at least 8", points.len());
@@ -106,11 +106,13 @@ pub fn calibrate(points: &[PlantPoint], drive: &DriveDynamics) -> anyhow::Result
     let mut best: Option<([f64; 4], f64)> = None;
     for &theta in &starts {
         let (theta, c) = levenberg_marquardt(&points, drive, theta);
-        if best.is_none_or(|b| c < b.1) {
+        if c.is_finite() && best.is_none_or(|b| c < b.1) {
             best = Some((theta, c));
         }
     }
-    let (theta, c) = best.ok_or_else(|| anyhow::anyhow!("no fit converged"))?;
+    let (theta, c) = best.ok_or_else(|| {
+        anyhow::anyhow!("no start of the fit gave a finite residual: the measured response is not a machine's")
+    })?;
     let mechanics = mechanics_of(&theta, 0.0);
     let r = residuals(&points, drive, &theta);
     let (mut worst_gain_db, mut worst_phase_deg) = (0.0f64, 0.0f64);
@@ -124,7 +126,15 @@ pub fn calibrate(points: &[PlantPoint], drive: &DriveDynamics) -> anyhow::Result
     let sigma2 = c / dof;
     let jtj = jac.transpose() * &jac;
     let relative_errors = match jtj.try_inverse() {
-        Some(inv) => [0, 1, 2, 3].map(|i| (sigma2 * inv[(i, i)]).max(0.0).sqrt()),
+        // A variance that is not a finite non-negative number says the value is undetermined.
+        Some(inv) => [0, 1, 2, 3].map(|i| {
+            let v = sigma2 * inv[(i, i)];
+            if v.is_finite() && v >= 0.0 {
+                v.sqrt()
+            } else {
+                f64::INFINITY
+            }
+        }),
         None => [f64::INFINITY; 4],
     };
     let (fr, _) = mechanics.resonance_hz();

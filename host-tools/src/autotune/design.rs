@@ -103,18 +103,42 @@ pub struct Design {
 /// Lowest frequency of the design grid (Hz).
 const LOW_HZ: f64 = 0.5;
 
+/// The highest notch centre, as a share of the loop's Nyquist frequency.
+const NOTCH_LIMIT: f64 = 0.9;
+
+/// The design grid: `points` frequencies log-spaced from [`LOW_HZ`] to just below the loop's
+/// Nyquist frequency, with the plant's `features` (its modes' frequencies, which a lightly
+/// damped mode's narrow peak needs) merged in.
+pub fn design_grid(period: f64, points: usize, features: &[f64]) -> Vec<f64> {
+    let high = 0.999 * 0.5 / period;
+    let mut f = log_grid(LOW_HZ, high, points);
+    f.extend(features.iter().copied().filter(|&x| x.is_finite() && x > LOW_HZ && x < high));
+    f.sort_by(f64::total_cmp);
+    f.dedup();
+    f
+}
+
 /// The widest-bandwidth tuning for `plant` (torque command → velocity estimate at a frequency
-/// in Hz) on a loop ticking every `period` s; `None` when no candidate keeps the margins.
-pub fn design(plant: &dyn Fn(f64) -> Complex64, period: f64, goal: &MarginGoal, grid: &SearchGrid) -> Option<Design> {
+/// in Hz) on a loop ticking every `period` s, on the design grid with `features` (Hz) in it;
+/// `None` when no candidate keeps the margins.
+pub fn design(
+    plant: &dyn Fn(f64) -> Complex64,
+    period: f64,
+    goal: &MarginGoal,
+    grid: &SearchGrid,
+    features: &[f64],
+) -> Option<Design> {
     let nyquist = 0.5 / period;
-    let f = log_grid(LOW_HZ, 0.999 * nyquist, grid.grid_points);
+    let f = design_grid(period, grid.grid_points, features);
     let p: Vec<Complex64> = f.iter().map(|&f| plant(f)).collect();
     let inertia = rigid_inertia(&f, &p)?;
     let peaks = resonance_peaks(&f, &p, inertia);
     let mut best: Option<Design> = None;
     let mut notches = vec![None];
     for &fr in &peaks {
-        for &shift in grid.notch_shifts {
+        // A notch's centre stays below the loop's Nyquist frequency (above it, it would
+        // alias onto a lower one).
+        for shift in grid.notch_shifts.iter().copied().filter(|s| fr * s < NOTCH_LIMIT * nyquist) {
             for &depth in grid.notch_depths {
                 for &q in grid.notch_qs {
                     notches.push(Some(Notch { hz: fr * shift, q, depth }));
@@ -157,14 +181,15 @@ pub fn design(plant: &dyn Fn(f64) -> Complex64, period: f64, goal: &MarginGoal, 
     best
 }
 
-/// The margins of `tuning` on `plant` over the design grid.
+/// The margins of `tuning` on `plant` over the design grid with `features`.
 pub fn margins_of(
     tuning: &VelocityTuning,
     plant: &dyn Fn(f64) -> Complex64,
     period: f64,
     points: usize,
+    features: &[f64],
 ) -> Option<Margins> {
-    let f = log_grid(LOW_HZ, 0.999 * 0.5 / period, points);
+    let f = design_grid(period, points, features);
     let l: Vec<Complex64> = f.iter().map(|&f| tuning.response(f, period) * plant(f)).collect();
     margins(&f, &l)
 }
@@ -206,16 +231,18 @@ fn resonance_peaks(f: &[f64], p: &[Complex64], inertia: f64) -> Vec<f64> {
 
 /// The oracle's refinement: a compass search from `start` over the continuous parameters (the
 /// proportional gain, the integral ratio, the low-pass cut-off, the notch's centre, width and
-/// depth), keeping the margins, for the widest bandwidth on `plant` over `points` grid points.
+/// depth), keeping the margins, for the widest bandwidth on `plant` over `points` grid points
+/// with `features`. `None` when the start itself does not keep them on that grid.
 pub fn refine(
     plant: &dyn Fn(f64) -> Complex64,
     period: f64,
     goal: &MarginGoal,
     start: &Design,
     points: usize,
-) -> Design {
+    features: &[f64],
+) -> Option<Design> {
     let nyquist = 0.5 / period;
-    let f = log_grid(LOW_HZ, 0.999 * nyquist, points);
+    let f = design_grid(period, points, features);
     let p: Vec<Complex64> = f.iter().map(|&f| plant(f)).collect();
     let j = start.inertia;
     let evaluate = |t: &VelocityTuning| -> Option<Margins> {
@@ -223,7 +250,7 @@ pub fn refine(
             return None;
         }
         if let Some(n) = t.notch {
-            if !(n.hz > 1.0 && n.hz < nyquist && n.q > 0.05 && (0.0..=1.0).contains(&n.depth)) {
+            if !(n.hz > 1.0 && n.hz < NOTCH_LIMIT * nyquist && n.q > 0.05 && (0.0..=1.0).contains(&n.depth)) {
                 return None;
             }
         }
@@ -251,7 +278,7 @@ pub fn refine(
             notch: has_notch.then(|| Notch { hz: x[3].exp(), q: x[4].exp(), depth: x[5] }),
         }
     };
-    let mut best = *start;
+    let mut best = Design { margins: evaluate(&start.tuning)?, ..*start };
     let mut steps = [0.1, 0.2, 0.1, 0.05, 0.2, 0.1];
     let dims: Vec<usize> = (0..6).filter(|&d| d < 2 || (d == 2 && has_lp) || (d >= 3 && has_notch)).collect();
     for _ in 0..6 {
@@ -277,5 +304,74 @@ pub fn refine(
             *s *= 0.5;
         }
     }
-    best
+    Some(best)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::autotune::drive_dynamics::DriveDynamics;
+    use crate::autotune::mechanics::Mechanics;
+
+    fn machine(jm: f64, jl: f64, fr: f64, zeta: f64) -> Mechanics {
+        let w = std::f64::consts::TAU * fr;
+        let k = w * w / (1.0 / jm + 1.0 / jl);
+        Mechanics {
+            motor_inertia: jm,
+            load_inertia: jl,
+            shaft_stiffness: k,
+            shaft_damping: 2.0 * zeta * (k * jl).sqrt(),
+            motor_viscous: 0.0,
+            load_viscous: 0.0,
+        }
+    }
+
+    /// A resonance just below the loop's Nyquist frequency: whatever the search picks,
+    /// its notch lies below 0.9 of Nyquist, and the design keeps its margins on a grid that
+    /// holds the mode (checked on a denser one).
+    #[test]
+    fn a_notch_never_lands_at_or_above_the_nyquist_frequency() {
+        let params = control_core::Params::default();
+        let drive = DriveDynamics::as_configured(&params);
+        let period = params.rates.velocity_period() as f64;
+        let nyquist = 0.5 / period;
+        let goal = MarginGoal::named("standard").unwrap();
+        for fr in [0.8 * nyquist, 0.95 * nyquist] {
+            let m = machine(1.5e-4, 1e-4, fr, 0.01);
+            let plant = |f: f64| crate::autotune::loop_plant(&drive, &m, f);
+            // Notch centres shifted up from the peak, as the fine search's are.
+            let grid = SearchGrid { notch_shifts: &[1.0, 1.17], ..SearchGrid::STANDARD };
+            let d = design(&plant, period, &goal, &grid, &m.features_hz()).unwrap();
+            if let Some(n) = d.tuning.notch {
+                assert!(n.hz < NOTCH_LIMIT * nyquist, "{d:?}");
+            }
+            let dense = margins_of(&d.tuning, &plant, period, 12_000, &m.features_hz()).unwrap();
+            assert!(goal.held_by(&dense), "{dense:?}");
+        }
+    }
+
+    /// The design grid holds a lightly damped mode (ζ = 0.002): its features are grid points,
+    /// the grid stays increasing, and the sensitivity peak read on a sparse grid with them is
+    /// the dense grid's; a start that does not keep the margins is not refined, and a start
+    /// that does is refined to at least its own bandwidth.
+    #[test]
+    fn the_grid_holds_a_narrow_mode_and_refine_refuses_a_failing_start() {
+        let params = control_core::Params::default();
+        let drive = DriveDynamics::as_configured(&params);
+        let period = params.rates.velocity_period() as f64;
+        let goal = MarginGoal::named("standard").unwrap();
+        let m = machine(1.5e-4, 3e-4, 300.0, 0.002);
+        let plant = |f: f64| crate::autotune::loop_plant(&drive, &m, f);
+        let d = design(&plant, period, &goal, &SearchGrid::STANDARD, &m.features_hz()).unwrap();
+        let with = margins_of(&d.tuning, &plant, period, 400, &m.features_hz()).unwrap();
+        let dense = margins_of(&d.tuning, &plant, period, 50_000, &[]).unwrap();
+        assert!((with.sensitivity_peak - dense.sensitivity_peak).abs() < 0.02, "{with:?} vs {dense:?}");
+        let g = design_grid(period, 400, &m.features_hz());
+        assert!(m.features_hz().iter().all(|x| g.contains(x)) && g.windows(2).all(|w| w[0] < w[1]));
+        let mut reckless = d;
+        reckless.tuning.kp *= 30.0;
+        assert!(refine(&plant, period, &goal, &reckless, 2000, &m.features_hz()).is_none());
+        let refined = refine(&plant, period, &goal, &d, 2000, &m.features_hz()).unwrap();
+        assert!(refined.margins.bandwidth_hz >= d.margins.bandwidth_hz * 0.999 && goal.held_by(&refined.margins));
+    }
 }

@@ -103,13 +103,20 @@ pub fn margins(frequencies: &[f64], loop_gain: &[Complex64]) -> Option<Margins> 
 }
 
 /// On a grid too sparse for [`margins`] (a measured sweep's points): the smallest phase
-/// margin over the gain crossovers between neighbouring points (180 where there is none; NaN
-/// when there are no points) and the largest `|1/(1 + L)|` over the points.
+/// margin over the gain crossovers between neighbouring points and the largest
+/// `|1/(1 + L)|` over the points. The phase margin is NaN where no crossover lies between
+/// the points (a loop whose crossover was not measured has not shown its margin), and both
+/// are NaN when there are no points.
 pub fn crossover_margins(frequencies: &[f64], loop_gain: &[Complex64]) -> (f64, f64) {
     if loop_gain.is_empty() || frequencies.len() != loop_gain.len() {
         return (f64::NAN, f64::NAN);
     }
-    let pm = loop_gain.windows(2).filter_map(|p| gain_crossover(p[0], p[1])).map(|(_, m)| m).fold(180.0, f64::min);
+    let pm = loop_gain
+        .windows(2)
+        .filter_map(|p| gain_crossover(p[0], p[1]))
+        .map(|(_, m)| m)
+        .reduce(f64::min)
+        .unwrap_or(f64::NAN);
     let ms = loop_gain.iter().map(|l| 1.0 / (1.0 + l).norm()).fold(0.0, f64::max);
     (pm, ms)
 }
@@ -183,5 +190,8 @@ mod tests {
         let sparse = log_grid(0.1, 4000.0, 60);
         let (pm_sparse, ms_sparse) = crossover_margins(&sparse, &loop_on(&sparse, kp));
         assert!((pm_sparse - m.phase_margin_deg).abs() < 2.0 && ms_sparse <= m.sensitivity_peak + 1e-9, "{pm_sparse}");
+        // Points all above the crossover show no margin: NaN, not a pass.
+        let above = log_grid(10.0 * m.crossover_hz, 4000.0, 20);
+        assert!(crossover_margins(&above, &loop_on(&above, kp)).0.is_nan());
     }
 }

@@ -48,6 +48,18 @@ impl Mechanics {
         ((k * (1.0 / self.motor_inertia + 1.0 / self.load_inertia)).sqrt() / tau, (k / self.load_inertia).sqrt() / tau)
     }
 
+    /// The frequencies (Hz) where the machine's response turns fastest: its resonance and
+    /// anti-resonance, each with its half-power points `f·(1 ± ζ)`. A design grid holds
+    /// them so that a lightly damped mode is never stepped over.
+    pub fn features_hz(&self) -> [f64; 6] {
+        let (fr, fa) = self.resonance_hz();
+        let tau = std::f64::consts::TAU;
+        let c = self.shaft_damping;
+        let zeta_r = c * (1.0 / self.motor_inertia + 1.0 / self.load_inertia) / (2.0 * tau * fr);
+        let zeta_a = c / (2.0 * (self.shaft_stiffness * self.load_inertia).sqrt());
+        [fr, fr * (1.0 - zeta_r), fr * (1.0 + zeta_r), fa, fa * (1.0 - zeta_a), fa * (1.0 + zeta_a)]
+    }
+
     pub fn total_inertia(&self) -> f64 {
         self.motor_inertia + self.load_inertia
     }
