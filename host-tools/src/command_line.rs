@@ -4,7 +4,9 @@
 
 use clap::{CommandFactory, Parser, Subcommand};
 
-use crate::{accdec, autotune, bench, circle, commission, device, ident, index, run, sequence, sweep, virtual_drive};
+use crate::{
+    accdec, autotune, bench, calibrate, circle, commission, device, ident, index, run, sequence, sweep, virtual_drive,
+};
 
 #[derive(Parser)]
 #[command(
@@ -31,6 +33,7 @@ pub enum Command {
     Sweep(sweep::args::SweepArgs),
     Ident(ident::args::IdentArgs),
     Tune(ident::args::TuneArgs),
+    Calibrate(calibrate::command::CalibrateArgs),
     Autotune(autotune::command::AutotuneArgs),
     Compare(run::args::CompareArgs),
     Device(device::args::DeviceArgs),
@@ -51,6 +54,7 @@ pub enum Command {
 pub enum BenchCommand {
     Commission(bench::commission_bench::CommissionBenchArgs),
     Autotune(autotune::bench::AutotuneBenchArgs),
+    Calibrate(calibrate::bench::CalibrateBenchArgs),
     Robustness(bench::args::RobustnessBenchArgs),
     Firmware(bench::args::FirmwareBenchArgs),
     Fmu(bench::args::FmuBenchArgs),

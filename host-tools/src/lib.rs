@@ -3,7 +3,9 @@
 //! experiments' commands.
 //!
 //! One folder per experiment — `run` (scenarios), `sweep` (seed 000), `ident` (seed 001, with
-//! `tune`), `circle` (seed 002), `accdec` (seed 003), `sequence` (seed 004), `device` (the drive
+//! `tune`), `circle` (seed 002), `accdec` (seed 003), `sequence` (seed 004), `calibrate` (the twin
+//! fitted to a machine: mechanics and friction) and `autotune` (gains and filters from the
+//! response, built on the mechanics model `calibrate` fits), `device` (the drive
 //! link) — each with its options (`args.rs`, clap), commands (`command.rs`: their `run`),
 //! measurement, report, plot, bench and its section of out/index.html (`index.rs`). `bench` holds the benches
 //! that are not experiments (FMU speed, plant, firmware, robustness and fault campaigns). Shared
@@ -17,6 +19,7 @@ pub mod accdec;
 pub mod analysis;
 pub mod autotune;
 pub mod bench;
+pub mod calibrate;
 pub mod circle;
 pub mod cli;
 pub mod command_line;

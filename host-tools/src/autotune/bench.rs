@@ -121,7 +121,7 @@ pub struct MachineRow {
 /// The torque-point sweep on the twin: its readings (`Y/U` at each frequency).
 pub fn measure(fmu: &Fmu, parameters: &BTreeMap<String, Value>) -> Result<Vec<ResponsePoint>> {
     let torque = control_core::excitation::InjectionPoint::TorqueCommand;
-    super::sweep_on_fmu(fmu, torque, 0.2, parameters, crate::sweep::bench::VELOCITY)
+    Ok(super::sweep_on_fmu(fmu, torque, 0.2, parameters, crate::sweep::bench::VELOCITY)?.points)
 }
 
 /// Design and check one machine.

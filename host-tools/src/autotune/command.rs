@@ -42,6 +42,10 @@ pub struct AutotuneArgs {
     /// (Ms 2.0), each with a phase margin of at least 45° and a gain margin of 6 dB
     #[arg(long, default_value = "standard")]
     pub margin: String,
+    /// Plant file of the twin's machine (as `servo calibrate` writes it: the calibrated
+    /// twin); --set applies over it
+    #[arg(long)]
+    pub plant: Option<std::path::PathBuf>,
     /// FMU parameter NAME=VALUE (repeatable): the twin's machine, e.g. plant.load_inertia=3e-4
     #[arg(long = "set")]
     pub set: Vec<String>,
@@ -64,7 +68,7 @@ impl AutotuneArgs {
         if !(self.amplitude.is_finite() && self.amplitude > 0.0) {
             anyhow::bail!("--amplitude must be a positive torque (N·m), got {}", self.amplitude);
         }
-        let parameters = crate::fmu::assignment::axis_parameters(&self.set, &[])?;
+        let parameters = crate::fmu::plant_file::machine_parameters(self.plant.as_deref(), &self.set)?;
         let params = configuration(&parameters)?.control;
         let period = params.rates.velocity_period() as f64;
         let out = self.common.out.clone().unwrap_or_else(|| default_out("autotune"));
@@ -74,7 +78,8 @@ impl AutotuneArgs {
         pb.set_position(50);
         // 1. The plant, measured.
         let measured = sweep_on_fmu(&fmu, InjectionPoint::TorqueCommand, self.amplitude, &parameters, self.velocity)
-            .context("the torque-point sweep")?;
+            .context("the torque-point sweep")?
+            .points;
         pb.set_position(400);
         // 2. The mechanics, calibrated (from the plant behind the sweep's readings).
         let drive = DriveDynamics::as_configured(&params);
@@ -95,7 +100,8 @@ impl AutotuneArgs {
             tuned.insert(k, Value::Float(v));
         }
         let open_loop = sweep_on_fmu(&fmu, InjectionPoint::VelocityFeedback, 2.0, &tuned, self.velocity)
-            .context("the feedback-point sweep with the new gains")?;
+            .context("the feedback-point sweep with the new gains")?
+            .points;
         pb.finish_and_clear();
         let hz: Vec<f64> = open_loop.iter().map(|p| p.frequency).collect();
         let l: Vec<Complex64> = open_loop.iter().map(ResponsePoint::to_complex).collect();
@@ -111,18 +117,17 @@ impl AutotuneArgs {
             writeln!(toml, "\"{k}\" = {v:e}")?;
         }
         std::fs::write(out.join("autotune.toml"), &toml)?;
-        let mut plant_toml = String::from(
-            "# servo autotune: the twin's mechanics calibrated from the measured response\n[parameters]\n",
-        );
-        for (k, v) in [
-            ("plant.motor_inertia", m.motor_inertia),
-            ("plant.load_inertia", m.load_inertia),
-            ("plant.shaft_stiffness", m.shaft_stiffness),
-            ("plant.shaft_damping", m.shaft_damping),
-        ] {
-            writeln!(plant_toml, "\"{k}\" = {v:e}")?;
-        }
-        std::fs::write(out.join("calibrated-plant.toml"), &plant_toml)?;
+        crate::fmu::plant_file::write_plant_file(
+            &out.join("calibrated-plant.toml"),
+            "servo autotune: the twin's mechanics calibrated from the measured response\n\
+             (servo calibrate also measures the friction)",
+            &[
+                ("plant.motor_inertia", Value::Float(m.motor_inertia)),
+                ("plant.load_inertia", Value::Float(m.load_inertia)),
+                ("plant.shaft_stiffness", Value::Float(m.shaft_stiffness)),
+                ("plant.shaft_damping", Value::Float(m.shaft_damping)),
+            ],
+        )?;
         let dense = log_grid(1.0, 0.999 * 0.5 / period, 400);
         let model_points: Vec<ResponsePoint> =
             dense.iter().map(|&f| ResponsePoint::from_complex(f, plant_response(&drive, &m, f), 1.0)).collect();

@@ -48,19 +48,29 @@ pub fn plant_points(
         .collect()
 }
 
+/// A sweep's measured points with a finite response, and the drive time it took (s, from
+/// the command to ride to the sweep's end).
+pub struct MeasuredSweep {
+    pub points: Vec<crate::analysis::response_point::ResponsePoint>,
+    pub drive_time_s: f64,
+}
+
 /// A sweep at `point` with `amplitude` on the FMU (a drive's twin or the plant of
-/// `parameters`), riding at `velocity` rad/s: its measured points with a finite response.
+/// `parameters`), riding at `velocity` rad/s.
 pub fn sweep_on_fmu(
     fmu: &crate::fmu::runner::Fmu,
     point: control_core::excitation::InjectionPoint,
     amplitude: f64,
     parameters: &std::collections::BTreeMap<String, crate::fmu::scenario::Value>,
     velocity: f64,
-) -> anyhow::Result<Vec<crate::analysis::response_point::ResponsePoint>> {
+) -> anyhow::Result<MeasuredSweep> {
     let settings =
         control_core::phase_shifted_sweep::SweepParams { point, amplitude: amplitude as f32, ..Default::default() };
     let run = crate::fmu::sweep_run::SweepRun { settings, parameters: parameters.clone(), velocity };
     let trace = run.run(fmu, |_| {})?;
     let points = crate::sweep::measurement::stream_results(&trace, &run.settings)?;
-    Ok(points.into_iter().filter(|p| p.gain_db.is_finite() && p.phase_deg.is_finite()).collect())
+    Ok(MeasuredSweep {
+        points: points.into_iter().filter(|p| p.gain_db.is_finite() && p.phase_deg.is_finite()).collect(),
+        drive_time_s: trace.rows.last().map_or(0.0, |r| r[0]),
+    })
 }

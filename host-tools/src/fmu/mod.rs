@@ -6,6 +6,7 @@ pub mod circle;
 pub mod configuration;
 pub mod fmpy;
 pub mod log;
+pub mod plant_file;
 pub mod runner;
 pub mod scenario;
 pub mod sweep_run;

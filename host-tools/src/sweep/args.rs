@@ -105,6 +105,9 @@ pub struct SweepArgs {
     /// Constant speed the sweep rides on (rad/s; keeps friction on one side)
     #[arg(long, default_value_t = 50.0)]
     pub velocity: f64,
+    /// Plant file of the twin's machine (as `servo calibrate` writes it); --set applies over it
+    #[arg(long)]
+    pub plant: Option<PathBuf>,
     /// FMU parameter NAME=VALUE (repeatable), e.g. plant.current_noise_std=0.05
     #[arg(long = "set")]
     pub set: Vec<String>,

@@ -391,7 +391,7 @@ fn print_limit_detection(cases: &[crate::sweep::limit_detection::LimitCase]) {
 impl SweepArgs {
     pub fn run(&self) -> Result<bool> {
         let settings = sweep_settings(self)?;
-        let parameters = crate::fmu::assignment::axis_parameters(&self.set, &[])?;
+        let parameters = crate::fmu::plant_file::machine_parameters(self.plant.as_deref(), &self.set)?;
         // The sweep's settings come from this command's options: a `--set sweep.…` would be
         // overwritten by them without a word.
         if let Some(name) = parameters.keys().find(|name| name.starts_with("sweep.")) {

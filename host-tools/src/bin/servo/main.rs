@@ -19,6 +19,7 @@ fn main() -> ExitCode {
         Command::Ident(args) => args.run(),
         Command::Tune(args) => args.run(),
         Command::Autotune(args) => args.run(),
+        Command::Calibrate(args) => args.run(),
         Command::Compare(args) => args.run(),
         Command::Device(args) => args.run(),
         Command::VirtualDrive(args) => args.run(),
@@ -30,6 +31,7 @@ fn main() -> ExitCode {
         }
         Command::Bench(BenchCommand::Commission(args)) => args.run(),
         Command::Bench(BenchCommand::Autotune(args)) => args.run(),
+        Command::Bench(BenchCommand::Calibrate(args)) => args.run(),
         Command::Bench(BenchCommand::Robustness(args)) => args.run(),
         Command::Bench(BenchCommand::Firmware(args)) => args.run(),
         Command::Bench(BenchCommand::Fmu(args)) => args.run(),

@@ -1,0 +1,131 @@
+//! `servo calibrate`: the twin fitted to a machine. The mechanics (motor and load inertia,
+//! shaft stiffness and damping) from a torque-point sweep (the fit lives with the model it
+//! fits, in `autotune::calibration`), and friction (Coulomb, viscous, a constant load torque)
+//! from constant-speed runs in both directions (`friction`, `friction_runs`); the result is a
+//! plant file (`fmu::plant_file`) every command that runs a twin takes with `--plant`.
+
+pub mod bench;
+pub mod command;
+pub mod friction;
+pub mod friction_runs;
+
+use std::collections::BTreeMap;
+
+use anyhow::{Context, Result};
+use serde::Serialize;
+use servo_axis::plant::PlantParams;
+
+use crate::analysis::response_point::ResponsePoint;
+use crate::autotune::calibration::{calibrate, Calibration, PlantPoint};
+use crate::autotune::drive_dynamics::DriveDynamics;
+use crate::autotune::velocity_controller::VelocityTuning;
+use crate::autotune::{plant_points, sweep_on_fmu};
+use crate::fmu::configuration::configuration;
+use crate::fmu::runner::Fmu;
+use crate::fmu::scenario::Value;
+use friction::{fit_friction, Friction, SpeedPoint};
+use friction_runs::FrictionRuns;
+
+/// How a machine is measured for its calibration.
+#[derive(Clone, Debug)]
+pub struct Measurement {
+    /// Torque amplitude of the sweep (N·m).
+    pub amplitude: f64,
+    /// Speed the sweep rides at (rad/s).
+    pub velocity: f64,
+    pub friction_runs: FrictionRuns,
+}
+
+/// A machine calibrated: its mechanics and friction, and what they were fitted to.
+#[derive(Clone, Debug, Serialize)]
+pub struct MachineCalibration {
+    pub mechanics: Calibration,
+    pub friction: Friction,
+    #[serde(skip)]
+    pub readings: Vec<ResponsePoint>,
+    #[serde(skip)]
+    pub plant_points: Vec<PlantPoint>,
+    pub speed_points: Vec<SpeedPoint>,
+    /// Drive time the measurements took (s).
+    pub drive_time_s: f64,
+}
+
+impl MachineCalibration {
+    /// The calibrated twin's plant parameters, the other values (motor, sensors) from `base`.
+    /// Friction at a constant speed is the motor's and the load's together: the twin splits
+    /// it in proportion to the inertias (the split a constant speed cannot see; this one keeps
+    /// the friction's stiffness near zero speed the lowest, never above the machine's). A
+    /// constant load torque has no plant parameter and is reported only. The sub-steps are
+    /// the fewest (not fewer than `base`'s) the twin's plant accepts.
+    pub fn plant_parameters(&self, base: &PlantParams) -> Vec<(&'static str, Value)> {
+        let m = &self.mechanics.mechanics;
+        let f = &self.friction;
+        let share = m.motor_inertia / m.total_inertia();
+        let mut plant = *base;
+        plant.motor_inertia = m.motor_inertia;
+        plant.load_inertia = m.load_inertia;
+        plant.shaft_stiffness = m.shaft_stiffness;
+        plant.shaft_damping = m.shaft_damping;
+        plant.motor_coulomb = share * f.coulomb.max(0.0);
+        plant.load_coulomb = (1.0 - share) * f.coulomb.max(0.0);
+        plant.motor_viscous = share * f.viscous.max(0.0);
+        plant.load_viscous = (1.0 - share) * f.viscous.max(0.0);
+        let substeps = fewest_substeps(&plant);
+        let mut values: Vec<(&'static str, Value)> = [
+            ("plant.motor_inertia", plant.motor_inertia),
+            ("plant.load_inertia", plant.load_inertia),
+            ("plant.shaft_stiffness", plant.shaft_stiffness),
+            ("plant.shaft_damping", plant.shaft_damping),
+            ("plant.motor_coulomb", plant.motor_coulomb),
+            ("plant.load_coulomb", plant.load_coulomb),
+            ("plant.motor_viscous", plant.motor_viscous),
+            ("plant.load_viscous", plant.load_viscous),
+        ]
+        .into_iter()
+        .map(|(k, v)| (k, Value::Float(v)))
+        .collect();
+        values.push(("plant.substeps", Value::Int(substeps as i64)));
+        values
+    }
+}
+
+/// The fewest sub-steps, from `plant`'s own up to 64, with which the plant model accepts
+/// `plant` (its friction near zero speed is integrated explicitly: a strong friction on a
+/// light inertia needs shorter sub-steps); `plant`'s own when none does.
+pub fn fewest_substeps(plant: &PlantParams) -> u32 {
+    let mut p = *plant;
+    (plant.substeps..=64.max(plant.substeps))
+        .find(|&n| {
+            p.substeps = n;
+            p.validate().is_ok()
+        })
+        .unwrap_or(plant.substeps)
+}
+
+/// Calibrate the machine of `parameters` on `fmu` (its twin, or the plant those parameters
+/// describe): the torque-point sweep, the mechanics fitted to it, the constant-speed runs,
+/// the friction fitted to them.
+pub fn calibrate_on_fmu(
+    fmu: &Fmu,
+    parameters: &BTreeMap<String, Value>,
+    how: &Measurement,
+) -> Result<MachineCalibration> {
+    how.friction_runs.validate(parameters)?;
+    let params = configuration(parameters)?.control;
+    let torque = control_core::excitation::InjectionPoint::TorqueCommand;
+    let sweep = sweep_on_fmu(fmu, torque, how.amplitude, parameters, how.velocity).context("the torque-point sweep")?;
+    let readings = sweep.points;
+    let drive = DriveDynamics::as_configured(&params);
+    let points = plant_points(&readings, &drive, &VelocityTuning::of_params(&params));
+    let mechanics = calibrate(&points, &drive).context("calibrating the mechanics")?;
+    let (speed_points, _) = how.friction_runs.run(fmu, parameters)?;
+    let friction = fit_friction(&speed_points).context("fitting the friction")?;
+    Ok(MachineCalibration {
+        mechanics,
+        friction,
+        readings,
+        plant_points: points,
+        speed_points,
+        drive_time_s: sweep.drive_time_s + how.friction_runs.duration(),
+    })
+}
