@@ -57,9 +57,10 @@ mod common;
 use common::{servo, tmp, OnTheFmu};
 
 /// `servo autotune` on a machine it does not ship (a load three times the motor's on a 90 Hz
-/// shaft, sensor noise on): exit 0, its files, the calibrated mechanics within 5 % of the
-/// twin's, and its gains checked on the **true** analytic plant (not the fit): stable, phase
-/// margin ≥ 44°, gain margin ≥ 6 dB, Ms ≤ 1.7. A bad --margin is refused by name.
+/// shaft, sensor noise on): exit 0, its files, the step measured on the twin matching the
+/// predicted one, the calibrated mechanics within 5 % of the twin's, and its gains checked
+/// on the **true** analytic plant (not the fit): stable, phase margin ≥ 44°, gain margin
+/// ≥ 6 dB, Ms ≤ 1.7. A bad --margin is refused by name.
 #[test]
 fn autotune_tunes_a_machine_it_does_not_ship_and_the_true_plant_keeps_the_margins() {
     let machine = Machine { inertia_ratio: 3.0, resonance_hz: 90.0, damping_ratio: 0.03 };
@@ -73,10 +74,27 @@ fn autotune_tunes_a_machine_it_does_not_ship_and_the_true_plant_keeps_the_margin
     let o = c.output().unwrap();
     let stderr = String::from_utf8_lossy(&o.stderr);
     assert_eq!(o.status.code(), Some(0), "{stderr}");
-    for f in ["autotune.toml", "calibrated-plant.toml", "autotune.json", "plant.svg", "open-loop.svg"] {
+    for f in [
+        "autotune.toml",
+        "calibrated-plant.toml",
+        "autotune.json",
+        "plant.svg",
+        "open-loop.svg",
+        "nyquist.svg",
+        "closed-loop.svg",
+        "step.svg",
+        "disturbance.svg",
+    ] {
         assert!(out.join(f).exists(), "{f}");
     }
     let j: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+    // The step measured on the twin is the predicted one: overshoot within 5 points, settling
+    // within 30 % (the twin's estimate is noisy and its friction is not in the model).
+    let r = &j["responses"];
+    let f = |a: &str, b: &str| r[a][b].as_f64().unwrap();
+    assert!((f("measured_step", "overshoot_percent") - f("tuned", "overshoot_percent")).abs() <= 5.0, "{r}");
+    let (settle, predicted) = (f("measured_step", "settling_time_s"), f("tuned", "settling_time_s"));
+    assert!((settle / predicted - 1.0).abs() <= 0.3, "{r}");
     let config = configuration(&parameters).unwrap();
     let truth = Mechanics::of_plant(&config.plant);
     let fitted: Mechanics = serde_json::from_value(j["calibration"]["mechanics"].clone()).unwrap();

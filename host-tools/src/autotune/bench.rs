@@ -112,10 +112,17 @@ pub struct MachineRow {
     pub sensitivity_peak: f64,
     pub bandwidth_hz: f64,
     pub oracle_bandwidth_hz: f64,
+    /// The oracle's tuning, and its margins on the calibrated model (what the design saw).
+    pub oracle_tuning: Option<VelocityTuning>,
+    pub oracle_on_model: Option<super::margins::Margins>,
     /// The default gains' bandwidth on the true plant (NaN: unstable), and the disturbance
     /// response's peak (motor velocity per load torque) of the default over the tuned.
     pub default_bandwidth_hz: f64,
     pub disturbance_improvement: f64,
+    /// Predicted on the true plant, tuned and with the default gains: the velocity step's
+    /// settling time (2 %, s) and a load step's peak (rad/s per N·m).
+    pub step_settling_s: [f64; 2],
+    pub load_step_peak: [f64; 2],
 }
 
 /// The torque-point sweep on the twin: its readings (`Y/U` at each frequency).
@@ -138,8 +145,12 @@ pub fn tune_one(fmu: &Fmu, machine: &Machine, goal: &MarginGoal) -> MachineRow {
         sensitivity_peak: f64::NAN,
         bandwidth_hz: f64::NAN,
         oracle_bandwidth_hz: f64::NAN,
+        oracle_tuning: None,
+        oracle_on_model: None,
         default_bandwidth_hz: f64::NAN,
         disturbance_improvement: f64::NAN,
+        step_settling_s: [f64::NAN; 2],
+        load_step_peak: [f64::NAN; 2],
     };
     if let Err(e) = tune_into(fmu, machine, goal, &mut row) {
         row.failed = Some(format!("{e:#}"));
@@ -194,11 +205,13 @@ fn tune_into(fmu: &Fmu, machine: &Machine, goal: &MarginGoal, row: &mut MachineR
         let j = super::design::rigid_inertia_of(&true_plant, period);
         starts.push(super::design::Design { tuning: d.tuning, margins: on_truth, inertia: j });
     }
-    row.oracle_bandwidth_hz = starts
+    let oracle = starts
         .iter()
         .filter_map(|s| refine(&true_plant, period, goal, s, 4000, &features))
-        .map(|d| d.margins.bandwidth_hz)
-        .fold(f64::NAN, f64::max);
+        .max_by(|a, b| a.margins.bandwidth_hz.total_cmp(&b.margins.bandwidth_hz));
+    row.oracle_bandwidth_hz = oracle.map_or(f64::NAN, |o| o.margins.bandwidth_hz);
+    row.oracle_tuning = oracle.map(|o| o.tuning);
+    row.oracle_on_model = oracle.and_then(|o| margins_of(&o.tuning, &model, period, 4000, &m.features_hz()));
     // The shipped default gains on the truth.
     let default = VelocityTuning::of_params(&params);
     if let Some(dm) = margins_of(&default, &true_plant, period, 4000, &features) {
@@ -211,6 +224,10 @@ fn tune_into(fmu: &Fmu, machine: &Machine, goal: &MarginGoal, row: &mut MachineR
         };
         if dm.stable {
             row.disturbance_improvement = peak(&default) / peak(&d.tuning);
+            let predicted = |t: &VelocityTuning| super::prediction::predict(t, &true_plant, period, 0.3);
+            let (tuned, shipped) = (predicted(&d.tuning), predicted(&default));
+            row.step_settling_s = [tuned.settling_time_s, shipped.settling_time_s];
+            row.load_step_peak = [tuned.disturbance_peak, shipped.disturbance_peak];
         }
     }
     Ok(())
@@ -269,6 +286,21 @@ impl AutotuneBenchArgs {
         rec.at_most("stiffness error", 100.0 * worst(&|r| r.calibration_errors[2]), 3.0, "%");
         rec.at_most("resonance error", 100.0 * worst(&|r| r.calibration_errors[3]), 1.0, "%");
         rec.at_most("anti-resonance error", 100.0 * worst(&|r| r.calibration_errors[4]), 1.0, "%");
+        let median = |f: &dyn Fn(&MachineRow) -> f64| {
+            let mut v: Vec<f64> = finished().map(f).filter(|x| x.is_finite()).collect();
+            v.sort_by(f64::total_cmp);
+            v.get(v.len() / 2).copied().unwrap_or(f64::NAN)
+        };
+        rec.info(
+            "load-step peak, default gains over tuned (median)",
+            median(&|r| r.load_step_peak[1] / r.load_step_peak[0]),
+            "x",
+        );
+        rec.info(
+            "step settling, default gains over tuned (median)",
+            median(&|r| r.step_settling_s[1] / r.step_settling_s[0]),
+            "x",
+        );
         let passed = rec.all_met();
         rec.write(self.common.out.as_deref(), passed)?;
         if self.common.json {
@@ -280,7 +312,7 @@ impl AutotuneBenchArgs {
             );
         } else {
             println!(
-                "{:>3} {:>5} {:>6} {:>6} {:>8} {:>7} {:>6} {:>6} {:>6} {:>6} {:>5} {:>6} {:>6} {:>6} {:>6}",
+                "{:>3} {:>5} {:>6} {:>6} {:>8} {:>7} {:>6} {:>6} {:>6} {:>6} {:>5} {:>6} {:>6} {:>6} {:>13} {:>13} {:>6}",
                 "#",
                 "ratio",
                 "fr Hz",
@@ -295,16 +327,19 @@ impl AutotuneBenchArgs {
                 "bw Hz",
                 "orc Hz",
                 "dflt",
+                "settle ms/dflt",
+                "load pk/dflt",
                 "cal %"
             );
             for (k, r) in rows.iter().enumerate() {
                 let m = &r.machine;
                 match (&r.failed, &r.tuning) {
                     (None, Some(t)) => println!(
-                        "{k:>3} {:>5.2} {:>6.0} {:>6.3} {:>8.4} {:>7.1} {:>6.0} {:>6.0} {:>6.1} {:>6.1} {:>5.2} {:>6.0} {:>6.0} {:>6.0} {:>6.2}{}",
+                        "{k:>3} {:>5.2} {:>6.0} {:>6.3} {:>8.4} {:>7.1} {:>6.0} {:>6.0} {:>6.1} {:>6.1} {:>5.2} {:>6.0} {:>6.0} {:>6.0} {:>6.0}/{:<6.0} {:>6.3}/{:<6.3} {:>6.2}{}",
                         m.inertia_ratio, m.resonance_hz, m.damping_ratio, t.kp, t.ki, t.low_pass_hz,
                         t.notch.map_or(0.0, |n| n.hz), r.phase_margin_deg, r.gain_margin_db, r.sensitivity_peak,
                         r.bandwidth_hz, r.oracle_bandwidth_hz, r.default_bandwidth_hz,
+                        1e3 * r.step_settling_s[0], 1e3 * r.step_settling_s[1], r.load_step_peak[0], r.load_step_peak[1],
                         100.0 * r.calibration_errors.iter().copied().fold(0.0, f64::max),
                         if r.stable { "" } else { "  UNSTABLE" }
                     ),

@@ -14,6 +14,7 @@ use super::calibration::calibrate;
 use super::design::{design, MarginGoal, SearchGrid};
 use super::drive_dynamics::DriveDynamics;
 use super::margins::{crossover_margins, log_grid};
+use super::responses::{plot_loops, Responses};
 use super::velocity_controller::VelocityTuning;
 use super::{loop_plant, plant_points, plant_response, sweep_on_fmu};
 use crate::analysis::response_point::ResponsePoint;
@@ -32,8 +33,10 @@ use crate::paths::{default_fmu, default_out};
 /// with the new gains measures the open loop, whose crossover and phase margin are printed
 /// beside the design's. Writes autotune.toml (the ctrl.* parameters, for a scenario's
 /// [parameters] or --set), calibrated-plant.toml (the plant.* parameters of the calibrated
-/// twin), autotune.json and plant.svg / open-loop.svg. Exit status 1 when the verification
-/// misses the margins.
+/// twin), autotune.json, plant.svg, open-loop.svg, nyquist.svg (the open loop near −1 with
+/// the Ms circle), closed-loop.svg, step.svg (the velocity step predicted, tuned and before,
+/// and measured on the twin) and disturbance.svg (a load step at the motor, predicted). Exit
+/// status 1 when the verification misses the margins.
 ///
 /// Example: servo autotune --set plant.load_inertia=4.5e-4 --set plant.shaft_stiffness=60
 #[derive(clap::Args)]
@@ -102,6 +105,10 @@ impl AutotuneArgs {
         let open_loop = sweep_on_fmu(&fmu, InjectionPoint::VelocityFeedback, 2.0, &tuned, self.velocity)
             .context("the feedback-point sweep with the new gains")?
             .points;
+        pb.set_position(900);
+        // The time responses: predicted on the model (tuned and before), a step on the twin.
+        let before = VelocityTuning::of_params(&params);
+        let responses = Responses::of(&fmu, &tuned, &d.tuning, &before, &model, period, self.velocity)?;
         pb.finish_and_clear();
         let hz: Vec<f64> = open_loop.iter().map(|p| p.frequency).collect();
         let l: Vec<Complex64> = open_loop.iter().map(ResponsePoint::to_complex).collect();
@@ -152,7 +159,15 @@ impl AutotuneArgs {
             &[("measured with the new gains (feedback-point sweep)", &open_loop), ("designed", &predicted)],
             Some((d.margins.crossover_hz, "crossover")),
         )?;
-        let before = VelocityTuning::of_params(&params);
+        responses.plot(&out)?;
+        plot_loops(
+            &out,
+            &|f| d.tuning.response(f, period) * model(f),
+            &open_loop,
+            &d.margins,
+            goal.sensitivity_peak,
+            period,
+        )?;
         let plant_json: Vec<serde_json::Value> = points
             .iter()
             .map(|p| {
@@ -169,6 +184,18 @@ impl AutotuneArgs {
             "design": d,
             "before": before,
             "verification": {"phase_margin_deg": measured_pm, "sensitivity_peak": measured_ms, "passed": ok},
+            "responses": {
+                "tuned": {"overshoot_percent": responses.tuned.overshoot_percent,
+                          "settling_time_s": responses.tuned.settling_time_s,
+                          "disturbance_peak": responses.tuned.disturbance_peak,
+                          "disturbance_recovery_s": responses.tuned.disturbance_recovery_s},
+                "before": {"overshoot_percent": responses.before.overshoot_percent,
+                           "settling_time_s": responses.before.settling_time_s,
+                           "disturbance_peak": responses.before.disturbance_peak,
+                           "disturbance_recovery_s": responses.before.disturbance_recovery_s},
+                "measured_step": {"overshoot_percent": responses.measured.overshoot_percent,
+                                  "settling_time_s": responses.measured.settling_time_s},
+            },
         });
         std::fs::write(out.join("autotune.json"), serde_json::to_string_pretty(&report)?)?;
         if self.common.json {
@@ -211,7 +238,24 @@ impl AutotuneArgs {
                 if ok { "holds" } else { "MISSES the margins" }
             );
         }
-        println!("files: {}", out.display());
+        let (r, b, ms) = (&responses.tuned, &responses.before, &responses.measured);
+        println!(
+            "  velocity step: overshoot {:.1} %, settles in {:.1} ms predicted (before: {:.1} %, {:.1} ms); on the twin {:.1} %, {:.1} ms",
+            r.overshoot_percent,
+            1e3 * r.settling_time_s,
+            b.overshoot_percent,
+            1e3 * b.settling_time_s,
+            ms.overshoot_percent,
+            1e3 * ms.settling_time_s
+        );
+        println!(
+            "  load step at the motor: peak {:.4} rad/s per N·m, back within 10 % in {:.1} ms (before: {:.4}, {:.1} ms)",
+            r.disturbance_peak,
+            1e3 * r.disturbance_recovery_s,
+            b.disturbance_peak,
+            1e3 * b.disturbance_recovery_s
+        );
+        println!("files: {} (plant, open-loop, nyquist, closed-loop, step, disturbance .svg)", out.display());
         Ok(ok)
     }
 }

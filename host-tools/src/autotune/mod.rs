@@ -10,6 +10,9 @@ pub mod design;
 pub mod drive_dynamics;
 pub mod margins;
 pub mod mechanics;
+pub mod prediction;
+pub mod responses;
+pub mod step_on_twin;
 pub mod velocity_controller;
 
 use num_complex::Complex64;

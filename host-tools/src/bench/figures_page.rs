@@ -33,6 +33,7 @@ pub const SECTIONS: [(&str, &[&str]); 3] = [
             "sequence",
             "sequence-random",
             "plant",
+            "calibrate",
             "autotune",
         ],
     ),

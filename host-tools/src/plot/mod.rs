@@ -1,4 +1,5 @@
-//! SVG plots: signals against time, Bode diagrams.
+//! SVG plots: signals against time, Bode and Nyquist diagrams.
 
 pub mod bode;
+pub mod nyquist;
 pub mod signals;

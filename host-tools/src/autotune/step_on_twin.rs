@@ -1,0 +1,85 @@
+//! A velocity-command step measured on the twin (the verification's time response): the axis
+//! rides at a constant speed (friction on one side), the command steps up, and the velocity
+//! estimate's change per unit step is read, with its overshoot and settling time figured as
+//! the prediction's are.
+
+use std::collections::BTreeMap;
+
+use anyhow::{bail, Context, Result};
+use control_core::axis::Mode;
+use serde::Serialize;
+
+use crate::fmu::configuration::configuration;
+use crate::fmu::runner::Fmu;
+use crate::fmu::scenario::{Event, Scenario, Value};
+
+/// When the step comes (s): the axis rides steadily by then.
+const STEP_AT: f64 = 0.5;
+
+/// The measured step.
+#[derive(Clone, Debug, Serialize)]
+pub struct MeasuredStep {
+    /// Time from the step (s).
+    pub time: Vec<f64>,
+    /// The velocity estimate's change per unit step.
+    pub response: Vec<f64>,
+    pub overshoot_percent: f64,
+    /// When the response last leaves ±2 % of the step (s).
+    pub settling_time_s: f64,
+}
+
+/// A step of `size` rad/s from a ride at `velocity` rad/s on `fmu` with `parameters`, over
+/// `span_s` s after it.
+pub fn step_on_fmu(
+    fmu: &Fmu,
+    parameters: &BTreeMap<String, Value>,
+    velocity: f64,
+    size: f64,
+    span_s: f64,
+) -> Result<MeasuredStep> {
+    if !(size.is_finite() && size != 0.0 && velocity.is_finite() && span_s > 0.0) {
+        bail!("a step needs a finite, non-zero size and a finite riding speed");
+    }
+    let rates = configuration(parameters)?.control.rates;
+    let step = rates.position_divider as f64 / rates.current_loop_hz as f64;
+    let ride =
+        [("mode".to_string(), Value::code(Mode::Velocity.code())), ("velocity_command".into(), Value::Float(velocity))];
+    let scenario = Scenario {
+        name: "step".into(),
+        description: "a velocity-command step on the twin".into(),
+        stop_time: ((STEP_AT + span_s) / step).ceil() * step,
+        step: Some(step),
+        parameters: parameters.clone(),
+        events: vec![
+            Event { time: 0.0, inputs: ride.into() },
+            Event {
+                time: (STEP_AT / step).round() * step,
+                inputs: [("velocity_command".to_string(), Value::Float(velocity + size))].into(),
+            },
+        ],
+        checks: vec![],
+        plot: vec![],
+        record: ["velocity_estimate", "faults"].map(String::from).to_vec(),
+    };
+    let trace = fmu.run(&scenario, |_| {}).context("the step on the twin")?;
+    if let Some(trip) = crate::fmu::axis_health::first_trip(&trace)? {
+        bail!("the step tripped the drive: {}", trip.sentence());
+    }
+    let (t, v) = (trace.column("time").context("time")?, trace.column("velocity_estimate").context("velocity")?);
+    let at = (STEP_AT / step).round() * step;
+    let mut time = Vec::new();
+    let mut response = Vec::new();
+    for (t, v) in t.iter().zip(&v) {
+        if *t >= at - 1e-9 {
+            time.push(t - at);
+            response.push((v - velocity) / size);
+        }
+    }
+    if time.len() < 2 {
+        bail!("the step's trace is empty");
+    }
+    let overshoot_percent = 100.0 * (response.iter().copied().fold(f64::NEG_INFINITY, f64::max) - 1.0).max(0.0);
+    let settling_time_s =
+        response.iter().rposition(|y| (y - 1.0).abs() > 0.02).map_or(0.0, |k| time[(k + 1).min(time.len() - 1)]);
+    Ok(MeasuredStep { time, response, overshoot_percent, settling_time_s })
+}
