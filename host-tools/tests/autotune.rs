@@ -144,3 +144,23 @@ fn the_autotune_bench_runs_a_small_draw() {
     assert_eq!(o.status.code(), Some(if all_met { 0 } else { 1 }), "{stderr}");
     assert!(out.join("autotune.json").exists());
 }
+
+/// A measurement that cannot carry a design is refused with its reason, and nothing is
+/// designed: a sweep into the torque limit, a resonance above the measured band, a response
+/// too noisy to determine the inertias.
+#[test]
+fn autotune_refuses_a_measurement_that_cannot_carry_a_design() {
+    let out = tmp("autotune-refusals");
+    for (args, says) in [
+        (&["--amplitude", "1.99"][..], "into its"),
+        (&["--set", "plant.shaft_stiffness=20000"][..], "near or above the top of the measured band"),
+        (&["--set", "plant.current_noise_std=0.1", "--amplitude", "0.002"][..], "does not determine"),
+    ] {
+        let _ = std::fs::remove_file(out.join("autotune.toml"));
+        let o = servo().arg("autotune").on_fmu(&out).args(args).output().unwrap();
+        let e = String::from_utf8_lossy(&o.stderr);
+        assert_ne!(o.status.code(), Some(0), "{args:?}");
+        assert!(e.contains(says), "{args:?}: {e}");
+        assert!(!out.join("autotune.toml").exists(), "{args:?}: a design was written");
+    }
+}

@@ -58,7 +58,8 @@ fn calibrate_recovers_an_unshipped_machine_and_its_plant_file_runs() {
 }
 
 /// Bad input is refused before anything runs, with the reason: a speed of 0 or above the
-/// drive's velocity limit, a single speed, a plant file holding a drive parameter.
+/// drive's velocity limit, a single speed, a sweep riding at 0, a plant file holding a drive
+/// parameter.
 #[test]
 fn calibrate_refuses_bad_speeds_and_a_plant_file_that_is_not_a_machine() {
     let out = tmp("calibrate-refusals");
@@ -73,6 +74,9 @@ fn calibrate_refuses_bad_speeds_and_a_plant_file_that_is_not_a_machine() {
         let e = String::from_utf8_lossy(&o.stderr);
         assert!(e.contains(says), "{speeds}: {e}");
     }
+    let o = servo().arg("calibrate").on_fmu(&out).args(["--velocity", "0"]).output().unwrap();
+    assert_ne!(o.status.code(), Some(0));
+    assert!(String::from_utf8_lossy(&o.stderr).contains("non-zero speed"));
     let bad = out.join("bad-plant.toml");
     std::fs::create_dir_all(&out).unwrap();
     std::fs::write(&bad, "[parameters]\n\"ctrl.velocity_kp\" = 0.5\n").unwrap();

@@ -167,10 +167,16 @@ fn tune_into(fmu: &Fmu, machine: &Machine, goal: &MarginGoal, row: &mut MachineR
     let true_drive = DriveDynamics::on_plant(&params, &plant);
     let true_plant = |f: f64| loop_plant(&true_drive, &truth, f);
     // Measure, calibrate, design on the calibrated model.
-    let readings = measure(fmu, &parameters).context("the torque-point sweep")?;
+    let torque = control_core::excitation::InjectionPoint::TorqueCommand;
+    let sweep = super::sweep_on_fmu(fmu, torque, 0.2, &parameters, crate::sweep::bench::VELOCITY)
+        .context("the torque-point sweep")?;
+    super::design_checks::check_linear(&sweep, 0.2)?;
+    let readings = sweep.points;
     let drive = DriveDynamics::as_configured(&params);
     let points = plant_points(&readings, &drive, &VelocityTuning::of_params(&params));
     let c = calibrate(&points, &drive).context("calibrating the mechanics")?;
+    super::design_checks::check_determined(&c)?;
+    super::design_checks::check_resonance_measured(&c, points.iter().map(|p| p.hz).fold(0.0, f64::max))?;
     let m = c.mechanics;
     row.calibration_fit = [c.worst_gain_db, c.worst_phase_deg];
     let rel = |a: f64, b: f64| (a / b - 1.0).abs();

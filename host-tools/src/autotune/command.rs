@@ -12,6 +12,7 @@ use serde_json::json;
 
 use super::calibration::calibrate;
 use super::design::{design, MarginGoal, SearchGrid};
+use super::design_checks::{check_determined, check_linear, check_resonance_measured};
 use super::drive_dynamics::DriveDynamics;
 use super::margins::{crossover_margins, log_grid};
 use super::responses::{plot_loops, Responses};
@@ -68,6 +69,7 @@ impl AutotuneArgs {
         let goal = MarginGoal::named(&self.margin).ok_or_else(|| {
             anyhow::anyhow!("--margin must be conservative, standard or aggressive (got `{}`)", self.margin)
         })?;
+        crate::calibrate::check_riding_speed(self.velocity)?;
         if !(self.amplitude.is_finite() && self.amplitude > 0.0) {
             anyhow::bail!("--amplitude must be a positive torque (N·m), got {}", self.amplitude);
         }
@@ -80,15 +82,18 @@ impl AutotuneArgs {
         let pb = progress_bar("autotune", self.common.json);
         pb.set_position(50);
         // 1. The plant, measured.
-        let measured = sweep_on_fmu(&fmu, InjectionPoint::TorqueCommand, self.amplitude, &parameters, self.velocity)
-            .context("the torque-point sweep")?
-            .points;
+        let sweep = sweep_on_fmu(&fmu, InjectionPoint::TorqueCommand, self.amplitude, &parameters, self.velocity)
+            .context("the torque-point sweep")?;
+        check_linear(&sweep, self.amplitude)?;
+        let measured = sweep.points;
         pb.set_position(400);
         // 2. The mechanics, calibrated (from the plant behind the sweep's readings).
         let drive = DriveDynamics::as_configured(&params);
         let before = VelocityTuning::of_params(&params);
         let points = plant_points(&measured, &drive, &before);
         let c = calibrate(&points, &drive).context("calibrating the mechanics")?;
+        check_determined(&c)?;
+        check_resonance_measured(&c, points.iter().map(|p| p.hz).fold(0.0, f64::max))?;
         let m = c.mechanics;
         // 3. The design on the calibrated model.
         let model = |f: f64| loop_plant(&drive, &m, f);

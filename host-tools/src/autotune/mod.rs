@@ -7,6 +7,7 @@ pub mod bench;
 pub mod calibration;
 pub mod command;
 pub mod design;
+pub mod design_checks;
 pub mod drive_dynamics;
 pub mod margins;
 pub mod mechanics;
@@ -51,11 +52,15 @@ pub fn plant_points(
         .collect()
 }
 
-/// A sweep's measured points with a finite response, and the drive time it took (s, from
-/// the command to ride to the sweep's end).
+/// A sweep's measured points with a finite response, the drive time it took (s, from the
+/// command to ride to the sweep's end), and how many of its frequencies were measured with
+/// the torque command at a limit (their response is not the linear loop's).
 pub struct MeasuredSweep {
     pub points: Vec<crate::analysis::response_point::ResponsePoint>,
     pub drive_time_s: f64,
+    pub torque_limited: usize,
+    /// The torque command's limit the sweep ran under (N·m).
+    pub torque_limit: f64,
 }
 
 /// A sweep at `point` with `amplitude` on the FMU (a drive's twin or the plant of
@@ -72,8 +77,12 @@ pub fn sweep_on_fmu(
     let run = crate::fmu::sweep_run::SweepRun { settings, parameters: parameters.clone(), velocity };
     let trace = run.run(fmu, |_| {})?;
     let points = crate::sweep::measurement::stream_results(&trace, &run.settings)?;
+    let limits = crate::sweep::torque_limit::TorqueLimits::of(&run.params_on(fmu)?, &run.settings);
+    let shares = crate::sweep::torque_limit::torque_limited_shares(&trace, &limits)?;
     Ok(MeasuredSweep {
         points: points.into_iter().filter(|p| p.gain_db.is_finite() && p.phase_deg.is_finite()).collect(),
         drive_time_s: trace.rows.last().map_or(0.0, |r| r[0]),
+        torque_limited: shares.values().filter(|&&s| s > 0.0).count(),
+        torque_limit: limits.lowest(),
     })
 }

@@ -6,7 +6,7 @@ use anyhow::{Context, Result};
 use serde_json::json;
 
 use super::friction_runs::FrictionRuns;
-use super::{calibrate_on_fmu, Measurement};
+use super::{calibrate_on_fmu, check_riding_speed, Measurement};
 use crate::analysis::response_point::ResponsePoint;
 use crate::autotune::drive_dynamics::DriveDynamics;
 use crate::autotune::margins::log_grid;
@@ -59,9 +59,7 @@ impl CalibrateArgs {
         if !(self.amplitude.is_finite() && self.amplitude > 0.0) {
             anyhow::bail!("--amplitude must be a positive torque (N·m), got {}", self.amplitude);
         }
-        if !self.velocity.is_finite() {
-            anyhow::bail!("--velocity must be a finite speed (rad/s), got {}", self.velocity);
-        }
+        check_riding_speed(self.velocity)?;
         let parameters = machine_parameters(self.plant.as_deref(), &self.set)?;
         let config = configuration(&parameters)?;
         let how = Measurement {

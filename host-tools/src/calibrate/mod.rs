@@ -102,6 +102,17 @@ pub fn fewest_substeps(plant: &PlantParams) -> u32 {
         .unwrap_or(plant.substeps)
 }
 
+/// A speed a torque-point sweep rides at (rad/s): finite and not 0. The sweep keeps the
+/// velocity loop running at it (friction then stays on one side, and the loop's path beside
+/// the injection is what the calibration takes out); at 0 the drive would sweep in torque
+/// mode without the loop, which the calibration does not model.
+pub fn check_riding_speed(velocity: f64) -> Result<()> {
+    if !(velocity.is_finite() && velocity != 0.0) {
+        anyhow::bail!("--velocity must be a finite, non-zero speed (rad/s) for the sweep to ride at, got {velocity}");
+    }
+    Ok(())
+}
+
 /// Calibrate the machine of `parameters` on `fmu` (its twin, or the plant those parameters
 /// describe): the torque-point sweep, the mechanics fitted to it, the constant-speed runs,
 /// the friction fitted to them.
@@ -111,13 +122,16 @@ pub fn calibrate_on_fmu(
     how: &Measurement,
 ) -> Result<MachineCalibration> {
     how.friction_runs.validate(parameters)?;
+    check_riding_speed(how.velocity)?;
     let params = configuration(parameters)?.control;
     let torque = control_core::excitation::InjectionPoint::TorqueCommand;
     let sweep = sweep_on_fmu(fmu, torque, how.amplitude, parameters, how.velocity).context("the torque-point sweep")?;
+    crate::autotune::design_checks::check_linear(&sweep, how.amplitude)?;
     let readings = sweep.points;
     let drive = DriveDynamics::as_configured(&params);
     let points = plant_points(&readings, &drive, &VelocityTuning::of_params(&params));
     let mechanics = calibrate(&points, &drive).context("calibrating the mechanics")?;
+    crate::autotune::design_checks::check_determined(&mechanics)?;
     let (speed_points, _) = how.friction_runs.run(fmu, parameters)?;
     let friction = fit_friction(&speed_points).context("fitting the friction")?;
     Ok(MachineCalibration {
