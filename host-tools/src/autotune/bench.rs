@@ -230,7 +230,9 @@ fn tune_into(fmu: &Fmu, machine: &Machine, goal: &MarginGoal, row: &mut MachineR
         };
         if dm.stable {
             row.disturbance_improvement = peak(&default) / peak(&d.tuning);
-            let predicted = |t: &VelocityTuning| super::prediction::predict(t, &true_plant, period, 0.3);
+            let true_disturbance = |f: f64| super::disturbance_response(&true_drive, &truth, f);
+            let predicted =
+                |t: &VelocityTuning| super::prediction::predict(t, &true_plant, &true_disturbance, period, 0.3);
             let (tuned, shipped) = (predicted(&d.tuning), predicted(&default));
             row.step_settling_s = [tuned.settling_time_s, shipped.settling_time_s];
             row.load_step_peak = [tuned.disturbance_peak, shipped.disturbance_peak];

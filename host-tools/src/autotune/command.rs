@@ -15,9 +15,9 @@ use super::design::{design, MarginGoal, SearchGrid};
 use super::design_checks::{check_determined, check_linear, check_resonance_measured};
 use super::drive_dynamics::DriveDynamics;
 use super::margins::{crossover_margins, log_grid};
-use super::responses::{plot_loops, Responses};
+use super::responses::{plot_loops, LoopModel, Responses};
 use super::velocity_controller::VelocityTuning;
-use super::{loop_plant, plant_points, plant_response, sweep_on_fmu};
+use super::{disturbance_response, loop_plant, plant_points, plant_response, sweep_on_fmu};
 use crate::analysis::response_point::ResponsePoint;
 use crate::cli::{progress_bar, Common};
 use crate::fmu::configuration::configuration;
@@ -69,7 +69,7 @@ impl AutotuneArgs {
         let goal = MarginGoal::named(&self.margin).ok_or_else(|| {
             anyhow::anyhow!("--margin must be conservative, standard or aggressive (got `{}`)", self.margin)
         })?;
-        crate::calibrate::check_riding_speed(self.velocity)?;
+        super::design_checks::check_riding_speed(self.velocity)?;
         if !(self.amplitude.is_finite() && self.amplitude > 0.0) {
             anyhow::bail!("--amplitude must be a positive torque (N·m), got {}", self.amplitude);
         }
@@ -113,7 +113,9 @@ impl AutotuneArgs {
         pb.set_position(900);
         // The time responses: predicted on the model (tuned and before), a step on the twin.
         let before = VelocityTuning::of_params(&params);
-        let responses = Responses::of(&fmu, &tuned, &d.tuning, &before, &model, period, self.velocity)?;
+        let disturbance = |f: f64| disturbance_response(&drive, &m, f);
+        let loop_model = LoopModel { plant: &model, disturbance: &disturbance, period };
+        let responses = Responses::of(&fmu, &tuned, &d.tuning, &before, &loop_model, self.velocity)?;
         pb.finish_and_clear();
         let hz: Vec<f64> = open_loop.iter().map(|p| p.frequency).collect();
         let l: Vec<Complex64> = open_loop.iter().map(ResponsePoint::to_complex).collect();
@@ -244,22 +246,43 @@ impl AutotuneArgs {
             );
         }
         let (r, b, ms) = (&responses.tuned, &responses.before, &responses.measured);
+        // A step figure: its value, or what its NaN means.
+        let step = |p: &super::prediction::StepPrediction| {
+            if !p.stable {
+                "unstable".to_string()
+            } else if p.settling_time_s.is_nan() {
+                format!(
+                    "overshoot {:.1} %, not settled within {:.0} ms",
+                    p.overshoot_percent,
+                    1e3 * p.time.len() as f64 * period
+                )
+            } else {
+                format!("overshoot {:.1} %, settles in {:.1} ms", p.overshoot_percent, 1e3 * p.settling_time_s)
+            }
+        };
+        let measured_settling = if ms.settling_time_s.is_nan() {
+            "not settled".to_string()
+        } else {
+            format!("settles in {:.1} ms", 1e3 * ms.settling_time_s)
+        };
         println!(
-            "  velocity step: overshoot {:.1} %, settles in {:.1} ms predicted (before: {:.1} %, {:.1} ms); on the twin {:.1} %, {:.1} ms",
-            r.overshoot_percent,
-            1e3 * r.settling_time_s,
-            b.overshoot_percent,
-            1e3 * b.settling_time_s,
-            ms.overshoot_percent,
-            1e3 * ms.settling_time_s
+            "  velocity step: {} predicted (before: {}); on the twin overshoot {:.1} %, {measured_settling}",
+            step(r),
+            step(b),
+            ms.overshoot_percent
         );
-        println!(
-            "  load step at the motor: peak {:.4} rad/s per N·m, back within 10 % in {:.1} ms (before: {:.4}, {:.1} ms)",
-            r.disturbance_peak,
-            1e3 * r.disturbance_recovery_s,
-            b.disturbance_peak,
-            1e3 * b.disturbance_recovery_s
-        );
+        let load = |p: &super::prediction::StepPrediction| {
+            if !p.stable {
+                "unstable".to_string()
+            } else {
+                format!(
+                    "peak {:.4} rad/s per N·m, back within 10 % in {:.1} ms",
+                    p.disturbance_peak,
+                    1e3 * p.disturbance_recovery_s
+                )
+            }
+        };
+        println!("  load step at the motor: {} (before: {})", load(r), load(b));
         println!("files: {} (plant, open-loop, nyquist, closed-loop, step, disturbance .svg)", out.display());
         Ok(ok)
     }

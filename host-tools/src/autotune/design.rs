@@ -133,18 +133,7 @@ pub fn design(
     let p: Vec<Complex64> = f.iter().map(|&f| plant(f)).collect();
     let inertia = rigid_inertia(&f, &p)?;
     let peaks = resonance_peaks(&f, &p, inertia);
-    let mut notches = vec![None];
-    for &fr in &peaks {
-        // A notch's centre stays below the loop's Nyquist frequency (above it, it would
-        // alias onto a lower one).
-        for shift in grid.notch_shifts.iter().copied().filter(|s| fr * s < NOTCH_LIMIT * nyquist) {
-            for &depth in grid.notch_depths {
-                for &q in grid.notch_qs {
-                    notches.push(Some(Notch { hz: fr * shift, q, depth }));
-                }
-            }
-        }
-    }
+    let notches = notch_candidates(&peaks, grid, nyquist);
     let mut low_passes = vec![0.0];
     low_passes.extend(log_grid(150.0, 0.45 * nyquist, grid.low_passes));
     // Proportional gains: crossovers (kp/J) from 2 Hz to a quarter of the loop's rate.
@@ -195,6 +184,23 @@ pub fn design(
 
 /// How many of the search's best notch families are refined.
 const REFINED_FAMILIES: usize = 4;
+
+/// The notches the search tries: none, and on each resonance peak (Hz) each of the grid's
+/// shifts, depths and widths whose centre lies below [`NOTCH_LIMIT`] of the loop's Nyquist
+/// frequency (above it, it would alias onto a lower one).
+fn notch_candidates(peaks: &[f64], grid: &SearchGrid, nyquist: f64) -> Vec<Option<Notch>> {
+    let mut notches = vec![None];
+    for &fr in peaks {
+        for shift in grid.notch_shifts.iter().copied().filter(|s| fr * s < NOTCH_LIMIT * nyquist) {
+            for &depth in grid.notch_depths {
+                for &q in grid.notch_qs {
+                    notches.push(Some(Notch { hz: fr * shift, q, depth }));
+                }
+            }
+        }
+    }
+    notches
+}
 
 /// The margins of `tuning` on `plant` over the design grid with `features`.
 pub fn margins_of(
@@ -341,28 +347,34 @@ mod tests {
         }
     }
 
-    /// A resonance just below the loop's Nyquist frequency: whatever the search picks,
-    /// its notch lies below 0.9 of Nyquist, and the design keeps its margins on a grid that
-    /// holds the mode (checked on a denser one).
+    /// Notch candidates on peaks near the loop's Nyquist frequency: every centre lies below
+    /// 0.9 of it (a shifted one above is dropped, the peak's own kept where it fits), and a
+    /// design on a resonance just below Nyquist keeps its margins on a denser grid.
     #[test]
     fn a_notch_never_lands_at_or_above_the_nyquist_frequency() {
         let params = control_core::Params::default();
-        let drive = DriveDynamics::as_configured(&params);
         let period = params.rates.velocity_period() as f64;
         let nyquist = 0.5 / period;
+        let grid = SearchGrid { notch_shifts: &[1.0, 1.17], ..SearchGrid::STANDARD };
+        let per_shift = grid.notch_depths.len() * grid.notch_qs.len();
+        // At 0.8 of Nyquist the shift 1.17 lands above the limit: only the peak's own centre.
+        let c = notch_candidates(&[0.8 * nyquist], &grid, nyquist);
+        assert_eq!(c.len(), 1 + per_shift);
+        assert!(c
+            .iter()
+            .flatten()
+            .all(|n| n.hz < NOTCH_LIMIT * nyquist && (n.hz / (0.8 * nyquist) - 1.0).abs() < 1e-12));
+        // At 0.95, none; at 0.5, both shifts.
+        assert_eq!(notch_candidates(&[0.95 * nyquist], &grid, nyquist).len(), 1);
+        assert_eq!(notch_candidates(&[0.5 * nyquist], &grid, nyquist).len(), 1 + 2 * per_shift);
+        let drive = DriveDynamics::as_configured(&params);
         let goal = MarginGoal::named("standard").unwrap();
-        for fr in [0.8 * nyquist, 0.95 * nyquist] {
-            let m = machine(1.5e-4, 1e-4, fr, 0.01);
-            let plant = |f: f64| crate::autotune::loop_plant(&drive, &m, f);
-            // Notch centres shifted up from the peak, as the fine search's are.
-            let grid = SearchGrid { notch_shifts: &[1.0, 1.17], ..SearchGrid::STANDARD };
-            let d = design(&plant, period, &goal, &grid, &m.features_hz()).unwrap();
-            if let Some(n) = d.tuning.notch {
-                assert!(n.hz < NOTCH_LIMIT * nyquist, "{d:?}");
-            }
-            let dense = margins_of(&d.tuning, &plant, period, 12_000, &m.features_hz()).unwrap();
-            assert!(goal.held_by(&dense), "{dense:?}");
-        }
+        let m = machine(1.5e-4, 1e-4, 0.8 * nyquist, 0.01);
+        let plant = |f: f64| crate::autotune::loop_plant(&drive, &m, f);
+        let d = design(&plant, period, &goal, &grid, &m.features_hz()).unwrap();
+        assert!(d.tuning.notch.is_none_or(|n| n.hz < NOTCH_LIMIT * nyquist), "{d:?}");
+        let dense = margins_of(&d.tuning, &plant, period, 12_000, &m.features_hz()).unwrap();
+        assert!(goal.held_by(&dense), "{dense:?}");
     }
 
     /// The design grid holds a lightly damped mode (ζ = 0.002): its features are grid points,

@@ -3,7 +3,7 @@
 //! loop's), a calibration the measurement does not determine (too noisy: the inertias' or
 //! the stiffness's standard error over 5 %, or a model that misses the measurement by more
 //! than 3 dB or 20°), and — for a design — a shaft resonance near or above the top of the
-//! measured band (the loop's gain there would be a guess).
+//! measured band (the loop's gain there would be a guess); and a sweep riding at 0 rad/s.
 
 use anyhow::{bail, Result};
 
@@ -17,6 +17,17 @@ const MAX_MISFIT_DB: f64 = 3.0;
 const MAX_MISFIT_DEG: f64 = 20.0;
 /// A resonance above this share of the highest measured frequency is too near the top.
 const TOP_SHARE: f64 = 0.8;
+
+/// A speed a torque-point sweep rides at (rad/s): finite and not 0. The sweep keeps the
+/// velocity loop running at it (friction then stays on one side, and the loop's path beside
+/// the injection is what the calibration takes out); at 0 the drive would sweep in torque
+/// mode without the loop, which the calibration does not model.
+pub fn check_riding_speed(velocity: f64) -> Result<()> {
+    if !(velocity.is_finite() && velocity != 0.0) {
+        anyhow::bail!("--velocity must be a finite, non-zero speed (rad/s) for the sweep to ride at, got {velocity}");
+    }
+    Ok(())
+}
 
 /// The sweep ran below the torque limit throughout.
 pub fn check_linear(sweep: &MeasuredSweep, amplitude: f64) -> Result<()> {

@@ -70,18 +70,21 @@ impl DriveDynamics {
     /// phase), the estimate's mean over the velocity period (`(1 − e^{−sT_v})/(sT_v)`), the
     /// torque gain.
     pub fn around_machine(&self, f: f64) -> Complex64 {
-        let w = std::f64::consts::TAU * f;
-        let mean = |t: f64| {
-            if w * t < 1e-9 {
-                Complex64::new(1.0, 0.0)
-            } else {
-                let s = Complex64::new(0.0, w * t);
-                (1.0 - (-s).exp()) / s
-            }
-        };
-        let x = 0.5 * w * self.tick;
+        let x = 0.5 * std::f64::consts::TAU * f * self.tick;
         let sinc = if x < 1e-9 { 1.0 } else { x.sin() / x };
-        self.current_loop(f) * (sinc * sinc) * mean(self.velocity_period) * self.torque_gain
+        self.current_loop(f) * (sinc * sinc) * self.velocity_estimate(f) * self.torque_gain
+    }
+
+    /// The velocity estimate over the motor's velocity: its mean over the velocity period,
+    /// `(1 − e^{−sT_v})/(sT_v)`.
+    pub fn velocity_estimate(&self, f: f64) -> Complex64 {
+        let wt = std::f64::consts::TAU * f * self.velocity_period;
+        if wt < 1e-9 {
+            Complex64::new(1.0, 0.0)
+        } else {
+            let s = Complex64::new(0.0, wt);
+            (1.0 - (-s).exp()) / s
+        }
     }
 
     /// The velocity loop's torque command, held over the velocity period's two ticks, as the

@@ -27,6 +27,12 @@ pub fn plant_response(drive: &DriveDynamics, mechanics: &Mechanics, f: f64) -> C
     drive.around_machine(f) * mechanics.motor_velocity_per_torque(f)
 }
 
+/// A torque at the motor (a load step, N·m) to the velocity estimate: the machine's motor
+/// velocity per torque behind the estimate (no current loop or command hold on that path).
+pub fn disturbance_response(drive: &DriveDynamics, mechanics: &Mechanics, f: f64) -> Complex64 {
+    drive.velocity_estimate(f) * mechanics.motor_velocity_per_torque(f)
+}
+
 /// The plant the velocity loop drives: [`plant_response`] behind the command's hold over the
 /// velocity period.
 pub fn loop_plant(drive: &DriveDynamics, mechanics: &Mechanics, f: f64) -> Complex64 {

@@ -25,6 +25,14 @@ const SPAN_S: f64 = 0.15;
 /// The measured step's size, as a share of the riding speed (at least 1 rad/s).
 const STEP_SHARE: f64 = 0.1;
 
+/// The calibrated model a prediction runs on: the plant the velocity loop drives, the path of
+/// a torque at the motor to the velocity estimate, the velocity loop's period (s).
+pub struct LoopModel<'a> {
+    pub plant: &'a dyn Fn(f64) -> Complex64,
+    pub disturbance: &'a dyn Fn(f64) -> Complex64,
+    pub period: f64,
+}
+
 #[derive(Clone, Debug, Serialize)]
 pub struct Responses {
     pub tuned: StepPrediction,
@@ -40,14 +48,14 @@ impl Responses {
         parameters: &BTreeMap<String, Value>,
         tuned: &VelocityTuning,
         before: &VelocityTuning,
-        model: &dyn Fn(f64) -> Complex64,
-        period: f64,
+        model: &LoopModel,
         velocity: f64,
     ) -> Result<Self> {
+        let (plant, disturbance, period) = (model.plant, model.disturbance, model.period);
         let size = (STEP_SHARE * velocity.abs()).max(1.0);
         Ok(Self {
-            tuned: predict(tuned, model, period, SPAN_S),
-            before: predict(before, model, period, SPAN_S),
+            tuned: predict(tuned, plant, disturbance, period, SPAN_S),
+            before: predict(before, plant, disturbance, period, SPAN_S),
             measured: step_on_fmu(fmu, parameters, velocity, size, SPAN_S)?,
         })
     }

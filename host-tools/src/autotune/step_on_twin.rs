@@ -24,7 +24,8 @@ pub struct MeasuredStep {
     /// The velocity estimate's change per unit step.
     pub response: Vec<f64>,
     pub overshoot_percent: f64,
-    /// When the response last leaves ±2 % of the step (s).
+    /// When the response last leaves ±2 % of the step (s; NaN where it had not settled by the
+    /// end of the span).
     pub settling_time_s: f64,
 }
 
@@ -40,7 +41,12 @@ pub fn step_on_fmu(
     if !(size.is_finite() && size != 0.0 && velocity.is_finite() && span_s > 0.0) {
         bail!("a step needs a finite, non-zero size and a finite riding speed");
     }
-    let rates = configuration(parameters)?.control.rates;
+    let control = configuration(parameters)?.control;
+    let limit = control.position.velocity_limit as f64;
+    if velocity.abs().max((velocity + size).abs()) > limit {
+        bail!("the step ({velocity} → {} rad/s) passes the drive's velocity limit {limit} rad/s", velocity + size);
+    }
+    let rates = control.rates;
     let step = rates.position_divider as f64 / rates.current_loop_hz as f64;
     let ride =
         [("mode".to_string(), Value::code(Mode::Velocity.code())), ("velocity_command".into(), Value::Float(velocity))];
@@ -79,7 +85,6 @@ pub fn step_on_fmu(
         bail!("the step's trace is empty");
     }
     let overshoot_percent = 100.0 * (response.iter().copied().fold(f64::NEG_INFINITY, f64::max) - 1.0).max(0.0);
-    let settling_time_s =
-        response.iter().rposition(|y| (y - 1.0).abs() > 0.02).map_or(0.0, |k| time[(k + 1).min(time.len() - 1)]);
+    let settling_time_s = super::prediction::settled_after(&time, &response, |y| (y - 1.0).abs() > 0.02);
     Ok(MeasuredStep { time, response, overshoot_percent, settling_time_s })
 }

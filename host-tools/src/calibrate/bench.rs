@@ -91,7 +91,9 @@ impl FrictionMachine {
         most.insert(name::plant_substeps.to_string(), Value::Int(64));
         if let Ok(config) = configuration(&most) {
             let plant = servo_axis::plant::PlantParams { substeps: base, ..config.plant };
-            p.insert(name::plant_substeps.to_string(), Value::Int(super::fewest_substeps(&plant) as i64));
+            if let Ok(n) = super::fewest_substeps(&plant) {
+                p.insert(name::plant_substeps.to_string(), Value::Int(n as i64));
+            }
         }
         p
     }

@@ -6,8 +6,9 @@ use anyhow::{Context, Result};
 use serde_json::json;
 
 use super::friction_runs::FrictionRuns;
-use super::{calibrate_on_fmu, check_riding_speed, Measurement};
+use super::{calibrate_on_fmu, Measurement};
 use crate::analysis::response_point::ResponsePoint;
+use crate::autotune::design_checks::check_riding_speed;
 use crate::autotune::drive_dynamics::DriveDynamics;
 use crate::autotune::margins::log_grid;
 use crate::autotune::mechanics::Mechanics;
@@ -80,7 +81,7 @@ impl CalibrateArgs {
              constant-speed runs at {:?} rad/s (motor and load together, split in proportion to the inertias)",
             self.speeds
         );
-        write_plant_file(&out.join("calibrated-plant.toml"), &header, &c.plant_parameters(&config.plant))?;
+        write_plant_file(&out.join("calibrated-plant.toml"), &header, &c.plant_parameters(&config.plant)?)?;
         // Plots: the plant measured and modelled; the friction measured and fitted.
         let drive = DriveDynamics::as_configured(&config.control);
         let m = c.mechanics.mechanics;

@@ -39,8 +39,10 @@ impl Friction {
 }
 
 /// The friction that best explains `points`. Needs runs in both directions and at two or
-/// more speeds in one of them (else Coulomb and viscous cannot be told apart); refused with
-/// the reason otherwise, and when a point is not finite.
+/// more distinct speeds (else Coulomb and viscous cannot be told apart); refused with the
+/// reason otherwise, when a point is not finite, when the fit does not determine Coulomb or
+/// viscous friction (a standard error over half the value), and when either comes out
+/// negative (a friction that drives the axis: the runs did not measure friction).
 pub fn fit_friction(points: &[SpeedPoint]) -> anyhow::Result<Friction> {
     if let Some(p) = points.iter().find(|p| !(p.velocity.is_finite() && p.torque.is_finite())) {
         anyhow::bail!("a constant-speed run gave a non-finite mean ({} rad/s, {} N·m)", p.velocity, p.torque);
@@ -53,6 +55,12 @@ pub fn fit_friction(points: &[SpeedPoint]) -> anyhow::Result<Friction> {
         );
     }
     let points: Vec<SpeedPoint> = points.iter().copied().filter(|p| p.velocity != 0.0).collect();
+    let mut speeds: Vec<f64> = points.iter().map(|p| p.velocity.abs()).collect();
+    speeds.sort_by(f64::total_cmp);
+    speeds.dedup_by(|a, b| (*a - *b).abs() <= 1e-3 * b.abs());
+    if speeds.len() < 2 {
+        anyhow::bail!("friction needs runs at two or more distinct speeds (got {speeds:?} rad/s)");
+    }
     // Columns: 1, sign(ω), ω (scaled by the largest speed so the normal matrix is balanced).
     let scale = points.iter().map(|p| p.velocity.abs()).fold(0.0, f64::max);
     let x = nalgebra::DMatrix::from_fn(points.len(), 3, |i, j| match j {
@@ -70,13 +78,27 @@ pub fn fit_friction(points: &[SpeedPoint]) -> anyhow::Result<Friction> {
     let dof = (points.len() as f64 - 3.0).max(1.0);
     let sigma2 = residual.norm_squared() / dof;
     let error = |i: usize| (sigma2 * inverse[(i, i)]).max(0.0).sqrt();
+    let (coulomb, viscous) = (beta[1], beta[2] / scale);
+    let (coulomb_error, viscous_error) = (error(1), error(2) / scale);
+    for (name, v, e) in [("Coulomb", coulomb, coulomb_error), ("viscous", viscous, viscous_error)] {
+        if v < 0.0 {
+            anyhow::bail!(
+                "the runs give a negative {name} friction ({v:.3e} ± {e:.1e}): the torque that holds each speed is not friction's (a load that drives the axis, or runs too short to settle)"
+            );
+        }
+        if !(e <= 0.5 * v) {
+            anyhow::bail!(
+                "the runs do not determine the {name} friction ({v:.3e} ± {e:.1e}): too noisy, or the speeds too close together"
+            );
+        }
+    }
     Ok(Friction {
         load_torque: beta[0],
         load_torque_error: error(0),
-        coulomb: beta[1],
-        coulomb_error: error(1),
-        viscous: beta[2] / scale,
-        viscous_error: error(2) / scale,
+        coulomb,
+        coulomb_error,
+        viscous,
+        viscous_error,
         worst_residual: residual.amax(),
     })
 }
@@ -104,10 +126,19 @@ mod tests {
         assert!((f.coulomb - fc).abs() < 3.0 * f.coulomb_error + 1e-12 && f.coulomb_error < 0.01 * fc, "{f:?}");
         assert!((f.viscous - b).abs() < 3.0 * f.viscous_error + 1e-15 && f.viscous_error < 0.1 * b, "{f:?}");
         assert!((f.load_torque - t0).abs() < 3.0 * f.load_torque_error + 1e-12, "{f:?}");
+        assert!(f.load_torque_error < 0.05 * t0, "{f:?}");
         assert!((f.torque(80.0) - (t0 + fc + b * 80.0)).abs() < 3e-4);
         let one_way: Vec<SpeedPoint> = points.iter().copied().filter(|p| p.velocity > 0.0).collect();
         let e = fit_friction(&one_way).unwrap_err().to_string();
         assert!(e.contains("both directions"), "{e}");
+        let same: Vec<SpeedPoint> = points.iter().copied().filter(|p| p.velocity.abs() == 50.0).collect();
+        let doubled: Vec<SpeedPoint> = same.iter().chain(&same).copied().collect();
+        assert!(fit_friction(&doubled).unwrap_err().to_string().contains("distinct speeds"));
+        let driven: Vec<SpeedPoint> = points
+            .iter()
+            .map(|p| SpeedPoint { torque: t0 - fc * p.velocity.signum() + b * p.velocity, ..*p })
+            .collect();
+        assert!(fit_friction(&driven).unwrap_err().to_string().contains("negative Coulomb"));
         let mut bad = points.clone();
         bad[2].torque = f64::NAN;
         assert!(fit_friction(&bad).unwrap_err().to_string().contains("non-finite"));

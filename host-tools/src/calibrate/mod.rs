@@ -57,7 +57,7 @@ impl MachineCalibration {
     /// the friction's stiffness near zero speed the lowest, never above the machine's). A
     /// constant load torque has no plant parameter and is reported only. The sub-steps are
     /// the fewest (not fewer than `base`'s) the twin's plant accepts.
-    pub fn plant_parameters(&self, base: &PlantParams) -> Vec<(&'static str, Value)> {
+    pub fn plant_parameters(&self, base: &PlantParams) -> Result<Vec<(&'static str, Value)>> {
         let m = &self.mechanics.mechanics;
         let f = &self.friction;
         let share = m.motor_inertia / m.total_inertia();
@@ -66,11 +66,12 @@ impl MachineCalibration {
         plant.load_inertia = m.load_inertia;
         plant.shaft_stiffness = m.shaft_stiffness;
         plant.shaft_damping = m.shaft_damping;
-        plant.motor_coulomb = share * f.coulomb.max(0.0);
-        plant.load_coulomb = (1.0 - share) * f.coulomb.max(0.0);
-        plant.motor_viscous = share * f.viscous.max(0.0);
-        plant.load_viscous = (1.0 - share) * f.viscous.max(0.0);
-        let substeps = fewest_substeps(&plant);
+        // The fit refuses negative friction (`fit_friction`): no clamp here.
+        plant.motor_coulomb = share * f.coulomb;
+        plant.load_coulomb = (1.0 - share) * f.coulomb;
+        plant.motor_viscous = share * f.viscous;
+        plant.load_viscous = (1.0 - share) * f.viscous;
+        let substeps = fewest_substeps(&plant)?;
         let mut values: Vec<(&'static str, Value)> = [
             ("plant.motor_inertia", plant.motor_inertia),
             ("plant.load_inertia", plant.load_inertia),
@@ -85,32 +86,27 @@ impl MachineCalibration {
         .map(|(k, v)| (k, Value::Float(v)))
         .collect();
         values.push(("plant.substeps", Value::Int(substeps as i64)));
-        values
+        Ok(values)
     }
 }
 
-/// The fewest sub-steps, from `plant`'s own up to 64, with which the plant model accepts
-/// `plant` (its friction near zero speed is integrated explicitly: a strong friction on a
-/// light inertia needs shorter sub-steps); `plant`'s own when none does.
-pub fn fewest_substeps(plant: &PlantParams) -> u32 {
+/// The fewest sub-steps, from `plant`'s own up to the FMU's most, with which the plant model
+/// accepts `plant` (its friction near zero speed is integrated explicitly: a strong friction
+/// on a light inertia needs shorter sub-steps); the plant model's reason when none does.
+pub fn fewest_substeps(plant: &PlantParams) -> Result<u32> {
+    let most = servo_axis::variables::by_name("plant.substeps").and_then(|d| d.range.max).map_or(1000, |m| m as u32);
     let mut p = *plant;
-    (plant.substeps..=64.max(plant.substeps))
-        .find(|&n| {
-            p.substeps = n;
-            p.validate().is_ok()
-        })
-        .unwrap_or(plant.substeps)
-}
-
-/// A speed a torque-point sweep rides at (rad/s): finite and not 0. The sweep keeps the
-/// velocity loop running at it (friction then stays on one side, and the loop's path beside
-/// the injection is what the calibration takes out); at 0 the drive would sweep in torque
-/// mode without the loop, which the calibration does not model.
-pub fn check_riding_speed(velocity: f64) -> Result<()> {
-    if !(velocity.is_finite() && velocity != 0.0) {
-        anyhow::bail!("--velocity must be a finite, non-zero speed (rad/s) for the sweep to ride at, got {velocity}");
+    for n in plant.substeps..=most.max(plant.substeps) {
+        p.substeps = n;
+        if p.validate().is_ok() {
+            return Ok(n);
+        }
     }
-    Ok(())
+    p.substeps = most.max(plant.substeps);
+    match p.validate() {
+        Err(e) => anyhow::bail!("the calibrated twin cannot be simulated: {e}"),
+        Ok(()) => Ok(p.substeps),
+    }
 }
 
 /// Calibrate the machine of `parameters` on `fmu` (its twin, or the plant those parameters
@@ -122,7 +118,7 @@ pub fn calibrate_on_fmu(
     how: &Measurement,
 ) -> Result<MachineCalibration> {
     how.friction_runs.validate(parameters)?;
-    check_riding_speed(how.velocity)?;
+    crate::autotune::design_checks::check_riding_speed(how.velocity)?;
     let params = configuration(parameters)?.control;
     let torque = control_core::excitation::InjectionPoint::TorqueCommand;
     let sweep = sweep_on_fmu(fmu, torque, how.amplitude, parameters, how.velocity).context("the torque-point sweep")?;

@@ -25,14 +25,26 @@ pub fn read_plant_file(path: &Path) -> Result<BTreeMap<String, Value>> {
     let text = std::fs::read_to_string(path).with_context(|| format!("reading the plant file {}", path.display()))?;
     let file: PlantFile = toml::from_str(&text)
         .with_context(|| format!("{}: a plant file is a [parameters] table of plant.* values", path.display()))?;
+    use servo_axis::variables::Kind;
     for (name, value) in &file.parameters {
-        if !name.starts_with("plant.") || servo_axis::variables::by_name(name).is_none() {
+        let Some(d) = servo_axis::variables::by_name(name).filter(|_| name.starts_with("plant.")) else {
             bail!("{}: `{name}` is not a plant parameter of the FMU (a plant file holds plant.* only)", path.display());
-        }
-        if let Value::Float(x) = value {
-            if !x.is_finite() {
-                bail!("{}: `{name}` = {x} is not a finite number", path.display());
-            }
+        };
+        let fits = match (d.kind, value) {
+            (_, Value::Float(x)) if !x.is_finite() => false,
+            (Kind::Float64, Value::Float(_) | Value::Int(_)) => true,
+            (Kind::Int32, Value::Int(_)) => true,
+            (Kind::Int32, Value::Float(x)) => x.fract() == 0.0,
+            (Kind::Boolean, Value::Bool(_)) => true,
+            _ => false,
+        };
+        if !fits {
+            let wants = match d.kind {
+                Kind::Float64 => "a finite number",
+                Kind::Int32 => "a whole number",
+                Kind::Boolean => "true or false",
+            };
+            bail!("{}: `{name}` = {value} is not {wants}", path.display());
         }
     }
     Ok(file.parameters)
@@ -97,6 +109,8 @@ mod tests {
             ("[parameters]\n\"plant.no_such_thing\" = 1.0\n", "not a plant parameter"),
             ("[other]\nx = 1\n", "a plant file is a [parameters] table"),
             ("[parameters]\n\"plant.load_inertia\" = nan\n", "not a finite number"),
+            ("[parameters]\n\"plant.load_inertia\" = true\n", "not a finite number"),
+            ("[parameters]\n\"plant.substeps\" = 2.5\n", "not a whole number"),
         ] {
             std::fs::write(&path, text).unwrap();
             let e = format!("{:#}", read_plant_file(&path).unwrap_err());
