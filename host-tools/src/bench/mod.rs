@@ -5,6 +5,7 @@ pub mod args;
 pub mod backbone_command;
 pub mod campaign_command;
 pub mod commission_bench;
+pub mod drawn;
 pub mod elf_sections;
 pub mod fault_campaign;
 pub mod figures;

@@ -164,24 +164,11 @@ impl CalibrateBenchArgs {
         if self.plants == 0 {
             anyhow::bail!("--plants must be at least 1");
         }
-        let mut machines = draw(self.plants, self.seed);
-        if let Some(k) = self.plant {
-            let Some(m) = machines.get(k as usize).copied() else {
-                anyhow::bail!("--plant {k}: the draw has machines 0 to {}", self.plants - 1);
-            };
-            machines = vec![m];
-        }
+        let machines =
+            crate::bench::drawn::one_or_all(draw(self.plants, self.seed), self.plant, "--plant", "machines")?;
         let fmu = Fmu::load(&self.common.fmu.clone().unwrap_or_else(crate::paths::default_fmu))?;
-        let pb = crate::cli::progress_bar("calibrate", self.common.json);
-        let rows: Vec<CalibrationRow> = machines
-            .iter()
-            .enumerate()
-            .map(|(k, m)| {
-                pb.set_position((1000 * k as u64) / machines.len() as u64);
-                calibrate_one(&fmu, m)
-            })
-            .collect();
-        pb.finish_and_clear();
+        let rows: Vec<CalibrationRow> =
+            crate::bench::drawn::run_each("calibrate", self.common.json, &machines, |m| calibrate_one(&fmu, m));
         let finished = || rows.iter().filter(|r| r.failed.is_none());
         let worst = |f: &dyn Fn(&CalibrationRow) -> f64| finished().map(f).fold(f64::NEG_INFINITY, f64::max);
         let failed = rows.iter().filter(|r| r.failed.is_some()).count();
