@@ -692,3 +692,50 @@ fn ident_over_a_faulted_or_dying_drive_ends_in_a_clear_error() {
         serde_json::from_str(&std::fs::read_to_string(dir.join("out/ident.json")).unwrap()).unwrap();
     assert_eq!(saved["complete"], false, "{saved}");
 }
+
+/// Issue 38: `servo autotune --device` over a virtual drive whose machine is not the FMU's
+/// default (load inertia 2e-4 kg·m², shaft 120 N·m/rad): the mechanics calibrated from the
+/// drive's own response (within the issue's 3 % of the plant the drive simulates), the tuning
+/// verified on the twin of that machine and then on the drive itself (margins held there),
+/// kept and saved; the drive's parameters read back are the tuning's. A drive whose motor is
+/// not commissioned is refused before anything moves.
+#[test]
+fn autotune_over_the_virtual_drive_tunes_its_machine_verifies_it_there_and_saves_it() {
+    let _serial = one_at_a_time();
+    let dir = tmp("autotune-device");
+    let machine = ["--set", "plant.load_inertia=2e-4", "--set", "plant.shaft_stiffness=120"];
+    let vd = VirtualDrive::start(&dir, "max", &machine);
+    let o = output_within(servo().args(["autotune", "--device", &vd.port, "--json"]).on_fmu(dir.join("out")), 180);
+    let r = json(&o);
+    let near = |v: &serde_json::Value, truth: f64| (v.as_f64().unwrap() / truth - 1.0).abs();
+    let m = &r["calibration"]["mechanics"];
+    assert!(near(&m["load_inertia"], 2e-4) <= 0.03, "{m}");
+    assert!(near(&m["shaft_stiffness"], 120.0) <= 0.03, "{m}");
+    let default_motor_inertia =
+        host_tools::fmu::configuration::configuration(&Default::default()).unwrap().plant.motor_inertia;
+    assert!(near(&m["motor_inertia"], default_motor_inertia) <= 0.03, "{m}");
+    for v in [&r["verification"], &r["drive_verification"]] {
+        assert_eq!(v["passed"], true, "{v}");
+        assert!(v["phase_margin_deg"].as_f64().unwrap() >= 45.0, "{v}");
+        assert!(v["sensitivity_peak"].as_f64().unwrap() <= 1.6, "{v}");
+    }
+    assert!(r["drive_verification"]["on"].as_str().unwrap().contains(&vd.port), "{}", r["drive_verification"]);
+    assert!(r["saved_sequence"].as_u64().is_some(), "{}", r["saved_sequence"]);
+    let drive_time = r["drive_time_s"].as_f64().unwrap();
+    assert!(drive_time > 0.0 && drive_time <= 60.0, "drive time {drive_time} s");
+    // The drive runs the tuning (f32 on the drive).
+    let p = json(&device(&vd.port, &["params"]));
+    let tuning = &r["design"]["tuning"];
+    for (drive, designed) in [("kp", "kp"), ("ki", "ki")] {
+        let (a, b) = (p["params"]["velocity"][drive].as_f64().unwrap(), tuning[designed].as_f64().unwrap());
+        assert!((a / b - 1.0).abs() < 1e-6, "drive {drive} {a}, designed {b}");
+    }
+    assert!(dir.join("out/open-loop.svg").exists() && dir.join("out/autotune.toml").exists());
+    drop(vd);
+    // Not commissioned: refused, naming what to do.
+    let vd = VirtualDrive::start_uncommissioned(&tmp("autotune-device-new"), "max", &machine);
+    let o = output_within(servo().args(["autotune", "--device", &vd.port]).on_fmu(dir.join("refused")), 60);
+    assert!(!o.status.success());
+    let e = String::from_utf8_lossy(&o.stderr);
+    assert!(e.contains("not commissioned") && e.contains("servo commission"), "{e}");
+}

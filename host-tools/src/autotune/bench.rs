@@ -8,17 +8,16 @@
 
 use std::collections::BTreeMap;
 
-use anyhow::{Context, Result};
+use anyhow::Result;
 use serde::Serialize;
 
 use servo_axis::variables::name;
 
-use super::calibration::calibrate;
 use super::design::{design, margins_of, refine, MarginGoal, SearchGrid};
 use super::drive_dynamics::DriveDynamics;
+use super::loop_plant;
 use super::mechanics::Mechanics;
 use super::velocity_controller::VelocityTuning;
-use super::{loop_plant, plant_points};
 use crate::analysis::response_point::ResponsePoint;
 use crate::bench::figures::Recorder;
 use crate::cli::Common;
@@ -167,16 +166,13 @@ fn tune_into(fmu: &Fmu, machine: &Machine, goal: &MarginGoal, row: &mut MachineR
     let true_drive = DriveDynamics::on_plant(&params, &plant);
     let true_plant = |f: f64| loop_plant(&true_drive, &truth, f);
     // Measure, calibrate, design on the calibrated model.
-    let torque = control_core::excitation::InjectionPoint::TorqueCommand;
-    let sweep = super::sweep_on_fmu(fmu, torque, 0.2, &parameters, crate::sweep::bench::VELOCITY)
-        .context("the torque-point sweep")?;
-    super::design_checks::check_linear(&sweep, 0.2)?;
-    let readings = sweep.points;
-    let drive = DriveDynamics::as_configured(&params);
-    let points = plant_points(&readings, &drive, &VelocityTuning::of_params(&params));
-    let c = calibrate(&points, &drive).context("calibrating the mechanics")?;
-    super::design_checks::check_determined(&c)?;
-    super::design_checks::check_resonance_measured(&c, points.iter().map(|p| p.hz).fold(0.0, f64::max))?;
+    let measured = super::measured_mechanics::measure_mechanics(
+        &mut super::sweep_target::OnFmu(fmu),
+        &parameters,
+        0.2,
+        crate::sweep::bench::VELOCITY,
+    )?;
+    let c = &measured.calibration;
     let m = c.mechanics;
     row.calibration_fit = [c.worst_gain_db, c.worst_phase_deg];
     let rel = |a: f64, b: f64| (a / b - 1.0).abs();
@@ -189,9 +185,8 @@ fn tune_into(fmu: &Fmu, machine: &Machine, goal: &MarginGoal, row: &mut MachineR
         rel(fr, tr),
         rel(fa, ta),
     ];
-    let model = |f: f64| loop_plant(&drive, &m, f);
-    let d = design(&model, period, &goal.with_reserve(), &SearchGrid::STANDARD, &m.features_hz())
-        .ok_or_else(|| anyhow::anyhow!("no design keeps the margins on the calibrated model"))?;
+    let d = measured.design(goal, "chosen")?;
+    let model = |f: f64| measured.model(f);
     row.tuning = Some(d.tuning);
     // On the truth.
     let on_truth = margins_of(&d.tuning, &true_plant, period, 4000, &truth.features_hz())

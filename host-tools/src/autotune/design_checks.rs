@@ -29,8 +29,14 @@ pub fn check_riding_speed(velocity: f64) -> Result<()> {
     Ok(())
 }
 
-/// The sweep ran below the torque limit throughout.
+/// The sweep ran below the torque limit and the voltage circle throughout.
 pub fn check_linear(sweep: &MeasuredSweep, amplitude: f64) -> Result<()> {
+    if sweep.voltage_limited > 0 {
+        bail!(
+            "the torque-point sweep drove the current loop's output into the voltage circle at {} of its frequencies: the response read there is not the loop's; lower --amplitude (was {amplitude} N·m) or --velocity",
+            sweep.voltage_limited
+        );
+    }
     if sweep.torque_limited > 0 {
         bail!(
             "the torque-point sweep drove the torque command into its {:.2} N·m limit at {} of its frequencies: the response read there is not the loop's; lower --amplitude (was {amplitude} N·m)",
@@ -112,7 +118,17 @@ mod tests {
         assert!(check_resonance_measured(&fine, 3000.0).is_ok());
         assert!(check_resonance_measured(&fine, 300.0).unwrap_err().to_string().contains("near or above the top"));
         assert!(check_resonance_measured(&calibration([0.01; 4], 0.2, true), 3000.0).is_err());
-        let saturated = MeasuredSweep { points: vec![], drive_time_s: 1.0, torque_limited: 3, torque_limit: 2.0 };
-        assert!(check_linear(&saturated, 5.0).unwrap_err().to_string().contains("lower --amplitude"));
+        let saturated = MeasuredSweep {
+            points: vec![],
+            drive_time_s: 1.0,
+            torque_limited: 3,
+            voltage_limited: 0,
+            torque_limit: 2.0,
+        };
+        assert!(check_linear(&saturated, 5.0).unwrap_err().to_string().contains("torque command into its 2.00"));
+        let at_the_circle = MeasuredSweep { torque_limited: 0, voltage_limited: 2, ..saturated };
+        assert!(check_linear(&at_the_circle, 5.0).unwrap_err().to_string().contains("voltage circle at 2"));
+        let linear = MeasuredSweep { voltage_limited: 0, ..at_the_circle };
+        assert!(check_linear(&linear, 5.0).is_ok());
     }
 }

@@ -10,11 +10,15 @@ pub mod design;
 pub mod design_checks;
 pub mod drive_dynamics;
 pub mod margins;
+pub mod measured_mechanics;
 pub mod mechanics;
 pub mod prediction;
+pub mod report;
 pub mod responses;
 pub mod step_on_twin;
+pub mod sweep_target;
 pub mod velocity_controller;
+pub mod verification;
 
 use num_complex::Complex64;
 
@@ -65,6 +69,9 @@ pub struct MeasuredSweep {
     pub points: Vec<crate::analysis::response_point::ResponsePoint>,
     pub drive_time_s: f64,
     pub torque_limited: usize,
+    /// How many were measured with the current loop's output at the voltage circle (the
+    /// drive's flag, on a drive's sweep; 0 on the FMU, whose plant runs without that limit).
+    pub voltage_limited: usize,
     /// The torque command's limit the sweep ran under (N·m).
     pub torque_limit: f64,
 }
@@ -89,6 +96,7 @@ pub fn sweep_on_fmu(
         points: points.into_iter().filter(|p| p.gain_db.is_finite() && p.phase_deg.is_finite()).collect(),
         drive_time_s: trace.rows.last().map_or(0.0, |r| r[0]),
         torque_limited: shares.values().filter(|&&s| s > 0.0).count(),
+        voltage_limited: 0,
         torque_limit: limits.lowest(),
     })
 }

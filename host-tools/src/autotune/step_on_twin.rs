@@ -27,6 +27,8 @@ pub struct MeasuredStep {
     /// When the response last leaves ±2 % of the step (s; NaN where it had not settled by the
     /// end of the span).
     pub settling_time_s: f64,
+    /// Drive time of the run: the ride to the step and the span after it (s).
+    pub drive_time_s: f64,
 }
 
 /// A step of `size` rad/s from a ride at `velocity` rad/s on `fmu` with `parameters`, over
@@ -50,10 +52,11 @@ pub fn step_on_fmu(
     let step = rates.position_divider as f64 / rates.current_loop_hz as f64;
     let ride =
         [("mode".to_string(), Value::code(Mode::Velocity.code())), ("velocity_command".into(), Value::Float(velocity))];
+    let stop_time = ((STEP_AT + span_s) / step).ceil() * step;
     let scenario = Scenario {
         name: "step".into(),
         description: "a velocity-command step on the twin".into(),
-        stop_time: ((STEP_AT + span_s) / step).ceil() * step,
+        stop_time,
         step: Some(step),
         parameters: parameters.clone(),
         events: vec![
@@ -86,5 +89,5 @@ pub fn step_on_fmu(
     }
     let overshoot_percent = 100.0 * (response.iter().copied().fold(f64::NEG_INFINITY, f64::max) - 1.0).max(0.0);
     let settling_time_s = super::prediction::settled_after(&time, &response, |y| (y - 1.0).abs() > 0.02);
-    Ok(MeasuredStep { time, response, overshoot_percent, settling_time_s })
+    Ok(MeasuredStep { time, response, overshoot_percent, settling_time_s, drive_time_s: stop_time })
 }

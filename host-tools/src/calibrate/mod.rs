@@ -16,11 +16,9 @@ use serde::Serialize;
 use servo_axis::plant::PlantParams;
 
 use crate::analysis::response_point::ResponsePoint;
-use crate::autotune::calibration::{calibrate, Calibration, PlantPoint};
-use crate::autotune::drive_dynamics::DriveDynamics;
-use crate::autotune::velocity_controller::VelocityTuning;
-use crate::autotune::{plant_points, sweep_on_fmu};
-use crate::fmu::configuration::configuration;
+use crate::autotune::calibration::{Calibration, PlantPoint};
+use crate::autotune::measured_mechanics::measure_mechanics;
+use crate::autotune::sweep_target::OnFmu;
 use crate::fmu::runner::Fmu;
 use crate::fmu::scenario::Value;
 use friction::{fit_friction, Friction, SpeedPoint};
@@ -118,24 +116,15 @@ pub fn calibrate_on_fmu(
     how: &Measurement,
 ) -> Result<MachineCalibration> {
     how.friction_runs.validate(parameters)?;
-    crate::autotune::design_checks::check_riding_speed(how.velocity)?;
-    let params = configuration(parameters)?.control;
-    let torque = control_core::excitation::InjectionPoint::TorqueCommand;
-    let sweep = sweep_on_fmu(fmu, torque, how.amplitude, parameters, how.velocity).context("the torque-point sweep")?;
-    crate::autotune::design_checks::check_linear(&sweep, how.amplitude)?;
-    let readings = sweep.points;
-    let drive = DriveDynamics::as_configured(&params);
-    let points = plant_points(&readings, &drive, &VelocityTuning::of_params(&params));
-    let mechanics = calibrate(&points, &drive).context("calibrating the mechanics")?;
-    crate::autotune::design_checks::check_determined(&mechanics)?;
+    let measured = measure_mechanics(&mut OnFmu(fmu), parameters, how.amplitude, how.velocity)?;
     let (speed_points, _) = how.friction_runs.run(fmu, parameters)?;
     let friction = fit_friction(&speed_points).context("fitting the friction")?;
     Ok(MachineCalibration {
-        mechanics,
+        mechanics: measured.calibration,
         friction,
-        readings,
-        plant_points: points,
+        readings: measured.readings,
+        plant_points: measured.points,
         speed_points,
-        drive_time_s: sweep.drive_time_s + how.friction_runs.duration(),
+        drive_time_s: measured.drive_time_s + how.friction_runs.duration(),
     })
 }

@@ -6,7 +6,7 @@ use crate::cli::Common;
 /// checked first. The NUCLEO's ST-LINK virtual COM port is usually /dev/ttyACM0.
 ///
 /// Actions: hello (version handshake; says where the drive's parameters came from at boot),
-/// telemetry (one record, printed as JSON), clear-faults, start-sweep, save-params (the
+/// telemetry (one record, printed as JSON), params (the parameters the drive runs, as JSON), clear-faults, start-sweep, save-params (the
 /// parameters in force to the drive's flash, loaded at its next boot; at rest only; prints the
 /// record's sequence number),
 /// load-correction FILE (an <axis>.corr.frame from
@@ -29,7 +29,7 @@ pub struct DeviceArgs {
     /// Streaming time (s), for `stream`
     #[arg(long, default_value_t = 1.0)]
     pub seconds: f64,
-    /// hello, telemetry, clear-faults, start-sweep, save-params, load-correction FILE, stream
+    /// hello, telemetry, params, clear-faults, start-sweep, save-params, load-correction FILE, stream
     #[arg(num_args = 1..=2, required = true)]
     pub action: Vec<String>,
     #[command(flatten)]

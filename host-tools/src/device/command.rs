@@ -23,6 +23,7 @@ fn device(args: &DeviceArgs) -> Result<bool> {
     let request = match (what, arg) {
         ("hello", None) => None,
         ("telemetry", None) => Some(Request::GetTelemetry),
+        ("params", None) => Some(Request::GetParams),
         ("clear-faults", None) => Some(Request::ClearFaults),
         ("start-sweep", None) => Some(Request::StartSweep),
         ("save-params", None) => Some(Request::SaveParams),
@@ -38,7 +39,7 @@ fn device(args: &DeviceArgs) -> Result<bool> {
         }
         ("load-correction", None) => bail!("load-correction needs the <axis>.corr.frame file `servo tune` wrote"),
         _ => bail!(
-            "unknown action `{}`: use hello, telemetry, clear-faults, start-sweep, save-params, load-correction FILE or stream",
+            "unknown action `{}`: use hello, telemetry, params, clear-faults, start-sweep, save-params, load-correction FILE or stream",
             action.join(" ")
         ),
     };
@@ -78,6 +79,7 @@ fn device(args: &DeviceArgs) -> Result<bool> {
         }),
         (_, Some(r)) => match session.answer(&r)? {
             Response::Telemetry(t) => serde_json::json!({"telemetry": serde_json::to_value(t)?}),
+            Response::Params(p) => serde_json::json!({"params": serde_json::to_value(p)?}),
             Response::Done => serde_json::json!({"done": true}),
             Response::Saved { sequence } => serde_json::json!({"done": true, "record": sequence}),
             Response::Refused(why) => bail!("the drive refused the request: {why}"),

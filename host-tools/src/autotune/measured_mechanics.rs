@@ -1,0 +1,115 @@
+//! The machine's mechanics measured and calibrated on a [`SweepTarget`]: a torque-point sweep,
+//! refused where it ran into a limit, turned into the plant behind it, the two-inertia model
+//! fitted to that and refused where the measurement does not determine it. What `servo
+//! autotune`, `servo calibrate` and the autotune bench all start from.
+
+use std::collections::BTreeMap;
+
+use anyhow::{anyhow, Context, Result};
+use control_core::excitation::InjectionPoint;
+use control_core::Params;
+use num_complex::Complex64;
+
+use super::calibration::{calibrate, Calibration, PlantPoint};
+use super::design::{design, Design, MarginGoal, SearchGrid};
+use super::design_checks::{check_determined, check_linear, check_resonance_measured, check_riding_speed};
+use super::drive_dynamics::DriveDynamics;
+use super::sweep_target::SweepTarget;
+use super::velocity_controller::VelocityTuning;
+use super::{loop_plant, plant_points};
+use crate::analysis::response_point::ResponsePoint;
+use crate::fmu::scenario::Value;
+
+/// A calibration and what it was fitted to.
+pub struct MeasuredMechanics {
+    /// The drive parameters the sweep ran with.
+    pub params: Params,
+    /// The drive's part of the plant, as those parameters configure it.
+    pub drive: DriveDynamics,
+    /// The velocity loop that ran during the sweep.
+    pub during: VelocityTuning,
+    /// The sweep's readings (torque command → velocity estimate, the loop closed beside it).
+    pub readings: Vec<ResponsePoint>,
+    /// The plant behind them.
+    pub points: Vec<PlantPoint>,
+    pub calibration: Calibration,
+    /// The sweep's drive time (s).
+    pub drive_time_s: f64,
+}
+
+/// Sweep `target` at the torque point with `amplitude` N·m riding at `velocity` rad/s, and
+/// calibrate the mechanics from the response.
+pub fn measure_mechanics(
+    target: &mut dyn SweepTarget,
+    parameters: &BTreeMap<String, Value>,
+    amplitude: f64,
+    velocity: f64,
+) -> Result<MeasuredMechanics> {
+    check_riding_speed(velocity)?;
+    if !(amplitude.is_finite() && amplitude > 0.0) {
+        anyhow::bail!("--amplitude must be a positive torque (N·m), got {amplitude}");
+    }
+    let params = target.params(parameters)?;
+    let sweep = target
+        .sweep(InjectionPoint::TorqueCommand, amplitude, parameters, velocity)
+        .with_context(|| format!("the torque-point sweep on {}", target.name()))?;
+    check_linear(&sweep, amplitude)?;
+    let drive = DriveDynamics::as_configured(&params);
+    let during = VelocityTuning::of_params(&params);
+    let points = plant_points(&sweep.points, &drive, &during);
+    let calibration = calibrate(&points, &drive).context("calibrating the mechanics")?;
+    check_determined(&calibration)?;
+    Ok(MeasuredMechanics {
+        params,
+        drive,
+        during,
+        readings: sweep.points,
+        points,
+        calibration,
+        drive_time_s: sweep.drive_time_s,
+    })
+}
+
+impl MeasuredMechanics {
+    /// The calibrated loop plant (command hold, drive, machine) at `f` Hz.
+    pub fn model(&self, f: f64) -> Complex64 {
+        loop_plant(&self.drive, &self.calibration.mechanics, f)
+    }
+
+    /// The velocity loop's period (s).
+    pub fn period(&self) -> f64 {
+        self.params.rates.velocity_period() as f64
+    }
+
+    /// The highest frequency measured (Hz).
+    pub fn top_hz(&self) -> f64 {
+        self.points.iter().map(|p| p.hz).fold(0.0, f64::max)
+    }
+
+    /// The widest-bandwidth design on the calibrated model that keeps `goal` with a reserve;
+    /// refused where the resonance lies near the top of the measured band (`margin` names the
+    /// goal in the message).
+    pub fn design(&self, goal: &MarginGoal, margin: &str) -> Result<Design> {
+        check_resonance_measured(&self.calibration, self.top_hz())?;
+        let model = |f: f64| self.model(f);
+        design(
+            &model,
+            self.period(),
+            &goal.with_reserve(),
+            &SearchGrid::STANDARD,
+            &self.calibration.mechanics.features_hz(),
+        )
+        .ok_or_else(|| anyhow!("no velocity-loop design keeps the {margin} margins on the calibrated model"))
+    }
+
+    /// The calibrated mechanics as plant parameters (a twin of the measured machine).
+    pub fn plant_parameters(&self) -> [(&'static str, Value); 4] {
+        let m = &self.calibration.mechanics;
+        [
+            ("plant.motor_inertia", Value::Float(m.motor_inertia)),
+            ("plant.load_inertia", Value::Float(m.load_inertia)),
+            ("plant.shaft_stiffness", Value::Float(m.shaft_stiffness)),
+            ("plant.shaft_damping", Value::Float(m.shaft_damping)),
+        ]
+    }
+}

@@ -1,0 +1,143 @@
+//! Where autotune's and calibrate's sweeps run: the FMU (the plant a run's parameters
+//! describe, or a drive's twin) or a drive over its link (`--device`). Either gives the
+//! sweep's measured points ([`MeasuredSweep`]) and the drive parameters the sweep ran with
+//! (what the calibration takes the loops out with: on a drive its commissioned motor and
+//! current-loop gains, not the plant's).
+
+use std::collections::BTreeMap;
+
+use anyhow::{Context, Result};
+use control_core::excitation::InjectionPoint;
+use control_core::phase_shifted_sweep::SweepParams;
+use control_core::Params;
+
+use super::{sweep_on_fmu, MeasuredSweep};
+use crate::device::link::DrivePort;
+use crate::device::session::DriveSession;
+use crate::fmu::runner::Fmu;
+use crate::fmu::scenario::Value;
+use crate::fmu::sweep_run::{SweepRun, START_AT};
+use crate::fmu::trace::Trace;
+use crate::sweep::torque_limit::TorqueLimits;
+
+/// A machine the sweeps measure.
+pub trait SweepTarget {
+    /// The drive parameters a run of `parameters` runs with.
+    fn params(&mut self, parameters: &BTreeMap<String, Value>) -> Result<Params>;
+    /// A stepped-sine sweep at `point` of `amplitude`, riding at `velocity` rad/s.
+    fn sweep(
+        &mut self,
+        point: InjectionPoint,
+        amplitude: f64,
+        parameters: &BTreeMap<String, Value>,
+        velocity: f64,
+    ) -> Result<MeasuredSweep>;
+    /// Where the sweeps ran, for messages ("the FMU", "the drive at /dev/ttyACM0").
+    fn name(&self) -> String;
+}
+
+/// The FMU: the plant of the run's parameters, or the twin of a drive while the FMU is one.
+pub struct OnFmu<'a>(pub &'a Fmu);
+
+impl SweepTarget for OnFmu<'_> {
+    fn params(&mut self, parameters: &BTreeMap<String, Value>) -> Result<Params> {
+        let run = SweepRun { settings: SweepParams::default(), parameters: parameters.clone(), velocity: 0.0 };
+        run.params_on(self.0)
+    }
+
+    fn sweep(
+        &mut self,
+        point: InjectionPoint,
+        amplitude: f64,
+        parameters: &BTreeMap<String, Value>,
+        velocity: f64,
+    ) -> Result<MeasuredSweep> {
+        sweep_on_fmu(self.0, point, amplitude, parameters, velocity)
+    }
+
+    fn name(&self) -> String {
+        "the FMU".into()
+    }
+}
+
+/// A drive over its link: the run's parameters with the drive's own commissioning in place
+/// (`DriveSession::set_params`), the sweep the drive's own (`sweep::device`).
+pub struct OnDrive<'a, T: DrivePort> {
+    pub session: &'a mut DriveSession<T>,
+    pub port: String,
+}
+
+impl<T: DrivePort> SweepTarget for OnDrive<'_, T> {
+    fn params(&mut self, parameters: &BTreeMap<String, Value>) -> Result<Params> {
+        crate::fmu::runner::refuse_drive_owned(parameters.keys())?;
+        let control = crate::fmu::configuration::configuration(parameters)?.control;
+        self.session.with_drive_commissioning(&power_stage::ratings::with_board_limits(control))
+    }
+
+    fn sweep(
+        &mut self,
+        point: InjectionPoint,
+        amplitude: f64,
+        parameters: &BTreeMap<String, Value>,
+        velocity: f64,
+    ) -> Result<MeasuredSweep> {
+        crate::fmu::runner::refuse_drive_owned(parameters.keys())?;
+        let settings = SweepParams { point, amplitude: amplitude as f32, ..Default::default() };
+        let run = SweepRun { settings, parameters: parameters.clone(), velocity };
+        let sweep = crate::sweep::device::sweep_on_drive(self.session, &run, |_| {})
+            .with_context(|| format!("the sweep on the drive at {}", self.port))?;
+        if sweep.dropped > 0 {
+            anyhow::bail!(
+                "the drive at {} dropped {} samples of the sweep (its link too slow for the stream): the response \
+                 would be read from a gapped record",
+                self.port,
+                sweep.dropped
+            );
+        }
+        let limits = TorqueLimits::of(&self.params(parameters)?, &settings);
+        Ok(MeasuredSweep {
+            points: sweep.stream.into_iter().filter(|p| p.gain_db.is_finite() && p.phase_deg.is_finite()).collect(),
+            drive_time_s: START_AT + sweep.measurement_time_s,
+            torque_limited: torque_limited_points(&sweep.trace, &limits),
+            voltage_limited: sweep.limited_hz.len(),
+            torque_limit: limits.lowest(),
+        })
+    }
+
+    fn name(&self) -> String {
+        format!("the drive at {}", self.port)
+    }
+}
+
+/// How many of a drive's streamed sweep points have a sample whose torque (the stream's U:
+/// the torque command, averaged over the acquisition period) reached `limits`. An average at
+/// the limit means the command sat there; a clamp shorter than the period can hide in it, so
+/// this counts no more than the FMU's per-tick count would.
+fn torque_limited_points(trace: &Trace, limits: &TorqueLimits) -> usize {
+    let (Some(point), Some(measuring), Some(u)) =
+        (trace.column("acq_point"), trace.column("acq_measuring"), trace.column("acq_u"))
+    else {
+        return 0;
+    };
+    let mut limited: Vec<i64> =
+        (0..point.len()).filter(|&i| measuring[i] != 0.0 && limits.reached(u[i])).map(|i| point[i] as i64).collect();
+    limited.dedup();
+    limited.len()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_point_counts_once_however_many_of_its_samples_sat_at_the_limit() {
+        let limits = TorqueLimits::of(&Params::default(), &SweepParams::default());
+        let at = limits.lowest() * 1.001;
+        let mut t = Trace::new(["acq_point", "acq_measuring", "acq_u"].map(String::from).to_vec());
+        for &(p, m, u) in &[(0.0, 1.0, at), (0.0, 1.0, -at), (1.0, 1.0, 0.1), (2.0, 0.0, at), (3.0, 1.0, -at)] {
+            t.rows.push([p, m, u]);
+        }
+        // Point 0 twice, point 2 not measuring, point 3 once.
+        assert_eq!(torque_limited_points(&t, &limits), 2);
+    }
+}
