@@ -693,27 +693,59 @@ fn ident_over_a_faulted_or_dying_drive_ends_in_a_clear_error() {
     assert_eq!(saved["complete"], false, "{saved}");
 }
 
-/// Issue 38: `servo autotune --device` over a virtual drive whose machine is not the FMU's
-/// default (load inertia 2e-4 kg·m², shaft 120 N·m/rad): the mechanics calibrated from the
-/// drive's own response (within the issue's 3 % of the plant the drive simulates), the tuning
-/// verified on the twin of that machine and then on the drive itself (margins held there),
-/// kept and saved; the drive's parameters read back are the tuning's. A drive whose motor is
-/// not commissioned is refused before anything moves.
+/// Issue 38's workflow over a virtual drive whose machine is not the FMU's default (load
+/// inertia 2e-4 kg·m², shaft 120 N·m/rad, load friction 0.02 N·m and 1e-4 N·m·s/rad):
+/// commission → `servo calibrate --device` (the mechanics and friction from the drive's own
+/// sweep and constant-speed runs, within the issue's bounds of the plant the drive simulates)
+/// → `servo autotune --device --plant` (the tuning verified on the twin of the calibrated
+/// machine and then on the drive itself, margins held there, kept and saved; the drive's
+/// parameters read back are the tuning's), all within 60 s of drive time. A drive whose motor
+/// is not commissioned is refused before anything moves.
 #[test]
-fn autotune_over_the_virtual_drive_tunes_its_machine_verifies_it_there_and_saves_it() {
+fn calibrate_and_autotune_over_the_virtual_drive_tune_its_machine_verify_it_there_and_save_it() {
     let _serial = one_at_a_time();
     let dir = tmp("autotune-device");
-    let machine = ["--set", "plant.load_inertia=2e-4", "--set", "plant.shaft_stiffness=120"];
+    let machine = [
+        "--set",
+        "plant.load_inertia=2e-4",
+        "--set",
+        "plant.shaft_stiffness=120",
+        "--set",
+        "plant.load_coulomb=0.02",
+        "--set",
+        "plant.load_viscous=1e-4",
+    ];
     let vd = VirtualDrive::start(&dir, "max", &machine);
-    let o = output_within(servo().args(["autotune", "--device", &vd.port, "--json"]).on_fmu(dir.join("out")), 180);
-    let r = json(&o);
+    let truth = host_tools::fmu::configuration::configuration(&Default::default()).unwrap().plant;
+    let (coulomb, viscous) = (truth.motor_coulomb + 0.02, truth.motor_viscous + 1e-4);
     let near = |v: &serde_json::Value, truth: f64| (v.as_f64().unwrap() / truth - 1.0).abs();
+    // Calibrate on the drive.
+    let o = output_within(servo().args(["calibrate", "--device", &vd.port, "--json"]).on_fmu(dir.join("cal")), 120);
+    let cal = json(&o);
+    let m = &cal["calibration"]["mechanics"]["mechanics"];
+    let f = &cal["calibration"]["friction"];
+    for (value, truth, bound) in [
+        (&m["motor_inertia"], truth.motor_inertia, 0.03),
+        (&m["load_inertia"], 2e-4, 0.03),
+        (&m["shaft_stiffness"], 120.0, 0.03),
+        (&f["coulomb"], coulomb, 0.10),
+        (&f["viscous"], viscous, 0.20),
+    ] {
+        assert!(near(value, truth) <= bound, "{value} against {truth}: {cal}");
+    }
+    assert!(cal["values"][0]["truth"].is_null(), "a drive's calibration has no truth: {}", cal["values"][0]);
+    // Autotune on the drive, its twin the calibrated machine.
+    let o = output_within(
+        servo()
+            .args(["autotune", "--device", &vd.port, "--json", "--plant"])
+            .arg(dir.join("cal/calibrated-plant.toml"))
+            .on_fmu(dir.join("out")),
+        180,
+    );
+    let r = json(&o);
     let m = &r["calibration"]["mechanics"];
     assert!(near(&m["load_inertia"], 2e-4) <= 0.03, "{m}");
     assert!(near(&m["shaft_stiffness"], 120.0) <= 0.03, "{m}");
-    let default_motor_inertia =
-        host_tools::fmu::configuration::configuration(&Default::default()).unwrap().plant.motor_inertia;
-    assert!(near(&m["motor_inertia"], default_motor_inertia) <= 0.03, "{m}");
     for v in [&r["verification"], &r["drive_verification"]] {
         assert_eq!(v["passed"], true, "{v}");
         assert!(v["phase_margin_deg"].as_f64().unwrap() >= 45.0, "{v}");
@@ -721,14 +753,14 @@ fn autotune_over_the_virtual_drive_tunes_its_machine_verifies_it_there_and_saves
     }
     assert!(r["drive_verification"]["on"].as_str().unwrap().contains(&vd.port), "{}", r["drive_verification"]);
     assert!(r["saved_sequence"].as_u64().is_some(), "{}", r["saved_sequence"]);
-    let drive_time = r["drive_time_s"].as_f64().unwrap();
-    assert!(drive_time > 0.0 && drive_time <= 60.0, "drive time {drive_time} s");
+    let drive_time = cal["calibration"]["drive_time_s"].as_f64().unwrap() + r["drive_time_s"].as_f64().unwrap();
+    assert!(drive_time > 0.0 && drive_time <= 60.0, "calibrate + autotune: {drive_time} s of drive time");
     // The drive runs the tuning (f32 on the drive).
     let p = json(&device(&vd.port, &["params"]));
     let tuning = &r["design"]["tuning"];
-    for (drive, designed) in [("kp", "kp"), ("ki", "ki")] {
-        let (a, b) = (p["params"]["velocity"][drive].as_f64().unwrap(), tuning[designed].as_f64().unwrap());
-        assert!((a / b - 1.0).abs() < 1e-6, "drive {drive} {a}, designed {b}");
+    for gain in ["kp", "ki"] {
+        let (a, b) = (p["params"]["velocity"][gain].as_f64().unwrap(), tuning[gain].as_f64().unwrap());
+        assert!((a / b - 1.0).abs() < 1e-6, "drive {gain} {a}, designed {b}");
     }
     assert!(dir.join("out/open-loop.svg").exists() && dir.join("out/autotune.toml").exists());
     drop(vd);

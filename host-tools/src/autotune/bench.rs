@@ -167,7 +167,7 @@ fn tune_into(fmu: &Fmu, machine: &Machine, goal: &MarginGoal, row: &mut MachineR
     let true_plant = |f: f64| loop_plant(&true_drive, &truth, f);
     // Measure, calibrate, design on the calibrated model.
     let measured = super::measured_mechanics::measure_mechanics(
-        &mut super::sweep_target::OnFmu(fmu),
+        &mut super::axis_under_test::OnFmu(fmu),
         &parameters,
         0.2,
         crate::sweep::bench::VELOCITY,

@@ -8,12 +8,12 @@ use std::collections::BTreeMap;
 
 use anyhow::{Context, Result};
 
+use super::axis_under_test::{AxisUnderTest, OnDrive, OnFmu};
 use super::design::{Design, MarginGoal};
 use super::disturbance_response;
 use super::measured_mechanics::{measure_mechanics, MeasuredMechanics};
 use super::report::AutotuneReport;
 use super::responses::{LoopModel, Responses};
-use super::sweep_target::{OnDrive, OnFmu, SweepTarget};
 use super::verification::{verify, with_tuning, Verification};
 use crate::cli::{progress_bar, Common};
 use crate::device::link::DrivePort;

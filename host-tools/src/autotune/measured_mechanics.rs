@@ -1,4 +1,4 @@
-//! The machine's mechanics measured and calibrated on a [`SweepTarget`]: a torque-point sweep,
+//! The machine's mechanics measured and calibrated on a [`AxisUnderTest`]: a torque-point sweep,
 //! refused where it ran into a limit, turned into the plant behind it, the two-inertia model
 //! fitted to that and refused where the measurement does not determine it. What `servo
 //! autotune`, `servo calibrate` and the autotune bench all start from.
@@ -10,11 +10,11 @@ use control_core::excitation::InjectionPoint;
 use control_core::Params;
 use num_complex::Complex64;
 
+use super::axis_under_test::AxisUnderTest;
 use super::calibration::{calibrate, Calibration, PlantPoint};
 use super::design::{design, Design, MarginGoal, SearchGrid};
 use super::design_checks::{check_determined, check_linear, check_resonance_measured, check_riding_speed};
 use super::drive_dynamics::DriveDynamics;
-use super::sweep_target::SweepTarget;
 use super::velocity_controller::VelocityTuning;
 use super::{loop_plant, plant_points};
 use crate::analysis::response_point::ResponsePoint;
@@ -40,7 +40,7 @@ pub struct MeasuredMechanics {
 /// Sweep `target` at the torque point with `amplitude` N·m riding at `velocity` rad/s, and
 /// calibrate the mechanics from the response.
 pub fn measure_mechanics(
-    target: &mut dyn SweepTarget,
+    target: &mut dyn AxisUnderTest,
     parameters: &BTreeMap<String, Value>,
     amplitude: f64,
     velocity: f64,

@@ -3,6 +3,7 @@
 //! response for the widest bandwidth that keeps its margins (`design`), checked on the loop
 //! the drive runs (`velocity_controller`, `drive_dynamics`, `margins`).
 
+pub mod axis_under_test;
 pub mod bench;
 pub mod calibration;
 pub mod command;
@@ -16,7 +17,6 @@ pub mod prediction;
 pub mod report;
 pub mod responses;
 pub mod step_on_twin;
-pub mod sweep_target;
 pub mod velocity_controller;
 pub mod verification;
 

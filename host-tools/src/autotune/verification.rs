@@ -1,5 +1,5 @@
 //! A tuning verified where it is to run: the open loop measured with the new gains by a
-//! feedback-point sweep on a [`SweepTarget`] (the twin, or the drive), and the margins a
+//! feedback-point sweep on a [`AxisUnderTest`] (the twin, or the drive), and the margins a
 //! sparse measured grid can show — the phase margin at its gain crossovers and the
 //! sensitivity peak over its points (the stability and the gain margin need the model's
 //! dense grid). A sweep that measured no crossover has not shown a margin: it fails.
@@ -11,9 +11,9 @@ use control_core::excitation::InjectionPoint;
 use num_complex::Complex64;
 use serde::Serialize;
 
+use super::axis_under_test::AxisUnderTest;
 use super::design::MarginGoal;
 use super::margins::crossover_margins;
-use super::sweep_target::SweepTarget;
 use crate::analysis::response_point::ResponsePoint;
 use crate::fmu::scenario::Value;
 
@@ -36,7 +36,7 @@ pub struct Verification {
 /// The open loop of `tuned` (the run's parameters with the tuning in them) measured on
 /// `target` riding at `velocity` rad/s, held to `goal`'s phase margin and Ms.
 pub fn verify(
-    target: &mut dyn SweepTarget,
+    target: &mut dyn AxisUnderTest,
     tuned: &BTreeMap<String, Value>,
     velocity: f64,
     goal: &MarginGoal,

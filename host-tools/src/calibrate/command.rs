@@ -6,8 +6,9 @@ use anyhow::{Context, Result};
 use serde_json::json;
 
 use super::friction_runs::FrictionRuns;
-use super::{calibrate_on_fmu, Measurement};
+use super::{calibrate_machine, calibrate_on_fmu, Measurement};
 use crate::analysis::response_point::ResponsePoint;
+use crate::autotune::axis_under_test::{AxisUnderTest, OnDrive};
 use crate::autotune::design_checks::check_riding_speed;
 use crate::autotune::drive_dynamics::DriveDynamics;
 use crate::autotune::margins::log_grid;
@@ -31,7 +32,12 @@ use crate::paths::{default_fmu, default_out};
 /// Friction at a constant speed is the motor's and the load's together: the plant file
 /// splits it in proportion to the inertias.
 ///
-/// Example: servo calibrate --set plant.load_inertia=3e-4 --set plant.shaft_stiffness=80
+/// With --device PORT the machine is the drive's: the sweep and the runs are the drive's
+/// (its velocity estimate and torque command read over the link), and the plant file is the
+/// twin of that machine (the values without a truth to compare).
+///
+/// Examples: servo calibrate --set plant.load_inertia=3e-4 --set plant.shaft_stiffness=80
+///           servo calibrate --device /dev/ttyACM0
 #[derive(clap::Args)]
 pub struct CalibrateArgs {
     /// Plant file of the twin's machine (a [parameters] table of plant.* values, as this
@@ -52,6 +58,8 @@ pub struct CalibrateArgs {
     #[arg(long, value_delimiter = ',', default_values_t = [20.0, 50.0, 100.0, 150.0])]
     pub speeds: Vec<f64>,
     #[command(flatten)]
+    pub target: crate::device::args::TargetArgs,
+    #[command(flatten)]
     pub common: Common,
 }
 
@@ -68,13 +76,24 @@ impl CalibrateArgs {
             velocity: self.velocity,
             friction_runs: FrictionRuns { speeds: self.speeds.clone(), ..Default::default() },
         };
-        how.friction_runs.validate(&parameters)?;
         let out = self.common.out.clone().unwrap_or_else(|| default_out("calibrate"));
         std::fs::create_dir_all(&out).with_context(|| format!("creating {}", out.display()))?;
-        let fmu = Fmu::load(&self.common.fmu.clone().unwrap_or_else(default_fmu))?;
         let pb = progress_bar("calibrate", self.common.json);
         pb.set_position(100);
-        let c = calibrate_on_fmu(&fmu, &parameters, &how)?;
+        // On a drive: its machine, no truth to compare; on the FMU: the twin's plant.
+        let (c, truth, drive_params) = match self.target.session()? {
+            Some(mut session) => {
+                let port = self.target.device.clone().unwrap_or_default();
+                let mut drive = OnDrive { session: &mut session, port };
+                let c = calibrate_machine(&mut drive, &parameters, &how)?;
+                (c, None, drive.params(&parameters)?)
+            }
+            None => {
+                how.friction_runs.validate(&parameters)?;
+                let fmu = Fmu::load(&self.common.fmu.clone().unwrap_or_else(default_fmu))?;
+                (calibrate_on_fmu(&fmu, &parameters, &how)?, Some(config.plant), config.control)
+            }
+        };
         pb.finish_and_clear();
         let header = format!(
             "servo calibrate: the machine's mechanics from a torque-point sweep, its friction from\n\
@@ -83,9 +102,9 @@ impl CalibrateArgs {
         );
         write_plant_file(&out.join("calibrated-plant.toml"), &header, &c.plant_parameters(&config.plant)?)?;
         // Plots: the plant measured and modelled; the friction measured and fitted.
-        let drive = DriveDynamics::as_configured(&config.control);
+        let drive = DriveDynamics::as_configured(&drive_params);
         let m = c.mechanics.mechanics;
-        let period = config.control.rates.velocity_period() as f64;
+        let period = drive_params.rates.velocity_period() as f64;
         let model: Vec<ResponsePoint> = log_grid(1.0, 0.999 * 0.5 / period, 400)
             .into_iter()
             .map(|f| ResponsePoint::from_complex(f, plant_response(&drive, &m, f), 1.0))
@@ -120,9 +139,9 @@ impl CalibrateArgs {
             "velocity estimate (rad/s)",
             &["torque".to_string()],
         )?;
-        // The twin's truth, beside each value.
-        let truth = Mechanics::of_plant(&config.plant);
-        let p = &config.plant;
+        // The twin's truth, beside each value (NaN on a drive: none known).
+        let p = truth.unwrap_or_else(|| nan_plant(&config.plant));
+        let truth = Mechanics::of_plant(&p);
         let (fr, fa) = m.resonance_hz();
         let (tr, ta) = truth.resonance_hz();
         let e = c.mechanics.relative_errors;
@@ -136,13 +155,20 @@ impl CalibrateArgs {
             ("anti-resonance", "Hz", fa, f64::NAN, ta),
             ("Coulomb friction", "N·m", f.coulomb, f.coulomb_error, p.motor_coulomb + p.load_coulomb),
             ("viscous friction", "N·m·s/rad", f.viscous, f.viscous_error, p.motor_viscous + p.load_viscous),
-            ("constant load torque", "N·m", f.load_torque, f.load_torque_error, 0.0),
+            (
+                "constant load torque",
+                "N·m",
+                f.load_torque,
+                f.load_torque_error,
+                if p.motor_inertia.is_nan() { f64::NAN } else { 0.0 },
+            ),
         ];
         let table: Vec<serde_json::Value> = rows
             .iter()
             .map(|(name, unit, v, se, t)| {
-                json!({"name": name, "unit": unit, "value": v, "standard_error": se, "truth": t,
-                       "error_percent": 100.0 * (v / t - 1.0)})
+                json!({"name": name, "unit": unit, "value": v, "standard_error": se,
+                       "truth": t.is_finite().then_some(t),
+                       "error_percent": (t.is_finite() && *t != 0.0).then(|| 100.0 * (v / t - 1.0))})
             })
             .collect();
         let report = json!({
@@ -156,11 +182,17 @@ impl CalibrateArgs {
             println!("{}", serde_json::to_string_pretty(&report)?);
             return Ok(true);
         }
-        println!("{:<22} {:>12} {:>12} {:>12} {:>9}", "calibrated", "value", "± std. err.", "twin's truth", "error");
+        let on = match &self.target.device {
+            Some(port) => format!("the drive at {port}"),
+            None => "the twin".into(),
+        };
+        println!("calibrated on {on}:");
+        println!("{:<22} {:>12} {:>12} {:>12} {:>9}", "", "value", "± std. err.", "twin's truth", "error");
         for (name, unit, v, se, t) in rows {
-            let err = if t != 0.0 { format!("{:+.2} %", 100.0 * (v / t - 1.0)) } else { "-".into() };
+            let err = if t.is_finite() && t != 0.0 { format!("{:+.2} %", 100.0 * (v / t - 1.0)) } else { "-".into() };
             let se = if se.is_finite() { format!("{se:.3e}") } else { "-".into() };
-            println!("{name:<22} {v:>12.4e} {se:>12} {t:>12.4e} {err:>9}  {unit}");
+            let t = if t.is_finite() { format!("{t:.4e}") } else { "-".into() };
+            println!("{name:<22} {v:>12.4e} {se:>12} {t:>12} {err:>9}  {unit}");
         }
         println!(
             "model vs measurement: within {:.2} dB, {:.1}° over {} points; drive time {:.1} s",
@@ -175,4 +207,22 @@ impl CalibrateArgs {
         println!("plant file: {} (give it to any command with --plant)", out.join("calibrated-plant.toml").display());
         Ok(true)
     }
+}
+
+/// A plant whose machine values are unknown (NaN): a drive's, with no truth to compare.
+fn nan_plant(base: &servo_axis::plant::PlantParams) -> servo_axis::plant::PlantParams {
+    let mut p = *base;
+    for v in [
+        &mut p.motor_inertia,
+        &mut p.load_inertia,
+        &mut p.shaft_stiffness,
+        &mut p.shaft_damping,
+        &mut p.motor_coulomb,
+        &mut p.load_coulomb,
+        &mut p.motor_viscous,
+        &mut p.load_viscous,
+    ] {
+        *v = f64::NAN;
+    }
+    p
 }

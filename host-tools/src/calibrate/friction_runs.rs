@@ -37,19 +37,19 @@ impl Default for FrictionRuns {
 
 /// One run's schedule: its commanded speed, when its ramp starts, and its window [from, to) (s).
 #[derive(Clone, Copy, Debug)]
-struct Segment {
-    speed: f64,
-    ramp_from: f64,
-    from: f64,
-    to: f64,
+pub(crate) struct Segment {
+    pub speed: f64,
+    pub ramp_from: f64,
+    pub from: f64,
+    pub to: f64,
 }
 
 /// Time between the velocity command's updates on a ramp (s).
-const RAMP_STEP: f64 = 0.0025;
+pub(crate) const RAMP_STEP: f64 = 0.0025;
 
 impl FrictionRuns {
     /// The speeds in the order they are run (forward, then backward) with their windows.
-    fn segments(&self) -> Vec<Segment> {
+    pub(crate) fn segments(&self) -> Vec<Segment> {
         let (mut t, mut last) = (0.0, 0.0);
         let mut out = Vec::new();
         for sign in [1.0, -1.0] {
@@ -73,7 +73,11 @@ impl FrictionRuns {
 
     /// Checks the speeds against the drive's velocity limit in `parameters`.
     pub fn validate(&self, parameters: &BTreeMap<String, Value>) -> Result<()> {
-        let limit = configuration(parameters)?.control.position.velocity_limit as f64;
+        self.validate_within(configuration(parameters)?.control.position.velocity_limit as f64)
+    }
+
+    /// Checks the speeds against a velocity limit (rad/s).
+    pub fn validate_within(&self, limit: f64) -> Result<()> {
         if self.speeds.len() < 2 {
             bail!("friction needs at least two speeds (each is run in both directions), got {}", self.speeds.len());
         }

@@ -8,6 +8,7 @@ pub mod bench;
 pub mod command;
 pub mod friction;
 pub mod friction_runs;
+pub mod friction_runs_on_drive;
 
 use std::collections::BTreeMap;
 
@@ -16,9 +17,9 @@ use serde::Serialize;
 use servo_axis::plant::PlantParams;
 
 use crate::analysis::response_point::ResponsePoint;
+use crate::autotune::axis_under_test::{AxisUnderTest, OnFmu};
 use crate::autotune::calibration::{Calibration, PlantPoint};
 use crate::autotune::measured_mechanics::measure_mechanics;
-use crate::autotune::sweep_target::OnFmu;
 use crate::fmu::runner::Fmu;
 use crate::fmu::scenario::Value;
 use friction::{fit_friction, Friction, SpeedPoint};
@@ -107,17 +108,18 @@ pub fn fewest_substeps(plant: &PlantParams) -> Result<u32> {
     }
 }
 
-/// Calibrate the machine of `parameters` on `fmu` (its twin, or the plant those parameters
-/// describe): the torque-point sweep, the mechanics fitted to it, the constant-speed runs,
-/// the friction fitted to them.
-pub fn calibrate_on_fmu(
-    fmu: &Fmu,
+/// Calibrate the machine `target` measures with `parameters` (on the FMU its twin, or the
+/// plant those parameters describe; or a drive): the torque-point sweep, the mechanics fitted
+/// to it, the constant-speed runs, the friction fitted to them.
+pub fn calibrate_machine(
+    target: &mut dyn AxisUnderTest,
     parameters: &BTreeMap<String, Value>,
     how: &Measurement,
 ) -> Result<MachineCalibration> {
-    how.friction_runs.validate(parameters)?;
-    let measured = measure_mechanics(&mut OnFmu(fmu), parameters, how.amplitude, how.velocity)?;
-    let (speed_points, _) = how.friction_runs.run(fmu, parameters)?;
+    let limit = target.params(parameters)?.position.velocity_limit as f64;
+    how.friction_runs.validate_within(limit)?;
+    let measured = measure_mechanics(target, parameters, how.amplitude, how.velocity)?;
+    let speed_points = target.constant_speeds(&how.friction_runs, parameters)?;
     let friction = fit_friction(&speed_points).context("fitting the friction")?;
     Ok(MachineCalibration {
         mechanics: measured.calibration,
@@ -127,4 +129,13 @@ pub fn calibrate_on_fmu(
         speed_points,
         drive_time_s: measured.drive_time_s + how.friction_runs.duration(),
     })
+}
+
+/// [`calibrate_machine`] on the FMU.
+pub fn calibrate_on_fmu(
+    fmu: &Fmu,
+    parameters: &BTreeMap<String, Value>,
+    how: &Measurement,
+) -> Result<MachineCalibration> {
+    calibrate_machine(&mut OnFmu(fmu), parameters, how)
 }

@@ -1,8 +1,8 @@
-//! Where autotune's and calibrate's sweeps run: the FMU (the plant a run's parameters
-//! describe, or a drive's twin) or a drive over its link (`--device`). Either gives the
-//! sweep's measured points ([`MeasuredSweep`]) and the drive parameters the sweep ran with
-//! (what the calibration takes the loops out with: on a drive its commissioned motor and
-//! current-loop gains, not the plant's).
+//! Where autotune's and calibrate's measurements run: the FMU (the plant a run's parameters
+//! describe, or a drive's twin) or a drive over its link (`--device`). Either gives a
+//! sweep's measured points ([`MeasuredSweep`]), the constant-speed runs' points, and the
+//! drive parameters they ran with (what the calibration takes the loops out with: on a drive
+//! its commissioned motor and current-loop gains, not the plant's).
 
 use std::collections::BTreeMap;
 
@@ -12,6 +12,8 @@ use control_core::phase_shifted_sweep::SweepParams;
 use control_core::Params;
 
 use super::{sweep_on_fmu, MeasuredSweep};
+use crate::calibrate::friction::SpeedPoint;
+use crate::calibrate::friction_runs::FrictionRuns;
 use crate::device::link::DrivePort;
 use crate::device::session::DriveSession;
 use crate::fmu::runner::Fmu;
@@ -21,7 +23,7 @@ use crate::fmu::trace::Trace;
 use crate::sweep::torque_limit::TorqueLimits;
 
 /// A machine the sweeps measure.
-pub trait SweepTarget {
+pub trait AxisUnderTest {
     /// The drive parameters a run of `parameters` runs with.
     fn params(&mut self, parameters: &BTreeMap<String, Value>) -> Result<Params>;
     /// A stepped-sine sweep at `point` of `amplitude`, riding at `velocity` rad/s.
@@ -32,14 +34,17 @@ pub trait SweepTarget {
         parameters: &BTreeMap<String, Value>,
         velocity: f64,
     ) -> Result<MeasuredSweep>;
-    /// Where the sweeps ran, for messages ("the FMU", "the drive at /dev/ttyACM0").
+    /// The constant-speed runs friction is read from (one point per speed and direction).
+    fn constant_speeds(&mut self, runs: &FrictionRuns, parameters: &BTreeMap<String, Value>)
+        -> Result<Vec<SpeedPoint>>;
+    /// Where the measurements ran, for messages ("the FMU", "the drive at /dev/ttyACM0").
     fn name(&self) -> String;
 }
 
 /// The FMU: the plant of the run's parameters, or the twin of a drive while the FMU is one.
 pub struct OnFmu<'a>(pub &'a Fmu);
 
-impl SweepTarget for OnFmu<'_> {
+impl AxisUnderTest for OnFmu<'_> {
     fn params(&mut self, parameters: &BTreeMap<String, Value>) -> Result<Params> {
         let run = SweepRun { settings: SweepParams::default(), parameters: parameters.clone(), velocity: 0.0 };
         run.params_on(self.0)
@@ -55,6 +60,14 @@ impl SweepTarget for OnFmu<'_> {
         sweep_on_fmu(self.0, point, amplitude, parameters, velocity)
     }
 
+    fn constant_speeds(
+        &mut self,
+        runs: &FrictionRuns,
+        parameters: &BTreeMap<String, Value>,
+    ) -> Result<Vec<SpeedPoint>> {
+        Ok(runs.run(self.0, parameters)?.0)
+    }
+
     fn name(&self) -> String {
         "the FMU".into()
     }
@@ -67,7 +80,7 @@ pub struct OnDrive<'a, T: DrivePort> {
     pub port: String,
 }
 
-impl<T: DrivePort> SweepTarget for OnDrive<'_, T> {
+impl<T: DrivePort> AxisUnderTest for OnDrive<'_, T> {
     fn params(&mut self, parameters: &BTreeMap<String, Value>) -> Result<Params> {
         crate::fmu::runner::refuse_drive_owned(parameters.keys())?;
         let control = crate::fmu::configuration::configuration(parameters)?.control;
@@ -102,6 +115,16 @@ impl<T: DrivePort> SweepTarget for OnDrive<'_, T> {
             voltage_limited: sweep.limited_hz.len(),
             torque_limit: limits.lowest(),
         })
+    }
+
+    fn constant_speeds(
+        &mut self,
+        runs: &FrictionRuns,
+        parameters: &BTreeMap<String, Value>,
+    ) -> Result<Vec<SpeedPoint>> {
+        let params = self.params(parameters)?;
+        crate::calibrate::friction_runs_on_drive::run_on_drive(self.session, runs, &params)
+            .with_context(|| format!("the constant-speed runs on the drive at {}", self.port))
     }
 
     fn name(&self) -> String {
