@@ -123,26 +123,40 @@ fn autotune_tunes_a_machine_it_does_not_ship_and_the_true_plant_keeps_the_margin
     assert!(String::from_utf8_lossy(&o.stderr).contains("--margin must be conservative, standard or aggressive"));
 }
 
-/// `servo bench autotune` on a small draw of its own seed: one row per machine, none unstable
-/// on its true plant, the figures written, the exit status the figures' verdict.
+/// `servo bench autotune` on a small draw of its own seed, measured on the FMU and on a
+/// virtual drive: one row per machine, none unstable on its true plant, the tuning verified
+/// where it was measured, the calibration within the 3 %, the workflow within 60 s
+/// of drive time, the figures written, the exit status the figures' verdict.
 #[test]
-fn the_autotune_bench_runs_a_small_draw() {
-    let out = tmp("autotune-bench");
-    let o =
-        servo().args(["bench", "autotune", "--plants", "3", "--seed", "2026", "--json"]).on_fmu(&out).output().unwrap();
-    let stderr = String::from_utf8_lossy(&o.stderr);
-    assert!(matches!(o.status.code(), Some(0 | 1)), "{stderr}");
-    let j: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
-    let rows = j["rows"].as_array().unwrap();
-    assert_eq!(rows.len(), 3);
-    for r in rows {
-        assert!(r["failed"].is_null(), "{r}");
-        assert_eq!(r["stable"], true, "{r}");
-        assert!(r["phase_margin_deg"].as_f64().unwrap() >= 44.0, "{r}");
+fn the_autotune_bench_runs_a_small_draw_on_the_fmu_and_on_a_virtual_drive() {
+    for (arm, plants, extra) in [("fmu", "3", None), ("virtual-drive", "2", Some("--virtual-drive"))] {
+        let out = tmp(&format!("autotune-bench-{arm}"));
+        let mut c = servo();
+        c.args(["bench", "autotune", "--plants", plants, "--seed", "2026", "--json"]).on_fmu(&out);
+        c.args(extra);
+        let o = c.output().unwrap();
+        let stderr = String::from_utf8_lossy(&o.stderr);
+        assert!(matches!(o.status.code(), Some(0 | 1)), "{stderr}");
+        let j: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+        let rows = j["rows"].as_array().unwrap();
+        assert_eq!(rows.len(), plants.parse::<usize>().unwrap());
+        for r in rows {
+            assert!(r["failed"].is_null(), "{arm}: {r}");
+            assert_eq!(r["stable"], true, "{arm}: {r}");
+            assert_eq!(r["verified"], true, "{arm}: {r}");
+            assert!(r["phase_margin_deg"].as_f64().unwrap() >= 45.0, "{arm}: {r}");
+            assert!(r["verified_phase_margin_deg"].as_f64().unwrap() >= 45.0, "{arm}: {r}");
+            assert!(r["drive_time_s"].as_f64().unwrap() <= 60.0, "{arm}: {r}");
+            for e in &r["calibration_errors"].as_array().unwrap()[..3] {
+                assert!(e.as_f64().unwrap() <= 0.03, "{arm}: {r}");
+            }
+        }
+        // Figures with a goal (an information figure's `met` is null).
+        let all_met = j["figures"]["figures"].as_array().unwrap().iter().all(|g| g["met"] != false);
+        assert_eq!(o.status.code(), Some(if all_met { 0 } else { 1 }), "{stderr}");
+        let name = if extra.is_some() { "autotune-virtual-drive.json" } else { "autotune.json" };
+        assert!(out.join(name).exists(), "{arm}: no {name}");
     }
-    let all_met = j["figures"]["figures"].as_array().unwrap().iter().all(|g| g["met"] == true);
-    assert_eq!(o.status.code(), Some(if all_met { 0 } else { 1 }), "{stderr}");
-    assert!(out.join("autotune.json").exists());
 }
 
 /// A measurement that cannot carry a design is refused with its reason, and nothing is

@@ -13,18 +13,24 @@ use serde::Serialize;
 
 use servo_axis::variables::name;
 
+use super::axis_under_test::{AxisUnderTest, OnDrive, OnFmu};
 use super::design::{design, margins_of, refine, MarginGoal, SearchGrid};
 use super::drive_dynamics::DriveDynamics;
 use super::loop_plant;
+use super::measured_mechanics::measure_mechanics;
 use super::mechanics::Mechanics;
 use super::velocity_controller::VelocityTuning;
+use super::verification::{verify, with_tuning};
 use crate::analysis::response_point::ResponsePoint;
 use crate::bench::figures::Recorder;
+use crate::calibrate::friction_runs::FrictionRuns;
 use crate::cli::Common;
 use crate::fmu::configuration::configuration;
 use crate::fmu::runner::Fmu;
 use crate::fmu::scenario::Value;
 use crate::random::XorShift64Star;
+use crate::virtual_drive::in_process::commissioned_session;
+use crate::virtual_drive::uart::LineSettings;
 
 /// The velocity loop tuned from a measured response, over drawn machines: inertia ratio
 /// 0.2–5, shaft resonance 50–500 Hz and damping ratio 0.01–0.1 (log-uniform), Coulomb
@@ -51,6 +57,11 @@ pub struct AutotuneBenchArgs {
     /// Run only this machine of the draw (its index in the table, from 0)
     #[arg(long)]
     pub plant: Option<u32>,
+    /// Measure and verify each machine on a virtual drive in this process (the drive's
+    /// application on the simulated board, its motor commissioned first) instead of the FMU:
+    /// the path `servo autotune --device` takes, over the link
+    #[arg(long)]
+    pub virtual_drive: bool,
     #[command(flatten)]
     pub common: Common,
 }
@@ -122,6 +133,14 @@ pub struct MachineRow {
     /// settling time (2 %, s) and a load step's peak (rad/s per N·m).
     pub step_settling_s: [f64; 2],
     pub load_step_peak: [f64; 2],
+    /// The verification where the machine was measured (the twin, or the virtual drive): the
+    /// open loop measured with the tuning, its phase margin and Ms, and whether they held.
+    pub verified: bool,
+    pub verified_phase_margin_deg: f64,
+    pub verified_sensitivity_peak: f64,
+    /// Drive time of the workflow (s): calibrate's sweep and constant-speed runs, autotune's
+    /// sweep and its verification.
+    pub drive_time_s: f64,
 }
 
 /// The torque-point sweep on the twin: its readings (`Y/U` at each frequency).
@@ -130,8 +149,8 @@ pub fn measure(fmu: &Fmu, parameters: &BTreeMap<String, Value>) -> Result<Vec<Re
     Ok(super::sweep_on_fmu(fmu, torque, 0.2, parameters, crate::sweep::bench::VELOCITY)?.points)
 }
 
-/// Design and check one machine.
-pub fn tune_one(fmu: &Fmu, machine: &Machine, goal: &MarginGoal) -> MachineRow {
+/// Design and check one machine, measured on the FMU or (`on_drive`) a virtual drive.
+pub fn tune_one(fmu: &Fmu, machine: &Machine, goal: &MarginGoal, on_drive: bool) -> MachineRow {
     let mut row = MachineRow {
         machine: *machine,
         failed: None,
@@ -150,28 +169,40 @@ pub fn tune_one(fmu: &Fmu, machine: &Machine, goal: &MarginGoal) -> MachineRow {
         disturbance_improvement: f64::NAN,
         step_settling_s: [f64::NAN; 2],
         load_step_peak: [f64::NAN; 2],
+        verified: false,
+        verified_phase_margin_deg: f64::NAN,
+        verified_sensitivity_peak: f64::NAN,
+        drive_time_s: f64::NAN,
     };
-    if let Err(e) = tune_into(fmu, machine, goal, &mut row) {
+    if let Err(e) = tune_into(fmu, machine, goal, on_drive, &mut row) {
         row.failed = Some(format!("{e:#}"));
     }
     row
 }
 
-fn tune_into(fmu: &Fmu, machine: &Machine, goal: &MarginGoal, row: &mut MachineRow) -> Result<()> {
+fn tune_into(fmu: &Fmu, machine: &Machine, goal: &MarginGoal, on_drive: bool, row: &mut MachineRow) -> Result<()> {
     let parameters = machine.parameters();
-    let config = configuration(&parameters)?;
-    let (params, plant) = (config.control, config.plant);
+    let plant = configuration(&parameters)?.plant;
+    // Where the machine is measured: its twin, or a virtual drive with its plant.
+    let mut session = match on_drive {
+        true => Some(commissioned_session(&parameters, LineSettings::default())?),
+        false => None,
+    };
+    let mut on_fmu = OnFmu(fmu);
+    let mut on_vd = session.as_mut().map(|session| OnDrive { session, port: "an in-process virtual drive".into() });
+    let target: &mut dyn AxisUnderTest = match on_vd.as_mut() {
+        Some(d) => d,
+        None => &mut on_fmu,
+    };
+    // Measure, calibrate, design on the calibrated model.
+    let measured = measure_mechanics(target, &parameters, 0.2, crate::sweep::bench::VELOCITY)?;
+    // The truth: the machine's analytic model behind the drive as it ran (on a virtual drive
+    // with the current loop its commissioning designed).
+    let params = measured.params;
     let period = params.rates.velocity_period() as f64;
     let truth = Mechanics::of_plant(&plant);
     let true_drive = DriveDynamics::on_plant(&params, &plant);
     let true_plant = |f: f64| loop_plant(&true_drive, &truth, f);
-    // Measure, calibrate, design on the calibrated model.
-    let measured = super::measured_mechanics::measure_mechanics(
-        &mut super::axis_under_test::OnFmu(fmu),
-        &parameters,
-        0.2,
-        crate::sweep::bench::VELOCITY,
-    )?;
     let c = &measured.calibration;
     let m = c.mechanics;
     row.calibration_fit = [c.worst_gain_db, c.worst_phase_deg];
@@ -188,6 +219,13 @@ fn tune_into(fmu: &Fmu, machine: &Machine, goal: &MarginGoal, row: &mut MachineR
     let d = measured.design(goal, "chosen")?;
     let model = |f: f64| measured.model(f);
     row.tuning = Some(d.tuning);
+    // Verified where it was measured.
+    let v = verify(target, &with_tuning(&parameters, &d.tuning), crate::sweep::bench::VELOCITY, goal)?;
+    row.verified = v.passed;
+    row.verified_phase_margin_deg = v.phase_margin_deg;
+    row.verified_sensitivity_peak = v.sensitivity_peak;
+    // Calibrate's sweep and runs (the runs' schedule), autotune's sweep and verification.
+    row.drive_time_s = 2.0 * measured.drive_time_s + FrictionRuns::default().duration() + v.drive_time_s;
     // On the truth.
     let on_truth = margins_of(&d.tuning, &true_plant, period, 4000, &truth.features_hz())
         .ok_or_else(|| anyhow::anyhow!("the true plant's grid is too coarse for the design's loop"))?;
@@ -247,14 +285,15 @@ impl AutotuneBenchArgs {
         let machines =
             crate::bench::drawn::one_or_all(draw(self.plants, self.seed), self.plant, "--plant", "machines")?;
         let fmu = Fmu::load(&self.common.fmu.clone().unwrap_or_else(crate::paths::default_fmu))?;
-        let rows: Vec<MachineRow> =
-            crate::bench::drawn::run_each("autotune", self.common.json, &machines, |m| tune_one(&fmu, m, &goal));
+        let rows: Vec<MachineRow> = crate::bench::drawn::run_each("autotune", self.common.json, &machines, |m| {
+            tune_one(&fmu, m, &goal, self.virtual_drive)
+        });
         let finished = || rows.iter().filter(|r| r.failed.is_none());
         let worst = |f: &dyn Fn(&MachineRow) -> f64| finished().map(f).fold(f64::NEG_INFINITY, f64::max);
         let least = |f: &dyn Fn(&MachineRow) -> f64| finished().map(f).fold(f64::INFINITY, f64::min);
         let failed = rows.iter().filter(|r| r.failed.is_some()).count();
         let unstable = finished().filter(|r| !r.stable).count();
-        let mut rec = Recorder::new("autotune");
+        let mut rec = Recorder::new(if self.virtual_drive { "autotune-virtual-drive" } else { "autotune" });
         rec.equal("machines not tuned", failed as f64, 0.0, "machines");
         rec.equal("unstable on the true plant", unstable as f64, 0.0, "machines");
         rec.at_least("phase margin on the true plant", least(&|r| r.phase_margin_deg), 45.0, "deg");
@@ -271,6 +310,13 @@ impl AutotuneBenchArgs {
             80.0,
             "%",
         );
+        rec.equal(
+            "verification missed where measured",
+            finished().filter(|r| !r.verified).count() as f64,
+            0.0,
+            "machines",
+        );
+        rec.at_most("drive time, calibrate to verified", worst(&|r| r.drive_time_s), 60.0, "s");
         rec.at_most("motor inertia error", 100.0 * worst(&|r| r.calibration_errors[0]), 3.0, "%");
         rec.at_most("load inertia error", 100.0 * worst(&|r| r.calibration_errors[1]), 3.0, "%");
         rec.at_most("stiffness error", 100.0 * worst(&|r| r.calibration_errors[2]), 3.0, "%");
@@ -302,7 +348,7 @@ impl AutotuneBenchArgs {
             );
         } else {
             println!(
-                "{:>3} {:>5} {:>6} {:>6} {:>8} {:>7} {:>6} {:>6} {:>6} {:>6} {:>5} {:>6} {:>6} {:>6} {:>13} {:>13} {:>6}",
+                "{:>3} {:>5} {:>6} {:>6} {:>8} {:>7} {:>6} {:>6} {:>6} {:>6} {:>5} {:>6} {:>6} {:>6} {:>13} {:>13} {:>6} {:>5} {:>5}",
                 "#",
                 "ratio",
                 "fr Hz",
@@ -319,19 +365,23 @@ impl AutotuneBenchArgs {
                 "dflt",
                 "settle ms/dflt",
                 "load pk/dflt",
-                "cal %"
+                "cal %",
+                "vPM°",
+                "drv s"
             );
             for (k, r) in rows.iter().enumerate() {
                 let m = &r.machine;
                 match (&r.failed, &r.tuning) {
                     (None, Some(t)) => println!(
-                        "{k:>3} {:>5.2} {:>6.0} {:>6.3} {:>8.4} {:>7.1} {:>6.0} {:>6.0} {:>6.1} {:>6.1} {:>5.2} {:>6.0} {:>6.0} {:>6.0} {:>6.0}/{:<6.0} {:>6.3}/{:<6.3} {:>6.2}{}",
+                        "{k:>3} {:>5.2} {:>6.0} {:>6.3} {:>8.4} {:>7.1} {:>6.0} {:>6.0} {:>6.1} {:>6.1} {:>5.2} {:>6.0} {:>6.0} {:>6.0} {:>6.0}/{:<6.0} {:>6.3}/{:<6.3} {:>6.2} {:>5.1} {:>5.1}{}{}",
                         m.inertia_ratio, m.resonance_hz, m.damping_ratio, t.kp, t.ki, t.low_pass_hz,
                         t.notch.map_or(0.0, |n| n.hz), r.phase_margin_deg, r.gain_margin_db, r.sensitivity_peak,
                         r.bandwidth_hz, r.oracle_bandwidth_hz, r.default_bandwidth_hz,
                         1e3 * r.step_settling_s[0], 1e3 * r.step_settling_s[1], r.load_step_peak[0], r.load_step_peak[1],
                         100.0 * r.calibration_errors.iter().copied().fold(0.0, f64::max),
-                        if r.stable { "" } else { "  UNSTABLE" }
+                        r.verified_phase_margin_deg, r.drive_time_s,
+                        if r.stable { "" } else { "  UNSTABLE" },
+                        if r.verified { "" } else { "  VERIFICATION MISSED" }
                     ),
                     (e, _) => println!(
                         "{k:>3} {:>5.2} {:>6.0} {:>6.3}  FAILED: {}",
@@ -340,10 +390,11 @@ impl AutotuneBenchArgs {
                 }
             }
             rec.print_worst(&format!(
-                "worst over {} machines (seed {}, {} margins):",
+                "worst over {} machines (seed {}, {} margins, measured on {}):",
                 rows.len(),
                 self.seed,
-                self.margin
+                self.margin,
+                if self.virtual_drive { "a virtual drive" } else { "the FMU" }
             ));
         }
         Ok(passed)

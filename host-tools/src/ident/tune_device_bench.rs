@@ -16,9 +16,6 @@ use servo_axis::variables::name;
 
 use crate::circle::device::GOAL_COUNTS;
 use crate::cli::{progress_bar, Common};
-use crate::device::link::DeviceLink;
-use crate::device::session::DriveSession;
-use crate::fmu::configuration::configuration;
 use crate::fmu::runner::Fmu;
 use crate::fmu::scenario::Value;
 use crate::ident::bench::DAMPING;
@@ -27,13 +24,7 @@ use crate::ident::device_machine_end::{GOAL_FLOOR, GOAL_STANDARD_ERRORS};
 use crate::ident::identification::{absorber_parameters, true_anti_resonance, AxisModel};
 use crate::ident::tuning::{tune, write, Method};
 use crate::paths::{default_fmu, default_out};
-use crate::virtual_drive::flash::FileFlash;
-use crate::virtual_drive::in_process::InProcessDrive;
-use crate::virtual_drive::simulator::{VirtualDrive, VirtualDriveSettings};
 use crate::virtual_drive::uart::LineSettings;
-
-/// Time the bench gives each answer (the drive runs in this process: generous).
-const ANSWER_TIMEOUT: std::time::Duration = std::time::Duration::from_secs(10);
 
 /// The pairs of axes (anti-resonance in Hz, None: rigid): the demo's 40/70 Hz, the ends of
 /// the identification grid, and a rigid axis beside a resonant one.
@@ -120,13 +111,7 @@ fn check_axis(
     let mut parameters: BTreeMap<String, Value> =
         axis.fmu_parameters.iter().map(|(k, v)| (k.clone(), Value::Float(*v))).collect();
     parameters.insert(name::plant_acceleration_noise_std.into(), Value::Float(noise_std));
-    let c = configuration(&parameters)?;
-    let vd =
-        VirtualDriveSettings { defaults: c.control, plant: c.plant, line: LineSettings::default(), faults: vec![] };
-    let drive = VirtualDrive::power_on(&vd, FileFlash::in_memory())?;
-    let mut session = DriveSession::open(DeviceLink::new(InProcessDrive::new(drive), ANSWER_TIMEOUT))?;
-    session.baud = LineSettings::default().baud;
-    session.commission_with_defaults()?;
+    let mut session = crate::virtual_drive::in_process::commissioned_session(&parameters, LineSettings::default())?;
     let frame = out.join(format!("{}.corr.frame", axis.axis));
     let device = out.join(format!("device_{}_{}", axis.axis, if noise_std > 0.0 { "noise" } else { "clean" }));
     check_on_device(

@@ -69,3 +69,26 @@ impl<F: ParamFlash> Write for InProcessDrive<F> {
         Ok(())
     }
 }
+
+/// How long a bench waits for an in-process drive's answer (its time runs only as the host
+/// reads: generous, never reached by a drive that answers).
+const ANSWER_TIMEOUT: std::time::Duration = std::time::Duration::from_secs(10);
+
+/// A virtual drive in this process with the plant and drive defaults of `parameters` (FMU
+/// names), on `line`, its flash in memory, behind a session with its motor commissioned (as
+/// a user does first, kept in its RAM).
+pub fn commissioned_session(
+    parameters: &std::collections::BTreeMap<String, crate::fmu::scenario::Value>,
+    line: crate::virtual_drive::uart::LineSettings,
+) -> anyhow::Result<crate::device::session::DriveSession<InProcessDrive<crate::virtual_drive::flash::FileFlash>>> {
+    use crate::virtual_drive::simulator::VirtualDriveSettings;
+    let c = crate::fmu::configuration::configuration(parameters)?;
+    let baud = line.baud;
+    let settings = VirtualDriveSettings { defaults: c.control, plant: c.plant, line, faults: vec![] };
+    let drive = VirtualDrive::power_on(&settings, crate::virtual_drive::flash::FileFlash::in_memory())?;
+    let link = crate::device::link::DeviceLink::new(InProcessDrive::new(drive), ANSWER_TIMEOUT);
+    let mut session = crate::device::session::DriveSession::open(link)?;
+    session.baud = baud;
+    session.commission_with_defaults()?;
+    Ok(session)
+}
