@@ -147,6 +147,10 @@ fn the_autotune_bench_runs_a_small_draw_on_the_fmu_and_on_a_virtual_drive() {
             assert!(r["phase_margin_deg"].as_f64().unwrap() >= 45.0, "{arm}: {r}");
             assert!(r["verified_phase_margin_deg"].as_f64().unwrap() >= 45.0, "{arm}: {r}");
             assert!(r["drive_time_s"].as_f64().unwrap() <= 60.0, "{arm}: {r}");
+            let p = &r["position_on_truth"];
+            assert_eq!(p["stable"], true, "{arm}: {r}");
+            assert!(p["phase_margin_deg"].as_f64().unwrap() >= 45.0, "{arm}: {r}");
+            assert!(p["sensitivity_peak"].as_f64().unwrap() <= 1.7, "{arm}: {r}");
             for e in &r["calibration_errors"].as_array().unwrap()[..3] {
                 assert!(e.as_f64().unwrap() <= 0.03, "{arm}: {r}");
             }

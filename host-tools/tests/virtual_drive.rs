@@ -762,6 +762,8 @@ fn calibrate_and_autotune_over_the_virtual_drive_tune_its_machine_verify_it_ther
         let (a, b) = (p["params"]["velocity"][gain].as_f64().unwrap(), tuning[gain].as_f64().unwrap());
         assert!((a / b - 1.0).abs() < 1e-6, "drive {gain} {a}, designed {b}");
     }
+    let kp = (p["params"]["position"]["kp"].as_f64().unwrap(), r["position"]["kp"].as_f64().unwrap());
+    assert!((kp.0 / kp.1 - 1.0).abs() < 1e-6, "drive position kp {}, designed {}", kp.0, kp.1);
     assert!(dir.join("out/open-loop.svg").exists() && dir.join("out/autotune.toml").exists());
     drop(vd);
     // Not commissioned: refused, naming what to do.

@@ -141,6 +141,10 @@ pub struct MachineRow {
     /// Drive time of the workflow (s): calibrate's sweep and constant-speed runs, autotune's
     /// sweep and its verification.
     pub drive_time_s: f64,
+    /// The position loop designed around the tuning, and its margins around the tuning on the
+    /// true plant.
+    pub position: Option<super::position_loop_design::PositionTuning>,
+    pub position_on_truth: Option<super::margins::Margins>,
 }
 
 /// The torque-point sweep on the twin: its readings (`Y/U` at each frequency).
@@ -173,6 +177,8 @@ pub fn tune_one(fmu: &Fmu, machine: &Machine, goal: &MarginGoal, on_drive: bool)
         verified_phase_margin_deg: f64::NAN,
         verified_sensitivity_peak: f64::NAN,
         drive_time_s: f64::NAN,
+        position: None,
+        position_on_truth: None,
     };
     if let Err(e) = tune_into(fmu, machine, goal, on_drive, &mut row) {
         row.failed = Some(format!("{e:#}"));
@@ -219,8 +225,11 @@ fn tune_into(fmu: &Fmu, machine: &Machine, goal: &MarginGoal, on_drive: bool, ro
     let d = measured.design(goal, "chosen")?;
     let model = |f: f64| measured.model(f);
     row.tuning = Some(d.tuning);
+    let position = measured.design_position(&d.tuning, goal)?;
+    row.position = Some(position);
     // Verified where it was measured.
-    let v = verify(target, &with_tuning(&parameters, &d.tuning), crate::sweep::bench::VELOCITY, goal)?;
+    let tuned = with_tuning(&parameters, &d.tuning, Some(&position));
+    let v = verify(target, &tuned, crate::sweep::bench::VELOCITY, goal)?;
     row.verified = v.passed;
     row.verified_phase_margin_deg = v.phase_margin_deg;
     row.verified_sensitivity_peak = v.sensitivity_peak;
@@ -234,6 +243,21 @@ fn tune_into(fmu: &Fmu, machine: &Machine, goal: &MarginGoal, on_drive: bool, ro
     row.gain_margin_db = on_truth.gain_margin_db;
     row.sensitivity_peak = on_truth.sensitivity_peak;
     row.bandwidth_hz = on_truth.bandwidth_hz;
+    // The position loop around the tuning on the truth.
+    let true_closed = |f: f64| {
+        let l = d.tuning.response(f, period) * true_plant(f);
+        l / (1.0 + l)
+    };
+    let rates = super::position_loop_design::PositionRates::of(&params);
+    let true_position = |f: f64| {
+        super::position_loop_design::position_loop_per_gain(
+            &true_closed,
+            &|f| true_drive.velocity_estimate(f),
+            &rates,
+            f,
+        )
+    };
+    row.position_on_truth = super::position_loop_design::position_margins(&true_position, &rates, position.kp);
     // The oracle: the same search on the truth, refined by a compass search.
     // Its starts: the search's best on the truth, and this design where it keeps the margins
     // on the truth (the oracle is the best design found, whatever the start).
@@ -304,6 +328,43 @@ impl AutotuneBenchArgs {
             goal.sensitivity_peak + 0.1,
             "",
         );
+        let median = |f: &dyn Fn(&MachineRow) -> f64| {
+            let mut v: Vec<f64> = finished().map(f).filter(|x| x.is_finite()).collect();
+            v.sort_by(f64::total_cmp);
+            v.get(v.len() / 2).copied().unwrap_or(f64::NAN)
+        };
+        let position = |r: &MachineRow, f: &dyn Fn(&super::margins::Margins) -> f64| {
+            r.position_on_truth.as_ref().map_or(f64::NAN, f)
+        };
+        rec.equal(
+            "position loop unstable on the true plant",
+            finished().filter(|r| !r.position_on_truth.is_some_and(|m| m.stable)).count() as f64,
+            0.0,
+            "machines",
+        );
+        rec.at_least(
+            "position loop's phase margin on the true plant",
+            least(&|r| position(r, &|m| m.phase_margin_deg)),
+            45.0,
+            "deg",
+        );
+        rec.at_least(
+            "position loop's gain margin on the true plant",
+            least(&|r| position(r, &|m| m.gain_margin_db)),
+            6.0,
+            "dB",
+        );
+        rec.at_most(
+            "position loop's Ms on the true plant",
+            worst(&|r| position(r, &|m| m.sensitivity_peak)),
+            goal.sensitivity_peak + 0.1,
+            "",
+        );
+        rec.info(
+            "position loop's bandwidth over the velocity loop's (median)",
+            median(&|r| position(r, &|m| m.bandwidth_hz) / r.bandwidth_hz),
+            "x",
+        );
         rec.at_least(
             "bandwidth over the oracle's",
             100.0 * least(&|r| r.bandwidth_hz / r.oracle_bandwidth_hz),
@@ -322,11 +383,6 @@ impl AutotuneBenchArgs {
         rec.at_most("stiffness error", 100.0 * worst(&|r| r.calibration_errors[2]), 3.0, "%");
         rec.at_most("resonance error", 100.0 * worst(&|r| r.calibration_errors[3]), 1.0, "%");
         rec.at_most("anti-resonance error", 100.0 * worst(&|r| r.calibration_errors[4]), 1.0, "%");
-        let median = |f: &dyn Fn(&MachineRow) -> f64| {
-            let mut v: Vec<f64> = finished().map(f).filter(|x| x.is_finite()).collect();
-            v.sort_by(f64::total_cmp);
-            v.get(v.len() / 2).copied().unwrap_or(f64::NAN)
-        };
         rec.info(
             "load-step peak, default gains over tuned (median)",
             median(&|r| r.load_step_peak[1] / r.load_step_peak[0]),

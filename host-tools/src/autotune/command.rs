@@ -12,6 +12,7 @@ use super::axis_under_test::{AxisUnderTest, OnDrive, OnFmu};
 use super::design::{Design, MarginGoal};
 use super::disturbance_response;
 use super::measured_mechanics::{measure_mechanics, MeasuredMechanics};
+use super::position_loop_design::PositionTuning;
 use super::report::AutotuneReport;
 use super::responses::{LoopModel, Responses};
 use super::verification::{verify, with_tuning, Verification};
@@ -98,13 +99,14 @@ impl AutotuneArgs {
                 let mechanics = measure_mechanics(&mut OnFmu(&fmu), &parameters, self.amplitude, self.velocity)?;
                 pb.set_position(400);
                 let design = mechanics.design(&goal, &self.margin)?;
+                let position = mechanics.design_position(&design.tuning, &goal)?;
                 pb.set_position(550);
-                let tuned = with_tuning(&parameters, &design.tuning);
+                let tuned = with_tuning(&parameters, &design.tuning, Some(&position));
                 let twin = verify(&mut OnFmu(&fmu), &tuned, self.velocity, &goal)?;
                 pb.set_position(900);
                 let responses = self.responses(&fmu, &tuned, &mechanics, &design)?;
                 pb.finish_and_clear();
-                self.report(&out, &goal, (&mechanics, &design, &responses), &twin, None)?
+                self.report(&out, &goal, (&mechanics, &design, &position, &responses), &twin, None)?
             }
             Some(mut session) => self.on_drive(&fmu, &mut session, &parameters, &goal, &out, &pb)?,
         };
@@ -129,11 +131,12 @@ impl AutotuneArgs {
         let mechanics = measure_mechanics(&mut drive, parameters, self.amplitude, self.velocity)?;
         pb.set_position(400);
         let design = mechanics.design(goal, &self.margin)?;
+        let position = mechanics.design_position(&design.tuning, goal)?;
         // The twin of the measured machine: the drive's commissioning, the calibrated mechanics.
         let twin_fmu = fmu.as_twin_of(&before)?;
         let mut on_twin = parameters.clone();
         on_twin.extend(mechanics.plant_parameters().map(|(k, v)| (k.to_string(), v)));
-        let twin_tuned = with_tuning(&on_twin, &design.tuning);
+        let twin_tuned = with_tuning(&on_twin, &design.tuning, Some(&position));
         let twin = verify(&mut OnFmu(&twin_fmu), &twin_tuned, self.velocity, goal)?;
         pb.set_position(550);
         let responses = self.responses(&twin_fmu, &twin_tuned, &mechanics, &design)?;
@@ -141,12 +144,12 @@ impl AutotuneArgs {
             // Never on the drive: the twin of its own machine missed.
             pb.finish_and_clear();
             drive.session.set_params(&before)?;
-            let passed = self.report(out, goal, (&mechanics, &design, &responses), &twin, None)?;
+            let passed = self.report(out, goal, (&mechanics, &design, &position, &responses), &twin, None)?;
             eprintln!("the tuning misses the margins on the twin of the drive's machine: the drive was not given it");
             return Ok(passed);
         }
         // On the drive: its open loop measured with the tuning.
-        let tuned = with_tuning(parameters, &design.tuning);
+        let tuned = with_tuning(parameters, &design.tuning, Some(&position));
         let on_drive = verify(&mut drive, &tuned, self.velocity, goal);
         pb.finish_and_clear();
         let on_drive = match on_drive {
@@ -172,7 +175,7 @@ impl AutotuneArgs {
             drive.session.set_params(&before)?;
             None
         };
-        self.report(out, goal, (&mechanics, &design, &responses), &twin, Some((&on_drive, saved)))
+        self.report(out, goal, (&mechanics, &design, &position, &responses), &twin, Some((&on_drive, saved)))
     }
 
     /// The predicted step and load step (tuned and before) on the calibrated model, and the
@@ -195,7 +198,7 @@ impl AutotuneArgs {
         &self,
         out: &std::path::Path,
         goal: &MarginGoal,
-        (mechanics, design, responses): (&MeasuredMechanics, &Design, &Responses),
+        (mechanics, design, position, responses): (&MeasuredMechanics, &Design, &PositionTuning, &Responses),
         twin: &Verification,
         drive: Option<(&Verification, Option<u32>)>,
     ) -> Result<bool> {
@@ -204,6 +207,7 @@ impl AutotuneArgs {
             goal_ms: goal.sensitivity_peak,
             mechanics,
             design,
+            position,
             responses,
             twin,
             drive,

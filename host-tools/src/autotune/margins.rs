@@ -33,8 +33,17 @@ pub struct Margins {
 }
 
 /// The margins of `loop_gain` sampled at `frequencies` (Hz, increasing); `None` when the grid
-/// is too coarse to follow the phase of `1 + L`.
+/// is too coarse to follow the phase of `1 + L`. The loop has two integrators (the velocity
+/// loop's: the PI's and the rigid body's); [`margins_with_integrators`] takes another count.
 pub fn margins(frequencies: &[f64], loop_gain: &[Complex64]) -> Option<Margins> {
+    margins_with_integrators(frequencies, loop_gain, 2)
+}
+
+/// [`margins`] of a loop with `integrators` poles at `z = 1` and no other unstable pole (the
+/// position loop around a stable velocity loop has one): its closed loop is stable exactly
+/// when the phase of `1 + L` turns by `integrators · 90°` from the lowest frequency, where it
+/// starts at `−integrators · 90°`, to the highest.
+pub fn margins_with_integrators(frequencies: &[f64], loop_gain: &[Complex64], integrators: u32) -> Option<Margins> {
     assert_eq!(frequencies.len(), loop_gain.len());
     let n = frequencies.len();
     if n < 2 {
@@ -50,11 +59,12 @@ pub fn margins(frequencies: &[f64], loop_gain: &[Complex64]) -> Option<Margins> 
         sensitivity_peak_hz: f64::NAN,
         bandwidth_hz: f64::NAN,
     };
-    // The phase of 1 + L, unwrapped, counted from −180° (where the two integrators put it as
-    // the frequency goes to 0; below the grid's first point |L| ≫ 1 and it turns from there
-    // to its first value without wrapping).
+    // The phase of 1 + L, unwrapped, counted from −integrators · 90° (where the integrators
+    // put it as the frequency goes to 0; below the grid's first point |L| ≫ 1 and it turns
+    // from there to its first value without wrapping).
+    let quarter_turns = integrators as f64 * std::f64::consts::FRAC_PI_2;
     let mut last = (1.0 + loop_gain[0]).arg();
-    let mut turned = wrap(last + std::f64::consts::PI);
+    let mut turned = wrap(last + quarter_turns);
     for k in 0..n {
         let l = loop_gain[k];
         let f = frequencies[k];
@@ -98,7 +108,7 @@ pub fn margins(frequencies: &[f64], loop_gain: &[Complex64]) -> Option<Margins> 
             }
         }
     }
-    m.stable = (turned - std::f64::consts::PI).abs() < 0.5 * std::f64::consts::PI;
+    m.stable = (turned - quarter_turns).abs() < 0.5 * std::f64::consts::PI;
     Some(m)
 }
 

@@ -15,6 +15,7 @@ use super::calibration::{calibrate, Calibration, PlantPoint};
 use super::design::{design, Design, MarginGoal, SearchGrid};
 use super::design_checks::{check_determined, check_linear, check_resonance_measured, check_riding_speed};
 use super::drive_dynamics::DriveDynamics;
+use super::position_loop_design::{design_position_loop, position_loop_per_gain, PositionRates, PositionTuning};
 use super::velocity_controller::VelocityTuning;
 use super::{loop_plant, plant_points};
 use crate::analysis::response_point::ResponsePoint;
@@ -100,6 +101,23 @@ impl MeasuredMechanics {
             &self.calibration.mechanics.features_hz(),
         )
         .ok_or_else(|| anyhow!("no velocity-loop design keeps the {margin} margins on the calibrated model"))
+    }
+
+    /// The position loop's gain and feed-forward around the velocity loop of `tuning` on the
+    /// calibrated model, keeping `goal` with the design's reserve.
+    pub fn design_position(&self, tuning: &VelocityTuning, goal: &MarginGoal) -> Result<PositionTuning> {
+        let per_gain = |f: f64| self.position_loop_per_gain(tuning, f);
+        design_position_loop(&per_gain, &PositionRates::of(&self.params), &goal.with_reserve())
+            .ok_or_else(|| anyhow!("no position-loop gain keeps the margins around the tuned velocity loop"))
+    }
+
+    /// The position loop per unit gain around `tuning` on the calibrated model.
+    pub fn position_loop_per_gain(&self, tuning: &VelocityTuning, f: f64) -> Complex64 {
+        let closed = |f: f64| {
+            let l = tuning.response(f, self.period()) * self.model(f);
+            l / (1.0 + l)
+        };
+        position_loop_per_gain(&closed, &|f| self.drive.velocity_estimate(f), &PositionRates::of(&self.params), f)
     }
 
     /// The calibrated mechanics as plant parameters (a twin of the measured machine).

@@ -13,6 +13,7 @@ pub mod drive_dynamics;
 pub mod margins;
 pub mod measured_mechanics;
 pub mod mechanics;
+pub mod position_loop_design;
 pub mod prediction;
 pub mod report;
 pub mod responses;

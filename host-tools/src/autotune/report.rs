@@ -12,6 +12,7 @@ use super::design::Design;
 use super::margins::log_grid;
 use super::measured_mechanics::MeasuredMechanics;
 use super::plant_response;
+use super::position_loop_design::PositionTuning;
 use super::prediction::StepPrediction;
 use super::responses::{plot_loops, Responses};
 use super::verification::Verification;
@@ -23,6 +24,7 @@ pub struct AutotuneReport<'a> {
     pub goal_ms: f64,
     pub mechanics: &'a MeasuredMechanics,
     pub design: &'a Design,
+    pub position: &'a PositionTuning,
     pub responses: &'a Responses,
     /// On the twin (the FMU: the plant, or a drive's measured machine).
     pub twin: &'a Verification,
@@ -46,8 +48,8 @@ impl AutotuneReport<'_> {
         let (mech, d) = (self.mechanics, self.design);
         let m = &mech.calibration.mechanics;
         let period = mech.period();
-        let mut toml = String::from("# servo autotune: the velocity loop's gains and torque filters\n[parameters]\n");
-        for (k, v) in d.tuning.parameters() {
+        let mut toml = String::from("# servo autotune: the velocity loop's gains and torque filters, the position loop's gain and\n# feed-forward\n[parameters]\n");
+        for (k, v) in d.tuning.parameters().into_iter().chain(self.position.parameters()) {
             writeln!(toml, "\"{k}\" = {v:e}")?;
         }
         std::fs::write(out.join("autotune.toml"), &toml)?;
@@ -114,6 +116,7 @@ impl AutotuneReport<'_> {
             "plant": plant_json,
             "calibration": mech.calibration,
             "design": self.design,
+            "position": self.position,
             "before": mech.during,
             "verification": self.twin,
             "drive_verification": self.drive.map(|(v, _)| v),
@@ -160,6 +163,17 @@ impl AutotuneReport<'_> {
         println!(
             "  designed: bandwidth {:.0} Hz, crossover {:.0} Hz, phase margin {:.1}°, gain margin {:.1} dB, Ms {:.2}",
             dm.bandwidth_hz, dm.crossover_hz, dm.phase_margin_deg, dm.gain_margin_db, dm.sensitivity_peak
+        );
+        let p = self.position;
+        println!(
+            "position loop: kp {:.1} 1/s (was {:.1}), velocity feed-forward {:.2}; phase margin {:.1}°, gain margin {:.1} dB, Ms {:.2}, bandwidth {:.0} Hz",
+            p.kp,
+            mech.params.position.kp,
+            p.velocity_feedforward,
+            p.margins.phase_margin_deg,
+            p.margins.gain_margin_db,
+            p.margins.sensitivity_peak,
+            p.margins.bandwidth_hz
         );
         print_verification("on the twin", self.twin);
         if let Some((v, saved)) = self.drive {

@@ -59,13 +59,18 @@ pub fn verify(
     })
 }
 
-/// `parameters` with `tuning`'s values in them.
+/// `parameters` with the velocity loop's `tuning` and the position loop's (where designed)
+/// in them.
 pub fn with_tuning(
     parameters: &BTreeMap<String, Value>,
     tuning: &super::velocity_controller::VelocityTuning,
+    position: Option<&super::position_loop_design::PositionTuning>,
 ) -> BTreeMap<String, Value> {
     let mut tuned = parameters.clone();
     for (k, v) in tuning.parameters() {
+        tuned.insert(k, Value::Float(v));
+    }
+    for (k, v) in position.map(|p| p.parameters()).into_iter().flatten() {
         tuned.insert(k, Value::Float(v));
     }
     tuned
