@@ -20,6 +20,7 @@ use crate::fmu::plant_file::{machine_parameters, write_plant_file};
 use crate::fmu::runner::Fmu;
 use crate::fmu::trace::Trace;
 use crate::paths::{default_fmu, default_out};
+use servo_axis::plant::PlantParams;
 
 /// Fit the twin to the machine: a torque-point sweep measures the plant (torque command →
 /// velocity estimate) and the two-inertia mechanics are fitted to it (motor and load
@@ -140,28 +141,40 @@ impl CalibrateArgs {
             &["torque".to_string()],
         )?;
         // The twin's truth, beside each value (NaN on a drive: none known).
-        let p = truth.unwrap_or_else(|| nan_plant(&config.plant));
-        let truth = Mechanics::of_plant(&p);
         let (fr, fa) = m.resonance_hz();
-        let (tr, ta) = truth.resonance_hz();
         let e = c.mechanics.relative_errors;
         let f = &c.friction;
+        let truth_of = |value: &dyn Fn(&PlantParams) -> f64| truth.as_ref().map_or(f64::NAN, value);
+        let mechanics_truth = |value: &dyn Fn(&Mechanics) -> f64| truth_of(&|p| value(&Mechanics::of_plant(p)));
         let rows = [
-            ("motor inertia", "kg·m²", m.motor_inertia, e[0] * m.motor_inertia, truth.motor_inertia),
-            ("load inertia", "kg·m²", m.load_inertia, e[1] * m.load_inertia, truth.load_inertia),
-            ("shaft stiffness", "N·m/rad", m.shaft_stiffness, e[2] * m.shaft_stiffness, truth.shaft_stiffness),
-            ("shaft damping", "N·m·s/rad", m.shaft_damping, e[3] * m.shaft_damping, truth.shaft_damping),
-            ("resonance", "Hz", fr, f64::NAN, tr),
-            ("anti-resonance", "Hz", fa, f64::NAN, ta),
-            ("Coulomb friction", "N·m", f.coulomb, f.coulomb_error, p.motor_coulomb + p.load_coulomb),
-            ("viscous friction", "N·m·s/rad", f.viscous, f.viscous_error, p.motor_viscous + p.load_viscous),
+            ("motor inertia", "kg·m²", m.motor_inertia, e[0] * m.motor_inertia, mechanics_truth(&|t| t.motor_inertia)),
+            ("load inertia", "kg·m²", m.load_inertia, e[1] * m.load_inertia, mechanics_truth(&|t| t.load_inertia)),
             (
-                "constant load torque",
-                "N·m",
-                f.load_torque,
-                f.load_torque_error,
-                if p.motor_inertia.is_nan() { f64::NAN } else { 0.0 },
+                "shaft stiffness",
+                "N·m/rad",
+                m.shaft_stiffness,
+                e[2] * m.shaft_stiffness,
+                mechanics_truth(&|t| t.shaft_stiffness),
             ),
+            (
+                "shaft damping",
+                "N·m·s/rad",
+                m.shaft_damping,
+                e[3] * m.shaft_damping,
+                mechanics_truth(&|t| t.shaft_damping),
+            ),
+            ("resonance", "Hz", fr, f64::NAN, mechanics_truth(&|t| t.resonance_hz().0)),
+            ("anti-resonance", "Hz", fa, f64::NAN, mechanics_truth(&|t| t.resonance_hz().1)),
+            ("Coulomb friction", "N·m", f.coulomb, f.coulomb_error, truth_of(&|p| p.motor_coulomb + p.load_coulomb)),
+            (
+                "viscous friction",
+                "N·m·s/rad",
+                f.viscous,
+                f.viscous_error,
+                truth_of(&|p| p.motor_viscous + p.load_viscous),
+            ),
+            // The twin's plant has no constant load torque.
+            ("constant load torque", "N·m", f.load_torque, f.load_torque_error, truth_of(&|_| 0.0)),
         ];
         let table: Vec<serde_json::Value> = rows
             .iter()
@@ -207,22 +220,4 @@ impl CalibrateArgs {
         println!("plant file: {} (give it to any command with --plant)", out.join("calibrated-plant.toml").display());
         Ok(true)
     }
-}
-
-/// A plant whose machine values are unknown (NaN): a drive's, with no truth to compare.
-fn nan_plant(base: &servo_axis::plant::PlantParams) -> servo_axis::plant::PlantParams {
-    let mut p = *base;
-    for v in [
-        &mut p.motor_inertia,
-        &mut p.load_inertia,
-        &mut p.shaft_stiffness,
-        &mut p.shaft_damping,
-        &mut p.motor_coulomb,
-        &mut p.load_coulomb,
-        &mut p.motor_viscous,
-        &mut p.load_viscous,
-    ] {
-        *v = f64::NAN;
-    }
-    p
 }
