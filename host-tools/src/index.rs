@@ -10,7 +10,7 @@ use crate::cli::Common;
 /// Gather every experiment's results in the out folder into one page, out/index.html.
 ///
 /// Reads what `servo run`, `servo sequence`, `servo sweep`, `servo accdec`, `servo ident`,
-/// `servo tune` and `servo circle` wrote under --out (default out/): their key numbers, their
+/// `servo tune`, `servo circle`, `servo calibrate` and `servo autotune` wrote under --out (default out/): their key numbers, their
 /// checks with the verdicts, the fmpy cross-checks, the plots and the files behind them; and
 /// the benches' figures against their goals (bench/*.json). Anything failed or not met is
 /// listed at the top of the page (a bench goal not met on this machine does not change the
@@ -34,6 +34,8 @@ impl IndexArgs {
             crate::circle::index::section(&root),
             crate::accdec::index::section(&root),
             crate::device::index::section(&root),
+            crate::calibrate::index::section(&root),
+            crate::autotune::index::section(&root),
         ]
         .into_iter()
         .flatten()

@@ -15,7 +15,8 @@ use host_tools::fmu::plant_file::machine_parameters;
 /// values in it, and `servo autotune --plant` taking it.
 #[test]
 fn calibrate_recovers_an_unshipped_machine_and_its_plant_file_runs() {
-    let out = tmp("calibrate");
+    let root = tmp("calibrate");
+    let out = root.join("calibrate");
     let truth = [
         ("plant.load_inertia", 1.25e-4),
         ("plant.shaft_stiffness", 60.0),
@@ -52,9 +53,20 @@ fn calibrate_recovers_an_unshipped_machine_and_its_plant_file_runs() {
     assert!(rel(plant.load_inertia, value("load inertia")) < 1e-9);
     assert!(rel(plant.motor_coulomb + plant.load_coulomb, value("Coulomb friction")) < 1e-9);
     // And a command runs the calibrated twin from it.
-    let tuned = tmp("calibrate-autotune");
+    let tuned = root.join("autotune");
     let o = servo().arg("autotune").on_fmu(&tuned).arg("--plant").arg(&file).arg("--json").output().unwrap();
     assert_eq!(o.status.code(), Some(0), "{}", String::from_utf8_lossy(&o.stderr));
+    // The report gathers both: their numbers, the verification's verdict, the plots.
+    let o = servo().args(["index", "--json", "--out"]).arg(&root).output().unwrap();
+    assert_eq!(o.status.code(), Some(0), "{}", String::from_utf8_lossy(&o.stderr));
+    let index: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+    let html = std::fs::read_to_string(root.join("index.html")).unwrap();
+    let beside_truth = html.contains("from the twin&#x27;s truth") || html.contains("from the twin's truth");
+    assert!(html.contains("load inertia") && beside_truth, "calibration numbers missing");
+    assert!(html.contains("autotune/nyquist.svg") && html.contains("calibrate/friction.svg"), "plots missing");
+    assert!(html.contains("position loop"), "the position loop's gains missing");
+    assert_eq!(index["failed_checks"], 0, "{index}");
+    assert!(index["checks"].as_u64().unwrap() >= 1, "the verification's verdict is missing: {index}");
 }
 
 /// Bad input is refused before anything runs, with the reason: a speed of 0 or above the

@@ -10,6 +10,7 @@ pub mod command;
 pub mod design;
 pub mod design_checks;
 pub mod drive_dynamics;
+pub mod index;
 pub mod margins;
 pub mod measured_mechanics;
 pub mod mechanics;

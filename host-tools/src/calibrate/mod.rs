@@ -9,6 +9,7 @@ pub mod command;
 pub mod friction;
 pub mod friction_runs;
 pub mod friction_runs_on_drive;
+pub mod index;
 
 use std::collections::BTreeMap;
 
