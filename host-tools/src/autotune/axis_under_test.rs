@@ -111,7 +111,12 @@ impl<T: DrivePort> AxisUnderTest for OnDrive<'_, T> {
         Ok(MeasuredSweep {
             points: sweep.stream.into_iter().filter(|p| p.gain_db.is_finite() && p.phase_deg.is_finite()).collect(),
             drive_time_s: START_AT + sweep.measurement_time_s,
-            torque_limited: torque_limited_points(&sweep.trace, &limits),
+            // The stream's U is the torque command at the torque point only (a velocity at the
+            // feedback point): the feedback sweep's torque is not read there.
+            torque_limited: match point {
+                InjectionPoint::TorqueCommand => torque_limited_points(&sweep.trace, &limits),
+                _ => 0,
+            },
             voltage_limited: sweep.limited_hz.len(),
             torque_limit: limits.lowest(),
         })

@@ -8,7 +8,7 @@ use std::collections::BTreeMap;
 
 use anyhow::{Context, Result};
 
-use super::axis_under_test::{AxisUnderTest, OnDrive, OnFmu};
+use super::axis_under_test::{OnDrive, OnFmu};
 use super::design::{Design, MarginGoal};
 use super::disturbance_response;
 use super::measured_mechanics::{measure_mechanics, MeasuredMechanics};
@@ -75,6 +75,37 @@ pub struct AutotuneArgs {
     pub common: Common,
 }
 
+/// `before` with the velocity loop's `tuning` and the position loop's in place of its own.
+fn tuned_set(
+    before: &control_core::Params,
+    tuning: &super::velocity_controller::VelocityTuning,
+    position: &PositionTuning,
+) -> control_core::Params {
+    let mut p = *before;
+    p.velocity.kp = tuning.kp as f32;
+    p.velocity.ki = tuning.ki as f32;
+    p.filters.low_pass_hz = tuning.low_pass_hz as f32;
+    let notch = tuning.notch.unwrap_or(super::velocity_controller::Notch { hz: 0.0, q: 1.0, depth: 0.0 });
+    p.filters.notch_hz = notch.hz as f32;
+    p.filters.notch_q = notch.q as f32;
+    p.filters.notch_depth = notch.depth as f32;
+    p.position.kp = position.kp as f32;
+    p.position.velocity_feedforward = position.velocity_feedforward as f32;
+    p
+}
+
+/// What a tuning on a drive came to: the measurement and design, the twin's verification, and
+/// the drive's with the save's record (none where the twin missed and the drive was not given
+/// the tuning).
+struct DriveOutcome {
+    mechanics: MeasuredMechanics,
+    design: Design,
+    position: PositionTuning,
+    responses: Responses,
+    twin: Verification,
+    drive: Option<(Verification, Option<u32>)>,
+}
+
 impl AutotuneArgs {
     pub fn run(&self) -> Result<bool> {
         let goal = MarginGoal::named(&self.margin).ok_or_else(|| {
@@ -124,58 +155,83 @@ impl AutotuneArgs {
         out: &std::path::Path,
         pb: &indicatif::ProgressBar,
     ) -> Result<bool> {
-        let port = self.target.device.clone().unwrap_or_default();
         // The drive's parameters as they are (faults and a missing commissioning named first).
         let before = session.params_for_twin()?;
+        // Kept before anything changes: a restore that the drive refuses (a fault latched)
+        // leaves the user this file.
+        let kept = out.join("drive-params-before.json");
+        std::fs::write(&kept, serde_json::to_string_pretty(&before)?)
+            .with_context(|| format!("writing {}", kept.display()))?;
+        let tuned = self.tune_drive(fmu, session, &before, parameters, goal, pb);
+        pb.finish_and_clear();
+        let o = tuned.map_err(|e| {
+            // Whatever stopped it (a refusal, a fault, a lost link, a failed save), the drive
+            // gets its parameters back, and nothing is saved.
+            match session.set_params(&before) {
+                Ok(()) => e.context("the drive's parameters are back as they were; nothing saved"),
+                Err(r) => e.context(format!(
+                    "the drive could not be given its parameters back ({r:#}): it runs the parameters of the \
+                     experiment that stopped, unsaved; power-cycle it to reload the set in its flash (the set it \
+                     ran before is in {})",
+                    kept.display()
+                )),
+            }
+        })?;
+        let results = (&o.mechanics, &o.design, &o.position, &o.responses);
+        let passed = self.report(out, goal, results, &o.twin, o.drive.as_ref().map(|(v, s)| (v, *s)))?;
+        if o.drive.is_none() {
+            eprintln!("the tuning misses the margins on the twin of the drive's machine: the drive was not given it");
+        }
+        Ok(passed)
+    }
+
+    /// [`Self::on_drive`]'s steps up to the report; an error leaves restoring the drive to the
+    /// caller.
+    fn tune_drive<T: DrivePort>(
+        &self,
+        fmu: &Fmu,
+        session: &mut DriveSession<T>,
+        before: &control_core::Params,
+        parameters: &BTreeMap<String, Value>,
+        goal: &MarginGoal,
+        pb: &indicatif::ProgressBar,
+    ) -> Result<DriveOutcome> {
+        let port = self.target.device.clone().unwrap_or_default();
         let mut drive = OnDrive { session, port };
         let mechanics = measure_mechanics(&mut drive, parameters, self.amplitude, self.velocity)?;
         pb.set_position(400);
         let design = mechanics.design(goal, &self.margin)?;
         let position = mechanics.design_position(&design.tuning, goal)?;
         // The twin of the measured machine: the drive's commissioning, the calibrated mechanics.
-        let twin_fmu = fmu.as_twin_of(&before)?;
+        let twin_fmu = fmu.as_twin_of(before)?;
         let mut on_twin = parameters.clone();
         on_twin.extend(mechanics.plant_parameters().map(|(k, v)| (k.to_string(), v)));
         let twin_tuned = with_tuning(&on_twin, &design.tuning, Some(&position));
         let twin = verify(&mut OnFmu(&twin_fmu), &twin_tuned, self.velocity, goal)?;
         pb.set_position(550);
         let responses = self.responses(&twin_fmu, &twin_tuned, &mechanics, &design)?;
+        let outcome = |twin, drive| DriveOutcome { mechanics, design, position, responses, twin, drive };
         if !twin.passed {
             // Never on the drive: the twin of its own machine missed.
-            pb.finish_and_clear();
-            drive.session.set_params(&before)?;
-            let passed = self.report(out, goal, (&mechanics, &design, &position, &responses), &twin, None)?;
-            eprintln!("the tuning misses the margins on the twin of the drive's machine: the drive was not given it");
-            return Ok(passed);
+            drive.session.set_params(before)?;
+            return Ok(outcome(twin, None));
         }
         // On the drive: its open loop measured with the tuning.
         let tuned = with_tuning(parameters, &design.tuning, Some(&position));
-        let on_drive = verify(&mut drive, &tuned, self.velocity, goal);
-        pb.finish_and_clear();
-        let on_drive = match on_drive {
-            Ok(v) => v,
-            Err(e) => {
-                // Whatever stopped it, the drive gets its parameters back.
-                let restored = drive.session.set_params(&before);
-                return Err(match restored {
-                    Ok(()) => e.context("the drive's parameters are back as they were"),
-                    Err(r) => e.context(format!("and restoring the drive's parameters failed too: {r:#}")),
-                });
-            }
-        };
+        let on_drive = verify(&mut drive, &tuned, self.velocity, goal)?;
         let saved = if on_drive.passed {
-            let params = drive.params(&tuned)?;
-            drive.session.set_params(&params)?;
+            // The drive's own set with the tuning in it (not the run's other settings).
+            drive.session.set_params(&tuned_set(before, &design.tuning, &position))?;
             if self.no_save {
                 None
             } else {
                 Some(drive.session.save_params()?)
             }
         } else {
-            drive.session.set_params(&before)?;
+            drive.session.set_params(before)?;
             None
         };
-        self.report(out, goal, (&mechanics, &design, &position, &responses), &twin, Some((&on_drive, saved)))
+        Ok(outcome(twin, Some((on_drive, saved))))
     }
 
     /// The predicted step and load step (tuned and before) on the calibrated model, and the
@@ -211,6 +267,7 @@ impl AutotuneArgs {
             responses,
             twin,
             drive,
+            on_drive: self.target.device.is_some(),
         };
         report.write_files(out)?;
         if self.common.json {
@@ -220,4 +277,31 @@ impl AutotuneArgs {
         }
         Ok(report.passed())
     }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::autotune::velocity_controller::{Notch, VelocityTuning};
+
+    /// The set a drive saves and the parameters the twin and the verification run with carry
+    /// the same tuning: the FMU's configuration of the default parameters with the tuning in
+    /// them is the default set with the tuning put in its fields.
+    #[test]
+    fn the_saved_set_holds_the_tuning_the_parameters_name() {
+        let tuning = VelocityTuning {
+            kp: 0.1234,
+            ki: 17.5,
+            low_pass_hz: 900.0,
+            notch: Some(Notch { hz: 263.0, q: 0.7, depth: 0.1 }),
+        };
+        let margins = crate::autotune::margins::margins(&[1.0, 2.0], &[Complex::new(10.0, 0.0); 2]).unwrap();
+        let position = PositionTuning { kp: 177.8, velocity_feedforward: 1.0, margins };
+        let named = crate::fmu::configuration::configuration(&with_tuning(&BTreeMap::new(), &tuning, Some(&position)))
+            .unwrap()
+            .control;
+        assert_eq!(tuned_set(&control_core::Params::default(), &tuning, &position), named);
+    }
+
+    type Complex = num_complex::Complex64;
 }

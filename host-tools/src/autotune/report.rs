@@ -30,6 +30,8 @@ pub struct AutotuneReport<'a> {
     pub twin: &'a Verification,
     /// On the drive (`--device`), with the save's sequence number where it was saved.
     pub drive: Option<(&'a Verification, Option<u32>)>,
+    /// The machine is a drive's (`--device`): its drive time is the drive's sweeps only.
+    pub on_drive: bool,
 }
 
 impl AutotuneReport<'_> {
@@ -38,10 +40,15 @@ impl AutotuneReport<'_> {
         self.twin.passed && self.drive.is_none_or(|(v, _)| v.passed)
     }
 
-    /// Drive time of every sweep and step (s).
+    /// Drive time of every sweep and step on the machine (s): on a drive its own sweeps, on
+    /// the FMU the twin's sweeps and step.
     pub fn drive_time_s(&self) -> f64 {
-        self.mechanics.drive_time_s
-            + self.drive.map_or(self.twin.drive_time_s + self.responses.measured.drive_time_s, |(v, _)| v.drive_time_s)
+        let verification = match (self.on_drive, self.drive) {
+            (true, Some((v, _))) => v.drive_time_s,
+            (true, None) => 0.0,
+            (false, _) => self.twin.drive_time_s + self.responses.measured.drive_time_s,
+        };
+        self.mechanics.drive_time_s + verification
     }
 
     pub fn write_files(&self, out: &Path) -> Result<()> {
@@ -204,7 +211,12 @@ impl AutotuneReport<'_> {
 }
 
 fn print_verification(on: &str, v: &Verification) {
-    if v.phase_margin_deg.is_nan() {
+    if v.limited_points > 0 {
+        println!(
+            "  verified {on}: {} frequencies measured with the output at a limit (voltage circle or torque): not the loop's response, FAILS",
+            v.limited_points
+        );
+    } else if v.phase_margin_deg.is_nan() {
         println!("  verified {on}: NO gain crossover among the measured points, the margin is not shown");
     } else {
         println!(

@@ -29,6 +29,9 @@ pub struct Verification {
     /// NaN where no gain crossover was measured.
     pub phase_margin_deg: f64,
     pub sensitivity_peak: f64,
+    /// Frequencies measured with the output at a limit (the drive's voltage circle, or the
+    /// torque limit): not the linear loop's response, so the verification fails.
+    pub limited_points: usize,
     pub passed: bool,
     pub drive_time_s: f64,
 }
@@ -47,13 +50,16 @@ pub fn verify(
     let hz: Vec<f64> = sweep.points.iter().map(|p| p.frequency).collect();
     let l: Vec<Complex64> = sweep.points.iter().map(ResponsePoint::to_complex).collect();
     let (phase_margin_deg, sensitivity_peak) = crossover_margins(&hz, &l);
+    let limited_points = sweep.voltage_limited + sweep.torque_limited;
     // NaN compares false: no crossover measured, not passed.
-    let passed = phase_margin_deg >= goal.phase_margin_deg && sensitivity_peak <= goal.sensitivity_peak;
+    let passed =
+        phase_margin_deg >= goal.phase_margin_deg && sensitivity_peak <= goal.sensitivity_peak && limited_points == 0;
     Ok(Verification {
         on: target.name(),
         open_loop: sweep.points,
         phase_margin_deg,
         sensitivity_peak,
+        limited_points,
         passed,
         drive_time_s: sweep.drive_time_s,
     })

@@ -35,7 +35,8 @@ use servo_axis::plant::PlantParams;
 ///
 /// With --device PORT the machine is the drive's: the sweep and the runs are the drive's
 /// (its velocity estimate and torque command read over the link), and the plant file is the
-/// twin of that machine (the values without a truth to compare).
+/// twin of that machine (the values without a truth to compare). The drive gets its
+/// parameters back at the end.
 ///
 /// Examples: servo calibrate --set plant.load_inertia=3e-4 --set plant.shaft_stiffness=80
 ///           servo calibrate --device /dev/ttyACM0
@@ -85,9 +86,16 @@ impl CalibrateArgs {
         let (c, truth, drive_params) = match self.target.session()? {
             Some(mut session) => {
                 let port = self.target.device.clone().unwrap_or_default();
+                // The drive's parameters as they are; given back when the runs end, whatever
+                // happened.
+                let before = session.params_for_twin()?;
                 let mut drive = OnDrive { session: &mut session, port };
-                let c = calibrate_machine(&mut drive, &parameters, &how)?;
-                (c, None, drive.params(&parameters)?)
+                let calibrated =
+                    calibrate_machine(&mut drive, &parameters, &how).and_then(|c| Ok((c, drive.params(&parameters)?)));
+                let restored = session.set_params(&before);
+                let (c, ran) = calibrated?;
+                restored.context("giving the drive its parameters back")?;
+                (c, None, ran)
             }
             None => {
                 how.friction_runs.validate(&parameters)?;

@@ -11,6 +11,7 @@ use anyhow::{bail, Context, Result};
 use control_core::axis::Mode;
 
 use super::friction::SpeedPoint;
+use crate::device::velocity_ramp::RAMP_STEP;
 use crate::fmu::configuration::configuration;
 use crate::fmu::runner::Fmu;
 use crate::fmu::scenario::{Event, Scenario, Value};
@@ -43,9 +44,6 @@ pub(crate) struct Segment {
     pub from: f64,
     pub to: f64,
 }
-
-/// Time between the velocity command's updates on a ramp (s).
-pub(crate) const RAMP_STEP: f64 = 0.0025;
 
 impl FrictionRuns {
     /// The speeds in the order they are run (forward, then backward) with their windows.

@@ -1,17 +1,18 @@
 //! The constant-speed runs on a drive over its link (`servo calibrate --device`), on the
-//! schedule the FMU's runs follow (`FrictionRuns::segments`): the velocity command ramped in
-//! steps of `RAMP_STEP` of the drive's time, each speed left to settle, then the drive's
-//! velocity estimate and torque command read from its telemetry through the window (whole
+//! schedule the FMU's runs follow (`FrictionRuns::segments`): the velocity command ramped
+//! (`DriveSession::ramp_velocity`), each speed left to settle, then the drive's velocity
+//! estimate and torque command read from its telemetry through the window (whole
 //! revolutions) and averaged over the drive's time (each reading held until the next, by
-//! the drive's tick stamps: a poll is not periodic). The axis ramps back to 0 and rests at
-//! the end, and on a fault the run stops naming it.
+//! the drive's tick stamps: a poll is not periodic). The readings are a few hundred a second,
+//! not the FMU's every sample: a ripple at the rotation's multiples is sampled, not averaged
+//! out, and the fit's standard errors are the larger for it. The axis ramps back to 0 and
+//! rests at the end; on a fault the rest command is still sent and the fault named.
 
 use anyhow::{bail, Result};
-use control_core::protocol::Request;
-use control_core::{Commands, Mode, Params};
+use control_core::Params;
 
 use super::friction::SpeedPoint;
-use super::friction_runs::{FrictionRuns, RAMP_STEP};
+use super::friction_runs::FrictionRuns;
 use crate::device::link::DrivePort;
 use crate::device::session::DriveSession;
 
@@ -28,18 +29,20 @@ pub fn run_on_drive<T: DrivePort>(
     runs.validate_within(params.position.velocity_limit as f64)?;
     session.set_params(params)?;
     let result = measure(session, runs);
-    // Whatever happened: back to 0 along a ramp (from where the axis is), then at rest.
-    let stop = ramp_down(session, runs.acceleration).and_then(|()| session.rest().map(|_| ()));
+    // Whatever happened: back to 0 along a ramp where it can, then at rest (the rest command
+    // sent even with a fault latched).
+    let stop = session.stop_and_rest();
     let points = result?;
     stop?;
     Ok(points)
 }
 
 fn measure<T: DrivePort>(session: &mut DriveSession<T>, runs: &FrictionRuns) -> Result<Vec<SpeedPoint>> {
-    let mut last = 0.0;
+    // From the speed the axis has (a sweep before may have left it coasting).
+    let mut last = checked(session.telemetry()?)?.velocity_estimate as f64;
     let mut points = Vec::new();
     for s in runs.segments() {
-        ramp(session, last, s.speed, runs.acceleration)?;
+        session.ramp_velocity(last, s.speed, runs.acceleration).map_err(in_the_runs)?;
         last = s.speed;
         session.wait(runs.settle_s)?;
         points.push(window(session, s.to - s.from)?);
@@ -47,31 +50,8 @@ fn measure<T: DrivePort>(session: &mut DriveSession<T>, runs: &FrictionRuns) -> 
     Ok(points)
 }
 
-/// The velocity command from `from` to `to` rad/s at `acceleration` rad/s², a step every
-/// `RAMP_STEP` of the drive's time.
-fn ramp<T: DrivePort>(session: &mut DriveSession<T>, from: f64, to: f64, acceleration: f64) -> Result<()> {
-    let duration = (to - from).abs() / acceleration;
-    let start = checked(session.telemetry()?)?.tick;
-    loop {
-        let t = checked(session.telemetry()?)?;
-        let elapsed = t.tick.saturating_sub(start) as f64 / session.tick_hz;
-        let share = if duration > 0.0 { (elapsed / duration).min(1.0) } else { 1.0 };
-        let velocity = (from + (to - from) * share) as f32;
-        session.order(
-            Request::SetCommands(Commands { mode: Mode::Velocity, velocity, ..Commands::default() }),
-            "a speed",
-        )?;
-        if share >= 1.0 {
-            return Ok(());
-        }
-        session.link.pause(std::time::Duration::from_secs_f64(RAMP_STEP));
-    }
-}
-
-/// From the axis's present speed to 0.
-fn ramp_down<T: DrivePort>(session: &mut DriveSession<T>, acceleration: f64) -> Result<()> {
-    let now = session.telemetry()?.velocity_reference as f64;
-    ramp(session, if now.is_finite() { now } else { 0.0 }, 0.0, acceleration)
+fn in_the_runs(e: anyhow::Error) -> anyhow::Error {
+    e.context("during the constant-speed runs")
 }
 
 /// The velocity estimate and torque command averaged over `seconds` of the drive's time.
@@ -83,6 +63,9 @@ fn window<T: DrivePort>(session: &mut DriveSession<T>, seconds: f64) -> Result<S
     loop {
         session.link.pause(POLL);
         let t = checked(session.telemetry()?)?;
+        if t.tick < held.tick {
+            bail!("the drive's tick went back from {} to {} (did it restart?)", held.tick, t.tick);
+        }
         // The reading held from its tick to the next one's (or the window's end).
         let until = t.tick.min(end);
         let span = until.saturating_sub(held.tick) as f64;

@@ -40,8 +40,10 @@ pub struct DeviceArgs {
 #[derive(clap::Args, Clone, Debug)]
 pub struct TargetArgs {
     /// Run on a drive instead of the FMU: its serial port (a board's /dev/ttyACM0, or the port
-    /// `servo virtual-drive` prints). The FMU then runs the same experiment with the drive's
-    /// parameters as its twin, and the report shows how far the two differ
+    /// `servo virtual-drive` prints). The FMU then runs the drive's twin, with the drive's
+    /// commissioned motor and current loop: beside the drive's run for an experiment (the
+    /// report shows how far the two differ), or to check a tuning before the drive gets it
+    /// (`servo autotune`)
     #[arg(long, value_name = "PORT")]
     pub device: Option<String>,
     /// Baud rate of the drive's link (the firmware's USART2: 921600)

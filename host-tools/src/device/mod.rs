@@ -14,3 +14,4 @@ pub mod session;
 pub mod telemetry_trace;
 pub mod timed_run;
 pub mod twin;
+pub mod velocity_ramp;

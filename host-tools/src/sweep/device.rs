@@ -6,7 +6,7 @@
 //! parameters (the run's, the sweep's settings included, the IHM08M1's protective limits);
 //! the riding speed; `START_AT` of the drive's time; streaming on; `StartSweep`; telemetry
 //! polled until the drive says done (bounded by the longest the sweep can take, in the drive's
-//! time, and by a drive that stops ticking); streaming off; the axis back at rest.
+//! time, and by a drive that stops ticking); streaming off; the axis ramped to 0 and at rest.
 
 use std::path::Path;
 
@@ -145,9 +145,10 @@ pub fn sweep_on_drive_after<T: crate::device::link::DrivePort>(
         }
         Ok(t.sweep.state == SweepState::Done)
     });
-    // Whatever happened, the axis goes back to rest and stops streaming.
-    let stop =
-        session.order(Request::Stream { enabled: false }, "streaming off").and_then(|()| session.rest().map(|_| ()));
+    // Whatever happened, the axis stops streaming and goes back to rest (ramped down from its
+    // riding speed where it rides without a fault).
+    let streaming_off = session.order(Request::Stream { enabled: false }, "streaming off");
+    let stop = session.stop_and_rest().map(|_| ()).and(streaming_off);
     let end = end?;
     stop?;
     let batches = session.take_samples();

@@ -1,0 +1,77 @@
+//! The velocity command ramped over the link, and the axis brought to rest along a ramp: what
+//! the constant-speed runs move between speeds with, and how a velocity-mode experiment ends
+//! (a drop to zero torque at speed would leave the shaft coasting; a step to 0 rings a soft
+//! shaft).
+
+use std::time::{Duration, Instant};
+
+use anyhow::{bail, Result};
+use control_core::axis::{Mode, Telemetry};
+use control_core::protocol::Request;
+use control_core::Commands;
+
+use crate::device::link::DrivePort;
+use crate::device::session::{DriveSession, STALLED};
+
+/// Time between the velocity command's updates on a ramp (s).
+pub const RAMP_STEP: f64 = 0.0025;
+/// The deceleration an experiment ends with (rad/s²).
+pub const STOP_ACCELERATION: f64 = 2000.0;
+
+impl<T: DrivePort> DriveSession<T> {
+    /// The velocity command from `from` to `to` rad/s at `acceleration` rad/s², a step every
+    /// `RAMP_STEP` (of the drive's time on a virtual drive in this process, of the host's on a
+    /// port), timed by the drive's tick. A latched fault, a tick that stops or goes back (a
+    /// drive that rebooted) ends it with an error.
+    pub fn ramp_velocity(&mut self, from: f64, to: f64, acceleration: f64) -> Result<()> {
+        if !(from.is_finite() && to.is_finite() && acceleration.is_finite() && acceleration > 0.0) {
+            bail!("a ramp from {from} to {to} rad/s at {acceleration} rad/s² is not a ramp");
+        }
+        let duration = (to - from).abs() / acceleration;
+        let first = without_faults(self.telemetry()?)?;
+        let (start, mut last, mut moved) = (first.tick, first.tick, Instant::now());
+        loop {
+            let t = without_faults(self.telemetry()?)?;
+            if t.tick < last {
+                bail!("the drive's tick went back from {last} to {} during a ramp (did it restart?)", t.tick);
+            }
+            if t.tick != last {
+                (last, moved) = (t.tick, Instant::now());
+            } else if moved.elapsed() > STALLED {
+                bail!("the drive's tick counter stopped at {} during a ramp (is it still running?)", t.tick);
+            }
+            let elapsed = (t.tick - start) as f64 / self.tick_hz;
+            let share = if duration > 0.0 { (elapsed / duration).min(1.0) } else { 1.0 };
+            let velocity = (from + (to - from) * share) as f32;
+            let command = Commands { mode: Mode::Velocity, velocity, ..Commands::default() };
+            self.order(Request::SetCommands(command), "a speed on the ramp")?;
+            if share >= 1.0 {
+                return Ok(());
+            }
+            self.link.pause(Duration::from_secs_f64(RAMP_STEP));
+        }
+    }
+
+    /// The axis to rest: in velocity mode without a fault, first ramped from its commanded
+    /// speed to 0; then torque mode at zero torque, always (a fault latched, the rest command
+    /// is still sent before the fault is named).
+    pub fn stop_and_rest(&mut self) -> Result<Telemetry> {
+        let ramp = match self.telemetry() {
+            Ok(t) if t.mode == Mode::Velocity && !t.faults.any() && t.velocity_reference != 0.0 => {
+                self.ramp_velocity(t.velocity_reference as f64, 0.0, STOP_ACCELERATION)
+            }
+            _ => Ok(()),
+        };
+        let rest = self.rest();
+        ramp?;
+        rest
+    }
+}
+
+/// A reading with no fault latched, or the fault by name.
+pub fn without_faults(t: Telemetry) -> Result<Telemetry> {
+    if t.faults.any() {
+        bail!("the drive latched a fault: {}", t.faults);
+    }
+    Ok(t)
+}
