@@ -38,7 +38,19 @@ pub const SECTIONS: [(&str, &[&str]); 3] = [
         ],
     ),
     ("The FMU", &["fmu", "platforms", "fmi-campaign", "fault-campaign"]),
-    ("The drive", &["commission", "firmware", "device", "saves", "ident-device", "tune-device", "robustness"]),
+    (
+        "The drive",
+        &[
+            "commission",
+            "firmware",
+            "device",
+            "saves",
+            "ident-device",
+            "tune-device",
+            "autotune-virtual-drive",
+            "robustness",
+        ],
+    ),
 ];
 const OTHER: &str = "Other benches";
 const HEADER: &str =
