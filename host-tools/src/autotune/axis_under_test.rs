@@ -34,9 +34,13 @@ pub trait AxisUnderTest {
         parameters: &BTreeMap<String, Value>,
         velocity: f64,
     ) -> Result<MeasuredSweep>;
-    /// The constant-speed runs friction is read from (one point per speed and direction).
-    fn constant_speeds(&mut self, runs: &FrictionRuns, parameters: &BTreeMap<String, Value>)
-        -> Result<Vec<SpeedPoint>>;
+    /// The constant-speed runs friction is read from: one point per speed and direction, and
+    /// the drive time they took (s).
+    fn constant_speeds(
+        &mut self,
+        runs: &FrictionRuns,
+        parameters: &BTreeMap<String, Value>,
+    ) -> Result<(Vec<SpeedPoint>, f64)>;
     /// Where the measurements ran, for messages ("the FMU", "the drive at /dev/ttyACM0").
     fn name(&self) -> String;
 }
@@ -64,8 +68,8 @@ impl AxisUnderTest for OnFmu<'_> {
         &mut self,
         runs: &FrictionRuns,
         parameters: &BTreeMap<String, Value>,
-    ) -> Result<Vec<SpeedPoint>> {
-        Ok(runs.run(self.0, parameters)?.0)
+    ) -> Result<(Vec<SpeedPoint>, f64)> {
+        Ok((runs.run(self.0, parameters)?.0, runs.duration()))
     }
 
     fn name(&self) -> String {
@@ -126,7 +130,7 @@ impl<T: DrivePort> AxisUnderTest for OnDrive<'_, T> {
         &mut self,
         runs: &FrictionRuns,
         parameters: &BTreeMap<String, Value>,
-    ) -> Result<Vec<SpeedPoint>> {
+    ) -> Result<(Vec<SpeedPoint>, f64)> {
         let params = self.params(parameters)?;
         crate::calibrate::friction_runs_on_drive::run_on_drive(self.session, runs, &params)
             .with_context(|| format!("the constant-speed runs on the drive at {}", self.port))

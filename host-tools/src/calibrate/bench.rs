@@ -9,7 +9,8 @@ use serde::Serialize;
 use servo_axis::variables::name;
 
 use super::friction_runs::FrictionRuns;
-use super::{calibrate_on_fmu, Measurement};
+use super::{calibrate_machine, calibrate_on_fmu, Measurement};
+use crate::autotune::axis_under_test::{AxisUnderTest, OnDrive};
 use crate::autotune::bench::Machine;
 use crate::autotune::drive_dynamics::DriveDynamics;
 use crate::autotune::mechanics::Mechanics;
@@ -20,6 +21,8 @@ use crate::fmu::configuration::configuration;
 use crate::fmu::runner::Fmu;
 use crate::fmu::scenario::Value;
 use crate::random::XorShift64Star;
+use crate::virtual_drive::in_process::commissioned_session;
+use crate::virtual_drive::uart::LineSettings;
 
 /// The twin calibrated from measurements, over drawn machines: inertia ratio 0.2–5, shaft
 /// resonance 50–500 Hz, damping ratio 0.01–0.1 (the autotune bench's draw), Coulomb friction
@@ -41,6 +44,11 @@ pub struct CalibrateBenchArgs {
     /// Run only this machine of the draw (its index in the table, from 0)
     #[arg(long)]
     pub plant: Option<u32>,
+    /// Calibrate each machine on a virtual drive in this process (the drive's application on
+    /// the simulated board, its motor commissioned first) instead of the FMU: the path
+    /// `servo calibrate --device` takes, the constant-speed runs ramped and read over the link
+    #[arg(long)]
+    pub virtual_drive: bool,
     #[command(flatten)]
     pub common: Common,
 }
@@ -111,7 +119,8 @@ pub struct CalibrationRow {
     pub drive_time_s: f64,
 }
 
-fn calibrate_one(fmu: &Fmu, m: &FrictionMachine) -> CalibrationRow {
+/// One machine calibrated on its twin or (`on_drive`) on a virtual drive with its plant.
+fn calibrate_one(fmu: &Fmu, m: &FrictionMachine, on_drive: bool) -> CalibrationRow {
     let mut row = CalibrationRow {
         machine: *m,
         failed: None,
@@ -127,7 +136,16 @@ fn calibrate_one(fmu: &Fmu, m: &FrictionMachine) -> CalibrationRow {
             velocity: crate::sweep::bench::VELOCITY,
             friction_runs: FrictionRuns::default(),
         };
-        let c = calibrate_on_fmu(fmu, &parameters, &how)?;
+        // The drive parameters the measurement ran with: the drive's own on a virtual drive
+        // (its commissioned current loop), what the fit took out.
+        let (c, ran) = if on_drive {
+            let mut session = commissioned_session(&parameters, LineSettings::default())?;
+            let mut drive = OnDrive { session: &mut session, port: "an in-process virtual drive".into() };
+            let c = calibrate_machine(&mut drive, &parameters, &how)?;
+            (c, drive.params(&parameters)?)
+        } else {
+            (calibrate_on_fmu(fmu, &parameters, &how)?, config.control)
+        };
         let truth = Mechanics::of_plant(&config.plant);
         let fitted = c.mechanics.mechanics;
         let rel = |a: f64, b: f64| (a / b - 1.0).abs();
@@ -142,7 +160,7 @@ fn calibrate_one(fmu: &Fmu, m: &FrictionMachine) -> CalibrationRow {
             rel(c.friction.coulomb, m.motor_coulomb + m.load_coulomb),
             rel(c.friction.viscous, m.motor_viscous + m.load_viscous),
         ];
-        let drive = DriveDynamics::as_configured(&config.control);
+        let drive = DriveDynamics::as_configured(&ran);
         let (mut gain, mut phase) = (0.0f64, 0.0f64);
         for p in c.plant_points.iter().filter(|p| p.hz < 1000.0) {
             let e = (p.response / plant_response(&drive, &fitted, p.hz)).ln();
@@ -167,12 +185,13 @@ impl CalibrateBenchArgs {
         let machines =
             crate::bench::drawn::one_or_all(draw(self.plants, self.seed), self.plant, "--plant", "machines")?;
         let fmu = Fmu::load(&self.common.fmu.clone().unwrap_or_else(crate::paths::default_fmu))?;
-        let rows: Vec<CalibrationRow> =
-            crate::bench::drawn::run_each("calibrate", self.common.json, &machines, |m| calibrate_one(&fmu, m));
+        let rows: Vec<CalibrationRow> = crate::bench::drawn::run_each("calibrate", self.common.json, &machines, |m| {
+            calibrate_one(&fmu, m, self.virtual_drive)
+        });
         let finished = || rows.iter().filter(|r| r.failed.is_none());
         let worst = |f: &dyn Fn(&CalibrationRow) -> f64| finished().map(f).fold(f64::NEG_INFINITY, f64::max);
         let failed = rows.iter().filter(|r| r.failed.is_some()).count();
-        let mut rec = Recorder::new("calibrate");
+        let mut rec = Recorder::new(if self.virtual_drive { "calibrate-virtual-drive" } else { "calibrate" });
         rec.equal("machines not calibrated", failed as f64, 0.0, "machines");
         for (i, label, goal) in [
             (0, "motor inertia error", 3.0),
@@ -235,7 +254,12 @@ impl CalibrateBenchArgs {
                 ),
             }
         }
-        rec.print_worst(&format!("worst over {} machines (seed {}):", rows.len(), self.seed));
+        rec.print_worst(&format!(
+            "worst over {} machines (seed {}, calibrated on {}):",
+            rows.len(),
+            self.seed,
+            if self.virtual_drive { "a virtual drive" } else { "the FMU" }
+        ));
         Ok(passed)
     }
 }

@@ -17,24 +17,25 @@ use crate::device::link::DrivePort;
 use crate::device::session::DriveSession;
 
 /// How often the window's telemetry is read (the drive's time).
-const POLL: std::time::Duration = std::time::Duration::from_millis(2);
+const POLL: std::time::Duration = std::time::Duration::from_millis(1);
 
 /// `runs` on the drive behind `session` with `params` (the drive's, commissioned): one point
-/// per speed and direction.
+/// per speed and direction, and the drive time from the first ramp to rest (s).
 pub fn run_on_drive<T: DrivePort>(
     session: &mut DriveSession<T>,
     runs: &FrictionRuns,
     params: &Params,
-) -> Result<Vec<SpeedPoint>> {
+) -> Result<(Vec<SpeedPoint>, f64)> {
     runs.validate_within(params.position.velocity_limit as f64)?;
     session.set_params(params)?;
+    let start = session.telemetry()?.tick;
     let result = measure(session, runs);
     // Whatever happened: back to 0 along a ramp where it can, then at rest (the rest command
     // sent even with a fault latched).
     let stop = session.stop_and_rest();
     let points = result?;
-    stop?;
-    Ok(points)
+    let end = stop?.tick;
+    Ok((points, end.saturating_sub(start) as f64 / session.tick_hz))
 }
 
 fn measure<T: DrivePort>(session: &mut DriveSession<T>, runs: &FrictionRuns) -> Result<Vec<SpeedPoint>> {

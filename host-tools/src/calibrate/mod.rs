@@ -120,7 +120,7 @@ pub fn calibrate_machine(
     let limit = target.params(parameters)?.position.velocity_limit as f64;
     how.friction_runs.validate_within(limit)?;
     let measured = measure_mechanics(target, parameters, how.amplitude, how.velocity)?;
-    let speed_points = target.constant_speeds(&how.friction_runs, parameters)?;
+    let (speed_points, runs_time_s) = target.constant_speeds(&how.friction_runs, parameters)?;
     let friction = fit_friction(&speed_points).context("fitting the friction")?;
     Ok(MachineCalibration {
         mechanics: measured.calibration,
@@ -128,7 +128,7 @@ pub fn calibrate_machine(
         readings: measured.readings,
         plant_points: measured.points,
         speed_points,
-        drive_time_s: measured.drive_time_s + how.friction_runs.duration(),
+        drive_time_s: measured.drive_time_s + runs_time_s,
     })
 }
 
