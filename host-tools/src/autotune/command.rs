@@ -112,9 +112,7 @@ impl AutotuneArgs {
             anyhow::anyhow!("--margin must be conservative, standard or aggressive (got `{}`)", self.margin)
         })?;
         super::design_checks::check_riding_speed(self.velocity)?;
-        if !(self.amplitude.is_finite() && self.amplitude > 0.0) {
-            anyhow::bail!("--amplitude must be a positive torque (N·m), got {}", self.amplitude);
-        }
+        super::design_checks::check_torque_amplitude(self.amplitude)?;
         if self.no_save && self.target.device.is_none() {
             anyhow::bail!("--no-save is for a tuning loaded on a drive (--device PORT)");
         }

@@ -29,6 +29,14 @@ pub fn check_riding_speed(velocity: f64) -> Result<()> {
     Ok(())
 }
 
+/// A torque-point sweep's amplitude (N·m): finite and positive.
+pub fn check_torque_amplitude(amplitude: f64) -> Result<()> {
+    if !(amplitude.is_finite() && amplitude > 0.0) {
+        bail!("--amplitude must be a positive torque (N·m), got {amplitude}");
+    }
+    Ok(())
+}
+
 /// The sweep ran below the torque limit and the voltage circle throughout.
 pub fn check_linear(sweep: &MeasuredSweep, amplitude: f64) -> Result<()> {
     if sweep.voltage_limited > 0 {

@@ -13,7 +13,9 @@ use num_complex::Complex64;
 use super::axis_under_test::AxisUnderTest;
 use super::calibration::{calibrate, Calibration, PlantPoint};
 use super::design::{design, Design, MarginGoal, SearchGrid};
-use super::design_checks::{check_determined, check_linear, check_resonance_measured, check_riding_speed};
+use super::design_checks::{
+    check_determined, check_linear, check_resonance_measured, check_riding_speed, check_torque_amplitude,
+};
 use super::drive_dynamics::DriveDynamics;
 use super::position_loop_design::{design_position_loop, position_loop_per_gain, PositionRates, PositionTuning};
 use super::velocity_controller::VelocityTuning;
@@ -47,9 +49,7 @@ pub fn measure_mechanics(
     velocity: f64,
 ) -> Result<MeasuredMechanics> {
     check_riding_speed(velocity)?;
-    if !(amplitude.is_finite() && amplitude > 0.0) {
-        anyhow::bail!("--amplitude must be a positive torque (N·m), got {amplitude}");
-    }
+    check_torque_amplitude(amplitude)?;
     let params = target.params(parameters)?;
     let sweep = target
         .sweep(InjectionPoint::TorqueCommand, amplitude, parameters, velocity)

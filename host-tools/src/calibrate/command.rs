@@ -9,7 +9,7 @@ use super::friction_runs::FrictionRuns;
 use super::{calibrate_machine, calibrate_on_fmu, Measurement};
 use crate::analysis::response_point::ResponsePoint;
 use crate::autotune::axis_under_test::{AxisUnderTest, OnDrive};
-use crate::autotune::design_checks::check_riding_speed;
+use crate::autotune::design_checks::{check_riding_speed, check_torque_amplitude};
 use crate::autotune::drive_dynamics::DriveDynamics;
 use crate::autotune::margins::log_grid;
 use crate::autotune::mechanics::Mechanics;
@@ -67,9 +67,7 @@ pub struct CalibrateArgs {
 
 impl CalibrateArgs {
     pub fn run(&self) -> Result<bool> {
-        if !(self.amplitude.is_finite() && self.amplitude > 0.0) {
-            anyhow::bail!("--amplitude must be a positive torque (N·m), got {}", self.amplitude);
-        }
+        check_torque_amplitude(self.amplitude)?;
         check_riding_speed(self.velocity)?;
         let parameters = machine_parameters(self.plant.as_deref(), &self.set)?;
         let config = configuration(&parameters)?;

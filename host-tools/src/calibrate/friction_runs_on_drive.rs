@@ -15,6 +15,7 @@ use super::friction::SpeedPoint;
 use super::friction_runs::FrictionRuns;
 use crate::device::link::DrivePort;
 use crate::device::session::DriveSession;
+use crate::device::velocity_ramp::without_faults;
 
 /// How often the window's telemetry is read (the drive's time).
 const POLL: std::time::Duration = std::time::Duration::from_millis(1);
@@ -40,7 +41,7 @@ pub fn run_on_drive<T: DrivePort>(
 
 fn measure<T: DrivePort>(session: &mut DriveSession<T>, runs: &FrictionRuns) -> Result<Vec<SpeedPoint>> {
     // From the speed the axis has (a sweep before may have left it coasting).
-    let mut last = checked(session.telemetry()?)?.velocity_estimate as f64;
+    let mut last = without_faults(session.telemetry()?).map_err(in_the_runs)?.velocity_estimate as f64;
     let mut points = Vec::new();
     for s in runs.segments() {
         session.ramp_velocity(last, s.speed, runs.acceleration).map_err(in_the_runs)?;
@@ -57,13 +58,13 @@ fn in_the_runs(e: anyhow::Error) -> anyhow::Error {
 
 /// The velocity estimate and torque command averaged over `seconds` of the drive's time.
 fn window<T: DrivePort>(session: &mut DriveSession<T>, seconds: f64) -> Result<SpeedPoint> {
-    let first = checked(session.telemetry()?)?;
+    let first = without_faults(session.telemetry()?).map_err(in_the_runs)?;
     let end = first.tick + (seconds * session.tick_hz).round() as u64;
     let (mut sums, mut held) = ((0.0, 0.0, 0.0), first);
     let mut moved = std::time::Instant::now();
     loop {
         session.link.pause(POLL);
-        let t = checked(session.telemetry()?)?;
+        let t = without_faults(session.telemetry()?).map_err(in_the_runs)?;
         if t.tick < held.tick {
             bail!("the drive's tick went back from {} to {} (did it restart?)", held.tick, t.tick);
         }
@@ -87,12 +88,4 @@ fn window<T: DrivePort>(session: &mut DriveSession<T>, seconds: f64) -> Result<S
         bail!("no telemetry arrived during a friction run's window");
     }
     Ok(SpeedPoint { velocity: sums.0 / sums.2, torque: sums.1 / sums.2 })
-}
-
-/// A reading with no fault latched, or the fault by name.
-fn checked(t: control_core::axis::Telemetry) -> Result<control_core::axis::Telemetry> {
-    if t.faults.any() {
-        bail!("the drive latched a fault during the constant-speed runs: {}", t.faults);
-    }
-    Ok(t)
 }

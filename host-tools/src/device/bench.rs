@@ -7,17 +7,11 @@ use anyhow::Result;
 use serde::Serialize;
 
 use crate::cli::{progress_bar, Common};
-use crate::device::link::DeviceLink;
-use crate::device::session::DriveSession;
-use crate::fmu::configuration::configuration;
 use crate::fmu::runner::Fmu;
 use crate::fmu::sweep_run::SweepRun;
 use crate::paths::default_fmu;
 use crate::sweep::device::sweep_on_drive;
 use crate::sweep::device_report::{compare_with_twin, twin_sweep};
-use crate::virtual_drive::flash::FileFlash;
-use crate::virtual_drive::in_process::InProcessDrive;
-use crate::virtual_drive::simulator::{VirtualDrive, VirtualDriveSettings};
 use crate::virtual_drive::uart::LineSettings;
 
 /// Goals: every sample arrives; the drive and its twin agree as two measurements of the same
@@ -65,9 +59,6 @@ pub fn measured_to_target(se: &crate::sweep::standard_error::ResponseStandardErr
     se.gain_db <= PRECISION.0 && se.phase_deg <= PRECISION.1
 }
 
-/// Time the bench gives each answer (the drive runs in this process: generous).
-const ANSWER_TIMEOUT: std::time::Duration = std::time::Duration::from_secs(10);
-
 #[derive(Clone, Debug, Serialize)]
 pub struct LinkRow {
     pub point: String,
@@ -105,18 +96,11 @@ pub fn bench(fmu: &Fmu, baud: u32, mut progress: impl FnMut(f64)) -> Result<Vec<
         };
         let settings = control_core::phase_shifted_sweep::SweepParams { point, amplitude, ..Default::default() };
         let run = SweepRun { settings, parameters: Default::default(), velocity: 50.0 };
-        let c = configuration(&run.parameters)?;
-        let vd = VirtualDriveSettings {
-            defaults: c.control,
-            plant: c.plant,
-            line: LineSettings { baud, ..LineSettings::default() },
-            faults: vec![],
-        };
-        let drive = VirtualDrive::power_on(&vd, FileFlash::in_memory())?;
-        let capacity = drive.line_capacity();
-        let mut session = DriveSession::open(DeviceLink::new(InProcessDrive::new(drive), ANSWER_TIMEOUT))?;
-        session.baud = baud;
-        session.commission_with_defaults()?;
+        let mut session = crate::virtual_drive::in_process::commissioned_session(
+            &run.parameters,
+            LineSettings { baud, ..LineSettings::default() },
+        )?;
+        let capacity = session.link.port().drive.line_capacity();
         let base = k as f64 / points.len() as f64;
         let share = 1.0 / points.len() as f64;
         let d = sweep_on_drive(&mut session, &run, |f| progress(base + share * 0.5 * f))?;
