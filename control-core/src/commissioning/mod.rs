@@ -283,6 +283,8 @@ const PROBE_SHARE: f32 = 0.3;
 /// At the highest voltage, the least current (a share of the test current) the probe fits.
 const PROBE_FLOOR: f32 = 0.02;
 const PROBE_DEGREE: u32 = 8;
+/// The q chips' current peak, a share of the test current (`q_chip_volts`).
+const Q_CHIP_PEAK: f32 = 0.5;
 const PROBE_FIT_PERIODS: u32 = 8;
 /// Chips of each inductance stage (an M-sequence of degree 12), after a few ticks' start.
 const CHIP_DEGREE: u32 = 12;
@@ -897,7 +899,12 @@ impl Commissioning {
                 let size = crate::limit(0.25 * libm::sqrtf(ticks_per_tau), 1.0, 16.0);
                 // The resistive part of half the test current (the held voltage also carries
                 // the inverter's dead-time voltage, which a chip's swing must not scale).
-                let chip = size * 0.5 * self.resistance * self.test_current * self.chips.next_chip() as f32;
+                let volts = if stage == Stage::InductanceQ && self.slow_q_winding() {
+                    self.q_chip_volts()
+                } else {
+                    size * 0.5 * self.resistance * self.test_current
+                };
+                let chip = volts * self.chips.next_chip() as f32;
                 self.applied_chip = self.last_chip;
                 self.last_chip = chip;
                 if stage == Stage::InductanceD {
@@ -1143,10 +1150,34 @@ impl Commissioning {
         self.next_stage(Stage::CurrentStep);
     }
 
+    /// A winding whose time constant (the d axis's, measured) is at least a tick: the q chips
+    /// are sized for the current's peak and fitted high-passed (`q_chip_volts`,
+    /// `FreeRotorFit::high_passed`). A faster one keeps the chips and the fit the d axis has.
+    fn slow_q_winding(&self) -> bool {
+        self.ld > self.resistance * self.settings.tick_period
+    }
+
+    /// The q chips' size (V). Their current is zero-mean and makes torque, which a rotor's
+    /// friction resists: the rotor then sticks and slips, which no linear fit follows, unless
+    /// the chips' torque stands well above the friction's. So the chips are as large as the
+    /// current allows, their peak [`Q_CHIP_PEAK`] of the test current beside the held d
+    /// current (half of it): the current's random walk under ±V chips has a standard
+    /// deviation of `V·(1 − a)/(R·√(1 − a²))`, `a = e^{−RT/L}`, and stays within 3.5 of them
+    /// over a record, and within `V/R` whatever the record.
+    fn q_chip_volts(&self) -> f32 {
+        let a = libm::expf(-self.resistance * self.settings.tick_period / self.ld);
+        let peak_per_volt = crate::limit(3.5 * libm::sqrtf((1.0 - a) / (1.0 + a)), 0.0, 1.0) / self.resistance;
+        Q_CHIP_PEAK * self.test_current / peak_per_volt
+    }
+
     fn start_chips(&mut self, stage: Stage) {
         self.chips = MSequence::new(CHIP_DEGREE).unwrap_or(MSequence::DEGREE_15);
         self.fit = WindingFit::default();
-        self.q_fit = FreeRotorFit::default();
+        self.q_fit = if stage == Stage::InductanceQ && self.slow_q_winding() {
+            FreeRotorFit::high_passed()
+        } else {
+            FreeRotorFit::default()
+        };
         self.dead_time_along_axis = 0.0;
         self.dead_time_shape = 0.0;
         self.last_chip = 0.0;
