@@ -12,7 +12,8 @@
 //! fit of that recursion gives `L = T·(p₁ − p₂)/(c·(ln p₁ − ln p₂))` and `R = −L·(ln p₁ + ln
 //! p₂)/T`, for real or complex poles; a rotor that does not move (`κ = 0`) puts one pole at 1
 //! and leaves the first-order fit's answer. What it does not model — the d current's pull,
-//! friction — acts below a few hertz, far under the chips' band.
+//! the rotor sticking on its friction at each reversal — acts mostly at the low end of the
+//! chips' band, which [`FreeRotorFit::high_passed`] weighs less.
 
 use super::regression::Regression;
 use super::winding_fit::Winding;

@@ -6,8 +6,8 @@
 //!
 //! The sequence, each stage on the previous one's result:
 //! 1. **Probe.** Pseudo-random voltage chips of zero mean on a fixed angle (0), their size
-//!    growing from a millivolt while the current stays under a third of the test current (by
-//!    what the period's peak asks for, a quarter to twice a period); a fit of the response gives a first resistance and inductance: enough
+//!    growing from a millivolt while the current stays under a third of the test current
+//!    (by what the period's peak asks for, a quarter to twice a period); a fit of the response gives a first resistance and inductance: enough
 //!    to close a current loop. The fit with the rotor's back-EMF as a series capacitance
 //!    (`free_rotor_fit`: the chips make torque on a rotor that is not on the fixed angle, and
 //!    turn a light one) where it finds a winding, else the first-order one (`winding_fit`).
@@ -274,25 +274,27 @@ const STILL_WAIT_S: f32 = 1.0;
 /// The swing's damping ends this long before the first hold's wait for a still rotor: a rotor
 /// the damping held creeping takes the rest of its way then, and the wait sees it move.
 const RELEASE_S: f32 = 0.04;
-/// The probe's first chip size (V), its growth per period, the share of the test current it
-/// grows to, and its chips' M-sequence degree (255 chips a period: the growth is checked over
-/// whole periods, whose excursions the fit's periods repeat) and the periods it fits over.
+/// The probe's first chip size (V), its least growth per period, the share of the test
+/// current it grows to, and its chips' M-sequence degree (255 chips a period: the growth is
+/// checked over whole periods, whose excursions the fit's periods repeat) and the periods it
+/// fits over.
 const PROBE_START_V: f32 = 1e-3;
 const PROBE_GROWTH: f32 = 1.25;
-/// The probe's largest growth in a period, and its aim beside the share (the growth the
-/// period's peak asks for, within `PROBE_GROWTH..=PROBE_MAX_GROWTH`).
+/// The probe's largest growth in a period, and the share's multiple it aims at (the growth
+/// the period's peak asks for, within `PROBE_GROWTH..=PROBE_MAX_GROWTH`).
 const PROBE_MAX_GROWTH: f32 = 2.0;
 const PROBE_AIM: f32 = 1.0;
 const PROBE_SHARE: f32 = 0.3;
 /// At the highest voltage, the least current (a share of the test current) the probe fits.
 const PROBE_FLOOR: f32 = 0.02;
 const PROBE_DEGREE: u32 = 8;
-/// The q chips' current peak, a share of the test current (`q_chip_volts`).
-const Q_CHIP_PEAK: f32 = 0.5;
 const PROBE_FIT_PERIODS: u32 = 8;
 /// Chips of each inductance stage (an M-sequence of degree 12), after a few ticks' start.
 const CHIP_DEGREE: u32 = 12;
 const CHIP_SETTLING_TICKS: u32 = 64;
+/// The q chips' current peak on a winding slower than a tick, a share of the test current
+/// (`q_chip_volts`).
+const Q_CHIP_PEAK: f32 = 0.5;
 
 /// The current step's overshoot beyond which the sequence fails (the design is kept, and its
 /// measured bandwidth and overshoot reported, below it).
@@ -633,8 +635,8 @@ impl Commissioning {
                     // there, the fit's periods. At the highest voltage a current the sensors
                     // can read (a high resistance, a long time constant) is fitted as it is;
                     // none at all is an open phase.
-                    // The chips grow by as much as the current's peak says they can, up to
-                    // [`PROBE_MAX_GROWTH`] a period, aiming a little above the share; after
+                    // The chips grow by as much as the current's peak says reaches the
+                    // share, within [`PROBE_GROWTH`] and [`PROBE_MAX_GROWTH`] a period; after
                     // such a jump the next period only lets the current build up (a winding
                     // slower than a period has not reached its excursions in one), and the
                     // one after it is judged.
@@ -918,7 +920,7 @@ impl Commissioning {
                 // The resistive part of half the test current (the held voltage also carries
                 // the inverter's dead-time voltage, which a chip's swing must not scale).
                 let volts = if stage == Stage::InductanceQ && self.slow_q_winding() {
-                    self.q_chip_volts()
+                    self.q_chip_volts(i.bus_voltage)
                 } else {
                     size * 0.5 * self.resistance * self.test_current
                 };
@@ -1168,8 +1170,8 @@ impl Commissioning {
         self.next_stage(Stage::CurrentStep);
     }
 
-    /// A winding whose time constant (the d axis's, measured) is at least a tick: the q chips
-    /// are sized for the current's peak and fitted high-passed (`q_chip_volts`,
+    /// A winding whose time constant (the d axis's, measured) is longer than a tick: the q
+    /// chips are sized for the current's peak and fitted high-passed (`q_chip_volts`,
     /// `FreeRotorFit::high_passed`). A faster one keeps the chips and the fit the d axis has.
     fn slow_q_winding(&self) -> bool {
         self.ld > self.resistance * self.settings.tick_period
@@ -1180,12 +1182,16 @@ impl Commissioning {
     /// the chips' torque stands well above the friction's. So the chips are as large as the
     /// current allows, their peak [`Q_CHIP_PEAK`] of the test current beside the held d
     /// current (half of it): the current's random walk under ±V chips has a standard
-    /// deviation of `V·(1 − a)/(R·√(1 − a²))`, `a = e^{−RT/L}`, and stays within 3.5 of them
-    /// over a record, and within `V/R` whatever the record.
-    fn q_chip_volts(&self) -> f32 {
-        let a = libm::expf(-self.resistance * self.settings.tick_period / self.ld);
-        let peak_per_volt = crate::limit(3.5 * libm::sqrtf((1.0 - a) / (1.0 + a)), 0.0, 1.0) / self.resistance;
-        Q_CHIP_PEAK * self.test_current / peak_per_volt
+    /// deviation of `V·(1 − a)/(R·√(1 − a²))` = `V·√tanh(RT/2L)/R` (`a = e^{−RT/L}`), and
+    /// stays within 3.5 of them over a record, and within `V/R` whatever the record. Within
+    /// nine tenths of the voltage the held d voltage leaves (the vector is never scaled down,
+    /// which would scale the fitted chips with it).
+    fn q_chip_volts(&self, bus_voltage: f32) -> f32 {
+        let x = self.resistance * self.settings.tick_period / self.ld;
+        let peak_per_volt = crate::limit(3.5 * libm::sqrtf(libm::tanhf(0.5 * x)), 0.0, 1.0) / self.resistance;
+        let limit = self.settings.max_voltage.min(crate::reference_frames::voltage_circle_radius(bus_voltage));
+        let room = libm::sqrtf((limit * limit - self.held_low * self.held_low).max(0.0));
+        (Q_CHIP_PEAK * self.test_current / peak_per_volt).min(0.9 * room)
     }
 
     fn start_chips(&mut self, stage: Stage) {
