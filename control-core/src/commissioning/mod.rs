@@ -428,6 +428,8 @@ pub struct Commissioning {
     chips: MSequence,
     fit: WindingFit,
     q_fit: FreeRotorFit,
+    /// The probe's free-rotor fit of the samples' differences: its last resort.
+    probe_high_passed: FreeRotorFit,
     /// The dead-time voltage along the measured axis for the phase currents' signs at the
     /// last reading (V).
     dead_time_along_axis: f32,
@@ -500,6 +502,7 @@ impl Commissioning {
             },
             fit: WindingFit::default(),
             q_fit: FreeRotorFit::default(),
+            probe_high_passed: FreeRotorFit::high_passed(),
             dead_time_along_axis: 0.0,
             dead_time_shape: 0.0,
             last_chip: 0.0,
@@ -599,6 +602,7 @@ impl Commissioning {
                         self.fit.add_with_dead_time(previous, current.d, self.applied_chip, self.dead_time_shape);
                     }
                     self.q_fit.add(current.d, self.applied_chip);
+                    self.probe_high_passed.add(current.d, self.applied_chip);
                     self.last_current = Some(current.d);
                     // Per volt of dead time (its size is not known yet: the fit finds it), for
                     // the phase currents' signs at the next tick's start.
@@ -608,7 +612,15 @@ impl Commissioning {
                             w.resistance > 1e-3 && w.resistance < 100.0 && w.inductance > 1e-6 && w.inductance < 1.0
                         };
                         let free_rotor = self.q_fit.winding(s.tick_period).filter(plausible);
-                        let Some(w) = free_rotor.or_else(|| self.fit.winding(s.tick_period)) else {
+                        // The fits in turn: the free rotor's, the first-order one, and where a
+                        // light rotor on a strong magnet sticks and slips under the chips so
+                        // that neither finds a winding, the free rotor's high-passed. The loop
+                        // closed on it needs the inductance roughly; the stages after it
+                        // measure the winding.
+                        let found = free_rotor.or_else(|| self.fit.winding(s.tick_period)).or_else(|| {
+                            self.probe_high_passed.winding(s.tick_period).filter(plausible)
+                        });
+                        let Some(w) = found else {
                             return self.fail(CommissioningFault::Inductance { axis: 'd' });
                         };
                         if !(w.resistance > 1e-3 && w.resistance < 100.0 && w.inductance > 1e-6 && w.inductance < 1.0) {
@@ -653,6 +665,7 @@ impl Commissioning {
                     } else {
                         self.fit = WindingFit::default();
                         self.q_fit = FreeRotorFit::default();
+                        self.probe_high_passed = FreeRotorFit::high_passed();
                         self.last_current = None;
                         self.next_stage(Stage::ProbeFit);
                     }
