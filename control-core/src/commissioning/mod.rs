@@ -6,8 +6,8 @@
 //!
 //! The sequence, each stage on the previous one's result:
 //! 1. **Probe.** Pseudo-random voltage chips of zero mean on a fixed angle (0), their size
-//!    growing from a millivolt while the current stays under a third of the test current
-//!    (by what the period's peak asks for, a quarter to twice a period); a fit of the response gives a first resistance and inductance: enough
+//!    growing from a millivolt by a quarter a period while the current stays under a third of
+//!    the test current; a fit of the response gives a first resistance and inductance: enough
 //!    to close a current loop. The fit with the rotor's back-EMF as a series capacitance
 //!    (`free_rotor_fit`: the chips make torque on a rotor that is not on the fixed angle, and
 //!    turn a light one) where it finds a winding, else the first-order one (`winding_fit`).
@@ -274,16 +274,11 @@ const STILL_WAIT_S: f32 = 1.0;
 /// The swing's damping ends this long before the first hold's wait for a still rotor: a rotor
 /// the damping held creeping takes the rest of its way then, and the wait sees it move.
 const RELEASE_S: f32 = 0.04;
-/// The probe's first chip size (V), its least growth per period, the share of the test
-/// current it grows to, and its chips' M-sequence degree (255 chips a period: the growth is
-/// checked over whole periods, whose excursions the fit's periods repeat) and the periods it
-/// fits over.
+/// The probe's first chip size (V), its growth per period, the share of the test current it
+/// grows to, and its chips' M-sequence degree (255 chips a period: the growth is checked over
+/// whole periods, whose excursions the fit's periods repeat) and the periods it fits over.
 const PROBE_START_V: f32 = 1e-3;
 const PROBE_GROWTH: f32 = 1.25;
-/// The probe's largest growth in a period, and the share's multiple it aims at (the growth
-/// the period's peak asks for, within `PROBE_GROWTH..=PROBE_MAX_GROWTH`).
-const PROBE_MAX_GROWTH: f32 = 2.0;
-const PROBE_AIM: f32 = 1.0;
 const PROBE_SHARE: f32 = 0.3;
 /// At the highest voltage, the least current (a share of the test current) the probe fits.
 const PROBE_FLOOR: f32 = 0.02;
@@ -378,9 +373,6 @@ pub struct Commissioning {
     /// The probe's chip size (V) and the largest current of its present period (A).
     chip_size: f32,
     peak: f32,
-    /// The chips grew by more than [`PROBE_GROWTH`] at the last period's end: this period's
-    /// peak is not judged (a slow winding's current is still building up to the new size).
-    probe_settling: bool,
     /// The held voltage that drives the test current (V) and the averages of the two holds.
     held: f32,
     /// The voltage that drives half the test current (V): the chips' centre.
@@ -465,7 +457,6 @@ impl Commissioning {
             angle: 0.0,
             chip_size: PROBE_START_V,
             peak: 0.0,
-            probe_settling: false,
             held: 0.0,
             held_low: 0.0,
             test_current: settings.test_current,
@@ -617,9 +608,9 @@ impl Commissioning {
                         // that neither finds a winding, the free rotor's high-passed. The loop
                         // closed on it needs the inductance roughly; the stages after it
                         // measure the winding.
-                        let found = free_rotor.or_else(|| self.fit.winding(s.tick_period)).or_else(|| {
-                            self.probe_high_passed.winding(s.tick_period).filter(plausible)
-                        });
+                        let found = free_rotor
+                            .or_else(|| self.fit.winding(s.tick_period))
+                            .or_else(|| self.probe_high_passed.winding(s.tick_period).filter(plausible));
                         let Some(w) = found else {
                             return self.fail(CommissioningFault::Inductance { axis: 'd' });
                         };
@@ -647,19 +638,9 @@ impl Commissioning {
                     // there, the fit's periods. At the highest voltage a current the sensors
                     // can read (a high resistance, a long time constant) is fitted as it is;
                     // none at all is an open phase.
-                    // The chips grow by as much as the current's peak says reaches the
-                    // share, within [`PROBE_GROWTH`] and [`PROBE_MAX_GROWTH`] a period; after
-                    // such a jump the next period only lets the current build up (a winding
-                    // slower than a period has not reached its excursions in one), and the
-                    // one after it is judged.
                     let at_most = self.chip_size >= s.max_voltage;
-                    if self.probe_settling {
-                        self.probe_settling = false;
-                    } else if self.peak < PROBE_SHARE * s.test_current && !at_most {
-                        let wanted = PROBE_AIM * PROBE_SHARE * s.test_current / self.peak;
-                        let growth = crate::limit(wanted, PROBE_GROWTH, PROBE_MAX_GROWTH);
-                        self.chip_size = (self.chip_size * growth).min(s.max_voltage);
-                        self.probe_settling = growth > PROBE_GROWTH;
+                    if self.peak < PROBE_SHARE * s.test_current && !at_most {
+                        self.chip_size = (self.chip_size * PROBE_GROWTH).min(s.max_voltage);
                     } else if self.peak < PROBE_FLOOR * s.test_current {
                         return self.fail(CommissioningFault::OpenPhase { amps: self.peak });
                     } else {
