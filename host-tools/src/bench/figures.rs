@@ -345,12 +345,13 @@ impl Recorder {
         !self.figures.figures.iter().any(Figure::not_met)
     }
 
-    /// The worst case on the console: `heading`, a line per figure against its goal, the
-    /// verdict.
+    /// The worst case on the console: `heading`, a line per figure against its goal (a missed
+    /// one marked `NOT met`), the verdict.
     pub fn print_worst(&self, heading: &str) {
         println!("{heading}");
         for f in &self.figures.figures {
-            println!("  {:<40} {:>16}  goal {}", f.name, f.measured_text(), f.goal_text());
+            let missed = if f.not_met() { "  NOT met" } else { "" };
+            println!("  {:<40} {:>16}  goal {}{missed}", f.name, f.measured_text(), f.goal_text());
         }
         println!("{}", if self.all_met() { "every goal met" } else { "GOAL NOT MET" });
     }
