@@ -67,6 +67,12 @@ fn drive_motor(v: &Values, plant_pole_pairs: u32) -> Result<MotorModel, String> 
     })
 }
 
+/// The default axis with its drive given the plant's mounting and motor, commissioned (the
+/// FMU with `commissioning.at_start` off): for runs about something else than commissioning.
+pub fn default_config_given_mounting() -> Result<SimulationConfig, String> {
+    simulation_config(&Values { commissioning_at_start: false, ..Values::start() })
+}
+
 /// The whole configuration of the simulated axis.
 pub fn simulation_config(v: &Values) -> Result<SimulationConfig, String> {
     let pole_pairs = count("plant.pole_pairs", v.plant_pole_pairs)?;

@@ -9,9 +9,8 @@ use anyhow::{bail, Result};
 use control_core::faults::Faults;
 use control_core::{AxisInputs, Mode};
 use serde::Serialize;
-use servo_axis::parameters::simulation_config;
+use servo_axis::parameters::default_config_given_mounting;
 use servo_axis::simulation::{AxisSimulation, UserInputs};
-use servo_axis::variables::Values;
 
 /// The faults the campaign injects.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize)]
@@ -105,8 +104,7 @@ type Rng = crate::random::XorShift64Star;
 /// off, clear, watch it come back.
 fn run_one(kind: FaultKind, rng: &mut Rng) -> Result<(bool, u64, u64, bool)> {
     // A commissioned drive (the plant's mounting given): the campaign is about the faults.
-    let values = Values { commissioning_at_start: false, ..Values::start() };
-    let config = simulation_config(&values).map_err(anyhow::Error::msg)?;
+    let config = default_config_given_mounting().map_err(anyhow::Error::msg)?;
     let limits = config.control.limits;
     let mut sim = AxisSimulation::new(&config).map_err(|e| anyhow::anyhow!("{e}"))?;
     // Position mode with a jog: the loops are working (currents flow) when the fault comes.

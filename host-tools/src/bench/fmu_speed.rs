@@ -101,11 +101,8 @@ velocity_command = -50.0
 /// recorded): the wall time of one run.
 pub fn bare_simulation_wall(seconds: f64) -> Result<f64> {
     use control_core::Mode;
-    use servo_axis::parameters::simulation_config;
     use servo_axis::simulation::{AxisSimulation, UserInputs};
-    use servo_axis::variables::Values;
-    let values = Values { commissioning_at_start: false, ..Values::start() };
-    let config = simulation_config(&values).map_err(anyhow::Error::msg)?;
+    let config = servo_axis::parameters::default_config_given_mounting().map_err(anyhow::Error::msg)?;
     let h = crate::fmu::scenario::DEFAULT_STEP;
     let steps = (seconds / h).round() as usize;
     let (t1, t2, t3) = (grid(0.1 * seconds), grid(0.4 * seconds), grid(0.6 * seconds));

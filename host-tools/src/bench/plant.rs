@@ -28,9 +28,7 @@ pub fn step_error() -> Result<StepError> {
     // 1. Closed loop with the default plant: record the inverter command of every tick. The
     //    drive is given the plant's mounting (the FMU with `commissioning.at_start` off): a
     //    drive that has not been commissioned refuses every mode.
-    use servo_axis::variables::Values;
-    let values = Values { commissioning_at_start: false, ..Values::start() };
-    let base = servo_axis::parameters::simulation_config(&values).map_err(anyhow::Error::msg)?;
+    let base = servo_axis::parameters::default_config_given_mounting().map_err(anyhow::Error::msg)?;
     let substeps = base.plant.substeps;
     let mut sim = AxisSimulation::new(&base)?;
     let seconds = 0.2;
