@@ -326,3 +326,21 @@ fn shipped_scenarios_give_the_same_bits_natively_under_wine_and_under_qemu() {
     }
     assert!(failures.is_empty(), "{}", failures.join("; "));
 }
+
+/// Both archives carry the licence texts where FMI 3.0 puts them (`documentation/licenses/`),
+/// byte for byte the repository's.
+#[test]
+fn both_archives_carry_the_licence_texts() {
+    let fmi3 = fmu_path();
+    let fmi2 = fmi3.with_file_name("servo_axis_fmi2.fmu");
+    for licence in ["LICENSE-MIT", "LICENSE-APACHE"] {
+        let text = std::fs::read(host_tools::paths::workspace_root().join(licence)).unwrap();
+        for archive in [&fmi3, &fmi2] {
+            assert!(
+                entry(archive, &format!("documentation/licenses/{licence}.txt")) == text,
+                "{licence} in {}",
+                archive.display()
+            );
+        }
+    }
+}

@@ -128,6 +128,13 @@ fn write_archives(target_dir: &Path, binaries: &[Binary]) -> Result<()> {
     }
     fmi3_entries.push(("documentation/index.html".to_string(), documentation.clone().into_bytes()));
     fmi2_entries.push(("documentation/index.html".to_string(), documentation.into_bytes()));
+    // The licence texts where FMI 3.0 puts them (documentation/licenses/), in both archives.
+    let root = workspace_root();
+    for licence in ["LICENSE-MIT", "LICENSE-APACHE"] {
+        let text = std::fs::read(root.join(licence)).with_context(|| format!("reading {licence}"))?;
+        fmi3_entries.push((format!("documentation/licenses/{licence}.txt"), text.clone()));
+        fmi2_entries.push((format!("documentation/licenses/{licence}.txt"), text));
+    }
     let fmi3 = out.join(format!("{MODEL_IDENTIFIER}.fmu"));
     write_archive(&fmi3, &fmi3_entries)?;
     let fmi2 = out.join(format!("{MODEL_IDENTIFIER}_fmi2.fmu"));
