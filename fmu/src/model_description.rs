@@ -123,7 +123,8 @@ fn value_attributes(d: &Declaration, start: &Values) -> String {
     if let Some(u) = d.unit {
         let _ = write!(a, " declaredType=\"{}\"", u.type_name());
     }
-    if d.kind != Kind::Boolean && d.causality != Causality::Output && d.causality != Causality::Independent {
+    // Outputs too: their declared range is what the FMU guarantees (tests/tests/output_ranges.rs).
+    if d.kind != Kind::Boolean && d.causality != Causality::Independent {
         if let Some(m) = d.range.min {
             let _ = write!(a, " min=\"{}\"", number(d, m));
         }
@@ -268,8 +269,14 @@ pub fn fmi2() -> String {
 }
 
 fn range_text(d: &Declaration) -> String {
-    if d.causality == Causality::Output || d.kind == Kind::Boolean || (d.range.min.is_none() && d.range.max.is_none()) {
-        return String::new();
+    if d.kind == Kind::Boolean || (d.range.min.is_none() && d.range.max.is_none()) {
+        // An output without a declared range: any finite value (a step that would give
+        // another ends with an error, never OK).
+        return match (d.causality, d.kind) {
+            (Causality::Output | Causality::Independent, Kind::Float64) => "finite".to_string(),
+            (Causality::Output, Kind::Int32) => "Int32".to_string(),
+            _ => String::new(),
+        };
     }
     let side = |b: Option<f64>| b.map_or("…".to_string(), crate::variables::readable);
     format!("{} … {}", side(d.range.min), side(d.range.max))
@@ -305,18 +312,20 @@ fn kind_text(d: &Declaration) -> &'static str {
 }
 
 /// The output table (Markdown) of the book's FMU variables reference: every output (and the
-/// independent variable `time`) with its value reference, type, unit and description.
+/// independent variable `time`) with its value reference, type, unit, range and description.
 pub fn markdown_outputs_table() -> String {
-    let mut out =
-        String::from("| variable | value reference | type | unit | description |\n| --- | --- | --- | --- | --- |\n");
+    let mut out = String::from(
+        "| variable | value reference | type | unit | range | description |\n| --- | --- | --- | --- | --- | --- |\n",
+    );
     for d in DECLARATIONS.iter().filter(|d| !d.settable()) {
         let _ = writeln!(
             out,
-            "| `{}` | {} | {} | {} | {} |",
+            "| `{}` | {} | {} | {} | {} | {} |",
             d.name,
             d.vr,
             kind_text(d),
             d.unit.map_or("", |u| u.name()),
+            range_text(d),
             d.description.replace('|', "\\|")
         );
     }

@@ -26,7 +26,15 @@ Usage:
       container's loggingOn is handed to the embedded FMU, whose messages come back through the
       container's logger): every message goes to OUT.csv.container.log; an Error or Fatal
       message from the embedded FMU, or no message at all, fails the run.
-
+  importers.py libcosim FMU SCENARIO.toml OUT.csv
+      libcosim (the Open Simulation Platform's co-simulation library, through libcosimpy): FMI
+      2.0 only (its FMI Library reads FMI 1.0 and 2.0; an FMI 3.0 archive is refused by name).
+      The scenario's parameters and t = 0 inputs are initial values (applied in initialisation,
+      which libcosim runs inside the first step), later inputs go through an override
+      manipulator before the step they start; one step() per communication step, its time in
+      integer nanoseconds. Outputs after each step from a last-value observer, those at t = 0
+      from a time-series observer. libcosim reports a failed step as False (the FMU's message
+      in its log at Warning level and up, on stderr), which fails the run.
 Each command prints `<importer>: <seconds> s` (the run's wall time) on stderr.
 """
 import ctypes
@@ -309,12 +317,112 @@ def run_fmutool_container(fmu, out, scenario):
         fail(f"the embedded FMU logged an error (whole log: {out}.container.log)")
 
 
+# ------------------------------------------------------------------------------------ libcosim
+def run_libcosim(fmu, scenario, out):
+    from libcosimpy.CosimEnums import CosimVariableCausality, CosimVariableType
+    from libcosimpy.CosimExecution import CosimExecution
+    from libcosimpy.CosimLogging import CosimLogLevel, log_output_level
+    from libcosimpy.CosimManipulator import CosimManipulator
+    from libcosimpy.CosimObserver import CosimObserver
+    from libcosimpy.CosimSlave import CosimLocalSlave
+    from libcosimpy._internal import get_last_error_message
+
+    version = fmi_version(fmu)
+    if version != "2.0":
+        fail(f"libcosim reads FMI 1.0 and 2.0; {fmu} is FMI {version}")
+    sc = Scenario(scenario)
+    md = read_model_description(fmu)
+    variables, names, table = scenario_inputs(md, sc)
+    out_names = output_names(md, sc)
+    step_ns = round(sc.h * 1e9)
+    if abs(step_ns - sc.h * 1e9) > 1e-6:
+        fail(f"libcosim counts time in whole nanoseconds; the step {sc.h} s is not one")
+
+    log_output_level(CosimLogLevel.WARNING)
+    t0 = time.perf_counter()
+    ex = CosimExecution.from_step_size(step_size=step_ns)
+    local = CosimLocalSlave(fmu_path=str(Path(fmu).resolve()), instance_name="servo")
+    # A refused archive leaves a null slave, which add_local_slave would dereference.
+    if not local.ptr():
+        fail(f"libcosim cannot load {fmu}: {get_last_error_message()}")
+    slave = ex.add_local_slave(local)
+    info = {v.name.decode(): v for v in ex.slave_variables(slave)}
+    real, integer, boolean = CosimVariableType.REAL.value, CosimVariableType.INTEGER.value, CosimVariableType.BOOLEAN.value
+
+    def initial(nm, value):
+        v = info[nm]
+        if v.type == real:
+            ok = ex.real_initial_value(slave, v.reference, float(value))
+        elif v.type == integer:
+            ok = ex.integer_initial_value(slave, v.reference, int(value))
+        elif v.type == boolean:
+            ok = ex.boolean_initial_value(slave, v.reference, bool(value))
+        else:
+            fail(f"{nm}: type {v.type} is not handled")
+        if not ok:
+            fail(f"libcosim refused {nm} = {value}: {get_last_error_message()}")
+
+    for nm, value in sc.parameters.items():
+        if nm not in info or info[nm].causality != CosimVariableCausality.PARAMETER.value:
+            fail(f"scenario parameter {nm!r} is not a parameter of the FMU")
+        initial(nm, value)
+    for nm in names:
+        initial(nm, table[0][nm])
+    setter = CosimManipulator.create_override()
+    ex.add_manipulator(setter)
+    last = CosimObserver.create_last_value()
+    ex.add_observer(last)
+    series = CosimObserver.create_time_series()
+    ex.add_observer(series)
+    outputs = [info[nm] for nm in out_names]
+    for v in outputs:
+        if v.type not in (real, integer):
+            fail(f"{v.name.decode()}: type {v.type} is not handled")
+        series.start_time_series(slave, v.reference, CosimVariableType(v.type))
+
+    def override(nm, value):
+        v = info[nm]
+        if v.type == real:
+            setter.slave_real_values(slave, [v.reference], [float(value)])
+        elif v.type == integer:
+            setter.slave_integer_values(slave, [v.reference], [int(value)])
+        else:
+            setter.slave_boolean_values(slave, [v.reference], [bool(value)])
+
+    rows = []
+    for k in range(sc.n):
+        if k > 0:
+            for nm in names:
+                if table[k][nm] != table[k - 1][nm]:
+                    override(nm, table[k][nm])
+        if not ex.step():
+            fail(f"libcosim's step {k + 1} failed: {get_last_error_message()}")
+        rows.append([(k + 1) * sc.h] + [
+            (last.last_real_values if v.type == real else last.last_integer_values)(slave, [v.reference])[0]
+            for v in outputs
+        ])
+    # The values at t = 0 (after initialisation): libcosimpy 0.0.6 drops the samples of step
+    # number 0 from a read's tail, so two are read and the first kept.
+    first = [0.0]
+    for v in outputs:
+        read = series.time_series_real_samples if v.type == real else series.time_series_integer_samples
+        _, steps, values = read(slave, v.reference, from_step=0, sample_count=2)
+        if not steps or steps[0] != 0:
+            fail(f"libcosim has no sample of {v.name.decode()} at step 0")
+        first.append(values[0])
+    wall = time.perf_counter() - t0
+    write_csv(out, out_names, [first] + rows)
+    print(f"libcosim: {wall:.3f} s", file=sys.stderr)
+
+
 def main():
     faulthandler.enable()  # a crash inside an FMU or an importer's library says where
     a = sys.argv[1:]
     usage = __doc__.split("Usage:")[1].split("Each command")[0]
     if a[:1] == ["ecospy"] and len(a) == 4:
         run_ecospy(a[1], a[2], a[3])
+    elif a[:1] == ["libcosim"] and len(a) == 4:
+        run_libcosim(a[1], a[2], a[3])
     elif a[:1] == ["fmutool-check"] and len(a) == 2:
         run_fmutool_check(a[1])
     elif a[:1] == ["fmutool-container"] and len(a) == 4:

@@ -1,9 +1,9 @@
 //! The FMU in other importers: ecos (ecospy) on the FMI 3.0 archive; fmu-manipulation-toolbox's
 //! `fmutool -check` on both archives and its FMU container (debug logging on) around each; fmpy
-//! on the FMI 2.0 archive. Each runs scenarios/position_step.toml its own way
-//! (tests/python/importers.py, tests/python/fmpy_run.py) and every recorded value must have the
-//! bits of the Rust host's run of the FMI 3.0 archive: one binary, one model, whichever importer
-//! and FMI version drive it.
+//! and libcosim (the Open Simulation Platform's, through libcosimpy) on the FMI 2.0 archive. Each
+//! runs scenarios/position_step.toml its own way (tests/python/importers.py,
+//! tests/python/fmpy_run.py) and every recorded value must have the bits of the Rust host's run
+//! of the FMI 3.0 archive: one binary, one model, whichever importer and FMI version drive it.
 
 use std::ffi::OsStr;
 use std::os::unix::process::ExitStatusExt;
@@ -199,6 +199,31 @@ fn an_fmu_container_around_the_fmi2_archive_with_logging_on_has_the_rust_hosts_b
 }
 
 #[test]
+fn libcosim_runs_the_fmi2_archive_with_the_rust_hosts_bits() {
+    let label = "libcosim (FMI 2.0)";
+    for (file, refused_key) in [(scenario_file(), false), (refused_key_file(), true)] {
+        let csv = tmp(&format!("{}.libcosim.csv", file.file_stem().unwrap().to_string_lossy()));
+        let (so, _) =
+            importer(label, &[OsStr::new("libcosim"), fmi2_path().as_os_str(), file.as_os_str(), csv.as_os_str()]);
+        assert_bit_identical(label, &csv, refused_key);
+        if refused_key {
+            // The FMU's warning reaches libcosim's log (on stdout; its level: warning and up).
+            let logged = format!("[FMI status=warning, category=logStatusWarning] {REFUSAL_LOGGED}");
+            assert!(so.contains(&logged), "{label}: the refusal was not logged:\n{so}");
+        }
+    }
+    // libcosim reads FMI 1.0 and 2.0 only: the FMI 3.0 archive is refused by name, not crashed on.
+    let script = workspace_root().join("tests/python/importers.py");
+    let out = Command::new(python().unwrap())
+        .arg(&script)
+        .args([OsStr::new("libcosim"), fmu_path().as_os_str(), scenario_file().as_os_str(), tmp("no.csv").as_os_str()])
+        .output()
+        .unwrap();
+    let se = String::from_utf8_lossy(&out.stderr);
+    assert!(out.status.code() == Some(1) && se.contains("is FMI 3.0"), "{}: {se}", describe(out.status));
+}
+
+#[test]
 fn fmpy_runs_the_fmi2_archive_with_the_rust_hosts_bits() {
     for (file, refused_key) in [(scenario_file(), false), (refused_key_file(), true)] {
         let csv = tmp(&format!("{}.fmpy-fmi2.csv", file.file_stem().unwrap().to_string_lossy()));
@@ -207,4 +232,40 @@ fn fmpy_runs_the_fmi2_archive_with_the_rust_hosts_bits() {
         eprintln!("fmpy (FMI 2.0): {:.2} s (process), {wall:.2} s simulating", t0.elapsed().as_secs_f64());
         assert_bit_identical("fmpy (FMI 2.0)", &csv, refused_key);
     }
+}
+
+/// The import tutorial's Python recipes, as the book prints them (every ```python block of
+/// docs/src/tutorials/import-the-fmu.md), run in a folder where `target/fmu/` holds the archives
+/// and a copy of the FMI 3.0 one sits beside (the container's recipe takes it from there): each
+/// exits 0, and each that prints a number prints the load's position 0.3 s after a 1 rad
+/// position command, about 1 rad.
+#[test]
+fn the_import_tutorials_python_recipes_run_as_printed() {
+    let page = std::fs::read_to_string(workspace_root().join("docs/src/tutorials/import-the-fmu.md")).unwrap();
+    let recipes: Vec<&str> = page.split("```python\n").skip(1).map(|rest| rest.split("```").next().unwrap()).collect();
+    assert!(recipes.len() >= 4, "{} recipes", recipes.len());
+    let dir = tmp("recipes");
+    std::fs::create_dir_all(dir.join("target")).unwrap();
+    let fmu_dir = dir.join("target/fmu");
+    if !fmu_dir.exists() {
+        std::os::unix::fs::symlink(fmu_path().parent().unwrap(), &fmu_dir).unwrap();
+    }
+    std::fs::copy(fmu_path(), dir.join("servo_axis.fmu")).unwrap();
+    let mut printed = 0;
+    for (i, recipe) in recipes.iter().enumerate() {
+        let out = Command::new(python().unwrap()).arg("-c").arg(recipe).current_dir(&dir).output().unwrap();
+        let (so, se) = (String::from_utf8_lossy(&out.stdout), String::from_utf8_lossy(&out.stderr));
+        assert!(
+            out.status.success(),
+            "recipe {i} failed ({}):\n{recipe}\n--- stdout\n{so}\n--- stderr\n{se}",
+            describe(out.status)
+        );
+        // The number is the last line (libcosim's log lines come before it).
+        if let Some(x) = so.lines().last().and_then(|l| l.trim().parse::<f64>().ok()) {
+            assert!((x - 1.0).abs() < 0.02, "recipe {i} printed {x}:\n{recipe}");
+            printed += 1;
+        }
+    }
+    assert!(printed >= 3, "only {printed} recipes printed the load's position");
+    assert!(dir.join("servo_container.fmu").is_file(), "the container recipe wrote no servo_container.fmu");
 }

@@ -400,31 +400,31 @@ declare_variables! {
     154 following_error: Float64 "following_error" Output Continuous = 0.0; RAD; ANY; "Position command minus encoder position (position mode)";
     155 position_command_out: Float64 "position_command_out" Output Continuous = 0.0; RAD; ANY; "Position command after interpolation and acc/dec filter (position mode)";
     156 command_velocity: Float64 "command_velocity" Output Continuous = 0.0; RAD_S; ANY; "Speed of that command (its pulses per position tick)";
-    157 seq_state: Int32 "seq_state" Output Discrete = 0; NONE; ANY; "Sequence state: 0 idle, 1 running, 2 decelerating, 3 servo lock, 4 fine adjust";
-    158 seq_complete: Int32 "seq_complete" Output Discrete = 0; NONE; ANY; "Zero-servo / fine-adjust completion: in position (|deviation| <= seq.completion_counts, |speed| <= seq.zero_speed) for seq.completion_hold, dropped beyond seq.completion_hysteresis or on a new target";
+    157 seq_state: Int32 "seq_state" Output Discrete = 0; NONE; r(0.0, 4.0); "Sequence state: 0 idle, 1 running, 2 decelerating, 3 servo lock, 4 fine adjust";
+    158 seq_complete: Int32 "seq_complete" Output Discrete = 0; NONE; r(0.0, 1.0); "Zero-servo / fine-adjust completion: in position (|deviation| <= seq.completion_counts, |speed| <= seq.zero_speed) for seq.completion_hold, dropped beyond seq.completion_hysteresis or on a new target";
     159 seq_deviation: Int32 "seq_deviation" Output Discrete = 0; NONE; ANY; "Deviation counter: target minus position, in encoder counts (saturates at the Int32 range)";
     160 seq_hold_position: Float64 "seq_hold_position" Output Discrete = 0.0; RAD; ANY; "Position the sequence holds or moves to (the accepted stop position in servo lock)";
     161 seq_speed_reference: Float64 "seq_speed_reference" Output Continuous = 0.0; RAD_S; ANY; "Speed reference the sequence hands to the velocity loop";
-    162 seq_gain: Float64 "seq_gain" Output Discrete = 0.0; NONE; ANY; "Gain multiplier in use";
-    163 seq_refused: Int32 "seq_refused" Output Discrete = 0; NONE; ANY; "Sequence events refused so far";
-    164 seq_last_refusal: Int32 "seq_last_refusal" Output Discrete = 0; NONE; ANY; "Reason of the last refusal: 0 none, 1 already running, 2 not running, 3 stop while running, 4 already stopped, 5 no accepted stop, 6 target blocked, 7 beyond soft limits, 8 gain index, 9 not in sequence mode";
-    165 sweep_state: Int32 "sweep_state" Output Discrete = 0; NONE; ANY; "Sweep state: 0 idle, 1 settling, 2 measuring, 3 done";
+    162 seq_gain: Float64 "seq_gain" Output Discrete = 0.0; NONE; r(0.0, 1.0e6); "Gain multiplier in use";
+    163 seq_refused: Int32 "seq_refused" Output Discrete = 0; NONE; r(0.0, 2147483647.0); "Sequence events refused so far";
+    164 seq_last_refusal: Int32 "seq_last_refusal" Output Discrete = 0; NONE; r(0.0, 9.0); "Reason of the last refusal: 0 none, 1 already running, 2 not running, 3 stop while running, 4 already stopped, 5 no accepted stop, 6 target blocked, 7 beyond soft limits, 8 gain index, 9 not in sequence mode";
+    165 sweep_state: Int32 "sweep_state" Output Discrete = 0; NONE; r(0.0, 3.0); "Sweep state: 0 idle, 1 settling, 2 measuring, 3 done";
     166 sweep_point_index: Int32 "sweep_point" Output Discrete = 0; NONE; ANY; "Index of the frequency being measured";
     167 sweep_record: Int32 "sweep_record" Output Discrete = 0; NONE; ANY; "Record (phase-shifted repeat) of that frequency";
-    168 sweep_frequency: Float64 "sweep_frequency" Output Discrete = 0.0; HZ; ANY; "Frequency being measured";
-    169 sweep_done_points: Int32 "sweep_done_points" Output Discrete = 0; NONE; ANY; "Frequencies measured so far (the on-line correlator's results)";
-    170 sweep_last_frequency: Float64 "sweep_last_frequency" Output Discrete = 0.0; HZ; ANY; "Last measured frequency";
+    168 sweep_frequency: Float64 "sweep_frequency" Output Discrete = 0.0; HZ; FREQ; "Frequency being measured";
+    169 sweep_done_points: Int32 "sweep_done_points" Output Discrete = 0; NONE; r(0.0, 128.0); "Frequencies measured so far (the on-line correlator's results)";
+    170 sweep_last_frequency: Float64 "sweep_last_frequency" Output Discrete = 0.0; HZ; FREQ; "Last measured frequency";
     171 sweep_last_gain_db: Float64 "sweep_last_gain_db" Output Discrete = 0.0; DB; ANY; "Its gain (on-line correlator, on the drive)";
-    172 sweep_last_phase_deg: Float64 "sweep_last_phase_deg" Output Discrete = 0.0; DEG; ANY; "Its phase";
+    172 sweep_last_phase_deg: Float64 "sweep_last_phase_deg" Output Discrete = 0.0; DEG; r(-180.0, 180.0); "Its phase";
     173 sweep_last_quality: Float64 "sweep_last_quality" Output Discrete = 0.0; NONE; ANY; "Its quality: fraction of U's AC power at the excitation frequency (0: no result, or none the excitation defines; gain and phase then read 0)";
     174 acq_time: Float64 "acq_time" Output Discrete = 0.0; S; ANY; "Time of the last acquisition sample (the base tick it was taken at)";
     175 acq_u: Float64 "acq_u" Output Discrete = 0.0; NONE; ANY; "Acquired U: the loop signal the sweep relates Y to, per injection point (the book: How it works, the sweep)";
     176 acq_y: Float64 "acq_y" Output Discrete = 0.0; RAD_S; ANY; "Acquired Y (the velocity estimate; the position in rad, from position_command, for a position-command injection)";
     177 acq_phase: Float64 "acq_phase" Output Discrete = 0.0; RAD; ANY; "Excitation phase at that sample";
-    178 acq_measuring: Int32 "acq_measuring" Output Discrete = 0; NONE; ANY; "1 if the sample belongs to a measured record";
+    178 acq_measuring: Int32 "acq_measuring" Output Discrete = 0; NONE; r(0.0, 1.0); "1 if the sample belongs to a measured record";
     179 acq_point: Int32 "acq_point" Output Discrete = 0; NONE; ANY; "Frequency index the sample belongs to";
     180 acq_record: Int32 "acq_record" Output Discrete = 0; NONE; ANY; "Record (phase-shifted repeat) the sample belongs to";
-    181 faults: Int32 "faults" Output Discrete = 0; NONE; ANY; "Latched fault bits: 1 overcurrent, 2 undervoltage, 4 overvoltage, 8 following error, 16 non-finite, 32 encoder";
+    181 faults: Int32 "faults" Output Discrete = 0; NONE; r(0.0, 1023.0); "Latched fault bits: 1 overcurrent, 2 undervoltage, 4 overvoltage, 8 following error, 16 non-finite, 32 encoder, 64 the power stage's break input, 128 current sensing not calibrated, 256 a command out of its range, 512 a mode asked of a motor not commissioned";
 
     // Stop sequence completion signal (seed 004), added after the first release: appended so
     // that every earlier value reference stays.
@@ -443,9 +443,9 @@ declare_variables! {
     188 sweep_measure: Int32 "sweep.measure" Parameter Fixed = Params::default().sweep.measure.code(); NONE; r(0.0, 1.0); "What acq_u and acq_y are: 0 the injection point's signals; 1 the machine-end acceleration (the plant's accelerometer, with its noise) as acq_y, with torque-command injection against acq_u the torque from the measured q current (kt*iq), with position-command injection against acq_u the injected position; both the means over each acquisition period";
     189 accelerometer_sensitivity: Float64 "accelerometer.sensitivity" Parameter Fixed = core(|p| p.accelerometer.sensitivity); NONE; r(1.0e-7, 10.0); "A drive's machine-end accelerometer input: volts per rad/s2 of machine-end angular acceleration (the sensor's V per m/s2 times its radius). The FMU feeds its plant's accelerometer to the core in rad/s2, so it changes nothing here; runs on a drive (--device) carry it to the drive";
     // Whether the loop stayed linear while a frequency was measured (issue 15), appended likewise.
-    190 sweep_last_limited: Float64 "sweep_last_limited" Output Discrete = 0.0; NONE; ANY; "Share (0..1) of the last result's samples whose acquisition period saw the drive's output limited (the voltage circle cut what the current loop asked for). Above 0 the loop was not linear for part of the measurement and the result can be off by tenths of a dB and degrees: lower sweep.amplitude or the riding speed (back-EMF takes voltage), or raise the bus voltage";
+    190 sweep_last_limited: Float64 "sweep_last_limited" Output Discrete = 0.0; NONE; r(0.0, 1.0); "Share (0..1) of the last result's samples whose acquisition period saw the drive's output limited (the voltage circle cut what the current loop asked for). Above 0 the loop was not linear for part of the measurement and the result can be off by tenths of a dB and degrees: lower sweep.amplitude or the riding speed (back-EMF takes voltage), or raise the bus voltage";
     // The limited flag of each acquisition sample (issue 15), appended likewise.
-    191 acq_limited: Int32 "acq_limited" Output Discrete = 0; NONE; ANY; "1 if the drive's output was limited (the voltage circle cut what the current loop asked for) on a tick of the sample's acquisition period: the share of a result's kept samples (those its fit uses, see acq_half_block) is sweep_last_limited, counted from the stream";
+    191 acq_limited: Int32 "acq_limited" Output Discrete = 0; NONE; r(0.0, 1.0); "1 if the drive's output was limited (the voltage circle cut what the current loop asked for) on a tick of the sample's acquisition period: the share of a result's kept samples (those its fit uses, see acq_half_block) is sweep_last_limited, counted from the stream";
     // The sweep's time budget (issue 15), appended likewise.
     192 sweep_time_budget_s: Float64 "sweep.time_budget_s" Parameter Fixed = core(|p| p.sweep.time_budget_s); S; r(0.0, 1.0e4); "Stepped sine with precision control: a frequency's records may take more half blocks than sweep.max_extensions allows (up to 64 blocks) while the whole sweep still ends within this time from its start, every later frequency counted at its own longest; frequencies that finish early leave their time to later ones that need more (in practice the top of the sweep, where the response is a few encoder counts); a sweep granted nothing runs as without it; where there is room an extended frequency also measures to 1/1.25 of sweep.precision_db (0 = never)";
     // What a real machine hides from its drive, and the drive's commissioning at power-up
@@ -466,11 +466,11 @@ declare_variables! {
     206 commissioned_ld: Float64 "commissioned_ld" Output Discrete = 0.0; H; ANY; "d-axis inductance commissioning measured";
     207 commissioned_lq: Float64 "commissioned_lq" Output Discrete = 0.0; H; ANY; "q-axis inductance commissioning measured";
     208 commissioned_flux_linkage: Float64 "commissioned_flux_linkage" Output Discrete = 0.0; WB; ANY; "Flux linkage commissioning measured (from the back-EMF)";
-    209 commissioned_pole_pairs: Int32 "commissioned_pole_pairs" Output Discrete = 0; NONE; ANY; "Pole pairs commissioning found";
-    210 commissioned_encoder_offset: Float64 "commissioned_encoder_offset" Output Discrete = 0.0; RAD; ANY; "Electrical angle at encoder count 0 commissioning found";
-    211 commissioned_encoder_reversed: Int32 "commissioned_encoder_reversed" Output Discrete = 0; NONE; ANY; "1 if commissioning found the encoder counting down as the rotor turns forward";
+    209 commissioned_pole_pairs: Int32 "commissioned_pole_pairs" Output Discrete = 0; NONE; r(0.0, 64.0); "Pole pairs commissioning found";
+    210 commissioned_encoder_offset: Float64 "commissioned_encoder_offset" Output Discrete = 0.0; RAD; r(0.0, core::f64::consts::TAU); "Electrical angle at encoder count 0 commissioning found";
+    211 commissioned_encoder_reversed: Int32 "commissioned_encoder_reversed" Output Discrete = 0; NONE; r(0.0, 1.0); "1 if commissioning found the encoder counting down as the rotor turns forward";
     212 commissioned_current_bandwidth: Float64 "commissioned_current_bandwidth" Output Discrete = 0.0; HZ; ANY; "Current-loop bandwidth the commissioning's step measured with its designed gains";
-    213 commissioning_time: Float64 "commissioning_time" Output Discrete = 0.0; S; ANY; "Drive time the commissioning took at initialisation";
+    213 commissioning_time: Float64 "commissioning_time" Output Discrete = 0.0; S; r(0.0, 1.0e4); "Drive time the commissioning took at initialisation";
     // The motor a drive runs with when it is given a commissioned set (issue 37): what a twin of
     // a commissioned drive takes from that drive, appended likewise.
     214 ctrl_motor_pole_pairs: Int32 "ctrl.motor_pole_pairs" Parameter Fixed = 0; NONE; r(0.0, 64.0); "Pole pairs the drive runs with when it is not applying what it measured (commissioning.at_start off, or commissioning.apply_motor off): a commissioned drive's value, for its twin; 0 = the plant's own";
