@@ -3,7 +3,8 @@
 //! hold over the bench's grid checked row by row against the plant's truth the bench drew.
 //! The figures the bench still misses on some motors (see the notes) are held here at
 //! the levels measured over seeds 1 to 7 and 2026 (100 motors each), so that they cannot get
-//! worse unnoticed: the q-axis inductance within 14 % (goal 3 %), the peak current within 1.5
+//! worse unnoticed: the q-axis inductance within 7 % where the winding's time constant is over
+//! 1.1 ticks and within 14 % on faster ones (goal 3 %), the peak current within 1.5
 //! times the test current (goal 1.1), at most one motor of the sixteen refused (goal none;
 //! 1 to 4 in a hundred over those seeds).
 
@@ -41,7 +42,10 @@ fn a_small_draw_commissions_within_the_figures_row_by_row_and_names_each_refusal
         assert_eq!(r["found_right"], true, "direction or pole pairs wrong, {at}");
         assert!(f(r, "offset_deg") <= 1.0, "offset, {at}");
         assert!(e[0] <= 0.03 && e[1] <= 0.03 && e[3] <= 0.03, "R, Ld or flux linkage beyond 3 %, {at}");
-        assert!(e[2] <= 0.14, "Lq beyond 14 %, {at}");
+        // The sequence takes the slow winding's q path on its measured time constant: a tenth
+        // either side of a tick may go either way.
+        let slow = f(r, "inductance") / f(r, "resistance") >= 1.1 * 62.5e-6;
+        assert!(e[2] <= if slow { 0.07 } else { 0.14 }, "Lq beyond its level, {at}");
         assert!(f(r, "bandwidth_error") <= 0.10 && f(r, "overshoot") <= 0.10, "current loop, {at}");
         assert!(f(r, "seconds") <= 5.0, "drive time, {at}");
         assert!(f(r, "turns") <= 2.0, "travel, {at}");

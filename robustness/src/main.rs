@@ -1,13 +1,16 @@
-//! `robustness --campaign frames|requests|stream|all [--seconds N] [--seed S] [--json]`:
-//! run the campaigns and print their figures; exit 1 when any goal (0 crashes, 0
-//! accepted-corrupt frames, 0 overflow panics, 0 refusals that changed state) is missed.
+//! `robustness --campaign frames|requests|stream|all [--seconds N] [--seed S] [--json]
+//! [--figures FILE]`: run the campaigns and print their figures (`--figures`: also write them as
+//! JSON to FILE, for `servo bench robustness`'s figure file); exit 1 when any goal (0 crashes,
+//! 0 accepted-corrupt frames, 0 overflow panics, 0 refusals that changed state) is missed.
 
 use robustness::campaigns::{run, Campaign};
 
 fn main() {
     let mut args = std::env::args().skip(1);
     let (mut which, mut seconds, mut seed, mut json) = (String::from("all"), 20.0f64, 0x5EED_0018u64, false);
-    let usage = "usage: robustness [--campaign frames|requests|stream|all] [--seconds N] [--seed S] [--json]";
+    let mut figures_file = None;
+    let usage =
+        "usage: robustness [--campaign frames|requests|stream|all] [--seconds N] [--seed S] [--json] [--figures FILE]";
     while let Some(a) = args.next() {
         let mut value = |name: &str| args.next().unwrap_or_else(|| fail(&format!("{name} needs a value\n{usage}")));
         match a.as_str() {
@@ -24,6 +27,7 @@ fn main() {
                 seed = v.parse().unwrap_or_else(|_| fail(&format!("--seed {v}: not an unsigned integer")));
             }
             "--json" => json = true,
+            "--figures" => figures_file = Some(value("--figures")),
             _ => fail(&format!("unknown argument {a}\n{usage}")),
         }
     }
@@ -42,8 +46,14 @@ fn main() {
         }
         all.push(f);
     }
+    let array = format!("[{}]", all.iter().map(|f| f.json()).collect::<Vec<_>>().join(",\n"));
     if json {
-        println!("[{}]", all.iter().map(|f| f.json()).collect::<Vec<_>>().join(",\n"));
+        println!("{array}");
+    }
+    if let Some(file) = figures_file {
+        if let Err(e) = std::fs::write(&file, &array) {
+            fail(&format!("cannot write {file}: {e}"));
+        }
     }
     std::process::exit(if ok { 0 } else { 1 });
 }

@@ -22,13 +22,13 @@ fn phase_shifting_measures_every_injection_point_against_the_oracle_and_single_p
         assert!(row.met, "{row:?}");
     }
     // Every plant (both inertia ratios, shaft resonance 50 and 500 Hz) meets the accuracy
-    // goal at every point, with and without noise; the stiff plants and the light 50 Hz one
-    // also the time; the heavy 50 Hz plant's rows take up to about 11 s (its 20 Hz
-    // anti-resonance rings after each step and the settling check waits for it).
+    // goal at every point, with and without noise, and the time: the sweep's 9.9 s budget
+    // bounds it where the low end took long (the heavy 50 Hz plant's 20 Hz anti-resonance
+    // rings after each step and the settling check waits for it; noise lengthens the low end
+    // of the light one).
     for row in &r.grid {
         assert!(row.gain_db <= 0.1 && row.phase_deg <= 1.0, "{row:?}");
-        let limit = if row.plant.starts_with("J_L/J_M 5, 50 Hz") { 12.0 } else { 10.0 };
-        assert!(row.measurement_time_s <= limit, "{row:?}");
+        assert!(row.measurement_time_s <= 10.0, "{row:?}");
     }
     // The bench reports a miss as a miss.
     assert_eq!(r.goals_met(), r.grid.iter().all(|row| row.met) && r.limit_detection.iter().all(|c| c.met));

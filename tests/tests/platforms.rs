@@ -316,14 +316,28 @@ fn shipped_scenarios_give_the_same_bits_natively_under_wine_and_under_qemu() {
         "the native harness differs from the Rust host in {differ} of {cells} values (largest {worst:e})"
     );
     let mut failures = Vec::new();
+    let (mut differing, mut compared) = (0, 0);
     for (name, text) in &outputs[1..] {
         let (worst, differ, cells) = difference(&outputs[0].1, text);
         eprintln!("{name} against x86_64-linux: max difference {worst:e}, {differ} of {cells} values differ");
+        (differing, compared) = (differing + differ, compared + cells);
         if differ != 0 {
             failures
                 .push(format!("{name} differs from x86_64-linux in {differ} of {cells} values (largest {worst:e})"));
         }
     }
+    // The figure for the book's figures page (`servo figures` renders out/bench/platforms.json).
+    host_tools::bench::figures::Recorder::new("platforms")
+        .command("cargo test --release -p cross-checks --test platforms -- --nocapture")
+        .equal(
+            "output differences between x86_64 Linux, Windows (Wine) and aarch64 (qemu), shipped scenarios",
+            differing as f64,
+            0.0,
+            "",
+        )
+        .info("values compared", compared as f64, "")
+        .write(None, failures.is_empty())
+        .unwrap();
     assert!(failures.is_empty(), "{}", failures.join("; "));
 }
 

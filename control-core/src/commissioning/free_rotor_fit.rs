@@ -12,7 +12,8 @@
 //! fit of that recursion gives `L = T·(p₁ − p₂)/(c·(ln p₁ − ln p₂))` and `R = −L·(ln p₁ + ln
 //! p₂)/T`, for real or complex poles; a rotor that does not move (`κ = 0`) puts one pole at 1
 //! and leaves the first-order fit's answer. What it does not model — the d current's pull,
-//! friction — acts below a few hertz, far under the chips' band.
+//! the rotor sticking on its friction at each reversal — acts mostly at the low end of the
+//! chips' band, which [`FreeRotorFit::high_passed`] weighs less.
 
 use super::regression::Regression;
 use super::winding_fit::Winding;
@@ -27,12 +28,31 @@ pub struct FreeRotorFit {
     last_voltage: f32,
     /// Regressors (i[k], i[k] − i[k−1], v[k] − v[k−1]) against y = i[k+1] − i[k].
     sums: Regression<3>,
+    /// The raw sample before (current, voltage), when the fit is high-passed.
+    raw: Option<(f32, f32)>,
+    high_passed: bool,
 }
 
 impl FreeRotorFit {
+    /// The fit of the samples' differences from one tick to the next (`i[k] − i[k−1]`,
+    /// `v[k] − v[k−1]`): a linear branch's recursion holds for them as for the samples, and
+    /// the difference weighs each frequency by `2·sin(πfT)`, so that what the model misses at
+    /// low frequencies (a rotor that sticks on its friction and slips, a slow swing on the d
+    /// current's pull) counts for less beside the chips' upper band, where the winding's
+    /// inductance shows.
+    pub fn high_passed() -> Self {
+        Self { high_passed: true, ..Self::default() }
+    }
+
     /// One tick: the current read now, and the voltage applied over the tick that ended with
     /// this reading.
     pub fn add(&mut self, current: f32, voltage: f32) {
+        let (current, voltage) = if self.high_passed {
+            let Some((i, v)) = self.raw.replace((current, voltage)) else { return };
+            (current - i, voltage - v)
+        } else {
+            (current, voltage)
+        };
         let i0 = *self.origin.get_or_insert(current);
         // A row once three currents are known.
         if let (Some(before), Some(previous)) = self.history {
@@ -130,6 +150,53 @@ mod tests {
                 assert!((f.inductance as f64 / l - 1.0).abs() > 0.1, "{f:?}");
             }
         }
+    }
+
+    /// A light rotor with a strong magnet (6 pole pairs, 82.6 mWb, 5.7·10⁻⁶ kg·m², a motor of
+    /// `servo bench commission`) held by the d current's pull, under ±0.5·R·I chips whose q
+    /// current makes about as much torque as the rotor's Coulomb friction: without friction
+    /// both fits hold the inductance within 0.2 %; with a twentieth of the test current's
+    /// torque the rotor sticks and slips, and the high-passed fit's error is at most 60 % of
+    /// the plain fit's (3.4 % against 6.8 % here; `servo bench commission` measures the
+    /// sequence on the drawn motors).
+    #[test]
+    fn a_rotor_that_sticks_and_slips_is_fitted_better_high_passed() {
+        let tick = 62.5e-6f64;
+        let (r, l, p, psi, j, test_current) = (0.379, 1.26e-4, 6.0, 0.0826, 5.74e-6, 2.0);
+        let torque_constant = 1.5 * p * psi;
+        // The d current's pull (half the test current) per mechanical radian.
+        let spring = 1.5 * p * p * psi * 0.5 * test_current;
+        let errors = [0.0, 0.05].map(|share| {
+            let coulomb = share * torque_constant * test_current;
+            let mut plain = FreeRotorFit::default();
+            let mut high_passed = FreeRotorFit::high_passed();
+            let mut chips = crate::m_sequence::MSequence::new(12).unwrap();
+            let (mut i, mut w, mut angle, mut v_prev, mut v) = (0.0f64, 0.0f64, 0.0f64, 0.0f64, 0.0f64);
+            let sub = 64;
+            let h = tick / sub as f64;
+            for _ in 0..4095 {
+                for _ in 0..sub {
+                    let drive = torque_constant * i - spring * angle;
+                    // Stuck while the drive stays within the friction; else sliding against it.
+                    let friction = if w != 0.0 { coulomb * w.signum() } else { drive.clamp(-coulomb, coulomb) };
+                    let w_next = w + h * (drive - friction) / j;
+                    w = if w != 0.0 && w_next.signum() != w.signum() { 0.0 } else { w_next };
+                    angle += h * w;
+                    i += h * (v_prev - r * i - p * psi * w) / l;
+                }
+                plain.add(i as f32, v_prev as f32);
+                high_passed.add(i as f32, v_prev as f32);
+                v_prev = v;
+                v = 0.5 * r * test_current * chips.next_chip() as f64;
+            }
+            let error = |fit: &FreeRotorFit| {
+                fit.winding(tick as f32).map_or(f64::INFINITY, |w| (w.inductance as f64 / l - 1.0).abs())
+            };
+            (error(&high_passed), error(&plain))
+        });
+        let [(free_high_passed, free_plain), (sticking_high_passed, sticking_plain)] = errors;
+        assert!(free_high_passed < 0.002 && free_plain < 0.002, "{errors:?}");
+        assert!(sticking_plain > 0.03 && sticking_high_passed < 0.6 * sticking_plain, "{errors:?}");
     }
 
     #[test]

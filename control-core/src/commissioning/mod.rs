@@ -287,6 +287,9 @@ const PROBE_FIT_PERIODS: u32 = 8;
 /// Chips of each inductance stage (an M-sequence of degree 12), after a few ticks' start.
 const CHIP_DEGREE: u32 = 12;
 const CHIP_SETTLING_TICKS: u32 = 64;
+/// The q chips' current peak on a winding slower than a tick, a share of the test current
+/// (`q_chip_volts`).
+const Q_CHIP_PEAK: f32 = 0.5;
 
 /// The current step's overshoot beyond which the sequence fails (the design is kept, and its
 /// measured bandwidth and overshoot reported, below it).
@@ -417,6 +420,8 @@ pub struct Commissioning {
     chips: MSequence,
     fit: WindingFit,
     q_fit: FreeRotorFit,
+    /// The probe's free-rotor fit of the samples' differences: its last resort.
+    probe_high_passed: FreeRotorFit,
     /// The dead-time voltage along the measured axis for the phase currents' signs at the
     /// last reading (V).
     dead_time_along_axis: f32,
@@ -488,6 +493,7 @@ impl Commissioning {
             },
             fit: WindingFit::default(),
             q_fit: FreeRotorFit::default(),
+            probe_high_passed: FreeRotorFit::high_passed(),
             dead_time_along_axis: 0.0,
             dead_time_shape: 0.0,
             last_chip: 0.0,
@@ -587,6 +593,7 @@ impl Commissioning {
                         self.fit.add_with_dead_time(previous, current.d, self.applied_chip, self.dead_time_shape);
                     }
                     self.q_fit.add(current.d, self.applied_chip);
+                    self.probe_high_passed.add(current.d, self.applied_chip);
                     self.last_current = Some(current.d);
                     // Per volt of dead time (its size is not known yet: the fit finds it), for
                     // the phase currents' signs at the next tick's start.
@@ -596,7 +603,15 @@ impl Commissioning {
                             w.resistance > 1e-3 && w.resistance < 100.0 && w.inductance > 1e-6 && w.inductance < 1.0
                         };
                         let free_rotor = self.q_fit.winding(s.tick_period).filter(plausible);
-                        let Some(w) = free_rotor.or_else(|| self.fit.winding(s.tick_period)) else {
+                        // The fits in turn: the free rotor's, the first-order one, and where a
+                        // light rotor on a strong magnet sticks and slips under the chips so
+                        // that neither finds a winding, the free rotor's high-passed. The loop
+                        // closed on it needs the inductance roughly; the stages after it
+                        // measure the winding.
+                        let found = free_rotor
+                            .or_else(|| self.fit.winding(s.tick_period))
+                            .or_else(|| self.probe_high_passed.winding(s.tick_period).filter(plausible));
+                        let Some(w) = found else {
                             return self.fail(CommissioningFault::Inductance { axis: 'd' });
                         };
                         if !(w.resistance > 1e-3 && w.resistance < 100.0 && w.inductance > 1e-6 && w.inductance < 1.0) {
@@ -631,6 +646,7 @@ impl Commissioning {
                     } else {
                         self.fit = WindingFit::default();
                         self.q_fit = FreeRotorFit::default();
+                        self.probe_high_passed = FreeRotorFit::high_passed();
                         self.last_current = None;
                         self.next_stage(Stage::ProbeFit);
                     }
@@ -897,7 +913,12 @@ impl Commissioning {
                 let size = crate::limit(0.25 * libm::sqrtf(ticks_per_tau), 1.0, 16.0);
                 // The resistive part of half the test current (the held voltage also carries
                 // the inverter's dead-time voltage, which a chip's swing must not scale).
-                let chip = size * 0.5 * self.resistance * self.test_current * self.chips.next_chip() as f32;
+                let volts = if stage == Stage::InductanceQ && self.slow_q_winding() {
+                    self.q_chip_volts(i.bus_voltage)
+                } else {
+                    size * 0.5 * self.resistance * self.test_current
+                };
+                let chip = volts * self.chips.next_chip() as f32;
                 self.applied_chip = self.last_chip;
                 self.last_chip = chip;
                 if stage == Stage::InductanceD {
@@ -1143,10 +1164,38 @@ impl Commissioning {
         self.next_stage(Stage::CurrentStep);
     }
 
+    /// A winding whose time constant (the d axis's, measured) is longer than a tick: the q
+    /// chips are sized for the current's peak and fitted high-passed (`q_chip_volts`,
+    /// `FreeRotorFit::high_passed`). A faster one keeps the chips and the fit the d axis has.
+    fn slow_q_winding(&self) -> bool {
+        self.ld > self.resistance * self.settings.tick_period
+    }
+
+    /// The q chips' size (V). Their current is zero-mean and makes torque, which a rotor's
+    /// friction resists: the rotor then sticks and slips, which no linear fit follows, unless
+    /// the chips' torque stands well above the friction's. So the chips are as large as the
+    /// current allows, their peak [`Q_CHIP_PEAK`] of the test current beside the held d
+    /// current (half of it): the current's random walk under ±V chips has a standard
+    /// deviation of `V·(1 − a)/(R·√(1 − a²))` = `V·√tanh(RT/2L)/R` (`a = e^{−RT/L}`), and
+    /// stays within 3.5 of them over a record, and within `V/R` whatever the record. Within
+    /// nine tenths of the voltage the held d voltage leaves (the vector is never scaled down,
+    /// which would scale the fitted chips with it).
+    fn q_chip_volts(&self, bus_voltage: f32) -> f32 {
+        let x = self.resistance * self.settings.tick_period / self.ld;
+        let peak_per_volt = crate::limit(3.5 * libm::sqrtf(libm::tanhf(0.5 * x)), 0.0, 1.0) / self.resistance;
+        let limit = self.settings.max_voltage.min(crate::reference_frames::voltage_circle_radius(bus_voltage));
+        let room = libm::sqrtf((limit * limit - self.held_low * self.held_low).max(0.0));
+        (Q_CHIP_PEAK * self.test_current / peak_per_volt).min(0.9 * room)
+    }
+
     fn start_chips(&mut self, stage: Stage) {
         self.chips = MSequence::new(CHIP_DEGREE).unwrap_or(MSequence::DEGREE_15);
         self.fit = WindingFit::default();
-        self.q_fit = FreeRotorFit::default();
+        self.q_fit = if stage == Stage::InductanceQ && self.slow_q_winding() {
+            FreeRotorFit::high_passed()
+        } else {
+            FreeRotorFit::default()
+        };
         self.dead_time_along_axis = 0.0;
         self.dead_time_shape = 0.0;
         self.last_chip = 0.0;

@@ -342,3 +342,25 @@ fn other_loop_rates_commission_the_default_motor() {
         assert!(error < 1f64.to_radians(), "offset {} vs {offset} at {} Hz", m.alignment.offset, 1.0 / tick);
     }
 }
+
+/// The q chips on a slow winding stay within the voltage the held d voltage leaves, never
+/// scaled down with the vector, and finite on a winding whose time constant is millions of
+/// ticks (where `1 − e^{−RT/L}` rounds to 0 in f32).
+#[test]
+fn the_q_chips_stay_finite_and_within_the_voltage_left_beside_the_held_d_voltage() {
+    let mut c = Commissioning::new(CommissioningSettings::for_encoder(2000, TICK)).unwrap();
+    let s = c.settings;
+    let bus = 24.0;
+    let limit = s.max_voltage.min(crate::reference_frames::voltage_circle_radius(bus));
+    for (resistance, ld) in [(3.0, 0.03), (1e-3, 0.9), (0.379, 1.16e-4), (10.0, 0.01)] {
+        c.resistance = resistance;
+        c.ld = ld;
+        c.test_current = s.test_current.min(0.7 * s.max_voltage / resistance);
+        c.held_low = 0.5 * c.test_current * resistance;
+        let v = c.q_chip_volts(bus);
+        let room = libm::sqrtf(limit * limit - c.held_low * c.held_low);
+        assert!(v.is_finite() && v > 0.0 && v <= 0.9 * room, "R {resistance} L {ld}: {v} V, room {room} V");
+        c.voltage = c.held_low;
+        assert_eq!(c.output_scale(bus, v), 1.0, "R {resistance} L {ld}");
+    }
+}

@@ -212,6 +212,24 @@ impl SweepParams {
         record.saturating_mul(self.records(f, base_rate_hz) as u64).saturating_add(discarded).saturating_add(wait)
     }
 
+    /// The shortest a frequency f can take: [`Self::longest_point_ticks`] without a half block
+    /// added to its records or discarded while the first settles.
+    pub fn shortest_point_ticks(&self, f: f32, last: bool, base_rate_hz: f32) -> u64 {
+        let d = self.acquisition_divider as u64;
+        let (settle, samples) = self.record_length(f, base_rate_hz);
+        let record = settle.max(1).saturating_add(samples.saturating_mul(d));
+        let wait = if last { 0 } else { self.peak_wait_bound(f, base_rate_hz) };
+        record.saturating_mul(self.records(f, base_rate_hz) as u64).saturating_add(wait)
+    }
+
+    /// The sum of [`Self::shortest_point_ticks`] over the frequencies of `plan`.
+    pub fn shortest_ticks(&self, plan: &FrequencyPlan, base_rate_hz: f32) -> u64 {
+        let count = plan.count as usize;
+        (0..count).fold(0u64, |total, i| {
+            total.saturating_add(self.shortest_point_ticks(self.frequency_in(plan, i), i + 1 == count, base_rate_hz))
+        })
+    }
+
     /// The sum of [`Self::longest_point_ticks`] over the frequencies of `plan`.
     pub fn longest_ticks(&self, plan: &FrequencyPlan, base_rate_hz: f32) -> u64 {
         let count = plan.count as usize;

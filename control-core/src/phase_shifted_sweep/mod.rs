@@ -263,6 +263,14 @@ pub struct PhaseShiftedSweep {
     /// (see `SweepParams::shifts`; not measured for this field alone).
     budget_over_longest: i32,
     budget_left: i32,
+    /// With a budget: what the frequencies can take beyond their shortest (no half block added
+    /// or discarded), summed over all of them when the sweep is built, and while it runs over
+    /// those after the present one. `budget_left` plus the latter is what the present frequency
+    /// may take with every later one at its shortest: the bound that keeps the sweep within
+    /// its budget where the frequencies before took long (see [`Self::budget_bound`]). 0
+    /// without a budget.
+    slack_over_shortest: i32,
+    slack_later: i32,
 }
 
 /// [`PhaseShiftedSweep::budget_over_longest`] without a time budget: no budget
@@ -292,7 +300,7 @@ impl PhaseShiftedSweep {
     #[allow(unsafe_code)]
     pub(crate) unsafe fn init(sweep: *mut Self, params: SweepParams, base_rate_hz: f32) {
         let plan = params.plan();
-        let budget_over_longest = Self::budget_over_longest(&params, &plan, base_rate_hz);
+        let (budget_over_longest, slack_over_shortest) = Self::budget_over_longest(&params, &plan, base_rate_hz);
         // SAFETY: the caller's; every field is written once.
         unsafe {
             let results = core::ptr::addr_of_mut!((*sweep).results).cast::<SweepResult>();
@@ -303,6 +311,8 @@ impl PhaseShiftedSweep {
                 plan: plan,
                 budget_over_longest: budget_over_longest,
                 budget_left: NO_BUDGET,
+                slack_over_shortest: slack_over_shortest,
+                slack_later: 0,
                 params: params,
                 base_rate_hz: base_rate_hz,
                 status: SweepStatus::default(),
@@ -341,21 +351,24 @@ impl PhaseShiftedSweep {
     }
 
     /// [`Self::budget_over_longest`] of these settings: the budget's ticks less the longest
-    /// the sweep can take, or [`NO_BUDGET`]. A pass over the frequencies (a power and a
+    /// the sweep can take, or [`NO_BUDGET`]; and [`Self::slack_over_shortest`], the longest
+    /// less the shortest (0 without a budget). Passes over the frequencies (a power and a
     /// record length each), when the sweep is built; out of line, so that the constructor
     /// (an axis of 20 KiB built in place) stays as it was.
     #[inline(never)]
-    fn budget_over_longest(params: &SweepParams, plan: &FrequencyPlan, base_rate_hz: f32) -> i32 {
+    fn budget_over_longest(params: &SweepParams, plan: &FrequencyPlan, base_rate_hz: f32) -> (i32, i32) {
         let budget = params.budget_ticks(base_rate_hz);
         // `budget_ticks` is 0 for the PRBS mode and without precision control.
         if budget == 0 || budget >= MAX_BUDGET_TICKS {
-            return NO_BUDGET;
+            return (NO_BUDGET, 0);
         }
         let longest = params.longest_ticks(plan, base_rate_hz);
         if longest < MAX_BUDGET_TICKS {
-            budget as i32 - longest as i32
+            // The shortest is at most the longest, point by point.
+            let shortest = params.shortest_ticks(plan, base_rate_hz);
+            (budget as i32 - longest as i32, (longest - shortest) as i32)
         } else {
-            NO_BUDGET
+            (NO_BUDGET, 0)
         }
     }
 
@@ -394,6 +407,7 @@ impl PhaseShiftedSweep {
         self.dither = 0.0;
         self.aligning = false;
         self.budget_left = self.budget_over_longest;
+        self.slack_later = self.slack_over_shortest;
         self.begin_record(0, 0);
         Ok(())
     }
@@ -415,6 +429,7 @@ impl PhaseShiftedSweep {
             self.aligning = true;
             // The first frequency begins (and takes its longest from the budget) after the wait.
             self.budget_left = self.budget_over_longest;
+            self.slack_later = self.slack_over_shortest;
             self.set_left(ticks as u64);
         }
         Ok(())
@@ -449,7 +464,9 @@ impl PhaseShiftedSweep {
                 // The present frequency leaves the later ones: its own longest is now its to
                 // take (below 2³⁰ ticks, as their sum).
                 let last = point as usize + 1 >= self.plan.count as usize;
-                self.budget_left += p.longest_point_ticks(f, last, self.base_rate_hz) as i32;
+                let longest = p.longest_point_ticks(f, last, self.base_rate_hz);
+                self.budget_left += longest as i32;
+                self.slack_later -= (longest - p.shortest_point_ticks(f, last, self.base_rate_hz)) as i32;
             }
             self.acc = SineFitSums::default();
             self.extensions = 0;

@@ -73,7 +73,7 @@ impl PhaseShiftedSweep {
             }
         };
         let cap = p.half_block_cap(self.status.frequency, self.base_rate_hz).max(grant);
-        halves(ratio, cap).max(halves(ratio * BUDGET_MARGIN, grant))
+        halves(ratio, cap).max(halves(ratio * BUDGET_MARGIN, grant)).min(self.budget_bound(records))
     }
 
     /// The end of a half block of a settled record below the threshold (measured on in half
@@ -127,7 +127,36 @@ impl PhaseShiftedSweep {
     /// record's base block (`records` of them) and, below the threshold, at the end of each
     /// of its half blocks (one record; those already measured count as taken).
     pub(super) fn extension_cap(&self, records: u32) -> u32 {
-        self.params.half_block_cap(self.status.frequency, self.base_rate_hz).max(self.budget_grant(records))
+        let cap = self.params.half_block_cap(self.status.frequency, self.base_rate_hz).max(self.budget_grant(records));
+        cap.min(self.budget_bound(records))
+    }
+
+    /// The half blocks per record (of `records`, as [`Self::budget_grant`] counts them) that
+    /// still end the sweep within its time budget with every later frequency at its shortest
+    /// (`slack_later` added to the room the grant sees): where the frequencies before took
+    /// long (a noisy low end lengthened to its cap, a ringing loop's settling), the present
+    /// one is cut short rather than the budget overrun. At least the half blocks already
+    /// measured (they are paid for); `u32::MAX` without a budget. It binds only where the
+    /// budget would otherwise be overrun: a sweep that fits ends as it did before.
+    pub(super) fn budget_bound(&self, records: u32) -> u32 {
+        if self.budget_over_longest == super::NO_BUDGET {
+            return u32::MAX;
+        }
+        let p = &self.params;
+        let (f, rate) = (self.status.frequency, self.base_rate_hz);
+        let (settle, samples) = p.record_length(f, rate);
+        let d = p.acquisition_divider as u64;
+        let half = ((samples / 2) * d).max(1);
+        let later_records = records.saturating_sub(1 + self.status.record) as u64;
+        let last = self.status.point as usize + 1 >= self.plan.count as usize;
+        let wait = if last { 0 } else { p.peak_wait_bound(f, rate) };
+        let fixed = later_records * (settle.max(1) + samples * d) + wait;
+        let taken = self.spread.half_blocks.saturating_sub(2) as u64;
+        let room = self.budget_left as i64 + self.slack_later as i64 + (taken * half) as i64 - fixed as i64;
+        if room <= 0 {
+            return taken as u32;
+        }
+        (room as u64 / (half * records.max(1) as u64)).max(taken).min(u32::MAX as u64) as u32
     }
 
     /// The half blocks per record the time budget has room for (see [`Self::extension_cap`]),

@@ -78,8 +78,10 @@ pub struct SweepParams {
     /// early leave their time to the later ones that need more (the first to ask): in
     /// practice the top of the sweep, where the response is a few encoder counts and the cap
     /// left about 0.04 dB of spread, is measured longer when the lower frequencies were quick.
-    /// A sweep granted nothing runs as without a budget (and may take longer than it: the
-    /// budget bounds only a sweep that was granted more); a short one (a few points) has room
+    /// The budget also bounds the sweep: where the frequencies before took long, a frequency
+    /// adds or discards only the half blocks that still end the sweep within it with every
+    /// later frequency at its shortest (`PhaseShiftedSweep::budget_bound`), so a sweep whose
+    /// shortest schedule fits the budget ends within it. A short one (a few points) has room
     /// to run its noisy points to the precision (see `PhaseShiftedSweep::extension_cap`).
     /// Where there is room, an extended frequency also measures to 1/1.25 of the precision
     /// (`BUDGET_MARGIN` in `precision_control`). At most 2³⁰ base ticks (18.6 h at 16 kHz:

@@ -582,9 +582,9 @@ fn a_ring_told_by_its_ratios_is_waited_for_under_noise_the_residuals_over_read()
 /// The time budget (`time_budget_s`): at a noisy top frequency (3 kHz, three phase-shifted
 /// records, whose prediction asks for more than the cap of `max_extensions`) the records go
 /// past the cap only while the sweep ends within the budget, and measure closer for it; a
-/// budget the fixed schedule (the records at their base length) fills grants nothing; where the
-/// precision needs fewer half blocks than the cap, the budget's room takes the records on to
-/// 1/1.25 of it.
+/// budget the fixed schedule (the records at their base length) fills holds the records to it;
+/// where the precision needs fewer half blocks than the cap, the budget's room takes the
+/// records on to 1/1.25 of it.
 #[test]
 fn the_time_budget_lengthens_a_capped_top_frequency_within_the_budget() {
     const NOISE: f32 = 0.15;
@@ -599,8 +599,9 @@ fn the_time_budget_lengthens_a_capped_top_frequency_within_the_budget() {
     for seed in (0..seeds).map(|k| 2 * k + 1) {
         let (r_capped, t_capped) = noisy(capped, 0.06, NOISE, seed);
         assert!(t_capped <= longest, "{t_capped} ticks beyond the cap's {longest}");
-        // The tight budget: the same run.
-        assert_eq!(noisy(tight, 0.06, NOISE, seed), (r_capped, t_capped), "seed {seed}");
+        // The tight budget: the records at their base length, whatever the noise asks for.
+        assert_eq!(noisy(tight, 0.06, NOISE, seed).1, top.total_ticks(FS), "seed {seed}");
+        assert!(t_capped > top.total_ticks(FS), "seed {seed}: {t_capped}");
         // Room: past the cap, within the budget.
         let (r_budget, t_budget) = noisy(top, 0.06, NOISE, seed);
         assert!(t_budget > longest && t_budget <= top.budget_ticks(FS), "seed {seed}: {t_budget} ticks vs {longest}");
@@ -618,10 +619,10 @@ fn the_time_budget_lengthens_a_capped_top_frequency_within_the_budget() {
     let half_ticks = top.record_length(3000.0, FS).1 / 2 * top.acquisition_divider as u64;
     let at_cap = top.total_ticks(FS) + 3 * top.half_block_cap(3000.0, FS) as u64 * half_ticks;
     for seed in [1, 3, 5, 7] {
-        let (r_capped, t_capped) = noisy(capped, 0.06, 0.025, seed);
+        let (_, t_capped) = noisy(capped, 0.06, 0.025, seed);
         let (_, t_budget) = noisy(top, 0.06, 0.025, seed);
-        // The tight budget: no finer target either, the same run.
-        assert_eq!(noisy(tight, 0.06, 0.025, seed), (r_capped, t_capped), "seed {seed}");
+        // The tight budget: no half block added.
+        assert_eq!(noisy(tight, 0.06, 0.025, seed).1, top.total_ticks(FS), "seed {seed}");
         assert!(
             t_capped > top.total_ticks(FS) && t_capped < at_cap,
             "seed {seed}: {t_capped} ticks, {at_cap} at the cap"
@@ -635,6 +636,30 @@ fn the_time_budget_lengthens_a_capped_top_frequency_within_the_budget() {
     for seed in [1, 3, 5, 7] {
         let ticks = noisy(two, 0.06, NOISE, seed).1;
         assert!(ticks > capped_two.max_total_ticks(FS) && ticks <= two.budget_ticks(FS), "seed {seed}: {ticks}");
+    }
+}
+
+/// The time budget bounds the sweep where its frequencies would take longer than it: two noisy
+/// frequencies each asking for their cap, with a budget between their shortest and the capped
+/// schedule. Without the budget they overrun it; with it every seed ends within it, the first
+/// frequency's records lengthened as far as the second's shortest leaves room, the second's
+/// held to what is left (here its base length).
+#[test]
+fn the_time_budget_bounds_a_sweep_whose_frequencies_ask_for_more() {
+    let two = SweepParams { start_hz: 2500.0, stop_hz: 3000.0, points: 2, extra_hz: 0.0, ..Default::default() };
+    let (shortest, capped) = (two.total_ticks(FS), SweepParams { time_budget_s: 0.0, ..two }.max_total_ticks(FS));
+    let budget_s = (shortest + (capped - shortest) / 3) as f32 / FS;
+    let bounded = SweepParams { time_budget_s: budget_s, ..two };
+    let unbounded = SweepParams { time_budget_s: 0.0, ..two };
+    for seed in [1, 3, 5, 7, 9, 11] {
+        let free = noisy(unbounded, 0.06, 0.15, seed).1;
+        assert!(free > bounded.budget_ticks(FS), "seed {seed}: {free} ticks fit the budget without it: no test");
+        let ticks = noisy(bounded, 0.06, 0.15, seed).1;
+        assert!(
+            ticks <= bounded.budget_ticks(FS) && ticks > shortest,
+            "seed {seed}: {ticks} ticks, budget {}",
+            bounded.budget_ticks(FS)
+        );
     }
 }
 

@@ -180,10 +180,34 @@ fn bench_robustness(campaign: &str, seconds: f64, seed: u64, common: &Common) ->
     if common.json {
         cmd.arg("--json");
     }
+    let figures_file = std::env::temp_dir().join(format!("servo-robustness-{}.json", std::process::id()));
+    cmd.arg("--figures").arg(&figures_file);
     let status = cmd.status().context("cannot run cargo for the robustness campaigns")?;
-    match status.code() {
-        Some(0) => Ok(true),
-        Some(1) => Ok(false),
+    let passed = match status.code() {
+        Some(0) => true,
+        Some(1) => false,
         _ => bail!("the robustness campaigns did not run to the end ({status})"),
-    }
+    };
+    let text = std::fs::read_to_string(&figures_file).context("the robustness campaigns wrote no figures")?;
+    let _ = std::fs::remove_file(&figures_file);
+    let campaigns: Vec<serde_json::Value> =
+        serde_json::from_str(&text).context("the robustness campaigns' figures are not JSON")?;
+    let sum = |key: &str| campaigns.iter().map(|c| c[key].as_u64().unwrap_or(0)).sum::<u64>() as f64;
+    let names: Vec<&str> = campaigns.iter().filter_map(|c| c["campaign"].as_str()).collect();
+    let overflow_checks = campaigns.iter().all(|c| c["overflow_checks"].as_bool() == Some(true));
+    Recorder::new("robustness")
+        .equal(
+            &format!("link robustness campaigns ({}, {seconds} s each, overflow checks on): crashes", names.join(", ")),
+            sum("crashes"),
+            0.0,
+            "",
+        )
+        .equal("corrupt frames accepted", sum("accepted_corrupt"), 0.0, "")
+        .equal("overflow panics", sum("overflow_panics"), 0.0, "")
+        .equal("refusals that changed the drive's state", sum("refusals_that_changed_state"), 0.0, "")
+        .equal("stream batches whose bad count reached the rows", sum("bad_counts_used"), 0.0, "")
+        .equal("campaigns run without overflow checks", if overflow_checks { 0.0 } else { 1.0 }, 0.0, "")
+        .info("inputs tried", sum("inputs"), "")
+        .write(common.out.as_deref(), passed)?;
+    Ok(passed)
 }

@@ -294,6 +294,13 @@ impl Recorder {
         }
     }
 
+    /// The command that prints the figures, where it is not this process's `servo` command line
+    /// (a test of `tests/` that records its figures): set before the first figure.
+    pub fn command(&mut self, command: &str) -> &mut Self {
+        self.figures.command = command.into();
+        self
+    }
+
     fn push(&mut self, name: &str, goal: Option<Goal>, measured: f64, unit: &str) -> &mut Self {
         let met = goal.map(|g| g.met_by(measured));
         let command = self.figures.command.clone();

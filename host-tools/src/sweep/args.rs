@@ -97,9 +97,10 @@ pub struct SweepArgs {
     /// sweep still ends within this time from its start, every later frequency counted at its
     /// own longest (s; 0 = never): frequencies that finish early leave their time to later ones
     /// that need more, in practice the top, where the response is a few encoder counts; with
-    /// room an extended frequency also measures to 1/1.25 of --precision-db. A sweep granted
-    /// nothing runs as without it. The default: a tenth under the 10 s of `servo bench
-    /// sweep`'s goal (a trace sees the end up to a communication step late)
+    /// room an extended frequency also measures to 1/1.25 of --precision-db. It also bounds the
+    /// sweep: where earlier frequencies took long, a frequency is cut short so that the sweep
+    /// ends within it (every later one at its shortest). The default: a tenth under the 10 s of
+    /// `servo bench sweep`'s goal (a trace sees the end up to a communication step late)
     #[arg(long, default_value_t = 9.9)]
     pub time_budget: f64,
     /// Constant speed the sweep rides on (rad/s; keeps friction on one side)
