@@ -268,7 +268,7 @@ pub struct PhaseShiftedSweep {
     /// those after the present one. `budget_left` plus the latter is what the present frequency
     /// may take with every later one at its shortest: the bound that keeps the sweep within
     /// its budget where the frequencies before took long (see [`Self::budget_bound`]). 0
-    /// without a budget.
+    /// without a budget; -1 (and no bound) with one the shortest schedule does not fit.
     slack_over_shortest: i32,
     slack_later: i32,
 }
@@ -364,9 +364,11 @@ impl PhaseShiftedSweep {
         }
         let longest = params.longest_ticks(plan, base_rate_hz);
         if longest < MAX_BUDGET_TICKS {
-            // The shortest is at most the longest, point by point.
+            // The shortest is at most the longest, point by point. A budget the shortest does
+            // not fit bounds nothing (-1: see `PhaseShiftedSweep::budget_bound`).
             let shortest = params.shortest_ticks(plan, base_rate_hz);
-            (budget as i32 - longest as i32, (longest - shortest) as i32)
+            let slack = if shortest <= budget { (longest - shortest) as i32 } else { -1 };
+            (budget as i32 - longest as i32, slack)
         } else {
             (NO_BUDGET, 0)
         }

@@ -136,11 +136,37 @@ impl PhaseShiftedSweep {
     /// (`slack_later` added to the room the grant sees): where the frequencies before took
     /// long (a noisy low end lengthened to its cap, a ringing loop's settling), the present
     /// one is cut short rather than the budget overrun. At least the half blocks already
-    /// measured (they are paid for); `u32::MAX` without a budget. It binds only where the
-    /// budget would otherwise be overrun: a sweep that fits ends as it did before.
+    /// measured (they are paid for); `u32::MAX` without a budget, or with one the sweep's
+    /// shortest schedule does not fit (nothing can hold it: the sweep runs as without it). It
+    /// binds only where the budget would otherwise be overrun: a sweep that fits ends as it
+    /// did before.
     pub(super) fn budget_bound(&self, records: u32) -> u32 {
-        if self.budget_over_longest == super::NO_BUDGET {
-            return u32::MAX;
+        let Some((room, half, taken)) = self.budget_room(records) else { return u32::MAX };
+        if room <= 0 {
+            return taken as u32;
+        }
+        (room as u64 / (half * records.max(1) as u64)).max(taken).min(u32::MAX as u64) as u32
+    }
+
+    /// The half blocks the settling check may still discard from the present frequency's first
+    /// record within the budget's bound: each lengthens that record alone (the discarded ones
+    /// are already paid for). `u32::MAX` where [`Self::budget_bound`] has no bound.
+    pub(super) fn budget_discards_left(&self) -> u32 {
+        let records = self.params.records(self.status.frequency, self.base_rate_hz);
+        let Some((room, half, _)) = self.budget_room(records) else { return u32::MAX };
+        if room <= 0 {
+            return 0;
+        }
+        (room as u64 / half).min(u32::MAX as u64) as u32
+    }
+
+    /// The ticks the present frequency may still take beyond its later records' base length
+    /// with every later frequency at its shortest (the half blocks of its extension already
+    /// measured counted back in), its half block's ticks and those half blocks; None without
+    /// a bound (see [`Self::budget_bound`]).
+    fn budget_room(&self, records: u32) -> Option<(i64, u64, u64)> {
+        if self.budget_over_longest == super::NO_BUDGET || self.slack_over_shortest < 0 {
+            return None;
         }
         let p = &self.params;
         let (f, rate) = (self.status.frequency, self.base_rate_hz);
@@ -153,10 +179,7 @@ impl PhaseShiftedSweep {
         let fixed = later_records * (settle.max(1) + samples * d) + wait;
         let taken = self.spread.half_blocks.saturating_sub(2) as u64;
         let room = self.budget_left as i64 + self.slack_later as i64 + (taken * half) as i64 - fixed as i64;
-        if room <= 0 {
-            return taken as u32;
-        }
-        (room as u64 / (half * records.max(1) as u64)).max(taken).min(u32::MAX as u64) as u32
+        Some((room, half, taken))
     }
 
     /// The half blocks per record the time budget has room for (see [`Self::extension_cap`]),

@@ -177,12 +177,8 @@ impl PhaseShiftedSweep {
         self.previous_difference = (dre, dim);
         self.previous_above_noise = difference > noise;
         self.previous_excess = excess;
-        // Discarded half blocks lengthen the first record alone: the budget's bound per record
-        // times the records is what all of it leaves for them.
-        let records = p.records(self.status.frequency, self.base_rate_hz);
-        let bound = self.budget_bound(records).saturating_mul(records);
-        let cap = p.half_block_cap(self.status.frequency, self.base_rate_hz).min(bound);
-        if settled || self.discarded_halves >= cap {
+        let cap = p.half_block_cap(self.status.frequency, self.base_rate_hz);
+        if settled || self.discarded_halves >= cap || self.budget_discards_left() == 0 {
             self.checking_settling = false;
             if settled && self.averaging {
                 // Below the threshold the frequency has this one record: its extension is

@@ -643,7 +643,7 @@ fn the_time_budget_lengthens_a_capped_top_frequency_within_the_budget() {
 /// frequencies each asking for their cap, with a budget between their shortest and the capped
 /// schedule. Without the budget they overrun it; with it every seed ends within it, the first
 /// frequency's records lengthened as far as the second's shortest leaves room, the second's
-/// held to what is left (here its base length).
+/// held to what is left.
 #[test]
 fn the_time_budget_bounds_a_sweep_whose_frequencies_ask_for_more() {
     let two = SweepParams { start_hz: 2500.0, stop_hz: 3000.0, points: 2, extra_hz: 0.0, ..Default::default() };
@@ -670,6 +670,30 @@ fn the_time_budget_bounds_a_sweep_whose_frequencies_ask_for_more() {
 /// cap's extension in every record (1.1 s instead of 0.15 s at 2 kHz on a noisy 0.2:1, 50 Hz
 /// torque-command sweep, 10.6 s in all). Slightly off fs/2 (1 934.5 Hz, the sweep's point
 /// below 2 kHz) the phases turn and the error is told.
+/// The budget's bound on the settling check: a ringing first frequency (see [`ringing`])
+/// whose wait fits the budget is waited for exactly as without a budget; with a budget some
+/// half blocks short of that wait, the check discards fewer and the sweep ends within it; a
+/// budget its shortest schedule does not fit bounds nothing.
+#[test]
+fn the_time_budget_bounds_the_settling_wait_only_where_it_must() {
+    let p = SweepParams { start_hz: 50.0, stop_hz: 50.05, points: 2, extra_hz: 0.0, ..Default::default() };
+    let free = SweepParams { time_budget_s: 0.0, ..p };
+    let (r_free, t_free, last_free) = ringing(free);
+    assert!(last_free >= 3, "{last_free} half blocks: the ring is not waited for, no test");
+    // A budget the run fits (with the bound of the wait for the next frequency's peak, which
+    // the budget reserves whole): the same run.
+    let fits = SweepParams { time_budget_s: (t_free + p.peak_wait_bound(50.0, FS)) as f32 / FS, ..p };
+    assert_eq!(ringing(fits), (r_free, t_free, last_free));
+    // Two half blocks short: fewer discarded, within the budget.
+    let half = p.record_length(50.0, FS).1 / 2 * p.acquisition_divider as u64;
+    let short = SweepParams { time_budget_s: (t_free - 2 * half) as f32 / FS, ..p };
+    let (_, t_short, last_short) = ringing(short);
+    assert!(t_short <= short.budget_ticks(FS) && last_short < last_free, "{t_short} ticks, {last_short} half blocks");
+    // Shorter than the shortest schedule: nothing can hold it, the sweep runs as without it.
+    let below = SweepParams { time_budget_s: (p.total_ticks(FS) / 2) as f32 / FS, ..p };
+    assert_eq!(ringing(below), (r_free, t_free, last_free));
+}
+
 #[test]
 fn a_record_at_the_acquisition_nyquist_frequency_predicts_no_error_from_any_start() {
     use crate::trigonometry::ReducedAngle;
