@@ -119,7 +119,9 @@ pub struct Limits {
     pub overcurrent: f32,
     pub bus_undervoltage: f32,
     pub bus_overvoltage: f32,
-    /// Position following error that trips in position mode (rad).
+    /// Position following error that trips in position mode (rad). The default, 2 rad, leaves
+    /// room above the shipped position step of 1 rad: a step as large as the limit trips on
+    /// the first backward micro-radian of a rotor not perfectly at rest.
     pub following_error: f32,
 }
 
@@ -324,7 +326,7 @@ impl Default for Params {
             velocity: VelocityLoopGains { kp: 0.0942, ki: 11.84, torque_limit: 2.0 },
             position: PositionLoopGains { kp: 125.7, velocity_feedforward: 1.0, velocity_limit: 300.0 },
             filters: TorqueFilters { low_pass_hz: 0.0, notch_hz: 0.0, notch_q: 1.0, notch_depth: 0.0 },
-            limits: Limits { overcurrent: 30.0, bus_undervoltage: 20.0, bus_overvoltage: 60.0, following_error: 1.0 },
+            limits: Limits { overcurrent: 30.0, bus_undervoltage: 20.0, bus_overvoltage: 60.0, following_error: 2.0 },
             acc_dec: AccDecParams::default(),
             sequence: SequenceParams::default(),
             friction: FrictionCompensationParams::default(),

@@ -326,7 +326,8 @@ fn shipped_scenarios_give_the_same_bits_natively_under_wine_and_under_qemu() {
                 .push(format!("{name} differs from x86_64-linux in {differ} of {cells} values (largest {worst:e})"));
         }
     }
-    // The figure for the book's figures page (`servo figures` renders out/bench/platforms.json).
+    // The figure for the book's figures page (`servo figures` renders out/bench/platforms.json,
+    // at the workspace's root: a test runs in its package's folder).
     host_tools::bench::figures::Recorder::new("platforms")
         .command("cargo test --release -p cross-checks --test platforms -- --nocapture")
         .equal(
@@ -336,7 +337,7 @@ fn shipped_scenarios_give_the_same_bits_natively_under_wine_and_under_qemu() {
             "",
         )
         .info("values compared", compared as f64, "")
-        .write(None, failures.is_empty())
+        .write(Some(&host_tools::paths::workspace_root().join("out/bench")), failures.is_empty())
         .unwrap();
     assert!(failures.is_empty(), "{}", failures.join("; "));
 }

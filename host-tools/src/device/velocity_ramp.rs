@@ -17,6 +17,13 @@ use crate::device::session::{DriveSession, STALLED};
 pub const RAMP_STEP: f64 = 0.0025;
 /// The deceleration an experiment ends with (rad/s²).
 pub const STOP_ACCELERATION: f64 = 2000.0;
+/// After the ramp to 0 the velocity loop holds 0 until the rotor turns slower than this (rad/s)
+/// or for at most `STOP_HOLD` of the drive's time: at the end of the ramp the rotor still
+/// turns by the loop's lag, and released at speed it would coast on, into whatever comes next
+/// (a position-mode run that starts on a coasting rotor brakes it against its own command and
+/// latches a following error).
+pub const REST_SPEED: f32 = 0.5;
+pub const STOP_HOLD: f64 = 0.5;
 
 impl<T: DrivePort> DriveSession<T> {
     /// The velocity command from `from` to `to` rad/s at `acceleration` rad/s², a step every
@@ -57,14 +64,40 @@ impl<T: DrivePort> DriveSession<T> {
     /// is still sent before the fault is named).
     pub fn stop_and_rest(&mut self) -> Result<Telemetry> {
         let ramp = match self.telemetry() {
-            Ok(t) if t.mode == Mode::Velocity && !t.faults.any() && t.velocity_reference != 0.0 => {
-                self.ramp_velocity(t.velocity_reference as f64, 0.0, STOP_ACCELERATION)
-            }
+            Ok(t) if t.mode == Mode::Velocity && !t.faults.any() && t.velocity_reference != 0.0 => self
+                .ramp_velocity(t.velocity_reference as f64, 0.0, STOP_ACCELERATION)
+                .and_then(|_| self.hold_zero().map(|_| ())),
             _ => Ok(()),
         };
         let rest = self.rest();
         ramp?;
         rest
+    }
+}
+
+impl<T: DrivePort> DriveSession<T> {
+    /// Velocity 0 held until the rotor turns slower than [`REST_SPEED`], at most
+    /// [`STOP_HOLD`] of the drive's time; a latched fault or a stalled drive ends it with an
+    /// error. Returns the last reading.
+    pub fn hold_zero(&mut self) -> Result<Telemetry> {
+        let command = Commands { mode: Mode::Velocity, velocity: 0.0, ..Commands::default() };
+        self.order(Request::SetCommands(command), "velocity 0")?;
+        let first = without_faults(self.telemetry()?)?;
+        let (start, mut last, mut moved) = (first.tick, first.tick, Instant::now());
+        let mut t = first;
+        while t.velocity_estimate.abs() >= REST_SPEED && ((t.tick - start) as f64) < STOP_HOLD * self.tick_hz {
+            self.link.pause(Duration::from_secs_f64(RAMP_STEP));
+            t = without_faults(self.telemetry()?)?;
+            if t.tick < last {
+                bail!("the drive's tick went back from {last} to {} while it stopped (did it restart?)", t.tick);
+            }
+            if t.tick != last {
+                (last, moved) = (t.tick, Instant::now());
+            } else if moved.elapsed() > STALLED {
+                bail!("the drive's tick counter stopped at {} while it stopped (is it still running?)", t.tick);
+            }
+        }
+        Ok(t)
     }
 }
 

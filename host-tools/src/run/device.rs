@@ -17,6 +17,7 @@ use control_core::Commands;
 use crate::device::link::DrivePort;
 use crate::device::session::DriveSession;
 use crate::device::timed_run::{on_grid, run_timed, SentAt, TimedRequests};
+use crate::device::velocity_ramp::{REST_SPEED, STOP_HOLD};
 use crate::fmu::configuration::configuration;
 use crate::fmu::scenario::{Scenario, Value, DEFAULT_STEP};
 use crate::fmu::trace::Trace;
@@ -86,6 +87,19 @@ pub fn scenario_on_drive<T: DrivePort>(
 ) -> Result<DeviceScenario> {
     let params = with_board_limits(configuration(&scenario.parameters)?.control);
     session.set_params(&params)?;
+    // The run starts from rest, as its twin does: a rotor still turning (left coasting by
+    // whatever ran before) is stopped first, or the run is refused.
+    let now = session.telemetry()?;
+    if now.velocity_estimate.abs() >= REST_SPEED {
+        let held = session.hold_zero()?;
+        session.rest()?;
+        if held.velocity_estimate.abs() >= REST_SPEED {
+            bail!(
+                "the rotor still turns at {:.2} rad/s after {STOP_HOLD} s at velocity 0: a run starts from rest",
+                held.velocity_estimate
+            );
+        }
+    }
     let origin = session.telemetry()?.position;
     let cpr = params.encoder_counts_per_rev as f64;
     // The set-points accumulate event by event, as the FMU's inputs keep their values.

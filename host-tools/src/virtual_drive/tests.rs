@@ -317,3 +317,35 @@ fn a_save_whose_answer_is_lost_is_told_from_the_telemetry_and_writes_one_record(
         }
     }
 }
+
+/// A run over the link starts from rest, as its twin does: on a rotor left coasting at speed
+/// (torque mode at zero torque after 30 rad/s) `servo run --device`'s position step stops it
+/// first and then runs without a fault; the stop at the end of a velocity experiment
+/// (`stop_and_rest`) leaves the rotor stopped.
+#[test]
+fn a_run_on_a_coasting_rotor_stops_it_first_and_a_velocity_experiment_ends_stopped() {
+    use crate::device::velocity_ramp::REST_SPEED;
+    let mut s = commissioned(VirtualDrive::power_on(&settings(), FileFlash::in_memory()).unwrap());
+    let defaults = s.params().unwrap();
+    s.set_params(&defaults).unwrap();
+    let spin = |s: &mut DriveSession<InProcessDrive<FileFlash>>| {
+        s.ramp_velocity(0.0, 30.0, 2000.0).unwrap();
+        s.link.pause(Duration::from_millis(200));
+    };
+    spin(&mut s);
+    s.order(Request::SetCommands(Commands { mode: Mode::Torque, ..Commands::default() }), "coast").unwrap();
+    assert!(s.telemetry().unwrap().velocity_estimate.abs() > 10.0, "not coasting: no test");
+    let scenario =
+        crate::fmu::scenario::Scenario::load(&crate::paths::workspace_root().join("scenarios/position_step.toml"))
+            .unwrap();
+    let run = crate::run::device::scenario_on_drive(&mut s, &scenario, |_| {}).unwrap();
+    let faults = run.trace.column("faults").unwrap();
+    assert!(faults.iter().all(|&f| f == 0.0), "a fault latched during the run");
+    // It started from rest, as its twin does.
+    let v0 = run.trace.column("velocity_estimate").unwrap()[0];
+    assert!(v0.abs() < REST_SPEED as f64, "the run started at {v0} rad/s");
+    // A velocity experiment's end: ramped down, held until stopped, at rest.
+    spin(&mut s);
+    let t = s.stop_and_rest().unwrap();
+    assert!(t.velocity_estimate.abs() < REST_SPEED, "still turning at {} rad/s", t.velocity_estimate);
+}
