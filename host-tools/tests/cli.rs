@@ -292,9 +292,10 @@ fn csv_column(path: &std::path::Path, name: &str, rows: std::ops::Range<usize>) 
 
 #[test]
 fn circle_fails_when_a_drive_trips_naming_the_fault_and_when() {
-    // 20 revolutions per second on 1 rad: the axes cannot follow, and trip on their following error.
+    // 20 revolutions per second on 1 rad: the axes cannot follow, and trip on their following
+    // error (a limit of 1 rad, half the default, on both axes).
     let out = tmp("circle-trip");
-    let args = ["circle", "--radius", "1", "--feed", "125.66370614359172"];
+    let args = ["circle", "--radius", "1", "--feed", "125.66370614359172", "--set", "ctrl.following_error_limit=1"];
     let o = servo().args(args).arg("--json").on_fmu(&out).output().unwrap();
     assert_eq!(o.status.code(), Some(1), "{}", String::from_utf8_lossy(&o.stderr));
     let r: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
