@@ -26,12 +26,28 @@ fn markdown_pages(dir: &Path, out: &mut Vec<PathBuf>) {
 /// pipe cut off) or a mention (inline code).
 fn commands(page: &str) -> Vec<(String, bool)> {
     let mut found = Vec::new();
-    let mut in_sh = false;
+    let (mut in_sh, mut in_block) = (false, false);
     let mut joined = String::new();
+    // Prose is read a paragraph at a time: an inline span may wrap onto the next line.
+    let mut paragraph = String::new();
+    let mentions = |paragraph: &mut String, found: &mut Vec<(String, bool)>| {
+        for (i, span) in paragraph.split('`').enumerate() {
+            let span = servo_command(span);
+            if i % 2 == 1 && span.starts_with("servo ") {
+                found.push((collapse(span.trim_end_matches('&')), false));
+            }
+        }
+        paragraph.clear();
+    };
     for line in page.lines() {
         let trimmed = line.trim_start();
         if let Some(lang) = trimmed.strip_prefix("```") {
-            in_sh = !in_sh && matches!(lang.trim(), "sh" | "bash" | "console");
+            mentions(&mut paragraph, &mut found);
+            in_sh = !in_block && matches!(lang.trim(), "sh" | "bash" | "console");
+            in_block = !in_block;
+            continue;
+        }
+        if in_block && !in_sh {
             continue;
         }
         if in_sh {
@@ -42,19 +58,27 @@ fn commands(page: &str) -> Vec<(String, bool)> {
             }
             let text = std::mem::take(&mut joined);
             let text = text.split(" #").next().unwrap().split(" | ").next().unwrap().trim().trim_end_matches('&');
-            let text = text.trim().trim_start_matches("$ ");
+            let text = servo_command(text.trim().trim_start_matches("$ "));
             if text.starts_with("servo ") {
-                found.push((collapse(text), true));
+                found.push((collapse(&text), true));
             }
+        } else if trimmed.is_empty() {
+            mentions(&mut paragraph, &mut found);
         } else {
-            for (i, span) in line.split('`').enumerate() {
-                if i % 2 == 1 && span.starts_with("servo ") {
-                    found.push((collapse(span.trim_end_matches('&')), false));
-                }
-            }
+            paragraph.push_str(line);
+            paragraph.push(' ');
         }
     }
+    mentions(&mut paragraph, &mut found);
     found
+}
+
+/// `cargo run … --bin servo -- ARGS` as `servo ARGS` (the README's form on a fresh clone).
+fn servo_command(text: &str) -> String {
+    match text.split_once("--bin servo -- ") {
+        Some((cargo, args)) if cargo.trim_start().starts_with("cargo run") => format!("servo {args}"),
+        _ => text.to_string(),
+    }
 }
 
 fn collapse(text: &str) -> String {
@@ -128,11 +152,16 @@ fn every_servo_command_in_the_docs_parses() {
 /// The extraction: continuation lines, comments, inline spans; a renamed option is caught.
 #[test]
 fn the_extraction_finds_commands_and_a_wrong_option_fails() {
-    let page = "Run `servo sweep --oracle` first.\n\n```sh\nservo sweep --point torque \\\n  --amplitude 0.2   # a comment\nservo index &\n```\n";
+    let page = "Run `servo sweep\n--oracle` first.\n\n```sh\nservo sweep --point torque \\\n  --amplitude 0.2   # a comment\nservo index &\ncargo run --release -q -p host-tools --bin servo -- run --fmpy\n```\n\n```text\n`servo nothing`\n```\n";
     let found: Vec<_> = commands(page).into_iter().map(|(c, whole)| format!("{whole} {c}")).collect();
     assert_eq!(
         found,
-        ["false servo sweep --oracle", "true servo sweep --point torque --amplitude 0.2", "true servo index"]
+        [
+            "false servo sweep --oracle",
+            "true servo sweep --point torque --amplitude 0.2",
+            "true servo index",
+            "true servo run --fmpy"
+        ]
     );
     assert!(command().try_get_matches_from(words("servo sweep --point torque --amplitude 0.2")).is_ok());
     let wrong = command().try_get_matches_from(words("servo sweep --no-such-option 1")).unwrap_err();

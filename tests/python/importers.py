@@ -28,13 +28,14 @@ Usage:
       message from the embedded FMU, or no message at all, fails the run.
   importers.py libcosim FMU SCENARIO.toml OUT.csv
       libcosim (the Open Simulation Platform's co-simulation library, through libcosimpy): FMI
-      2.0 only (its FMI Library reads FMI 1.0 and 2.0; an FMI 3.0 archive is refused by name).
+      2.0 only (its FMI Library reads FMI 1.0 and 2.0; an FMI 3.0 archive is refused with
+      libcosim's reason).
       The scenario's parameters and t = 0 inputs are initial values (applied in initialisation,
       which libcosim runs inside the first step), later inputs go through an override
       manipulator before the step they start; one step() per communication step, its time in
       integer nanoseconds. Outputs after each step from a last-value observer, those at t = 0
       from a time-series observer. libcosim reports a failed step as False (the FMU's message
-      in its log at Warning level and up, on stderr), which fails the run.
+      in its log at Warning level and up, on stdout), which fails the run.
 Each command prints `<importer>: <seconds> s` (the run's wall time) on stderr.
 """
 import ctypes
@@ -327,9 +328,6 @@ def run_libcosim(fmu, scenario, out):
     from libcosimpy.CosimSlave import CosimLocalSlave
     from libcosimpy._internal import get_last_error_message
 
-    version = fmi_version(fmu)
-    if version != "2.0":
-        fail(f"libcosim reads FMI 1.0 and 2.0; {fmu} is FMI {version}")
     sc = Scenario(scenario)
     md = read_model_description(fmu)
     variables, names, table = scenario_inputs(md, sc)
@@ -342,11 +340,16 @@ def run_libcosim(fmu, scenario, out):
     t0 = time.perf_counter()
     ex = CosimExecution.from_step_size(step_size=step_ns)
     local = CosimLocalSlave(fmu_path=str(Path(fmu).resolve()), instance_name="servo")
-    # A refused archive leaves a null slave, which add_local_slave would dereference.
+    # An archive libcosim refuses (FMI 3.0: its FMI Library reads 1.0 and 2.0) leaves a null
+    # slave, which add_local_slave would dereference: the refusal is reported with libcosim's
+    # own reason.
     if not local.ptr():
         fail(f"libcosim cannot load {fmu}: {get_last_error_message()}")
     slave = ex.add_local_slave(local)
     info = {v.name.decode(): v for v in ex.slave_variables(slave)}
+    unknown = [nm for nm in list(sc.parameters) + names + out_names if nm not in info]
+    if unknown:
+        fail(f"libcosim does not list {unknown} among the FMU's variables")
     real, integer, boolean = CosimVariableType.REAL.value, CosimVariableType.INTEGER.value, CosimVariableType.BOOLEAN.value
 
     def initial(nm, value):

@@ -143,7 +143,9 @@ pub fn align(
     let offset = -at_zero / exact;
     let offset = offset - TAU * libm::floorf(offset / TAU);
     let lag = 0.5 * (c2 - c1).abs() / exact;
-    Ok(Alignment { pole_pairs: pole_pairs as u32, reversed, offset: if offset >= TAU { 0.0 } else { offset }, lag })
+    // In f32 the reduction can land a few µrad either side of the turn: both ends are 0.
+    let offset = if (0.0..TAU).contains(&offset) { offset } else { 0.0 };
+    Ok(Alignment { pole_pairs: pole_pairs as u32, reversed, offset, lag })
 }
 
 #[cfg(test)]

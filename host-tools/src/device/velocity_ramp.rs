@@ -24,6 +24,9 @@ pub const STOP_ACCELERATION: f64 = 2000.0;
 /// latches a following error).
 pub const REST_SPEED: f32 = 0.5;
 pub const STOP_HOLD: f64 = 0.5;
+/// The rotor counts as stopped once every reading over this much of the drive's time (s) is
+/// below [`REST_SPEED`] (one reading can catch a ringing shaft at a zero crossing).
+pub const REST_FOR: f64 = 0.02;
 
 impl<T: DrivePort> DriveSession<T> {
     /// The velocity command from `from` to `to` rad/s at `acceleration` rad/s², a step every
@@ -76,16 +79,21 @@ impl<T: DrivePort> DriveSession<T> {
 }
 
 impl<T: DrivePort> DriveSession<T> {
-    /// Velocity 0 held until the rotor turns slower than [`REST_SPEED`], at most
-    /// [`STOP_HOLD`] of the drive's time; a latched fault or a stalled drive ends it with an
-    /// error. Returns the last reading.
+    /// Velocity 0 held until the rotor has turned slower than [`REST_SPEED`] for
+    /// [`REST_FOR`], at most [`STOP_HOLD`] of the drive's time; a latched fault or a stalled
+    /// drive ends it with an error. Returns the last reading.
     pub fn hold_zero(&mut self) -> Result<Telemetry> {
         let command = Commands { mode: Mode::Velocity, velocity: 0.0, ..Commands::default() };
         self.order(Request::SetCommands(command), "velocity 0")?;
         let first = without_faults(self.telemetry()?)?;
         let (start, mut last, mut moved) = (first.tick, first.tick, Instant::now());
         let mut t = first;
-        while t.velocity_estimate.abs() >= REST_SPEED && ((t.tick - start) as f64) < STOP_HOLD * self.tick_hz {
+        // The tick since which every reading was below the rest speed (None: the last was not).
+        let mut slow_since = (t.velocity_estimate.abs() < REST_SPEED).then_some(t.tick);
+        let rested = |slow_since: Option<u64>, tick: u64, hz: f64| {
+            slow_since.is_some_and(|s| (tick - s) as f64 >= REST_FOR * hz)
+        };
+        while !rested(slow_since, t.tick, self.tick_hz) && ((t.tick - start) as f64) < STOP_HOLD * self.tick_hz {
             self.link.pause(Duration::from_secs_f64(RAMP_STEP));
             t = without_faults(self.telemetry()?)?;
             if t.tick < last {
@@ -96,6 +104,7 @@ impl<T: DrivePort> DriveSession<T> {
             } else if moved.elapsed() > STALLED {
                 bail!("the drive's tick counter stopped at {} while it stopped (is it still running?)", t.tick);
             }
+            slow_since = if t.velocity_estimate.abs() < REST_SPEED { slow_since.or(Some(t.tick)) } else { None };
         }
         Ok(t)
     }
