@@ -55,6 +55,19 @@ pub fn files_with(dir: &Path, ext: &str) -> Vec<PathBuf> {
     v
 }
 
+/// The files under `dir` (its subfolders too) with extension `ext`, sorted (none when the
+/// folder is missing).
+pub fn files_under(dir: &Path, ext: &str) -> Vec<PathBuf> {
+    let mut v = files_with(dir, ext);
+    if let Ok(entries) = std::fs::read_dir(dir) {
+        for sub in entries.filter_map(|e| e.ok().map(|e| e.path())).filter(|p| p.is_dir()) {
+            v.extend(files_under(&sub, ext));
+        }
+    }
+    v.sort();
+    v
+}
+
 /// A JSON file, if it is there and readable.
 pub fn read_json(path: &Path) -> Option<serde_json::Value> {
     read_result(path).ok().flatten()

@@ -4,22 +4,9 @@
 //! command renamed or removed fails here, naming the page and the command. Usage sketches
 //! (with `[optional]` parts or `…`) are skipped.
 
-use std::path::{Path, PathBuf};
-
 use clap::error::ErrorKind;
 use host_tools::command_line::command;
 use host_tools::paths::workspace_root;
-
-fn markdown_pages(dir: &Path, out: &mut Vec<PathBuf>) {
-    for entry in std::fs::read_dir(dir).unwrap() {
-        let path = entry.unwrap().path();
-        if path.is_dir() {
-            markdown_pages(&path, out);
-        } else if path.extension().is_some_and(|e| e == "md") {
-            out.push(path);
-        }
-    }
-}
 
 /// The `servo …` command lines of a page, whitespace collapsed, each with whether it is a whole
 /// command line (from an `sh` block: continuation lines joined, a trailing comment, `&` or
@@ -110,7 +97,7 @@ fn words(line: &str) -> Vec<String> {
 fn every_servo_command_in_the_docs_parses() {
     let root = workspace_root();
     let mut pages = vec![root.join("README.md")];
-    markdown_pages(&root.join("docs/src"), &mut pages);
+    pages.extend(host_tools::page::files_under(&root.join("docs/src"), "md"));
     let (mut checked, mut broken) = (0, Vec::new());
     for page in &pages {
         let text = std::fs::read_to_string(page).unwrap();

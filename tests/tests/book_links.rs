@@ -31,17 +31,6 @@ fn normalise(path: &Path) -> PathBuf {
     out
 }
 
-fn html_pages(dir: &Path, out: &mut Vec<PathBuf>) {
-    for entry in std::fs::read_dir(dir).unwrap() {
-        let path = entry.unwrap().path();
-        if path.is_dir() {
-            html_pages(&path, out);
-        } else if path.extension().is_some_and(|e| e == "html") {
-            out.push(path);
-        }
-    }
-}
-
 /// An HTML entity-encoded attribute value as the browser reads it.
 fn decode(value: &str) -> String {
     value.replace("&amp;", "&").replace("&quot;", "\"").replace("&#39;", "'").replace("%20", " ")
@@ -86,8 +75,7 @@ fn the_rendered_books_links_and_anchors_resolve() {
         book.join("index.html").is_file(),
         "the book is not built: `scripts/book` builds it into target/book (the test command runs it before the tests)"
     );
-    let mut pages = Vec::new();
-    html_pages(&book, &mut pages);
+    let pages = host_tools::page::files_under(&book, "html");
     let ids: BTreeMap<PathBuf, BTreeSet<String>> = pages
         .iter()
         .map(|p| {

@@ -67,16 +67,10 @@ fn the_books_table_of_contents_names_every_page() {
         assert!(src.join(target).is_file(), "SUMMARY.md links {target}, which does not exist");
         linked.push(target.to_string());
     }
-    let mut stack = vec![src.clone()];
-    while let Some(dir) = stack.pop() {
-        for entry in std::fs::read_dir(&dir).unwrap() {
-            let path = entry.unwrap().path();
-            if path.is_dir() {
-                stack.push(path);
-            } else if path.extension().is_some_and(|e| e == "md") && !path.ends_with("SUMMARY.md") {
-                let relative = path.strip_prefix(&src).unwrap().to_string_lossy().replace('\\', "/");
-                assert!(linked.contains(&relative), "docs/src/{relative} is not in SUMMARY.md");
-            }
+    for path in host_tools::page::files_under(&src, "md") {
+        if !path.ends_with("SUMMARY.md") {
+            let relative = path.strip_prefix(&src).unwrap().to_string_lossy().replace('\\', "/");
+            assert!(linked.contains(&relative), "docs/src/{relative} is not in SUMMARY.md");
         }
     }
 }
@@ -87,17 +81,7 @@ fn the_books_table_of_contents_names_every_page() {
 fn relative_links_point_at_existing_files() {
     let root = workspace_root();
     let mut pages = vec![root.join("README.md")];
-    let mut stack = vec![root.join("docs/src")];
-    while let Some(dir) = stack.pop() {
-        for entry in std::fs::read_dir(&dir).unwrap() {
-            let path = entry.unwrap().path();
-            if path.is_dir() {
-                stack.push(path);
-            } else if path.extension().is_some_and(|e| e == "md") {
-                pages.push(path);
-            }
-        }
-    }
+    pages.extend(host_tools::page::files_under(&root.join("docs/src"), "md"));
     let mut broken = Vec::new();
     for page in &pages {
         let text = std::fs::read_to_string(page).unwrap();

@@ -18,14 +18,7 @@ use servo_axis::variables::{Causality, Declaration, DECLARATIONS};
 
 /// The `.toml` files of `scenarios/<sub>`, sorted.
 fn files_in(sub: &str) -> Vec<PathBuf> {
-    let dir = workspace_root().join("scenarios").join(sub);
-    let mut files: Vec<PathBuf> = std::fs::read_dir(dir)
-        .unwrap()
-        .map(|e| e.unwrap().path())
-        .filter(|p| p.extension().is_some_and(|e| e == "toml"))
-        .collect();
-    files.sort();
-    files
+    host_tools::page::files_with(&workspace_root().join("scenarios").join(sub), "toml")
 }
 
 /// Every value of every output column of `trace` against its declaration; the outputs seen are

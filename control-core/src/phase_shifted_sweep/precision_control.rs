@@ -168,32 +168,20 @@ impl PhaseShiftedSweep {
         if self.budget_over_longest == super::NO_BUDGET || self.slack_over_shortest < 0 {
             return None;
         }
-        let p = &self.params;
-        let (f, rate) = (self.status.frequency, self.base_rate_hz);
-        let (settle, samples) = p.record_length(f, rate);
-        let d = p.acquisition_divider as u64;
-        let half = ((samples / 2) * d).max(1);
-        let later_records = records.saturating_sub(1 + self.status.record) as u64;
-        let last = self.status.point as usize + 1 >= self.plan.count as usize;
-        let wait = if last { 0 } else { p.peak_wait_bound(f, rate) };
-        let fixed = later_records * (settle.max(1) + samples * d) + wait;
-        let taken = self.spread.half_blocks.saturating_sub(2) as u64;
-        let room = self.budget_left as i64 + self.slack_later as i64 + (taken * half) as i64 - fixed as i64;
-        Some((room, half, taken))
+        let (room, half, taken, _) = self.room_with_later_at_longest(records);
+        Some((room + self.slack_later as i64, half, taken))
     }
 
-    /// The half blocks per record the time budget has room for (see [`Self::extension_cap`]),
-    /// at most the cap of [`MAX_EXTENSIONS`](super::MAX_EXTENSIONS); 0 without a budget or
-    /// room.
-    pub(super) fn budget_grant(&self, records: u32) -> u32 {
+    /// What `budget_left` leaves the present frequency's `records` beyond their base length
+    /// and the wait for the next frequency's peak, every later frequency at its longest (the
+    /// half blocks of its extension already measured counted back in); with the half block's
+    /// ticks, those half blocks and the record's samples. Only with a budget: every
+    /// frequency's longest is then below 2³⁰ ticks (see `MAX_BUDGET_TICKS`), and with it each
+    /// of the terms: 64-bit sums cannot overflow.
+    fn room_with_later_at_longest(&self, records: u32) -> (i64, u64, u64, u64) {
         let p = &self.params;
         let (f, rate) = (self.status.frequency, self.base_rate_hz);
-        if self.budget_over_longest == super::NO_BUDGET || self.budget_left <= 0 {
-            return 0;
-        }
         let (settle, samples) = p.record_length(f, rate);
-        // With a budget every frequency's longest is below 2³⁰ ticks (see
-        // `MAX_BUDGET_TICKS`), and with it each of the terms below: 64-bit sums cannot overflow.
         let d = p.acquisition_divider as u64;
         let half = ((samples / 2) * d).max(1);
         let later_records = records.saturating_sub(1 + self.status.record) as u64;
@@ -203,11 +191,23 @@ impl PhaseShiftedSweep {
         // Half blocks of this record's extension already measured (and paid for).
         let taken = self.spread.half_blocks.saturating_sub(2) as u64;
         let room = self.budget_left as i64 + (taken * half) as i64 - fixed as i64;
+        (room, half, taken, samples)
+    }
+
+    /// The half blocks per record the time budget has room for (see [`Self::extension_cap`]),
+    /// at most the cap of [`MAX_EXTENSIONS`](super::MAX_EXTENSIONS); 0 without a budget or
+    /// room.
+    pub(super) fn budget_grant(&self, records: u32) -> u32 {
+        if self.budget_over_longest == super::NO_BUDGET || self.budget_left <= 0 {
+            return 0;
+        }
+        let (room, half, _, samples) = self.room_with_later_at_longest(records);
         if room <= 0 {
             return 0;
         }
         let granted = room as u64 / (half * records.max(1) as u64);
-        let most = p.half_blocks_in(super::MAX_EXTENSIONS, samples, f, rate);
+        let (f, rate) = (self.status.frequency, self.base_rate_hz);
+        let most = self.params.half_blocks_in(super::MAX_EXTENSIONS, samples, f, rate);
         granted.min(most as u64) as u32
     }
 }

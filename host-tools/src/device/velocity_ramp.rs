@@ -85,28 +85,23 @@ impl<T: DrivePort> DriveSession<T> {
     pub fn hold_zero(&mut self) -> Result<Telemetry> {
         let command = Commands { mode: Mode::Velocity, velocity: 0.0, ..Commands::default() };
         self.order(Request::SetCommands(command), "velocity 0")?;
-        let first = without_faults(self.telemetry()?)?;
-        let (start, mut last, mut moved) = (first.tick, first.tick, Instant::now());
-        let mut t = first;
-        // The tick since which every reading was below the rest speed (None: the last was not).
-        let mut slow_since = (t.velocity_estimate.abs() < REST_SPEED).then_some(t.tick);
-        let rested = |slow_since: Option<u64>, tick: u64, hz: f64| {
-            slow_since.is_some_and(|s| (tick - s) as f64 >= REST_FOR * hz)
-        };
-        while !rested(slow_since, t.tick, self.tick_hz) && ((t.tick - start) as f64) < STOP_HOLD * self.tick_hz {
-            self.link.pause(Duration::from_secs_f64(RAMP_STEP));
-            t = without_faults(self.telemetry()?)?;
+        let hz = self.tick_hz;
+        // The first reading's tick, the last one's, and the tick since which every reading was
+        // below the rest speed (None: the last was not).
+        let (mut start, mut last, mut slow_since) = (None, 0u64, None);
+        // The hold's own bound ends it (a rotor still turning then is left as it is); the
+        // wait's is a backstop.
+        self.wait_until(2.0 * STOP_HOLD + 0.1, |t| {
+            let t = without_faults(*t)?;
+            let start = *start.get_or_insert(t.tick);
             if t.tick < last {
                 bail!("the drive's tick went back from {last} to {} while it stopped (did it restart?)", t.tick);
             }
-            if t.tick != last {
-                (last, moved) = (t.tick, Instant::now());
-            } else if moved.elapsed() > STALLED {
-                bail!("the drive's tick counter stopped at {} while it stopped (is it still running?)", t.tick);
-            }
+            last = t.tick;
             slow_since = if t.velocity_estimate.abs() < REST_SPEED { slow_since.or(Some(t.tick)) } else { None };
-        }
-        Ok(t)
+            let rested = slow_since.is_some_and(|s| (t.tick - s) as f64 >= REST_FOR * hz);
+            Ok(rested || (t.tick - start) as f64 >= STOP_HOLD * hz)
+        })
     }
 }
 
