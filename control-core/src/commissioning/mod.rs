@@ -42,7 +42,10 @@
 //!    intercepts and the back-EMF's mean need a few of its periods in a pass (4 Hz or more at
 //!    the test current: a heavy load on a weak magnet needs a higher test current).
 //! 5. **q-axis inductance.** Chips on the rotor's q axis (now known from the encoder) beside
-//!    the held d-axis voltage, and the fit.
+//!    the held d-axis voltage, and the fit. The chips' q current turns the rotor, whose
+//!    back-EMF the free rotor's fit takes (`free_rotor_fit`); a rotor that sticks and slips
+//!    on its friction under them is fitted on the samples' differences (twice differenced on
+//!    a winding faster than a tick: `q_winding`).
 //! 6. **Current loop.** The PI for the stated bandwidth from `R` and `L_q` (the torque's axis;
 //!    `current_loop_design`), the drive's gains for both axes. The design is checked on the d
 //!    axis, the rotor's own (where a current makes no torque and the rotor stays still), with
@@ -290,6 +293,9 @@ const CHIP_SETTLING_TICKS: u32 = 64;
 /// The q chips' current peak on a winding slower than a tick, a share of the test current
 /// (`q_chip_volts`).
 const Q_CHIP_PEAK: f32 = 0.5;
+/// How closely the q stage's first-order fit's resistance must agree with the holds' for its
+/// inductance to be taken on a winding faster than a tick (`q_winding`).
+const RESISTANCE_AGREEMENT: f32 = 0.03;
 
 /// The current step's overshoot beyond which the sequence fails (the design is kept, and its
 /// measured bandwidth and overshoot reported, below it).
@@ -420,6 +426,10 @@ pub struct Commissioning {
     chips: MSequence,
     fit: WindingFit,
     q_fit: FreeRotorFit,
+    /// On a q winding faster than a tick, the free rotor's fit of the samples' second
+    /// differences (`free_rotor_fit`): what a rotor that sticks and slips on its friction
+    /// adds at low and middle frequencies weighs least there.
+    q_fit_twice: FreeRotorFit,
     /// The probe's free-rotor fit of the samples' differences: its last resort.
     probe_high_passed: FreeRotorFit,
     /// The dead-time voltage along the measured axis for the phase currents' signs at the
@@ -493,6 +503,7 @@ impl Commissioning {
             },
             fit: WindingFit::default(),
             q_fit: FreeRotorFit::default(),
+            q_fit_twice: FreeRotorFit::high_passed_twice(),
             probe_high_passed: FreeRotorFit::high_passed(),
             dead_time_along_axis: 0.0,
             dead_time_shape: 0.0,
@@ -841,6 +852,7 @@ impl Commissioning {
                 if self.ticks > settling {
                     if stage == Stage::InductanceQ {
                         self.q_fit.add(axis_current, applied);
+                        self.q_fit_twice.add(axis_current, applied);
                     }
                     if let Some(previous) = self.last_current {
                         // What the holds' dead time leaves (a winding faster than a tick flips
@@ -855,26 +867,7 @@ impl Commissioning {
                 if self.ticks >= settling + self.chips.period() {
                     let axis = if stage == Stage::InductanceD { 'd' } else { 'q' };
                     let first_order = self.fit.winding(s.tick_period);
-                    let fitted = if stage == Stage::InductanceQ {
-                        // Of the two models, the one whose resistance agrees with the holds'
-                        // (a rotor's swing the first-order fit cannot take reads as extra
-                        // resistance; on a slow winding whose rotor a few hertz of pull and
-                        // friction hold, the free rotor's model is the one that errs).
-                        let off = |w: &Option<Winding>| match w {
-                            Some(w) if w.inductance > 1e-6 && w.inductance < 1.0 => {
-                                libm::fabsf(w.resistance / self.resistance - 1.0)
-                            }
-                            _ => f32::INFINITY,
-                        };
-                        let free_rotor = self.q_fit.winding(s.tick_period);
-                        if off(&free_rotor) < off(&first_order) {
-                            free_rotor
-                        } else {
-                            first_order
-                        }
-                    } else {
-                        first_order
-                    };
+                    let fitted = if stage == Stage::InductanceQ { self.q_winding(first_order) } else { first_order };
                     let Some(w) = fitted else {
                         return self.fail(CommissioningFault::Inductance { axis });
                     };
@@ -1188,6 +1181,41 @@ impl Commissioning {
         (Q_CHIP_PEAK * self.test_current / peak_per_volt).min(0.9 * room)
     }
 
+    /// The q winding from the fits of its stage (`first_order` the first-order fit's). The
+    /// chips' torque turns the rotor. On a winding faster than a tick, whose current follows
+    /// each chip within the tick: where the rotor's motion hardly touches the winding's
+    /// response, the first-order fit's resistance agrees with the holds' (within
+    /// [`RESISTANCE_AGREEMENT`]) and its inductance is taken; otherwise the free rotor's fit
+    /// of the samples' second differences. The rotor sticks and slips on its friction at each
+    /// reversal, and what no linear model follows of that sits at the low and middle
+    /// frequencies of the chips' band, which the second differences weigh least (`4·sin²(πfT)`).
+    /// Where the free rotor's plain fit finds no winding, neither model follows the motor and
+    /// the differences are not taken either: refused, not guessed. On a slower winding the
+    /// differences would weigh the sensors' noise up beside the current's small changes from
+    /// tick to tick: of the first-order fit and the free rotor's, the one whose resistance
+    /// agrees better with the holds' (the rotor's swing the first-order fit cannot take reads
+    /// as extra resistance; on a slow winding that a few hertz of pull and friction hold, the
+    /// free rotor's model is the one that errs).
+    fn q_winding(&self, first_order: Option<Winding>) -> Option<Winding> {
+        let tick = self.settings.tick_period;
+        let plausible = |w: &Winding| w.inductance > 1e-6 && w.inductance < 1.0;
+        let off = |w: &Option<Winding>| match w {
+            Some(w) if plausible(w) => libm::fabsf(w.resistance / self.resistance - 1.0),
+            _ => f32::INFINITY,
+        };
+        let free_rotor = self.q_fit.winding(tick);
+        if !self.slow_q_winding() && off(&first_order) >= RESISTANCE_AGREEMENT && off(&free_rotor).is_finite() {
+            if let Some(w) = self.q_fit_twice.winding(tick).filter(plausible) {
+                return Some(w);
+            }
+        }
+        if off(&free_rotor) < off(&first_order) {
+            free_rotor
+        } else {
+            first_order
+        }
+    }
+
     fn start_chips(&mut self, stage: Stage) {
         self.chips = MSequence::new(CHIP_DEGREE).unwrap_or(MSequence::DEGREE_15);
         self.fit = WindingFit::default();
@@ -1196,6 +1224,7 @@ impl Commissioning {
         } else {
             FreeRotorFit::default()
         };
+        self.q_fit_twice = FreeRotorFit::high_passed_twice();
         self.dead_time_along_axis = 0.0;
         self.dead_time_shape = 0.0;
         self.last_chip = 0.0;
