@@ -6,8 +6,9 @@
 //!
 //! The sequence, each stage on the previous one's result:
 //! 1. **Probe.** Pseudo-random voltage chips of zero mean on a fixed angle (0), their size
-//!    growing from a millivolt by a quarter a period while the current stays under a third of
-//!    the test current; a fit of the response gives a first resistance and inductance: enough
+//!    growing from a millivolt by a quarter a period (several quarters at once while the current
+//!    is lost in the sensors' offset and noise) while the current stays under a third of the
+//!    test current; a fit of the response gives a first resistance and inductance: enough
 //!    to close a current loop. The fit with the rotor's back-EMF as a series capacitance
 //!    (`free_rotor_fit`: the chips make torque on a rotor that is not on the fixed angle, and
 //!    turn a light one) where it finds a winding, else the first-order one (`winding_fit`).
@@ -281,7 +282,10 @@ const RELEASE_S: f32 = 0.04;
 /// grows to, and its chips' M-sequence degree (255 chips a period: the growth is checked over
 /// whole periods, whose excursions the fit's periods repeat) and the periods it fits over.
 const PROBE_START_V: f32 = 1e-3;
+/// The probe's chips grow by this step from one period to the next, by several steps at once
+/// (at most [`PROBE_MAX_STEPS`]) while their current's peak stays under [`PROBE_FLOOR`].
 const PROBE_GROWTH: f32 = 1.25;
+const PROBE_MAX_STEPS: u32 = 6;
 const PROBE_SHARE: f32 = 0.3;
 /// At the highest voltage, the least current (a share of the test current) the probe fits.
 const PROBE_FLOOR: f32 = 0.02;
@@ -651,7 +655,22 @@ impl Commissioning {
                     // none at all is an open phase.
                     let at_most = self.chip_size >= s.max_voltage;
                     if self.peak < PROBE_SHARE * s.test_current && !at_most {
+                        // The winding answers in proportion (the chips repeat every period):
+                        // while the current is still lost in the sensors' offset and noise
+                        // (under the floor an open phase is told by), the chips take several
+                        // of the ladder's steps at once, as many as keep it under the floor (at
+                        // most [`PROBE_MAX_STEPS`]); from there one step a period, as the
+                        // sizes stay on the ladder: the probe ends on the same chips.
+                        let aim = PROBE_FLOOR * s.test_current;
+                        let mut peak = self.peak * PROBE_GROWTH;
                         self.chip_size = (self.chip_size * PROBE_GROWTH).min(s.max_voltage);
+                        for _ in 1..PROBE_MAX_STEPS {
+                            peak *= PROBE_GROWTH;
+                            if !(peak < aim) {
+                                break;
+                            }
+                            self.chip_size = (self.chip_size * PROBE_GROWTH).min(s.max_voltage);
+                        }
                     } else if self.peak < PROBE_FLOOR * s.test_current {
                         return self.fail(CommissioningFault::OpenPhase { amps: self.peak });
                     } else {

@@ -364,3 +364,29 @@ fn the_q_chips_stay_finite_and_within_the_voltage_left_beside_the_held_d_voltage
         assert_eq!(c.output_scale(bus, v), 1.0, "R {resistance} L {ld}");
     }
 }
+
+/// The probe's chips on a high-resistance winding (9 Ω, 5 mH), whose current stays lost in
+/// the sensors' offset and noise over many of the ladder's steps: they take several steps a
+/// period there, and the probe ends on the ladder (a millivolt times a power of 1.25), in fewer
+/// than half the periods the one-step ladder takes to that size.
+#[test]
+fn the_probe_climbs_through_the_noise_and_ends_on_the_ladder() {
+    let truth = MotorTruth { resistance: 9.0, ld: 5e-3, lq: 5e-3, ..MotorTruth::default_motor() };
+    let settings = settings(&truth);
+    let mut motor = MotorModel::new(truth, TICK as f64);
+    let mut c = Commissioning::new(settings).unwrap();
+    let mut ticks = 0u32;
+    while c.status() == CommissioningStatus::Running(Stage::Probe) {
+        let (phase_currents, encoder_count) = motor.sample();
+        let v = c.step(&CommissioningInputs { phase_currents, encoder_count, bus_voltage: 48.0 }).unwrap();
+        motor.apply(v.alpha, v.beta);
+        ticks += 1;
+    }
+    assert_eq!(c.status(), CommissioningStatus::Running(Stage::ProbeFit));
+    let steps = libm::logf(c.chip_size / PROBE_START_V) / libm::logf(PROBE_GROWTH);
+    assert!((steps - libm::roundf(steps)).abs() < 1e-3, "{} V is not on the ladder ({steps} steps)", c.chip_size);
+    // The ladder's one-step climb: a period a step, and the period that finds the share.
+    let ladder_periods = libm::roundf(steps) as u32 + 1;
+    let period = c.chips.period();
+    assert!(ticks < ladder_periods * period / 2, "{ticks} ticks, the one-step ladder {} ticks", ladder_periods * period);
+}
