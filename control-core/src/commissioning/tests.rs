@@ -388,5 +388,9 @@ fn the_probe_climbs_through_the_noise_and_ends_on_the_ladder() {
     // The ladder's one-step climb: a period a step, and the period that finds the share.
     let ladder_periods = libm::roundf(steps) as u32 + 1;
     let period = c.chips.period();
-    assert!(ticks < ladder_periods * period / 2, "{ticks} ticks, the one-step ladder {} ticks", ladder_periods * period);
+    assert!(
+        ticks < ladder_periods * period / 2,
+        "{ticks} ticks, the one-step ladder {} ticks",
+        ladder_periods * period
+    );
 }
