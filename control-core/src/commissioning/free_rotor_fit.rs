@@ -13,7 +13,8 @@
 //! p₂)/T`, for real or complex poles; a rotor that does not move (`κ = 0`) puts one pole at 1
 //! and leaves the first-order fit's answer. What it does not model — the d current's pull,
 //! the rotor sticking on its friction at each reversal — acts mostly at the low end of the
-//! chips' band, which [`FreeRotorFit::high_passed`] weighs less.
+//! chips' band, which [`FreeRotorFit::high_passed`] weighs less, and
+//! [`FreeRotorFit::high_passed_twice`] less again.
 
 use super::regression::Regression;
 use super::winding_fit::Winding;

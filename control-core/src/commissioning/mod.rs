@@ -6,9 +6,9 @@
 //!
 //! The sequence, each stage on the previous one's result:
 //! 1. **Probe.** Pseudo-random voltage chips of zero mean on a fixed angle (0), their size
-//!    growing from a millivolt by a quarter a period (several quarters at once while the current
-//!    is lost in the sensors' offset and noise) while the current stays under a third of the
-//!    test current; a fit of the response gives a first resistance and inductance: enough
+//!    growing from a millivolt by a quarter a period (two such steps a period while their
+//!    current would stay under a fiftieth of the test current) while the current stays under
+//!    a third of the test current; a fit of the response gives a first resistance and inductance: enough
 //!    to close a current loop. The fit with the rotor's back-EMF as a series capacitance
 //!    (`free_rotor_fit`: the chips make torque on a rotor that is not on the fixed angle, and
 //!    turn a light one) where it finds a winding, else the first-order one (`winding_fit`).
@@ -44,9 +44,10 @@
 //!    the test current: a heavy load on a weak magnet needs a higher test current).
 //! 5. **q-axis inductance.** Chips on the rotor's q axis (now known from the encoder) beside
 //!    the held d-axis voltage, and the fit. The chips' q current turns the rotor, whose
-//!    back-EMF the free rotor's fit takes (`free_rotor_fit`); a rotor that sticks and slips
-//!    on its friction under them is fitted on the samples' differences (twice differenced on
-//!    a winding faster than a tick: `q_winding`).
+//!    back-EMF the free rotor's fit takes (`free_rotor_fit`), on the samples' differences on a
+//!    winding of a tick or more, where a rotor sticking and slipping on its friction acts
+//!    least; on a faster winding where the rotor's motion shows, on their second differences
+//!    (`q_winding`). The d-axis stage holds the q current at zero meanwhile.
 //! 6. **Current loop.** The PI for the stated bandwidth from `R` and `L_q` (the torque's axis;
 //!    `current_loop_design`), the drive's gains for both axes. The design is checked on the d
 //!    axis, the rotor's own (where a current makes no torque and the rotor stays still), with
@@ -282,10 +283,13 @@ const RELEASE_S: f32 = 0.04;
 /// grows to, and its chips' M-sequence degree (255 chips a period: the growth is checked over
 /// whole periods, whose excursions the fit's periods repeat) and the periods it fits over.
 const PROBE_START_V: f32 = 1e-3;
-/// The probe's chips grow by this step from one period to the next, by several steps at once
-/// (at most [`PROBE_MAX_STEPS`]) while their current's peak stays under [`PROBE_FLOOR`].
+/// The probe's chips grow by this step from one period to the next, by two steps at once
+/// ([`PROBE_MAX_STEPS`]) while their current's peak, grown in proportion, would stay under
+/// [`PROBE_FLOOR`] of the test current. Not more: chips the inverter's dead-time voltage
+/// swallows show no current either, and a jump past that voltage drives a current of up to
+/// `(1.25^steps − 1)·V_dead/R` at once (0.56 of `V_dead/R` with two steps, 0.25 with one).
 const PROBE_GROWTH: f32 = 1.25;
-const PROBE_MAX_STEPS: u32 = 6;
+const PROBE_MAX_STEPS: u32 = 2;
 const PROBE_SHARE: f32 = 0.3;
 /// At the highest voltage, the least current (a share of the test current) the probe fits.
 const PROBE_FLOOR: f32 = 0.02;
@@ -297,9 +301,11 @@ const CHIP_SETTLING_TICKS: u32 = 64;
 /// The q chips' current peak on a winding slower than a tick, a share of the test current
 /// (`q_chip_volts`).
 const Q_CHIP_PEAK: f32 = 0.5;
-/// How closely the q stage's first-order fit's resistance must agree with the holds' for its
-/// inductance to be taken on a winding faster than a tick (`q_winding`).
+/// On a winding faster than a tick, the first-order fit's resistance this far off the holds'
+/// (a share) says the rotor's motion shows in the q stage, and the second differences' fit is
+/// taken if its own resistance lies within [`DIFFERENCES_AGREEMENT`] of the holds' (`q_winding`).
 const RESISTANCE_AGREEMENT: f32 = 0.03;
+const DIFFERENCES_AGREEMENT: f32 = 0.25;
 
 /// The current step's overshoot beyond which the sequence fails (the design is kept, and its
 /// measured bandwidth and overshoot reported, below it).
@@ -430,9 +436,9 @@ pub struct Commissioning {
     chips: MSequence,
     fit: WindingFit,
     q_fit: FreeRotorFit,
-    /// On a q winding faster than a tick, the free rotor's fit of the samples' second
-    /// differences (`free_rotor_fit`): what a rotor that sticks and slips on its friction
-    /// adds at low and middle frequencies weighs least there.
+    /// The free rotor's fit of the q stage's samples' second differences (`free_rotor_fit`),
+    /// taken on a winding faster than a tick (`q_winding`): what a rotor that sticks and slips
+    /// on its friction adds at low and middle frequencies weighs least there.
     q_fit_twice: FreeRotorFit,
     /// The probe's free-rotor fit of the samples' differences: its last resort.
     probe_high_passed: FreeRotorFit,
@@ -656,11 +662,10 @@ impl Commissioning {
                     let at_most = self.chip_size >= s.max_voltage;
                     if self.peak < PROBE_SHARE * s.test_current && !at_most {
                         // The winding answers in proportion (the chips repeat every period):
-                        // while the current is still lost in the sensors' offset and noise
-                        // (under the floor an open phase is told by), the chips take several
-                        // of the ladder's steps at once, as many as keep it under the floor (at
-                        // most [`PROBE_MAX_STEPS`]); from there one step a period, as the
-                        // sizes stay on the ladder: the probe ends on the same chips.
+                        // while its current would stay under the floor an open phase is told by
+                        // (lost in the sensors' offset and noise), the chips take two of the
+                        // ladder's steps at once; from there one step a period, the sizes on
+                        // the ladder, so the probe ends on the chips it would have ended on.
                         let aim = PROBE_FLOOR * s.test_current;
                         let mut peak = self.peak * PROBE_GROWTH;
                         self.chip_size = (self.chip_size * PROBE_GROWTH).min(s.max_voltage);
@@ -935,6 +940,11 @@ impl Commissioning {
                 self.last_chip = chip;
                 if stage == Stage::InductanceD {
                     self.voltage = self.held_low + chip;
+                    // The q current held at zero: the rotor, still swinging on the vector
+                    // where the passes left it, would otherwise drive its back-EMF through the
+                    // winding's resistance alone (on a strong magnet and a small resistance,
+                    // more than the test current).
+                    q_voltage = self.current_pi.q(-current.q);
                 } else {
                     self.voltage = self.held_low;
                     q_voltage = chip;
@@ -1201,20 +1211,22 @@ impl Commissioning {
     }
 
     /// The q winding from the fits of its stage (`first_order` the first-order fit's). The
-    /// chips' torque turns the rotor. On a winding faster than a tick, whose current follows
-    /// each chip within the tick: where the rotor's motion hardly touches the winding's
-    /// response, the first-order fit's resistance agrees with the holds' (within
-    /// [`RESISTANCE_AGREEMENT`]) and its inductance is taken; otherwise the free rotor's fit
-    /// of the samples' second differences. The rotor sticks and slips on its friction at each
-    /// reversal, and what no linear model follows of that sits at the low and middle
-    /// frequencies of the chips' band, which the second differences weigh least (`4·sin²(πfT)`).
-    /// Where the free rotor's plain fit finds no winding, neither model follows the motor and
-    /// the differences are not taken either: refused, not guessed. On a slower winding the
-    /// differences would weigh the sensors' noise up beside the current's small changes from
-    /// tick to tick: of the first-order fit and the free rotor's, the one whose resistance
-    /// agrees better with the holds' (the rotor's swing the first-order fit cannot take reads
-    /// as extra resistance; on a slow winding that a few hertz of pull and friction hold, the
-    /// free rotor's model is the one that errs).
+    /// chips' torque turns the rotor, which may stick and slip on its friction at each
+    /// reversal: no linear model follows that, and it acts at the low and middle frequencies
+    /// of the chips' band. On a winding faster than a tick, whose current follows each chip
+    /// within the tick, the free rotor's fit of the samples' second differences (each
+    /// frequency weighed by `4·sin²(πfT)`, those bands least) is taken where the first-order
+    /// fit's resistance is [`RESISTANCE_AGREEMENT`] or more off the holds' (the rotor's motion
+    /// shows in the winding's response), the plain free-rotor fit finds a winding (where it
+    /// finds none, no linear model follows this motor: the differences are not taken either)
+    /// and the second differences' own resistance lies within [`DIFFERENCES_AGREEMENT`] of
+    /// the holds'. Otherwise, and on slower windings (where the second differences would weigh
+    /// the sensors' noise up beside the current's small changes from tick to tick), of the
+    /// first-order fit and the free rotor's (`q_fit`: of the samples' differences on a slow
+    /// winding), the one whose resistance agrees better with the holds' (the rotor's swing the
+    /// first-order fit cannot take reads as extra resistance; on a slow winding that a few
+    /// hertz of pull and friction hold, the free rotor's model is the one that errs); `None`
+    /// when neither finds a winding.
     fn q_winding(&self, first_order: Option<Winding>) -> Option<Winding> {
         let tick = self.settings.tick_period;
         let plausible = |w: &Winding| w.inductance > 1e-6 && w.inductance < 1.0;
@@ -1224,8 +1236,9 @@ impl Commissioning {
         };
         let free_rotor = self.q_fit.winding(tick);
         if !self.slow_q_winding() && off(&first_order) >= RESISTANCE_AGREEMENT && off(&free_rotor).is_finite() {
-            if let Some(w) = self.q_fit_twice.winding(tick).filter(plausible) {
-                return Some(w);
+            let twice = self.q_fit_twice.winding(tick);
+            if off(&twice) < DIFFERENCES_AGREEMENT {
+                return twice;
             }
         }
         if off(&free_rotor) < off(&first_order) {
