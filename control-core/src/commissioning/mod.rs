@@ -23,16 +23,13 @@
 //!    the two holds (the sensors' offsets and the
 //!    inverter's dead-time voltage, the same at both, drop out). The third phase's current not
 //!    the other two's mean: a phase is missing.
-//! 3. **d-axis inductance.** Chips around the voltage of half the test current (the current
-//!    keeps its sign, so the inverter's error stays constant) and the fit again, on the
-//!    rotor's d axis.
-//! 4. **Encoder.** The loop holds the test current on a vector that turns slowly forward by a
+//! 3. **Encoder.** The loop holds the test current on a vector that turns slowly forward by a
 //!    few electrical turns and back; the rotor follows. Counts against the vector's angle give
 //!    the direction, the pole pairs and the electrical angle at count 0 (`encoder_alignment`).
 //!    The q voltage the loop needs at full speed, forward and back, is the back-EMF:
 //!    `v_q = ω·(L_d·i·cos²δ + L_q·i·sin²δ + ψ·cos δ)` in the vector's frame, the rotor lagging
 //!    by `δ` either way, so half their difference over `ω` gives the flux linkage `ψ` once the
-//!    inductances are known (stage 5). The inverter's dead-time voltage (what the holds'
+//!    inductances are known (stages 4 and 5). The inverter's dead-time voltage (what the holds'
 //!    voltage carries beyond `R·I`) is fed forward, so the loop has no steps of it to follow
 //!    as the phase currents change sign (their lag, opposite on the two passes, would bias
 //!    the difference). The inductive term `ω·L_d·I` stands beside the back-EMF: the flux
@@ -42,12 +39,16 @@
 //!    The rotor swings on the vector (the magnet's torque a spring on its inertia); the lines'
 //!    intercepts and the back-EMF's mean need a few of its periods in a pass (4 Hz or more at
 //!    the test current: a heavy load on a weak magnet needs a higher test current).
+//! 4. **d-axis inductance.** Chips around the voltage of half the test current on the rotor's
+//!    d axis (read from the encoder each tick; the d current keeps its sign) and the fit
+//!    again, the q current held at zero by the loop meanwhile (a rotor still swinging from the
+//!    passes would drive its back-EMF through the winding).
 //! 5. **q-axis inductance.** Chips on the rotor's q axis (now known from the encoder) beside
 //!    the held d-axis voltage, and the fit. The chips' q current turns the rotor, whose
 //!    back-EMF the free rotor's fit takes (`free_rotor_fit`), on the samples' differences on a
 //!    winding of a tick or more, where a rotor sticking and slipping on its friction acts
 //!    least; on a faster winding where the rotor's motion shows, on their second differences
-//!    (`q_winding`). The d-axis stage holds the q current at zero meanwhile.
+//!    (`q_winding`).
 //! 6. **Current loop.** The PI for the stated bandwidth from `R` and `L_q` (the torque's axis;
 //!    `current_loop_design`), the drive's gains for both axes. The design is checked on the d
 //!    axis, the rotor's own (where a current makes no torque and the rotor stays still), with
@@ -305,6 +306,8 @@ const Q_CHIP_PEAK: f32 = 0.5;
 /// (a share) says the rotor's motion shows in the q stage, and the second differences' fit is
 /// taken if its own resistance lies within [`DIFFERENCES_AGREEMENT`] of the holds' (`q_winding`).
 const RESISTANCE_AGREEMENT: f32 = 0.03;
+/// How far (a share) the second differences' fit's own resistance may lie off the holds' for
+/// its inductance to be taken (`q_winding`).
 const DIFFERENCES_AGREEMENT: f32 = 0.25;
 
 /// The current step's overshoot beyond which the sequence fails (the design is kept, and its
@@ -943,8 +946,11 @@ impl Commissioning {
                     // The q current held at zero: the rotor, still swinging on the vector
                     // where the passes left it, would otherwise drive its back-EMF through the
                     // winding's resistance alone (on a strong magnet and a small resistance,
-                    // more than the test current).
-                    q_voltage = self.current_pi.q(-current.q);
+                    // more than the test current). Within nine tenths of the room the d
+                    // voltage leaves, so that the vector is never scaled down under the fit.
+                    let limit = s.max_voltage.min(crate::reference_frames::voltage_circle_radius(i.bus_voltage));
+                    let room = 0.9 * libm::sqrtf((limit * limit - self.voltage * self.voltage).max(0.0));
+                    q_voltage = self.current_pi.q.update(-current.q, room.min(self.current_pi.limit)).value;
                 } else {
                     self.voltage = self.held_low;
                     q_voltage = chip;
@@ -1225,8 +1231,9 @@ impl Commissioning {
     /// first-order fit and the free rotor's (`q_fit`: of the samples' differences on a slow
     /// winding), the one whose resistance agrees better with the holds' (the rotor's swing the
     /// first-order fit cannot take reads as extra resistance; on a slow winding that a few
-    /// hertz of pull and friction hold, the free rotor's model is the one that errs); `None`
-    /// when neither finds a winding.
+    /// hertz of pull and friction hold, the free rotor's model is the one that errs); where
+    /// neither resistance is plausible, the first-order fit's (`None`, or a winding the caller
+    /// refuses as out of range).
     fn q_winding(&self, first_order: Option<Winding>) -> Option<Winding> {
         let tick = self.settings.tick_period;
         let plausible = |w: &Winding| w.inductance > 1e-6 && w.inductance < 1.0;
@@ -1257,6 +1264,11 @@ impl Commissioning {
             FreeRotorFit::default()
         };
         self.q_fit_twice = FreeRotorFit::high_passed_twice();
+        if stage == Stage::InductanceD {
+            // The d stage's q loop starts from nothing (its integrator held the passes'
+            // back-EMF, in the vector's frame).
+            self.current_pi.q.reset();
+        }
         self.dead_time_along_axis = 0.0;
         self.dead_time_shape = 0.0;
         self.last_chip = 0.0;
