@@ -8,8 +8,8 @@
 //! 1. **Probe.** Pseudo-random voltage chips of zero mean on a fixed angle (0), their size
 //!    growing from a millivolt by a quarter a period (two such steps a period while their
 //!    current would stay under a fiftieth of the test current) while the current stays under
-//!    a third of the test current; a fit of the response gives a first resistance and inductance: enough
-//!    to close a current loop. The fit with the rotor's back-EMF as a series capacitance
+//!    a third of the test current; a fit of the response gives a first resistance and
+//!    inductance: enough to close a current loop. The fit with the rotor's back-EMF as a series capacitance
 //!    (`free_rotor_fit`: the chips make torque on a rotor that is not on the fixed angle, and
 //!    turn a light one) where it finds a winding, else the first-order one (`winding_fit`).
 //!    The resistance is rough: the loop's integral corner is kept to a third of its bandwidth.
@@ -440,7 +440,7 @@ pub struct Commissioning {
     fit: WindingFit,
     q_fit: FreeRotorFit,
     /// The free rotor's fit of the q stage's samples' second differences (`free_rotor_fit`),
-    /// taken on a winding faster than a tick (`q_winding`): what a rotor that sticks and slips
+    /// fed and taken on a winding faster than a tick only (`q_winding`): what a rotor that sticks and slips
     /// on its friction adds at low and middle frequencies weighs least there.
     q_fit_twice: FreeRotorFit,
     /// The probe's free-rotor fit of the samples' differences: its last resort.
@@ -879,7 +879,9 @@ impl Commissioning {
                 if self.ticks > settling {
                     if stage == Stage::InductanceQ {
                         self.q_fit.add(axis_current, applied);
-                        self.q_fit_twice.add(axis_current, applied);
+                        if !self.slow_q_winding() {
+                            self.q_fit_twice.add(axis_current, applied);
+                        }
                     }
                     if let Some(previous) = self.last_current {
                         // What the holds' dead time leaves (a winding faster than a tick flips
@@ -948,8 +950,7 @@ impl Commissioning {
                     // winding's resistance alone (on a strong magnet and a small resistance,
                     // more than the test current). Within nine tenths of the room the d
                     // voltage leaves, so that the vector is never scaled down under the fit.
-                    let limit = s.max_voltage.min(crate::reference_frames::voltage_circle_radius(i.bus_voltage));
-                    let room = 0.9 * libm::sqrtf((limit * limit - self.voltage * self.voltage).max(0.0));
+                    let room = 0.9 * self.room_beside(i.bus_voltage, self.voltage);
                     q_voltage = self.current_pi.q.update(-current.q, room.min(self.current_pi.limit)).value;
                 } else {
                     self.voltage = self.held_low;
@@ -1060,14 +1061,25 @@ impl Commissioning {
     /// What `output` scales the vector by to keep it within the highest voltage and the bus's
     /// circle.
     fn output_scale(&self, bus_voltage: f32, q_voltage: f32) -> f32 {
-        let s = &self.settings;
-        let limit = s.max_voltage.min(crate::reference_frames::voltage_circle_radius(bus_voltage));
+        let limit = self.voltage_limit(bus_voltage);
         let magnitude = libm::sqrtf(self.voltage * self.voltage + q_voltage * q_voltage);
         if magnitude > limit {
             limit / magnitude
         } else {
             1.0
         }
+    }
+
+    /// The largest vector `output` applies unscaled (V): the highest voltage, within the bus's
+    /// circle.
+    fn voltage_limit(&self, bus_voltage: f32) -> f32 {
+        self.settings.max_voltage.min(crate::reference_frames::voltage_circle_radius(bus_voltage))
+    }
+
+    /// The q voltage the limit leaves beside a d voltage of `d` (V).
+    fn room_beside(&self, bus_voltage: f32, d: f32) -> f32 {
+        let limit = self.voltage_limit(bus_voltage);
+        libm::sqrtf((limit * limit - d * d).max(0.0))
     }
 
     /// The vector's turn under a current loop designed from the resistance and the probe's
@@ -1211,9 +1223,7 @@ impl Commissioning {
     fn q_chip_volts(&self, bus_voltage: f32) -> f32 {
         let x = self.resistance * self.settings.tick_period / self.ld;
         let peak_per_volt = crate::limit(3.5 * libm::sqrtf(libm::tanhf(0.5 * x)), 0.0, 1.0) / self.resistance;
-        let limit = self.settings.max_voltage.min(crate::reference_frames::voltage_circle_radius(bus_voltage));
-        let room = libm::sqrtf((limit * limit - self.held_low * self.held_low).max(0.0));
-        (Q_CHIP_PEAK * self.test_current / peak_per_volt).min(0.9 * room)
+        (Q_CHIP_PEAK * self.test_current / peak_per_volt).min(0.9 * self.room_beside(bus_voltage, self.held_low))
     }
 
     /// The q winding from the fits of its stage (`first_order` the first-order fit's). The
