@@ -337,6 +337,10 @@ impl Default for Params {
     }
 }
 
+/// The largest current one step of the decoupling's back-EMF term may drive in a tick, a
+/// share of the currents the motor takes ([`Params::decoupling_steps_small`]).
+pub const DECOUPLING_STEP_SHARE: f32 = 0.1;
+
 impl Params {
     /// These parameters with the encoder's mounting given and marked commissioned: for a
     /// motor whose constants and mounting are known (a set commissioning saved, a test's
@@ -348,7 +352,8 @@ impl Params {
     }
 
     /// These parameters with what commissioning measured: the motor's constants, the encoder's
-    /// mounting and the current loop's gains, marked commissioned (every other setting kept).
+    /// mounting and the current loop's gains, marked commissioned (every other setting kept
+    /// but the decoupling, on where its steps are small: [`Params::decoupling_steps_small`]).
     pub fn with_commissioned(mut self, m: &crate::commissioning::MeasuredMotor) -> Self {
         self.motor = MotorModel {
             pole_pairs: m.alignment.pole_pairs,
@@ -359,7 +364,24 @@ impl Params {
         };
         self.current.kp = m.current_kp;
         self.current.ki = m.current_ki;
+        self.current.decoupling = self.decoupling_steps_small(m.test_current);
         self.commissioned_as(EncoderMounting { reversed: m.alignment.reversed, electrical_offset: m.alignment.offset })
+    }
+
+    /// Whether the current loop's back-EMF feed-forward moves in small steps on this motor and
+    /// encoder. The feed-forward `p·ω·ψ` takes the velocity estimate, which moves in steps of
+    /// one count per velocity period; one such step held over a tick drives
+    /// `p·ψ·(2π/counts)/T_v · T/L_q` amperes into the q winding before the loop answers. On a
+    /// coarse encoder under a strong magnet with many pole pairs that is amperes a count, and
+    /// the steps, fed back through the rotor's motion, make the loop trip (a light rotor's back
+    /// EMF follows the current within a few ticks). Small means at most
+    /// [`DECOUPLING_STEP_SHARE`] of `current` (A, the currents the motor takes) a tick; the
+    /// loop's integrator then takes the back-EMF instead.
+    pub fn decoupling_steps_small(&self, current: f32) -> bool {
+        let m = &self.motor;
+        let count_speed = crate::TAU / self.encoder_counts_per_rev as f32 / self.rates.velocity_period();
+        let step = m.pole_pairs as f32 * count_speed * m.flux_linkage * self.rates.tick_period() / m.lq;
+        step <= DECOUPLING_STEP_SHARE * current
     }
 
     /// Encoder counts per position tick at 1 rad/s: the scale from a speed to the
@@ -506,6 +528,39 @@ impl Params {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// One count per velocity period of the back-EMF feed-forward, held a tick over the q
+    /// inductance, computed here in f64 from the formula's parts.
+    fn feed_forward_step(p: &Params) -> f64 {
+        let m = &p.motor;
+        let period = p.rates.velocity_divider as f64 / p.rates.current_loop_hz as f64;
+        let speed = 2.0 * core::f64::consts::PI / p.encoder_counts_per_rev as f64 / period;
+        m.pole_pairs as f64 * speed * m.flux_linkage as f64 / p.rates.current_loop_hz as f64 / m.lq as f64
+    }
+
+    #[test]
+    fn the_decoupling_stays_on_where_a_count_of_its_back_emf_drives_a_tenth_of_the_current_at_most() {
+        // The default motor on its 20-bit encoder: 0.4 mA a count.
+        let default = Params::default();
+        let step = feed_forward_step(&default);
+        assert!((step - 4.0e-4).abs() < 1e-5, "{step}");
+        assert!(default.decoupling_steps_small(0.01) && default.decoupling_steps_small(2.0));
+        // 11 pole pairs, 54 mWb, 170 µH on a 1024-count encoder: 10.7 A a count.
+        let mut coarse = Params::default();
+        coarse.motor = MotorModel { pole_pairs: 11, resistance: 0.16, ld: 1.7e-4, lq: 1.7e-4, flux_linkage: 0.054 };
+        coarse.encoder_counts_per_rev = 1024;
+        let step = feed_forward_step(&coarse);
+        assert!((step - 10.7).abs() < 0.05, "{step}");
+        assert!(!coarse.decoupling_steps_small(2.0) && !coarse.decoupling_steps_small(100.0));
+        // The boundary: a tenth of the current, either side by a hundredth.
+        let at = (step / DECOUPLING_STEP_SHARE as f64) as f32;
+        assert!(coarse.decoupling_steps_small(1.01 * at) && !coarse.decoupling_steps_small(0.99 * at));
+        // A faster velocity period or a finer encoder makes the steps larger or smaller in
+        // proportion.
+        coarse.encoder_counts_per_rev = 1024 * 64;
+        assert!((feed_forward_step(&coarse) - step / 64.0).abs() < 1e-9);
+        assert!(coarse.decoupling_steps_small(2.0));
+    }
 
     #[test]
     fn a_sweep_dither_beyond_the_torque_limit_is_refused_not_cut() {

@@ -28,7 +28,8 @@ use crate::ranges::{check_position, Quantity, RangeError};
 use crate::response_correction::CorrectionParams;
 use crate::stop_sequence::{Refusal, SequenceEvent};
 
-/// Protocol version 11: commissioning ([`Request::Commission`], [`Request::StopCommissioning`],
+/// Protocol version 12: what commissioning measured carries the test current it drove
+/// (`MeasuredMotor::test_current`). Version 11: commissioning ([`Request::Commission`], [`Request::StopCommissioning`],
 /// [`Request::GetParams`],
 /// the telemetry's `commissioning` state) and the parameters' encoder mounting and
 /// `commissioned` flag. Version 10: the parameters carry the sweep's time budget
@@ -51,7 +52,7 @@ use crate::stop_sequence::{Refusal, SequenceEvent};
 /// board's PWM rate are refused with that rate; version 4: `SaveParams`, and the answer to `Hello` says where the
 /// drive's parameters came from at boot; version 3: CRC-32C instead of CRC-16, trailing bytes
 /// refused, range refusals).
-pub const VERSION: u16 = 11;
+pub const VERSION: u16 = 12;
 /// Largest encoded frame, COBS body without its terminator (a full parameter set fits with
 /// room to spare).
 pub const MAX_FRAME: usize = 1024;

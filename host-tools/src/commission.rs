@@ -139,6 +139,14 @@ impl CommissionArgs {
                     100.0 * step.overshoot
                 );
             }
+            if !params.current.decoupling {
+                println!(
+                    "the current loop's back-EMF feed-forward is off: one encoder count per velocity period of it \
+                     would drive more than a tenth of the test current ({:.2} A) into the winding in a tick \
+                     (a coarse encoder under a strong magnet); the loop's integrator takes the back-EMF",
+                    measured.test_current
+                );
+            }
             println!("parameters written to {}", params_file.display());
         }
         Ok(true)

@@ -188,6 +188,10 @@ pub struct MeasuredMotor {
     pub current_kp: f32,
     pub current_ki: f32,
     pub current_step: StepCheck,
+    /// The current the measurements drove (A): the settings' test current, or less where the
+    /// highest voltage allowed less on this winding. The scale of the currents the motor
+    /// takes (`Params::with_commissioned` weighs the decoupling's steps against it).
+    pub test_current: f32,
 }
 
 /// Why commissioning stopped; the bridge is off and nothing is kept.
@@ -1028,6 +1032,7 @@ impl Commissioning {
                             current_kp: self.designed.0,
                             current_ki: self.designed.1,
                             current_step: StepCheck { bandwidth_hz, overshoot },
+                            test_current: self.test_current,
                         });
                     }
                 }

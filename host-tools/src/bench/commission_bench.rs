@@ -5,7 +5,7 @@
 
 use anyhow::Result;
 use servo_axis::plant::PlantParams;
-use servo_axis::simulation::{AxisSimulation, CommissioningConfig, SimulationConfig};
+use servo_axis::simulation::{AxisSimulation, CommissioningConfig, SimulationConfig, UserInputs};
 
 use crate::bench::figures::Recorder;
 use crate::cli::Common;
@@ -58,6 +58,11 @@ pub struct MotorRow {
     pub current_ratio: f64,
     /// The sequence's stage when the current peaked.
     pub peak_stage: Option<control_core::commissioning::Stage>,
+    /// The drive running the motor on what commissioning found ([`run_after_commissioning`]):
+    /// the fault that stopped it (None: none), and the peak phase current over the test
+    /// current.
+    pub run_fault: Option<String>,
+    pub run_current_ratio: f64,
 }
 
 const TEST_CURRENT: f64 = 2.0;
@@ -65,7 +70,7 @@ const TICK: f64 = 1.0 / 16_000.0;
 
 /// Draw a motor the commissioning's stated conditions hold for (rejected draws are drawn
 /// again: see the arguments' notes).
-fn draw(rng: &mut XorShift64Star) -> PlantParams {
+pub fn draw(rng: &mut XorShift64Star) -> PlantParams {
     loop {
         let mut u = || (rng.next() >> 11) as f64 / (1u64 << 53) as f64;
         let log = |u: f64, lo: f64, hi: f64| lo * (hi / lo).powf(u);
@@ -149,8 +154,10 @@ pub fn commission_one(plant: &PlantParams) -> MotorRow {
         turns: f64::NAN,
         current_ratio: f64::NAN,
         peak_stage: None,
+        run_fault: None,
+        run_current_ratio: f64::NAN,
     };
-    let sim = match AxisSimulation::new(&config) {
+    let mut sim = match AxisSimulation::new(&config) {
         Ok(sim) => sim,
         Err(e) => {
             row.failed = Some(e.to_string());
@@ -182,7 +189,51 @@ pub fn commission_one(plant: &PlantParams) -> MotorRow {
     row.turns = c.excursion * plant.pole_pairs as f64 / tau;
     row.current_ratio = c.peak_current / TEST_CURRENT;
     row.peak_stage = c.peak_stage;
+    let (fault, peak) = run_after_commissioning(&mut sim, plant, &m);
+    row.run_fault = fault;
+    row.run_current_ratio = peak / TEST_CURRENT;
     row
+}
+
+/// Segments of the torque reversals in [`run_after_commissioning`].
+const RUN_SEGMENTS: u64 = 8;
+
+/// The drive on what commissioning found, running the motor: torque mode, the q current
+/// reversed between plus and minus half the test current on the free rotor, each reversal
+/// timed for the rotor to reach about a quarter of the bus voltage's back-EMF (the speed
+/// swings around zero: the first segment is half as long), at least 8 ticks and at most
+/// 50 ms a segment. The torque limit is raised to the command's torque. Returns the fault
+/// that stopped the run (None: none) and the largest phase current the plant carried (A).
+pub fn run_after_commissioning(
+    sim: &mut AxisSimulation,
+    plant: &PlantParams,
+    m: &control_core::commissioning::MeasuredMotor,
+) -> (Option<String>, f64) {
+    let mut params = *sim.axis.params();
+    let amplitude = 0.5 * TEST_CURRENT;
+    let kt = 1.5 * m.alignment.pole_pairs as f64 * m.flux_linkage as f64;
+    params.velocity.torque_limit = (1.25 * kt * amplitude) as f32;
+    if let Err(e) = sim.axis.rebuild(&params) {
+        return (Some(format!("parameters refused: {e}")), 0.0);
+    }
+    let true_kt = 1.5 * plant.pole_pairs as f64 * plant.flux_linkage;
+    let acceleration = true_kt * amplitude / (plant.motor_inertia + plant.load_inertia);
+    let speed = 0.25 * plant.bus_voltage / (plant.pole_pairs as f64 * plant.flux_linkage);
+    let segment = (speed / acceleration / TICK).clamp(8.0, 0.05 / TICK) as u64;
+    let mut inputs = UserInputs { mode: control_core::Mode::Torque, ..UserInputs::default() };
+    sim.apply_mode(&inputs);
+    let mut peak = 0.0f64;
+    for k in 0..RUN_SEGMENTS * segment {
+        let sign = if ((k + segment / 2) / segment).is_multiple_of(2) { 1.0 } else { -1.0 };
+        inputs.torque_command = sign * kt * amplitude;
+        sim.tick(&inputs);
+        peak = peak.max(sim.plant.phase_current_peak());
+        let faults = sim.telemetry().faults;
+        if faults.any() {
+            return (Some(format!("{faults} after {k} ticks")), peak);
+        }
+    }
+    (None, peak)
 }
 
 impl CommissionBenchArgs {
@@ -216,6 +267,7 @@ impl CommissionBenchArgs {
         };
         let failed = rows.iter().filter(|r| r.failed.is_some()).count();
         let wrong = rows.iter().filter(|r| r.failed.is_none() && !r.found_right).count();
+        let run_faults = rows.iter().filter(|r| r.failed.is_none() && r.run_fault.is_some()).count();
         let mut rec = Recorder::new("commission");
         rec.equal("motors refused or failed", failed as f64, 0.0, "motors");
         rec.at_most("resistance error", 100.0 * worst(&|r| r.errors[0]), 3.0, "%");
@@ -229,6 +281,8 @@ impl CommissionBenchArgs {
         rec.at_most("drive time", worst(&|r| r.seconds), 5.0, "s");
         rec.at_most("rotor's travel from where it stood", worst(&|r| r.turns), 2.0, "electrical turns");
         rec.at_most("peak current over the test current", worst(&|r| r.current_ratio), 1.1, "x");
+        rec.equal("drive faulted running the motor after", run_faults as f64, 0.0, "motors");
+        rec.at_most("its peak current over the test current", worst(&|r| r.run_current_ratio), 1.1, "x");
         let passed = rec.all_met();
         rec.write(self.common.out.as_deref(), passed)?;
         if self.common.json {
@@ -240,7 +294,7 @@ impl CommissionBenchArgs {
             );
         } else {
             println!(
-                "{:>3} {:>2} {:>8} {:>9} {:>8} {:>3} {:>6} {:>6} {:>6} {:>6} {:>6} {:>5} {:>5} {:>5}",
+                "{:>3} {:>2} {:>8} {:>9} {:>8} {:>3} {:>6} {:>6} {:>6} {:>6} {:>6} {:>5} {:>5} {:>5} {:>5}",
                 "#",
                 "p",
                 "R ohm",
@@ -254,17 +308,19 @@ impl CommissionBenchArgs {
                 "off °",
                 "bw %",
                 "t s",
-                "I/It"
+                "I/It",
+                "run"
             );
             for (k, r) in rows.iter().enumerate() {
                 match &r.failed {
                     Some(e) => println!("{k:>3} {:>2} {:>8.3} {:>9.2e} {:>8.4} {:>3}  FAILED: {e}", r.pole_pairs, r.resistance, r.inductance, r.flux_linkage, r.reversed as u8),
                     None => println!(
-                        "{k:>3} {:>2} {:>8.3} {:>9.2e} {:>8.4} {:>3} {:>6.2} {:>6.2} {:>6.2} {:>6.2} {:>6.2} {:>5.1} {:>5.2} {:>5.2}{}",
+                        "{k:>3} {:>2} {:>8.3} {:>9.2e} {:>8.4} {:>3} {:>6.2} {:>6.2} {:>6.2} {:>6.2} {:>6.2} {:>5.1} {:>5.2} {:>5.2} {:>5.2}{}{}",
                         r.pole_pairs, r.resistance, r.inductance, r.flux_linkage, r.reversed as u8,
                         100.0 * r.errors[0], 100.0 * r.errors[1], 100.0 * r.errors[2], 100.0 * r.errors[3],
-                        r.offset_deg, 100.0 * r.bandwidth_error, r.seconds, r.current_ratio,
-                        if r.found_right { "" } else { "  WRONG direction or pole pairs" }
+                        r.offset_deg, 100.0 * r.bandwidth_error, r.seconds, r.current_ratio, r.run_current_ratio,
+                        if r.found_right { "" } else { "  WRONG direction or pole pairs" },
+                        r.run_fault.as_ref().map_or(String::new(), |f| format!("  RUN FAULTED: {f}"))
                     ),
                 }
             }
