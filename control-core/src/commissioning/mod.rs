@@ -311,8 +311,11 @@ const Q_CHIP_PEAK: f32 = 0.5;
 /// taken if its own resistance lies within [`DIFFERENCES_AGREEMENT`] of the holds' (`q_winding`).
 const RESISTANCE_AGREEMENT: f32 = 0.03;
 /// How far (a share) the second differences' fit's own resistance may lie off the holds' for
-/// its inductance to be taken (`q_winding`).
-const DIFFERENCES_AGREEMENT: f32 = 0.25;
+/// its inductance to be taken (`q_winding`): a check that the fit found a winding, not of its
+/// resistance, which the second differences leave poorly determined (the resistance shows at
+/// the low frequencies they weigh least): on a rotor of 15 µs sticking on a winding of a
+/// tick, their resistance reads 30 % high while their inductance is within 1.1 %.
+const DIFFERENCES_AGREEMENT: f32 = 0.5;
 
 /// The current step's overshoot beyond which the sequence fails (the design is kept, and its
 /// measured bandwidth and overshoot reported, below it).
