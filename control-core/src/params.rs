@@ -352,8 +352,9 @@ impl Params {
     }
 
     /// These parameters with what commissioning measured: the motor's constants, the encoder's
-    /// mounting and the current loop's gains, marked commissioned (every other setting kept
-    /// but the decoupling, on where its steps are small: [`Params::decoupling_steps_small`]).
+    /// mounting and the current loop's gains, marked commissioned (every other setting kept;
+    /// the decoupling, where it was on, only where its steps are small:
+    /// [`Params::decoupling_steps_small`]).
     pub fn with_commissioned(mut self, m: &crate::commissioning::MeasuredMotor) -> Self {
         self.motor = MotorModel {
             pole_pairs: m.alignment.pole_pairs,
@@ -364,7 +365,7 @@ impl Params {
         };
         self.current.kp = m.current_kp;
         self.current.ki = m.current_ki;
-        self.current.decoupling = self.decoupling_steps_small(m.test_current);
+        self.current.decoupling &= self.decoupling_steps_small(m.test_current);
         self.commissioned_as(EncoderMounting { reversed: m.alignment.reversed, electrical_offset: m.alignment.offset })
     }
 
@@ -546,9 +547,11 @@ mod tests {
         assert!((step - 4.0e-4).abs() < 1e-5, "{step}");
         assert!(default.decoupling_steps_small(0.01) && default.decoupling_steps_small(2.0));
         // 11 pole pairs, 54 mWb, 170 µH on a 1024-count encoder: 10.7 A a count.
-        let mut coarse = Params::default();
-        coarse.motor = MotorModel { pole_pairs: 11, resistance: 0.16, ld: 1.7e-4, lq: 1.7e-4, flux_linkage: 0.054 };
-        coarse.encoder_counts_per_rev = 1024;
+        let mut coarse = Params {
+            motor: MotorModel { pole_pairs: 11, resistance: 0.16, ld: 1.7e-4, lq: 1.7e-4, flux_linkage: 0.054 },
+            encoder_counts_per_rev: 1024,
+            ..Params::default()
+        };
         let step = feed_forward_step(&coarse);
         assert!((step - 10.7).abs() < 0.05, "{step}");
         assert!(!coarse.decoupling_steps_small(2.0) && !coarse.decoupling_steps_small(100.0));

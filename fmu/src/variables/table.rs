@@ -233,7 +233,7 @@ declare_variables! {
     3 ctrl_position_divider: Int32 "ctrl.position_divider" Parameter Fixed = core_count(|p| p.rates.position_divider); NONE; r(1.0, 1000.0); "Position loop every this many base ticks (multiple of velocity_divider)";
     4 ctrl_current_kp: Float64 "ctrl.current_kp" Parameter Fixed = core(|p| p.current.kp); OHM; r(1.0e-6, 1.0e4); "Current-loop proportional gain";
     5 ctrl_current_ki: Float64 "ctrl.current_ki" Parameter Fixed = core(|p| p.current.ki); KI; r(0.0, 1.0e9); "Current-loop integral gain";
-    6 ctrl_decoupling: Boolean "ctrl.decoupling" Parameter Fixed = Params::default().current.decoupling; NONE; ANY; "Cross-coupling and back-EMF feed-forward on";
+    6 ctrl_decoupling: Boolean "ctrl.decoupling" Parameter Fixed = Params::default().current.decoupling; NONE; ANY; "Cross-coupling and back-EMF feed-forward on (commissioning at initialisation that measures the motor turns it off where one encoder count of it drives more than a tenth of the test current in a tick)";
     7 ctrl_angle_advance_ticks: Float64 "ctrl.angle_advance_ticks" Parameter Fixed = core(|p| p.current.angle_advance_ticks); NONE; r(0.0, 4.0); "Electrical-angle advance of the voltage output, in base ticks";
     8 ctrl_max_current: Float64 "ctrl.max_current" Parameter Fixed = core(|p| p.current.max_current); A; r(1.0e-3, 1.0e4); "Largest commanded current magnitude";
     9 ctrl_velocity_kp: Float64 "ctrl.velocity_kp" Parameter Fixed = core(|p| p.velocity.kp); DAMP; r(1.0e-9, 1.0e4); "Velocity-loop proportional gain";
