@@ -12,6 +12,9 @@
 //!    inductance: enough to close a current loop. The fit with the rotor's back-EMF as a series capacitance
 //!    (`free_rotor_fit`: the chips make torque on a rotor that is not on the fixed angle, and
 //!    turn a light one) where it finds a winding, else the first-order one (`winding_fit`).
+//!    On a winding that settles within the tick, whose pole no fit tells from the inverter's
+//!    dead-time voltage under binary chips, the winding's gain and a third of a tick
+//!    (`WindingFit::settled_within_tick`).
 //!    The resistance is rough: the loop's integral corner is kept to a third of its bandwidth.
 //!    No current at the highest voltage: an open phase.
 //! 2. **Resistance.** The current loop ramps the current to the test current while the vector
@@ -636,12 +639,15 @@ impl Commissioning {
                         let free_rotor = self.q_fit.winding(s.tick_period).filter(plausible);
                         // The fits in turn: the free rotor's, the first-order one, and where a
                         // light rotor on a strong magnet sticks and slips under the chips so
-                        // that neither finds a winding, the free rotor's high-passed. The loop
-                        // closed on it needs the inductance roughly; the stages after it
-                        // measure the winding.
+                        // that neither finds a winding, the free rotor's high-passed; last, on
+                        // a winding settling within the tick whose pole none tells from the
+                        // dead time's flips, its gain and a third of a tick. The loop closed on
+                        // it needs the inductance roughly; the stages after it measure the
+                        // winding.
                         let found = free_rotor
                             .or_else(|| self.fit.winding(s.tick_period))
-                            .or_else(|| self.probe_high_passed.winding(s.tick_period).filter(plausible));
+                            .or_else(|| self.probe_high_passed.winding(s.tick_period).filter(plausible))
+                            .or_else(|| self.fit.settled_within_tick(s.tick_period).filter(plausible));
                         let Some(w) = found else {
                             return self.fail(CommissioningFault::Inductance { axis: 'd' });
                         };
