@@ -369,7 +369,16 @@ fn replay_with(source: impl VectorSource, work: Work) -> Result<(u64, u64), Vect
         // What a commissioning measured (or why it stopped), every bit of it.
         match axis.commissioning() {
             Some(CommissioningStatus::Done(m)) => {
-                for x in [m.resistance, m.ld, m.lq, m.flux_linkage, m.alignment.offset, m.current_kp, m.current_ki] {
+                for x in [
+                    m.resistance,
+                    m.ld,
+                    m.lq,
+                    m.flux_linkage,
+                    m.alignment.offset,
+                    m.current_kp,
+                    m.current_ki,
+                    m.test_current,
+                ] {
                     digest.f32(x);
                 }
                 digest.bytes(&[m.alignment.pole_pairs as u8, m.alignment.reversed as u8]);

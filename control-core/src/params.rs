@@ -558,8 +558,10 @@ mod tests {
         // The boundary: a tenth of the current, either side by a hundredth.
         let at = (step / DECOUPLING_STEP_SHARE as f64) as f32;
         assert!(coarse.decoupling_steps_small(1.01 * at) && !coarse.decoupling_steps_small(0.99 * at));
-        // A faster velocity period or a finer encoder makes the steps larger or smaller in
-        // proportion.
+        // A longer velocity period or a finer encoder makes the steps smaller in proportion.
+        coarse.rates.velocity_divider = 4;
+        assert!((feed_forward_step(&coarse) - step / 2.0).abs() < 1e-9);
+        coarse.rates.velocity_divider = 2;
         coarse.encoder_counts_per_rev = 1024 * 64;
         assert!((feed_forward_step(&coarse) - step / 64.0).abs() < 1e-9);
         assert!(coarse.decoupling_steps_small(2.0));

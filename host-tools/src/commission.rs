@@ -62,9 +62,13 @@ impl CommissionArgs {
             }
             s
         };
+        // Whether the current loop fed the back-EMF forward before (commissioning only turns it
+        // off, and says why when it does).
+        let decoupling_before;
         let (measured, seconds, params, truth) = match self.target.session()? {
             Some(mut session) => {
                 let drive = session.params()?;
+                decoupling_before = drive.current.decoupling;
                 let s = settings(&drive);
                 s.validate().map_err(|field| anyhow::anyhow!("commissioning setting {field} is out of range"))?;
                 let c = session.commission(&s)?;
@@ -77,6 +81,7 @@ impl CommissionArgs {
             None => {
                 let mut parameters = crate::fmu::assignment::axis_parameters(&self.set, &[])?;
                 let mut config = crate::fmu::configuration::configuration(&parameters)?;
+                decoupling_before = config.control.current.decoupling;
                 let given = settings(&config.control);
                 parameters.insert("commissioning.at_start".into(), crate::fmu::scenario::Value::Bool(true));
                 parameters.insert("commissioning.apply_motor".into(), crate::fmu::scenario::Value::Bool(true));
@@ -139,7 +144,7 @@ impl CommissionArgs {
                     100.0 * step.overshoot
                 );
             }
-            if !params.current.decoupling {
+            if decoupling_before && !params.current.decoupling {
                 println!(
                     "the current loop's back-EMF feed-forward is off: one encoder count per velocity period of it \
                      would drive more than a tenth of the test current ({:.2} A) into the winding in a tick \

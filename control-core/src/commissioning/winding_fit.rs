@@ -75,8 +75,9 @@ impl WindingFit {
     }
 
     /// Where [`Self::winding`] finds none on a winding whose current settles within the tick:
-    /// the first-order fit's pole near zero or just below (`a` within
-    /// ±[`SETTLED_POLE`]), its gain `b` positive. There the chips swing the phase currents
+    /// the first-order fit's pole within ±[`SETTLED_POLE`] of zero, its gain `b` positive
+    /// (after [`Self::winding`], only a pole at zero or just below reaches this: one just above
+    /// is a winding it fits). There the chips swing the phase currents
     /// through zero at each reversal and their magnitude barely changes, so the dead-time
     /// voltage's flips follow the current's sign as closely as the current itself: the pole
     /// and the dead time cannot be told apart (beside anything the model leaves out, the pole

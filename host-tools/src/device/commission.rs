@@ -108,7 +108,14 @@ impl<T: DrivePort> DriveSession<T> {
                 drive.encoder_counts_per_rev
             );
         }
-        let current = CurrentLoopGains { kp: drive.current.kp, ki: drive.current.ki, ..params.current };
+        // The gains and the feed-forward's choice are the drive's commissioning's (it turns the
+        // back-EMF feed-forward off on a coarse encoder under a strong magnet).
+        let current = CurrentLoopGains {
+            kp: drive.current.kp,
+            ki: drive.current.ki,
+            decoupling: drive.current.decoupling,
+            ..params.current
+        };
         Ok(Params {
             motor: drive.motor,
             encoder_mounting: drive.encoder_mounting,

@@ -94,10 +94,11 @@ impl Drop for DriveTwin<'_> {
     }
 }
 
-/// The parameters a drive's commissioning owns: its motor model and its current loop's gains.
-/// An experiment on a drive cannot set them (the drive keeps its own, its twin takes the
-/// drive's); [`refuse_drive_owned`] says so before anything runs.
-pub const DRIVE_OWNED: [&str; 7] = [
+/// The parameters a drive's commissioning owns: its motor model, its current loop's gains and
+/// whether the loop feeds the back-EMF forward. An experiment on a drive cannot set them (the
+/// drive keeps its own, its twin takes the drive's); [`refuse_drive_owned`] says so before
+/// anything runs.
+pub const DRIVE_OWNED: [&str; 8] = [
     "ctrl.motor_pole_pairs",
     "ctrl.motor_resistance",
     "ctrl.motor_ld",
@@ -105,6 +106,7 @@ pub const DRIVE_OWNED: [&str; 7] = [
     "ctrl.motor_flux_linkage",
     "ctrl.current_kp",
     "ctrl.current_ki",
+    "ctrl.decoupling",
 ];
 
 /// An experiment on a drive that sets one of [`DRIVE_OWNED`]: refused by name.
@@ -134,7 +136,10 @@ fn measures_own_motor(parameters: &BTreeMap<String, Value>) -> bool {
 
 /// The drive's motor model and current-loop gains among a twin's parameters.
 fn drive_motor_or_current_loop(name: &str) -> bool {
-    name.starts_with("ctrl.motor_") || name == "ctrl.current_kp" || name == "ctrl.current_ki"
+    name.starts_with("ctrl.motor_")
+        || name == "ctrl.current_kp"
+        || name == "ctrl.current_ki"
+        || name == "ctrl.decoupling"
 }
 
 fn twin_parameters(drive: Option<&control_core::Params>) -> TwinParameters {
@@ -150,6 +155,7 @@ fn twin_parameters(drive: Option<&control_core::Params>) -> TwinParameters {
             (name::ctrl_motor_flux_linkage, Value::Float(m.flux_linkage as f64)),
             (name::ctrl_current_kp, Value::Float(d.current.kp as f64)),
             (name::ctrl_current_ki, Value::Float(d.current.ki as f64)),
+            (name::ctrl_decoupling, Value::Bool(d.current.decoupling)),
         ]);
     }
     p
