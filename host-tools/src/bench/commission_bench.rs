@@ -20,7 +20,9 @@ use crate::random::XorShift64Star;
 /// 3 %, electrical offset within 1°, direction and pole pairs right every time, current-loop
 /// bandwidth within 10 % of the target and overshoot ≤ 10 %, at most 5 s of drive time, the
 /// rotor within two electrical turns of where it stood and the current within 1.1 times the
-/// test current. One line per motor, then the worst case (exit 1 when a goal is missed).
+/// test current; then the drive runs each commissioned motor in torque mode (reversals at half
+/// the test current on the free rotor) without a fault and within 1.1 times the test current.
+/// One line per motor, then the worst case (exit 1 when a goal is missed).
 #[derive(clap::Args)]
 pub struct CommissionBenchArgs {
     /// Motors drawn
@@ -36,8 +38,8 @@ pub struct CommissionBenchArgs {
     /// unloaded motor fed a voltage step takes to 63 % of its speed. Catalogue servo motors
     /// have a few tenths of a millisecond to tens of milliseconds; the default, 10 µs, draws
     /// rotors twenty times lighter for their magnet than the lightest of them. 0 draws every
-    /// combination of the ranges (the same motors as before for the same seed, with rotors of
-    /// a microsecond, whose winding and inertia resonate at several kilohertz).
+    /// combination of the ranges, rotors of a microsecond among them, whose winding and
+    /// inertia resonate at several kilohertz.
     #[arg(long, default_value_t = MIN_MECHANICAL_TIME_CONSTANT)]
     pub min_mechanical_time_constant: f64,
     #[command(flatten)]
