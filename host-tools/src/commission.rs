@@ -68,7 +68,8 @@ impl CommissionArgs {
         let (measured, seconds, params, truth) = match self.target.session()? {
             Some(mut session) => {
                 let drive = session.params()?;
-                decoupling_before = drive.current.decoupling;
+                // The drive's commissioning decides the feed-forward afresh.
+                decoupling_before = true;
                 let s = settings(&drive);
                 s.validate().map_err(|field| anyhow::anyhow!("commissioning setting {field} is out of range"))?;
                 let c = session.commission(&s)?;

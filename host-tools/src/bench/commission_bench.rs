@@ -318,8 +318,12 @@ impl CommissionBenchArgs {
         // How much of its half test current the run drove, at the least: a light rotor on a
         // strong magnet whose back-EMF the loop takes with its integrator (the feed-forward
         // off on a coarse encoder) follows a torque reversal late.
-        let least =
-            rows.iter().filter(|r| r.failed.is_none()).map(|r| 2.0 * r.run_current_ratio).fold(f64::INFINITY, f64::min);
+        let least = rows
+            .iter()
+            .filter(|r| r.failed.is_none() && r.run_fault.is_none())
+            .map(|r| 2.0 * r.run_current_ratio)
+            .fold(f64::INFINITY, f64::min);
+        let least = if least.is_finite() { least } else { f64::NAN };
         rec.info("its least peak current over the command", least, "x");
         let passed = rec.all_met();
         rec.write(self.common.out.as_deref(), passed)?;

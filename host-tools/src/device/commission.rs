@@ -70,7 +70,10 @@ impl<T: DrivePort> DriveSession<T> {
             }
             other => bail!("the drive reports no finished commissioning ({other:?})"),
         };
-        let params = before.with_commissioned(&measured);
+        // Each commissioning decides the back-EMF feed-forward afresh (one that turned it off
+        // on this drive's encoder before, at a smaller test current say, leaves no trace).
+        let fresh = Params { current: CurrentLoopGains { decoupling: true, ..before.current }, ..before };
+        let params = fresh.with_commissioned(&measured);
         self.order(Request::SetParams(params), "the commissioned parameters")?;
         Ok(Commissioned { measured, seconds, params })
     }
@@ -83,8 +86,9 @@ impl<T: DrivePort> DriveSession<T> {
         self.commission(&CommissioningSettings::for_params(&p))
     }
 
-    /// `params` as the drive runs them: the motor's constants, the encoder's mounting and the
-    /// current loop's gains are always the drive's own commissioned set, whatever `params`
+    /// `params` as the drive runs them: the motor's constants, the encoder's mounting, the
+    /// current loop's gains and its back-EMF feed-forward's choice are always the drive's own
+    /// commissioned set, whatever `params`
     /// says (a plan's set is its twin's plant's, and the twin of a real machine does not know
     /// how the machine's encoder sits: its mounting given to the drive could reverse the
     /// torque); the twin runs with the same motor and gains ([`crate::fmu::runner::Fmu::as_twin_of`]).

@@ -160,7 +160,7 @@ impl<T: DrivePort> DriveSession<T> {
     }
 
     /// Give the drive `params` (at rest), with the drive's own commissioned motor, encoder
-    /// mounting and current-loop gains in place of theirs
+    /// mounting, current-loop gains and feed-forward's choice in place of theirs
     /// (`DriveSession::with_drive_commissioning`).
     pub fn set_params(&mut self, params: &Params) -> Result<()> {
         // Faults first (they name what is wrong with the drive), then its commissioning.

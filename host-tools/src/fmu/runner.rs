@@ -113,16 +113,17 @@ pub const DRIVE_OWNED: [&str; 8] = [
 pub fn refuse_drive_owned<'a>(names: impl IntoIterator<Item = &'a String>) -> Result<()> {
     if let Some(name) = names.into_iter().find(|n| DRIVE_OWNED.contains(&n.as_str())) {
         bail!(
-            "{name} is the drive's: with --device the drive runs, and its twin takes, the motor and current-loop \
-             gains its commissioning measured and designed (`servo commission --device PORT`, with --bandwidth for \
-             other gains), so it cannot be set for one experiment"
+            "{name} is the drive's: with --device the drive runs, and its twin takes, the motor, the current-loop \
+             gains and the back-EMF feed-forward's choice its commissioning measured, designed and made (`servo \
+             commission --device PORT` decides them again, with --bandwidth for other gains), so it cannot be set \
+             for one experiment"
         );
     }
     Ok(())
 }
 
 /// The parameters a twin's runs take in place of the FMU's: `commissioning.at_start` off, and
-/// the motor and current-loop gains of the drive it is the twin of.
+/// the motor, current-loop gains and feed-forward's choice of the drive it is the twin of.
 type TwinParameters = Vec<(&'static str, Value)>;
 
 /// A twin's parameters: a drive commissioned already (no commissioning at initialisation,
@@ -134,7 +135,8 @@ fn measures_own_motor(parameters: &BTreeMap<String, Value>) -> bool {
     on(name::commissioning_at_start) && on(name::commissioning_apply_motor)
 }
 
-/// The drive's motor model and current-loop gains among a twin's parameters.
+/// The drive's motor model, current-loop gains and feed-forward's choice among a twin's
+/// parameters.
 fn drive_motor_or_current_loop(name: &str) -> bool {
     name.starts_with("ctrl.motor_")
         || name == "ctrl.current_kp"
@@ -280,7 +282,7 @@ impl Fmu {
 
     /// This FMU as the twin of the drive whose parameters are `drive` (read from it), for as
     /// long as the returned guard lives: as [`Fmu::as_drive_twin`], and the twin's drive runs
-    /// with `drive`'s commissioned motor and current-loop gains (what the drive runs every
+    /// with `drive`'s commissioned motor, current-loop gains and feed-forward's choice (what the drive runs every
     /// experiment with), not with the plant's truth. A drive that is not commissioned has no
     /// such set: refused, saying what to do.
     pub fn as_twin_of(&self, drive: &control_core::Params) -> Result<DriveTwin<'_>> {
