@@ -209,7 +209,7 @@ pub fn commission_one(plant: &PlantParams) -> MotorRow {
     row.turns = c.excursion * plant.pole_pairs as f64 / tau;
     row.current_ratio = c.peak_current / TEST_CURRENT;
     row.peak_stage = c.peak_stage;
-    let (fault, peak) = run_after_commissioning(&mut sim, plant, &m);
+    let (fault, peak) = run_after_commissioning(&mut sim, plant);
     row.run_fault = fault;
     row.run_current_ratio = peak / TEST_CURRENT;
     row
@@ -222,16 +222,14 @@ const RUN_SEGMENTS: u64 = 8;
 /// reversed between plus and minus half the test current on the free rotor, each segment the
 /// time the command's torque takes to bring the rotor from rest to a quarter of the bus
 /// voltage's back-EMF, at least 8 ticks and at most 50 ms (the first half as long: the speed
-/// swings around zero, up to about an eighth of the bus's back-EMF either way). The torque limit is raised to the command's torque. Returns the fault
-/// that stopped the run (None: none) and the largest phase current the plant carried (A).
-pub fn run_after_commissioning(
-    sim: &mut AxisSimulation,
-    plant: &PlantParams,
-    m: &control_core::commissioning::MeasuredMotor,
-) -> (Option<String>, f64) {
+/// swings around zero, up to about an eighth of the bus's back-EMF either way). The torque
+/// limit is raised to the command's torque. Returns the fault that stopped the run (None:
+/// none) and the largest phase current the plant carried (A).
+pub fn run_after_commissioning(sim: &mut AxisSimulation, plant: &PlantParams) -> (Option<String>, f64) {
     let mut params = *sim.axis.params();
     let amplitude = 0.5 * TEST_CURRENT;
-    let kt = 1.5 * m.alignment.pole_pairs as f64 * m.flux_linkage as f64;
+    // The torque constant the drive runs on: the commissioned motor's.
+    let kt = params.motor.torque_constant() as f64;
     params.velocity.torque_limit = (1.25 * kt * amplitude) as f32;
     if let Err(e) = sim.axis.rebuild(&params) {
         return (Some(format!("parameters refused: {e}")), 0.0);
