@@ -40,9 +40,10 @@
 //!    (their armature's flux at the test current is a fraction of the magnet's) and large on
 //!    a motor whose armature's flux at the test current exceeds its magnet's. The loop holds
 //!    the current at the ticks' samples, so a winding that settles within about a tick adds
-//!    `(y·coth y − 1)·L_q·i` to the armature's flux (`y = R·T/(2·L_q)`: the d voltage, held in
-//!    the stator over the tick, turns against the rotor, and the q winding follows it), taken
-//!    out with the rest; on a weak magnet with a large resistance it is a few percent of `ψ`.
+//!    `(y·coth y − 1)·L_q·i` to the armature's flux at a small lag (`y = R·T/(2·L_q)`: the d
+//!    voltage, held in the stator over the tick, turns against the rotor, and the q winding
+//!    follows it), taken out with the rest; on a weak magnet with a large resistance it is a
+//!    few percent of `ψ`.
 //!    The rotor swings on the vector (the magnet's torque a spring on its inertia); the lines'
 //!    intercepts and the back-EMF's mean need a few of its periods in a pass (4 Hz or more at
 //!    the test current: a heavy load on a weak magnet needs a higher test current).
@@ -374,16 +375,18 @@ impl BackEmf {
     }
 }
 
-/// `y·coth(y) − 1` for `y = R·T/(2·L)` of the winding across the current: on a vector
-/// turning at `ω` with the current `I` held at the ticks (sampled at each tick's start, the
-/// voltage held over the tick and placed at its middle), the q voltage the loop needs is
-/// `ω·(ψ + L_d·I + (y·coth(y) − 1)·L_q·I)` (the q current starting and ending each tick at 0
-/// under the d voltage's turn within it). A winding much slower than the tick gives `y²/3`,
-/// nothing; one that settles within the tick, `y − 1`: its current follows the held voltage's
-/// turn, not the vector's.
+/// `y·coth(y) − 1` for `y = R·T/(2·L)` of a rotor axis's winding of inductance `L`: on a
+/// vector turning at `ω` with the current `I` held at the ticks (sampled at each tick's start,
+/// the voltage held over the tick and placed at its middle), on a rotor on the vector's axis
+/// the q voltage the loop needs is `ω·(ψ + L_d·I + (y·coth(y) − 1)·L_q·I)` with `L = L_q` (the
+/// q current starting and ending each tick at 0 under the d voltage's turn within it). A
+/// winding much slower than the tick gives `y²/3`, nothing; one that settles within the tick,
+/// `y − 1`: its current follows the held voltage's turn, not the vector's.
 fn sampled_winding_excess(y: f32) -> f32 {
-    if y.abs() < 1e-2 {
-        y * y / 3.0
+    if y.abs() < 0.1 {
+        // The series `y²/3 − y⁴/45 + …`, where the closed form loses digits.
+        let y2 = y * y;
+        y2 * (1.0 / 3.0 - y2 / 45.0)
     } else {
         y / libm::tanhf(y) - 1.0
     }
@@ -1206,9 +1209,11 @@ impl Commissioning {
         // holds the current at the ticks, and within a tick the voltage, held in the stator,
         // turns against the rotor while the winding across the current follows it with its
         // own time constant (`sampled_winding_excess`).
+        // On a rotor lagging by `δ` the turn's share splits on the rotor's own axes, each
+        // winding with its own time constant: `sin²δ` of it on d, `cos²δ` on q.
         let along = self.ld * cos * cos + self.lq * sin * sin;
-        let across = self.ld * sin * sin + self.lq * cos * cos;
-        let sampled = across * sampled_winding_excess(r * s.tick_period / (2.0 * across));
+        let excess = |l: f32| l * sampled_winding_excess(r * s.tick_period / (2.0 * l));
+        let sampled = sin * sin * excess(self.ld) + cos * cos * excess(self.lq);
         let inductive = 2.0 * omega * current * (along + sampled);
         let psi = (f_voltage - b_voltage - inductive) / (2.0 * omega * cos - swing_f + swing_b);
         if !(psi > 1e-4 && psi < 10.0) {

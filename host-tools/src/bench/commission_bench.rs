@@ -223,8 +223,9 @@ const RUN_SEGMENTS: u64 = 8;
 /// time the command's torque takes to bring the rotor from rest to a quarter of the bus
 /// voltage's back-EMF, at least 8 ticks and at most 50 ms (the first half as long: the speed
 /// swings around zero, up to about an eighth of the bus's back-EMF either way). The torque
-/// limit is raised to the command's torque. Returns the fault that stopped the run (None:
-/// none) and the largest phase current the plant carried (A).
+/// limit is raised to the command's torque. `sim` runs on what commissioning found (built
+/// with `apply_motor`: its parameters are the commissioned motor's). Returns the fault that
+/// stopped the run (None: none) and the largest phase current the plant carried (A).
 pub fn run_after_commissioning(sim: &mut AxisSimulation, plant: &PlantParams) -> (Option<String>, f64) {
     let mut params = *sim.axis.params();
     let amplitude = 0.5 * TEST_CURRENT;
