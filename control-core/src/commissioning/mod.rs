@@ -1207,10 +1207,9 @@ impl Commissioning {
         let (swing_f, swing_b) = (swing(&self.back_emf[0], f.3), swing(&self.back_emf[1], b.3));
         // The armature's flux along the current, and what the tick's sampling adds: the loop
         // holds the current at the ticks, and within a tick the voltage, held in the stator,
-        // turns against the rotor while the winding across the current follows it with its
-        // own time constant (`sampled_winding_excess`).
-        // On a rotor lagging by `δ` the turn's share splits on the rotor's own axes, each
-        // winding with its own time constant: `sin²δ` of it on d, `cos²δ` on q.
+        // turns against the rotor, which the windings follow (`sampled_winding_excess`). On a
+        // rotor lagging by `δ` that share splits on the rotor's own axes, each winding with
+        // its own time constant: `sin²δ` of it on d, `cos²δ` on q.
         let along = self.ld * cos * cos + self.lq * sin * sin;
         let excess = |l: f32| l * sampled_winding_excess(r * s.tick_period / (2.0 * l));
         let sampled = sin * sin * excess(self.ld) + cos * cos * excess(self.lq);
