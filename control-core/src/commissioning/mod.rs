@@ -313,7 +313,7 @@ const CHIP_DEGREE: u32 = 12;
 const CHIP_SETTLING_TICKS: u32 = 64;
 /// The q chips' current peak on a winding slower than a tick, a share of the test current
 /// (`q_chip_volts`).
-const Q_CHIP_PEAK: f32 = 0.5;
+const Q_CHIP_PEAK: f32 = 0.65;
 /// On a winding faster than a tick, the first-order fit's resistance this far off the holds'
 /// (a share) says the rotor's motion shows in the q stage, and the second differences' fit is
 /// taken if its own resistance lies within [`DIFFERENCES_AGREEMENT`] of the holds' (`q_winding`).
