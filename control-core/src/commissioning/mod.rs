@@ -21,9 +21,9 @@
 //!    turns half an electrical turn back to the fixed angle, fastest at the start and slowing
 //!    to rest (the rotor, wherever it stands, is pulled in while the current is small: on a
 //!    vector that stood still, a rotor at its unstable equilibrium would stay there, held by
-//!    friction, and fall at the full current later), holds it and then half of it, the rotor's swing on the vector damped
-//!    until shortly before the first hold has settled (`swing_damping`); `R = ΔV/ΔI` between
-//!    the two holds (the sensors' offsets and the
+//!    friction, and fall at the full current later), holds it and then half of it, the
+//!    rotor's swing on the vector damped until shortly before the first hold has settled
+//!    (`swing_damping`); `R = ΔV/ΔI` between the two holds (the sensors' offsets and the
 //!    inverter's dead-time voltage, the same at both, drop out). The third phase's current not
 //!    the other two's mean: a phase is missing.
 //! 3. **Encoder.** The loop holds the test current on a vector that turns slowly forward by a
@@ -751,7 +751,8 @@ impl Commissioning {
                 // then, instead of chasing it until it stops near the antipode and falls at
                 // half the test current or more (over 3 000 drawn motors, a vector that
                 // starts from rest left 7 at 1.12–1.54 times the test current, this one 3 at
-                // 1.16–1.19: a narrower band of start angles still falls).
+                // 1.16–1.19; on the test model a band of one or two 15° steps of start angles
+                // still falls on a light rotor, with either profile).
                 let x = share.min(1.0);
                 let angle = RAMP_TURN * (1.0 - x) * (1.0 - x);
                 self.speed = angle - self.angle;
