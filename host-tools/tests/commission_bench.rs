@@ -4,8 +4,7 @@
 //! misses over seeds 1–7 and 2026, 100 motors each, are two refusals and one ramp's peak of
 //! 1.18 times the test current on seed 2's motor 89; none is in this draw, and the misses over
 //! seeds 1–30 are listed on the book's commissioning page). Each commissioned motor is then
-//! run by the drive
-//! (torque reversals) without a fault and within 1.1 times the test current.
+//! run by the drive (torque reversals) without a fault and within 1.1 times the test current.
 
 #[allow(dead_code)] // the helpers other tests use
 mod common;
@@ -71,14 +70,7 @@ fn a_small_draw_commissions_within_the_figures_row_by_row_and_names_each_refusal
 #[test]
 fn light_rotors_on_strong_magnets_with_friction_give_their_q_inductance_within_3_percent() {
     for (seed, motor) in [(14, 55), (23, 56), (26, 59)] {
-        let o = servo()
-            .args(["bench", "commission", "--seed", &seed.to_string(), "--motor", &motor.to_string(), "--json"])
-            .output()
-            .unwrap();
-        let stderr = String::from_utf8_lossy(&o.stderr);
-        let j: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap_or_else(|e| panic!("{e}: {stderr}"));
-        let r = &j["rows"][0];
-        assert!(r["failed"].is_null(), "seed {seed} motor {motor}: {r}");
+        let r = &commissioned_row(seed, motor);
         let lq_error = r["errors"][2].as_f64().unwrap();
         assert!(lq_error <= 0.03, "seed {seed} motor {motor}: Lq {:.2} % off ({r})", 100.0 * lq_error);
         assert!(r["current_ratio"].as_f64().unwrap() <= 1.1, "seed {seed} motor {motor}: peak current ({r})");
@@ -94,15 +86,22 @@ fn light_rotors_on_strong_magnets_with_friction_give_their_q_inductance_within_3
 #[test]
 fn rotors_that_chase_the_ramps_vector_fall_back_to_it_within_the_current() {
     for (seed, motor) in [(8, 1), (10, 13), (24, 6), (27, 32)] {
-        let o = servo()
-            .args(["bench", "commission", "--seed", &seed.to_string(), "--motor", &motor.to_string(), "--json"])
-            .output()
-            .unwrap();
-        let stderr = String::from_utf8_lossy(&o.stderr);
-        let j: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap_or_else(|e| panic!("{e}: {stderr}"));
-        let r = &j["rows"][0];
-        assert!(r["failed"].is_null(), "seed {seed} motor {motor}: {r}");
+        let r = &commissioned_row(seed, motor);
         let peak = r["current_ratio"].as_f64().unwrap();
         assert!(peak <= 1.1, "seed {seed} motor {motor}: peak current {peak:.3} x ({r})");
     }
+}
+
+/// One motor of the bench's draw (`--seed`, `--motor`) commissioned: its row, which must not
+/// be a refusal.
+fn commissioned_row(seed: u64, motor: usize) -> serde_json::Value {
+    let o = servo()
+        .args(["bench", "commission", "--seed", &seed.to_string(), "--motor", &motor.to_string(), "--json"])
+        .output()
+        .unwrap();
+    let stderr = String::from_utf8_lossy(&o.stderr);
+    let mut j: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap_or_else(|e| panic!("{e}: {stderr}"));
+    let r = j["rows"][0].take();
+    assert!(r["failed"].is_null(), "seed {seed} motor {motor}: {r}");
+    r
 }

@@ -267,9 +267,9 @@ fn drawn_motors_with_sensor_errors_are_found() {
 }
 
 /// Light rotors (mechanical time constants of 11–17 µs) on strong magnets, on windings of
-/// five to sixty-five ticks (Lq/R), with Coulomb friction a twentieth of the test current's torque:
-/// the q chips' torque turns the rotor, which sticks and slips on the friction at each
-/// reversal, a motion no linear fit follows. Chips whose current peaks at 0.65 of the test
+/// five to sixty-five ticks (Lq/R), with Coulomb friction a twentieth of the test current's
+/// torque: the q chips' torque turns the rotor, which sticks and slips on the friction at
+/// each reversal, a motion no linear fit follows. Chips whose current peaks at 0.65 of the test
 /// current keep the friction small beside their torque: on this model (one inertia, where
 /// the FMU's plant adds a load on a shaft and the friction's share is larger) the q
 /// inductance within 2 % (chips of half the test current leave the third motor 2.4–2.8 %
