@@ -14,11 +14,12 @@ use serde::Serialize;
 use servo_axis::variables::name;
 
 use super::axis_under_test::{AxisUnderTest, OnDrive, OnFmu};
-use super::design::{design, margins_of, refine, MarginGoal, SearchGrid};
+use super::design::{design, margins_of, MarginGoal, SearchGrid};
 use super::drive_dynamics::DriveDynamics;
 use super::loop_plant;
 use super::measured_mechanics::measure_mechanics;
 use super::mechanics::Mechanics;
+use super::refinement::refine;
 use super::velocity_controller::VelocityTuning;
 use super::verification::{verify, with_tuning};
 use crate::analysis::response_point::ResponsePoint;

@@ -16,6 +16,7 @@ pub mod measured_mechanics;
 pub mod mechanics;
 pub mod position_loop_design;
 pub mod prediction;
+pub mod refinement;
 pub mod report;
 pub mod responses;
 pub mod step_on_twin;
