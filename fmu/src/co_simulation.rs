@@ -272,18 +272,20 @@ impl AxisModel {
             s.seen_sweep_start = s.values.sweep_start;
         }
         sim.run_ticks_with(n, &commands, inputs.disturbance_torque);
-        self.update_outputs();
-        self.check_outputs_finite()
+        if self.update_outputs() {
+            Ok(())
+        } else {
+            self.refuse_non_finite_output()
+        }
     }
 
     /// No step ends with an OK status and a non-finite output: if the plant or the core
-    /// produced one, the axis latches its non-finite fault (the bridge goes off) and the step
-    /// is an error naming the output.
-    fn check_outputs_finite(&mut self) -> Result<(), String> {
+    /// produced one ([`Self::update_outputs`] says so), the axis latches its non-finite fault
+    /// (the bridge goes off) and the step is an error naming the output.
+    #[cold]
+    #[inline(never)]
+    fn refuse_non_finite_output(&mut self) -> Result<(), String> {
         let values = &self.state.values;
-        if values.float64_outputs_finite() {
-            return Ok(());
-        }
         let finite = |vr: u32| values.float64(vr).is_some_and(f64::is_finite);
         let Some(d) = crate::variables::DECLARATIONS
             .iter()
@@ -349,9 +351,12 @@ impl AxisModel {
         };
     }
 
-    fn update_outputs(&mut self) {
+    /// Write every output from the axis; returns whether every Float64 output is finite (the
+    /// check of every step, [`Values::float64_outputs_finite`]; the output it names, and the
+    /// fault, are [`Self::refuse_non_finite_output`]'s, off the step's path).
+    fn update_outputs(&mut self) -> bool {
         let s = &mut self.state;
-        let Some(sim) = s.sim.as_ref() else { return };
+        let Some(sim) = s.sim.as_ref() else { return s.values.float64_outputs_finite() };
         let o = &mut s.values;
         let x = sim.plant.state;
         let t = sim.telemetry();
@@ -398,13 +403,16 @@ impl AxisModel {
             // No result yet (0 + 0j), or none the excitation defines (U without power at the
             // frequency: a ratio that is not finite): 0 dB, 0 deg and quality 0, rather than
             // -inf or NaN. Quality 0 says the gain and phase mean nothing.
-            let measured = w.last.re.is_finite() && w.last.im.is_finite() && (w.last.re != 0.0 || w.last.im != 0.0);
-            let gain = w.last.gain_db() as f64;
-            let phase = w.last.phase_deg() as f64;
+            // (A copy of the result is what the two calls take: were they given the telemetry's,
+            // all of it would be kept in memory, copied there at every step.)
+            let last = w.last;
+            let measured = last.re.is_finite() && last.im.is_finite() && (last.re != 0.0 || last.im != 0.0);
+            let gain = last.gain_db() as f64;
+            let phase = last.phase_deg() as f64;
             let defined = measured && gain.is_finite() && phase.is_finite();
             o.sweep_last_gain_db = if defined { gain } else { 0.0 };
             o.sweep_last_phase_deg = if defined { phase } else { 0.0 };
-            o.sweep_last_quality = if defined && w.last.quality.is_finite() { w.last.quality as f64 } else { 0.0 };
+            o.sweep_last_quality = if defined && last.quality.is_finite() { last.quality as f64 } else { 0.0 };
             s.reported_sweep_result = Some(key);
         }
         o.acq_time = s.start_time + w.sample.tick as f64 * sim.tick_period();
@@ -417,6 +425,7 @@ impl AxisModel {
         o.acq_half_block = w.sample.half_block() as i32;
         o.acq_limited = w.sample.limited as i32;
         o.faults = t.faults.0 as i32;
+        o.float64_outputs_finite()
     }
 }
 

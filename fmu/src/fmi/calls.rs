@@ -58,8 +58,10 @@ pub fn do_step(i: &mut Instance, current: f64, h: f64) -> Result<Status, String>
         }
     }
     let result = i.model.do_step(current, h);
-    for note in std::mem::take(&mut i.model.refusals) {
-        i.log(Status::Warning, &note);
+    if !i.model.refusals.is_empty() {
+        for note in std::mem::take(&mut i.model.refusals) {
+            i.log(Status::Warning, &note);
+        }
     }
     result.map(|()| Status::Ok)
 }

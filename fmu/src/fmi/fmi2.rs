@@ -12,7 +12,7 @@ use super::instance::{
 use super::values;
 use super::{calls, fmi3};
 use crate::model_description;
-use crate::variables::{Kind, Value, Values};
+use crate::variables::{Kind, Value};
 
 type Component = *mut c_void;
 type Vr = u32;
@@ -178,7 +178,7 @@ pub unsafe extern "C" fn fmi2CancelStep(c: Component) -> Fmi2Status {
 pub unsafe extern "C" fn fmi2GetReal(c: Component, vrs: *const Vr, n: usize, out: *mut f64) -> Fmi2Status {
     unsafe {
         call(c, "fmi2GetReal", GET, WhenPoisoned::Allow, |i| {
-            values::get(&i.model, slice(vrs, n, "vr")?, slice_mut(out, n, "value")?, Kind::Float64, Values::float64)?;
+            values::get_planned(&i.model, &mut i.get_plans.float64, slice(vrs, n, "vr")?, slice_mut(out, n, "value")?)?;
             Ok(Status::Ok)
         })
     }
@@ -188,7 +188,7 @@ pub unsafe extern "C" fn fmi2GetReal(c: Component, vrs: *const Vr, n: usize, out
 pub unsafe extern "C" fn fmi2GetInteger(c: Component, vrs: *const Vr, n: usize, out: *mut c_int) -> Fmi2Status {
     unsafe {
         call(c, "fmi2GetInteger", GET, WhenPoisoned::Allow, |i| {
-            values::get(&i.model, slice(vrs, n, "vr")?, slice_mut(out, n, "value")?, Kind::Int32, Values::int32)?;
+            values::get_planned(&i.model, &mut i.get_plans.int32, slice(vrs, n, "vr")?, slice_mut(out, n, "value")?)?;
             Ok(Status::Ok)
         })
     }

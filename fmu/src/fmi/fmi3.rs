@@ -12,7 +12,7 @@ use super::instance::{
 };
 use super::{calls, values};
 use crate::model_description;
-use crate::variables::{Kind, Value, Values};
+use crate::variables::Value;
 
 type Fmi3Instance = *mut c_void;
 type Vr = u32;
@@ -213,7 +213,7 @@ pub unsafe extern "C" fn fmi3DoStep(
 /// Get writes `$t`; Set reads `$in` (a byte for Boolean: any non-zero byte from C is true,
 /// never an invalid Rust `bool`).
 macro_rules! get_set_typed {
-    ($get:ident, $set:ident, $t:ty, $in:ty, $kind:ident, $conv:path, $wrap:expr) => {
+    ($get:ident, $set:ident, $t:ty, $in:ty, $plan:ident, $wrap:expr) => {
         #[no_mangle]
         pub unsafe extern "C" fn $get(
             instance: Fmi3Instance,
@@ -226,7 +226,7 @@ macro_rules! get_set_typed {
                 call(instance, stringify!($get), GET, WhenPoisoned::Allow, |i| {
                     let vrs = slice(vrs, nvr, "valueReferences")?;
                     let out = slice_mut(out, n, "values")?;
-                    values::get(&i.model, vrs, out, Kind::$kind, $conv)?;
+                    values::get_planned(&i.model, &mut i.get_plans.$plan, vrs, out)?;
                     Ok(Status::Ok)
                 })
             }
@@ -252,9 +252,9 @@ macro_rules! get_set_typed {
     };
 }
 
-get_set_typed!(fmi3GetFloat64, fmi3SetFloat64, f64, f64, Float64, Values::float64, Value::Float64);
-get_set_typed!(fmi3GetInt32, fmi3SetInt32, i32, i32, Int32, Values::int32, Value::Int32);
-get_set_typed!(fmi3GetBoolean, fmi3SetBoolean, bool, u8, Boolean, Values::boolean, |b: u8| Value::Boolean(b != 0));
+get_set_typed!(fmi3GetFloat64, fmi3SetFloat64, f64, f64, float64, Value::Float64);
+get_set_typed!(fmi3GetInt32, fmi3SetInt32, i32, i32, int32, Value::Int32);
+get_set_typed!(fmi3GetBoolean, fmi3SetBoolean, bool, u8, boolean, |b: u8| Value::Boolean(b != 0));
 
 /// Types the FMU has no variable of: zero references is fine, any reference is an error.
 macro_rules! get_set_absent {

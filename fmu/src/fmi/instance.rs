@@ -5,6 +5,7 @@
 use std::ffi::{c_char, c_int, c_void, CStr, CString};
 use std::panic::{catch_unwind, AssertUnwindSafe};
 
+use super::values::GetPlans;
 use crate::co_simulation::AxisModel;
 
 /// Status codes: the same numbers in FMI 2.0 (`fmi2Status`) and FMI 3.0 (`fmi3Status`).
@@ -67,6 +68,9 @@ pub struct Instance {
     pub logger: Logger,
     /// Stop time given at initialisation (steps beyond it are refused).
     pub stop_time: Option<f64>,
+    /// The value references of the last Get of each type, resolved (not part of the model's
+    /// state: a plan depends on nothing but the references).
+    pub(crate) get_plans: GetPlans,
 }
 
 impl Instance {
@@ -81,6 +85,7 @@ impl Instance {
             categories: [true; LOG_CATEGORIES.len()],
             logger,
             stop_time: None,
+            get_plans: GetPlans::default(),
         }
     }
 

@@ -6,4 +6,6 @@ pub mod calls;
 pub mod fmi2;
 pub mod fmi3;
 pub mod instance;
+#[cfg(test)]
+mod tests;
 mod values;

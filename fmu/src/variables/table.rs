@@ -56,17 +56,24 @@ macro_rules! declare_variables {
             }, )*
         ];
 
-        /// Each variable's type and byte offset in [`Values`], by value reference: the typed
-        /// getters read a field with one table lookup (the FMI Get path, every step).
-        static LAYOUT: &[(Kind, usize)] = &[ $( (Kind::$kind, std::mem::offset_of!(Values, $field)), )* ];
+        /// Each variable's type and byte offset in [`Values`], by value reference.
+        const LAYOUT: &[(Kind, usize)] = &[ $( (Kind::$kind, std::mem::offset_of!(Values, $field)), )* ];
+
+        /// Per type, the byte offset in [`Values`] of each value reference's field, or
+        /// [`NOT_OF_KIND`] where the variable is of another type: the typed getters read a
+        /// field with one load of a two-byte entry (the FMI Get path, every step, for every
+        /// value).
+        static FLOAT64_AT: [u16; LAYOUT.len()] = offsets_of(LAYOUT, Kind::Float64);
+        static INT32_AT: [u16; LAYOUT.len()] = offsets_of(LAYOUT, Kind::Int32);
+        static BOOLEAN_AT: [u16; LAYOUT.len()] = offsets_of(LAYOUT, Kind::Boolean);
 
         impl Values {
             /// A Float64 variable's value (None: no such value reference, or another type).
             #[inline]
             pub fn float64(&self, vr: u32) -> Option<f64> {
-                match LAYOUT.get(vr as usize) {
+                match FLOAT64_AT.get(vr as usize) {
                     // SAFETY: the offset is that of an f64 field of Values (generated above).
-                    Some(&(Kind::Float64, at)) => Some(unsafe { *((self as *const Self as *const u8).add(at) as *const f64) }),
+                    Some(&at) if at != NOT_OF_KIND => Some(unsafe { *((self as *const Self as *const u8).add(at as usize) as *const f64) }),
                     _ => None,
                 }
             }
@@ -74,9 +81,9 @@ macro_rules! declare_variables {
             /// An Int32 variable's value.
             #[inline]
             pub fn int32(&self, vr: u32) -> Option<i32> {
-                match LAYOUT.get(vr as usize) {
+                match INT32_AT.get(vr as usize) {
                     // SAFETY: the offset is that of an i32 field of Values.
-                    Some(&(Kind::Int32, at)) => Some(unsafe { *((self as *const Self as *const u8).add(at) as *const i32) }),
+                    Some(&at) if at != NOT_OF_KIND => Some(unsafe { *((self as *const Self as *const u8).add(at as usize) as *const i32) }),
                     _ => None,
                 }
             }
@@ -84,11 +91,22 @@ macro_rules! declare_variables {
             /// A Boolean variable's value.
             #[inline]
             pub fn boolean(&self, vr: u32) -> Option<bool> {
-                match LAYOUT.get(vr as usize) {
+                match BOOLEAN_AT.get(vr as usize) {
                     // SAFETY: the offset is that of a bool field of Values.
-                    Some(&(Kind::Boolean, at)) => Some(unsafe { *((self as *const Self as *const u8).add(at) as *const bool) }),
+                    Some(&at) if at != NOT_OF_KIND => Some(unsafe { *((self as *const Self as *const u8).add(at as usize) as *const bool) }),
                     _ => None,
                 }
+            }
+
+            /// The byte offset in `Values` of `vr`'s field if the variable is of `kind`.
+            #[inline]
+            pub fn offset_of(kind: Kind, vr: u32) -> Option<usize> {
+                let table = match kind {
+                    Kind::Float64 => &FLOAT64_AT,
+                    Kind::Int32 => &INT32_AT,
+                    Kind::Boolean => &BOOLEAN_AT,
+                };
+                table.get(vr as usize).filter(|&&at| at != NOT_OF_KIND).map(|&at| at as usize)
             }
 
             /// Whether every Float64 output is finite: each output's field read directly (no
@@ -129,6 +147,25 @@ macro_rules! declare_variables {
             }
         }
     };
+}
+
+/// The entry of a per-type offset table for a variable of another type.
+const NOT_OF_KIND: u16 = u16::MAX;
+
+/// The per-type offset table of `kind` from the layout (at compile time; an offset that does
+/// not fit the entry fails the build).
+const fn offsets_of<const N: usize>(layout: &[(Kind, usize)], kind: Kind) -> [u16; N] {
+    let mut table = [NOT_OF_KIND; N];
+    let mut vr = 0;
+    while vr < N {
+        let (k, at) = layout[vr];
+        if k as u8 == kind as u8 {
+            assert!(at < NOT_OF_KIND as usize, "a field of Values lies beyond the offset tables' reach");
+            table[vr] = at as u16;
+        }
+        vr += 1;
+    }
+    table
 }
 
 /// Whether a value is finite, for any variable type (integers and booleans always are).

@@ -11,7 +11,7 @@ use fmi::schema::fmi3::{Causality, VariableType};
 use fmi::traits::FmiImport;
 
 use crate::fmu::scenario::{Scenario, Value};
-use crate::fmu::trace::Trace;
+use crate::fmu::trace::{Gather, Trace};
 
 /// A variable of the model description.
 #[derive(Clone, Debug)]
@@ -448,6 +448,7 @@ impl Fmu {
         for (k, &c) in f64_cols.iter().chain(&i32_cols).chain(&bool_cols).enumerate() {
             sources[c + 1] = k + 1;
         }
+        let gather = Gather::new(sources, outputs.len() + 1);
         let (f64_end, i32_end) = (1 + f64_vrs.len(), 1 + f64_vrs.len() + i32_vrs.len());
         let mut buffer = vec![0.0; outputs.len() + 1];
         let (mut i32_buf, mut bool_buf) = (vec![0; i32_vrs.len()], vec![false; bool_vrs.len()]);
@@ -471,7 +472,7 @@ impl Fmu {
             if !keep_rows {
                 trace.rows.clear();
             }
-            trace.rows.push_gathered(&buffer, &sources);
+            trace.rows.push_gathered(&buffer, &gather);
             Ok(())
         };
         record(&mut inst, 0.0, &mut trace)?;

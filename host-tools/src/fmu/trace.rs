@@ -42,10 +42,16 @@ impl Rows {
         assert_eq!(self.values.len() - before, self.width, "a trace row must have {} values", self.width);
     }
 
-    /// Append the row `values[sources[0]], values[sources[1]], …` (one value per column).
-    pub fn push_gathered(&mut self, values: &[f64], sources: &[usize]) {
-        assert_eq!(sources.len(), self.width, "a trace row must have {} values", self.width);
-        self.values.extend(sources.iter().map(|&k| values[k]));
+    /// Append the row `values[gather.sources[0]], values[gather.sources[1]], …` (one value per
+    /// column): the sources were checked against the buffer's length once, by [`Gather::new`],
+    /// not at every value of every row.
+    pub fn push_gathered(&mut self, values: &[f64], gather: &Gather) {
+        assert_eq!(gather.sources.len(), self.width, "a trace row must have {} values", self.width);
+        assert_eq!(values.len(), gather.from, "the row is gathered from {} values, not {}", gather.from, values.len());
+        // The columns that take the buffer's first values in order, in one copy.
+        self.values.extend_from_slice(&values[..gather.in_place]);
+        // SAFETY: every source is below `gather.from` (`Gather::new`), the length of `values`.
+        self.values.extend(gather.sources[gather.in_place..].iter().map(|&k| unsafe { *values.get_unchecked(k) }));
     }
 
     /// Append a row of zeros and let `fill` write it (columns in any order).
@@ -90,6 +96,27 @@ impl Rows {
 
     pub fn get(&self, k: usize) -> Option<&[f64]> {
         (k < self.len()).then(|| &self[k])
+    }
+}
+
+/// Which value of a buffer each column of a row takes ([`Rows::push_gathered`]).
+#[derive(Clone, Debug, PartialEq)]
+pub struct Gather {
+    sources: Vec<usize>,
+    from: usize,
+    /// The first columns take the buffer's first values, in order (`sources[c] == c`).
+    in_place: usize,
+}
+
+impl Gather {
+    /// Column `c` takes `values[sources[c]]` of a buffer of `from` values; a source outside
+    /// the buffer panics here.
+    pub fn new(sources: Vec<usize>, from: usize) -> Self {
+        if let Some(k) = sources.iter().find(|&&k| k >= from) {
+            panic!("a column takes value {k} of a buffer of {from} values");
+        }
+        let in_place = sources.iter().enumerate().take_while(|&(c, &k)| c == k).count();
+        Self { sources, from, in_place }
     }
 }
 
@@ -202,4 +229,38 @@ pub fn compare_exact(a: &Trace, b: &Trace) -> Result<std::result::Result<usize, 
         }
     }
     Ok(Ok(common.len()))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_gathered_row_takes_each_column_from_its_source() {
+        // Columns 0 and 1 in place, then the buffer's values picked out of order.
+        let buffer = [10.0, 11.0, 12.0, 13.0, 14.0];
+        let gather = Gather::new(vec![0, 1, 4, 2, 2, 3], buffer.len());
+        let mut rows = Rows::new(6);
+        rows.push_gathered(&buffer, &gather);
+        rows.push_gathered(&[0.0, 1.0, 2.0, 3.0, 4.0], &gather);
+        assert_eq!(&rows[0], &[10.0, 11.0, 14.0, 12.0, 12.0, 13.0]);
+        assert_eq!(&rows[1], &[0.0, 1.0, 4.0, 2.0, 2.0, 3.0]);
+        // All in place (a record list whose Float64 outputs come first).
+        let mut rows = Rows::new(3);
+        rows.push_gathered(&[1.0, 2.0, 3.0], &Gather::new(vec![0, 1, 2], 3));
+        assert_eq!(&rows[0], &[1.0, 2.0, 3.0]);
+    }
+
+    #[test]
+    #[should_panic(expected = "takes value 5 of a buffer of 5 values")]
+    fn a_source_outside_the_buffer_is_refused_when_the_gather_is_made() {
+        Gather::new(vec![0, 5], 5);
+    }
+
+    #[test]
+    #[should_panic(expected = "gathered from 5 values, not 4")]
+    fn a_buffer_of_another_length_is_refused() {
+        let mut rows = Rows::new(2);
+        rows.push_gathered(&[0.0; 4], &Gather::new(vec![0, 4], 5));
+    }
 }
