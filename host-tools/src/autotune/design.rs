@@ -11,11 +11,11 @@
 //! proportional gain (`ki = kp²/(n·J)`, the crossover over `n`, for a few `n`). For each set
 //! the proportional gain runs up a log ladder, and the widest bandwidth whose margins hold
 //! is kept, then refined by a compass search over the continuous parameters. Beside it, for
-//! each set and integral ratio, the candidate whose closed loop dips below −3 dB at a load's
-//! anti-resonance and climbs back over it (the highest such dip) has its dip lifted
-//! (`refinement::lift_dip`): the
-//! bandwidth of such a loop is the dip's, and the loop that lifts it lies past a cliff the
-//! bandwidth's refinement does not climb.
+//! each notch family and integral ratio, the candidate whose closed loop dips below −3 dB at
+//! a load's anti-resonance and climbs back over it (the highest such dip, over the low-pass
+//! cut-offs) has its dip lifted (`refinement::lift_dip`): the bandwidth of such a loop is the
+//! dip's, and the loop that lifts it lies past a cliff the bandwidth's refinement does not
+//! climb.
 
 use num_complex::Complex64;
 use serde::{Deserialize, Serialize};
@@ -49,8 +49,9 @@ impl MarginGoal {
     /// gain and 0.02 of Ms beside `self`, for what the model misses of the machine (the loop
     /// verified on the machine is held to `self`). The Ms reserve is the smallest: a
     /// calibrated model's Ms lies within 0.02 of its machine's where its phase margin lies
-    /// within 1°, and Ms is where the loops that lift a light load's dip (`refinement`) are
-    /// bound.
+    /// within 1° (seed 7's oracle loops, at 45° and 1.6 on the true plant, read 44.98–45.8° and
+    /// 1.579–1.601 on their calibrated models), and Ms is where loops that lift a load's dip
+    /// (`refinement`) are bound.
     pub fn with_reserve(&self) -> Self {
         Self {
             phase_margin_deg: self.phase_margin_deg + 3.0,

@@ -3,14 +3,17 @@
 //! keeps the margins: for the widest bandwidth ([`refine`]), or to lift a dip of the closed
 //! loop over −3 dB ([`lift_dip`]).
 //!
-//! **The dip.** On a light load the closed loop `|L/(1 + L)|` can fall below −3 dB near the
-//! shaft's anti-resonance and rise over it again above. The bandwidth (the first −3 dB
+//! **The dip.** On a load whose anti-resonance lies below the loop's reach, the closed loop
+//! `|L/(1 + L)|` can fall below −3 dB near the anti-resonance and rise over it again above. The bandwidth (the first −3 dB
 //! frequency) is then the dip's, far below the loop's reach, and a few percent more gain or
 //! integral action lifts the dip and moves the bandwidth up to the reach: a cliff that a
 //! search for bandwidth does not climb (it sees no gain until it lands past the edge, on a
 //! sliver a few percent wide between the dip and the margins). [`lift_dip`] climbs the dip's
 //! floor instead, then refines for bandwidth with the floor kept [`FLOOR_HEADROOM_DB`] over
-//! −3 dB, so that a model a fraction of a percent off the machine does not drop it back.
+//! −3 dB up to where the start's dip ended, so that a model a fraction of a percent off the
+//! machine does not drop it back (above that frequency the loop is held to −3 dB only). A
+//! closed loop that rolls off and climbs back over −3 dB on a resonance peak counts as a dip
+//! too; its lift fails or its loop keeps the margins all the same.
 
 use num_complex::Complex64;
 
@@ -69,8 +72,9 @@ fn admissible(t: &VelocityTuning, nyquist: f64) -> bool {
     t.kp > 0.0 && t.ki >= 0.0 && t.low_pass_hz >= 0.0 && t.low_pass_hz < nyquist && filters_fit
 }
 
-/// A compass search from `x` (scored `score0`) along `dims`: each pass tries a step either
-/// way on each coordinate and keeps a move that `better` prefers, until none does; then the
+/// A compass search from `x` (scored `score0`) along `dims` (and, with `diagonals`, the four
+/// diagonals of the gain and the integral ratio): each pass tries a step either way on each
+/// coordinate and keeps a move that `better` prefers, until none does; then the
 /// steps halve, six times. Stops early once `done` holds for the best score.
 fn compass<S: Copy>(
     mut x: [f64; 6],
