@@ -17,6 +17,9 @@ pub fn servo() -> Command {
 /// its own process).
 pub fn tmp(name: &str) -> PathBuf {
     let d = std::env::temp_dir().join(format!("servo-test-{}-{name}", std::process::id()));
+    // Process ids come round again: a folder of an earlier run with this one's id is not
+    // this run's (a stale output in it would pass for this run's).
+    let _ = std::fs::remove_dir_all(&d);
     std::fs::create_dir_all(&d).unwrap();
     d
 }
