@@ -14,6 +14,7 @@ use super::disturbance_response;
 use super::measured_mechanics::{measure_mechanics, MeasuredMechanics};
 use super::position_loop_design::PositionTuning;
 use super::report::AutotuneReport;
+use super::reserve::{design_and_verify, Reserve};
 use super::responses::{LoopModel, Responses};
 use super::verification::{verify, with_tuning, Verification};
 use crate::cli::{progress_bar, Common};
@@ -101,6 +102,8 @@ struct DriveOutcome {
     mechanics: MeasuredMechanics,
     design: Design,
     position: PositionTuning,
+    reserve: Reserve,
+    close_missed: Option<Verification>,
     responses: Responses,
     twin: Verification,
     drive: Option<(Verification, Option<u32>)>,
@@ -127,15 +130,19 @@ impl AutotuneArgs {
                 // 1. The plant measured and calibrated, 2. the design, 3. verified on the twin.
                 let mechanics = measure_mechanics(&mut OnFmu(&fmu), &parameters, self.amplitude, self.velocity)?;
                 pb.set_position(400);
-                let design = mechanics.design(&goal, &self.margin)?;
-                let position = mechanics.design_position(&design.tuning, &goal)?;
-                pb.set_position(550);
-                let tuned = with_tuning(&parameters, &design.tuning, Some(&position));
-                let twin = verify(&mut OnFmu(&fmu), &tuned, self.velocity, &goal)?;
+                let verified = design_and_verify(&mechanics, &goal, &self.margin, |design, position| {
+                    let tuned = with_tuning(&parameters, &design.tuning, Some(position));
+                    let twin = verify(&mut OnFmu(&fmu), &tuned, self.velocity, &goal)?;
+                    let held = twin.passed;
+                    Ok((twin, held))
+                })?;
                 pb.set_position(900);
-                let responses = self.responses(&fmu, &tuned, &mechanics, &design)?;
+                let (design, position) = (&verified.design, &verified.position);
+                let tuned = with_tuning(&parameters, &design.tuning, Some(position));
+                let responses = self.responses(&fmu, &tuned, &mechanics, design)?;
                 pb.finish_and_clear();
-                self.report(&out, &goal, (&mechanics, &design, &position, &responses), &twin, None)?
+                let reserve = (verified.reserve, verified.close_missed.as_ref());
+                self.report(&out, &goal, (&mechanics, design, position, &responses), reserve, &verified.outcome, None)?
             }
             Some(mut session) => self.on_drive(&fmu, &mut session, &parameters, &goal, &out, &pb)?,
         };
@@ -176,7 +183,8 @@ impl AutotuneArgs {
             }
         })?;
         let results = (&o.mechanics, &o.design, &o.position, &o.responses);
-        let passed = self.report(out, goal, results, &o.twin, o.drive.as_ref().map(|(v, s)| (v, *s)))?;
+        let reserve = (o.reserve, o.close_missed.as_ref());
+        let passed = self.report(out, goal, results, reserve, &o.twin, o.drive.as_ref().map(|(v, s)| (v, *s)))?;
         if o.drive.is_none() {
             eprintln!("the tuning misses the margins on the twin of the drive's machine: the drive was not given it");
         }
@@ -198,25 +206,37 @@ impl AutotuneArgs {
         let mut drive = OnDrive { session, port };
         let mechanics = measure_mechanics(&mut drive, parameters, self.amplitude, self.velocity)?;
         pb.set_position(400);
-        let design = mechanics.design(goal, &self.margin)?;
-        let position = mechanics.design_position(&design.tuning, goal)?;
         // The twin of the measured machine: the drive's commissioning, the calibrated mechanics.
         let twin_fmu = fmu.as_twin_of(before)?;
         let mut on_twin = parameters.clone();
         on_twin.extend(mechanics.plant_parameters().map(|(k, v)| (k.to_string(), v)));
-        let twin_tuned = with_tuning(&on_twin, &design.tuning, Some(&position));
-        let twin = verify(&mut OnFmu(&twin_fmu), &twin_tuned, self.velocity, goal)?;
+        // Verified on the twin, then (only where the twin holds) on the drive: its open loop
+        // measured with the tuning. The full reserve's design where the close one misses.
+        let verified = design_and_verify(&mechanics, goal, &self.margin, |design, position| {
+            let twin_tuned = with_tuning(&on_twin, &design.tuning, Some(position));
+            let twin = verify(&mut OnFmu(&twin_fmu), &twin_tuned, self.velocity, goal)?;
+            if !twin.passed {
+                return Ok(((twin, None), false));
+            }
+            let tuned = with_tuning(parameters, &design.tuning, Some(position));
+            let on_drive = verify(&mut drive, &tuned, self.velocity, goal)?;
+            let held = on_drive.passed;
+            Ok(((twin, Some(on_drive)), held))
+        })?;
         pb.set_position(550);
+        let (design, position, reserve) = (verified.design, verified.position, verified.reserve);
+        // The verification the close design missed: the drive's where it ran, else the twin's.
+        let close_missed = verified.close_missed.map(|(twin, on_drive)| on_drive.unwrap_or(twin));
+        let twin_tuned = with_tuning(&on_twin, &design.tuning, Some(&position));
         let responses = self.responses(&twin_fmu, &twin_tuned, &mechanics, &design)?;
-        let outcome = |twin, drive| DriveOutcome { mechanics, design, position, responses, twin, drive };
-        if !twin.passed {
+        let (twin, on_drive) = verified.outcome;
+        let outcome =
+            |twin, drive| DriveOutcome { mechanics, design, position, reserve, close_missed, responses, twin, drive };
+        let Some(on_drive) = on_drive else {
             // Never on the drive: the twin of its own machine missed.
             drive.session.set_params(before)?;
             return Ok(outcome(twin, None));
-        }
-        // On the drive: its open loop measured with the tuning.
-        let tuned = with_tuning(parameters, &design.tuning, Some(&position));
-        let on_drive = verify(&mut drive, &tuned, self.velocity, goal)?;
+        };
         let saved = if on_drive.passed {
             // The drive's own set with the tuning in it (not the run's other settings).
             drive.session.set_params(&tuned_set(before, &design.tuning, &position))?;
@@ -253,6 +273,7 @@ impl AutotuneArgs {
         out: &std::path::Path,
         goal: &MarginGoal,
         (mechanics, design, position, responses): (&MeasuredMechanics, &Design, &PositionTuning, &Responses),
+        (reserve, close_missed): (Reserve, Option<&Verification>),
         twin: &Verification,
         drive: Option<(&Verification, Option<u32>)>,
     ) -> Result<bool> {
@@ -262,6 +283,8 @@ impl AutotuneArgs {
             mechanics,
             design,
             position,
+            reserve,
+            close_missed,
             responses,
             twin,
             drive,

@@ -22,6 +22,7 @@ use serde::{Deserialize, Serialize};
 
 use super::margins::{log_grid, margins, Margins};
 use super::refinement::{dip, lift_dip, refine};
+pub use super::reserve::Reserve;
 use super::velocity_controller::{Notch, VelocityTuning};
 
 /// The margins a design must keep.
@@ -45,18 +46,15 @@ impl MarginGoal {
         Some(Self { phase_margin_deg: 45.0, gain_margin_db: 6.0, sensitivity_peak: ms })
     }
 
-    /// The margins a design on a calibrated model aims for: a reserve of 3° of phase, 1 dB of
-    /// gain and 0.02 of Ms beside `self`, for what the model misses of the machine (the loop
-    /// verified on the machine is held to `self`). The Ms reserve is the smallest: a
-    /// calibrated model's Ms lies within 0.02 of its machine's where its phase margin lies
-    /// within 1° (seed 7's oracle loops, at 45° and 1.6 on the true plant, read 44.98–45.8° and
-    /// 1.579–1.601 on their calibrated models), and Ms is where loops that lift a load's dip
-    /// (`refinement`) are bound.
-    pub fn with_reserve(&self) -> Self {
+    /// The margins a design on a calibrated model aims for: `self` with `reserve` beside it,
+    /// for what the model misses of the machine (the loop verified on the machine is held to
+    /// `self`).
+    pub fn with_reserve(&self, reserve: Reserve) -> Self {
+        let (phase_deg, gain_db, sensitivity) = reserve.margins();
         Self {
-            phase_margin_deg: self.phase_margin_deg + 3.0,
-            gain_margin_db: self.gain_margin_db + 1.0,
-            sensitivity_peak: self.sensitivity_peak - 0.02,
+            phase_margin_deg: self.phase_margin_deg + phase_deg,
+            gain_margin_db: self.gain_margin_db + gain_db,
+            sensitivity_peak: self.sensitivity_peak - sensitivity,
         }
     }
 

@@ -12,7 +12,7 @@ use num_complex::Complex64;
 
 use super::axis_under_test::AxisUnderTest;
 use super::calibration::{calibrate, Calibration, PlantPoint};
-use super::design::{design, Design, MarginGoal, SearchGrid};
+use super::design::{design, Design, MarginGoal, Reserve, SearchGrid};
 use super::design_checks::{
     check_determined, check_linear, check_resonance_measured, check_riding_speed, check_torque_amplitude,
 };
@@ -87,27 +87,33 @@ impl MeasuredMechanics {
         self.points.iter().map(|p| p.hz).fold(0.0, f64::max)
     }
 
-    /// The widest-bandwidth design on the calibrated model that keeps `goal` with a reserve;
+    /// The widest-bandwidth design on the calibrated model that keeps `goal` with `reserve`;
     /// refused where the resonance lies near the top of the measured band (`margin` names the
     /// goal in the message).
-    pub fn design(&self, goal: &MarginGoal, margin: &str) -> Result<Design> {
+    pub fn design(&self, goal: &MarginGoal, margin: &str, reserve: Reserve) -> Result<Design> {
         check_resonance_measured(&self.calibration, self.top_hz())?;
         let model = |f: f64| self.model(f);
         design(
             &model,
             self.period(),
-            &goal.with_reserve(),
+            &goal.with_reserve(reserve),
             &SearchGrid::STANDARD,
             &self.calibration.mechanics.features_hz(),
         )
-        .ok_or_else(|| anyhow!("no velocity-loop design keeps the {margin} margins on the calibrated model"))
+        .ok_or_else(|| {
+            anyhow!(
+                "no velocity-loop design keeps the {margin} margins with the {} reserve on the calibrated model",
+                reserve.name()
+            )
+        })
     }
 
     /// The position loop's gain and feed-forward around the velocity loop of `tuning` on the
-    /// calibrated model, keeping `goal` with the design's reserve.
+    /// calibrated model, keeping `goal` with the full reserve (the position loop is not
+    /// verified on its own: its margins stand on the model).
     pub fn design_position(&self, tuning: &VelocityTuning, goal: &MarginGoal) -> Result<PositionTuning> {
         let per_gain = |f: f64| self.position_loop_per_gain(tuning, f);
-        design_position_loop(&per_gain, &PositionRates::of(&self.params), &goal.with_reserve())
+        design_position_loop(&per_gain, &PositionRates::of(&self.params), &goal.with_reserve(Reserve::Full))
             .ok_or_else(|| anyhow!("no position-loop gain keeps the margins around the tuned velocity loop"))
     }
 

@@ -18,6 +18,7 @@ pub mod position_loop_design;
 pub mod prediction;
 pub mod refinement;
 pub mod report;
+pub mod reserve;
 pub mod responses;
 pub mod step_on_twin;
 pub mod velocity_controller;

@@ -129,7 +129,7 @@ mod tests {
         let rates = PositionRates { period: 1.0 / 4000.0, velocity_period: 1.0 / 8000.0 };
         let one = |_: f64| Complex64::new(1.0, 0.0);
         let ideal = |f: f64| position_loop_per_gain(&one, &one, &PositionRates { period: 1e-6, ..rates }, f);
-        let goal = MarginGoal::named("standard").unwrap().with_reserve();
+        let goal = MarginGoal::named("standard").unwrap().with_reserve(crate::autotune::reserve::Reserve::Full);
         let top = design_position_loop(&ideal, &PositionRates { period: 1e-6, ..rates }, &goal);
         assert!(top.is_some_and(|t| t.margins.phase_margin_deg > 89.0));
         let fb = 100.0;

@@ -274,7 +274,7 @@ mod tests {
         let (_, fa) = m.resonance_hz();
         let plant = |f: f64| crate::autotune::loop_plant(&drive, &m, f);
         let standard = MarginGoal::named("standard").unwrap();
-        for goal in [standard, standard.with_reserve()] {
+        for goal in [standard, standard.with_reserve(crate::autotune::reserve::Reserve::Full)] {
             let d = design(&plant, period, &goal, &SearchGrid::STANDARD, &m.features_hz()).unwrap();
             let dense = margins_of(&d.tuning, &plant, period, 20_000, &m.features_hz()).unwrap();
             assert!(goal.held_by(&dense), "{dense:?}");

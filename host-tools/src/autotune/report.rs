@@ -14,6 +14,7 @@ use super::measured_mechanics::MeasuredMechanics;
 use super::plant_response;
 use super::position_loop_design::PositionTuning;
 use super::prediction::StepPrediction;
+use super::reserve::Reserve;
 use super::responses::{plot_loops, Responses};
 use super::verification::Verification;
 use crate::analysis::response_point::ResponsePoint;
@@ -25,6 +26,10 @@ pub struct AutotuneReport<'a> {
     pub mechanics: &'a MeasuredMechanics,
     pub design: &'a Design,
     pub position: &'a PositionTuning,
+    /// The reserve the design kept beside the goal on the calibrated model.
+    pub reserve: Reserve,
+    /// Where the full reserve's design was taken: the close design's verification that missed.
+    pub close_missed: Option<&'a Verification>,
     pub responses: &'a Responses,
     /// On the twin (the FMU: the plant, or a drive's measured machine).
     pub twin: &'a Verification,
@@ -48,7 +53,10 @@ impl AutotuneReport<'_> {
             (true, None) => 0.0,
             (false, _) => self.twin.drive_time_s + self.responses.measured.drive_time_s,
         };
-        self.mechanics.drive_time_s + verification
+        // The close design's verification that missed, where it ran on the machine.
+        let missed =
+            self.close_missed.filter(|v| !self.on_drive || v.on != self.twin.on).map_or(0.0, |v| v.drive_time_s);
+        self.mechanics.drive_time_s + verification + missed
     }
 
     pub fn write_files(&self, out: &Path) -> Result<()> {
@@ -123,6 +131,8 @@ impl AutotuneReport<'_> {
             "plant": plant_json,
             "calibration": mech.calibration,
             "design": self.design,
+            "reserve": self.reserve,
+            "close_verification_missed": self.close_missed,
             "position": self.position,
             "before": mech.during,
             "verification": self.twin,
@@ -155,7 +165,19 @@ impl AutotuneReport<'_> {
             c.worst_gain_db, c.worst_phase_deg
         );
         let t = &d.tuning;
-        println!("velocity loop ({} margins):", self.margin);
+        let (phase, gain, ms) = self.reserve.margins();
+        println!(
+            "velocity loop ({} margins, {} reserve on the model: {phase}°, {gain} dB, Ms {ms}):",
+            self.margin,
+            self.reserve.name()
+        );
+        if let Some(v) = self.close_missed {
+            println!(
+                "  the design with the close reserve missed its verification {} (phase margin {:.1}°, Ms {:.2}): \
+                 this is the design with the full reserve",
+                v.on, v.phase_margin_deg, v.sensitivity_peak
+            );
+        }
         println!("  kp {:.4} N·m·s/rad (was {:.4}), ki {:.2} N·m/rad (was {:.2})", t.kp, before.kp, t.ki, before.ki);
         match t.notch {
             Some(n) => println!("  notch {:.1} Hz, Q {:.2}, depth {:.2}", n.hz, n.q, n.depth),

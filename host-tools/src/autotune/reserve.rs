@@ -1,0 +1,159 @@
+//! How far inside the goal a design on a calibrated model aims, and the step back when a
+//! close design misses where it is verified.
+//!
+//! A design first keeps the goal with the **close** reserve and is verified where it is to
+//! run (the twin, then the drive). Where that verification misses, the design that keeps the
+//! **full** reserve is verified instead, and its verification decides. Many machines' widest
+//! loops lie between the two: loops that lift a load's anti-resonance dip over −3 dB exist
+//! only within a degree or two of the goal's phase margin.
+
+use anyhow::Result;
+use serde::Serialize;
+
+use super::design::{Design, MarginGoal};
+use super::measured_mechanics::MeasuredMechanics;
+use super::position_loop_design::PositionTuning;
+
+/// The margins a design on a calibrated model keeps beside the goal.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Reserve {
+    /// 0.5° of phase, 0.25 dB of gain, 0.01 of Ms. A calibrated twin's margins lie within a
+    /// few hundredths of a degree of its machine's where the model is optimistic (seed 1's
+    /// machines 30–182 that the full reserve keeps under their dip: 0.00–0.02°), and the
+    /// verification on the machine holds the loop to the goal itself.
+    Close,
+    /// 3° of phase, 1 dB of gain, 0.02 of Ms: for a machine whose measurement the model
+    /// follows less closely than that (the close design missed its verification).
+    Full,
+}
+
+impl Reserve {
+    /// (phase margin °, gain margin dB, Ms) added to the goal's margins (taken off its Ms).
+    pub fn margins(self) -> (f64, f64, f64) {
+        match self {
+            Reserve::Close => (0.5, 0.25, 0.01),
+            Reserve::Full => (3.0, 1.0, 0.02),
+        }
+    }
+
+    pub fn name(self) -> &'static str {
+        match self {
+            Reserve::Close => "close",
+            Reserve::Full => "full",
+        }
+    }
+}
+
+/// A design that was verified, the reserve it kept, and (where it is the full reserve's) the
+/// close design's verification that missed.
+#[derive(Clone, Debug)]
+pub struct Verified<V> {
+    pub design: Design,
+    pub position: PositionTuning,
+    pub reserve: Reserve,
+    /// What `check` returned for this design.
+    pub outcome: V,
+    /// What `check` returned for the close design, where it missed.
+    pub close_missed: Option<V>,
+}
+
+/// The close design checked by `check` (its outcome and whether it held); where it misses,
+/// or no design keeps the close reserve, the full reserve's design checked by `check`, whose
+/// outcome then stands whether it held or not. An error of `check` ends the attempt.
+pub fn design_and_verify<V>(
+    mechanics: &MeasuredMechanics,
+    goal: &MarginGoal,
+    margin: &str,
+    mut check: impl FnMut(&Design, &PositionTuning) -> Result<(V, bool)>,
+) -> Result<Verified<V>> {
+    let mut close_missed = None;
+    let close = mechanics
+        .design(goal, margin, Reserve::Close)
+        .and_then(|d| mechanics.design_position(&d.tuning, goal).map(|p| (d, p)));
+    if let Ok((design, position)) = close {
+        let (outcome, held) = check(&design, &position)?;
+        if held {
+            return Ok(Verified { design, position, reserve: Reserve::Close, outcome, close_missed: None });
+        }
+        close_missed = Some(outcome);
+    }
+    let design = mechanics.design(goal, margin, Reserve::Full)?;
+    let position = mechanics.design_position(&design.tuning, goal)?;
+    let (outcome, _) = check(&design, &position)?;
+    Ok(Verified { design, position, reserve: Reserve::Full, outcome, close_missed })
+}
+
+#[cfg(test)]
+mod tests {
+    use std::cell::Cell;
+
+    use super::*;
+    use crate::autotune::bench::Machine;
+    use crate::autotune::calibration::{calibrate, PlantPoint};
+    use crate::autotune::drive_dynamics::DriveDynamics;
+    use crate::autotune::margins::log_grid;
+    use crate::autotune::mechanics::Mechanics;
+    use crate::autotune::velocity_controller::VelocityTuning;
+    use crate::fmu::configuration::configuration;
+
+    /// `machine` measured through its drive without noise (40 points, 5 Hz to 3 kHz), as the
+    /// torque-point sweep gives it, and calibrated.
+    fn measured(machine: Machine) -> MeasuredMechanics {
+        let c = configuration(&machine.parameters()).unwrap();
+        let drive = DriveDynamics::as_configured(&c.control);
+        let truth = Mechanics::of_plant(&c.plant);
+        let points: Vec<PlantPoint> = log_grid(5.0, 3000.0, 40)
+            .into_iter()
+            .map(|hz| PlantPoint { hz, response: drive.around_machine(hz) * truth.motor_velocity_per_torque(hz) })
+            .collect();
+        let calibration = calibrate(&points, &drive).unwrap();
+        MeasuredMechanics {
+            params: c.control,
+            drive,
+            during: VelocityTuning::of_params(&c.control),
+            readings: Vec::new(),
+            points,
+            calibration,
+            drive_time_s: 0.0,
+        }
+    }
+
+    /// A light load on a 142 Hz shaft (seed 1's machine 168): its widest loop lifts the
+    /// anti-resonance dip with 45.5° of phase margin and no more. The close design is that
+    /// loop; where its verification misses, the full reserve's design is verified instead (it
+    /// stays under the dip, at a fraction of the bandwidth) and the close one's outcome is
+    /// kept beside it.
+    #[test]
+    fn a_close_design_that_misses_its_verification_gives_way_to_the_full_reserve() {
+        let mechanics = measured(Machine { inertia_ratio: 0.307, resonance_hz: 142.0, damping_ratio: 0.0617 });
+        let goal = MarginGoal::named("standard").unwrap();
+        let calls = Cell::new(0);
+        let held = design_and_verify(&mechanics, &goal, "standard", |d, _| {
+            calls.set(calls.get() + 1);
+            Ok((d.margins, true))
+        })
+        .unwrap();
+        assert_eq!((held.reserve, calls.get()), (Reserve::Close, 1));
+        assert!(held.close_missed.is_none());
+        assert!(goal.with_reserve(Reserve::Close).held_by(&held.outcome), "{:?}", held.outcome);
+
+        calls.set(0);
+        let missed = design_and_verify(&mechanics, &goal, "standard", |d, _| {
+            calls.set(calls.get() + 1);
+            // The close design's verification misses; the full one's holds.
+            Ok((d.margins, calls.get() > 1))
+        })
+        .unwrap();
+        assert_eq!((missed.reserve, calls.get()), (Reserve::Full, 2));
+        assert_eq!(missed.close_missed.map(|m| m.bandwidth_hz), Some(held.outcome.bandwidth_hz));
+        assert!(goal.with_reserve(Reserve::Full).held_by(&missed.outcome), "{:?}", missed.outcome);
+        // What the close reserve is for: the lifted dip, four times the full reserve's reach.
+        assert!(
+            held.outcome.bandwidth_hz > 4.0 * missed.outcome.bandwidth_hz,
+            "close {} Hz, full {} Hz",
+            held.outcome.bandwidth_hz,
+            missed.outcome.bandwidth_hz
+        );
+    }
+}
