@@ -13,8 +13,8 @@ use super::design::{Design, MarginGoal};
 use super::disturbance_response;
 use super::measured_mechanics::{measure_mechanics, MeasuredMechanics};
 use super::position_loop_design::PositionTuning;
-use super::report::AutotuneReport;
-use super::reserve::{design_and_verify, Reserve};
+use super::report::{AutotuneReport, ReserveTaken};
+use super::reserve::{design_and_verify, CloseDesign, Reserve};
 use super::responses::{LoopModel, Responses};
 use super::verification::{verify, with_tuning, Verification};
 use crate::cli::{progress_bar, Common};
@@ -103,7 +103,9 @@ struct DriveOutcome {
     design: Design,
     position: PositionTuning,
     reserve: Reserve,
-    close_missed: Option<Verification>,
+    close: CloseDesign<Verification>,
+    /// Drive time of the close design's verification on the drive, where it ran there (s).
+    close_drive_time_s: f64,
     responses: Responses,
     twin: Verification,
     drive: Option<(Verification, Option<u32>)>,
@@ -141,7 +143,11 @@ impl AutotuneArgs {
                 let tuned = with_tuning(&parameters, &design.tuning, Some(position));
                 let responses = self.responses(&fmu, &tuned, &mechanics, design)?;
                 pb.finish_and_clear();
-                let reserve = (verified.reserve, verified.close_missed.as_ref());
+                let close_drive_time_s = match &verified.close {
+                    CloseDesign::Missed(v) => v.drive_time_s,
+                    _ => 0.0,
+                };
+                let reserve = ReserveTaken { reserve: verified.reserve, close: &verified.close, close_drive_time_s };
                 self.report(&out, &goal, (&mechanics, design, position, &responses), reserve, &verified.outcome, None)?
             }
             Some(mut session) => self.on_drive(&fmu, &mut session, &parameters, &goal, &out, &pb)?,
@@ -183,10 +189,20 @@ impl AutotuneArgs {
             }
         })?;
         let results = (&o.mechanics, &o.design, &o.position, &o.responses);
-        let reserve = (o.reserve, o.close_missed.as_ref());
+        let reserve = ReserveTaken { reserve: o.reserve, close: &o.close, close_drive_time_s: o.close_drive_time_s };
         let passed = self.report(out, goal, results, reserve, &o.twin, o.drive.as_ref().map(|(v, s)| (v, *s)))?;
         if o.drive.is_none() {
-            eprintln!("the tuning misses the margins on the twin of the drive's machine: the drive was not given it");
+            if o.close_drive_time_s > 0.0 {
+                eprintln!(
+                    "the drive ran the close reserve's design for its verification and has its parameters back; the \
+                     full reserve's design misses the margins on the twin of the drive's machine: the drive was not \
+                     given it"
+                );
+            } else {
+                eprintln!(
+                    "the tuning misses the margins on the twin of the drive's machine: the drive was not given it"
+                );
+            }
         }
         Ok(passed)
     }
@@ -225,13 +241,27 @@ impl AutotuneArgs {
         })?;
         pb.set_position(550);
         let (design, position, reserve) = (verified.design, verified.position, verified.reserve);
-        // The verification the close design missed: the drive's where it ran, else the twin's.
-        let close_missed = verified.close_missed.map(|(twin, on_drive)| on_drive.unwrap_or(twin));
+        // The verification the close design missed: the drive's where it ran (its sweep is
+        // drive time), else the twin's.
+        let close_drive_time_s = match &verified.close {
+            CloseDesign::Missed((_, Some(on_drive))) => on_drive.drive_time_s,
+            _ => 0.0,
+        };
+        let close = verified.close.map(|(twin, on_drive)| on_drive.unwrap_or(twin));
         let twin_tuned = with_tuning(&on_twin, &design.tuning, Some(&position));
         let responses = self.responses(&twin_fmu, &twin_tuned, &mechanics, &design)?;
         let (twin, on_drive) = verified.outcome;
-        let outcome =
-            |twin, drive| DriveOutcome { mechanics, design, position, reserve, close_missed, responses, twin, drive };
+        let outcome = |twin, drive| DriveOutcome {
+            mechanics,
+            design,
+            position,
+            reserve,
+            close,
+            close_drive_time_s,
+            responses,
+            twin,
+            drive,
+        };
         let Some(on_drive) = on_drive else {
             // Never on the drive: the twin of its own machine missed.
             drive.session.set_params(before)?;
@@ -273,7 +303,7 @@ impl AutotuneArgs {
         out: &std::path::Path,
         goal: &MarginGoal,
         (mechanics, design, position, responses): (&MeasuredMechanics, &Design, &PositionTuning, &Responses),
-        (reserve, close_missed): (Reserve, Option<&Verification>),
+        reserve: ReserveTaken,
         twin: &Verification,
         drive: Option<(&Verification, Option<u32>)>,
     ) -> Result<bool> {
@@ -284,7 +314,6 @@ impl AutotuneArgs {
             design,
             position,
             reserve,
-            close_missed,
             responses,
             twin,
             drive,

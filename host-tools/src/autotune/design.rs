@@ -22,7 +22,7 @@ use serde::{Deserialize, Serialize};
 
 use super::margins::{log_grid, margins, Margins};
 use super::refinement::{dip, lift_dip, refine};
-pub use super::reserve::Reserve;
+use super::reserve::Reserve;
 use super::velocity_controller::{Notch, VelocityTuning};
 
 /// The margins a design must keep.

@@ -46,9 +46,12 @@ pub fn section(root: &Path) -> Option<Section> {
         m["gain_margin_db"].as_f64(),
         m["sensitivity_peak"].as_f64(),
     ) {
+        let reserve = json["reserve"].as_str().unwrap_or("-");
         s.numbers.push((
             "designed".into(),
-            format!("bandwidth {bw:.0} Hz, phase margin {pm:.1}°, gain margin {gm:.1} dB, Ms {ms:.2}"),
+            format!(
+                "bandwidth {bw:.0} Hz, phase margin {pm:.1}°, gain margin {gm:.1} dB, Ms {ms:.2} ({reserve} reserve)"
+            ),
         ));
     }
     let p = &json["position"];

@@ -12,12 +12,13 @@ use num_complex::Complex64;
 
 use super::axis_under_test::AxisUnderTest;
 use super::calibration::{calibrate, Calibration, PlantPoint};
-use super::design::{design, Design, MarginGoal, Reserve, SearchGrid};
+use super::design::{design, Design, MarginGoal, SearchGrid};
 use super::design_checks::{
     check_determined, check_linear, check_resonance_measured, check_riding_speed, check_torque_amplitude,
 };
 use super::drive_dynamics::DriveDynamics;
 use super::position_loop_design::{design_position_loop, position_loop_per_gain, PositionRates, PositionTuning};
+use super::reserve::Reserve;
 use super::velocity_controller::VelocityTuning;
 use super::{loop_plant, plant_points};
 use crate::analysis::response_point::ResponsePoint;

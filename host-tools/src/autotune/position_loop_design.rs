@@ -12,7 +12,7 @@
 //! - `H` the reference's hold over the position period's velocity ticks.
 //!
 //! The gain is the largest of a log ladder whose loop keeps the same margins as the velocity
-//! loop (with the design's reserve) and is stable; the feed-forward is 1 (the whole command
+//! loop (with the full reserve) and is stable; the feed-forward is 1 (the whole command
 //! speed: no following error at a constant speed, the feedback left to correct only what the
 //! velocity loop does not follow).
 

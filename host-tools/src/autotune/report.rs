@@ -14,7 +14,7 @@ use super::measured_mechanics::MeasuredMechanics;
 use super::plant_response;
 use super::position_loop_design::PositionTuning;
 use super::prediction::StepPrediction;
-use super::reserve::Reserve;
+use super::reserve::{CloseDesign, Reserve};
 use super::responses::{plot_loops, Responses};
 use super::verification::Verification;
 use crate::analysis::response_point::ResponsePoint;
@@ -26,10 +26,7 @@ pub struct AutotuneReport<'a> {
     pub mechanics: &'a MeasuredMechanics,
     pub design: &'a Design,
     pub position: &'a PositionTuning,
-    /// The reserve the design kept beside the goal on the calibrated model.
-    pub reserve: Reserve,
-    /// Where the full reserve's design was taken: the close design's verification that missed.
-    pub close_missed: Option<&'a Verification>,
+    pub reserve: ReserveTaken<'a>,
     pub responses: &'a Responses,
     /// On the twin (the FMU: the plant, or a drive's measured machine).
     pub twin: &'a Verification,
@@ -37,6 +34,16 @@ pub struct AutotuneReport<'a> {
     pub drive: Option<(&'a Verification, Option<u32>)>,
     /// The machine is a drive's (`--device`): its drive time is the drive's sweeps only.
     pub on_drive: bool,
+}
+
+/// The reserve the design kept beside the goal on the calibrated model, and what became of
+/// the close design (its verification that missed: the drive's where it ran there).
+pub struct ReserveTaken<'a> {
+    pub reserve: Reserve,
+    pub close: &'a CloseDesign<Verification>,
+    /// Drive time of the close design's verification on the machine (s): on the FMU the
+    /// twin's sweep, on a drive its own only.
+    pub close_drive_time_s: f64,
 }
 
 impl AutotuneReport<'_> {
@@ -53,10 +60,7 @@ impl AutotuneReport<'_> {
             (true, None) => 0.0,
             (false, _) => self.twin.drive_time_s + self.responses.measured.drive_time_s,
         };
-        // The close design's verification that missed, where it ran on the machine.
-        let missed =
-            self.close_missed.filter(|v| !self.on_drive || v.on != self.twin.on).map_or(0.0, |v| v.drive_time_s);
-        self.mechanics.drive_time_s + verification + missed
+        self.mechanics.drive_time_s + verification + self.reserve.close_drive_time_s
     }
 
     pub fn write_files(&self, out: &Path) -> Result<()> {
@@ -131,8 +135,8 @@ impl AutotuneReport<'_> {
             "plant": plant_json,
             "calibration": mech.calibration,
             "design": self.design,
-            "reserve": self.reserve,
-            "close_verification_missed": self.close_missed,
+            "reserve": self.reserve.reserve,
+            "close_design": self.reserve.close,
             "position": self.position,
             "before": mech.during,
             "verification": self.twin,
@@ -165,18 +169,28 @@ impl AutotuneReport<'_> {
             c.worst_gain_db, c.worst_phase_deg
         );
         let t = &d.tuning;
-        let (phase, gain, ms) = self.reserve.margins();
+        let reserve = self.reserve.reserve;
+        let (phase, gain, ms) = reserve.margins();
         println!(
             "velocity loop ({} margins, {} reserve on the model: {phase}°, {gain} dB, Ms {ms}):",
             self.margin,
-            self.reserve.name()
+            reserve.name()
         );
-        if let Some(v) = self.close_missed {
-            println!(
-                "  the design with the close reserve missed its verification {} (phase margin {:.1}°, Ms {:.2}): \
-                 this is the design with the full reserve",
-                v.on, v.phase_margin_deg, v.sensitivity_peak
-            );
+        match self.reserve.close {
+            CloseDesign::Held => {}
+            CloseDesign::Missed(v) => {
+                let limited = if v.limited_points > 0 {
+                    format!(", {} points at a limit", v.limited_points)
+                } else {
+                    String::new()
+                };
+                println!(
+                    "  the close reserve's design missed on {}: phase margin {:.2}°, Ms {:.3}{limited}; this is the \
+                     full reserve's design",
+                    v.on, v.phase_margin_deg, v.sensitivity_peak
+                );
+            }
+            CloseDesign::Refused(e) => println!("  no design with the close reserve ({e}); this is the full reserve's"),
         }
         println!("  kp {:.4} N·m·s/rad (was {:.4}), ki {:.2} N·m/rad (was {:.2})", t.kp, before.kp, t.ki, before.ki);
         match t.notch {

@@ -45,8 +45,19 @@ impl Reserve {
     }
 }
 
-/// A design that was verified, the reserve it kept, and (where it is the full reserve's) the
-/// close design's verification that missed.
+/// What became of the close design.
+#[derive(Clone, Debug, Serialize)]
+#[serde(rename_all = "lowercase")]
+pub enum CloseDesign<V> {
+    /// The close design held its verification: it is the one taken.
+    Held,
+    /// What `check` returned for the close design, which missed.
+    Missed(V),
+    /// No close design was made (the search's or the position loop's refusal).
+    Refused(String),
+}
+
+/// A design that was verified, the reserve it kept, and what became of the close design.
 #[derive(Clone, Debug)]
 pub struct Verified<V> {
     pub design: Design,
@@ -54,8 +65,17 @@ pub struct Verified<V> {
     pub reserve: Reserve,
     /// What `check` returned for this design.
     pub outcome: V,
-    /// What `check` returned for the close design, where it missed.
-    pub close_missed: Option<V>,
+    pub close: CloseDesign<V>,
+}
+
+impl<V> CloseDesign<V> {
+    pub fn map<W>(self, f: impl FnOnce(V) -> W) -> CloseDesign<W> {
+        match self {
+            CloseDesign::Held => CloseDesign::Held,
+            CloseDesign::Missed(v) => CloseDesign::Missed(f(v)),
+            CloseDesign::Refused(e) => CloseDesign::Refused(e),
+        }
+    }
 }
 
 /// The close design checked by `check` (its outcome and whether it held); where it misses,
@@ -67,21 +87,23 @@ pub fn design_and_verify<V>(
     margin: &str,
     mut check: impl FnMut(&Design, &PositionTuning) -> Result<(V, bool)>,
 ) -> Result<Verified<V>> {
-    let mut close_missed = None;
     let close = mechanics
         .design(goal, margin, Reserve::Close)
         .and_then(|d| mechanics.design_position(&d.tuning, goal).map(|p| (d, p)));
-    if let Ok((design, position)) = close {
-        let (outcome, held) = check(&design, &position)?;
-        if held {
-            return Ok(Verified { design, position, reserve: Reserve::Close, outcome, close_missed: None });
+    let close = match close {
+        Ok((design, position)) => {
+            let (outcome, held) = check(&design, &position)?;
+            if held {
+                return Ok(Verified { design, position, reserve: Reserve::Close, outcome, close: CloseDesign::Held });
+            }
+            CloseDesign::Missed(outcome)
         }
-        close_missed = Some(outcome);
-    }
+        Err(e) => CloseDesign::Refused(format!("{e:#}")),
+    };
     let design = mechanics.design(goal, margin, Reserve::Full)?;
     let position = mechanics.design_position(&design.tuning, goal)?;
     let (outcome, _) = check(&design, &position)?;
-    Ok(Verified { design, position, reserve: Reserve::Full, outcome, close_missed })
+    Ok(Verified { design, position, reserve: Reserve::Full, outcome, close })
 }
 
 #[cfg(test)]
@@ -135,8 +157,10 @@ mod tests {
         })
         .unwrap();
         assert_eq!((held.reserve, calls.get()), (Reserve::Close, 1));
-        assert!(held.close_missed.is_none());
+        assert!(matches!(held.close, CloseDesign::Held));
+        // The close design keeps its reserve and uses the room the full one would not leave.
         assert!(goal.with_reserve(Reserve::Close).held_by(&held.outcome), "{:?}", held.outcome);
+        assert!(!goal.with_reserve(Reserve::Full).held_by(&held.outcome), "{:?}", held.outcome);
 
         calls.set(0);
         let missed = design_and_verify(&mechanics, &goal, "standard", |d, _| {
@@ -146,7 +170,8 @@ mod tests {
         })
         .unwrap();
         assert_eq!((missed.reserve, calls.get()), (Reserve::Full, 2));
-        assert_eq!(missed.close_missed.map(|m| m.bandwidth_hz), Some(held.outcome.bandwidth_hz));
+        let CloseDesign::Missed(close) = missed.close else { panic!("{:?}", missed.close) };
+        assert_eq!(close.bandwidth_hz, held.outcome.bandwidth_hz);
         assert!(goal.with_reserve(Reserve::Full).held_by(&missed.outcome), "{:?}", missed.outcome);
         // What the close reserve is for: the lifted dip, four times the full reserve's reach.
         assert!(
