@@ -21,8 +21,9 @@ use num_complex::Complex64;
 use serde::{Deserialize, Serialize};
 
 use super::margins::{log_grid, margins, Margins};
-use super::refinement::{dip, lift_dip, refine};
+use super::refinement::{dip, lift_dip_on, refine_on};
 use super::reserve::Reserve;
+use super::sampled_plant::SampledPlant;
 use super::velocity_controller::{Notch, VelocityTuning};
 
 /// The margins a design must keep.
@@ -140,10 +141,10 @@ pub fn design(
     features: &[f64],
 ) -> Option<Design> {
     let nyquist = 0.5 / period;
-    let f = design_grid(period, grid.grid_points, features);
-    let p: Vec<Complex64> = f.iter().map(|&f| plant(f)).collect();
-    let inertia = rigid_inertia(&f, &p)?;
-    let peaks = resonance_peaks(&f, &p, inertia);
+    let sampled = SampledPlant::new(plant, period, grid.grid_points, features);
+    let (f, p) = (&sampled.hz, &sampled.response);
+    let inertia = rigid_inertia(f, p)?;
+    let peaks = resonance_peaks(f, p, inertia);
     let notches = notch_candidates(&peaks, grid, nyquist);
     let mut low_passes = vec![0.0];
     low_passes.extend(log_grid(150.0, 0.45 * nyquist, grid.low_passes));
@@ -194,13 +195,10 @@ pub fn design(
     let mut candidates: Vec<Design> = family_best.into_iter().flatten().collect();
     candidates.sort_by(|a, b| b.margins.bandwidth_hz.total_cmp(&a.margins.bandwidth_hz));
     let dips: Vec<(Design, f64)> = family_dip.into_iter().flatten().collect();
-    let refined = candidates
-        .iter()
-        .take(REFINED_FAMILIES)
-        .map(|c| refine(plant, period, goal, c, grid.grid_points, features).unwrap_or(*c));
+    let refined = candidates.iter().take(REFINED_FAMILIES).map(|c| refine_on(&sampled, goal, c, None).unwrap_or(*c));
     // Every dip is lifted: which one lifts is not the one nearest to it (the margins bind
     // each start differently).
-    let lifted = dips.iter().filter_map(|(c, _)| lift_dip(plant, period, goal, c, grid.grid_points, features));
+    let lifted = dips.iter().filter_map(|(c, _)| lift_dip_on(&sampled, goal, c));
     refined.chain(lifted).max_by(|a, b| a.margins.bandwidth_hz.total_cmp(&b.margins.bandwidth_hz))
 }
 
@@ -232,9 +230,7 @@ pub fn margins_of(
     points: usize,
     features: &[f64],
 ) -> Option<Margins> {
-    let f = design_grid(period, points, features);
-    let l: Vec<Complex64> = f.iter().map(|&f| tuning.response(f, period) * plant(f)).collect();
-    margins(&f, &l)
+    SampledPlant::new(plant, period, points, features).margins_of(tuning)
 }
 
 /// The rigid body's inertia of `plant` as `design` reads it.
@@ -277,6 +273,7 @@ mod tests {
     use super::*;
     use crate::autotune::drive_dynamics::DriveDynamics;
     use crate::autotune::mechanics::Mechanics;
+    use crate::autotune::refinement::refine;
 
     fn machine(jm: f64, jl: f64, fr: f64, zeta: f64) -> Mechanics {
         let w = std::f64::consts::TAU * fr;

@@ -20,6 +20,7 @@ pub mod refinement;
 pub mod report;
 pub mod reserve;
 pub mod responses;
+pub mod sampled_plant;
 pub mod step_on_twin;
 pub mod velocity_controller;
 pub mod verification;

@@ -17,8 +17,9 @@
 
 use num_complex::Complex64;
 
-use super::design::{design_grid, Design, MarginGoal, NOTCH_LIMIT};
+use super::design::{Design, MarginGoal, NOTCH_LIMIT};
 use super::margins::{margins, Margins};
+use super::sampled_plant::SampledPlant;
 use super::velocity_controller::{Notch, VelocityTuning};
 
 /// How far over −3 dB a lifted dip's floor is kept (dB).
@@ -158,31 +159,23 @@ pub fn refine(
     points: usize,
     features: &[f64],
 ) -> Option<Design> {
-    refine_keeping_floor(plant, period, goal, start, points, features, None)
+    refine_on(&SampledPlant::new(plant, period, points, features), goal, start, None)
 }
 
-/// [`refine`], keeping `|L/(1 + L)|` at or over `floor.1` up to `floor.0` Hz where given.
-fn refine_keeping_floor(
-    plant: &dyn Fn(f64) -> Complex64,
-    period: f64,
-    goal: &MarginGoal,
-    start: &Design,
-    points: usize,
-    features: &[f64],
-    floor: Option<(f64, f64)>,
-) -> Option<Design> {
-    let f = design_grid(period, points, features);
-    let p: Vec<Complex64> = f.iter().map(|&f| plant(f)).collect();
+/// [`refine`] on a sampled plant, keeping `|L/(1 + L)|` at or over `floor.1` up to
+/// `floor.0` Hz where given.
+pub fn refine_on(plant: &SampledPlant, goal: &MarginGoal, start: &Design, floor: Option<(f64, f64)>) -> Option<Design> {
+    let f = &plant.hz;
     let (c, x) = Coordinates::of(start);
     let evaluate = |t: &VelocityTuning| -> Option<Margins> {
-        if !admissible(t, 0.5 / period) {
+        if !admissible(t, 0.5 / plant.period) {
             return None;
         }
-        let l: Vec<Complex64> = f.iter().zip(&p).map(|(&f, p)| t.response(f, period) * p).collect();
-        if floor.is_some_and(|(hz, least)| floor_up_to(&f, &l, hz) < least) {
+        let l = plant.loop_of(t);
+        if floor.is_some_and(|(hz, least)| floor_up_to(f, &l, hz) < least) {
             return None;
         }
-        margins(&f, &l).filter(|m| goal.held_by(m))
+        margins(f, &l).filter(|m| goal.held_by(m))
     };
     let m0 = evaluate(&start.tuning)?;
     let (x, m) = compass(
@@ -209,20 +202,22 @@ pub fn lift_dip(
     points: usize,
     features: &[f64],
 ) -> Option<Design> {
-    let f = design_grid(period, points, features);
-    let p: Vec<Complex64> = f.iter().map(|&f| plant(f)).collect();
-    let loop_of =
-        |t: &VelocityTuning| -> Vec<Complex64> { f.iter().zip(&p).map(|(&f, p)| t.response(f, period) * p).collect() };
-    let end = dip(&f, &loop_of(&start.tuning))?.end_hz;
+    lift_dip_on(&SampledPlant::new(plant, period, points, features), goal, start)
+}
+
+/// [`lift_dip`] on a sampled plant.
+pub fn lift_dip_on(plant: &SampledPlant, goal: &MarginGoal, start: &Design) -> Option<Design> {
+    let f = &plant.hz;
+    let end = dip(f, &plant.loop_of(&start.tuning))?.end_hz;
     let target = std::f64::consts::FRAC_1_SQRT_2 * 10f64.powf(FLOOR_HEADROOM_DB / 20.0);
     let (c, x) = Coordinates::of(start);
     let floor = |t: &VelocityTuning| -> Option<f64> {
-        if !admissible(t, 0.5 / period) {
+        if !admissible(t, 0.5 / plant.period) {
             return None;
         }
-        let l = loop_of(t);
-        margins(&f, &l).filter(|m| goal.held_by(m))?;
-        Some(floor_up_to(&f, &l, end))
+        let l = plant.loop_of(t);
+        margins(f, &l).filter(|m| goal.held_by(m))?;
+        Some(floor_up_to(f, &l, end))
     };
     let floor0 = floor(&start.tuning)?;
     let (x, lifted) =
@@ -231,7 +226,7 @@ pub fn lift_dip(
         return None;
     }
     let at = Design { tuning: c.tuning(&x), ..*start };
-    refine_keeping_floor(plant, period, goal, &at, points, features, Some((end, target)))
+    refine_on(plant, goal, &at, Some((end, target)))
 }
 
 #[cfg(test)]
