@@ -173,13 +173,13 @@ pub fn design(
                     let ki = kp * kp / (n * inertia);
                     let l: Vec<Complex64> =
                         (0..f.len()).map(|k| (kp + ki * period * z[k] / (z[k] - 1.0)) * filters[k] * p[k]).collect();
-                    let Some(m) = margins(&f, &l).filter(|m| goal.held_by(m)) else { continue };
+                    let Some(m) = margins(f, &l).filter(|m| goal.held_by(m)) else { continue };
                     let candidate =
                         Design { tuning: VelocityTuning { kp, ki, low_pass_hz, notch: *notch }, margins: m, inertia };
                     if best.is_none_or(|b| m.bandwidth_hz > b.margins.bandwidth_hz) {
                         *best = Some(candidate);
                     }
-                    if let Some(d) = dip(&f, &l) {
+                    if let Some(d) = dip(f, &l) {
                         if best_dip.is_none_or(|(_, floor)| d.floor > floor) {
                             *best_dip = Some((candidate, d.floor));
                         }
