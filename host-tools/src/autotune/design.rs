@@ -15,7 +15,8 @@
 //! a load's anti-resonance and climbs back over it (the highest such dip, over the low-pass
 //! cut-offs) has its dip lifted (`refinement::lift_dip`): the bandwidth of such a loop is the
 //! dip's, and the loop that lifts it lies past a cliff the bandwidth's refinement does not
-//! climb.
+//! climb. The widest loop of all is polished last: refined again from itself and its own dip
+//! lifted, the widest of the three kept.
 
 use num_complex::Complex64;
 use serde::{Deserialize, Serialize};
@@ -199,7 +200,17 @@ pub fn design(
     // Every dip is lifted: which one lifts is not the one nearest to it (the margins bind
     // each start differently).
     let lifted = dips.iter().filter_map(|(c, _)| lift_dip_on(&sampled, goal, c));
-    refined.chain(lifted).max_by(|a, b| a.margins.bandwidth_hz.total_cmp(&b.margins.bandwidth_hz))
+    let widest = refined.chain(lifted).max_by(by_bandwidth)?;
+    // The widest polished: its compass search restarted from it with the first steps again
+    // (a search that ended on a small step may sit below a cliff its large steps cross), and
+    // its own dip lifted where it has one.
+    let polished = [refine_on(&sampled, goal, &widest, None), lift_dip_on(&sampled, goal, &widest)];
+    polished.into_iter().flatten().chain([widest]).max_by(by_bandwidth)
+}
+
+/// Designs ordered by their bandwidth.
+fn by_bandwidth(a: &Design, b: &Design) -> std::cmp::Ordering {
+    a.margins.bandwidth_hz.total_cmp(&b.margins.bandwidth_hz)
 }
 
 /// How many of the search's best notch families are refined.
