@@ -148,9 +148,6 @@ impl TwoInertia {
     /// Advance the mechanical part of `x` by one sub-step: the motor torque goes from
     /// `torque0` (rising at `torque_rate`, Nm/s) to `torque1`, the disturbance `td` is held,
     /// `coulomb0` is the Coulomb friction at the start.
-    // Inlined into the tick: out of line, its state written back as 8-byte stores was read
-    // straight after as 16-byte loads, which the stores cannot forward (a stall each).
-    #[inline(always)]
     pub fn advance(
         &self,
         x: &mut PlantState,

@@ -206,8 +206,6 @@ impl Plant {
 
     /// Sample the sensors (advances the noise generators): the currents through the sensors'
     /// offsets and gains, the encoder's counter from its start in its own direction.
-    // Inlined into the tick, as `advance` (its readings go on in registers).
-    #[inline(always)]
     pub fn measure(&mut self) -> Measurements {
         let p = &self.params;
         let theta_e = p.pole_pairs as f64 * self.state.motor_angle + self.motor.electrical_offset;

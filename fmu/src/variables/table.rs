@@ -112,9 +112,7 @@ macro_rules! declare_variables {
             /// Whether every Float64 output is finite: each output's field read directly (no
             /// table lookup; the check after every communication step). The other rows fold
             /// to `true` at compile time.
-            // Always inlined into `update_outputs`: the values are checked in the registers
-            // they were computed in, not read back from the stores just made.
-            #[inline(always)]
+            #[inline]
             pub fn float64_outputs_finite(&self) -> bool {
                 let mut finite = true;
                 $( finite &= !matches!((Kind::$kind, Causality::$caus), (Kind::Float64, Causality::Output))
