@@ -13,7 +13,7 @@
 //! is kept, then refined by a compass search over the continuous parameters. Beside it, for
 //! each notch family and integral ratio, the candidate whose closed loop dips below −3 dB at
 //! a load's anti-resonance and climbs back over it (the highest such dip, over the low-pass
-//! cut-offs) has its dip lifted (`refinement::lift_dip`): the bandwidth of such a loop is the
+//! cut-offs) has its dip lifted (`refinement::lift_dip_on`): the bandwidth of such a loop is the
 //! dip's, and the loop that lifts it lies past a cliff the bandwidth's refinement does not
 //! climb. The widest loop of all is polished last: refined again from itself and its own dip
 //! lifted, the widest of the three kept.
@@ -196,15 +196,16 @@ pub fn design(
     let mut candidates: Vec<Design> = family_best.into_iter().flatten().collect();
     candidates.sort_by(|a, b| b.margins.bandwidth_hz.total_cmp(&a.margins.bandwidth_hz));
     let dips: Vec<(Design, f64)> = family_dip.into_iter().flatten().collect();
-    let refined = candidates.iter().take(REFINED_FAMILIES).map(|c| refine_on(&sampled, goal, c, None).unwrap_or(*c));
+    let refined =
+        candidates.iter().take(REFINED_FAMILIES).map(|c| (refine_on(&sampled, goal, c, None).unwrap_or(*c), None));
     // Every dip is lifted: which one lifts is not the one nearest to it (the margins bind
     // each start differently).
-    let lifted = dips.iter().filter_map(|(c, _)| lift_dip_on(&sampled, goal, c));
-    let widest = refined.chain(lifted).max_by(by_bandwidth)?;
+    let lifted = dips.iter().filter_map(|(c, _)| lift_dip_on(&sampled, goal, c)).map(|(d, floor)| (d, Some(floor)));
+    let (widest, floor) = refined.chain(lifted).max_by(|a, b| by_bandwidth(&a.0, &b.0))?;
     // The widest polished: its compass search restarted from it with the first steps again
-    // (a search that ended on a small step may sit below a cliff its large steps cross), and
-    // its own dip lifted where it has one.
-    let polished = [refine_on(&sampled, goal, &widest, None), lift_dip_on(&sampled, goal, &widest)];
+    // (a search that ended on a small step may sit below a cliff its large steps cross),
+    // keeping its floor where it is a lifted dip's, and its own dip lifted where it has one.
+    let polished = [refine_on(&sampled, goal, &widest, floor), lift_dip_on(&sampled, goal, &widest).map(|(d, _)| d)];
     polished.into_iter().flatten().chain([widest]).max_by(by_bandwidth)
 }
 

@@ -1,14 +1,14 @@
 //! A design refined over its continuous parameters (the proportional gain, the integral
 //! ratio, the low-pass cut-off, the notch's centre, width and depth) by a compass search that
 //! keeps the margins: for the widest bandwidth ([`refine`]), or to lift a dip of the closed
-//! loop over −3 dB ([`lift_dip`]).
+//! loop over −3 dB ([`lift_dip_on`]).
 //!
 //! **The dip.** On a load whose anti-resonance lies below the loop's reach, the closed loop
 //! `|L/(1 + L)|` can fall below −3 dB near the anti-resonance and rise over it again above. The bandwidth (the first −3 dB
 //! frequency) is then the dip's, far below the loop's reach, and a few percent more gain or
 //! integral action lifts the dip and moves the bandwidth up to the reach: a cliff that a
 //! search for bandwidth does not climb (it sees no gain until it lands past the edge, on a
-//! sliver a few percent wide between the dip and the margins). [`lift_dip`] climbs the dip's
+//! sliver a few percent wide between the dip and the margins). [`lift_dip_on`] climbs the dip's
 //! floor instead, then refines for bandwidth with the floor kept [`FLOOR_HEADROOM_DB`] over
 //! −3 dB up to where the start's dip ended, so that a model a fraction of a percent off the
 //! machine does not drop it back (above that frequency the loop is held to −3 dB only). A
@@ -162,9 +162,8 @@ pub fn refine(
     refine_on(&SampledPlant::new(plant, period, points, features), goal, start, None)
 }
 
-/// [`refine`] on a sampled plant, keeping `|L/(1 + L)|` at or over `floor.1` up to
-/// `floor.0` Hz where given.
-pub fn refine_on(plant: &SampledPlant, goal: &MarginGoal, start: &Design, floor: Option<(f64, f64)>) -> Option<Design> {
+/// [`refine`] on a sampled plant, keeping `floor` where given.
+pub fn refine_on(plant: &SampledPlant, goal: &MarginGoal, start: &Design, floor: Option<Floor>) -> Option<Design> {
     let f = &plant.hz;
     let (c, x) = Coordinates::of(start);
     let evaluate = |t: &VelocityTuning| -> Option<Margins> {
@@ -190,23 +189,14 @@ pub fn refine_on(plant: &SampledPlant, goal: &MarginGoal, start: &Design, floor:
     Some(Design { tuning: c.tuning(&x), margins: m, inertia: c.j })
 }
 
-/// `start` with its closed loop's dip (see the module) lifted over −3 dB by
-/// [`FLOOR_HEADROOM_DB`] within `goal`, then refined for bandwidth with the dip kept lifted;
-/// `None` when `start` has no dip, does not keep `goal`, or the dip cannot be lifted within
-/// it.
-pub fn lift_dip(
-    plant: &dyn Fn(f64) -> Complex64,
-    period: f64,
-    goal: &MarginGoal,
-    start: &Design,
-    points: usize,
-    features: &[f64],
-) -> Option<Design> {
-    lift_dip_on(&SampledPlant::new(plant, period, points, features), goal, start)
-}
+/// The floor a lifted dip is kept at: `|L/(1 + L)|` at or over `.1` up to `.0` Hz.
+pub type Floor = (f64, f64);
 
-/// [`lift_dip`] on a sampled plant.
-pub fn lift_dip_on(plant: &SampledPlant, goal: &MarginGoal, start: &Design) -> Option<Design> {
+/// `start` with its closed loop's dip (see the module) lifted over −3 dB by
+/// [`FLOOR_HEADROOM_DB`] within `goal` on `plant`, then refined for bandwidth with the dip
+/// kept lifted; with the floor it keeps. `None` when `start` has no dip, does not keep
+/// `goal`, or the dip cannot be lifted within it.
+pub fn lift_dip_on(plant: &SampledPlant, goal: &MarginGoal, start: &Design) -> Option<(Design, Floor)> {
     let f = &plant.hz;
     let end = dip(f, &plant.loop_of(&start.tuning))?.end_hz;
     let target = std::f64::consts::FRAC_1_SQRT_2 * 10f64.powf(FLOOR_HEADROOM_DB / 20.0);
@@ -226,7 +216,7 @@ pub fn lift_dip_on(plant: &SampledPlant, goal: &MarginGoal, start: &Design) -> O
         return None;
     }
     let at = Design { tuning: c.tuning(&x), ..*start };
-    refine_on(plant, goal, &at, Some((end, target)))
+    refine_on(plant, goal, &at, Some((end, target))).map(|d| (d, (end, target)))
 }
 
 #[cfg(test)]
