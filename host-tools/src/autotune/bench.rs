@@ -19,8 +19,9 @@ use super::drive_dynamics::DriveDynamics;
 use super::loop_plant;
 use super::measured_mechanics::measure_mechanics;
 use super::mechanics::Mechanics;
-use super::refinement::refine;
-use super::reserve::{design_and_verify, CloseDesign, Reserve};
+use super::refinement::refine_on;
+use super::reserve::{design_and_verify, Reserve};
+use super::sampled_plant::SampledPlant;
 use super::velocity_controller::VelocityTuning;
 use super::verification::{verify, with_tuning};
 use crate::analysis::response_point::ResponsePoint;
@@ -246,11 +247,8 @@ fn tune_into(fmu: &Fmu, machine: &Machine, goal: &MarginGoal, on_drive: bool, ro
     row.verified_phase_margin_deg = v.phase_margin_deg;
     row.verified_sensitivity_peak = v.sensitivity_peak;
     // Calibrate's sweep and runs (the runs' schedule), autotune's sweep and verification(s).
-    let missed = match &verified.close {
-        CloseDesign::Missed(m) => m.drive_time_s,
-        _ => 0.0,
-    };
-    row.close_missed = matches!(verified.close, CloseDesign::Missed(_));
+    let missed = verified.close.missed().map_or(0.0, |m| m.drive_time_s);
+    row.close_missed = verified.close.missed().is_some();
     row.drive_time_s = 2.0 * measured.drive_time_s + FrictionRuns::default().duration() + v.drive_time_s + missed;
     // On the truth.
     let on_truth = margins_of(&d.tuning, &true_plant, period, 4000, &truth.features_hz())
@@ -285,9 +283,10 @@ fn tune_into(fmu: &Fmu, machine: &Machine, goal: &MarginGoal, on_drive: bool, ro
         let j = super::design::rigid_inertia_of(&true_plant, period);
         starts.push(super::design::Design { tuning: d.tuning, margins: on_truth, inertia: j });
     }
+    let sampled_truth = SampledPlant::new(&true_plant, period, 4000, &features);
     let oracle = starts
         .iter()
-        .filter_map(|s| refine(&true_plant, period, goal, s, 4000, &features))
+        .filter_map(|s| refine_on(&sampled_truth, goal, s, None))
         .max_by(|a, b| a.margins.bandwidth_hz.total_cmp(&b.margins.bandwidth_hz));
     row.oracle_bandwidth_hz = oracle.map_or(f64::NAN, |o| o.margins.bandwidth_hz);
     row.oracle_tuning = oracle.map(|o| o.tuning);

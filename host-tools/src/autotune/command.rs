@@ -106,6 +106,8 @@ struct DriveOutcome {
     close: CloseDesign<Verification>,
     /// Drive time of the close design's verification on the drive, where it ran there (s).
     close_drive_time_s: f64,
+    /// The drive ran the close design (and missed with it) before the full reserve's.
+    close_ran_on_drive: bool,
     responses: Responses,
     twin: Verification,
     drive: Option<(Verification, Option<u32>)>,
@@ -143,10 +145,7 @@ impl AutotuneArgs {
                 let tuned = with_tuning(&parameters, &design.tuning, Some(position));
                 let responses = self.responses(&fmu, &tuned, &mechanics, design)?;
                 pb.finish_and_clear();
-                let close_drive_time_s = match &verified.close {
-                    CloseDesign::Missed(v) => v.drive_time_s,
-                    _ => 0.0,
-                };
+                let close_drive_time_s = verified.close.missed().map_or(0.0, |v| v.drive_time_s);
                 let reserve = ReserveTaken { reserve: verified.reserve, close: &verified.close, close_drive_time_s };
                 self.report(&out, &goal, (&mechanics, design, position, &responses), reserve, &verified.outcome, None)?
             }
@@ -192,7 +191,7 @@ impl AutotuneArgs {
         let reserve = ReserveTaken { reserve: o.reserve, close: &o.close, close_drive_time_s: o.close_drive_time_s };
         let passed = self.report(out, goal, results, reserve, &o.twin, o.drive.as_ref().map(|(v, s)| (v, *s)))?;
         if o.drive.is_none() {
-            if o.close_drive_time_s > 0.0 {
+            if o.close_ran_on_drive {
                 eprintln!(
                     "the drive ran the close reserve's design for its verification and has its parameters back; the \
                      full reserve's design misses the margins on the twin of the drive's machine: the drive was not \
@@ -243,10 +242,9 @@ impl AutotuneArgs {
         let (design, position, reserve) = (verified.design, verified.position, verified.reserve);
         // The verification the close design missed: the drive's where it ran (its sweep is
         // drive time), else the twin's.
-        let close_drive_time_s = match &verified.close {
-            CloseDesign::Missed((_, Some(on_drive))) => on_drive.drive_time_s,
-            _ => 0.0,
-        };
+        let close_on_drive = verified.close.missed().and_then(|(_, on_drive)| on_drive.as_ref());
+        let close_ran_on_drive = close_on_drive.is_some();
+        let close_drive_time_s = close_on_drive.map_or(0.0, |v| v.drive_time_s);
         let close = verified.close.map(|(twin, on_drive)| on_drive.unwrap_or(twin));
         let twin_tuned = with_tuning(&on_twin, &design.tuning, Some(&position));
         let responses = self.responses(&twin_fmu, &twin_tuned, &mechanics, &design)?;
@@ -258,6 +256,7 @@ impl AutotuneArgs {
             reserve,
             close,
             close_drive_time_s,
+            close_ran_on_drive,
             responses,
             twin,
             drive,

@@ -69,6 +69,14 @@ pub struct Verified<V> {
 }
 
 impl<V> CloseDesign<V> {
+    /// What the close design's verification returned, where it ran and missed.
+    pub fn missed(&self) -> Option<&V> {
+        match self {
+            CloseDesign::Missed(v) => Some(v),
+            _ => None,
+        }
+    }
+
     pub fn map<W>(self, f: impl FnOnce(V) -> W) -> CloseDesign<W> {
         match self {
             CloseDesign::Held => CloseDesign::Held,

@@ -117,6 +117,14 @@ impl Stamp {
         Stamp { commit: commit(), date: utc_date(secs), machine: Machine::this() }
     }
 
+    /// The stamp of this run: the checkout and time when the process took its first stamp
+    /// (`servo` takes it before it runs anything), so a long bench's figures name the code
+    /// that ran, not a commit made while it ran.
+    pub fn of_this_run() -> Stamp {
+        static RUN: std::sync::OnceLock<Stamp> = std::sync::OnceLock::new();
+        RUN.get_or_init(Stamp::now).clone()
+    }
+
     /// One line: `commit eae9d1a, 2025-06-01 10:00 UTC, vm (AMD EPYC, 2 cores)`.
     pub fn text(&self) -> String {
         format!(
@@ -288,7 +296,7 @@ impl Recorder {
                 bench: bench.into(),
                 command,
                 passed: true,
-                stamp: Stamp::now(),
+                stamp: Stamp::of_this_run(),
                 figures: Vec::new(),
             },
         }

@@ -9,6 +9,10 @@ use host_tools::command_line::{command, BenchCommand, Cli, Command};
 fn main() -> ExitCode {
     let matches = command().get_matches();
     let cli = Cli::from_arg_matches(&matches).unwrap_or_else(|e| e.exit());
+    // A bench's figures are stamped with the checkout as the run starts.
+    if matches!(cli.command, Command::Bench(_)) {
+        host_tools::bench::figures::Stamp::of_this_run();
+    }
     let result = match &cli.command {
         Command::Commission(args) => args.run(),
         Command::Run(args) => args.run(),
