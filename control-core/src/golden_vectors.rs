@@ -49,7 +49,7 @@ pub fn preset(id: u32) -> Option<Params> {
         }
         4 => p.acc_dec.kind = AccDecKind::MovingAverage,
         // Every feature at once, at its most expensive: 6th-order Butterworth acc/dec, eight
-        // correction sections, friction compensation, torque low-pass and notch, and (with a
+        // correction sections, friction compensation, torque low-pass and both notches, and (with a
         // sweep start event) a sweep injecting on the torque while the position loop runs.
         ALL_FEATURES => {
             p.encoder_mounting.electrical_offset = 2.0;
@@ -61,6 +61,9 @@ pub fn preset(id: u32) -> Option<Params> {
             p.filters.notch_hz = 900.0;
             p.filters.notch_q = 2.0;
             p.filters.notch_depth = 0.1;
+            p.filters.notch2_hz = 2200.0;
+            p.filters.notch2_q = 1.0;
+            p.filters.notch2_depth = 0.2;
             p.sweep.point = crate::excitation::InjectionPoint::TorqueCommand;
             p.sweep.amplitude = 0.05;
             p.correction.count = crate::response_correction::MAX_SECTIONS;

@@ -110,6 +110,11 @@ pub struct TorqueFilters {
     pub notch_q: f32,
     /// Gain at the notch centre, 0 (full) to 1 (none).
     pub notch_depth: f32,
+    /// A second notch after the first, for a machine with two resonances above the
+    /// crossover (0 Hz: off).
+    pub notch2_hz: f32,
+    pub notch2_q: f32,
+    pub notch2_depth: f32,
 }
 
 /// Protective limits; crossing one latches a fault and switches the PWM off.
@@ -325,7 +330,15 @@ impl Default for Params {
             },
             velocity: VelocityLoopGains { kp: 0.0942, ki: 11.84, torque_limit: 2.0 },
             position: PositionLoopGains { kp: 125.7, velocity_feedforward: 1.0, velocity_limit: 300.0 },
-            filters: TorqueFilters { low_pass_hz: 0.0, notch_hz: 0.0, notch_q: 1.0, notch_depth: 0.0 },
+            filters: TorqueFilters {
+                low_pass_hz: 0.0,
+                notch_hz: 0.0,
+                notch_q: 1.0,
+                notch_depth: 0.0,
+                notch2_hz: 0.0,
+                notch2_q: 1.0,
+                notch2_depth: 0.0,
+            },
             limits: Limits { overcurrent: 30.0, bus_undervoltage: 20.0, bus_overvoltage: 60.0, following_error: 2.0 },
             acc_dec: AccDecParams::default(),
             sequence: SequenceParams::default(),
@@ -449,6 +462,9 @@ impl Params {
         filter_frequency("filters.notch_hz", f.notch_hz, velocity_rate)?;
         positive("filters.notch_q", f.notch_q)?;
         in_range("filters.notch_depth", f.notch_depth, 0.0, 1.0)?;
+        filter_frequency("filters.notch2_hz", f.notch2_hz, velocity_rate)?;
+        positive("filters.notch2_q", f.notch2_q)?;
+        in_range("filters.notch2_depth", f.notch2_depth, 0.0, 1.0)?;
 
         let l = &self.limits;
         positive("limits.overcurrent", l.overcurrent)?;
@@ -733,6 +749,14 @@ mod tests {
         let mut p = Params::default();
         p.filters.notch_hz = 4000.0;
         assert!(matches!(p.validate(), Err(ParamError::AboveNyquist { .. })));
+
+        let mut p = Params::default();
+        p.filters.notch2_hz = 4000.0;
+        assert!(matches!(p.validate(), Err(ParamError::AboveNyquist { field: "filters.notch2_hz", .. })));
+
+        let mut p = Params::default();
+        p.filters.notch2_q = f32::NAN;
+        assert!(p.validate().is_err());
 
         let mut p = Params::default();
         p.limits.bus_undervoltage = 70.0;

@@ -22,7 +22,7 @@ use crate::board::ParamFlash;
 pub const MAGIC: u32 = u32::from_le_bytes(*b"SVPR");
 /// The record format: raise it whenever `Params` changes its serialised layout (a record of
 /// another format is refused as foreign, not misread).
-pub const FORMAT: u16 = 3; // 3: the sweep's time budget; 2: the sweep's measure and the accelerometer's sensitivity
+pub const FORMAT: u16 = 4; // 4: the second notch (and the encoder mounting); 3: the sweep's time budget; 2: the sweep's measure and the accelerometer's sensitivity
 /// Head (magic, format, length) and its tail (sequence, CRC).
 pub const HEAD_BYTES: usize = 16;
 /// Largest payload (the parameter set is at most a frame).

@@ -149,6 +149,9 @@ pub fn simulation_config(v: &Values) -> Result<SimulationConfig, String> {
             notch_hz: v.ctrl_notch_hz as f32,
             notch_q: v.ctrl_notch_q as f32,
             notch_depth: v.ctrl_notch_depth as f32,
+            notch2_hz: v.ctrl_notch2_hz as f32,
+            notch2_q: v.ctrl_notch2_q as f32,
+            notch2_depth: v.ctrl_notch2_depth as f32,
         },
         limits: Limits {
             overcurrent: v.ctrl_overcurrent as f32,

@@ -19,6 +19,7 @@ const COUPLED: &[(&str, &str, &str)] = &[
     ("ctrl.position_divider", "max", "Nyquist"),
     ("ctrl.low_pass_hz", "max", "Nyquist"),
     ("ctrl.notch_hz", "max", "Nyquist"),
+    ("ctrl.notch2_hz", "max", "Nyquist"),
     ("accdec.cutoff_hz", "max", "Nyquist"),
     ("excitation.frequency", "max", "half the loop rate"),
     // The machine-end acceleration measure needs torque- or position-command injection (the

@@ -415,6 +415,11 @@ impl AutotuneBenchArgs {
             "machines",
         );
         rec.info(
+            "designs with a second notch",
+            finished().filter(|r| r.tuning.is_some_and(|t| t.notch2.is_some())).count() as f64,
+            "machines",
+        );
+        rec.info(
             "designs with the full reserve",
             finished().filter(|r| r.reserve == Some(Reserve::Full)).count() as f64,
             "machines",
@@ -430,7 +435,7 @@ impl AutotuneBenchArgs {
             );
         } else {
             println!(
-                "{:>3} {:>5} {:>6} {:>6} {:>8} {:>7} {:>6} {:>6} {:>6} {:>6} {:>5} {:>6} {:>6} {:>6} {:>13} {:>13} {:>6} {:>5} {:>5} {:>5}",
+                "{:>3} {:>5} {:>6} {:>6} {:>8} {:>7} {:>6} {:>6} {:>6} {:>6} {:>6} {:>5} {:>6} {:>6} {:>6} {:>13} {:>13} {:>6} {:>5} {:>5} {:>5}",
                 "#",
                 "ratio",
                 "fr Hz",
@@ -439,6 +444,7 @@ impl AutotuneBenchArgs {
                 "ki",
                 "lp Hz",
                 "notch",
+                "2nd",
                 "PM°",
                 "GM dB",
                 "Ms",
@@ -456,9 +462,9 @@ impl AutotuneBenchArgs {
                 let m = &r.machine;
                 match (&r.failed, &r.tuning) {
                     (None, Some(t)) => println!(
-                        "{k:>3} {:>5.2} {:>6.0} {:>6.3} {:>8.4} {:>7.1} {:>6.0} {:>6.0} {:>6.1} {:>6.1} {:>5.2} {:>6.0} {:>6.0} {:>6.0} {:>6.0}/{:<6.0} {:>6.3}/{:<6.3} {:>6.2} {:>5.1} {:>5.1} {:>5}{}{}",
+                        "{k:>3} {:>5.2} {:>6.0} {:>6.3} {:>8.4} {:>7.1} {:>6.0} {:>6.0} {:>6.0} {:>6.1} {:>6.1} {:>5.2} {:>6.0} {:>6.0} {:>6.0} {:>6.0}/{:<6.0} {:>6.3}/{:<6.3} {:>6.2} {:>5.1} {:>5.1} {:>5}{}{}",
                         m.inertia_ratio, m.resonance_hz, m.damping_ratio, t.kp, t.ki, t.low_pass_hz,
-                        t.notch.map_or(0.0, |n| n.hz), r.phase_margin_deg, r.gain_margin_db, r.sensitivity_peak,
+                        t.notch.map_or(0.0, |n| n.hz), t.notch2.map_or(0.0, |n| n.hz), r.phase_margin_deg, r.gain_margin_db, r.sensitivity_peak,
                         r.bandwidth_hz, r.oracle_bandwidth_hz, r.default_bandwidth_hz,
                         1e3 * r.step_settling_s[0], 1e3 * r.step_settling_s[1], r.load_step_peak[0], r.load_step_peak[1],
                         100.0 * r.calibration_errors.iter().copied().fold(0.0, f64::max),

@@ -83,13 +83,7 @@ fn tuned_set(
     position: &PositionTuning,
 ) -> control_core::Params {
     let mut p = *before;
-    p.velocity.kp = tuning.kp as f32;
-    p.velocity.ki = tuning.ki as f32;
-    p.filters.low_pass_hz = tuning.low_pass_hz as f32;
-    let notch = tuning.notch.unwrap_or(super::velocity_controller::Notch { hz: 0.0, q: 1.0, depth: 0.0 });
-    p.filters.notch_hz = notch.hz as f32;
-    p.filters.notch_q = notch.q as f32;
-    p.filters.notch_depth = notch.depth as f32;
+    tuning.apply(&mut p);
     p.position.kp = position.kp as f32;
     p.position.velocity_feedforward = position.velocity_feedforward as f32;
     p
@@ -343,6 +337,7 @@ mod tests {
             ki: 17.5,
             low_pass_hz: 900.0,
             notch: Some(Notch { hz: 263.0, q: 0.7, depth: 0.1 }),
+            notch2: Some(Notch { hz: 1450.0, q: 1.2, depth: 0.25 }),
         };
         let margins = crate::autotune::margins::margins(&[1.0, 2.0], &[Complex::new(10.0, 0.0); 2]).unwrap();
         let position = PositionTuning { kp: 177.8, velocity_feedforward: 1.0, margins };

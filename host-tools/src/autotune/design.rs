@@ -1,5 +1,5 @@
 //! Gains and filters from a plant's response: the velocity PI, the torque low-pass and a notch
-//! on the resonance above the crossover, chosen for the widest closed-loop bandwidth whose
+//! on the resonance above the crossover (two notches on two resonances), chosen for the widest closed-loop bandwidth whose
 //! loop keeps its margins (phase margin, gain margin, sensitivity peak `Ms`).
 //!
 //! The plant `P` (torque command → velocity estimate, as the torque point of a sweep
@@ -7,7 +7,8 @@
 //! follow a lightly damped resonance). The search: the rigid body's inertia `J` from the
 //! lowest frequencies; candidate filter sets — no low-pass or one of a ladder of cut-offs,
 //! no notch or a notch on each resonance peak of `s·P` (the acceleration per torque, flat
-//! on a rigid body) with a ladder of depths and widths; the PI's integral corner set from its
+//! on a rigid body) with a ladder of depths and widths, and where there are two peaks the best
+//! notch's family with a second notch on the other peak; the PI's integral corner set from its
 //! proportional gain (`ki = kp²/(n·J)`, the crossover over `n`, for a few `n`). For each set
 //! the proportional gain runs up a log ladder, and the widest bandwidth whose margins hold
 //! is kept, then refined by a compass search over the continuous parameters. Beside it, for
@@ -78,6 +79,8 @@ pub struct SearchGrid {
     pub notch_qs: &'static [f64],
     pub notch_shifts: &'static [f64],
     pub integral_ratios: &'static [f64],
+    /// With two resonance peaks, a second notch on the one the best notch leaves.
+    pub second_notch: bool,
 }
 
 impl SearchGrid {
@@ -92,6 +95,7 @@ impl SearchGrid {
         // integral action that lifts the dip over it (and the bandwidth to the loop's upper
         // reach) lies in a basin of its own, which a refinement from 4 does not reach.
         integral_ratios: &[1.5, 2.0, 3.0, 4.0, 6.0, 10.0],
+        second_notch: true,
     };
     pub const FINE: Self = Self {
         grid_points: 4000,
@@ -101,6 +105,7 @@ impl SearchGrid {
         notch_qs: &[0.35, 0.5, 0.7, 1.0, 1.4, 2.0, 3.0],
         notch_shifts: &[0.85, 0.92, 1.0, 1.08, 1.17],
         integral_ratios: &[3.0, 4.0, 5.0, 6.0, 8.0, 10.0, 15.0],
+        second_notch: true,
     };
 }
 
@@ -152,43 +157,27 @@ pub fn design(
     // Proportional gains: crossovers (kp/J) from 2 Hz to a quarter of the loop's rate.
     let gains =
         log_grid(inertia * std::f64::consts::TAU * 2.0, inertia * std::f64::consts::TAU * 0.5 * nyquist, grid.gains);
-    // The best of each notch's family (none, or one centre/width/depth on a peak).
-    let mut family_best: Vec<Option<Design>> = vec![None; notches.len()];
-    // And for each family and integral ratio, the candidate whose closed loop climbs out of a
-    // dip below −3 dB with the highest floor (the nearest to lifting it: see `refinement`).
-    let mut family_dip: Vec<Option<(Design, f64)>> = vec![None; notches.len() * grid.integral_ratios.len()];
-    for (family, notch) in notches.iter().enumerate() {
-        let best = &mut family_best[family];
-        for &low_pass_hz in &low_passes {
-            let filters: Vec<Complex64> = {
-                let t = VelocityTuning { kp: 1.0, ki: 0.0, low_pass_hz, notch: *notch };
-                f.iter().map(|&f| t.response(f, period)).collect()
-            };
-            let z: Vec<Complex64> =
-                f.iter().map(|&f| Complex64::from_polar(1.0, std::f64::consts::TAU * f * period)).collect();
-            for (ni, &n) in grid.integral_ratios.iter().enumerate() {
-                let best_dip = &mut family_dip[family * grid.integral_ratios.len() + ni];
-                // The whole ladder: on a light load the margins fail while the crossover
-                // passes the resonance and hold again above it.
-                for &kp in &gains {
-                    let ki = kp * kp / (n * inertia);
-                    let l: Vec<Complex64> =
-                        (0..f.len()).map(|k| (kp + ki * period * z[k] / (z[k] - 1.0)) * filters[k] * p[k]).collect();
-                    let Some(m) = margins(f, &l).filter(|m| goal.held_by(m)) else { continue };
-                    let candidate =
-                        Design { tuning: VelocityTuning { kp, ki, low_pass_hz, notch: *notch }, margins: m, inertia };
-                    if best.is_none_or(|b| m.bandwidth_hz > b.margins.bandwidth_hz) {
-                        *best = Some(candidate);
-                    }
-                    if let Some(d) = dip(f, &l) {
-                        if best_dip.is_none_or(|(_, floor)| d.floor > floor) {
-                            *best_dip = Some((candidate, d.floor));
-                        }
-                    }
-                }
-            }
+    let ladders = Ladders { sampled: &sampled, goal, grid, inertia, low_passes: &low_passes, gains: &gains };
+    // Each notch family (none, or one centre/width/depth on a peak): its best candidate, and
+    // for each integral ratio the candidate whose closed loop climbs out of a dip below −3 dB
+    // with the highest floor (the nearest to lifting it: see `refinement`).
+    let mut results: Vec<Ladder> = notches.iter().map(|&n| ladders.run((n, None))).collect();
+    // Two resonances: the best family with a notch keeps it, and a second notch goes on the
+    // other peak (each of the grid's shifts, depths and widths).
+    if let (&[a, b], true) = (&peaks[..], grid.second_notch) {
+        let best_notched = results
+            .iter()
+            .filter_map(|r| r.best)
+            .filter(|d| d.tuning.notch.is_some())
+            .max_by(|x, y| x.margins.bandwidth_hz.total_cmp(&y.margins.bandwidth_hz));
+        if let Some(first) = best_notched.and_then(|d| d.tuning.notch) {
+            let other = if (first.hz / a).ln().abs() <= (first.hz / b).ln().abs() { b } else { a };
+            let seconds = notch_candidates(&[other], grid, nyquist);
+            results.extend(seconds.into_iter().flatten().map(|n2| ladders.run((Some(first), Some(n2)))));
         }
     }
+    let family_best: Vec<Option<Design>> = results.iter().map(|r| r.best).collect();
+    let family_dip: Vec<Option<(Design, f64)>> = results.into_iter().flat_map(|r| r.dips).collect();
     // The best few families, each refined over the continuous parameters: on a light load the
     // gains that lift the loop over the anti-resonance's dip and still keep Ms lie within a
     // few percent, narrower than the ladder's step, and the family that wins on the ladder
@@ -212,6 +201,63 @@ pub fn design(
 /// Designs ordered by their bandwidth.
 fn by_bandwidth(a: &Design, b: &Design) -> std::cmp::Ordering {
     a.margins.bandwidth_hz.total_cmp(&b.margins.bandwidth_hz)
+}
+
+/// The search's ladders over one notch family: every low-pass cut-off, integral ratio and
+/// proportional gain of the grid.
+struct Ladders<'a> {
+    sampled: &'a SampledPlant,
+    goal: &'a MarginGoal,
+    grid: &'a SearchGrid,
+    inertia: f64,
+    low_passes: &'a [f64],
+    gains: &'a [f64],
+}
+
+/// A family's ladders: the widest candidate that keeps the margins, and for each integral
+/// ratio the candidate with the highest dip floor.
+struct Ladder {
+    best: Option<Design>,
+    dips: Vec<Option<(Design, f64)>>,
+}
+
+impl Ladders<'_> {
+    fn run(&self, (notch, notch2): (Option<Notch>, Option<Notch>)) -> Ladder {
+        let (f, p, period) = (&self.sampled.hz, &self.sampled.response, self.sampled.period);
+        let (inertia, goal) = (self.inertia, self.goal);
+        let mut best: Option<Design> = None;
+        let mut dips: Vec<Option<(Design, f64)>> = vec![None; self.grid.integral_ratios.len()];
+        let z: Vec<Complex64> =
+            f.iter().map(|&f| Complex64::from_polar(1.0, std::f64::consts::TAU * f * period)).collect();
+        for &low_pass_hz in self.low_passes {
+            let filters: Vec<Complex64> = {
+                let t = VelocityTuning { kp: 1.0, ki: 0.0, low_pass_hz, notch, notch2 };
+                f.iter().map(|&f| t.response(f, period)).collect()
+            };
+            for (ni, &n) in self.grid.integral_ratios.iter().enumerate() {
+                let best_dip = &mut dips[ni];
+                // The whole ladder: on a light load the margins fail while the crossover
+                // passes the resonance and hold again above it.
+                for &kp in self.gains {
+                    let ki = kp * kp / (n * inertia);
+                    let l: Vec<Complex64> =
+                        (0..f.len()).map(|k| (kp + ki * period * z[k] / (z[k] - 1.0)) * filters[k] * p[k]).collect();
+                    let Some(m) = margins(f, &l).filter(|m| goal.held_by(m)) else { continue };
+                    let tuning = VelocityTuning { kp, ki, low_pass_hz, notch, notch2 };
+                    let candidate = Design { tuning, margins: m, inertia };
+                    if best.is_none_or(|b| m.bandwidth_hz > b.margins.bandwidth_hz) {
+                        best = Some(candidate);
+                    }
+                    if let Some(d) = dip(f, &l) {
+                        if best_dip.is_none_or(|(_, floor)| d.floor > floor) {
+                            *best_dip = Some((candidate, d.floor));
+                        }
+                    }
+                }
+            }
+        }
+        Ladder { best, dips }
+    }
 }
 
 /// How many of the search's best notch families are refined.
@@ -327,6 +373,41 @@ mod tests {
         let d = design(&plant, period, &goal, &grid, &m.features_hz()).unwrap();
         assert!(d.tuning.notch.is_none_or(|n| n.hz < NOTCH_LIMIT * nyquist), "{d:?}");
         let dense = margins_of(&d.tuning, &plant, period, 12_000, &m.features_hz()).unwrap();
+        assert!(goal.held_by(&dense), "{dense:?}");
+    }
+
+    /// A machine with a second mode above the shaft's (an absorber's resonance and
+    /// anti-resonance on the load): the design puts a notch on each peak and reaches a wider
+    /// loop than the best single notch does, and the two-notch loop keeps its margins on a
+    /// dense grid.
+    #[test]
+    fn a_second_resonance_gets_a_second_notch_and_a_wider_loop() {
+        let params = control_core::Params::default();
+        let drive = DriveDynamics::as_configured(&params);
+        let period = params.rates.velocity_period() as f64;
+        let goal = MarginGoal::named("standard").unwrap();
+        let m = machine(1.5e-4, 0.6e-4, 420.0, 0.02);
+        // The second mode: a pole pair at 1.3 kHz over a zero pair at 1.1 kHz (unit gain at
+        // DC), lightly damped.
+        let mode = |f: f64| {
+            let s = Complex64::new(0.0, std::f64::consts::TAU * f);
+            let (wz, wp) = (std::f64::consts::TAU * 1100.0, std::f64::consts::TAU * 1300.0);
+            let (zz, zp) = (0.02, 0.02);
+            (s * s + 2.0 * zz * wz * s + wz * wz) / (s * s + 2.0 * zp * wp * s + wp * wp) * (wp * wp / (wz * wz))
+        };
+        let plant = |f: f64| crate::autotune::loop_plant(&drive, &m, f) * mode(f);
+        let mut features = m.features_hz().to_vec();
+        features.extend([1100.0, 1300.0, 1100.0 * 0.98, 1100.0 * 1.02, 1300.0 * 0.98, 1300.0 * 1.02]);
+        let two = design(&plant, period, &goal, &SearchGrid::STANDARD, &features).unwrap();
+        let one_grid = SearchGrid { second_notch: false, ..SearchGrid::STANDARD };
+        let one = design(&plant, period, &goal, &one_grid, &features).unwrap();
+        assert!(one.tuning.notch2.is_none());
+        let (n1, n2) = (two.tuning.notch.expect("a first notch"), two.tuning.notch2.expect("a second notch"));
+        let near = |n: Notch, hz: f64| (n.hz / hz).ln().abs() < 0.3;
+        assert!(near(n1, 420.0) && near(n2, 1300.0) || near(n1, 1300.0) && near(n2, 420.0), "{two:?}");
+        eprintln!("one notch: {:.0} Hz; two: {:.0} Hz", one.margins.bandwidth_hz, two.margins.bandwidth_hz);
+        assert!(two.margins.bandwidth_hz > 1.1 * one.margins.bandwidth_hz, "{two:?} against {one:?}");
+        let dense = margins_of(&two.tuning, &plant, period, 50_000, &features).unwrap();
         assert!(goal.held_by(&dense), "{dense:?}");
     }
 

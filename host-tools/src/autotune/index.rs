@@ -30,10 +30,15 @@ pub fn section(root: &Path) -> Option<Section> {
     if let (Some(kp), Some(ki)) = (t["kp"].as_f64(), t["ki"].as_f64()) {
         s.numbers.push(("velocity loop".into(), format!("kp {kp:.4} N·m·s/rad, ki {ki:.2} N·m/rad")));
     }
-    let notch = match (t["notch"]["hz"].as_f64(), t["notch"]["q"].as_f64(), t["notch"]["depth"].as_f64()) {
-        (Some(hz), Some(q), Some(depth)) => format!("notch {hz:.1} Hz, Q {q:.2}, depth {depth:.2}"),
-        _ => "no notch".into(),
+    let notch_text = |n: &serde_json::Value, name: &str| match (n["hz"].as_f64(), n["q"].as_f64(), n["depth"].as_f64())
+    {
+        (Some(hz), Some(q), Some(depth)) => Some(format!("{name} {hz:.1} Hz, Q {q:.2}, depth {depth:.2}")),
+        _ => None,
     };
+    let mut notch = notch_text(&t["notch"], "notch").unwrap_or_else(|| "no notch".into());
+    if let Some(second) = notch_text(&t["notch2"], "second notch") {
+        notch = format!("{notch}; {second}");
+    }
     let low_pass = match t["low_pass_hz"].as_f64().filter(|&hz| hz > 0.0) {
         Some(hz) => format!("low-pass {hz:.0} Hz"),
         None => "no low-pass".into(),

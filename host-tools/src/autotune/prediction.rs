@@ -131,7 +131,7 @@ mod tests {
     #[test]
     fn steps_match_a_direct_simulation_of_a_discrete_loop() {
         let (j, period) = (2e-4f64, 1.0 / 8000.0);
-        let tuning = VelocityTuning { kp: 0.05, ki: 5.0, low_pass_hz: 0.0, notch: None };
+        let tuning = VelocityTuning { kp: 0.05, ki: 5.0, low_pass_hz: 0.0, notch: None, notch2: None };
         // The rigid body with a zero-order hold, as a discrete transfer T/(J(z − 1)), at f.
         let plant = |f: f64| {
             let z = Complex64::from_polar(1.0, std::f64::consts::TAU * f * period);

@@ -1,5 +1,5 @@
 //! A design refined over its continuous parameters (the proportional gain, the integral
-//! ratio, the low-pass cut-off, the notch's centre, width and depth) by a compass search that
+//! ratio, the low-pass cut-off, each notch's centre, width and depth) by a compass search that
 //! keeps the margins: for the widest bandwidth ([`refine`]), or to lift a dip of the closed
 //! loop over −3 dB ([`lift_dip_on`]).
 //!
@@ -25,17 +25,21 @@ use super::velocity_controller::{Notch, VelocityTuning};
 /// How far over −3 dB a lifted dip's floor is kept (dB).
 pub const FLOOR_HEADROOM_DB: f64 = 0.25;
 
+/// A point of the search: `(ln kp, ln n, ln f_lp, ln f_notch, ln q, depth)` and the second
+/// notch's `(ln f_notch2, ln q2, depth2)`.
+type Point = [f64; 9];
+
 /// The continuous parameters of a design around its rigid inertia `j`:
-/// `x = (ln kp, ln n, ln f_lp, ln f_notch, ln q, depth)` with `ki = kp²/(n·j)`; a filter the
-/// start does not have stays absent.
+/// a [`Point`] with `ki = kp²/(n·j)`; a filter the start does not have stays absent.
 struct Coordinates {
     j: f64,
     has_low_pass: bool,
     has_notch: bool,
+    has_notch2: bool,
 }
 
 impl Coordinates {
-    fn of(start: &Design) -> (Self, [f64; 6]) {
+    fn of(start: &Design) -> (Self, Point) {
         let t = &start.tuning;
         let n = t.kp * t.kp / (t.ki.max(1e-30) * start.inertia);
         let x = [
@@ -45,31 +49,42 @@ impl Coordinates {
             t.notch.map_or(0.0, |n| n.hz.ln()),
             t.notch.map_or(0.0, |n| n.q.ln()),
             t.notch.map_or(0.0, |n| n.depth),
+            t.notch2.map_or(0.0, |n| n.hz.ln()),
+            t.notch2.map_or(0.0, |n| n.q.ln()),
+            t.notch2.map_or(0.0, |n| n.depth),
         ];
-        (Self { j: start.inertia, has_low_pass: t.low_pass_hz > 0.0, has_notch: t.notch.is_some() }, x)
+        let has = (t.low_pass_hz > 0.0, t.notch.is_some(), t.notch2.is_some());
+        (Self { j: start.inertia, has_low_pass: has.0, has_notch: has.1, has_notch2: has.2 }, x)
     }
 
-    fn tuning(&self, x: &[f64; 6]) -> VelocityTuning {
+    fn tuning(&self, x: &Point) -> VelocityTuning {
         let kp = x[0].exp();
         VelocityTuning {
             kp,
             ki: kp * kp / (x[1].exp() * self.j),
             low_pass_hz: if self.has_low_pass { x[2].exp() } else { 0.0 },
             notch: self.has_notch.then(|| Notch { hz: x[3].exp(), q: x[4].exp(), depth: x[5] }),
+            notch2: self.has_notch2.then(|| Notch { hz: x[6].exp(), q: x[7].exp(), depth: x[8] }),
         }
     }
 
     /// The coordinates the search moves.
     fn dims(&self) -> Vec<usize> {
-        (0..6).filter(|&d| d < 2 || (d == 2 && self.has_low_pass) || (d >= 3 && self.has_notch)).collect()
+        (0..9)
+            .filter(|&d| {
+                d < 2
+                    || (d == 2 && self.has_low_pass)
+                    || ((3..6).contains(&d) && self.has_notch)
+                    || (d >= 6 && self.has_notch2)
+            })
+            .collect()
     }
 }
 
 /// A tuning the drive can run on a loop whose Nyquist frequency is `nyquist`.
 fn admissible(t: &VelocityTuning, nyquist: f64) -> bool {
-    let filters_fit = t
-        .notch
-        .is_none_or(|n| n.hz > 1.0 && n.hz < NOTCH_LIMIT * nyquist && n.q > 0.05 && (0.0..=1.0).contains(&n.depth));
+    let fits = |n: &Notch| n.hz > 1.0 && n.hz < NOTCH_LIMIT * nyquist && n.q > 0.05 && (0.0..=1.0).contains(&n.depth);
+    let filters_fit = t.notch.iter().chain(&t.notch2).all(fits);
     t.kp > 0.0 && t.ki >= 0.0 && t.low_pass_hz >= 0.0 && t.low_pass_hz < nyquist && filters_fit
 }
 
@@ -78,16 +93,16 @@ fn admissible(t: &VelocityTuning, nyquist: f64) -> bool {
 /// coordinate and keeps a move that `better` prefers, until none does; then the
 /// steps halve, six times. Stops early once `done` holds for the best score.
 fn compass<S: Copy>(
-    mut x: [f64; 6],
+    mut x: Point,
     score0: S,
     dims: &[usize],
-    score: &dyn Fn(&[f64; 6]) -> Option<S>,
+    score: &dyn Fn(&Point) -> Option<S>,
     better: &dyn Fn(&S, &S) -> bool,
     done: &dyn Fn(&S) -> bool,
     diagonals: bool,
-) -> ([f64; 6], S) {
+) -> (Point, S) {
     let mut best = score0;
-    let mut steps = [0.1, 0.2, 0.1, 0.05, 0.2, 0.1];
+    let mut steps = [0.1, 0.2, 0.1, 0.05, 0.2, 0.1, 0.05, 0.2, 0.1];
     for _ in 0..6 {
         let mut moved = true;
         while moved && !done(&best) {

@@ -197,6 +197,9 @@ impl AutotuneReport<'_> {
             Some(n) => println!("  notch {:.1} Hz, Q {:.2}, depth {:.2}", n.hz, n.q, n.depth),
             None => println!("  no notch"),
         }
+        if let Some(n) = t.notch2 {
+            println!("  second notch {:.1} Hz, Q {:.2}, depth {:.2}", n.hz, n.q, n.depth);
+        }
         if t.low_pass_hz > 0.0 {
             println!("  torque low-pass {:.0} Hz", t.low_pass_hz);
         } else {

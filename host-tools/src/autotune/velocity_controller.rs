@@ -1,5 +1,5 @@
 //! The velocity loop's controller as the drive runs it: the PI `kp + ki·T·z/(z − 1)` at the
-//! velocity rate, then the torque command's low-pass and notch (the drive's own biquads,
+//! velocity rate, then the torque command's low-pass and two notches (the drive's own biquads,
 //! `control_core::biquad`, their coefficients evaluated on the unit circle), and the FMU
 //! parameters that set it.
 
@@ -18,6 +18,11 @@ pub struct Notch {
     pub depth: f64,
 }
 
+impl Notch {
+    /// A notch switched off (the drive's parameters for no notch).
+    pub const OFF: Notch = Notch { hz: 0.0, q: 1.0, depth: 0.0 };
+}
+
 /// Velocity-loop gains and torque filters (a low-pass of 0 Hz is off).
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
 pub struct VelocityTuning {
@@ -26,6 +31,9 @@ pub struct VelocityTuning {
     pub ki: f64,
     pub low_pass_hz: f64,
     pub notch: Option<Notch>,
+    /// The second notch, after the first: for a second resonance above the crossover.
+    #[serde(default)]
+    pub notch2: Option<Notch>,
 }
 
 impl VelocityTuning {
@@ -41,6 +49,11 @@ impl VelocityTuning {
                 q: f.notch_q as f64,
                 depth: f.notch_depth as f64,
             }),
+            notch2: (f.notch2_hz > 0.0).then_some(Notch {
+                hz: f.notch2_hz as f64,
+                q: f.notch2_q as f64,
+                depth: f.notch2_depth as f64,
+            }),
         }
     }
 
@@ -52,7 +65,7 @@ impl VelocityTuning {
         if self.low_pass_hz > 0.0 {
             c *= biquad_at(&Biquad::low_pass(self.low_pass_hz as f32, rate), z);
         }
-        if let Some(n) = self.notch {
+        for n in self.notch.iter().chain(&self.notch2) {
             c *= biquad_at(&Biquad::notch(n.hz as f32, n.q as f32, n.depth as f32, rate), z);
         }
         c
@@ -60,7 +73,8 @@ impl VelocityTuning {
 
     /// The FMU parameters (and `--set` names) that give this tuning.
     pub fn parameters(&self) -> BTreeMap<String, f64> {
-        let n = self.notch.unwrap_or(Notch { hz: 0.0, q: 1.0, depth: 0.0 });
+        let n = self.notch.unwrap_or(Notch::OFF);
+        let n2 = self.notch2.unwrap_or(Notch::OFF);
         [
             ("ctrl.velocity_kp", self.kp),
             ("ctrl.velocity_ki", self.ki),
@@ -68,6 +82,9 @@ impl VelocityTuning {
             ("ctrl.notch_hz", n.hz),
             ("ctrl.notch_q", n.q),
             ("ctrl.notch_depth", n.depth),
+            ("ctrl.notch2_hz", n2.hz),
+            ("ctrl.notch2_q", n2.q),
+            ("ctrl.notch2_depth", n2.depth),
         ]
         .into_iter()
         .map(|(k, v)| (k.to_string(), v))
@@ -79,10 +96,14 @@ impl VelocityTuning {
         p.velocity.kp = self.kp as f32;
         p.velocity.ki = self.ki as f32;
         p.filters.low_pass_hz = self.low_pass_hz as f32;
-        let n = self.notch.unwrap_or(Notch { hz: 0.0, q: 1.0, depth: 0.0 });
+        let n = self.notch.unwrap_or(Notch::OFF);
         p.filters.notch_hz = n.hz as f32;
         p.filters.notch_q = n.q as f32;
         p.filters.notch_depth = n.depth as f32;
+        let n2 = self.notch2.unwrap_or(Notch::OFF);
+        p.filters.notch2_hz = n2.hz as f32;
+        p.filters.notch2_q = n2.q as f32;
+        p.filters.notch2_depth = n2.depth as f32;
     }
 }
 
@@ -109,10 +130,11 @@ mod tests {
             ki: 12.0,
             low_pass_hz: 900.0,
             notch: Some(Notch { hz: 300.0, q: 1.5, depth: 0.1 }),
+            notch2: Some(Notch { hz: 1700.0, q: 1.0, depth: 0.2 }),
         };
         t.apply(&mut p);
         let period = p.rates.velocity_period() as f64;
-        for f in [20.0, 300.0, 1200.0] {
+        for f in [20.0, 300.0, 1200.0, 1700.0] {
             let mut lp = control_core::velocity_loop::VelocityLoop::new(&p.velocity, &p.filters, &p.rates);
             // A small sine (no limit reached); the last whole periods' first harmonic.
             let n = 40_000usize;
