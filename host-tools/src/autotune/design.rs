@@ -343,6 +343,7 @@ mod tests {
             shaft_damping: 2.0 * zeta * (k * jl).sqrt(),
             motor_viscous: 0.0,
             load_viscous: 0.0,
+            absorber: None,
         }
     }
 

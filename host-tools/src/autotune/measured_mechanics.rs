@@ -17,6 +17,7 @@ use super::design_checks::{
     check_determined, check_linear, check_resonance_measured, check_riding_speed, check_torque_amplitude,
 };
 use super::drive_dynamics::DriveDynamics;
+use super::mechanics::AbsorberMechanics;
 use super::position_loop_design::{design_position_loop, position_loop_per_gain, PositionRates, PositionTuning};
 use super::reserve::Reserve;
 use super::velocity_controller::VelocityTuning;
@@ -128,13 +129,18 @@ impl MeasuredMechanics {
     }
 
     /// The calibrated mechanics as plant parameters (a twin of the measured machine).
-    pub fn plant_parameters(&self) -> [(&'static str, Value); 4] {
+    pub fn plant_parameters(&self) -> [(&'static str, Value); 7] {
         let m = &self.calibration.mechanics;
+        // No absorber fitted: none in the twin either (0 inertia), whatever the base had.
+        let a = m.absorber.unwrap_or(AbsorberMechanics { inertia: 0.0, stiffness: 0.0, damping: 0.0 });
         [
             ("plant.motor_inertia", Value::Float(m.motor_inertia)),
             ("plant.load_inertia", Value::Float(m.load_inertia)),
             ("plant.shaft_stiffness", Value::Float(m.shaft_stiffness)),
             ("plant.shaft_damping", Value::Float(m.shaft_damping)),
+            ("plant.absorber_inertia", Value::Float(a.inertia)),
+            ("plant.absorber_stiffness", Value::Float(a.stiffness)),
+            ("plant.absorber_damping", Value::Float(a.damping)),
         ]
     }
 }

@@ -1,12 +1,14 @@
 //! The machine a velocity loop drives: a motor and a load on a shaft (two inertias, a spring
-//! and its damper, viscous friction on each side), as the torque at the motor sees it. The
-//! twin's plant (`servo_axis::plant`) integrates the same equations with Coulomb friction and
-//! an optional absorber on top; the loop's design and its check use this linear part.
+//! and its damper, viscous friction on each side), and where there is one an absorber on the
+//! load (a third inertia on its own spring and damper: a second mode), as the torque at the
+//! motor sees it. The twin's plant (`servo_axis::plant`) integrates the same equations with
+//! Coulomb friction on top; the loop's design and its check use this linear part.
 
 use num_complex::Complex64;
 use serde::{Deserialize, Serialize};
 
-/// Two inertias on a shaft (SI units: kg·m², N·m/rad, N·m·s/rad).
+/// Two inertias on a shaft (SI units: kg·m², N·m/rad, N·m·s/rad), and an absorber on the
+/// load where there is one.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
 pub struct Mechanics {
     pub motor_inertia: f64,
@@ -15,10 +17,31 @@ pub struct Mechanics {
     pub shaft_damping: f64,
     pub motor_viscous: f64,
     pub load_viscous: f64,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub absorber: Option<AbsorberMechanics>,
+}
+
+/// A second mode on the load: an inertia on a spring and damper to it (kg·m², N·m/rad,
+/// N·m·s/rad).
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+pub struct AbsorberMechanics {
+    pub inertia: f64,
+    pub stiffness: f64,
+    pub damping: f64,
+}
+
+impl AbsorberMechanics {
+    /// Its own frequency `√(k/J)/2π` (Hz) and damping ratio `c/(2√(kJ))`.
+    pub fn own_mode(&self) -> (f64, f64) {
+        (
+            (self.stiffness / self.inertia).sqrt() / std::f64::consts::TAU,
+            self.damping / (2.0 * (self.stiffness * self.inertia).sqrt()),
+        )
+    }
 }
 
 impl Mechanics {
-    /// The twin plant's mechanics (its absorber and Coulomb friction left out).
+    /// The twin plant's mechanics (its Coulomb friction left out).
     pub fn of_plant(p: &servo_axis::plant::PlantParams) -> Self {
         Self {
             motor_inertia: p.motor_inertia,
@@ -27,21 +50,32 @@ impl Mechanics {
             shaft_damping: p.shaft_damping,
             motor_viscous: p.motor_viscous,
             load_viscous: p.load_viscous,
+            absorber: (p.absorber_inertia > 0.0).then_some(AbsorberMechanics {
+                inertia: p.absorber_inertia,
+                stiffness: p.absorber_stiffness,
+                damping: p.absorber_damping,
+            }),
         }
     }
 
     /// Motor velocity over motor torque at `f` Hz:
-    /// `(J_L s + b_L + S) / ((J_M s + b_M)(J_L s + b_L) + (J_M s + b_M + J_L s + b_L)·S)` with
-    /// the shaft `S = (c s + k)/s`.
+    /// `(Z_L + S) / (Z_M·Z_L + (Z_M + Z_L)·S)` with the motor `Z_M = J_M s + b_M`, the load
+    /// `Z_L = J_L s + b_L` (plus the absorber's `S_a·J_a s/(J_a s + S_a)`) and the shaft
+    /// `S = (c s + k)/s`.
     pub fn motor_velocity_per_torque(&self, f: f64) -> Complex64 {
         let s = Complex64::new(0.0, std::f64::consts::TAU * f);
         let spring = (s * self.shaft_damping + self.shaft_stiffness) / s;
-        let load = s * self.load_inertia + self.load_viscous;
+        let mut load = s * self.load_inertia + self.load_viscous;
+        if let Some(a) = self.absorber {
+            let spring_a = (s * a.damping + a.stiffness) / s;
+            load += spring_a * s * a.inertia / (s * a.inertia + spring_a);
+        }
         let motor = s * self.motor_inertia + self.motor_viscous;
         (load + spring) / (motor * load + (motor + load) * spring)
     }
 
-    /// The shaft's resonance and anti-resonance (Hz): `√(k(1/J_M + 1/J_L))/2π`, `√(k/J_L)/2π`.
+    /// The shaft's resonance and anti-resonance (Hz): `√(k(1/J_M + 1/J_L))/2π`, `√(k/J_L)/2π`
+    /// (the two-inertia part's, the absorber left out).
     pub fn resonance_hz(&self) -> (f64, f64) {
         let k = self.shaft_stiffness;
         let tau = std::f64::consts::TAU;
@@ -49,15 +83,31 @@ impl Mechanics {
     }
 
     /// The frequencies (Hz) where the machine's response turns fastest: its resonance and
-    /// anti-resonance, each with its half-power points `f·(1 ± ζ)`. A design grid holds
-    /// them so that a lightly damped mode is never stepped over.
-    pub fn features_hz(&self) -> [f64; 6] {
+    /// anti-resonance, each with its half-power points `f·(1 ± ζ)`; with an absorber, the
+    /// undamped chain's two resonances and two anti-resonances, each with the absorber's
+    /// and the shaft's damping ratios either side. A design grid holds them so that a
+    /// lightly damped mode is never stepped over.
+    pub fn features_hz(&self) -> Vec<f64> {
         let (fr, fa) = self.resonance_hz();
         let tau = std::f64::consts::TAU;
         let c = self.shaft_damping;
         let zeta_r = c * (1.0 / self.motor_inertia + 1.0 / self.load_inertia) / (2.0 * tau * fr);
         let zeta_a = c / (2.0 * (self.shaft_stiffness * self.load_inertia).sqrt());
-        [fr, fr * (1.0 - zeta_r), fr * (1.0 + zeta_r), fa, fa * (1.0 - zeta_a), fa * (1.0 + zeta_a)]
+        let Some(a) = self.absorber else {
+            return vec![fr, fr * (1.0 - zeta_r), fr * (1.0 + zeta_r), fa, fa * (1.0 - zeta_a), fa * (1.0 + zeta_a)];
+        };
+        // The chain motor –k– load –k_a– absorber: ω⁴ − b·ω² + c = 0 for its resonances, and
+        // the same with the motor held for its anti-resonances (the motor's response zeros).
+        let (jm, jl, ja, k, ka) = (self.motor_inertia, self.load_inertia, a.inertia, self.shaft_stiffness, a.stiffness);
+        let roots = |b: f64, c: f64| {
+            let d = (b * b - 4.0 * c).max(0.0).sqrt();
+            [((b - d) / 2.0).max(0.0).sqrt() / tau, ((b + d) / 2.0).sqrt() / tau]
+        };
+        let resonances =
+            roots(k * (1.0 / jm + 1.0 / jl) + ka * (1.0 / jl + 1.0 / ja), k * ka * (jm + jl + ja) / (jm * jl * ja));
+        let zeros = roots((k + ka) / jl + ka / ja, k * ka / (jl * ja));
+        let zeta = zeta_r.max(zeta_a).max(a.own_mode().1);
+        resonances.into_iter().chain(zeros).flat_map(|f| [f, f * (1.0 - zeta), f * (1.0 + zeta)]).collect()
     }
 
     pub fn total_inertia(&self) -> f64 {
@@ -85,6 +135,14 @@ impl Mechanics {
                 return Err(format!("{name} = {v}: must be a number ≥ 0"));
             }
         }
+        if let Some(a) = self.absorber {
+            if !(a.inertia.is_finite() && a.inertia > 0.0 && a.stiffness.is_finite() && a.stiffness > 0.0) {
+                return Err(format!("absorber {a:?}: its inertia and stiffness must be positive numbers"));
+            }
+            if !(a.damping.is_finite() && a.damping >= 0.0) {
+                return Err(format!("absorber damping = {}: must be a number ≥ 0", a.damping));
+            }
+        }
         Ok(())
     }
 }
@@ -105,6 +163,7 @@ mod tests {
             shaft_damping: 0.002,
             motor_viscous: 0.0,
             load_viscous: 0.0,
+            absorber: None,
         };
         let (fr, fa) = m.resonance_hz();
         let rigid = |f: f64| 1.0 / (std::f64::consts::TAU * f * m.total_inertia());
@@ -113,5 +172,42 @@ mod tests {
         assert!((m.motor_velocity_per_torque(fr * 20.0).norm() / motor_alone(fr * 20.0) - 1.0).abs() < 0.01);
         assert!(m.motor_velocity_per_torque(fa).norm() < 0.2 * rigid(fa));
         assert!(m.motor_velocity_per_torque(fr).norm() > 5.0 * motor_alone(fr));
+    }
+
+    /// With an absorber on the load, the motor's response dips at the chain's two
+    /// anti-resonances and peaks at its two resonances, as `features_hz` computes them from
+    /// the undamped chain; a vanishing absorber gives the two-inertia response back.
+    #[test]
+    fn an_absorber_adds_a_second_dip_and_peak_where_the_chain_has_them() {
+        let two = Mechanics {
+            motor_inertia: 1e-4,
+            load_inertia: 3e-4,
+            shaft_stiffness: 400.0,
+            shaft_damping: 1e-4,
+            motor_viscous: 0.0,
+            load_viscous: 0.0,
+            absorber: None,
+        };
+        let m =
+            Mechanics { absorber: Some(AbsorberMechanics { inertia: 5e-5, stiffness: 2000.0, damping: 1e-5 }), ..two };
+        let f = m.features_hz();
+        assert_eq!(f.len(), 12);
+        let (resonances, zeros) = ([f[0], f[3]], [f[6], f[9]]);
+        let rigid = |hz: f64| 1.0 / (std::f64::consts::TAU * hz * (1e-4 + 3e-4 + 5e-5));
+        for hz in resonances {
+            assert!(m.motor_velocity_per_torque(hz).norm() > 50.0 * rigid(hz), "{hz} Hz");
+        }
+        for hz in zeros {
+            assert!(m.motor_velocity_per_torque(hz).norm() < 0.05 * rigid(hz), "{hz} Hz");
+        }
+        // Between them the response is neither.
+        let mid = (zeros[1] * resonances[1]).sqrt();
+        assert!(resonances[0] < zeros[1] && zeros[1] < resonances[1], "{f:?}");
+        let tiny =
+            Mechanics { absorber: Some(AbsorberMechanics { inertia: 1e-12, stiffness: 2000.0, damping: 0.0 }), ..two };
+        for hz in [10.0, 100.0, mid, 3000.0] {
+            let (a, b) = (tiny.motor_velocity_per_torque(hz), two.motor_velocity_per_torque(hz));
+            assert!((a / b - 1.0).norm() < 1e-3, "{hz} Hz: {a} vs {b}");
+        }
     }
 }

@@ -266,7 +266,7 @@ mod tests {
     /// margins hold there.
     #[test]
     fn the_design_lifts_a_heavy_loads_anti_resonance_dip_and_keeps_its_margins() {
-        let machine = Machine { inertia_ratio: 4.22, resonance_hz: 55.7, damping_ratio: 0.0508 };
+        let machine = Machine { inertia_ratio: 4.22, resonance_hz: 55.7, damping_ratio: 0.0508, absorber: None };
         let c = configuration(&machine.parameters()).unwrap();
         let period = c.control.rates.velocity_period() as f64;
         let drive = DriveDynamics::on_plant(&c.control, &c.plant);

@@ -163,6 +163,16 @@ impl AutotuneReport<'_> {
         println!("  load inertia    {:.4e} kg·m² ± {:.2} %", m.load_inertia, 100.0 * e[1]);
         println!("  shaft stiffness {:.4e} N·m/rad ± {:.2} %", m.shaft_stiffness, 100.0 * e[2]);
         println!("  shaft damping   {:.4e} N·m·s/rad (damping ratio ± {:.1} %)", m.shaft_damping, 100.0 * e[3]);
+        if let (Some(a), Some(ea)) = (m.absorber, c.absorber_relative_errors) {
+            let (hz, zeta) = a.own_mode();
+            println!(
+                "  absorber        {:.4e} kg·m² ± {:.2} %, {:.4e} N·m/rad ± {:.2} %: its own mode {hz:.1} Hz, damping ratio {zeta:.3}",
+                a.inertia,
+                100.0 * ea[0],
+                a.stiffness,
+                100.0 * ea[1]
+            );
+        }
         let (fr, fa) = m.resonance_hz();
         println!(
             "  resonance {fr:.1} Hz, anti-resonance {fa:.1} Hz; fit within {:.2} dB, {:.1}°",

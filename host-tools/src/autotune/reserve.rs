@@ -156,7 +156,8 @@ mod tests {
     /// kept beside it.
     #[test]
     fn a_close_design_that_misses_its_verification_gives_way_to_the_full_reserve() {
-        let mechanics = measured(Machine { inertia_ratio: 0.307, resonance_hz: 142.0, damping_ratio: 0.0617 });
+        let mechanics =
+            measured(Machine { inertia_ratio: 0.307, resonance_hz: 142.0, damping_ratio: 0.0617, absorber: None });
         let goal = MarginGoal::named("standard").unwrap();
         let calls = Cell::new(0);
         let held = design_and_verify(&mechanics, &goal, "standard", |d, _| {

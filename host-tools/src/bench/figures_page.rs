@@ -35,6 +35,7 @@ pub const SECTIONS: [(&str, &[&str]); 3] = [
             "plant",
             "calibrate",
             "autotune",
+            "autotune-absorbers",
         ],
     ),
     ("The FMU", &["fmu", "platforms", "fmi-campaign", "fault-campaign"]),

@@ -12,7 +12,7 @@ use crate::autotune::axis_under_test::{AxisUnderTest, OnDrive};
 use crate::autotune::design_checks::{check_riding_speed, check_torque_amplitude};
 use crate::autotune::drive_dynamics::DriveDynamics;
 use crate::autotune::margins::log_grid;
-use crate::autotune::mechanics::Mechanics;
+use crate::autotune::mechanics::{AbsorberMechanics, Mechanics};
 use crate::autotune::plant_response;
 use crate::cli::{progress_bar, Common};
 use crate::fmu::configuration::configuration;
@@ -152,7 +152,7 @@ impl CalibrateArgs {
         let f = &c.friction;
         let truth_of = |value: &dyn Fn(&PlantParams) -> f64| truth.as_ref().map_or(f64::NAN, value);
         let mechanics_truth = |value: &dyn Fn(&Mechanics) -> f64| truth_of(&|p| value(&Mechanics::of_plant(p)));
-        let rows = [
+        let mut rows = vec![
             ("motor inertia", "kg·m²", m.motor_inertia, e[0] * m.motor_inertia, mechanics_truth(&|t| t.motor_inertia)),
             ("load inertia", "kg·m²", m.load_inertia, e[1] * m.load_inertia, mechanics_truth(&|t| t.load_inertia)),
             (
@@ -182,6 +182,22 @@ impl CalibrateArgs {
             // The twin's plant has no constant load torque.
             ("constant load torque", "N·m", f.load_torque, f.load_torque_error, truth_of(&|_| 0.0)),
         ];
+        // The absorber, where the fit kept one or the twin has one (0: none).
+        let true_absorber = truth.as_ref().is_some_and(|p| p.absorber_inertia > 0.0);
+        if m.absorber.is_some() || true_absorber {
+            let a = m.absorber.unwrap_or(AbsorberMechanics { inertia: 0.0, stiffness: 0.0, damping: 0.0 });
+            let ea = c.mechanics.absorber_relative_errors.unwrap_or([f64::NAN; 3]);
+            let own = |a: &AbsorberMechanics| if a.inertia > 0.0 { a.own_mode().0 } else { 0.0 };
+            let truth_absorber = |value: &dyn Fn(&AbsorberMechanics) -> f64| {
+                mechanics_truth(&|t| t.absorber.as_ref().map_or(0.0, value))
+            };
+            rows.extend([
+                ("absorber inertia", "kg·m²", a.inertia, ea[0] * a.inertia, truth_absorber(&|t| t.inertia)),
+                ("absorber stiffness", "N·m/rad", a.stiffness, ea[1] * a.stiffness, truth_absorber(&|t| t.stiffness)),
+                ("absorber damping", "N·m·s/rad", a.damping, ea[2] * a.damping, truth_absorber(&|t| t.damping)),
+                ("absorber's own mode", "Hz", own(&a), f64::NAN, truth_absorber(&own)),
+            ]);
+        }
         let table: Vec<serde_json::Value> = rows
             .iter()
             .map(|(name, unit, v, se, t)| {

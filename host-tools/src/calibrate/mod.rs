@@ -21,6 +21,7 @@ use crate::analysis::response_point::ResponsePoint;
 use crate::autotune::axis_under_test::{AxisUnderTest, OnFmu};
 use crate::autotune::calibration::{Calibration, PlantPoint};
 use crate::autotune::measured_mechanics::measure_mechanics;
+use crate::autotune::mechanics::AbsorberMechanics;
 use crate::fmu::runner::Fmu;
 use crate::fmu::scenario::Value;
 use friction::{fit_friction, Friction, SpeedPoint};
@@ -66,6 +67,11 @@ impl MachineCalibration {
         plant.load_inertia = m.load_inertia;
         plant.shaft_stiffness = m.shaft_stiffness;
         plant.shaft_damping = m.shaft_damping;
+        // No absorber fitted: none in the twin either, whatever the base had.
+        let absorber = m.absorber.unwrap_or(AbsorberMechanics { inertia: 0.0, stiffness: 0.0, damping: 0.0 });
+        plant.absorber_inertia = absorber.inertia;
+        plant.absorber_stiffness = absorber.stiffness;
+        plant.absorber_damping = absorber.damping;
         // The fit refuses negative friction (`fit_friction`): no clamp here.
         plant.motor_coulomb = share * f.coulomb;
         plant.load_coulomb = (1.0 - share) * f.coulomb;
@@ -81,6 +87,9 @@ impl MachineCalibration {
             ("plant.load_coulomb", plant.load_coulomb),
             ("plant.motor_viscous", plant.motor_viscous),
             ("plant.load_viscous", plant.load_viscous),
+            ("plant.absorber_inertia", plant.absorber_inertia),
+            ("plant.absorber_stiffness", plant.absorber_stiffness),
+            ("plant.absorber_damping", plant.absorber_damping),
         ]
         .into_iter()
         .map(|(k, v)| (k, Value::Float(v)))
