@@ -756,7 +756,7 @@ mod tests {
 
         let mut p = Params::default();
         p.filters.notch2_q = f32::NAN;
-        assert!(p.validate().is_err());
+        assert_eq!(p.validate().map_err(|e| e.field()), Err("filters.notch2_q"));
 
         let mut p = Params::default();
         p.limits.bus_undervoltage = 70.0;

@@ -49,6 +49,7 @@ pub const SECTIONS: [(&str, &[&str]); 3] = [
             "ident-device",
             "tune-device",
             "autotune-virtual-drive",
+            "autotune-virtual-drive-absorbers",
             "robustness",
         ],
     ),
