@@ -107,16 +107,7 @@ fn autotune_tunes_a_machine_it_does_not_ship_and_the_true_plant_keeps_the_margin
     }
     let tuning: host_tools::autotune::velocity_controller::VelocityTuning =
         serde_json::from_value(j["design"]["tuning"].clone()).unwrap();
-    let drive = DriveDynamics::on_plant(&config.control, &config.plant);
-    let period = config.control.rates.velocity_period() as f64;
-    let m = host_tools::autotune::design::margins_of(
-        &tuning,
-        &|f| loop_plant(&drive, &truth, f),
-        period,
-        4000,
-        &truth.features_hz(),
-    )
-    .unwrap();
+    let m = margins_on_truth(&tuning, &config, &truth);
     assert!(m.stable && m.phase_margin_deg >= 44.0 && m.gain_margin_db >= 6.0 && m.sensitivity_peak <= 1.7, "{m:?}");
     let o = servo().arg("autotune").on_fmu(&out).args(["--margin", "reckless"]).output().unwrap();
     assert_eq!(o.status.code(), Some(2));
@@ -163,16 +154,7 @@ fn autotune_finds_an_absorber_and_gives_it_the_second_notch() {
         modes[3]
     );
     assert_eq!(j["verification"]["passed"], true, "{}", j["verification"]);
-    let drive = DriveDynamics::on_plant(&config.control, &config.plant);
-    let period = config.control.rates.velocity_period() as f64;
-    let m = host_tools::autotune::design::margins_of(
-        &tuning,
-        &|f| loop_plant(&drive, &truth, f),
-        period,
-        4000,
-        &truth.features_hz(),
-    )
-    .unwrap();
+    let m = margins_on_truth(&tuning, &config, &truth);
     assert!(m.stable && m.phase_margin_deg >= 45.0 && m.gain_margin_db >= 6.0 && m.sensitivity_peak <= 1.7, "{m:?}");
 }
 
@@ -234,4 +216,23 @@ fn autotune_refuses_a_measurement_that_cannot_carry_a_design() {
         assert!(e.contains(says), "{args:?}: {e}");
         assert!(!out.join("autotune.toml").exists(), "{args:?}: a design was written");
     }
+}
+
+/// The margins of `tuning` on the true analytic plant: `truth` behind the drive `config`
+/// configures.
+fn margins_on_truth(
+    tuning: &VelocityTuning,
+    config: &servo_axis::simulation::SimulationConfig,
+    truth: &Mechanics,
+) -> host_tools::autotune::margins::Margins {
+    let drive = DriveDynamics::on_plant(&config.control, &config.plant);
+    let period = config.control.rates.velocity_period() as f64;
+    host_tools::autotune::design::margins_of(
+        tuning,
+        &|f| loop_plant(&drive, truth, f),
+        period,
+        4000,
+        &truth.features_hz(),
+    )
+    .unwrap()
 }

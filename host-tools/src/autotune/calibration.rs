@@ -311,6 +311,20 @@ fn levenberg_marquardt(points: &[PlantPoint], drive: &DriveDynamics, mut theta: 
 mod tests {
     use super::*;
 
+    /// `truth`'s plant through `drive` at 41 frequencies from 10 Hz to 3 kHz, each reading
+    /// multiplied by `1 + noise() + j·noise()`.
+    fn noisy_points(truth: &Mechanics, drive: &DriveDynamics, noise: &mut impl FnMut() -> f64) -> Vec<PlantPoint> {
+        crate::autotune::margins::log_grid(10.0, 3000.0, 41)
+            .into_iter()
+            .map(|hz| PlantPoint {
+                hz,
+                response: drive.around_machine(hz)
+                    * truth.motor_velocity_per_torque(hz)
+                    * Complex64::new(1.0 + noise(), noise()),
+            })
+            .collect()
+    }
+
     /// Points of a known machine through the default drive, with 0.5 % multiplicative noise:
     /// the fit recovers its inertias and stiffness within 2 % and the damping within 20 %,
     /// from starting points that know nothing of it.
@@ -336,15 +350,7 @@ mod tests {
                 load_viscous: 0.0,
                 absorber: None,
             };
-            let points: Vec<PlantPoint> = crate::autotune::margins::log_grid(10.0, 3000.0, 41)
-                .into_iter()
-                .map(|hz| PlantPoint {
-                    hz,
-                    response: drive.around_machine(hz)
-                        * truth.motor_velocity_per_torque(hz)
-                        * Complex64::new(1.0 + noise(), noise()),
-                })
-                .collect();
+            let points = noisy_points(&truth, &drive, &mut noise);
             let c = calibrate(&points, &drive).unwrap();
             let m = c.mechanics;
             let rel = |a: f64, b: f64| (a / b - 1.0).abs();
@@ -391,15 +397,7 @@ mod tests {
                     damping: 2.0 * 0.02 * (ka * ja).sqrt(),
                 }),
             };
-            let points: Vec<PlantPoint> = crate::autotune::margins::log_grid(10.0, 3000.0, 41)
-                .into_iter()
-                .map(|hz| PlantPoint {
-                    hz,
-                    response: drive.around_machine(hz)
-                        * truth.motor_velocity_per_torque(hz)
-                        * Complex64::new(1.0 + noise(), noise()),
-                })
-                .collect();
+            let points = noisy_points(&truth, &drive, &mut noise);
             let c = calibrate(&points, &drive).unwrap();
             let m = c.mechanics;
             let a = m.absorber.unwrap_or_else(|| panic!("no absorber found: {c:?}"));
