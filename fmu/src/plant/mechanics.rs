@@ -147,7 +147,9 @@ impl TwoInertia {
 
     /// Advance the mechanical part of `x` by one sub-step: the motor torque goes from
     /// `torque0` (rising at `torque_rate`, Nm/s) to `torque1`, the disturbance `td` is held,
-    /// `coulomb0` is the Coulomb friction at the start.
+    /// `coulomb0` is the Coulomb friction at the start. Returns the Coulomb friction at the
+    /// end velocities where the step found it (the friction did not change over the step),
+    /// None where the caller has to compute it.
     pub fn advance(
         &self,
         x: &mut PlantState,
@@ -156,13 +158,13 @@ impl TwoInertia {
         torque1: f64,
         td: f64,
         coulomb0: [f64; 2],
-    ) {
+    ) -> Option<[f64; 2]> {
         let base = [x.motor_angle - x.load_angle, x.motor_velocity, x.load_velocity, x.load_angle];
         let inputs = (torque0, torque_rate, torque1, td, coulomb0);
-        let y = match &self.discrete {
+        let (y, coulomb1) = match &self.discrete {
             Discrete::TwoInertia(hold) => {
-                let y = self.linear_step(hold, base, inputs);
-                [y[0], y[1], y[2], y[3], 0.0, 0.0]
+                let (y, coulomb1) = self.linear_step(hold, base, inputs);
+                ([y[0], y[1], y[2], y[3], 0.0, 0.0], coulomb1)
             }
             Discrete::WithAbsorber(hold) => {
                 let full = [base[0], base[1], base[2], base[3], x.absorber_twist, x.absorber_velocity];
@@ -175,32 +177,41 @@ impl TwoInertia {
         x.load_velocity = y[2];
         x.absorber_twist = y[4];
         x.absorber_velocity = y[5];
+        coulomb1
     }
 
     /// One sub-step of the linear part with the torque held as a quadratic and the Coulomb
-    /// friction as a ramp: predictor (friction held), then one corrector.
+    /// friction as a ramp: predictor (friction held), then one corrector; with the friction
+    /// at the end where the corrector left the predictor's velocities.
     fn linear_step<const N: usize>(
         &self,
         hold: &PolynomialHold<N, 2>,
         y: [f64; N],
         (torque0, torque_rate, torque1, td, coulomb0): (f64, f64, f64, f64, [f64; 2]),
-    ) -> [f64; N] {
+    ) -> ([f64; N], Option<[f64; 2]>) {
         let u0 = [torque0 - coulomb0[0], td - coulomb0[1]];
         let rise = self.substep * torque_rate;
         // Predictor: Coulomb friction held at its start value.
         let y1 = hold.step_shaping_first(&y, &u0, rise, torque1 - torque0 - rise);
         // Corrector: friction ramps to its value at the predicted end velocities (more passes
         // were tried: they do not reduce the error, which comes from the friction's bend
-        // within the step near zero speed, not from the predicted end value).
+        // within the step near zero speed, not from the predicted end value). Where that
+        // value is the start's (either side saturated at any working speed), the ramp is flat
+        // and the predictor stands: the step's result then does not wait for the friction.
         let mut y_end = y1;
+        let mut coulomb_end = None;
         for _ in 0..CORRECTOR_PASSES {
             let coulomb1 = self.coulomb(y_end[1], y_end[2]);
+            if coulomb1 == coulomb0 {
+                coulomb_end = Some(coulomb1);
+                break;
+            }
             let correction = hold.slope_response(&[coulomb0[0] - coulomb1[0], coulomb0[1] - coulomb1[1]]);
             for ((v, base), c) in y_end.iter_mut().zip(y1).zip(correction) {
                 *v = base + c;
             }
         }
-        y_end
+        (y_end, coulomb_end)
     }
 }
 

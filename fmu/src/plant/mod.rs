@@ -148,9 +148,9 @@ impl Plant {
                 0.0
             };
             let torque_end = self.motor.torque(x.id, x.iq);
-            self.mechanics.advance(&mut x, torque, torque_rate, torque_end, u.disturbance_torque, coulomb);
+            let found = self.mechanics.advance(&mut x, torque, torque_rate, torque_end, u.disturbance_torque, coulomb);
             torque = torque_end;
-            coulomb = self.mechanics.coulomb(x.motor_velocity, x.load_velocity);
+            coulomb = found.unwrap_or_else(|| self.mechanics.coulomb(x.motor_velocity, x.load_velocity));
             (self.motor_acceleration, self.load_acceleration) =
                 self.mechanics.acceleration(&x, torque, u.disturbance_torque, coulomb);
         }
@@ -206,6 +206,7 @@ impl Plant {
 
     /// Sample the sensors (advances the noise generators): the currents through the sensors'
     /// offsets and gains, the encoder's counter from its start in its own direction.
+    #[inline(always)]
     pub fn measure(&mut self) -> Measurements {
         let p = &self.params;
         let theta_e = p.pole_pairs as f64 * self.state.motor_angle + self.motor.electrical_offset;

@@ -27,11 +27,24 @@ pub struct Pmsm {
     mean_decay: f64,
     /// `1/J_motor`: the rotor's own response to a torque change within a step.
     inverse_motor_inertia: f64,
-    /// Reciprocals and ratios the per-step code multiplies by.
+    /// Reciprocals, ratios and products the per-step code multiplies by (computed once: the
+    /// step is the simulation's critical path).
     inv_ld: f64,
     inv_lq: f64,
     lq_over_ld: f64,
     ld_over_lq: f64,
+    /// `h/2`, `h²/8`, `h/2·p`, `(n·h)²`, `R²/(Ld·Lq)` (the winding matrix's determinant at
+    /// standstill), `−R/Ld`, `−R/Lq`.
+    half_step: f64,
+    eighth_step_squared: f64,
+    half_step_pole_pairs: f64,
+    half_difference_step_squared: f64,
+    standstill_determinant: f64,
+    neg_r_over_ld: f64,
+    neg_r_over_lq: f64,
+    /// The torque `1.5·p·(ψ·iq + (Ld − Lq)·id·iq)` as `torque_flux·iq + torque_reluctance·id·iq`.
+    torque_flux: f64,
+    torque_reluctance: f64,
 }
 
 impl Pmsm {
@@ -54,6 +67,18 @@ impl Pmsm {
             inv_lq: 1.0 / lq,
             lq_over_ld: lq / ld,
             ld_over_lq: ld / lq,
+            half_step: 0.5 * substep,
+            eighth_step_squared: 0.125 * substep * substep,
+            half_step_pole_pairs: 0.5 * substep * p.pole_pairs as f64,
+            half_difference_step_squared: {
+                let nh = 0.5 * (r / lq - r / ld) * substep;
+                nh * nh
+            },
+            standstill_determinant: (r / ld) * (r / lq),
+            neg_r_over_ld: -r / ld,
+            neg_r_over_lq: -r / lq,
+            torque_flux: 1.5 * p.pole_pairs as f64 * p.flux_linkage,
+            torque_reluctance: 1.5 * p.pole_pairs as f64 * (ld - lq),
         }
     }
 
@@ -83,8 +108,9 @@ impl Pmsm {
     ) -> f64 {
         let h = self.substep;
         let (p, r, ld, lq, psi) = (self.pole_pairs, self.resistance, self.ld, self.lq, self.flux_linkage);
-        let advance = 0.5 * h * x.motor_velocity + 0.125 * h * h * motor_acceleration;
-        let half_turn = 0.5 * h * p * (x.motor_velocity + 0.5 * h * motor_acceleration);
+        let (half_h, eighth_h2) = (self.half_step, self.eighth_step_squared);
+        let advance = half_h * x.motor_velocity + eighth_h2 * motor_acceleration;
+        let half_turn = self.half_step_pole_pairs * (x.motor_velocity + half_h * motor_acceleration);
         let (s, c) = match start_rotor {
             Some(rotor) if (p * advance).abs() < MAX_ROTATION => rotate(rotor, p * advance),
             _ => sin_cos(p * (x.motor_angle + advance) + self.electrical_offset),
@@ -97,45 +123,50 @@ impl Pmsm {
         // shaft passes the torque on only later).
         let we0 = p * x.motor_velocity;
         let (inv_ld, inv_lq) = (self.inv_ld, self.inv_lq);
+        let (a00, a11) = (self.neg_r_over_ld, self.neg_r_over_lq);
         let did = (vd - r * x.id + we0 * lq * x.iq) * inv_ld;
         let diq = (vq - r * x.iq - we0 * (ld * x.id + psi)) * inv_lq;
-        let jerk = 1.5 * p * (psi * diq + (ld - lq) * (did * x.iq + x.id * diq)) * self.inverse_motor_inertia;
-        let we = p * (x.motor_velocity + 0.5 * h * motor_acceleration + 0.125 * h * h * jerk);
-        let mid_acceleration = motor_acceleration + 0.5 * h * jerk;
+        let jerk =
+            (self.torque_flux * diq + self.torque_reluctance * (did * x.iq + x.id * diq)) * self.inverse_motor_inertia;
+        let we = p * (x.motor_velocity + half_h * motor_acceleration + eighth_h2 * jerk);
+        let mid_acceleration = motor_acceleration + half_h * jerk;
         // x' = A·x + b(t) with A = [[−R/Ld, ωe·Lq/Ld], [−ωe·Ld/Lq, −R/Lq]] and b ramping
         // through the step: the rotor-frame voltage turns at ωe (d/dt (vd, vq) = ωe·(vq, −vd))
         // and the back-EMF follows the acceleration.
         let a01 = we * self.lq_over_ld;
         let a10 = -we * self.ld_over_lq;
-        let (a00, a11) = (-r * inv_ld, -r * inv_lq);
         let b_mid = [vd * inv_ld, (vq - we * psi) * inv_lq];
         let b_rise = [h * we * vq * inv_ld, h * (-we * vd - p * mid_acceleration * psi) * inv_lq];
         let b0 = [b_mid[0] - 0.5 * b_rise[0], b_mid[1] - 0.5 * b_rise[1]];
-        // e^{A·h} = e^{m·h}·(C·I + h·S·N), N² = (n² + a01·a10)·I.
+        // e^{A·h} = e^{m·h}·(C·I + h·S·N), N² = (n² + a01·a10)·I = (n² − ωe²)·I.
         let n = self.half_difference;
-        let (cz, sz) = cosh_sinhc((n * n + a01 * a10) * h * h);
+        let we_h = we * h;
+        let (cz, sz) = cosh_sinhc(self.half_difference_step_squared - we_h * we_h);
         let (g, hs) = (self.mean_decay, self.mean_decay * h * sz);
         let phi = [[g * cz + hs * n, hs * a01], [hs * a10, g * cz - hs * n]];
-        let inv_det = 1.0 / (a00 * a11 - a01 * a10);
+        // det A = R²/(Ld·Lq) + ωe².
+        let inv_det = 1.0 / (self.standstill_determinant + we * we);
         let solve = |v: [f64; 2]| [(a11 * v[0] - a01 * v[1]) * inv_det, (-a10 * v[0] + a00 * v[1]) * inv_det];
         let phi_minus_one =
             |v: [f64; 2]| [(phi[0][0] - 1.0) * v[0] + phi[0][1] * v[1], phi[1][0] * v[0] + (phi[1][1] - 1.0) * v[1]];
-        // x(h) = Φ·x0 + Γ0·b0 + Γ1·(b1 − b0), Γ0 = A⁻¹(Φ − I), Γ1 = A⁻¹(Γ0 − h·I)/h.
-        let held = solve(phi_minus_one(b0));
+        // x(h) = Φ·x0 + Γ0·b0 + Γ1·(b1 − b0), Γ0 = A⁻¹(Φ − I), Γ1 = A⁻¹(Γ0 − h·I)/h: the two
+        // input terms are A⁻¹ of one sum, (Φ − I)·b0 + Γ0·rise/h − rise.
         let g0_rise = solve(phi_minus_one(b_rise));
         let inv_h = self.inverse_substep;
-        let ramp = solve([g0_rise[0] * inv_h - b_rise[0], g0_rise[1] * inv_h - b_rise[1]]);
+        let held = phi_minus_one(b0);
+        let inputs = solve([held[0] + g0_rise[0] * inv_h - b_rise[0], held[1] + g0_rise[1] * inv_h - b_rise[1]]);
         let (id, iq) = (x.id, x.iq);
-        x.id = phi[0][0] * id + phi[0][1] * iq + held[0] + ramp[0];
-        x.iq = phi[1][0] * id + phi[1][1] * iq + held[1] + ramp[1];
+        x.id = phi[0][0] * id + phi[0][1] * iq + inputs[0];
+        x.iq = phi[1][0] * id + phi[1][1] * iq + inputs[1];
         let did0 = a00 * id + a01 * iq + b0[0];
         let diq0 = a10 * id + a11 * iq + b0[1];
-        1.5 * p * (psi * diq0 + (ld - lq) * (did0 * iq + id * diq0))
+        self.torque_flux * diq0 + self.torque_reluctance * (did0 * iq + id * diq0)
     }
 
     /// Electromagnetic torque `1.5·p·(ψ·iq + (Ld − Lq)·id·iq)`.
+    #[inline(always)]
     pub fn torque(&self, id: f64, iq: f64) -> f64 {
-        1.5 * self.pole_pairs * (self.flux_linkage * iq + (self.ld - self.lq) * id * iq)
+        self.torque_flux * iq + self.torque_reluctance * id * iq
     }
 }
 
