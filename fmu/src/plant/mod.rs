@@ -73,9 +73,18 @@ pub struct Plant {
     coulomb_cache: ([f64; 2], [f64; 2]),
     /// Encoder counts per radian of motor angle.
     counts_per_radian: f64,
-    /// The motor angle of the last measurement and `(sin, cos)` of its electrical angle.
-    measured_rotor: Option<(f64, f64, f64)>,
+    /// A motor angle and `(sin, cos)` of its electrical angle: the last measurement's, then
+    /// the end of the tick's (that one turned by the tick's advance), which the next
+    /// measurement takes when the rotor is still there.
+    rotor: Option<(f64, f64, f64)>,
+    /// Turns in a row since `rotor` was last computed from its angle (each adds a rounding
+    /// or two: [`ROTOR_RESYNC`] of them bound the sum far below the plant's own error).
+    rotor_turns: u32,
 }
+
+/// The most ticks whose sensed rotor angle comes from turning the previous one before it is
+/// computed from the angle again.
+const ROTOR_RESYNC: u32 = 64;
 
 impl Plant {
     pub fn new(params: PlantParams) -> Result<Self, PlantError> {
@@ -93,7 +102,8 @@ impl Plant {
             electromagnetic_torque: 0.0,
             coulomb_cache: ([0.0; 2], [0.0; 2]),
             counts_per_radian: params.encoder_counts_per_rev as f64 / TAU,
-            measured_rotor: None,
+            rotor: None,
+            rotor_turns: 0,
         })
     }
 
@@ -139,7 +149,7 @@ impl Plant {
             let first = substep == 0;
             let torque_rate = if u.bridge_enabled {
                 // The sensors' angle is the start of the step when measure() saw this state.
-                let start_rotor = match self.measured_rotor {
+                let start_rotor = match self.rotor {
                     Some((angle, s, c)) if first && angle.to_bits() == x.motor_angle.to_bits() => Some((s, c)),
                     _ => None,
                 };
@@ -154,6 +164,19 @@ impl Plant {
             (self.motor_acceleration, self.load_acceleration) =
                 self.mechanics.acceleration(&x, torque, u.disturbance_torque, coulomb);
         }
+        // The rotor at the tick's end for the next measurement: the start's turned by the
+        // tick's advance (a few multiplications instead of a sine and a cosine).
+        self.rotor = match self.rotor {
+            Some((angle, s, c)) if angle.to_bits() == self.state.motor_angle.to_bits() => {
+                let turn = self.motor.pole_pairs * (x.motor_angle - angle);
+                (turn.abs() < pmsm::MAX_ROTATION && self.rotor_turns < ROTOR_RESYNC).then(|| {
+                    self.rotor_turns += 1;
+                    let (s, c) = pmsm::rotate((s, c), turn);
+                    (x.motor_angle, s, c)
+                })
+            }
+            _ => None,
+        };
         self.state = x;
         self.coulomb_cache = ([x.motor_velocity, x.load_velocity], coulomb);
         self.accelerometer = self.load_acceleration + self.acceleration_noise.sample();
@@ -209,9 +232,14 @@ impl Plant {
     #[inline(always)]
     pub fn measure(&mut self) -> Measurements {
         let p = &self.params;
-        let theta_e = p.pole_pairs as f64 * self.state.motor_angle + self.motor.electrical_offset;
-        let (s, c) = discretisation::sin_cos(theta_e);
-        self.measured_rotor = Some((self.state.motor_angle, s, c));
+        let (s, c) = match self.rotor {
+            Some((angle, s, c)) if angle.to_bits() == self.state.motor_angle.to_bits() => (s, c),
+            _ => {
+                self.rotor_turns = 0;
+                discretisation::sin_cos(p.pole_pairs as f64 * self.state.motor_angle + self.motor.electrical_offset)
+            }
+        };
+        self.rotor = Some((self.state.motor_angle, s, c));
         let alpha = self.state.id * c - self.state.iq * s;
         let beta = self.state.id * s + self.state.iq * c;
         let ia = alpha;
@@ -225,5 +253,39 @@ impl Plant {
             encoder_count,
             bus_voltage: p.bus_voltage,
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The sensed rotor angle turned from tick to tick stays on the angle's own sine and
+    /// cosine, through the resyncs, at speed and through a reversal.
+    #[test]
+    fn the_rotor_turned_tick_by_tick_keeps_the_sine_and_cosine_of_its_angle() {
+        let params = PlantParams { rotor_start_angle: 0.7, ..PlantParams::default() };
+        let mut plant = Plant::new(params).unwrap();
+        let (mut worst, mut turned) = (0.0f64, 0u32);
+        for tick in 0..200_000u32 {
+            // A voltage vector turning at 300 rad/s electrical, reversed half-way.
+            let t = tick as f64 * params.tick;
+            let angle = if tick < 100_000 { 300.0 * t } else { 300.0 * (2.0 * 100_000.0 * params.tick - t) };
+            let duties = [0.0, 1.0, 2.0].map(|k: f64| 0.5 + 0.1 * (angle - k * TAU / 3.0).cos());
+            plant.measure();
+            let (a, s, c) = plant.rotor.unwrap();
+            let theta = params.pole_pairs as f64 * a + plant.motor.electrical_offset;
+            let (ws, wc) = discretisation::sin_cos(theta);
+            // In units of the electrical angle's own rounding (the reference's uncertainty)
+            // or of 1e-16, whichever is larger.
+            let unit = (theta.abs() * f64::EPSILON).max(1e-16);
+            worst = worst.max((s - ws).abs() / unit).max((c - wc).abs() / unit);
+            turned += (plant.rotor_turns > 0) as u32;
+            plant.advance(&PlantInputs { duties, bridge_enabled: true, disturbance_torque: 0.0 });
+        }
+        assert!(plant.state.motor_velocity.abs() > 1.0, "the motor turned");
+        assert!(turned > 150_000, "most ticks turned the rotor ({turned})");
+        // Up to 64 turns of a few roundings each, against the reference's rounding of the angle.
+        assert!(worst < 8.0, "worst difference {worst:.1} units");
     }
 }

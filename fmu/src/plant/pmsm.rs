@@ -171,11 +171,12 @@ impl Pmsm {
 }
 
 /// Largest turn [`rotate`] takes (rad): its series then leave less than 0.05⁹/9! ≈ 5e-18.
-const MAX_ROTATION: f64 = 0.05;
+pub const MAX_ROTATION: f64 = 0.05;
 
 /// `(sin, cos)` of an angle turned by `delta` (|delta| < [`MAX_ROTATION`]), from `(sin, cos)`
 /// of the angle: the angle-sum formulas with Taylor series of `sin delta` and `cos delta`.
-fn rotate((s, c): (f64, f64), delta: f64) -> (f64, f64) {
+#[inline(always)]
+pub fn rotate((s, c): (f64, f64), delta: f64) -> (f64, f64) {
     let d2 = delta * delta;
     let sin_d = delta * (1.0 - d2 * (1.0 / 6.0 - d2 * (1.0 / 120.0 - d2 * (1.0 / 5040.0))));
     let cos_d = 1.0 - d2 * (0.5 - d2 * (1.0 / 24.0 - d2 * (1.0 / 720.0 - d2 * (1.0 / 40_320.0))));
