@@ -91,7 +91,8 @@ impl<const N: usize, const M: usize> PolynomialHold<N, M> {
     }
 
     /// `Φ·x + Γ0·u0 + Γσ·σ + Γκ·κ` when only the first input has a slope and a curve (`σ`,
-    /// `κ`) and the others are held.
+    /// `κ`) and the others are held. The curve is added last: it is the input known last (the
+    /// torque at the step's end, on the simulation's critical path).
     pub fn step_shaping_first(&self, x: &[f64; N], u0: &[f64; M], slope: f64, curve: f64) -> [f64; N] {
         let mut y = [0.0; N];
         for (i, yi) in y.iter_mut().enumerate() {
@@ -99,11 +100,11 @@ impl<const N: usize, const M: usize> PolynomialHold<N, M> {
             for j in 0..N {
                 acc += self.phi[i][j] * x[j];
             }
-            acc += self.gamma0[i][0] * u0[0] + self.gamma_slope[i][0] * slope + self.gamma_curve[i][0] * curve;
+            acc += self.gamma0[i][0] * u0[0] + self.gamma_slope[i][0] * slope;
             for j in 1..M {
                 acc += self.gamma0[i][j] * u0[j];
             }
-            *yi = acc;
+            *yi = acc + self.gamma_curve[i][0] * curve;
         }
         y
     }

@@ -192,12 +192,13 @@ impl TwoInertia {
         let u0 = [torque0 - coulomb0[0], td - coulomb0[1]];
         let rise = self.substep * torque_rate;
         // Predictor: Coulomb friction held at its start value.
-        let y1 = hold.step_shaping_first(&y, &u0, rise, torque1 - torque0 - rise);
+        let y1 = hold.step_shaping_first(&y, &u0, rise, torque1 - (torque0 + rise));
         // Corrector: friction ramps to its value at the predicted end velocities (more passes
         // were tried: they do not reduce the error, which comes from the friction's bend
         // within the step near zero speed, not from the predicted end value). Where that
-        // value is the start's (either side saturated at any working speed), the ramp is flat
-        // and the predictor stands: the step's result then does not wait for the friction.
+        // value is the start's (both sides saturated at any working speed, or no friction),
+        // the ramp is flat and the predictor stands: the step's result then does not wait for
+        // the friction.
         let mut y_end = y1;
         let mut coulomb_end = None;
         for _ in 0..CORRECTOR_PASSES {

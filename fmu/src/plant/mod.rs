@@ -82,8 +82,8 @@ pub struct Plant {
     rotor_turns: u32,
 }
 
-/// The most ticks whose sensed rotor angle comes from turning the previous one before it is
-/// computed from the angle again.
+/// The most turns in a row of the sensed rotor's (sin, cos) (it is computed from the angle
+/// again at the next tick: every 65th tick at the most).
 const ROTOR_RESYNC: u32 = 64;
 
 impl Plant {
@@ -148,7 +148,8 @@ impl Plant {
         for substep in 0..self.params.substeps {
             let first = substep == 0;
             let torque_rate = if u.bridge_enabled {
-                // The sensors' angle is the start of the step when measure() saw this state.
+                // The rotor's (sin, cos) the sensors took at this state's angle (computed, or the
+                // last tick's turned), when the measurement saw this state.
                 let start_rotor = match self.rotor {
                     Some((angle, s, c)) if first && angle.to_bits() == x.motor_angle.to_bits() => Some((s, c)),
                     _ => None,
@@ -261,18 +262,35 @@ mod tests {
     use super::*;
 
     /// The sensed rotor angle turned from tick to tick stays on the angle's own sine and
-    /// cosine, through the resyncs, at speed and through a reversal.
+    /// cosine and on the unit circle, through the resyncs, through a reversal, and where the
+    /// rotor turns too far in a tick to be turned (computed from the angle at every tick), and
+    /// after its angle is set from outside.
     #[test]
     fn the_rotor_turned_tick_by_tick_keeps_the_sine_and_cosine_of_its_angle() {
         let params = PlantParams { rotor_start_angle: 0.7, ..PlantParams::default() };
         let mut plant = Plant::new(params).unwrap();
-        let (mut worst, mut turned) = (0.0f64, 0u32);
-        for tick in 0..200_000u32 {
-            // A voltage vector turning at 300 rad/s electrical, reversed half-way.
+        let (mut worst, mut worst_norm) = (0.0f64, 0.0f64);
+        let (mut turned, mut computed, mut fast_computed) = (0u32, 0u32, 0u32);
+        let ticks = 200_000u32;
+        for tick in 0..ticks {
+            // A voltage vector turning at 300 rad/s electrical, reversed half-way; then the
+            // bridge off and the machine set spinning at 300 rad/s (1200 electrical: 0.075 rad
+            // a tick).
             let t = tick as f64 * params.tick;
             let angle = if tick < 100_000 { 300.0 * t } else { 300.0 * (2.0 * 100_000.0 * params.tick - t) };
             let duties = [0.0, 1.0, 2.0].map(|k: f64| 0.5 + 0.1 * (angle - k * TAU / 3.0).cos());
+            let fast = tick >= 180_000;
+            if tick == 180_000 {
+                (plant.state.motor_angle, plant.state.load_angle) = (-3.1, -3.1);
+            }
+            if fast {
+                (plant.state.motor_velocity, plant.state.load_velocity) = (300.0, 300.0);
+            }
             plant.measure();
+            assert!(plant.rotor_turns <= ROTOR_RESYNC, "tick {tick}: {} turns in a row", plant.rotor_turns);
+            computed += (plant.rotor_turns == 0) as u32;
+            fast_computed += (fast && plant.rotor_turns == 0) as u32;
+            turned += (plant.rotor_turns > 0) as u32;
             let (a, s, c) = plant.rotor.unwrap();
             let theta = params.pole_pairs as f64 * a + plant.motor.electrical_offset;
             let (ws, wc) = discretisation::sin_cos(theta);
@@ -280,12 +298,20 @@ mod tests {
             // or of 1e-16, whichever is larger.
             let unit = (theta.abs() * f64::EPSILON).max(1e-16);
             worst = worst.max((s - ws).abs() / unit).max((c - wc).abs() / unit);
-            turned += (plant.rotor_turns > 0) as u32;
-            plant.advance(&PlantInputs { duties, bridge_enabled: true, disturbance_torque: 0.0 });
+            worst_norm = worst_norm.max((s * s + c * c - 1.0).abs());
+            plant.advance(&PlantInputs { duties, bridge_enabled: !fast, disturbance_torque: 0.0 });
         }
-        assert!(plant.state.motor_velocity.abs() > 1.0, "the motor turned");
         assert!(turned > 150_000, "most ticks turned the rotor ({turned})");
+        // A recompute after every ROTOR_RESYNC turns (and at every fast tick).
+        let slow_ticks = 180_000 / (ROTOR_RESYNC + 1);
+        assert!(
+            computed >= slow_ticks + 20_000 && computed <= slow_ticks + 20_100,
+            "{computed} recomputes, {fast_computed} fast"
+        );
+        assert_eq!(fast_computed, 20_000, "a tick that turns 0.075 rad is computed from its angle");
         // Up to 64 turns of a few roundings each, against the reference's rounding of the angle.
         assert!(worst < 8.0, "worst difference {worst:.1} units");
+        // At most an epsilon a turn (18 of them measured).
+        assert!(worst_norm < ROTOR_RESYNC as f64 * f64::EPSILON, "sin² + cos² off 1 by {worst_norm:e}");
     }
 }

@@ -60,8 +60,12 @@ pub fn step_error() -> Result<StepError> {
     let mut err = [0.0f64; 4];
     let mut peak = [0.0f64; 4];
     for u in &inputs {
-        coarse.advance(u);
-        fine.advance(u);
+        // Each tick as the simulation runs it: the sensors sampled at its start (the plant
+        // keeps the rotor's angle they saw for the step), then the step.
+        for plant in [&mut coarse, &mut fine] {
+            plant.measure();
+            plant.advance(u);
+        }
         let (x, y) = (coarse.state, fine.state);
         let pairs = [
             (x.iq, y.iq),
