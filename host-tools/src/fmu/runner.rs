@@ -251,10 +251,15 @@ impl Fmu {
         r.map(|_| ()).map_err(|_| anyhow!("the FMU refused {} = {value}: {}", var.name, crate::fmu::log::reasons()))
     }
 
-    /// The outputs `names` (the scenario's `record` list), or every output when it is empty.
+    /// The outputs `names` (the scenario's `record` list, in its order), or every output when
+    /// it is empty: the Float64 outputs, then the Int32 ones, then the Boolean ones, each in
+    /// value-reference order, the order a step reads them in (one Get per type), so that a
+    /// recorded row is the values as read, without a gather into another order.
     pub fn recorded(&self, names: &[String]) -> Result<Vec<&VariableInfo>> {
         if names.is_empty() {
-            return Ok(self.outputs());
+            let mut outputs = self.outputs();
+            outputs.sort_by_key(|v| (kind_rank(v.kind), v.vr));
+            return Ok(outputs);
         }
         names
             .iter()
@@ -493,6 +498,15 @@ impl Fmu {
         progress(1.0);
         inst.terminate().ok();
         Ok(trace)
+    }
+}
+
+/// The order the step's Gets read the output types in (Float64, Int32, Boolean).
+fn kind_rank(kind: Kind) -> u8 {
+    match kind {
+        Kind::Float64 => 0,
+        Kind::Int32 => 1,
+        Kind::Boolean => 2,
     }
 }
 
