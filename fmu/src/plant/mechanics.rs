@@ -120,11 +120,6 @@ impl TwoInertia {
         }
     }
 
-    /// Torque transmitted by the shaft from motor to load (Nm).
-    pub fn shaft_torque(&self, x: &PlantState) -> f64 {
-        self.stiffness * (x.motor_angle - x.load_angle) + self.damping * (x.motor_velocity - x.load_velocity)
-    }
-
     /// Smoothed Coulomb friction torques `Fc·tanh(ω/ω_s)` on the motor and the load.
     pub fn coulomb(&self, motor_velocity: f64, load_velocity: f64) -> [f64; 2] {
         [
@@ -134,9 +129,11 @@ impl TwoInertia {
     }
 
     /// `(dω_motor/dt, dω_load/dt)` for motor torque `tm`, load disturbance `td` and the
-    /// Coulomb friction torques `coulomb` at the state's velocities.
-    pub fn acceleration(&self, x: &PlantState, tm: f64, td: f64, coulomb: [f64; 2]) -> (f64, f64) {
-        let shaft = self.shaft_torque(x);
+    /// Coulomb friction torques `coulomb` at the state's velocities; `twist` is the shaft's
+    /// (motor angle less load angle, as the step integrated it: not recomputed from the two
+    /// angles, which are large beside it and known later).
+    pub fn acceleration(&self, x: &PlantState, twist: f64, tm: f64, td: f64, coulomb: [f64; 2]) -> (f64, f64) {
+        let shaft = self.stiffness * twist + self.damping * (x.motor_velocity - x.load_velocity);
         let fm = coulomb[0] + self.motor_viscous * x.motor_velocity;
         let fl = coulomb[1] + self.load_viscous * x.load_velocity;
         let absorber = self
@@ -147,9 +144,9 @@ impl TwoInertia {
 
     /// Advance the mechanical part of `x` by one sub-step: the motor torque goes from
     /// `torque0` (rising at `torque_rate`, Nm/s) to `torque1`, the disturbance `td` is held,
-    /// `coulomb0` is the Coulomb friction at the start. Returns the Coulomb friction at the
-    /// end velocities where the step found it (the friction did not change over the step),
-    /// None where the caller has to compute it.
+    /// `coulomb0` is the Coulomb friction at the start. Returns the shaft's twist at the end,
+    /// and the Coulomb friction at the end velocities where the step found it (the friction
+    /// did not change over the step), None where the caller has to compute it.
     pub fn advance(
         &self,
         x: &mut PlantState,
@@ -158,7 +155,7 @@ impl TwoInertia {
         torque1: f64,
         td: f64,
         coulomb0: [f64; 2],
-    ) -> Option<[f64; 2]> {
+    ) -> (f64, Option<[f64; 2]>) {
         let base = [x.motor_angle - x.load_angle, x.motor_velocity, x.load_velocity, x.load_angle];
         let inputs = (torque0, torque_rate, torque1, td, coulomb0);
         let (y, coulomb1) = match &self.discrete {
@@ -177,7 +174,7 @@ impl TwoInertia {
         x.load_velocity = y[2];
         x.absorber_twist = y[4];
         x.absorber_velocity = y[5];
-        coulomb1
+        (y[0], coulomb1)
     }
 
     /// One sub-step of the linear part with the torque held as a quadratic and the Coulomb

@@ -159,11 +159,12 @@ impl Plant {
                 0.0
             };
             let torque_end = self.motor.torque(x.id, x.iq);
-            let found = self.mechanics.advance(&mut x, torque, torque_rate, torque_end, u.disturbance_torque, coulomb);
+            let (twist, found) =
+                self.mechanics.advance(&mut x, torque, torque_rate, torque_end, u.disturbance_torque, coulomb);
             torque = torque_end;
             coulomb = found.unwrap_or_else(|| self.mechanics.coulomb(x.motor_velocity, x.load_velocity));
             (self.motor_acceleration, self.load_acceleration) =
-                self.mechanics.acceleration(&x, torque, u.disturbance_torque, coulomb);
+                self.mechanics.acceleration(&x, twist, torque, u.disturbance_torque, coulomb);
         }
         // The rotor at the tick's end for the next measurement: the start's turned by the
         // tick's advance (a few multiplications instead of a sine and a cosine).
