@@ -107,10 +107,19 @@ def scenario_inputs(md, sc):
     return variables, names, input_table(sc.events, names, sc.n, sc.h, start)
 
 
+# The order the Rust host records every output in: the Float64 outputs, then the Int32 ones,
+# then the Boolean ones (FMI 2.0's Real, Integer, Boolean), each in value-reference order.
+TYPE_RANK = {"Float64": 0, "Real": 0, "Int32": 1, "Integer": 1, "Boolean": 2}
+
+
 def output_names(md, sc):
     """The recorded outputs: the scenario's `record` list in its order, as the Rust host records
-    it, or every output in value-reference order; exits on a name that is not an output."""
-    outputs = sorted((v for v in md.modelVariables if v.causality == "output"), key=lambda v: v.valueReference)
+    it, or every output as the Rust host orders them (TYPE_RANK, then value reference); exits
+    on a name that is not an output."""
+    outputs = sorted(
+        (v for v in md.modelVariables if v.causality == "output"),
+        key=lambda v: (TYPE_RANK.get(v.type, 3), v.valueReference),
+    )
     out_names = [v.name for v in outputs]
     if sc.record:
         unknown = [nm for nm in sc.record if nm not in out_names]
