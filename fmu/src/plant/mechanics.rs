@@ -13,8 +13,10 @@ use super::discretisation::PolynomialHold;
 use super::{PlantParams, PlantState};
 
 /// Discrete state `[θm − θL, ωm, ωL, θL]` (and `θL − θa, ωa` with the absorber): the twists
-/// are integrated directly, so that the large absolute angles never enter the spring
-/// equations. Velocities are at indices 1 and 2 in both layouts.
+/// are integrated directly over a sub-step, so that the large absolute angles do not enter
+/// the spring equations within it (a sub-step starts from the state's angles' difference),
+/// and the step's end accelerations take the twist it integrated. Velocities are at indices 1
+/// and 2 in both layouts.
 const CORRECTOR_PASSES: usize = 1;
 
 /// The smallest |x| for which `libm::tanh` takes its saturated branch (the high word of |x|
