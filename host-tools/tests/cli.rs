@@ -973,7 +973,7 @@ fn run_and_sequence_refuse_a_stop_time_whose_trace_would_not_fit_memory() {
         let err = String::from_utf8_lossy(&o.stderr);
         assert_eq!(o.status.code(), Some(2), "{command}: {err}");
         assert!(err.contains("stop_time = 1000000000 s") && err.contains("1 GiB"), "{command}: {err}");
-        // The longest that fits at the default 0.25 ms with every output recorded (762.6 s
+        // The longest that fits at the default 0.25 ms with every output recorded (633.1 s
         // with today's outputs): from the trace's row size, not a copy of today's count.
         let columns = host_tools::fmu::trace_budget::fmu_output_count() + 1;
         let longest = ((1u64 << 30) as f64 / (8.0 * columns as f64) - 1.0).floor() * 0.25e-3;

@@ -7,8 +7,8 @@
 //! it and, with `--fmpy`, has fmpy build the same table a second time. [`MAX_TRACE_BYTES`],
 //! 1 GiB, keeps all of that within the memory of an ordinary workstation or CI runner: with
 //! every output of the FMU (53 columns with the time, 424 bytes a step) at the default step of
-//! 0.25 ms that is about 633 s of simulated time; a scenario that records a few outputs (`record`) or takes
-//! a longer `step` runs for proportionally longer.
+//! 0.25 ms that is about 633 s of simulated time; a scenario that records a few outputs
+//! (`record`) or takes a longer `step` runs for proportionally longer.
 
 use anyhow::{bail, Result};
 
