@@ -150,10 +150,7 @@ impl Plant {
             let torque_rate = if u.bridge_enabled {
                 // The rotor's (sin, cos) the sensors took at this state's angle (computed, or the
                 // last tick's turned), when the measurement saw this state.
-                let start_rotor = match self.rotor {
-                    Some((angle, s, c)) if first && angle.to_bits() == x.motor_angle.to_bits() => Some((s, c)),
-                    _ => None,
-                };
+                let start_rotor = if first { self.rotor_at(x.motor_angle) } else { None };
                 self.motor.advance_currents(&mut x, voltage, self.motor_acceleration, start_rotor)
             } else {
                 0.0
@@ -168,17 +165,15 @@ impl Plant {
         }
         // The rotor at the tick's end for the next measurement: the start's turned by the
         // tick's advance (a few multiplications instead of a sine and a cosine).
-        self.rotor = match self.rotor {
-            Some((angle, s, c)) if angle.to_bits() == self.state.motor_angle.to_bits() => {
-                let turn = self.motor.pole_pairs * (x.motor_angle - angle);
-                (turn.abs() < pmsm::MAX_ROTATION && self.rotor_turns < ROTOR_RESYNC).then(|| {
-                    self.rotor_turns += 1;
-                    let (s, c) = pmsm::rotate((s, c), turn);
-                    (x.motor_angle, s, c)
-                })
-            }
-            _ => None,
-        };
+        let start = self.state.motor_angle;
+        self.rotor = self.rotor_at(start).and_then(|rotor| {
+            let turn = self.motor.pole_pairs * (x.motor_angle - start);
+            (turn.abs() < pmsm::MAX_ROTATION && self.rotor_turns < ROTOR_RESYNC).then(|| {
+                self.rotor_turns += 1;
+                let (s, c) = pmsm::rotate(rotor, turn);
+                (x.motor_angle, s, c)
+            })
+        });
         self.state = x;
         self.coulomb_cache = ([x.motor_velocity, x.load_velocity], coulomb);
         self.accelerometer = self.load_acceleration + self.acceleration_noise.sample();
@@ -229,18 +224,22 @@ impl Plant {
         floor as i32
     }
 
+    /// `(sin, cos)` of the electrical angle at motor angle `angle`, where `rotor` holds it (the
+    /// angle bit for bit).
+    #[inline(always)]
+    fn rotor_at(&self, angle: f64) -> Option<(f64, f64)> {
+        self.rotor.and_then(|(at, s, c)| (at.to_bits() == angle.to_bits()).then_some((s, c)))
+    }
+
     /// Sample the sensors (advances the noise generators): the currents through the sensors'
     /// offsets and gains, the encoder's counter from its start in its own direction.
     #[inline(always)]
     pub fn measure(&mut self) -> Measurements {
         let p = &self.params;
-        let (s, c) = match self.rotor {
-            Some((angle, s, c)) if angle.to_bits() == self.state.motor_angle.to_bits() => (s, c),
-            _ => {
-                self.rotor_turns = 0;
-                discretisation::sin_cos(p.pole_pairs as f64 * self.state.motor_angle + self.motor.electrical_offset)
-            }
-        };
+        let (s, c) = self.rotor_at(self.state.motor_angle).unwrap_or_else(|| {
+            self.rotor_turns = 0;
+            discretisation::sin_cos(p.pole_pairs as f64 * self.state.motor_angle + self.motor.electrical_offset)
+        });
         self.rotor = Some((self.state.motor_angle, s, c));
         let alpha = self.state.id * c - self.state.iq * s;
         let beta = self.state.id * s + self.state.iq * c;
