@@ -1,5 +1,5 @@
-//! `cargo run -p xtask -- bundle`: build the FMU library (release) for the host and write the
-//! two archives from the project's own model descriptions:
+//! `cargo run -p xtask -- bundle`: build the FMU library (`fmu/library/`, profile
+//! `fmu-library`) for the host and write the two archives from the project's own model descriptions:
 //! - `target/fmu/servo_axis.fmu`: FMI 3.0 Co-Simulation (`binaries/x86_64-linux`),
 //! - `target/fmu/servo_axis_fmi2.fmu`: FMI 2.0 Co-Simulation (`binaries/linux64`),
 //!
@@ -61,20 +61,26 @@ fn bundle() -> Result<()> {
     let cargo = std::env::var("CARGO").unwrap_or_else(|_| "cargo".into());
     let status = Command::new(cargo)
         .current_dir(&root)
-        .args(["build", "--release", "-q", "-p", "servo-fmu", "--lib"])
+        .args(["build", "--profile", LIBRARY_PROFILE, "-q", "-p", LIBRARY_PACKAGE])
         .status()
         .context("running cargo build for the FMU library")?;
     if !status.success() {
-        bail!("cargo build -p servo-fmu failed");
+        bail!("cargo build -p {LIBRARY_PACKAGE} --profile {LIBRARY_PROFILE} failed");
     }
     if !cfg!(all(target_arch = "x86_64", target_os = "linux")) {
         bail!("the bundle packs the host's library as binaries/x86_64-linux: run it on x86_64 Linux");
     }
     let target_dir = target_dir(&root);
-    let library = target_dir.join(format!("release/lib{MODEL_IDENTIFIER}.so"));
+    let library = target_dir.join(format!("{LIBRARY_PROFILE}/lib{LIBRARY_NAME}.so"));
     let binary = std::fs::read(&library).with_context(|| format!("reading {}", library.display()))?;
     write_archives(&target_dir, &[Binary { fmi3: "x86_64-linux", fmi2: "linux64", extension: "so", bytes: binary }])
 }
+
+/// The package that builds the FMU's shared library, its Cargo profile and its library name
+/// (the archives name the binary after the model identifier instead).
+const LIBRARY_PACKAGE: &str = "servo-fmu-library";
+const LIBRARY_PROFILE: &str = "fmu-library";
+const LIBRARY_NAME: &str = "servo_axis_fmu";
 
 fn target_dir(root: &Path) -> PathBuf {
     std::env::var_os("CARGO_TARGET_DIR").map(PathBuf::from).unwrap_or_else(|| root.join("target"))
@@ -95,14 +101,14 @@ fn bundle_all_platforms() -> Result<()> {
     let root = workspace_root();
     let target_dir = target_dir(&root);
     let sources = [
-        ("x86_64-linux", "linux64", "so", format!("x86_64-unknown-linux-gnu/release/lib{MODEL_IDENTIFIER}.so")),
+        ("x86_64-linux", "linux64", "so", format!("x86_64-unknown-linux-gnu/{LIBRARY_PROFILE}/lib{LIBRARY_NAME}.so")),
         // Stripped of its symbol table by scripts/platforms.
         ("x86_64-windows", "win64", "dll", format!("cross/{MODEL_IDENTIFIER}.dll")),
         (
             "aarch64-linux",
             "aarch64-linux",
             "so",
-            format!("cross/aarch64-unknown-linux-gnu/release/lib{MODEL_IDENTIFIER}.so"),
+            format!("cross/aarch64-unknown-linux-gnu/{LIBRARY_PROFILE}/lib{LIBRARY_NAME}.so"),
         ),
     ];
     let mut binaries = Vec::new();
