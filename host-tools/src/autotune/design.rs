@@ -16,14 +16,19 @@
 //! a load's anti-resonance and climbs back over it (the highest such dip, over the low-pass
 //! cut-offs) has its dip lifted (`refinement::lift_dip_on`): the bandwidth of such a loop is the
 //! dip's, and the loop that lifts it lies past a cliff the bandwidth's refinement does not
-//! climb. The widest loop of all is polished last: refined again from itself and its own dip
-//! lifted, the widest of the three kept.
+//! climb. And each family's loop of the farthest reach (its last gain crossover) that keeps
+//! the margins or misses them by a little is moved onto them with its dip lifted
+//! (`refinement::restore_on`): on a lightly damped shaft the loops past the resonance that
+//! keep the margins lie on a sliver narrower than the ladder's steps (a notch on the
+//! resonance, its centre, width and depth and the gain within a few percent), and the ladder
+//! sees only the loops beside it. The widest loop of all is polished last: refined again from
+//! itself and its own dip lifted, the widest of the three kept.
 
 use num_complex::Complex64;
 use serde::{Deserialize, Serialize};
 
 use super::margins::{log_grid, margins, Margins};
-use super::refinement::{dip, lift_dip_on, refine_on};
+use super::refinement::{dip, lift_dip_on, reach_hz, refine_on, restore_on};
 use super::reserve::Reserve;
 use super::sampled_plant::SampledPlant;
 use super::velocity_controller::{Notch, VelocityTuning};
@@ -177,6 +182,7 @@ pub fn design(
         }
     }
     let family_best: Vec<Option<Design>> = results.iter().map(|r| r.best).collect();
+    let mut near_misses: Vec<(Design, f64)> = results.iter().filter_map(|r| r.near_miss).collect();
     let family_dip: Vec<Option<(Design, f64)>> = results.into_iter().flat_map(|r| r.dips).collect();
     // The best few families, each refined over the continuous parameters: on a light load the
     // gains that lift the loop over the anti-resonance's dip and still keep Ms lie within a
@@ -190,7 +196,14 @@ pub fn design(
     // Every dip is lifted: which one lifts is not the one nearest to it (the margins bind
     // each start differently).
     let lifted = dips.iter().filter_map(|(c, _)| lift_dip_on(&sampled, goal, c)).map(|(d, floor)| (d, Some(floor)));
-    let (widest, floor) = refined.chain(lifted).max_by(|a, b| by_bandwidth(&a.0, &b.0))?;
+    // The widest near misses, each moved onto the margins (see `Ladder::near_miss`).
+    near_misses.sort_by(|a, b| b.1.total_cmp(&a.1));
+    let restored = near_misses
+        .iter()
+        .take(RESTORED_NEAR_MISSES)
+        .filter_map(|(c, _)| restore_on(&sampled, goal, c, NEAR_MISS_KEPT_REACH))
+        .map(|(d, floor)| (d, Some(floor)));
+    let (widest, floor) = refined.chain(lifted).chain(restored).max_by(|a, b| by_bandwidth(&a.0, &b.0))?;
     // The widest polished: its compass search restarted from it with the first steps again
     // (a search that ended on a small step may sit below a cliff its large steps cross),
     // keeping its floor where it is a lifted dip's, and its own dip lifted where it has one.
@@ -214,11 +227,35 @@ struct Ladders<'a> {
     gains: &'a [f64],
 }
 
-/// A family's ladders: the widest candidate that keeps the margins, and for each integral
-/// ratio the candidate with the highest dip floor.
+/// A family's ladders: the widest candidate that keeps the margins, for each integral ratio
+/// the candidate with the highest dip floor, and the widest near miss.
 struct Ladder {
     best: Option<Design>,
     dips: Vec<Option<(Design, f64)>>,
+    /// The candidate of the farthest reach ([`reach_hz`]) that keeps the margins or misses
+    /// them by a little ([`near_miss`]), where its reach is past every bandwidth the family
+    /// delivers. On a lightly damped shaft with a notch on its resonance, the loops that keep
+    /// the margins and the closed loop over −3 dB through the anti-resonance lie on a sliver
+    /// a few percent wide in the gain and the notch's centre, width and depth; the ladder's
+    /// steps straddle it and see only the loops beside it, which miss Ms or the phase margin
+    /// by a little or dip at the anti-resonance (a bandwidth below the resonance). Moved onto
+    /// the margins with the dip lifted ([`restore_on`]), such a loop reaches the sliver.
+    near_miss: Option<(Design, f64)>,
+}
+
+/// How many near misses (those of the farthest reach) are moved onto the margins.
+const RESTORED_NEAR_MISSES: usize = 12;
+
+/// The share of its reach ([`reach_hz`]) a near miss keeps while it is moved.
+const NEAR_MISS_KEPT_REACH: f64 = 0.8;
+
+/// Whether a stable loop keeps `goal` or misses it by a little: Ms within 0.1 over it, the
+/// phase margin within 5°, the gain margin within 2 dB under it.
+fn near_miss(goal: &MarginGoal, m: &Margins) -> bool {
+    m.stable
+        && m.sensitivity_peak <= goal.sensitivity_peak + 0.1
+        && m.phase_margin_deg >= goal.phase_margin_deg - 5.0
+        && m.gain_margin_db >= goal.gain_margin_db - 2.0
 }
 
 impl Ladders<'_> {
@@ -226,6 +263,7 @@ impl Ladders<'_> {
         let (f, p, period) = (&self.sampled.hz, &self.sampled.response, self.sampled.period);
         let (inertia, goal) = (self.inertia, self.goal);
         let mut best: Option<Design> = None;
+        let mut near: Option<(Design, f64)> = None;
         let mut dips: Vec<Option<(Design, f64)>> = vec![None; self.grid.integral_ratios.len()];
         let z: Vec<Complex64> =
             f.iter().map(|&f| Complex64::from_polar(1.0, std::f64::consts::TAU * f * period)).collect();
@@ -242,8 +280,17 @@ impl Ladders<'_> {
                     let ki = kp * kp / (n * inertia);
                     let l: Vec<Complex64> =
                         (0..f.len()).map(|k| (kp + ki * period * z[k] / (z[k] - 1.0)) * filters[k] * p[k]).collect();
-                    let Some(m) = margins(f, &l).filter(|m| goal.held_by(m)) else { continue };
+                    let Some(m) = margins(f, &l) else { continue };
                     let tuning = VelocityTuning { kp, ki, low_pass_hz, notch, notch2 };
+                    if near_miss(goal, &m) {
+                        let reach = reach_hz(f, &l);
+                        if near.is_none_or(|(_, r)| reach > r) {
+                            near = Some((Design { tuning, margins: m, inertia }, reach));
+                        }
+                    }
+                    if !goal.held_by(&m) {
+                        continue;
+                    }
                     let candidate = Design { tuning, margins: m, inertia };
                     if best.is_none_or(|b| m.bandwidth_hz > b.margins.bandwidth_hz) {
                         best = Some(candidate);
@@ -256,7 +303,9 @@ impl Ladders<'_> {
                 }
             }
         }
-        Ladder { best, dips }
+        // Only a near miss that reaches past the family's best bandwidth is worth moving.
+        let near_miss = near.filter(|(_, reach)| best.is_none_or(|b| *reach > b.margins.bandwidth_hz));
+        Ladder { best, dips, near_miss }
     }
 }
 

@@ -151,9 +151,9 @@ mod tests {
 
     /// A light load on a 142 Hz shaft (seed 1's machine 168): its widest loop lifts the
     /// anti-resonance dip with 45.5° of phase margin and no more. The close design is that
-    /// loop; where its verification misses, the full reserve's design is verified instead (it
-    /// stays under the dip, at a fraction of the bandwidth) and the close one's outcome is
-    /// kept beside it.
+    /// loop; where its verification misses, the full reserve's design is verified instead (a
+    /// loop moved onto the full reserve's margins past the dip, a little narrower) and the
+    /// close one's outcome is kept beside it.
     #[test]
     fn a_close_design_that_misses_its_verification_gives_way_to_the_full_reserve() {
         let mechanics =
@@ -181,9 +181,10 @@ mod tests {
         let CloseDesign::Missed(close) = missed.close else { panic!("{:?}", missed.close) };
         assert_eq!(close.bandwidth_hz, held.outcome.bandwidth_hz);
         assert!(goal.with_reserve(Reserve::Full).held_by(&missed.outcome), "{:?}", missed.outcome);
-        // What the close reserve is for: the lifted dip, four times the full reserve's reach.
+        // The close reserve leaves the wider loop; the full reserve's still lifts the dip
+        // (its bandwidth the loop's reach, past three times the shaft's resonance).
         assert!(
-            held.outcome.bandwidth_hz > 4.0 * missed.outcome.bandwidth_hz,
+            held.outcome.bandwidth_hz >= missed.outcome.bandwidth_hz && missed.outcome.bandwidth_hz > 3.0 * 142.0,
             "close {} Hz, full {} Hz",
             held.outcome.bandwidth_hz,
             missed.outcome.bandwidth_hz
