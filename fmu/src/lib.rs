@@ -6,8 +6,10 @@
 //! - [`fmi`]: the C APIs (state machine, logger, panic barrier), [`fmu_state`]: saved states.
 //! - [`model_description`]: modelDescription.xml (both versions) and the documentation page.
 //!
-//! The crate is also an rlib so host tools and tests can run [`simulation::AxisSimulation`]
-//! directly (for example for the plant step-size check) and read the declarations.
+//! The crate is a Rust library: host tools and tests run [`simulation::AxisSimulation`]
+//! directly (for example for the plant step-size check) and read the declarations. The FMU's
+//! shared library is built from it by `fmu/library/` (a cdylib of its own, optimised as one
+//! module with the `fmu-library` profile).
 
 pub mod co_simulation;
 pub mod fmi;

@@ -17,7 +17,7 @@ pub fn default_fmu() -> PathBuf {
 /// The x86_64 Linux FMU library the archives carry (glibc 2.17 build by `scripts/platforms`,
 /// `cargo zigbuild -p servo-fmu-library --profile fmu-library --target
 /// x86_64-unknown-linux-gnu.2.17`). Tests that call the C API load this one: a plain `cargo
-/// test` never links the FMU's shared library.
+/// test` does not build the shipped library (glibc 2.17, the `fmu-library` profile).
 pub fn shipped_linux_fmu_library() -> PathBuf {
     workspace_root().join("target/x86_64-unknown-linux-gnu/fmu-library/libservo_axis_fmu.so")
 }

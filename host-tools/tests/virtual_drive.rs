@@ -108,7 +108,14 @@ fn device(port: &str, action: &[&str]) -> std::process::Output {
 }
 
 fn json(o: &std::process::Output) -> serde_json::Value {
-    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    // With --json a command's error can be on stdout: both are shown.
+    assert!(
+        o.status.success(),
+        "{:?}\nstderr: {}\nstdout: {}",
+        o.status,
+        String::from_utf8_lossy(&o.stderr),
+        String::from_utf8_lossy(&o.stdout)
+    );
     serde_json::from_slice(&o.stdout).unwrap()
 }
 

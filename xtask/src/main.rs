@@ -62,6 +62,8 @@ fn bundle() -> Result<()> {
     let status = Command::new(cargo)
         .current_dir(&root)
         .args(["build", "--profile", LIBRARY_PROFILE, "-q", "-p", LIBRARY_PACKAGE, "--config", LIBRARY_RUSTFLAGS])
+        .env_remove("RUSTFLAGS")
+        .env_remove("CARGO_ENCODED_RUSTFLAGS")
         .status()
         .context("running cargo build for the FMU library")?;
     if !status.success() {
@@ -86,7 +88,9 @@ const LIBRARY_NAME: &str = "servo_axis_fmu";
 /// by one just before (the outputs after a step, the plant's state after a tick) such a load
 /// waits for the stores to reach the cache. Without it the FMI boundary costs about 2 % of the
 /// bare simulation less (`servo bench fmu`); the results are the same bits.
-const LIBRARY_RUSTFLAGS: &str = r#"build.rustflags=["-C", "llvm-args=-vectorize-slp=false"]"#;
+/// A `RUSTFLAGS` or `CARGO_ENCODED_RUSTFLAGS` in the environment would replace these flags
+/// (cargo takes the first source of flags it finds): the build runs without them.
+const LIBRARY_RUSTFLAGS: &str = r#"build.rustflags=["-C", "no-vectorize-slp"]"#;
 
 fn target_dir(root: &Path) -> PathBuf {
     std::env::var_os("CARGO_TARGET_DIR").map(PathBuf::from).unwrap_or_else(|| root.join("target"))

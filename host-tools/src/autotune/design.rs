@@ -206,7 +206,8 @@ pub fn design(
     let (widest, floor) = refined.chain(lifted).chain(restored).max_by(|a, b| by_bandwidth(&a.0, &b.0))?;
     // The widest polished: its compass search restarted from it with the first steps again
     // (a search that ended on a small step may sit below a cliff its large steps cross),
-    // keeping its floor where it is a lifted dip's, and its own dip lifted where it has one.
+    // keeping its floor where it is a lifted dip's or a restored near miss's, and its own dip
+    // lifted where it has one.
     let polished = [refine_on(&sampled, goal, &widest, floor), lift_dip_on(&sampled, goal, &widest).map(|(d, _)| d)];
     polished.into_iter().flatten().chain([widest]).max_by(by_bandwidth)
 }

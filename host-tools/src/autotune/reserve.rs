@@ -19,8 +19,8 @@ use super::position_loop_design::PositionTuning;
 #[serde(rename_all = "lowercase")]
 pub enum Reserve {
     /// 0.5° of phase, 0.25 dB of gain, 0.01 of Ms. A calibrated twin's margins lie within a
-    /// few hundredths of a degree of its machine's where the model is optimistic (seed 1's
-    /// machines 30–182 that the full reserve keeps under their dip: 0.00–0.02°), and the
+    /// few hundredths of a degree of its machine's where the model is optimistic (0.00–0.02°
+    /// on seed 1's machines whose widest loops keep 45–46° of phase margin), and the
     /// verification on the machine holds the loop to the goal itself.
     Close,
     /// 3° of phase, 1 dB of gain, 0.02 of Ms: for a machine whose measurement the model
