@@ -73,6 +73,10 @@ pub struct AutotuneBenchArgs {
     /// with the load)
     #[arg(long)]
     pub absorbers: bool,
+    /// Machines tuned at once, each on its own thread (default: one per core). The figures
+    /// do not depend on it: each machine's run is its own
+    #[arg(long)]
+    pub jobs: Option<usize>,
     #[command(flatten)]
     pub common: Common,
 }
@@ -377,10 +381,15 @@ impl AutotuneBenchArgs {
             "--plant",
             "machines",
         )?;
-        let fmu = Fmu::load(&self.common.fmu.clone().unwrap_or_else(crate::paths::default_fmu))?;
-        let rows: Vec<MachineRow> = crate::bench::drawn::run_each("autotune", self.common.json, &machines, |m| {
-            tune_one(&fmu, m, &goal, self.virtual_drive)
-        });
+        let fmu_path = self.common.fmu.clone().unwrap_or_else(crate::paths::default_fmu);
+        let rows: Vec<MachineRow> = crate::bench::drawn::run_each(
+            "autotune",
+            self.common.json,
+            &machines,
+            self.jobs.unwrap_or_else(crate::bench::drawn::default_jobs),
+            || Fmu::load(&fmu_path),
+            |fmu, m| tune_one(fmu, m, &goal, self.virtual_drive),
+        )?;
         let finished = || rows.iter().filter(|r| r.failed.is_none());
         let worst = |f: &dyn Fn(&MachineRow) -> f64| finished().map(f).fold(f64::NEG_INFINITY, f64::max);
         let least = |f: &dyn Fn(&MachineRow) -> f64| finished().map(f).fold(f64::INFINITY, f64::min);

@@ -21,8 +21,11 @@
 //! (`refinement::restore_on`): on a lightly damped shaft the loops past the resonance that
 //! keep the margins lie on a sliver narrower than the ladder's steps (a notch on the
 //! resonance, its centre, width and depth and the gain within a few percent), and the ladder
-//! sees only the loops beside it. The widest loop of all is polished last: refined again from
-//! itself and its own dip lifted, the widest of the three kept.
+//! sees only the loops beside it. Where the widest loop still falls short of the farthest
+//! near misses' reach, those near misses get a second notch that shapes their phase (broad
+//! and shallow, below their crossover: `shaping_notches`) and are moved onto the margins
+//! with it. The widest loop of all is polished last: refined again from itself and its own
+//! dip lifted, the widest of the three kept.
 
 use num_complex::Complex64;
 use serde::{Deserialize, Serialize};
@@ -203,13 +206,34 @@ pub fn design(
         .take(RESTORED_NEAR_MISSES)
         .filter_map(|(c, _)| restore_on(&sampled, goal, c, NEAR_MISS_KEPT_REACH))
         .map(|(d, floor)| (d, Some(floor)));
-    let (widest, floor) = refined.chain(lifted).chain(restored).max_by(|a, b| by_bandwidth(&a.0, &b.0))?;
+    let widest = refined.chain(lifted).chain(restored).max_by(|a, b| by_bandwidth(&a.0, &b.0));
+    // Where that loop falls short of the farthest near misses' reach, a second notch below
+    // their crossover shapes the loop's phase there (see `shaping_notches`), and each such
+    // near miss is moved onto the margins with it.
+    let short_of = |reach: f64| widest.is_none_or(|(w, _)| w.margins.bandwidth_hz < NEAR_MISS_KEPT_REACH * reach);
+    let shaped = near_misses
+        .iter()
+        .filter(|(c, reach)| grid.second_notch && c.tuning.notch2.is_none() && short_of(*reach))
+        .take(SHAPED_NEAR_MISSES)
+        .flat_map(|&(c, reach)| {
+            shaping_notches(reach, nyquist)
+                .map(move |n2| Design { tuning: VelocityTuning { notch2: Some(n2), ..c.tuning }, ..c })
+        })
+        .filter_map(|start| restore_on(&sampled, goal, &start, NEAR_MISS_KEPT_REACH))
+        .map(|(d, floor)| (d, Some(floor)));
+    let (widest, floor) = widest.into_iter().chain(shaped).max_by(|a, b| by_bandwidth(&a.0, &b.0))?;
     // The widest polished: its compass search restarted from it with the first steps again
     // (a search that ended on a small step may sit below a cliff its large steps cross),
     // keeping its floor where it is a lifted dip's or a restored near miss's, and its own dip
     // lifted where it has one.
     let polished = [refine_on(&sampled, goal, &widest, floor), lift_dip_on(&sampled, goal, &widest).map(|(d, _)| d)];
-    polished.into_iter().flatten().chain([widest]).max_by(by_bandwidth)
+    let best = polished.into_iter().flatten().chain([widest]).max_by(by_bandwidth)?;
+    // A shaping notch where the loop kept no notch on a resonance is the drive's first notch.
+    let mut tuning = best.tuning;
+    if tuning.notch.is_none() {
+        tuning.notch = tuning.notch2.take();
+    }
+    Some(Design { tuning, ..best })
 }
 
 /// Designs ordered by their bandwidth.
@@ -308,6 +332,28 @@ impl Ladders<'_> {
         let near_miss = near.filter(|(_, reach)| best.is_none_or(|b| *reach > b.margins.bandwidth_hz));
         Ladder { best, dips, near_miss }
     }
+}
+
+/// How many near misses (those of the farthest reach) get a shaping second notch
+/// ([`shaping_notches`]) where the widest loop falls short of their reach.
+const SHAPED_NEAR_MISSES: usize = 2;
+
+/// The second notches tried to shape a near miss's loop: centres at a few shares of its
+/// reach (its last gain crossover, Hz), each with two widths and depths. On a lightly damped
+/// shaft whose loop past the resonance keeps the phase margin only on a sliver, a broad,
+/// shallow notch at a third to nine tenths of the crossover lends the loop phase there (a
+/// notch's phase rises through its centre and leads above it) at the cost of a little gain
+/// below: seed 1's machine 30 (shaft 52 Hz, ζ 0.016) goes from a sliver at 45.0° to loops
+/// past 700 Hz with 48–60°.
+fn shaping_notches(reach_hz: f64, nyquist: f64) -> impl Iterator<Item = Notch> {
+    const CENTRES: [f64; 4] = [0.3, 0.45, 0.65, 0.9];
+    const QS: [f64; 2] = [0.5, 1.0];
+    const DEPTHS: [f64; 2] = [0.3, 0.6];
+    CENTRES
+        .into_iter()
+        .map(move |share| share * reach_hz)
+        .filter(move |&hz| hz > LOW_HZ && hz < NOTCH_LIMIT * nyquist)
+        .flat_map(|hz| QS.into_iter().flat_map(move |q| DEPTHS.into_iter().map(move |depth| Notch { hz, q, depth })))
 }
 
 /// How many of the search's best notch families are refined.
@@ -465,10 +511,54 @@ mod tests {
         assert!(goal.held_by(&dense), "{dense:?}");
     }
 
+    /// A shaft whose loops past the resonance keep the phase margin only on a knife's edge
+    /// (seed 1's machine 30 on the default axis: load 0.91 times the motor, shaft at 52 Hz,
+    /// ζ 0.016; its loops with one notch past the resonance keep 45.5° and no more). Without a
+    /// second notch the design with the full reserve (48°) stays below the resonance; with
+    /// one, a broad shallow notch well above the shaft's resonance and below the crossover
+    /// shapes the loop's phase, and the design reaches past ten times the resonance. Checked
+    /// on a 20 000-point grid: the margins held, and the closed loop over −3 dB from 0.5 Hz up
+    /// to its bandwidth.
+    #[test]
+    fn a_shaping_notch_takes_a_knife_edge_shaft_past_its_resonance() {
+        use crate::autotune::bench::Machine;
+        use crate::autotune::margins::log_grid;
+        use crate::fmu::configuration::configuration;
+        let machine = Machine { inertia_ratio: 0.911, resonance_hz: 52.1, damping_ratio: 0.0157, absorber: None };
+        let c = configuration(&machine.parameters()).unwrap();
+        let period = c.control.rates.velocity_period() as f64;
+        let drive = DriveDynamics::on_plant(&c.control, &c.plant);
+        let m = Mechanics::of_plant(&c.plant);
+        let (fr, _) = m.resonance_hz();
+        let plant = |f: f64| crate::autotune::loop_plant(&drive, &m, f);
+        let goal = MarginGoal::named("standard").unwrap().with_reserve(crate::autotune::reserve::Reserve::Full);
+        let unshaped = design(
+            &plant,
+            period,
+            &goal,
+            &SearchGrid { second_notch: false, ..SearchGrid::STANDARD },
+            &m.features_hz(),
+        )
+        .unwrap();
+        assert!(unshaped.margins.bandwidth_hz < fr, "{unshaped:?}");
+        let d = design(&plant, period, &goal, &SearchGrid::STANDARD, &m.features_hz()).unwrap();
+        let shaping =
+            d.tuning.notch.iter().chain(&d.tuning.notch2).any(|n| n.hz > 1.5 * fr && n.hz < d.margins.bandwidth_hz);
+        assert!(shaping, "{d:?}");
+        let dense = margins_of(&d.tuning, &plant, period, 20_000, &m.features_hz()).unwrap();
+        assert!(goal.held_by(&dense) && dense.bandwidth_hz > 10.0 * fr, "{dense:?}");
+        let t = |f: f64| {
+            let l = d.tuning.response(f, period) * plant(f);
+            (l / (1.0 + l)).norm()
+        };
+        let least = log_grid(0.5, dense.bandwidth_hz, 20_000).into_iter().map(t).fold(1.0, f64::min);
+        assert!(least > 0.99 * std::f64::consts::FRAC_1_SQRT_2, "{least}");
+    }
+
     /// The design grid holds a lightly damped mode (ζ = 0.002): its features are grid points,
     /// the grid stays increasing, and the sensitivity peak read on a sparse grid with them is
     /// the dense grid's; a start that does not keep the margins is not refined, and a start
-    /// that does is refined to at least its own bandwidth.
+    /// that does is refined to at least its own bandwidth (on the refinement's grid).
     #[test]
     fn the_grid_holds_a_narrow_mode_and_refine_refuses_a_failing_start() {
         let params = control_core::Params::default();
@@ -487,6 +577,8 @@ mod tests {
         reckless.tuning.kp *= 30.0;
         assert!(refine(&plant, period, &goal, &reckless, 2000, &m.features_hz()).is_none());
         let refined = refine(&plant, period, &goal, &d, 2000, &m.features_hz()).unwrap();
-        assert!(refined.margins.bandwidth_hz >= d.margins.bandwidth_hz * 0.999 && goal.held_by(&refined.margins));
+        // At least its own bandwidth on the refinement's grid.
+        let start = margins_of(&d.tuning, &plant, period, 2000, &m.features_hz()).unwrap();
+        assert!(refined.margins.bandwidth_hz >= start.bandwidth_hz && goal.held_by(&refined.margins), "{refined:?}");
     }
 }

@@ -13,18 +13,76 @@ pub fn one_or_all<T: Copy>(draw: Vec<T>, pick: Option<u32>, option: &str, what: 
     }
 }
 
-/// `run` on each of `members`, in order, behind a progress bar labelled `label` (hidden
-/// with `quiet`).
-pub fn run_each<T, R>(label: &str, quiet: bool, members: &[T], mut run: impl FnMut(&T) -> R) -> Vec<R> {
+/// `run` on each of `members` behind a progress bar labelled `label` (hidden with `quiet`),
+/// on `jobs` threads, each with its own `state` (an FMU loaded once per thread, say): the
+/// members are independent, so the rows are those a single thread gives, in the members'
+/// order. An error making a thread's state ends the run with it.
+pub fn run_each<T: Sync, S, R: Send>(
+    label: &str,
+    quiet: bool,
+    members: &[T],
+    jobs: usize,
+    state: impl Fn() -> Result<S> + Sync,
+    run: impl Fn(&mut S, &T) -> R + Sync,
+) -> Result<Vec<R>> {
+    use std::sync::atomic::{AtomicUsize, Ordering};
+    use std::sync::Mutex;
     let pb = crate::cli::progress_bar(label, quiet);
-    let rows = members
-        .iter()
-        .enumerate()
-        .map(|(k, m)| {
-            pb.set_position((1000 * k as u64) / members.len() as u64);
-            run(m)
-        })
-        .collect();
+    let (next, done) = (AtomicUsize::new(0), AtomicUsize::new(0));
+    let rows: Mutex<Vec<Option<R>>> = Mutex::new(members.iter().map(|_| None).collect());
+    let worker = || -> Result<()> {
+        let mut s = state()?;
+        loop {
+            let k = next.fetch_add(1, Ordering::Relaxed);
+            let Some(m) = members.get(k) else { return Ok(()) };
+            let row = run(&mut s, m);
+            rows.lock().unwrap_or_else(|e| e.into_inner())[k] = Some(row);
+            let finished = done.fetch_add(1, Ordering::Relaxed) + 1;
+            pb.set_position((1000 * finished as u64) / members.len() as u64);
+        }
+    };
+    let jobs = jobs.clamp(1, members.len().max(1));
+    std::thread::scope(|scope| {
+        let handles: Vec<_> = (0..jobs).map(|_| scope.spawn(worker)).collect();
+        handles.into_iter().try_for_each(|h| h.join().unwrap_or_else(|p| std::panic::resume_unwind(p)))
+    })?;
     pb.finish_and_clear();
-    rows
+    let rows = rows.into_inner().unwrap_or_else(|e| e.into_inner());
+    Ok(rows.into_iter().map(|r| r.expect("every member ran")).collect())
+}
+
+/// The threads a bench over a draw runs on by default: one per core.
+pub fn default_jobs() -> usize {
+    std::thread::available_parallelism().map_or(1, |n| n.get())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// On several threads, each member's row lands in its place, each thread makes its state
+    /// once, and a state that cannot be made ends the run with its error.
+    #[test]
+    fn rows_keep_the_members_order_on_any_number_of_threads() {
+        let members: Vec<u32> = (0..37).collect();
+        let states = AtomicUsize::new(0);
+        for jobs in [1, 2, 5, 64] {
+            states.store(0, std::sync::atomic::Ordering::Relaxed);
+            let rows = run_each(
+                "test",
+                true,
+                &members,
+                jobs,
+                || Ok(states.fetch_add(1, std::sync::atomic::Ordering::Relaxed)),
+                |_, m| m * m,
+            )
+            .unwrap();
+            assert_eq!(rows, members.iter().map(|m| m * m).collect::<Vec<_>>());
+            assert_eq!(states.load(std::sync::atomic::Ordering::Relaxed), jobs.min(members.len()));
+        }
+        let refused = run_each("test", true, &members, 2, || -> Result<()> { bail!("no FMU") }, |_, m| *m);
+        assert_eq!(refused.unwrap_err().to_string(), "no FMU");
+    }
+
+    use std::sync::atomic::AtomicUsize;
 }

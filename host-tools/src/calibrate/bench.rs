@@ -49,6 +49,10 @@ pub struct CalibrateBenchArgs {
     /// `servo calibrate --device` takes, the constant-speed runs ramped and read over the link
     #[arg(long)]
     pub virtual_drive: bool,
+    /// Machines calibrated at once, each on its own thread (default: one per core). The
+    /// figures do not depend on it: each machine's run is its own
+    #[arg(long)]
+    pub jobs: Option<usize>,
     #[command(flatten)]
     pub common: Common,
 }
@@ -184,10 +188,15 @@ impl CalibrateBenchArgs {
         }
         let machines =
             crate::bench::drawn::one_or_all(draw(self.plants, self.seed), self.plant, "--plant", "machines")?;
-        let fmu = Fmu::load(&self.common.fmu.clone().unwrap_or_else(crate::paths::default_fmu))?;
-        let rows: Vec<CalibrationRow> = crate::bench::drawn::run_each("calibrate", self.common.json, &machines, |m| {
-            calibrate_one(&fmu, m, self.virtual_drive)
-        });
+        let fmu_path = self.common.fmu.clone().unwrap_or_else(crate::paths::default_fmu);
+        let rows: Vec<CalibrationRow> = crate::bench::drawn::run_each(
+            "calibrate",
+            self.common.json,
+            &machines,
+            self.jobs.unwrap_or_else(crate::bench::drawn::default_jobs),
+            || Fmu::load(&fmu_path),
+            |fmu, m| calibrate_one(fmu, m, self.virtual_drive),
+        )?;
         let finished = || rows.iter().filter(|r| r.failed.is_none());
         let worst = |f: &dyn Fn(&CalibrationRow) -> f64| finished().map(f).fold(f64::NEG_INFINITY, f64::max);
         let failed = rows.iter().filter(|r| r.failed.is_some()).count();
