@@ -527,7 +527,7 @@ declare_variables! {
     216 ctrl_motor_ld: Float64 "ctrl.motor_ld" Parameter Fixed = 0.0; H; r(0.0, 10.0); "d-axis inductance the drive runs with, as ctrl.motor_pole_pairs; 0 = the plant's own";
     217 ctrl_motor_lq: Float64 "ctrl.motor_lq" Parameter Fixed = 0.0; H; r(0.0, 10.0); "q-axis inductance the drive runs with, as ctrl.motor_pole_pairs; 0 = the plant's own";
     218 ctrl_motor_flux_linkage: Float64 "ctrl.motor_flux_linkage" Parameter Fixed = 0.0; WB; r(0.0, 10.0); "Flux linkage the drive runs with (its torque constant is 1.5 x pole pairs x this), as ctrl.motor_pole_pairs; 0 = the plant's own";
-    219 ctrl_notch2_hz: Float64 "ctrl.notch2_hz" Parameter Fixed = core(|p| p.filters.notch2_hz); HZ; FREQ; "Second torque-command notch centre, after the first (0 = off; below the velocity loop's Nyquist frequency): for a second resonance above the crossover";
+    219 ctrl_notch2_hz: Float64 "ctrl.notch2_hz" Parameter Fixed = core(|p| p.filters.notch2_hz); HZ; FREQ; "Second torque-command notch centre, after the first (0 = off; below the velocity loop's Nyquist frequency): for a second resonance above the crossover, or a broad, shallow notch below it that shapes the loop's phase";
     220 ctrl_notch2_q: Float64 "ctrl.notch2_q" Parameter Fixed = core(|p| p.filters.notch2_q); NONE; r(1.0e-3, 1.0e3); "Second notch's quality factor";
     221 ctrl_notch2_depth: Float64 "ctrl.notch2_depth" Parameter Fixed = core(|p| p.filters.notch2_depth); NONE; r(0.0, 1.0); "Second notch's gain at the centre (0 = full notch)";
 }

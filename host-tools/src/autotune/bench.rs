@@ -73,8 +73,9 @@ pub struct AutotuneBenchArgs {
     /// with the load)
     #[arg(long)]
     pub absorbers: bool,
-    /// Machines tuned at once, each on its own thread (default: one per core). The figures
-    /// do not depend on it: each machine's run is its own
+    /// Machines tuned at once, each on its own thread (default: one per core, one with
+    /// --virtual-drive). Each machine's run is its own, so the figures do not depend on it;
+    /// a virtual drive's link waits on wall-clock timeouts, which a loaded machine can meet
     #[arg(long)]
     pub jobs: Option<usize>,
     #[command(flatten)]
@@ -386,7 +387,7 @@ impl AutotuneBenchArgs {
             "autotune",
             self.common.json,
             &machines,
-            self.jobs.unwrap_or_else(crate::bench::drawn::default_jobs),
+            self.jobs.unwrap_or_else(|| crate::bench::drawn::default_jobs(self.virtual_drive)),
             || Fmu::load(&fmu_path),
             |fmu, m| tune_one(fmu, m, &goal, self.virtual_drive),
         )?;
@@ -499,7 +500,7 @@ impl AutotuneBenchArgs {
             "machines",
         );
         rec.info(
-            "designs with a second notch",
+            "designs with two notches",
             finished().filter(|r| r.tuning.is_some_and(|t| t.notch2.is_some())).count() as f64,
             "machines",
         );

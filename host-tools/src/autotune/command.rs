@@ -27,7 +27,7 @@ use crate::paths::{default_fmu, default_out};
 /// Tune the velocity loop from the axis's measured response: a torque-point sweep on the
 /// twin measures the plant (torque command → velocity estimate), the machine's mechanics
 /// (motor and load inertia, shaft stiffness and damping) are calibrated from it with their
-/// standard errors, and the velocity PI, the torque low-pass and a notch on the resonance (and one on an absorber's) are
+/// standard errors, and the velocity PI, the torque low-pass and a notch on the resonance (and one on an absorber's, or one that shapes the loop's phase) are
 /// designed on the calibrated model for the widest closed-loop bandwidth whose loop keeps
 /// its margins (--margin). The design is then verified on the twin: a feedback-point sweep
 /// with the new gains measures the open loop, whose crossover and phase margin are printed

@@ -31,7 +31,8 @@ pub struct VelocityTuning {
     pub ki: f64,
     pub low_pass_hz: f64,
     pub notch: Option<Notch>,
-    /// The second notch, after the first: for a second resonance above the crossover.
+    /// The second notch, after the first: for a second resonance above the crossover, or a
+    /// broad, shallow notch below it that shapes the loop's phase (`design::shaping_notches`).
     #[serde(default)]
     pub notch2: Option<Notch>,
 }

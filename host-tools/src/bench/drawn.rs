@@ -16,7 +16,8 @@ pub fn one_or_all<T: Copy>(draw: Vec<T>, pick: Option<u32>, option: &str, what: 
 /// `run` on each of `members` behind a progress bar labelled `label` (hidden with `quiet`),
 /// on `jobs` threads, each with its own `state` (an FMU loaded once per thread, say): the
 /// members are independent, so the rows are those a single thread gives, in the members'
-/// order. An error making a thread's state ends the run with it.
+/// order. An error making a thread's state stops the others after their member at hand, and
+/// the run returns it.
 pub fn run_each<T: Sync, S, R: Send>(
     label: &str,
     quiet: bool,
@@ -28,61 +29,73 @@ pub fn run_each<T: Sync, S, R: Send>(
     use std::sync::atomic::{AtomicUsize, Ordering};
     use std::sync::Mutex;
     let pb = crate::cli::progress_bar(label, quiet);
-    let (next, done) = (AtomicUsize::new(0), AtomicUsize::new(0));
+    pb.set_length(members.len() as u64);
+    let next = AtomicUsize::new(0);
     let rows: Mutex<Vec<Option<R>>> = Mutex::new(members.iter().map(|_| None).collect());
     let worker = || -> Result<()> {
-        let mut s = state()?;
+        let mut s = state().inspect_err(|_| next.store(members.len(), Ordering::Relaxed))?;
         loop {
             let k = next.fetch_add(1, Ordering::Relaxed);
             let Some(m) = members.get(k) else { return Ok(()) };
             let row = run(&mut s, m);
             rows.lock().unwrap_or_else(|e| e.into_inner())[k] = Some(row);
-            let finished = done.fetch_add(1, Ordering::Relaxed) + 1;
-            pb.set_position((1000 * finished as u64) / members.len() as u64);
+            pb.inc(1);
         }
     };
     let jobs = jobs.clamp(1, members.len().max(1));
-    std::thread::scope(|scope| {
+    let ended = std::thread::scope(|scope| {
         let handles: Vec<_> = (0..jobs).map(|_| scope.spawn(worker)).collect();
-        handles.into_iter().try_for_each(|h| h.join().unwrap_or_else(|p| std::panic::resume_unwind(p)))
-    })?;
+        handles.into_iter().map(|h| h.join().unwrap_or_else(|p| std::panic::resume_unwind(p))).collect::<Vec<_>>()
+    });
     pb.finish_and_clear();
+    ended.into_iter().collect::<Result<()>>()?;
     let rows = rows.into_inner().unwrap_or_else(|e| e.into_inner());
     Ok(rows.into_iter().map(|r| r.expect("every member ran")).collect())
 }
 
-/// The threads a bench over a draw runs on by default: one per core.
-pub fn default_jobs() -> usize {
-    std::thread::available_parallelism().map_or(1, |n| n.get())
+/// The threads a bench over a draw runs on by default: one per core, or one where each member
+/// runs on a virtual drive (its link waits on wall-clock timeouts, which drives competing for
+/// the cores can meet).
+pub fn default_jobs(virtual_drive: bool) -> usize {
+    if virtual_drive {
+        1
+    } else {
+        std::thread::available_parallelism().map_or(1, |n| n.get())
+    }
 }
 
 #[cfg(test)]
 mod tests {
+    use std::sync::atomic::{AtomicUsize, Ordering};
+    use std::time::Duration;
+
     use super::*;
 
-    /// On several threads, each member's row lands in its place, each thread makes its state
-    /// once, and a state that cannot be made ends the run with its error.
+    /// On several threads, the members finishing out of order (the first ones take longest),
+    /// each member's row lands in its place and each thread makes its state once; a state
+    /// that one thread cannot make ends the run with its error.
     #[test]
     fn rows_keep_the_members_order_on_any_number_of_threads() {
-        let members: Vec<u32> = (0..37).collect();
+        let members: Vec<u64> = (0..24).collect();
         let states = AtomicUsize::new(0);
+        let slow_first = |_: &mut usize, m: &u64| {
+            std::thread::sleep(Duration::from_millis(24 - m));
+            m * m
+        };
         for jobs in [1, 2, 5, 64] {
-            states.store(0, std::sync::atomic::Ordering::Relaxed);
-            let rows = run_each(
-                "test",
-                true,
-                &members,
-                jobs,
-                || Ok(states.fetch_add(1, std::sync::atomic::Ordering::Relaxed)),
-                |_, m| m * m,
-            )
-            .unwrap();
+            states.store(0, Ordering::Relaxed);
+            let rows =
+                run_each("test", true, &members, jobs, || Ok(states.fetch_add(1, Ordering::Relaxed)), slow_first)
+                    .unwrap();
             assert_eq!(rows, members.iter().map(|m| m * m).collect::<Vec<_>>());
-            assert_eq!(states.load(std::sync::atomic::Ordering::Relaxed), jobs.min(members.len()));
+            assert_eq!(states.load(Ordering::Relaxed), jobs.min(members.len()));
         }
-        let refused = run_each("test", true, &members, 2, || -> Result<()> { bail!("no FMU") }, |_, m| *m);
+        states.store(0, Ordering::Relaxed);
+        let second_fails = || match states.fetch_add(1, Ordering::Relaxed) {
+            1 => bail!("no FMU"),
+            k => Ok(k),
+        };
+        let refused = run_each("test", true, &members, 3, second_fails, slow_first);
         assert_eq!(refused.unwrap_err().to_string(), "no FMU");
     }
-
-    use std::sync::atomic::AtomicUsize;
 }

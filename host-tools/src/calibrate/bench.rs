@@ -49,8 +49,9 @@ pub struct CalibrateBenchArgs {
     /// `servo calibrate --device` takes, the constant-speed runs ramped and read over the link
     #[arg(long)]
     pub virtual_drive: bool,
-    /// Machines calibrated at once, each on its own thread (default: one per core). The
-    /// figures do not depend on it: each machine's run is its own
+    /// Machines calibrated at once, each on its own thread (default: one per core, one with
+    /// --virtual-drive). Each machine's run is its own, so the figures do not depend on it;
+    /// a virtual drive's link waits on wall-clock timeouts, which a loaded machine can meet
     #[arg(long)]
     pub jobs: Option<usize>,
     #[command(flatten)]
@@ -193,7 +194,7 @@ impl CalibrateBenchArgs {
             "calibrate",
             self.common.json,
             &machines,
-            self.jobs.unwrap_or_else(crate::bench::drawn::default_jobs),
+            self.jobs.unwrap_or_else(|| crate::bench::drawn::default_jobs(self.virtual_drive)),
             || Fmu::load(&fmu_path),
             |fmu, m| calibrate_one(fmu, m, self.virtual_drive),
         )?;
