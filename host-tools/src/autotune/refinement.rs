@@ -82,9 +82,15 @@ impl Coordinates {
     }
 }
 
+/// The widest notch quality factor the drive takes (`ctrl.notch_q`, `ctrl.notch2_q` range to
+/// 1000): a compass search can drive an ineffective notch's Q far past it.
+const MAX_NOTCH_Q: f64 = 1000.0;
+
 /// A tuning the drive can run on a loop whose Nyquist frequency is `nyquist`.
 fn admissible(t: &VelocityTuning, nyquist: f64) -> bool {
-    let fits = |n: &Notch| n.hz > 1.0 && n.hz < NOTCH_LIMIT * nyquist && n.q > 0.05 && (0.0..=1.0).contains(&n.depth);
+    let fits = |n: &Notch| {
+        n.hz > 1.0 && n.hz < NOTCH_LIMIT * nyquist && n.q > 0.05 && n.q < MAX_NOTCH_Q && (0.0..=1.0).contains(&n.depth)
+    };
     let filters_fit = t.notch.iter().chain(&t.notch2).all(fits);
     t.kp > 0.0 && t.ki >= 0.0 && t.low_pass_hz >= 0.0 && t.low_pass_hz < nyquist && filters_fit
 }
