@@ -18,7 +18,7 @@
 
 use num_complex::Complex64;
 
-use super::design::{Design, MarginGoal, NOTCH_LIMIT};
+use super::design::{Design, MarginGoal, LOWEST_NOTCH_HZ, NOTCH_LIMIT};
 use super::margins::{margins, Margins};
 use super::sampled_plant::SampledPlant;
 use super::velocity_controller::{Notch, VelocityTuning};
