@@ -89,7 +89,11 @@ const MAX_NOTCH_Q: f64 = 1000.0;
 /// A tuning the drive can run on a loop whose Nyquist frequency is `nyquist`.
 fn admissible(t: &VelocityTuning, nyquist: f64) -> bool {
     let fits = |n: &Notch| {
-        n.hz > 1.0 && n.hz < NOTCH_LIMIT * nyquist && n.q > 0.05 && n.q < MAX_NOTCH_Q && (0.0..=1.0).contains(&n.depth)
+        n.hz > LOWEST_NOTCH_HZ
+            && n.hz < NOTCH_LIMIT * nyquist
+            && n.q > 0.05
+            && n.q < MAX_NOTCH_Q
+            && (0.0..=1.0).contains(&n.depth)
     };
     let filters_fit = t.notch.iter().chain(&t.notch2).all(fits);
     t.kp > 0.0 && t.ki >= 0.0 && t.low_pass_hz >= 0.0 && t.low_pass_hz < nyquist && filters_fit
