@@ -82,9 +82,14 @@ impl Coordinates {
     }
 }
 
-/// The widest notch quality factor the drive takes (`ctrl.notch_q`, `ctrl.notch2_q` range to
-/// 1000): a compass search can drive an ineffective notch's Q far past it.
-const MAX_NOTCH_Q: f64 = 1000.0;
+/// The widest notch quality factor the drive takes: the upper end of `ctrl.notch_q`'s declared
+/// range (`ctrl.notch2_q` has the same). A compass search can drive an ineffective notch's Q
+/// far past it.
+static MAX_NOTCH_Q: std::sync::LazyLock<f64> = std::sync::LazyLock::new(|| {
+    servo_axis::variables::by_name(servo_axis::variables::name::ctrl_notch_q)
+        .and_then(|d| d.range.max)
+        .expect("the FMU declares ctrl.notch_q with an upper bound")
+});
 
 /// A tuning the drive can run on a loop whose Nyquist frequency is `nyquist`.
 fn admissible(t: &VelocityTuning, nyquist: f64) -> bool {
@@ -92,7 +97,7 @@ fn admissible(t: &VelocityTuning, nyquist: f64) -> bool {
         n.hz > LOWEST_NOTCH_HZ
             && n.hz < NOTCH_LIMIT * nyquist
             && n.q > 0.05
-            && n.q < MAX_NOTCH_Q
+            && n.q < *MAX_NOTCH_Q
             && (0.0..=1.0).contains(&n.depth)
     };
     let filters_fit = t.notch.iter().chain(&t.notch2).all(fits);
