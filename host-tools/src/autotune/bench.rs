@@ -505,6 +505,11 @@ impl AutotuneBenchArgs {
             "machines",
         );
         rec.info(
+            "designs with the tight reserve",
+            finished().filter(|r| r.reserve == Some(Reserve::Tight)).count() as f64,
+            "machines",
+        );
+        rec.info(
             "designs with the full reserve",
             finished().filter(|r| r.reserve == Some(Reserve::Full)).count() as f64,
             "machines",

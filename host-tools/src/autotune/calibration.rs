@@ -43,6 +43,67 @@ pub struct Calibration {
     /// The shaft's resonance lies above the measured band: the machine is rigid there and
     /// the split of its inertia and the stiffness are not determined (only bounds).
     pub rigid: bool,
+    /// The fitted parameters and their covariance, where the fit determines every one.
+    #[serde(skip)]
+    pub uncertainty: Option<Uncertainty>,
+}
+
+/// The fit's log parameters θ and their covariance `σ²·(JᵀJ)⁻¹`: the models the measurement
+/// cannot tell from the fitted one lie in the ellipsoid it spans around θ.
+#[derive(Clone, Copy, Debug)]
+pub struct Uncertainty {
+    theta: [f64; 7],
+    len: usize,
+    covariance: [[f64; 7]; 7],
+}
+
+impl Uncertainty {
+    fn of(theta: &[f64], covariance: &nalgebra::DMatrix<f64>) -> Option<Self> {
+        let len = theta.len();
+        if len > 7 || covariance.nrows() != len || covariance.iter().any(|v| !v.is_finite()) {
+            return None;
+        }
+        let mut u = Self { theta: [0.0; 7], len, covariance: [[0.0; 7]; 7] };
+        u.theta[..len].copy_from_slice(theta);
+        for i in 0..len {
+            for j in 0..len {
+                u.covariance[i][j] = covariance[(i, j)];
+            }
+        }
+        Some(u)
+    }
+
+    /// The machines at the ends of the ellipsoid's principal axes, `sigmas` standard
+    /// deviations out from the fit (two per parameter); `None` where the covariance is not
+    /// positive semi-definite (a value the fit does not determine).
+    pub fn principal_extremes(&self, sigmas: f64) -> Option<Vec<Mechanics>> {
+        let n = self.len;
+        let c = nalgebra::DMatrix::from_fn(n, n, |i, j| 0.5 * (self.covariance[i][j] + self.covariance[j][i]));
+        let eigen = nalgebra::SymmetricEigen::new(c);
+        let mut extremes = Vec::with_capacity(2 * n);
+        for (k, &lambda) in eigen.eigenvalues.iter().enumerate() {
+            if !(lambda.is_finite() && lambda >= -1e-12 * eigen.eigenvalues.amax()) {
+                return None;
+            }
+            let reach = sigmas * lambda.max(0.0).sqrt();
+            for sign in [-1.0, 1.0] {
+                let theta: Vec<f64> =
+                    (0..n).map(|i| self.theta[i] + sign * reach * eigen.eigenvectors[(i, k)]).collect();
+                extremes.push(mechanics_of(&theta, 0.0));
+            }
+        }
+        Some(extremes)
+    }
+
+    /// The same fit with independent relative errors `sigma` on every parameter.
+    #[cfg(test)]
+    pub fn with_relative_errors(mut self, sigma: f64) -> Self {
+        self.covariance = [[0.0; 7]; 7];
+        for i in 0..self.len {
+            self.covariance[i][i] = sigma * sigma;
+        }
+        self
+    }
 }
 
 /// The absorber is kept where its fit's residual (sum of squares) is at most this share of
@@ -162,7 +223,8 @@ pub fn calibrate(points: &[PlantPoint], drive: &DriveDynamics) -> anyhow::Result
     let mechanics = mechanics_of(&theta, 0.0);
     let (worst_gain_db, worst_phase_deg) = worst_misfit(&residuals(&points, drive, &theta));
     // Standard errors: σ²·(JᵀJ)⁻¹ on the log parameters are relative errors.
-    let errors = standard_errors(&points, drive, &theta, c);
+    let covariance = covariance(&points, drive, &theta, c);
+    let errors = standard_errors_of(covariance.as_ref(), theta.len());
     let relative_errors = [errors[0], errors[1], errors[2], errors[3]];
     let absorber_relative_errors = (theta.len() == 7).then(|| [errors[4], errors[5], errors[6]]);
     let fr = mechanics.highest_resonance_hz();
@@ -173,6 +235,7 @@ pub fn calibrate(points: &[PlantPoint], drive: &DriveDynamics) -> anyhow::Result
         worst_gain_db,
         worst_phase_deg,
         rigid: fr > high,
+        uncertainty: covariance.as_ref().and_then(|cov| Uncertainty::of(&theta, cov)),
     })
 }
 
@@ -221,16 +284,24 @@ fn absorber_holds(
 /// Standard errors: σ²·(JᵀJ)⁻¹ on the log parameters are relative errors (infinite where a
 /// value is undetermined).
 fn standard_errors(points: &[PlantPoint], drive: &DriveDynamics, theta: &[f64], c: f64) -> Vec<f64> {
-    let n = theta.len();
+    standard_errors_of(covariance(points, drive, theta, c).as_ref(), theta.len())
+}
+
+/// The covariance of the log parameters, `σ²·(JᵀJ)⁻¹` (`None` where `JᵀJ` is singular).
+fn covariance(points: &[PlantPoint], drive: &DriveDynamics, theta: &[f64], c: f64) -> Option<nalgebra::DMatrix<f64>> {
     let jac = jacobian(points, drive, theta);
-    let dof = (2.0 * points.len() as f64 - n as f64).max(1.0);
-    let sigma2 = c / dof;
+    let dof = (2.0 * points.len() as f64 - theta.len() as f64).max(1.0);
     let jtj = jac.transpose() * &jac;
-    match jtj.try_inverse() {
-        // A variance that is not a finite non-negative number says the value is undetermined.
-        Some(inv) => (0..n)
+    jtj.try_inverse().map(|inv| inv * (c / dof))
+}
+
+/// The square roots of the covariance's diagonal; infinite where it is not a finite
+/// non-negative number (the value is undetermined), every one without a covariance.
+fn standard_errors_of(covariance: Option<&nalgebra::DMatrix<f64>>, n: usize) -> Vec<f64> {
+    match covariance {
+        Some(cov) => (0..n)
             .map(|i| {
-                let v = sigma2 * inv[(i, i)];
+                let v = cov[(i, i)];
                 if v.is_finite() && v >= 0.0 {
                     v.sqrt()
                 } else {
@@ -360,6 +431,57 @@ mod tests {
             assert!(c.relative_errors.iter().all(|e| e.is_finite()), "{c:?}");
             assert!(!c.rigid);
             assert!(m.absorber.is_none() && c.absorber_relative_errors.is_none(), "no absorber: {c:?}");
+        }
+    }
+
+    /// The machines the measurement cannot tell from the fit: every principal extreme lies
+    /// `sigmas` standard deviations out (its Mahalanobis distance from the fit, under the
+    /// fit's covariance, is `sigmas`), two per parameter, and the covariance's diagonal is the
+    /// standard errors reported.
+    #[test]
+    fn the_principal_extremes_lie_on_the_fits_confidence_ellipsoid() {
+        let params = control_core::Params::default();
+        let drive = DriveDynamics::as_configured(&params);
+        let mut seed = 3u64;
+        let mut noise = || {
+            seed = seed.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+            ((seed >> 11) as f64 / (1u64 << 53) as f64 - 0.5) * 0.01
+        };
+        let (jm, jl, fr, zeta) = (1.5e-4, 3e-4, 120.0, 0.03);
+        let w = std::f64::consts::TAU * fr;
+        let k = w * w / (1.0 / jm + 1.0 / jl);
+        let truth = Mechanics {
+            motor_inertia: jm,
+            load_inertia: jl,
+            shaft_stiffness: k,
+            shaft_damping: 2.0 * zeta * (k * jl).sqrt(),
+            motor_viscous: 0.0,
+            load_viscous: 0.0,
+            absorber: None,
+        };
+        let c = calibrate(&noisy_points(&truth, &drive, &mut noise), &drive).unwrap();
+        let u = c.uncertainty.expect("a determined fit");
+        let log_params = |m: &Mechanics| {
+            let zeta = m.shaft_damping / (2.0 * (m.shaft_stiffness * m.load_inertia).sqrt());
+            nalgebra::DVector::from_vec(vec![
+                m.motor_inertia.ln(),
+                m.load_inertia.ln(),
+                m.shaft_stiffness.ln(),
+                zeta.ln(),
+            ])
+        };
+        let cov = nalgebra::DMatrix::from_fn(4, 4, |i, j| u.covariance[i][j]);
+        for i in 0..4 {
+            assert!((cov[(i, i)].sqrt() / c.relative_errors[i] - 1.0).abs() < 1e-9, "{c:?}");
+        }
+        let inverse = cov.clone().try_inverse().unwrap();
+        let fit = log_params(&c.mechanics);
+        let extremes = u.principal_extremes(4.0).unwrap();
+        assert_eq!(extremes.len(), 8);
+        for m in &extremes {
+            let d = log_params(m) - &fit;
+            let distance = (d.transpose() * &inverse * &d)[(0, 0)].sqrt();
+            assert!((distance - 4.0).abs() < 1e-6, "{distance}");
         }
     }
 

@@ -111,6 +111,7 @@ mod tests {
             worst_gain_db: misfit_db,
             worst_phase_deg: 1.0,
             rigid,
+            uncertainty: None,
         }
     }
 

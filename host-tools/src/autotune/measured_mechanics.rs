@@ -12,7 +12,7 @@ use num_complex::Complex64;
 
 use super::axis_under_test::AxisUnderTest;
 use super::calibration::{calibrate, Calibration, PlantPoint};
-use super::design::{design, Design, MarginGoal, SearchGrid};
+use super::design::{design, margins_of, Design, MarginGoal, SearchGrid};
 use super::design_checks::{
     check_determined, check_linear, check_resonance_measured, check_riding_speed, check_torque_amplitude,
 };
@@ -107,6 +107,22 @@ impl MeasuredMechanics {
                 "no velocity-loop design keeps the {margin} margins with the {} reserve on the calibrated model",
                 reserve.name()
             )
+        })
+    }
+
+    /// Whether `design` keeps `goal` on every machine at the ends of the calibration's
+    /// principal axes, `sigmas` standard deviations out; false where the calibration does not
+    /// determine every value (a rigid machine's split of its inertia, say).
+    pub fn holds_within_uncertainty(&self, design: &Design, goal: &MarginGoal, sigmas: f64) -> bool {
+        let c = &self.calibration;
+        let Some(extremes) = c.uncertainty.filter(|_| !c.rigid).and_then(|u| u.principal_extremes(sigmas)) else {
+            return false;
+        };
+        extremes.into_iter().all(|mut m| {
+            (m.motor_viscous, m.load_viscous) = (c.mechanics.motor_viscous, c.mechanics.load_viscous);
+            let plant = |f: f64| loop_plant(&self.drive, &m, f);
+            margins_of(&design.tuning, &plant, self.period(), SearchGrid::STANDARD.grid_points, &m.features_hz())
+                .is_some_and(|margins| goal.held_by(&margins))
         })
     }
 

@@ -195,7 +195,7 @@ impl AutotuneReport<'_> {
                     String::new()
                 };
                 println!(
-                    "  the close reserve's design missed on {}: phase margin {:.2}°, Ms {:.3}{limited}; this is the \
+                    "  the close design missed on {}: phase margin {:.2}°, Ms {:.3}{limited}; this is the \
                      full reserve's design",
                     v.on, v.phase_margin_deg, v.sensitivity_peak
                 );
