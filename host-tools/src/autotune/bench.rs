@@ -202,6 +202,8 @@ pub struct MachineRow {
     /// verification (else, with the full reserve, no close design was made).
     pub reserve: Option<Reserve>,
     pub close_missed: bool,
+    /// The close design's reserve (tight or close).
+    pub close_reserve: Option<Reserve>,
     /// The calibration fitted an absorber.
     pub absorber_found: bool,
 }
@@ -240,6 +242,7 @@ pub fn tune_one(fmu: &Fmu, machine: &Machine, goal: &MarginGoal, on_drive: bool)
         position_on_truth: None,
         reserve: None,
         close_missed: false,
+        close_reserve: None,
         absorber_found: false,
     };
     if let Err(e) = tune_into(fmu, machine, goal, on_drive, &mut row) {
@@ -297,6 +300,7 @@ fn tune_into(fmu: &Fmu, machine: &Machine, goal: &MarginGoal, on_drive: bool, ro
     row.tuning = Some(d.tuning);
     row.position = Some(position);
     row.reserve = Some(verified.reserve);
+    row.close_reserve = Some(verified.close_reserve);
     row.verified = v.passed;
     row.verified_phase_margin_deg = v.phase_margin_deg;
     row.verified_sensitivity_peak = v.sensitivity_peak;

@@ -98,6 +98,7 @@ struct DriveOutcome {
     position: PositionTuning,
     reserve: Reserve,
     close: CloseDesign<Verification>,
+    close_reserve: Reserve,
     /// Drive time of the close design's verification on the drive, where it ran there (s).
     close_drive_time_s: f64,
     /// The drive ran the close design (and missed with it) before the full reserve's.
@@ -140,7 +141,12 @@ impl AutotuneArgs {
                 let responses = self.responses(&fmu, &tuned, &mechanics, design)?;
                 pb.finish_and_clear();
                 let close_drive_time_s = verified.close.missed().map_or(0.0, |v| v.drive_time_s);
-                let reserve = ReserveTaken { reserve: verified.reserve, close: &verified.close, close_drive_time_s };
+                let reserve = ReserveTaken {
+                    reserve: verified.reserve,
+                    close: &verified.close,
+                    close_reserve: verified.close_reserve,
+                    close_drive_time_s,
+                };
                 self.report(&out, &goal, (&mechanics, design, position, &responses), reserve, &verified.outcome, None)?
             }
             Some(mut session) => self.on_drive(&fmu, &mut session, &parameters, &goal, &out, &pb)?,
@@ -182,12 +188,17 @@ impl AutotuneArgs {
             }
         })?;
         let results = (&o.mechanics, &o.design, &o.position, &o.responses);
-        let reserve = ReserveTaken { reserve: o.reserve, close: &o.close, close_drive_time_s: o.close_drive_time_s };
+        let reserve = ReserveTaken {
+            reserve: o.reserve,
+            close: &o.close,
+            close_reserve: o.close_reserve,
+            close_drive_time_s: o.close_drive_time_s,
+        };
         let passed = self.report(out, goal, results, reserve, &o.twin, o.drive.as_ref().map(|(v, s)| (v, *s)))?;
         if o.drive.is_none() {
             if o.close_ran_on_drive {
                 eprintln!(
-                    "the drive ran the close reserve's design for its verification and has its parameters back; the \
+                    "the drive ran the close design for its verification and has its parameters back; the \
                      full reserve's design misses the margins on the twin of the drive's machine: the drive was not \
                      given it"
                 );
@@ -233,7 +244,8 @@ impl AutotuneArgs {
             Ok(((twin, Some(on_drive)), held))
         })?;
         pb.set_position(550);
-        let (design, position, reserve) = (verified.design, verified.position, verified.reserve);
+        let (design, position, reserve, close_reserve) =
+            (verified.design, verified.position, verified.reserve, verified.close_reserve);
         // The verification the close design missed: the drive's where it ran (its sweep is
         // drive time), else the twin's.
         let close_on_drive = verified.close.missed().and_then(|(_, on_drive)| on_drive.as_ref());
@@ -249,6 +261,7 @@ impl AutotuneArgs {
             position,
             reserve,
             close,
+            close_reserve,
             close_drive_time_s,
             close_ran_on_drive,
             responses,

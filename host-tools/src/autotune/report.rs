@@ -41,6 +41,8 @@ pub struct AutotuneReport<'a> {
 pub struct ReserveTaken<'a> {
     pub reserve: Reserve,
     pub close: &'a CloseDesign<Verification>,
+    /// The close design's reserve (tight or close).
+    pub close_reserve: Reserve,
     /// Drive time of the close design's verification on the machine (s): on the FMU the
     /// twin's sweep, on a drive its own only.
     pub close_drive_time_s: f64,
@@ -137,6 +139,7 @@ impl AutotuneReport<'_> {
             "design": self.design,
             "reserve": self.reserve.reserve,
             "close_design": self.reserve.close,
+            "close_reserve": self.reserve.close_reserve,
             "position": self.position,
             "before": mech.during,
             "verification": self.twin,
@@ -195,12 +198,20 @@ impl AutotuneReport<'_> {
                     String::new()
                 };
                 println!(
-                    "  the close design missed on {}: phase margin {:.2}°, Ms {:.3}{limited}; this is the \
-                     full reserve's design",
-                    v.on, v.phase_margin_deg, v.sensitivity_peak
+                    "  the close design ({} reserve) missed on {}: phase margin {:.2}°, Ms {:.3}{limited}; this \
+                     is the full reserve's design",
+                    self.reserve.close_reserve.name(),
+                    v.on,
+                    v.phase_margin_deg,
+                    v.sensitivity_peak
                 );
             }
-            CloseDesign::Refused(e) => println!("  no design with the close reserve ({e}); this is the full reserve's"),
+            CloseDesign::Refused(e) => {
+                println!(
+                    "  no close design ({} reserve: {e}); this is the full reserve's",
+                    self.reserve.close_reserve.name()
+                )
+            }
         }
         println!("  kp {:.4} N·m·s/rad (was {:.4}), ki {:.2} N·m/rad (was {:.2})", t.kp, before.kp, t.ki, before.ki);
         match t.notch {
