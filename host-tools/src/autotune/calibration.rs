@@ -382,6 +382,14 @@ fn levenberg_marquardt(points: &[PlantPoint], drive: &DriveDynamics, mut theta: 
 mod tests {
     use super::*;
 
+    /// Uniform noise of ±0.5 % from a linear congruential generator seeded with `seed`.
+    fn uniform_noise(mut seed: u64) -> impl FnMut() -> f64 {
+        move || {
+            seed = seed.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+            ((seed >> 11) as f64 / (1u64 << 53) as f64 - 0.5) * 0.01
+        }
+    }
+
     /// `truth`'s plant through `drive` at 41 frequencies from 10 Hz to 3 kHz, each reading
     /// multiplied by `1 + noise() + j·noise()`.
     fn noisy_points(truth: &Mechanics, drive: &DriveDynamics, noise: &mut impl FnMut() -> f64) -> Vec<PlantPoint> {
@@ -403,24 +411,11 @@ mod tests {
     fn a_two_inertia_machine_is_recovered_from_its_response() {
         let params = control_core::Params::default();
         let drive = DriveDynamics::as_configured(&params);
-        let mut seed = 7u64;
-        let mut noise = || {
-            seed = seed.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
-            ((seed >> 11) as f64 / (1u64 << 53) as f64 - 0.5) * 0.01
-        };
+        let mut noise = uniform_noise(7);
         for (jl, fr, zeta) in [(3e-4, 120.0, 0.03), (5e-5, 400.0, 0.08), (7e-4, 60.0, 0.01)] {
             let jm = 1.5e-4;
-            let w = std::f64::consts::TAU * fr;
-            let k = w * w / (1.0 / jm + 1.0 / jl);
-            let truth = Mechanics {
-                motor_inertia: jm,
-                load_inertia: jl,
-                shaft_stiffness: k,
-                shaft_damping: 2.0 * zeta * (k * jl).sqrt(),
-                motor_viscous: 0.0,
-                load_viscous: 0.0,
-                absorber: None,
-            };
+            let truth = Mechanics::two_inertia(jm, jl, fr, zeta);
+            let k = truth.shaft_stiffness;
             let points = noisy_points(&truth, &drive, &mut noise);
             let c = calibrate(&points, &drive).unwrap();
             let m = c.mechanics;
@@ -442,23 +437,8 @@ mod tests {
     fn the_principal_extremes_lie_on_the_fits_confidence_ellipsoid() {
         let params = control_core::Params::default();
         let drive = DriveDynamics::as_configured(&params);
-        let mut seed = 3u64;
-        let mut noise = || {
-            seed = seed.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
-            ((seed >> 11) as f64 / (1u64 << 53) as f64 - 0.5) * 0.01
-        };
-        let (jm, jl, fr, zeta) = (1.5e-4, 3e-4, 120.0, 0.03);
-        let w = std::f64::consts::TAU * fr;
-        let k = w * w / (1.0 / jm + 1.0 / jl);
-        let truth = Mechanics {
-            motor_inertia: jm,
-            load_inertia: jl,
-            shaft_stiffness: k,
-            shaft_damping: 2.0 * zeta * (k * jl).sqrt(),
-            motor_viscous: 0.0,
-            load_viscous: 0.0,
-            absorber: None,
-        };
+        let mut noise = uniform_noise(3);
+        let truth = Mechanics::two_inertia(1.5e-4, 3e-4, 120.0, 0.03);
         let c = calibrate(&noisy_points(&truth, &drive, &mut noise), &drive).unwrap();
         let u = c.uncertainty.expect("a determined fit");
         let log_params = |m: &Mechanics| {
@@ -495,11 +475,7 @@ mod tests {
     fn an_absorber_on_the_load_is_found_and_fitted() {
         let params = control_core::Params::default();
         let drive = DriveDynamics::as_configured(&params);
-        let mut seed = 11u64;
-        let mut noise = || {
-            seed = seed.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
-            ((seed >> 11) as f64 / (1u64 << 53) as f64 - 0.5) * 0.01
-        };
+        let mut noise = uniform_noise(11);
         for (jl, fr, fa, share) in [(3e-4, 150.0, 60.0, 0.3), (1e-4, 400.0, 250.0, 0.2), (2e-4, 1500.0, 300.0, 0.15)] {
             let jm = 1.5e-4;
             let w = std::f64::consts::TAU * fr;

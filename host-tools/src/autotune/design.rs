@@ -442,20 +442,6 @@ mod tests {
     use crate::autotune::mechanics::Mechanics;
     use crate::autotune::refinement::refine;
 
-    fn machine(jm: f64, jl: f64, fr: f64, zeta: f64) -> Mechanics {
-        let w = std::f64::consts::TAU * fr;
-        let k = w * w / (1.0 / jm + 1.0 / jl);
-        Mechanics {
-            motor_inertia: jm,
-            load_inertia: jl,
-            shaft_stiffness: k,
-            shaft_damping: 2.0 * zeta * (k * jl).sqrt(),
-            motor_viscous: 0.0,
-            load_viscous: 0.0,
-            absorber: None,
-        }
-    }
-
     /// Notch candidates on peaks near the loop's Nyquist frequency: every centre lies below
     /// 0.9 of it (a shifted one above is dropped, the peak's own kept where it fits), and a
     /// design on a resonance just below Nyquist keeps its margins on a denser grid.
@@ -478,7 +464,7 @@ mod tests {
         assert_eq!(notch_candidates(&[0.5 * nyquist], &grid, nyquist).len(), 1 + 2 * per_shift);
         let drive = DriveDynamics::as_configured(&params);
         let goal = MarginGoal::named("standard").unwrap();
-        let m = machine(1.5e-4, 1e-4, 0.8 * nyquist, 0.01);
+        let m = Mechanics::two_inertia(1.5e-4, 1e-4, 0.8 * nyquist, 0.01);
         let plant = |f: f64| crate::autotune::loop_plant(&drive, &m, f);
         let d = design(&plant, period, &goal, &grid, &m.features_hz()).unwrap();
         assert!(d.tuning.notch.is_none_or(|n| n.hz < NOTCH_LIMIT * nyquist), "{d:?}");
@@ -496,7 +482,7 @@ mod tests {
         let drive = DriveDynamics::as_configured(&params);
         let period = params.rates.velocity_period() as f64;
         let goal = MarginGoal::named("standard").unwrap();
-        let m = machine(1.5e-4, 0.6e-4, 420.0, 0.02);
+        let m = Mechanics::two_inertia(1.5e-4, 0.6e-4, 420.0, 0.02);
         // The second mode: a pole pair at 1.3 kHz over a zero pair at 1.1 kHz (unit gain at
         // DC), lightly damped.
         let mode = |f: f64| {
@@ -594,7 +580,7 @@ mod tests {
         let drive = DriveDynamics::as_configured(&params);
         let period = params.rates.velocity_period() as f64;
         let goal = MarginGoal::named("standard").unwrap();
-        let m = machine(1.5e-4, 3e-4, 300.0, 0.002);
+        let m = Mechanics::two_inertia(1.5e-4, 3e-4, 300.0, 0.002);
         let plant = |f: f64| crate::autotune::loop_plant(&drive, &m, f);
         let d = design(&plant, period, &goal, &SearchGrid::STANDARD, &m.features_hz()).unwrap();
         let with = margins_of(&d.tuning, &plant, period, 400, &m.features_hz()).unwrap();

@@ -41,6 +41,24 @@ impl AbsorberMechanics {
 }
 
 impl Mechanics {
+    /// A two-inertia machine of motor and load inertia `jm`, `jl` (kg·m²) whose shaft
+    /// resonates at `fr` Hz with damping ratio `zeta` (at the load's own frequency), without
+    /// friction: the tests' machines.
+    #[cfg(test)]
+    pub fn two_inertia(jm: f64, jl: f64, fr: f64, zeta: f64) -> Self {
+        let w = std::f64::consts::TAU * fr;
+        let k = w * w / (1.0 / jm + 1.0 / jl);
+        Self {
+            motor_inertia: jm,
+            load_inertia: jl,
+            shaft_stiffness: k,
+            shaft_damping: 2.0 * zeta * (k * jl).sqrt(),
+            motor_viscous: 0.0,
+            load_viscous: 0.0,
+            absorber: None,
+        }
+    }
+
     /// The twin plant's mechanics (its Coulomb friction left out).
     pub fn of_plant(p: &servo_axis::plant::PlantParams) -> Self {
         Self {
