@@ -4,6 +4,7 @@
 //! autotune`, `servo calibrate` and the autotune bench all start from.
 
 use std::collections::BTreeMap;
+use std::sync::Mutex;
 
 use anyhow::{anyhow, Context, Result};
 use control_core::excitation::InjectionPoint;
@@ -19,11 +20,17 @@ use super::design_checks::{
 use super::drive_dynamics::DriveDynamics;
 use super::mechanics::AbsorberMechanics;
 use super::position_loop_design::{design_position_loop, position_loop_per_gain, PositionRates, PositionTuning};
+use super::refinement::{refine_on, restore_on};
 use super::reserve::Reserve;
+use super::sampled_plant::SampledPlant;
 use super::velocity_controller::VelocityTuning;
 use super::{loop_plant, plant_points};
 use crate::analysis::response_point::ResponsePoint;
 use crate::fmu::scenario::Value;
+
+/// How far up its reach a loop moved from the goal onto a reserve keeps its closed loop over
+/// −3 dB (a share of its last gain crossover), as the search's near misses are moved.
+const MOVED_FLOOR: f64 = 0.8;
 
 /// A calibration and what it was fitted to.
 pub struct MeasuredMechanics {
@@ -40,6 +47,9 @@ pub struct MeasuredMechanics {
     pub calibration: Calibration,
     /// The sweep's drive time (s).
     pub drive_time_s: f64,
+    /// The widest design that keeps the goal itself (no reserve) on the calibrated model, once
+    /// it was needed, and the goal it keeps ([`Self::design`]).
+    pub at_goal: Mutex<Option<(MarginGoal, Option<Design>)>>,
 }
 
 /// Sweep `target` at the torque point with `amplitude` N·m riding at `velocity` rad/s, and
@@ -70,6 +80,7 @@ pub fn measure_mechanics(
         points,
         calibration,
         drive_time_s: sweep.drive_time_s,
+        at_goal: Mutex::new(None),
     })
 }
 
@@ -92,22 +103,64 @@ impl MeasuredMechanics {
     /// The widest-bandwidth design on the calibrated model that keeps `goal` with `reserve`;
     /// refused where the resonance lies near the top of the measured band (`margin` names the
     /// goal in the message).
+    ///
+    /// Where the search's widest loop with the reserve stays under the model's highest
+    /// anti-resonance (its closed loop dips there and its bandwidth is the dip's), the widest
+    /// loop that keeps the goal itself is moved onto the reserve's margins
+    /// (`refinement::restore_on`) and taken where it is wider. The loops that lift such a dip
+    /// can lie on a sliver the search with the reserve does not reach while the search at the
+    /// goal does: on seed 1's machine 43 of 200 (a load of 0.23 times the motor on a 147 Hz
+    /// shaft) the search's widest loop with the tight reserve stays at 130 Hz, while the loop
+    /// it finds at the goal (two broad notches, 842 Hz, 45.04° of phase margin) moves onto the
+    /// tight reserve's margins at 834 Hz.
     pub fn design(&self, goal: &MarginGoal, margin: &str, reserve: Reserve) -> Result<Design> {
         check_resonance_measured(&self.calibration, self.top_hz())?;
-        let model = |f: f64| self.model(f);
-        design(
-            &model,
-            self.period(),
-            &goal.with_reserve(reserve),
-            &SearchGrid::STANDARD,
-            &self.calibration.mechanics.features_hz(),
-        )
-        .ok_or_else(|| {
+        let reserved = goal.with_reserve(reserve);
+        let found = self.search(&reserved);
+        let under_dip = found
+            .as_ref()
+            .map_or(true, |d| d.margins.bandwidth_hz < self.calibration.mechanics.highest_anti_resonance_hz());
+        let moved = if under_dip { self.moved_from_goal(goal, &reserved) } else { None };
+        let best = match (found, moved) {
+            (Some(f), Some(m)) => Some(if m.margins.bandwidth_hz > f.margins.bandwidth_hz { m } else { f }),
+            (f, m) => f.or(m),
+        };
+        best.ok_or_else(|| {
             anyhow!(
                 "no velocity-loop design keeps the {margin} margins with the {} reserve on the calibrated model",
                 reserve.name()
             )
         })
+    }
+
+    /// The search's widest loop on the calibrated model that keeps `goal`.
+    fn search(&self, goal: &MarginGoal) -> Option<Design> {
+        let model = |f: f64| self.model(f);
+        design(&model, self.period(), goal, &SearchGrid::STANDARD, &self.calibration.mechanics.features_hz())
+    }
+
+    /// The widest loop that keeps `goal` itself (searched once per goal) moved onto the
+    /// `reserved` margins, its closed loop held over −3 dB up to four fifths of its reach.
+    pub(crate) fn moved_from_goal(&self, goal: &MarginGoal, reserved: &MarginGoal) -> Option<Design> {
+        let model = |f: f64| self.model(f);
+        let sampled = SampledPlant::new(
+            &model,
+            self.period(),
+            SearchGrid::STANDARD.grid_points,
+            &self.calibration.mechanics.features_hz(),
+        );
+        let at_goal = {
+            let mut cache = self.at_goal.lock().unwrap_or_else(|e| e.into_inner());
+            match cache.as_ref() {
+                Some((g, d)) if g == goal => *d,
+                _ => {
+                    let d = self.search(goal).map(|d| refine_on(&sampled, goal, &d, None).unwrap_or(d));
+                    *cache = Some((*goal, d));
+                    d
+                }
+            }
+        }?;
+        restore_on(&sampled, reserved, &at_goal, MOVED_FLOOR).map(|(d, _)| d)
     }
 
     /// Whether `design` keeps `goal` on every machine at the ends of the calibration's

@@ -100,6 +100,16 @@ impl Mechanics {
         ((k * (1.0 / self.motor_inertia + 1.0 / self.load_inertia)).sqrt() / tau, (k / self.load_inertia).sqrt() / tau)
     }
 
+    /// The highest anti-resonance (Hz): the load's, or with an absorber the higher of the
+    /// chain's two (where the motor's response has its zeros).
+    pub fn highest_anti_resonance_hz(&self) -> f64 {
+        let Some(a) = self.absorber else { return self.resonance_hz().1 };
+        let (jl, ja, k, ka) = (self.load_inertia, a.inertia, self.shaft_stiffness, a.stiffness);
+        // ω⁴ − b·ω² + c = 0 with the motor held; the larger root.
+        let (b, c) = ((k + ka) / jl + ka / ja, k * ka / (jl * ja));
+        ((b + (b * b - 4.0 * c).max(0.0).sqrt()) / 2.0).sqrt() / std::f64::consts::TAU
+    }
+
     /// The frequencies (Hz) where the machine's response turns fastest: its resonance and
     /// anti-resonance, each with its half-power points `f·(1 ± ζ)`; with an absorber, the
     /// undamped chain's two resonances and two anti-resonances, each with the absorber's
@@ -178,6 +188,33 @@ impl Mechanics {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// The highest anti-resonance is where the motor's response has its highest dip: with
+    /// a lightly damped absorber the response at it lies under a fifth of the response a tenth
+    /// either side, and no deeper dip lies above it.
+    #[test]
+    fn the_highest_anti_resonance_is_the_responses_highest_dip() {
+        let mut m = Mechanics::two_inertia(1e-4, 2e-4, 90.0, 0.002);
+        let response = |m: &Mechanics, f: f64| m.motor_velocity_per_torque(f).norm();
+        assert_eq!(m.highest_anti_resonance_hz(), m.resonance_hz().1);
+        m.absorber = Some(AbsorberMechanics {
+            inertia: 2e-5,
+            stiffness: 2e-5 * (std::f64::consts::TAU * 130.0f64).powi(2),
+            damping: 1e-5,
+        });
+        let fa = m.highest_anti_resonance_hz();
+        assert!(fa > m.resonance_hz().1, "{fa}");
+        for side in [0.9, 1.1] {
+            assert!(response(&m, fa) < 0.2 * response(&m, side * fa), "{fa} Hz against {side}");
+        }
+        // Above it the response only falls as the motor's alone does, with one peak and no
+        // dip: sampled finely, its local minima lie at or below fa.
+        let f: Vec<f64> = (0..4000).map(|k| 10.0 * 1.001f64.powi(k)).collect();
+        let r: Vec<f64> = f.iter().map(|&f| response(&m, f)).collect();
+        let top_dip =
+            (1..f.len() - 1).filter(|&k| r[k] < r[k - 1] && r[k] < r[k + 1]).map(|k| f[k]).fold(0.0, f64::max);
+        assert!((top_dip / fa - 1.0).abs() < 0.002, "{top_dip} against {fa}");
+    }
 
     /// Far below the resonance the axis is one rigid body (1/(J s)); at the anti-resonance
     /// the motor hardly moves (a dip), at the resonance it moves most (a peak); far above it
