@@ -284,8 +284,9 @@ struct Ladder {
 /// How many near misses (those of the farthest reach) are moved onto the margins.
 const RESTORED_NEAR_MISSES: usize = 12;
 
-/// The share of its reach ([`reach_hz`]) a near miss keeps while it is moved.
-const NEAR_MISS_KEPT_REACH: f64 = 0.8;
+/// The share of its reach ([`reach_hz`]) a near miss keeps while it is moved (and a loop
+/// at the goal moved onto a reserve, `MeasuredMechanics::design`).
+pub(crate) const NEAR_MISS_KEPT_REACH: f64 = 0.8;
 
 /// Whether a stable loop keeps `goal` or misses it by a little: Ms within 0.1 over it, the
 /// phase margin within 5°, the gain margin within 2 dB under it.

@@ -103,11 +103,26 @@ impl Mechanics {
     /// The highest anti-resonance (Hz): the load's, or with an absorber the higher of the
     /// chain's two (where the motor's response has its zeros).
     pub fn highest_anti_resonance_hz(&self) -> f64 {
-        let Some(a) = self.absorber else { return self.resonance_hz().1 };
-        let (jl, ja, k, ka) = (self.load_inertia, a.inertia, self.shaft_stiffness, a.stiffness);
-        // ω⁴ − b·ω² + c = 0 with the motor held; the larger root.
-        let (b, c) = ((k + ka) / jl + ka / ja, k * ka / (jl * ja));
-        ((b + (b * b - 4.0 * c).max(0.0).sqrt()) / 2.0).sqrt() / std::f64::consts::TAU
+        match self.absorber {
+            Some(a) => self.chain_modes_hz(&a).1[1],
+            None => self.resonance_hz().1,
+        }
+    }
+
+    /// The undamped chain motor –k– load –k_a– absorber: its two resonances and its two
+    /// anti-resonances (Hz, each pair ascending), the roots of `ω⁴ − b·ω² + c = 0`, and of
+    /// the same with the motor held for the anti-resonances (the motor's response zeros).
+    fn chain_modes_hz(&self, a: &AbsorberMechanics) -> ([f64; 2], [f64; 2]) {
+        let tau = std::f64::consts::TAU;
+        let (jm, jl, ja, k, ka) = (self.motor_inertia, self.load_inertia, a.inertia, self.shaft_stiffness, a.stiffness);
+        let roots = |b: f64, c: f64| {
+            let d = (b * b - 4.0 * c).max(0.0).sqrt();
+            [((b - d) / 2.0).max(0.0).sqrt() / tau, ((b + d) / 2.0).sqrt() / tau]
+        };
+        (
+            roots(k * (1.0 / jm + 1.0 / jl) + ka * (1.0 / jl + 1.0 / ja), k * ka * (jm + jl + ja) / (jm * jl * ja)),
+            roots((k + ka) / jl + ka / ja, k * ka / (jl * ja)),
+        )
     }
 
     /// The frequencies (Hz) where the machine's response turns fastest: its resonance and
@@ -124,16 +139,7 @@ impl Mechanics {
         let Some(a) = self.absorber else {
             return vec![fr, fr * (1.0 - zeta_r), fr * (1.0 + zeta_r), fa, fa * (1.0 - zeta_a), fa * (1.0 + zeta_a)];
         };
-        // The chain motor –k– load –k_a– absorber: ω⁴ − b·ω² + c = 0 for its resonances, and
-        // the same with the motor held for its anti-resonances (the motor's response zeros).
-        let (jm, jl, ja, k, ka) = (self.motor_inertia, self.load_inertia, a.inertia, self.shaft_stiffness, a.stiffness);
-        let roots = |b: f64, c: f64| {
-            let d = (b * b - 4.0 * c).max(0.0).sqrt();
-            [((b - d) / 2.0).max(0.0).sqrt() / tau, ((b + d) / 2.0).sqrt() / tau]
-        };
-        let resonances =
-            roots(k * (1.0 / jm + 1.0 / jl) + ka * (1.0 / jl + 1.0 / ja), k * ka * (jm + jl + ja) / (jm * jl * ja));
-        let zeros = roots((k + ka) / jl + ka / ja, k * ka / (jl * ja));
+        let (resonances, zeros) = self.chain_modes_hz(&a);
         let zeta = zeta_r.max(zeta_a).max(a.own_mode().1);
         resonances.into_iter().chain(zeros).flat_map(|f| [f, f * (1.0 - zeta), f * (1.0 + zeta)]).collect()
     }
@@ -196,7 +202,6 @@ mod tests {
     fn the_highest_anti_resonance_is_the_responses_highest_dip() {
         let mut m = Mechanics::two_inertia(1e-4, 2e-4, 90.0, 0.002);
         let response = |m: &Mechanics, f: f64| m.motor_velocity_per_torque(f).norm();
-        assert_eq!(m.highest_anti_resonance_hz(), m.resonance_hz().1);
         m.absorber = Some(AbsorberMechanics {
             inertia: 2e-5,
             stiffness: 2e-5 * (std::f64::consts::TAU * 130.0f64).powi(2),

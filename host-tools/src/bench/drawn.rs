@@ -30,6 +30,10 @@ pub fn run_each<T: Sync, S, R: Send>(
     use std::sync::Mutex;
     let pb = crate::cli::progress_bar(label, quiet);
     pb.set_length(members.len() as u64);
+    // Where the bar is not drawn (stderr not a terminal: a log file, CI), a line per member
+    // ended, with the time so far and the time left at that pace.
+    let log_lines = !quiet && !std::io::IsTerminal::is_terminal(&std::io::stderr());
+    let (started, done) = (std::time::Instant::now(), AtomicUsize::new(0));
     let next = AtomicUsize::new(0);
     let rows: Mutex<Vec<Option<R>>> = Mutex::new(members.iter().map(|_| None).collect());
     let worker = || -> Result<()> {
@@ -40,6 +44,17 @@ pub fn run_each<T: Sync, S, R: Send>(
             let row = run(&mut s, m);
             rows.lock().unwrap_or_else(|e| e.into_inner())[k] = Some(row);
             pb.inc(1);
+            let n = done.fetch_add(1, Ordering::Relaxed) + 1;
+            if log_lines {
+                let elapsed = started.elapsed().as_secs_f64();
+                let left = elapsed / n as f64 * (members.len() - n) as f64;
+                eprintln!(
+                    "{label}: {n} of {} done, {:.1} min so far, about {:.1} min left",
+                    members.len(),
+                    elapsed / 60.0,
+                    left / 60.0
+                );
+            }
         }
     };
     let jobs = jobs.clamp(1, members.len().max(1));
