@@ -304,12 +304,11 @@ impl Ladders<'_> {
         let mut best: Option<Design> = None;
         let mut near: Option<(Design, f64)> = None;
         let mut dips: Vec<Option<(Design, f64)>> = vec![None; self.grid.integral_ratios.len()];
-        let z: Vec<Complex64> =
-            f.iter().map(|&f| Complex64::from_polar(1.0, std::f64::consts::TAU * f * period)).collect();
+        let z = &self.sampled.z;
         for &low_pass_hz in self.low_passes {
             let filters: Vec<Complex64> = {
-                let t = VelocityTuning { kp: 1.0, ki: 0.0, low_pass_hz, notch, notch2 };
-                f.iter().map(|&f| t.response(f, period)).collect()
+                let t = VelocityTuning { kp: 1.0, ki: 0.0, low_pass_hz, notch, notch2 }.at_period(period);
+                z.iter().map(|&z| t.at(z)).collect()
             };
             for (ni, &n) in self.grid.integral_ratios.iter().enumerate() {
                 let best_dip = &mut dips[ni];

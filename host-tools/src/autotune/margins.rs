@@ -65,24 +65,37 @@ pub fn margins_with_integrators(frequencies: &[f64], loop_gain: &[Complex64], in
     let quarter_turns = integrators as f64 * std::f64::consts::FRAC_PI_2;
     let mut last = (1.0 + loop_gain[0]).arg();
     let mut turned = wrap(last + quarter_turns);
+    // `|1 + L|²` at the sensitivity peak so far: a point whose `|1 + L|²` lies clearly above
+    // it cannot be a new peak, and its root and reciprocal are not taken (the search
+    // evaluates millions of loops; the peak found is the same, bit for bit).
+    let mut peak_norm_sqr = f64::INFINITY;
     for k in 0..n {
         let l = loop_gain[k];
         let f = frequencies[k];
         let one_plus = 1.0 + l;
         if k > 0 {
-            let step = wrap(one_plus.arg() - last);
+            let arg = one_plus.arg();
+            let step = wrap(arg - last);
             if step.abs() > 0.5 * std::f64::consts::PI {
                 return None;
             }
             turned += step;
-            last = one_plus.arg();
+            last = arg;
         }
-        let s = 1.0 / one_plus.norm();
-        if !(s <= m.sensitivity_peak) {
-            m.sensitivity_peak = s;
-            m.sensitivity_peak_hz = f;
+        let d = one_plus.norm_sqr();
+        if !(d > peak_norm_sqr * CLEARLY) {
+            let s = 1.0 / one_plus.norm();
+            if !(s <= m.sensitivity_peak) {
+                m.sensitivity_peak = s;
+                m.sensitivity_peak_hz = f;
+                peak_norm_sqr = d;
+            }
         }
-        if m.bandwidth_hz.is_nan() && (l / one_plus).norm() < std::f64::consts::FRAC_1_SQRT_2 {
+        // `|L/(1 + L)|² = |L|²/|1 + L|²` against a half: only near it is the ratio taken.
+        if m.bandwidth_hz.is_nan()
+            && !(l.norm_sqr() > 0.5 * d * CLEARLY)
+            && (l / one_plus).norm() < std::f64::consts::FRAC_1_SQRT_2
+        {
             m.bandwidth_hz = f;
         }
         if k == 0 {
@@ -136,6 +149,12 @@ pub fn crossover_margins(frequencies: &[f64], loop_gain: &[Complex64]) -> (f64, 
 /// `L` to −1 on the unit circle, `180° − |∠L|` (∠L within ±180°: a crossover in a notch's
 /// phase lead lies far from −1, whichever side).
 fn gain_crossover(a: Complex64, b: Complex64) -> Option<(f64, f64)> {
+    // Both points clearly on one side of the unit circle: no crossover, without the roots and
+    // logarithms (the same answer as the test below, which decides near the circle).
+    let (na, nb) = (a.norm_sqr(), b.norm_sqr());
+    if (na > CLEARLY && nb > CLEARLY) || (na * CLEARLY < 1.0 && nb * CLEARLY < 1.0) {
+        return None;
+    }
     let (ga, gb) = (a.norm().ln(), b.norm().ln());
     if (ga >= 0.0) == (gb >= 0.0) {
         return None;
@@ -144,6 +163,10 @@ fn gain_crossover(a: Complex64, b: Complex64) -> Option<(f64, f64)> {
     let phase = a.arg() + x * wrap(b.arg() - a.arg());
     Some((x, 180.0 - wrap(phase).to_degrees().abs()))
 }
+
+/// A factor past every rounding of a root or a square (a few parts in 10¹⁶): a squared
+/// magnitude this far beyond a bound lies beyond it whichever way the magnitude is computed.
+const CLEARLY: f64 = 1.0 + 1e-9;
 
 fn wrap(x: f64) -> f64 {
     (x + std::f64::consts::PI).rem_euclid(std::f64::consts::TAU) - std::f64::consts::PI

@@ -60,19 +60,23 @@ impl VelocityTuning {
 
     /// Torque command over velocity error at `f` Hz, the loop ticking every `period` s.
     pub fn response(&self, f: f64, period: f64) -> Complex64 {
-        let z = Complex64::from_polar(1.0, std::f64::consts::TAU * f * period);
-        let mut c = self.kp + self.ki * period * z / (z - 1.0);
-        let rate = (1.0 / period) as f32;
-        if self.low_pass_hz > 0.0 {
-            c *= biquad_at(&Biquad::low_pass(self.low_pass_hz as f32, rate), z);
-        }
-        for n in self.notch.iter().chain(&self.notch2) {
-            c *= biquad_at(&Biquad::notch(n.hz as f32, n.q as f32, n.depth as f32, rate), z);
-        }
-        c
+        self.at_period(period).at(unit_circle(f, period))
     }
 
-    /// The FMU parameters (and `--set` names) that give this tuning.
+    /// The tuning's PI and filters designed for the loop's `period` (s), to be evaluated at
+    /// many points: the biquads are designed once, not at each point.
+    pub fn at_period(&self, period: f64) -> TuningAtPeriod {
+        let rate = (1.0 / period) as f32;
+        let low_pass = (self.low_pass_hz > 0.0).then(|| Biquad::low_pass(self.low_pass_hz as f32, rate));
+        let notch = |n: &Option<Notch>| n.map(|n| Biquad::notch(n.hz as f32, n.q as f32, n.depth as f32, rate));
+        TuningAtPeriod {
+            kp: self.kp,
+            ki: self.ki,
+            period,
+            filters: [low_pass, notch(&self.notch), notch(&self.notch2)],
+        }
+    }
+
     pub fn parameters(&self) -> BTreeMap<String, f64> {
         let n = self.notch.unwrap_or(Notch::OFF);
         let n2 = self.notch2.unwrap_or(Notch::OFF);
@@ -109,6 +113,32 @@ impl VelocityTuning {
 }
 
 /// A biquad's `H(z)` from its coefficients.
+/// `e^{j·2π·f·T}`: the point of the unit circle a frequency `f` (Hz) maps to at the
+/// loop's `period` `T` (s).
+pub fn unit_circle(f: f64, period: f64) -> Complex64 {
+    Complex64::from_polar(1.0, std::f64::consts::TAU * f * period)
+}
+
+/// A tuning with its filters designed for a period ([`VelocityTuning::at_period`]).
+pub struct TuningAtPeriod {
+    kp: f64,
+    ki: f64,
+    period: f64,
+    /// The low-pass, the notch and the second notch, in the drive's order.
+    filters: [Option<Biquad>; 3],
+}
+
+impl TuningAtPeriod {
+    /// The controller's response at `z` on the unit circle ([`unit_circle`]).
+    pub fn at(&self, z: Complex64) -> Complex64 {
+        let mut c = self.kp + self.ki * self.period * z / (z - 1.0);
+        for b in self.filters.iter().flatten() {
+            c *= biquad_at(b, z);
+        }
+        c
+    }
+}
+
 fn biquad_at(b: &Biquad, z: Complex64) -> Complex64 {
     let zi = 1.0 / z;
     let num = b.b0 as f64 + zi * (b.b1 as f64 + zi * b.b2 as f64);
