@@ -77,6 +77,7 @@ impl VelocityTuning {
         }
     }
 
+    /// The FMU parameters (and `--set` names) that give this tuning.
     pub fn parameters(&self) -> BTreeMap<String, f64> {
         let n = self.notch.unwrap_or(Notch::OFF);
         let n2 = self.notch2.unwrap_or(Notch::OFF);
@@ -112,7 +113,6 @@ impl VelocityTuning {
     }
 }
 
-/// A biquad's `H(z)` from its coefficients.
 /// `e^{j·2π·f·T}`: the point of the unit circle a frequency `f` (Hz) maps to at the
 /// loop's `period` `T` (s).
 pub fn unit_circle(f: f64, period: f64) -> Complex64 {
@@ -139,6 +139,7 @@ impl TuningAtPeriod {
     }
 }
 
+/// A biquad's `H(z)` from its coefficients.
 fn biquad_at(b: &Biquad, z: Complex64) -> Complex64 {
     let zi = 1.0 / z;
     let num = b.b0 as f64 + zi * (b.b1 as f64 + zi * b.b2 as f64);
