@@ -153,8 +153,8 @@ impl Mechanics {
     /// chain's upper one.
     pub fn highest_resonance_hz(&self) -> f64 {
         match self.absorber {
+            Some(a) => self.chain_modes_hz(&a).0[1],
             None => self.resonance_hz().0,
-            Some(_) => self.features_hz()[3],
         }
     }
 
