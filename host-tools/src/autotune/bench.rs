@@ -127,6 +127,18 @@ impl Machine {
         }
         p
     }
+
+    /// The velocity loop's period (s), the drive's part of the loop plant and the true
+    /// mechanics of this machine's twin (what the design tests build their plants from).
+    #[cfg(test)]
+    pub fn axis(&self) -> (f64, DriveDynamics, Mechanics) {
+        let c = configuration(&self.parameters()).expect("a drawn machine's twin configures");
+        (
+            c.control.rates.velocity_period() as f64,
+            DriveDynamics::on_plant(&c.control, &c.plant),
+            Mechanics::of_plant(&c.plant),
+        )
+    }
 }
 
 pub fn draw(n: u32, seed: u64) -> Vec<Machine> {

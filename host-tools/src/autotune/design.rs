@@ -550,12 +550,8 @@ mod tests {
     fn a_shaping_notch_takes_a_knife_edge_shaft_past_its_resonance() {
         use crate::autotune::bench::Machine;
         use crate::autotune::margins::log_grid;
-        use crate::fmu::configuration::configuration;
         let machine = Machine { inertia_ratio: 0.911, resonance_hz: 52.1, damping_ratio: 0.0157, absorber: None };
-        let c = configuration(&machine.parameters()).unwrap();
-        let period = c.control.rates.velocity_period() as f64;
-        let drive = DriveDynamics::on_plant(&c.control, &c.plant);
-        let m = Mechanics::of_plant(&c.plant);
+        let (period, drive, m) = machine.axis();
         let (fr, _) = m.resonance_hz();
         let plant = |f: f64| crate::autotune::loop_plant(&drive, &m, f);
         let goal = MarginGoal::named("standard").unwrap().with_reserve(crate::autotune::reserve::Reserve::Full);
@@ -596,11 +592,8 @@ mod tests {
     #[test]
     fn a_first_notch_raised_above_the_resonance_takes_the_loop_past_it() {
         use crate::autotune::bench::Machine;
-        use crate::fmu::configuration::configuration;
         let machine = Machine { inertia_ratio: 0.232, resonance_hz: 147.0, damping_ratio: 0.0256, absorber: None };
-        let c = configuration(&machine.parameters()).unwrap();
-        let period = c.control.rates.velocity_period() as f64;
-        let drive = DriveDynamics::on_plant(&c.control, &c.plant);
+        let (period, drive, _) = machine.axis();
         let m = Mechanics {
             motor_inertia: 5.00894806317959e-5,
             load_inertia: 1.1556370451877894e-5,

@@ -299,10 +299,7 @@ mod tests {
     use super::*;
     use crate::autotune::bench::Machine;
     use crate::autotune::design::{design, margins_of, SearchGrid};
-    use crate::autotune::drive_dynamics::DriveDynamics;
     use crate::autotune::margins::log_grid;
-    use crate::autotune::mechanics::Mechanics;
-    use crate::fmu::configuration::configuration;
 
     /// A dip is found where the closed loop climbs back to −3 dB, with its floor; a loop that
     /// rolls off for good has none.
@@ -327,10 +324,7 @@ mod tests {
     #[test]
     fn the_design_lifts_a_heavy_loads_anti_resonance_dip_and_keeps_its_margins() {
         let machine = Machine { inertia_ratio: 4.22, resonance_hz: 55.7, damping_ratio: 0.0508, absorber: None };
-        let c = configuration(&machine.parameters()).unwrap();
-        let period = c.control.rates.velocity_period() as f64;
-        let drive = DriveDynamics::on_plant(&c.control, &c.plant);
-        let m = Mechanics::of_plant(&c.plant);
+        let (period, drive, m) = machine.axis();
         let (_, fa) = m.resonance_hz();
         let plant = |f: f64| crate::autotune::loop_plant(&drive, &m, f);
         let standard = MarginGoal::named("standard").unwrap();
@@ -359,10 +353,7 @@ mod tests {
     #[test]
     fn a_near_miss_beside_the_sliver_is_moved_onto_the_margins_past_the_resonance() {
         let machine = Machine { inertia_ratio: 1.10, resonance_hz: 91.0, damping_ratio: 0.05, absorber: None };
-        let c = configuration(&machine.parameters()).unwrap();
-        let period = c.control.rates.velocity_period() as f64;
-        let drive = DriveDynamics::on_plant(&c.control, &c.plant);
-        let m = Mechanics::of_plant(&c.plant);
+        let (period, drive, m) = machine.axis();
         let (fr, _) = m.resonance_hz();
         let plant = |f: f64| crate::autotune::loop_plant(&drive, &m, f);
         let goal = MarginGoal::named("standard").unwrap().with_reserve(crate::autotune::reserve::Reserve::Close);
