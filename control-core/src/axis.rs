@@ -111,6 +111,10 @@ pub struct PwmOutput {
     pub enabled: bool,
 }
 
+/// N·m per unit of [`Telemetry::torque_command_sum`]: 2⁻²⁴ (a power of two, so that a torque
+/// becomes a count without rounding; 10 N·m held wraps the sum after about 40 days at 16 kHz).
+pub const TORQUE_SUM_UNIT: f32 = 1.0 / 16_777_216.0;
+
 /// Everything worth recording about one tick.
 #[derive(Clone, Copy, Debug, Default, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct Telemetry {
@@ -125,6 +129,11 @@ pub struct Telemetry {
     pub velocity_reference: f32,
     pub following_error: f32,
     pub torque_command: f32,
+    /// Every tick's torque command summed since the axis was built, in units of
+    /// [`TORQUE_SUM_UNIT`] (wrapping): the mean torque command between two records is the
+    /// (wrapping) difference of their sums over the difference of their ticks, however rarely
+    /// the records are read (a host's polls cannot average a 16 kHz signal; this can, exactly).
+    pub torque_command_sum: i64,
     pub current_reference: Dq,
     pub current: Dq,
     pub voltage: Dq,
@@ -281,6 +290,8 @@ pub struct Axis {
     following_error: f32,
     /// What the last tick's inner loop applied (the telemetry's per-tick part).
     applied: Applied,
+    /// The torque commands applied so far, summed ([`Telemetry::torque_command_sum`]).
+    torque_command_sum: i64,
     sweep: PhaseShiftedSweep,
     /// [`Params::validate_sweep`] of `params`, computed when the axis is built: a drive starts
     /// a sweep with its interrupts off, and builds its axis outside that section.
@@ -383,6 +394,7 @@ impl Axis {
                 faults: Faults(if params.commissioned { 0 } else { Faults::NOT_COMMISSIONED }),
                 following_error: 0.0,
                 applied: Applied::default(),
+                torque_command_sum: 0,
                 commissioning: None,
                 commissioning_started: false,
                 ; command_path, sweep
@@ -410,6 +422,7 @@ impl Axis {
             velocity_reference: self.velocity_reference,
             following_error: self.following_error,
             torque_command: a.torque_command,
+            torque_command_sum: self.torque_command_sum,
             current_reference: a.current_reference,
             current: a.current,
             voltage: a.voltage,
@@ -954,6 +967,9 @@ impl Axis {
             voltage: inner.out.voltage,
             voltage_saturated: inner.out.saturated,
         };
+        // Scaled by a power of two (exact), truncated toward zero (a bias under one unit).
+        self.torque_command_sum =
+            self.torque_command_sum.wrapping_add((inner.torque * (1.0 / TORQUE_SUM_UNIT)) as i64);
         self.faults = faults;
         self.tick += 1;
         if self.settings.counted_phases {
@@ -1041,6 +1057,38 @@ mod tests {
             last = (pwm.duties, axis.telemetry());
         }
         last
+    }
+
+    /// The telemetry's torque sum is the ticks' torque commands summed, each to within one
+    /// unit (truncated toward zero): the mean between two records read far apart is the mean
+    /// of every tick between them, which a reading of `torque_command` now and then is not.
+    /// A rebuilt axis starts its sum again, as its tick.
+    #[test]
+    fn the_torque_sum_is_every_tick_s_torque_command_summed() {
+        extern crate std;
+        let mut axis = Axis::new(commissioned()).unwrap();
+        let commands = Commands { mode: Mode::Velocity, velocity: 5.0, ..Commands::default() };
+        let (mut exact, mut ticks) = (0.0f64, 0u32);
+        let mut seen = std::vec::Vec::new();
+        for k in 0..4000u32 {
+            let i = AxisInputs {
+                phase_currents: [0.2 * libm::sinf(k as f32 * 0.013), -0.05],
+                encoder_count: (k * k / 97) as i32,
+                ..inputs()
+            };
+            axis.step(&i, &commands);
+            let t = axis.telemetry();
+            exact += t.torque_command as f64;
+            ticks += 1;
+            seen.push(t.torque_command);
+            let sum = t.torque_command_sum as f64 * TORQUE_SUM_UNIT as f64;
+            assert!((sum - exact).abs() <= ticks as f64 * TORQUE_SUM_UNIT as f64, "tick {k}: {sum} against {exact}");
+        }
+        // The loops moved the torque (a sum of one constant would prove little).
+        let (lo, hi) = seen.iter().fold((f32::MAX, f32::MIN), |(a, b), &x| (a.min(x), b.max(x)));
+        assert!(hi - lo > 0.01 && exact.abs() > 1.0, "{lo} {hi} {exact}");
+        axis.rebuild(&commissioned()).unwrap();
+        assert_eq!(axis.telemetry().torque_command_sum, 0);
     }
 
     /// Every acc/dec kind, and every feature of the golden vectors at once.

@@ -349,6 +349,7 @@ fn replay_with(source: impl VectorSource, work: Work) -> Result<(u64, u64), Vect
             digest.bytes(&[pwm.enabled as u8]);
             digest.bytes(&t.position.to_le_bytes());
             digest.bytes(&t.position_command.to_le_bytes());
+            digest.bytes(&t.torque_command_sum.to_le_bytes());
             for x in [
                 t.velocity_estimate,
                 t.velocity_reference,

@@ -735,8 +735,10 @@ fn calibrate_and_autotune_over_the_virtual_drive_tune_its_machine_verify_it_ther
         (&m["motor_inertia"], truth.motor_inertia, 0.03),
         (&m["load_inertia"], 2e-4, 0.03),
         (&m["shaft_stiffness"], 120.0, 0.03),
-        (&f["coulomb"], coulomb, 0.10),
-        (&f["viscous"], viscous, 0.20),
+        // The bounds are 10 % and 20 %; the drive's torque sums make its means every
+        // tick's, so this machine's friction comes out within a fraction of a percent.
+        (&f["coulomb"], coulomb, 0.02),
+        (&f["viscous"], viscous, 0.03),
     ] {
         assert!(near(value, truth) <= bound, "{value} against {truth}: {cal}");
     }
