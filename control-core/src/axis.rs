@@ -968,8 +968,7 @@ impl Axis {
             voltage_saturated: inner.out.saturated,
         };
         // Scaled by a power of two (exact), truncated toward zero (a bias under one unit).
-        self.torque_command_sum =
-            self.torque_command_sum.wrapping_add((inner.torque * (1.0 / TORQUE_SUM_UNIT)) as i64);
+        self.torque_command_sum = self.torque_command_sum.wrapping_add((inner.torque * (1.0 / TORQUE_SUM_UNIT)) as i64);
         self.faults = faults;
         self.tick += 1;
         if self.settings.counted_phases {
