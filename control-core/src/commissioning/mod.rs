@@ -56,7 +56,13 @@
 //!    back-EMF the free rotor's fit takes (`free_rotor_fit`), on the samples' differences on a
 //!    winding of a tick or more, where a rotor sticking and slipping on its friction acts
 //!    least; on a faster winding where the rotor's motion shows, on their second differences
-//!    (`q_winding`).
+//!    (`q_winding`). Where no fit finds a winding, on a winding of up to four ticks (a light
+//!    rotor on a strong magnet reverses with each chip and sticks on its friction), the
+//!    stage runs once more with a constant q voltage three times
+//!    the chips', ramped in first, turns the rotor one way throughout (at most 1¼ electrical
+//!    turns over the stage, by the flux linkage the passes give), the frame following the
+//!    rotor: its friction is then a constant torque, which no chip reverses
+//!    (`turning_bias`).
 //! 6. **Current loop.** The PI for the stated bandwidth from `R` and `L_q` (the torque's axis;
 //!    `current_loop_design`), the drive's gains for both axes. The design is checked on the d
 //!    axis, the rotor's own (where a current makes no torque and the rotor stays still), with
@@ -311,6 +317,23 @@ const PROBE_FIT_PERIODS: u32 = 8;
 /// Chips of each inductance stage (an M-sequence of degree 12), after a few ticks' start.
 const CHIP_DEGREE: u32 = 12;
 const CHIP_SETTLING_TICKS: u32 = 64;
+/// The q stage's constant voltage under its chips, their voltage's multiple, the electrical
+/// turns it may turn the rotor over the stage, and its ramp from 0 (s: the rotor's
+/// acceleration current is its voltage's over `R` times its mechanical time constant over
+/// the ramp) (`turning_bias`).
+const Q_BIAS_OVER_CHIP: f32 = 3.0;
+/// The chips' share of their size on a stage that turns the rotor: at most the first, down to
+/// the second where the turns or the voltage allow no more.
+const Q_TURNING_CHIP_SHARE: f32 = 0.5;
+const Q_LEAST_CHIP_SHARE: f32 = 0.15;
+/// The slowest winding (its time constant in ticks) whose q stage turns the rotor.
+const Q_TURNING_TICKS: f32 = 4.0;
+const Q_TURNS: f32 = 1.25;
+const Q_BIAS_RAMP_S: f32 = 0.02;
+/// The q current (a share of the test current, low-passed over `Q_BIAS_SMOOTHING_S`) under
+/// which the constant voltage ramps on.
+const Q_BIAS_CURRENT: f32 = 0.2;
+const Q_BIAS_SMOOTHING_S: f32 = 0.002;
 /// The q chips' current peak on a winding slower than a tick, a share of the test current
 /// (`q_chip_volts`).
 const Q_CHIP_PEAK: f32 = 0.65;
@@ -488,6 +511,14 @@ pub struct Commissioning {
     last_chip: f32,
     applied_chip: f32,
     last_current: Option<f32>,
+    /// The q stage's constant voltage once ramped (V; 0: none): the rotor turns on it
+    /// (`turning_bias`).
+    q_bias: f32,
+    /// The constant voltage applied now (V), on its ramp to `q_bias`, and the q current
+    /// low-passed (A): the ramp waits while the rotor's acceleration draws more than
+    /// [`Q_BIAS_CURRENT`] of the test current.
+    bias_now: f32,
+    q_lowpass: f32,
     /// What was measured, kept while the rotor is braked to rest.
     result: Option<MeasuredMotor>,
 }
@@ -514,6 +545,9 @@ impl Commissioning {
             peak: 0.0,
             held: 0.0,
             held_low: 0.0,
+            q_bias: 0.0,
+            bias_now: 0.0,
+            q_lowpass: 0.0,
             test_current: settings.test_current,
             last_count: 0,
             still_ticks: 0,
@@ -631,7 +665,9 @@ impl Commissioning {
         // The d-axis chips and the current step run on the rotor's own frame, read from the
         // encoder each tick (as the drive's loop does): a rotor that drifts or swings (a load on
         // a soft shaft, no friction) then takes no torque from the d current.
-        if matches!(stage, Stage::CurrentStep | Stage::InductanceD) {
+        if matches!(stage, Stage::CurrentStep | Stage::InductanceD)
+            || (stage == Stage::InductanceQ && self.q_bias > 0.0)
+        {
             if let Some(a) = self.alignment {
                 self.angle = self.rotor_angle(&a, i.encoder_count);
             }
@@ -901,7 +937,7 @@ impl Commissioning {
                         };
                         self.alignment = Some(a);
                         self.angle = self.rotor_angle(&a, i.encoder_count);
-                        self.start_chips(Stage::InductanceD);
+                        self.start_chips(Stage::InductanceD, i.bus_voltage, false);
                     }
                 }
             }
@@ -909,7 +945,8 @@ impl Commissioning {
                 let axis_current = if stage == Stage::InductanceD { current.d } else { current.q };
                 // The fit's model holds through the transient of the chips' start: a few ticks
                 // only, for the delayed voltage's bookkeeping.
-                let settling = CHIP_SETTLING_TICKS;
+                let turning = stage == Stage::InductanceQ && self.q_bias > 0.0;
+                let settling = self.chip_settling_ticks(turning);
                 // The q current turns the rotor: its fit takes the rotor's back-EMF
                 // (`free_rotor_fit`); the d current makes no torque on the rotor it is
                 // aligned with.
@@ -940,6 +977,14 @@ impl Commissioning {
                     let first_order = self.fit.winding(s.tick_period);
                     let fitted = if stage == Stage::InductanceQ { self.q_winding(first_order) } else { first_order };
                     let Some(w) = fitted else {
+                        // No winding under chips that the rotor reverses with: once more with
+                        // the rotor turned through them, where it can be (`turning_bias`).
+                        if stage == Stage::InductanceQ && self.q_bias == 0.0 {
+                            self.start_chips(Stage::InductanceQ, i.bus_voltage, true);
+                            if self.q_bias > 0.0 {
+                                return self.output(i.bus_voltage, 0.0);
+                            }
+                        }
                         return self.fail(CommissioningFault::Inductance { axis });
                     };
                     if !(w.inductance > 1e-6 && w.inductance < 1.0) {
@@ -950,7 +995,7 @@ impl Commissioning {
                     }
                     if stage == Stage::InductanceD {
                         self.ld = w.inductance;
-                        self.start_chips(Stage::InductanceQ);
+                        self.start_chips(Stage::InductanceQ, i.bus_voltage, false);
                     } else {
                         self.lq = w.inductance;
                         match self.flux_from_back_emf() {
@@ -965,26 +1010,24 @@ impl Commissioning {
                         return self.output(i.bus_voltage, 0.0);
                     }
                 }
-                // A chip around the voltage that holds half the test current, on the measured
-                // axis. Its size: the resistive voltage of half the test current where the
-                // winding follows a chip within a few ticks (the current then swings between
-                // none and the test current and keeps its sign, so the inverter's error stays
-                // constant); up to sixteen times it on a slow winding, whose current moves by a
-                // small share of a chip (its random walk over the record, about `sqrt(T/2τ)` of
-                // the chip's current), so that the ripple stands above the sensors' noise: a
-                // swing of about a tenth of the test current either way.
-                let ticks_per_tau = self.probe_inductance / (self.resistance * s.tick_period);
-                let size = crate::limit(0.25 * libm::sqrtf(ticks_per_tau), 1.0, 16.0);
-                // The resistive part of half the test current (the held voltage also carries
-                // the inverter's dead-time voltage, which a chip's swing must not scale).
-                let volts = if stage == Stage::InductanceQ && self.slow_q_winding() {
-                    self.q_chip_volts(i.bus_voltage)
-                } else {
-                    size * 0.5 * self.resistance * self.test_current
-                };
+                let volts = self.chip_volts(stage, i.bus_voltage);
                 let chip = volts * self.chips.next_chip() as f32;
+                // The q stage's constant voltage, ramped from 0 over its settling while the
+                // rotor's acceleration (its current: the voltage's over `R` times the rotor's
+                // mechanical time constant over the ramp) stays within its share; a heavy rotor
+                // takes longer, whose speed swings little under the chips.
+                let bias = if turning {
+                    let smoothing = s.tick_period / Q_BIAS_SMOOTHING_S;
+                    self.q_lowpass += smoothing.min(1.0) * (current.q - self.q_lowpass);
+                    if libm::fabsf(self.q_lowpass) < Q_BIAS_CURRENT * self.test_current {
+                        self.bias_now = (self.bias_now + self.q_bias / settling as f32).min(self.q_bias);
+                    }
+                    self.bias_now
+                } else {
+                    0.0
+                };
                 self.applied_chip = self.last_chip;
-                self.last_chip = chip;
+                self.last_chip = bias + chip;
                 if stage == Stage::InductanceD {
                     self.voltage = self.held_low + chip;
                     // The q current held at zero: the rotor, still swinging on the vector
@@ -996,7 +1039,7 @@ impl Commissioning {
                     q_voltage = self.current_pi.q.update(-current.q, room.min(self.current_pi.limit)).value;
                 } else {
                     self.voltage = self.held_low;
-                    q_voltage = chip;
+                    q_voltage = bias + chip;
                 }
             }
             Stage::CurrentStep => {
@@ -1189,6 +1232,11 @@ impl Commissioning {
 
     /// The flux linkage from the passes' q voltages (stage 4) and the inductances.
     fn flux_from_back_emf(&self) -> Result<f32, CommissioningFault> {
+        self.flux_with(self.lq)
+    }
+
+    /// The flux linkage from the passes' q voltages with a q-axis inductance of `lq`.
+    fn flux_with(&self, lq: f32) -> Result<f32, CommissioningFault> {
         let Some(a) = self.alignment else {
             return Err(CommissioningFault::OutOfRange { quantity: MeasuredQuantity::FluxLinkage, value: f32::NAN });
         };
@@ -1217,9 +1265,9 @@ impl Commissioning {
         // turns against the rotor, which the windings follow (`sampled_winding_excess`). On a
         // rotor lagging by `δ` that share splits on the rotor's own axes, each winding with
         // its own time constant: `sin²δ` of it on d, `cos²δ` on q.
-        let along = self.ld * cos * cos + self.lq * sin * sin;
+        let along = self.ld * cos * cos + lq * sin * sin;
         let excess = |l: f32| l * sampled_winding_excess(r * s.tick_period / (2.0 * l));
-        let sampled = sin * sin * excess(self.ld) + cos * cos * excess(self.lq);
+        let sampled = sin * sin * excess(self.ld) + cos * cos * excess(lq);
         let inductive = 2.0 * omega * current * (along + sampled);
         let psi = (f_voltage - b_voltage - inductive) / (2.0 * omega * cos - swing_f + swing_b);
         if !(psi > 1e-4 && psi < 10.0) {
@@ -1253,6 +1301,32 @@ impl Commissioning {
         self.step = StepResponse::default();
         self.voltage = self.held_low;
         self.next_stage(Stage::CurrentStep);
+    }
+
+    /// The chips' size on the measured axis of `stage` (V): around the voltage that holds half
+    /// the test current. The resistive voltage of half the test current where the winding
+    /// follows a chip within a few ticks (the current then swings between none and the test
+    /// current and keeps its sign, so the inverter's error stays constant); up to sixteen
+    /// times it on a slow winding, whose current moves by a small share of a chip (its random
+    /// walk over the record, about `sqrt(T/2τ)` of the chip's current), so that the ripple
+    /// stands above the sensors' noise: a swing of about a tenth of the test current either
+    /// way. The resistive part of half the test current only (the held voltage also carries
+    /// the inverter's dead-time voltage, which a chip's swing must not scale). The q chips of
+    /// a slow winding: `q_chip_volts`.
+    fn chip_volts(&self, stage: Stage, bus_voltage: f32) -> f32 {
+        let s = &self.settings;
+        let ticks_per_tau = self.probe_inductance / (self.resistance * s.tick_period);
+        let size = crate::limit(0.25 * libm::sqrtf(ticks_per_tau), 1.0, 16.0);
+        let volts = if stage == Stage::InductanceQ && self.slow_q_winding() {
+            self.q_chip_volts(bus_voltage)
+        } else {
+            size * 0.5 * self.resistance * self.test_current
+        };
+        if stage == Stage::InductanceQ && self.q_bias > 0.0 {
+            self.q_bias / Q_BIAS_OVER_CHIP
+        } else {
+            volts
+        }
     }
 
     /// A winding whose time constant (the d axis's, measured) is longer than a tick: the q
@@ -1316,7 +1390,9 @@ impl Commissioning {
         }
     }
 
-    fn start_chips(&mut self, stage: Stage) {
+    /// An inductance stage from its start; a q stage `turning` the rotor where it can
+    /// (`turning_bias`).
+    fn start_chips(&mut self, stage: Stage, bus_voltage: f32, turning: bool) {
         self.chips = MSequence::new(CHIP_DEGREE).unwrap_or(MSequence::DEGREE_15);
         self.fit = WindingFit::default();
         self.q_fit = if stage == Stage::InductanceQ && self.slow_q_winding() {
@@ -1336,7 +1412,55 @@ impl Commissioning {
         self.applied_chip = 0.0;
         self.last_current = None;
         self.voltage = self.held_low;
+        self.q_bias = 0.0;
+        self.bias_now = 0.0;
+        self.q_lowpass = 0.0;
         self.next_stage(stage);
+        if stage == Stage::InductanceQ && turning {
+            self.q_bias = self.turning_bias(bus_voltage);
+        }
+    }
+
+    /// The constant q voltage under the q chips that keeps the rotor turning one way (V; 0:
+    /// none). The chips' torque turns a light rotor on a strong magnet back and forth, and at
+    /// each reversal its friction holds it, then lets it slip: no linear model follows that.
+    /// Under a constant voltage [`Q_BIAS_OVER_CHIP`] times the chips' the rotor turns one way
+    /// throughout (a rotor whose speed follows its voltage within a tick swings by at most
+    /// the chips' voltage over the flux linkage), its friction a constant torque, and the
+    /// chips see the winding and the free rotor's back-EMF alone; the frame follows the
+    /// rotor (read from the encoder each tick). Only where the rotor then turns at most
+    /// [`Q_TURNS`] electrical turns over the stage (the flux linkage the passes give with
+    /// `L_q = L_d`, with the armature's `L_d·I/2` beside it) and the voltage leaves room for
+    /// it beside the held d voltage and the chips; elsewhere the stage holds its frame and
+    /// adds nothing (a weak magnet's rotor hardly moves under the chips).
+    fn turning_bias(&self, bus_voltage: f32) -> f32 {
+        if self.ld > Q_TURNING_TICKS * self.resistance * self.settings.tick_period {
+            return 0.0;
+        }
+        let Ok(psi) = self.flux_with(self.ld) else { return 0.0 };
+        let s = &self.settings;
+        let volts = self.chip_volts(Stage::InductanceQ, bus_voltage);
+        let seconds = (self.chip_settling_ticks(true) + self.chips.period()) as f32 * s.tick_period;
+        let flux = psi + 0.5 * self.ld * self.test_current;
+        let turning = Q_TURNS * TAU * flux / seconds;
+        // The voltage beside the held d voltage takes the constant and the chips.
+        let room = 0.9 * self.room_beside(bus_voltage, self.held_low) / (1.0 + 1.0 / Q_BIAS_OVER_CHIP);
+        let bias = (Q_BIAS_OVER_CHIP * Q_TURNING_CHIP_SHARE * volts).min(turning).min(room);
+        if bias >= Q_BIAS_OVER_CHIP * Q_LEAST_CHIP_SHARE * volts && bias.is_finite() {
+            bias
+        } else {
+            0.0
+        }
+    }
+
+    /// Ticks of an inductance stage before its fit starts: the chips' start, and on a q stage
+    /// that turns the rotor its constant voltage's ramp ([`Q_BIAS_RAMP_S`]).
+    fn chip_settling_ticks(&self, turning: bool) -> u32 {
+        if turning {
+            CHIP_SETTLING_TICKS.max(self.ticks_of(Q_BIAS_RAMP_S))
+        } else {
+            CHIP_SETTLING_TICKS
+        }
     }
 }
 
