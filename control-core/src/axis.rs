@@ -111,9 +111,11 @@ pub struct PwmOutput {
     pub enabled: bool,
 }
 
-/// N·m per unit of [`Telemetry::torque_command_sum`]: 2⁻²⁴ (a power of two, so that a torque
-/// becomes a count without rounding; 10 N·m held wraps the sum after about 40 days at 16 kHz).
-pub const TORQUE_SUM_UNIT: f32 = 1.0 / 16_777_216.0;
+/// N·m per unit of [`Telemetry::torque_command_sum`]: 2⁻¹⁶ (a power of two, so that the
+/// scaling is exact; each tick's count truncated toward zero, a bias under 1.6·10⁻⁵ N·m, and
+/// converted as an `i32`, one instruction on the Cortex-M4: a torque beyond ±32 768 N·m
+/// counts as that). 10 N·m held wraps the sum after about 28 years at 16 kHz.
+pub const TORQUE_SUM_UNIT: f32 = 1.0 / 65_536.0;
 
 /// Everything worth recording about one tick.
 #[derive(Clone, Copy, Debug, Default, PartialEq, serde::Serialize, serde::Deserialize)]
@@ -290,7 +292,8 @@ pub struct Axis {
     following_error: f32,
     /// What the last tick's inner loop applied (the telemetry's per-tick part).
     applied: Applied,
-    /// The torque commands applied so far, summed ([`Telemetry::torque_command_sum`]).
+    /// Every tick's torque command so far (a tick with a fault latched counts its command,
+    /// the bridge off), summed ([`Telemetry::torque_command_sum`]).
     torque_command_sum: i64,
     sweep: PhaseShiftedSweep,
     /// [`Params::validate_sweep`] of `params`, computed when the axis is built: a drive starts
@@ -968,7 +971,8 @@ impl Axis {
             voltage_saturated: inner.out.saturated,
         };
         // Scaled by a power of two (exact), truncated toward zero (a bias under one unit).
-        self.torque_command_sum = self.torque_command_sum.wrapping_add((inner.torque * (1.0 / TORQUE_SUM_UNIT)) as i64);
+        self.torque_command_sum =
+            self.torque_command_sum.wrapping_add((inner.torque * (1.0 / TORQUE_SUM_UNIT)) as i32 as i64);
         self.faults = faults;
         self.tick += 1;
         if self.settings.counted_phases {

@@ -317,10 +317,7 @@ const PROBE_FIT_PERIODS: u32 = 8;
 /// Chips of each inductance stage (an M-sequence of degree 12), after a few ticks' start.
 const CHIP_DEGREE: u32 = 12;
 const CHIP_SETTLING_TICKS: u32 = 64;
-/// The q stage's constant voltage under its chips, their voltage's multiple, the electrical
-/// turns it may turn the rotor over the stage, and its ramp from 0 (s: the rotor's
-/// acceleration current is its voltage's over `R` times its mechanical time constant over
-/// the ramp) (`turning_bias`).
+/// The q stage's constant voltage under its chips, their voltage's multiple (`turning_bias`).
 const Q_BIAS_OVER_CHIP: f32 = 3.0;
 /// The chips' share of their size on a stage that turns the rotor: at most the first, down to
 /// the second where the turns or the voltage allow no more.
@@ -328,7 +325,12 @@ const Q_TURNING_CHIP_SHARE: f32 = 0.5;
 const Q_LEAST_CHIP_SHARE: f32 = 0.15;
 /// The slowest winding (its time constant in ticks) whose q stage turns the rotor.
 const Q_TURNING_TICKS: f32 = 4.0;
+/// The electrical turns the constant voltage may turn the rotor over the stage.
 const Q_TURNS: f32 = 1.25;
+/// The constant voltage's ramp from 0 (s), before the fit starts: the rotor's acceleration
+/// current is the voltage's over `R` times its mechanical time constant over the ramp (the
+/// ramp waits while it exceeds [`Q_BIAS_CURRENT`]; a rotor that slow then turns under a
+/// voltage still rising, which the fit takes as applied).
 const Q_BIAS_RAMP_S: f32 = 0.02;
 /// The q current (a share of the test current, low-passed over `Q_BIAS_SMOOTHING_S`) under
 /// which the constant voltage ramps on.
@@ -661,7 +663,8 @@ impl Commissioning {
         let s = self.settings;
         // The current in the frame of the vector's angle: on the q-axis stage, the rotor's
         // angle where the stage began (held there: a frame that followed the rotor's small
-        // swings would turn the held d current into the measured q current).
+        // swings would turn the held d current into the measured q current), unless the stage
+        // turns the rotor (`turning_bias`): then the rotor's, read each tick.
         // The d-axis chips and the current step run on the rotor's own frame, read from the
         // encoder each tick (as the drive's loop does): a rotor that drifts or swings (a load on
         // a soft shaft, no friction) then takes no torque from the d current.

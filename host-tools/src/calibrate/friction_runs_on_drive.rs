@@ -102,12 +102,14 @@ mod tests {
     use super::*;
 
     /// Two readings 8 000 ticks apart at 16 kHz: the mean speed from the counts and the mean
-    /// torque from the sums, across the sum's wrap and a negative speed alike.
+    /// torque from the sums, across the sum's wrap either way and a negative speed alike.
     #[test]
     fn the_window_s_means_come_from_the_counts_and_sums_between_its_readings() {
         let unit = TORQUE_SUM_UNIT as f64;
         let rad_per_count = std::f64::consts::TAU / 4096.0;
-        for (start_sum, torque, speed) in [(0i64, 0.03, 20.0), (i64::MAX - 5_000, -0.047, -150.0)] {
+        for (start_sum, torque, speed) in
+            [(0i64, 0.03, 20.0), (i64::MAX - 5_000, 0.047, 150.0), (i64::MIN + 5_000, -0.047, -150.0)]
+        {
             let ticks = 8_000u64;
             let counts = (speed / rad_per_count * ticks as f64 / 16_000.0).round() as i64;
             let per_tick = (torque / unit).round() as i64;
