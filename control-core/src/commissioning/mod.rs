@@ -56,13 +56,14 @@
 //!    back-EMF the free rotor's fit takes (`free_rotor_fit`), on the samples' differences on a
 //!    winding of a tick or more, where a rotor sticking and slipping on its friction acts
 //!    least; on a faster winding where the rotor's motion shows, on their second differences
-//!    (`q_winding`). Where no fit finds a winding, on a winding of up to four ticks (a light
+//!    (`q_winding`). Where no fit finds a winding, or the fit's resistance lies 3 % or more
+//!    off the holds' (the rotor's motion shows), on a winding of up to four ticks (a light
 //!    rotor on a strong magnet reverses with each chip and sticks on its friction), the
 //!    stage runs once more with a constant q voltage three times
 //!    the chips', ramped in first, turns the rotor one way throughout (at most 1¼ electrical
 //!    turns over the stage, by the flux linkage the passes give), the frame following the
 //!    rotor: its friction is then a constant torque, which no chip reverses
-//!    (`turning_bias`).
+//!    (`turning_bias`). Of the two runs, the one whose resistance agrees with the holds'.
 //! 6. **Current loop.** The PI for the stated bandwidth from `R` and `L_q` (the torque's axis;
 //!    `current_loop_design`), the drive's gains for both axes. The design is checked on the d
 //!    axis, the rotor's own (where a current makes no torque and the rotor stays still), with
@@ -323,6 +324,9 @@ const Q_BIAS_OVER_CHIP: f32 = 3.0;
 /// the second where the turns or the voltage allow no more.
 const Q_TURNING_CHIP_SHARE: f32 = 0.5;
 const Q_LEAST_CHIP_SHARE: f32 = 0.15;
+/// The q stage runs once more turning the rotor where its fit's resistance lies this far (a
+/// share) or more off the holds' (the rotor's motion shows), or no fit finds a winding.
+const Q_RETRY_AGREEMENT: f32 = 0.03;
 /// The slowest winding (its time constant in ticks) whose q stage turns the rotor.
 const Q_TURNING_TICKS: f32 = 4.0;
 /// The electrical turns the constant voltage may turn the rotor over the stage.
@@ -521,6 +525,8 @@ pub struct Commissioning {
     /// [`Q_BIAS_CURRENT`] of the test current.
     bias_now: f32,
     q_lowpass: f32,
+    /// The q stage's first run's winding, while a second turns the rotor (`Q_RETRY_AGREEMENT`).
+    first_q: Option<Winding>,
     /// What was measured, kept while the rotor is braked to rest.
     result: Option<MeasuredMotor>,
 }
@@ -550,6 +556,7 @@ impl Commissioning {
             q_bias: 0.0,
             bias_now: 0.0,
             q_lowpass: 0.0,
+            first_q: None,
             test_current: settings.test_current,
             last_count: 0,
             still_ticks: 0,
@@ -978,16 +985,25 @@ impl Commissioning {
                 if self.ticks >= settling + self.chips.period() {
                     let axis = if stage == Stage::InductanceD { 'd' } else { 'q' };
                     let first_order = self.fit.winding(s.tick_period);
-                    let fitted = if stage == Stage::InductanceQ { self.q_winding(first_order) } else { first_order };
-                    let Some(w) = fitted else {
-                        // No winding under chips that the rotor reverses with: once more with
-                        // the rotor turned through them, where it can be (`turning_bias`).
-                        if stage == Stage::InductanceQ && self.q_bias == 0.0 {
-                            self.start_chips(Stage::InductanceQ, i.bus_voltage, true);
-                            if self.q_bias > 0.0 {
+                    let mut fitted =
+                        if stage == Stage::InductanceQ { self.q_winding(first_order) } else { first_order };
+                    if stage == Stage::InductanceQ {
+                        let off = self.resistance_off(&fitted);
+                        if self.q_bias == 0.0 {
+                            // No winding, or one whose resistance the rotor's motion bends,
+                            // under chips that the rotor may reverse with: once more with the
+                            // rotor turned through them, where it can be (`turning_bias`).
+                            if off >= Q_RETRY_AGREEMENT && self.turning_bias(i.bus_voltage) > 0.0 {
+                                self.first_q = fitted;
+                                self.start_chips(Stage::InductanceQ, i.bus_voltage, true);
                                 return self.output(i.bus_voltage, 0.0);
                             }
+                        } else if self.resistance_off(&self.first_q) < off {
+                            // Of the two runs, the one whose resistance agrees with the holds'.
+                            fitted = self.first_q;
                         }
+                    }
+                    let Some(w) = fitted else {
                         return self.fail(CommissioningFault::Inductance { axis });
                     };
                     if !(w.inductance > 1e-6 && w.inductance < 1.0) {
@@ -1374,11 +1390,7 @@ impl Commissioning {
     /// refuses as out of range).
     fn q_winding(&self, first_order: Option<Winding>) -> Option<Winding> {
         let tick = self.settings.tick_period;
-        let plausible = |w: &Winding| w.inductance > 1e-6 && w.inductance < 1.0;
-        let off = |w: &Option<Winding>| match w {
-            Some(w) if plausible(w) => libm::fabsf(w.resistance / self.resistance - 1.0),
-            _ => f32::INFINITY,
-        };
+        let off = |w: &Option<Winding>| self.resistance_off(w);
         let free_rotor = self.q_fit.winding(tick);
         if !self.slow_q_winding() && off(&first_order) >= RESISTANCE_AGREEMENT && off(&free_rotor).is_finite() {
             let twice = self.q_fit_twice.winding(tick);
@@ -1390,6 +1402,15 @@ impl Commissioning {
             free_rotor
         } else {
             first_order
+        }
+    }
+
+    /// How far a fit's resistance lies off the holds' (a share; infinite for no winding or
+    /// an implausible inductance).
+    fn resistance_off(&self, w: &Option<Winding>) -> f32 {
+        match w {
+            Some(w) if w.inductance > 1e-6 && w.inductance < 1.0 => libm::fabsf(w.resistance / self.resistance - 1.0),
+            _ => f32::INFINITY,
         }
     }
 
