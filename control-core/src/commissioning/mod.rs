@@ -59,11 +59,11 @@
 //!    (`q_winding`). Where no fit finds a winding, or the fit's resistance lies 3 % or more
 //!    off the holds' (the rotor's motion shows), on a winding of up to four ticks (a light
 //!    rotor on a strong magnet reverses with each chip and sticks on its friction), the
-//!    stage runs once more with a constant q voltage three times
-//!    the chips', ramped in first, turns the rotor one way throughout (at most 1¼ electrical
-//!    turns over the stage, by the flux linkage the passes give), the frame following the
-//!    rotor: its friction is then a constant torque, which no chip reverses
-//!    (`turning_bias`). Of the two runs, the one whose resistance agrees with the holds'.
+//!    stage runs once more: a constant q voltage three times the chips', ramped in first,
+//!    turns the rotor one way throughout (at most 1¼ electrical turns over the stage, by the
+//!    flux linkage the passes give), the frame following the rotor, so that its friction is a
+//!    constant torque, which no chip reverses (`turning_bias`). Of the two runs, the one whose
+//!    resistance agrees with the holds' is kept.
 //! 6. **Current loop.** The PI for the stated bandwidth from `R` and `L_q` (the torque's axis;
 //!    `current_loop_design`), the drive's gains for both axes. The design is checked on the d
 //!    axis, the rotor's own (where a current makes no torque and the rotor stays still), with
@@ -947,7 +947,7 @@ impl Commissioning {
                         };
                         self.alignment = Some(a);
                         self.angle = self.rotor_angle(&a, i.encoder_count);
-                        self.start_chips(Stage::InductanceD, i.bus_voltage, false);
+                        self.start_chips(Stage::InductanceD, 0.0);
                     }
                 }
             }
@@ -993,9 +993,10 @@ impl Commissioning {
                             // No winding, or one whose resistance the rotor's motion bends,
                             // under chips that the rotor may reverse with: once more with the
                             // rotor turned through them, where it can be (`turning_bias`).
-                            if off >= Q_RETRY_AGREEMENT && self.turning_bias(i.bus_voltage) > 0.0 {
+                            let bias = if off >= Q_RETRY_AGREEMENT { self.turning_bias(i.bus_voltage) } else { 0.0 };
+                            if bias > 0.0 {
                                 self.first_q = fitted;
-                                self.start_chips(Stage::InductanceQ, i.bus_voltage, true);
+                                self.start_chips(Stage::InductanceQ, bias);
                                 return self.output(i.bus_voltage, 0.0);
                             }
                         } else if self.resistance_off(&self.first_q) < off {
@@ -1014,7 +1015,7 @@ impl Commissioning {
                     }
                     if stage == Stage::InductanceD {
                         self.ld = w.inductance;
-                        self.start_chips(Stage::InductanceQ, i.bus_voltage, false);
+                        self.start_chips(Stage::InductanceQ, 0.0);
                     } else {
                         self.lq = w.inductance;
                         match self.flux_from_back_emf() {
@@ -1331,21 +1332,18 @@ impl Commissioning {
     /// stands above the sensors' noise: a swing of about a tenth of the test current either
     /// way. The resistive part of half the test current only (the held voltage also carries
     /// the inverter's dead-time voltage, which a chip's swing must not scale). The q chips of
-    /// a slow winding: `q_chip_volts`.
+    /// a slow winding: `q_chip_volts`; on a stage that turns the rotor, a third of its constant
+    /// voltage (`turning_bias`).
     fn chip_volts(&self, stage: Stage, bus_voltage: f32) -> f32 {
-        let s = &self.settings;
-        let ticks_per_tau = self.probe_inductance / (self.resistance * s.tick_period);
-        let size = crate::limit(0.25 * libm::sqrtf(ticks_per_tau), 1.0, 16.0);
-        let volts = if stage == Stage::InductanceQ && self.slow_q_winding() {
-            self.q_chip_volts(bus_voltage)
-        } else {
-            size * 0.5 * self.resistance * self.test_current
-        };
         if stage == Stage::InductanceQ && self.q_bias > 0.0 {
-            self.q_bias / Q_BIAS_OVER_CHIP
-        } else {
-            volts
+            return self.q_bias / Q_BIAS_OVER_CHIP;
         }
+        if stage == Stage::InductanceQ && self.slow_q_winding() {
+            return self.q_chip_volts(bus_voltage);
+        }
+        let ticks_per_tau = self.probe_inductance / (self.resistance * self.settings.tick_period);
+        let size = crate::limit(0.25 * libm::sqrtf(ticks_per_tau), 1.0, 16.0);
+        size * 0.5 * self.resistance * self.test_current
     }
 
     /// A winding whose time constant (the d axis's, measured) is longer than a tick: the q
@@ -1414,9 +1412,9 @@ impl Commissioning {
         }
     }
 
-    /// An inductance stage from its start; a q stage `turning` the rotor where it can
-    /// (`turning_bias`).
-    fn start_chips(&mut self, stage: Stage, bus_voltage: f32, turning: bool) {
+    /// An inductance stage from its start; a q stage with a constant voltage `q_bias` under
+    /// its chips (V; 0: none) turns the rotor (`turning_bias`).
+    fn start_chips(&mut self, stage: Stage, q_bias: f32) {
         self.chips = MSequence::new(CHIP_DEGREE).unwrap_or(MSequence::DEGREE_15);
         self.fit = WindingFit::default();
         self.q_fit = if stage == Stage::InductanceQ && self.slow_q_winding() {
@@ -1436,13 +1434,10 @@ impl Commissioning {
         self.applied_chip = 0.0;
         self.last_current = None;
         self.voltage = self.held_low;
-        self.q_bias = 0.0;
+        self.q_bias = q_bias;
         self.bias_now = 0.0;
         self.q_lowpass = 0.0;
         self.next_stage(stage);
-        if stage == Stage::InductanceQ && turning {
-            self.q_bias = self.turning_bias(bus_voltage);
-        }
     }
 
     /// The constant q voltage under the q chips that keeps the rotor turning one way (V; 0:

@@ -55,8 +55,8 @@ fn measure<T: DrivePort>(
         session.ramp_velocity(last, s.speed, runs.acceleration).map_err(in_the_runs)?;
         last = s.speed;
         session.wait(runs.settle_s)?;
-        let (first, last) = window(session, s.to - s.from)?;
-        points.push(mean_between(&first, &last, rad_per_count, session.tick_hz));
+        let (opening, closing) = window(session, s.to - s.from)?;
+        points.push(mean_between(&opening, &closing, rad_per_count, session.tick_hz));
     }
     Ok(points)
 }
