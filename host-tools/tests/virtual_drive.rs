@@ -125,33 +125,33 @@ fn sweep_over(port: &str, dir: &std::path::Path) -> std::process::Output {
     output_within(servo().args(["sweep", "--device", port, "--json"]).on_fmu(dir.join("out")), 120)
 }
 
-/// Every point of a device sweep's report within its bound, checked here from the points'
-/// differences and standard errors (not only from the report's verdict): the goal where the
-/// drive's standard error is within the precision target, 5 standard errors (at most 5 times
-/// the goal) where it is not;
-/// and at least `precise_share` of the points held to the goal itself.
+/// Every point of a device sweep's report within its bound (`device::bench::difference_bound`),
+/// checked here from the points' differences and standard errors (not only from the report's
+/// verdict): the current converter's systematic allowance plus the goal where the drive's
+/// standard error is within the precision target, plus 5 standard errors (at most 5 times the
+/// goal) where it is not; and at least `precise_share` of the points held to the goal itself.
 fn assert_within_bounds(r: &serde_json::Value, context: &str, precise_share: f64) {
-    use host_tools::device::bench::{GOAL_DB, GOAL_DEG, PRECISION};
+    use host_tools::device::bench::{difference_bound, measured_to_target};
     let points = r["points"].as_array().unwrap();
     let mut at_goal = 0;
     for p in points {
         let f = |v: &serde_json::Value| v.as_f64().unwrap_or(f64::INFINITY);
-        let (se_db, se_deg) = (f(&p["standard_error"]["gain_db"]), f(&p["standard_error"]["phase_deg"]));
-        // 5 standard errors, up to 5 times the goal.
-        let bound = |goal: f64, target: f64, se: f64| {
-            if se.is_finite() && se > target {
-                (goal * se / target).min(5.0 * goal)
-            } else {
-                goal
-            }
+        // The report's standard errors (one it cannot tell is written as null: infinite).
+        let se = host_tools::sweep::standard_error::ResponseStandardError {
+            gain_db: f(&p["standard_error"]["gain_db"]),
+            phase_deg: f(&p["standard_error"]["phase_deg"]),
+            ..host_tools::sweep::standard_error::ResponseStandardError::unknown()
         };
+        let (bound_db, bound_deg) = difference_bound(&se);
         let (db, deg) = (f(&p["difference_db"]).abs(), f(&p["difference_deg"]).abs());
         assert!(
-            db <= bound(GOAL_DB, PRECISION.0, se_db) && deg <= bound(GOAL_DEG, PRECISION.1, se_deg),
-            "drive vs twin at {} Hz: {db} dB, {deg} deg (standard errors {se_db} dB, {se_deg} deg){context}",
-            p["frequency"]
+            db <= bound_db && deg <= bound_deg,
+            "drive vs twin at {} Hz: {db} dB, {deg} deg, bound {bound_db} dB, {bound_deg} deg (standard errors {} dB, {} deg){context}",
+            p["frequency"],
+            se.gain_db,
+            se.phase_deg
         );
-        at_goal += (se_db <= PRECISION.0 && se_deg <= PRECISION.1) as usize;
+        at_goal += measured_to_target(&se) as usize;
     }
     assert!(
         at_goal as f64 >= precise_share * points.len() as f64,

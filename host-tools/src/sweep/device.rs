@@ -4,7 +4,8 @@
 //!
 //! Sequence: handshake; at rest (no faults latched, or the run stops with them named); the
 //! parameters (the run's, the sweep's settings included, the IHM08M1's protective limits);
-//! the riding speed; `START_AT` of the drive's time; streaming on; `StartSweep`; telemetry
+//! the riding speed (a position-command sweep: velocity 0 until the axis rests, then a hold
+//! where it stands); `START_AT` of the drive's time; streaming on; `StartSweep`; telemetry
 //! polled until the drive says done (bounded by the longest the sweep can take, in the drive's
 //! time, and by a drive that stops ticking); streaming off; the axis ramped to 0 and at rest.
 
@@ -106,9 +107,12 @@ pub fn sweep_on_drive_after<T: crate::device::link::DrivePort>(
     session.set_params(&params)?;
     after_params(session)?;
     let commands = match run.mode() {
-        // A position-command sweep: the axis holds where it stands, the sine adds to that.
+        // A position-command sweep: the axis holds where it stands, the sine adds to that. It
+        // is brought to rest first (velocity 0): an axis left at zero torque after a sweep
+        // coasts, and on a machine without friction it would keep turning between the reading
+        // of its position and the command to hold it there, which then arrives as a step.
         Mode::Position => {
-            Commands { mode: Mode::Position, position: session.telemetry()?.position, ..Commands::default() }
+            Commands { mode: Mode::Position, position: session.hold_zero()?.position, ..Commands::default() }
         }
         mode => Commands { mode, velocity: run.velocity as f32, ..Commands::default() },
     };

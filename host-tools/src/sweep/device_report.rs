@@ -73,9 +73,10 @@ pub struct DeviceSweepReport {
     pub precision_target_db: f64,
     pub imprecise_hz: Vec<f64>,
     /// Every sample arrived (none dropped by the drive, no frame lost on the line), every
-    /// frequency is in both, and they agree within each point's bound (`device::bench::GOAL_DB`,
-    /// `GOAL_DEG` where the drive measured the point to the precision target; at most a quarter
-    /// of the points measured less precisely, see `device::bench::difference_bound`).
+    /// frequency is in both, and they agree within each point's bound (the current converter's
+    /// `device::bench::QUANTISATION` plus `GOAL_DB`, `GOAL_DEG` where the drive measured the
+    /// point to the precision target; at most a quarter of the points measured less precisely,
+    /// see `device::bench::difference_bound`).
     pub passed: bool,
     /// The line's capacity at the baud rate (bytes/s), and the share the sweep used.
     pub line_capacity_bytes_per_s: f64,
@@ -301,10 +302,12 @@ impl DeviceSweepReport {
             );
         }
         println!(
-            "  drive vs twin: largest difference {:.3} dB, {:.2} deg (goal {} dB, {} deg, or 5 standard errors, at most 5 times the goal, at a \
-             point the drive measured less precisely than {} dB / {} deg: {:.2} / {:.2} of that bound){}{}",
+            "  drive vs twin: largest difference {:.3} dB, {:.2} deg (the current converter's {} dB, {} deg plus {} dB, {} deg, or plus 5 standard \
+             errors, at most 5 times that, at a point the drive measured less precisely than {} dB / {} deg: {:.2} / {:.2} of that bound){}{}",
             self.largest_difference.0,
             self.largest_difference.1,
+            crate::device::bench::QUANTISATION.0,
+            crate::device::bench::QUANTISATION.1,
             crate::device::bench::GOAL_DB,
             crate::device::bench::GOAL_DEG,
             crate::device::bench::PRECISION.0,

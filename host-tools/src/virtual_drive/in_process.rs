@@ -17,11 +17,26 @@ const TICKS_PER_WAIT: usize = 16;
 pub struct InProcessDrive<F: ParamFlash> {
     pub drive: VirtualDrive<F>,
     pub wire: Wire,
+    /// Ticks the drive runs on, at most, before a write from the host reaches it (0: none),
+    /// drawn from `lag_state` (see [`InProcessDrive::lag_requests`]).
+    request_lag_ticks: u32,
+    lag_state: u64,
 }
 
 impl<F: ParamFlash> InProcessDrive<F> {
     pub fn new(drive: VirtualDrive<F>) -> Self {
-        Self { drive, wire: Wire::default() }
+        Self { drive, wire: Wire::default(), request_lag_ticks: 0, lag_state: 0x9e37_79b9_7f4a_7c15 }
+    }
+
+    /// Let the drive run on for a drawn 0 to `max_s` of its time before each of the host's
+    /// writes reaches it, the draws reproducible from `seed`. A drive behind a real line runs
+    /// freely between the host's requests, so the state an experiment starts from (the
+    /// rotor's angle, the tick's phase, the converter's noise, how long a ride lasted) varies
+    /// from run to run; this brings that variety into a deterministic run.
+    pub fn lag_requests(&mut self, max_s: f64, seed: u64) {
+        self.request_lag_ticks = (max_s * crate::virtual_drive::board::TICK_HZ as f64).round() as u32;
+        // Never 0: xorshift would stay there.
+        self.lag_state = seed.wrapping_mul(0x9e37_79b9_7f4a_7c15) | 1;
     }
 
     /// Let the drive run for `seconds` with nothing read (bytes it sends are kept).
@@ -61,6 +76,18 @@ impl<F: ParamFlash> Read for InProcessDrive<F> {
 
 impl<F: ParamFlash> Write for InProcessDrive<F> {
     fn write(&mut self, buf: &[u8]) -> std::io::Result<usize> {
+        if self.request_lag_ticks > 0 {
+            // xorshift64*: a few bits of a lag, reproducible from the seed.
+            let mut x = self.lag_state;
+            x ^= x >> 12;
+            x ^= x << 25;
+            x ^= x >> 27;
+            self.lag_state = x;
+            let lag = (x.wrapping_mul(0x2545_f491_4f6c_dd1d) >> 32) % (self.request_lag_ticks as u64 + 1);
+            for _ in 0..lag {
+                self.drive.tick(&mut self.wire);
+            }
+        }
         self.wire.to_drive.extend(buf);
         Ok(buf.len())
     }
