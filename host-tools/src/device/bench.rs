@@ -10,8 +10,8 @@ use crate::cli::{progress_bar, Common};
 use crate::fmu::runner::Fmu;
 use crate::fmu::sweep_run::SweepRun;
 use crate::paths::default_fmu;
-use crate::sweep::device::sweep_on_drive;
-use crate::sweep::device_report::{compare_with_twin, largest_share_of_bound, twin_sweep};
+use crate::sweep::device::{sweep_on_drive, DeviceSweep};
+use crate::sweep::device_report::{compare_with_twin, largest_share_of_bound, twin_sweep, TwinPoint};
 use crate::virtual_drive::uart::LineSettings;
 
 /// Goals: every sample arrives; the drive and its twin agree as two measurements of the same
@@ -164,49 +164,52 @@ pub fn bench(fmu: &Fmu, baud: u32, starts: u32, mut progress: impl FnMut(f64)) -
                 && compared.len() >= run.settings.points as usize
                 && compared.len() == d.stream.len()
                 && compared.len() == twin.len();
-            sweeps.push((d, compared, capacity, complete));
+            sweeps.push(StartSweep { sweep: d, points: compared, capacity, complete });
         }
         rows.push(link_row(name, &sweeps));
     }
     Ok(rows)
 }
 
-/// One injection point's row from its sweeps: (the sweep, its points against the twin, the
-/// line's capacity, every point compared).
-fn link_row(
-    name: &str,
-    sweeps: &[(crate::sweep::device::DeviceSweep, Vec<crate::sweep::device_report::TwinPoint>, f64, bool)],
-) -> LinkRow {
-    let max = |f: &dyn Fn(&(crate::sweep::device::DeviceSweep, Vec<_>, f64, bool)) -> f64| {
-        sweeps.iter().map(f).fold(0.0f64, f64::max)
-    };
-    let largest = |f: fn(&crate::sweep::device_report::TwinPoint) -> f64| {
-        max(&|s| s.1.iter().map(|p| f(p).abs()).fold(0.0f64, f64::max))
-    };
-    let shares: Vec<(f64, f64)> = sweeps.iter().map(|s| largest_share_of_bound(&s.1)).collect();
-    let share_of_bound = shares.iter().fold((0.0f64, 0.0f64), |w, s| (w.0.max(s.0), w.1.max(s.1)));
+/// One sweep from one start state: the sweep, its points against the twin, the line's
+/// capacity (bytes/s), and whether every point was compared.
+struct StartSweep {
+    sweep: DeviceSweep,
+    points: Vec<TwinPoint>,
+    capacity: f64,
+    complete: bool,
+}
+
+/// One injection point's row from its sweeps.
+fn link_row(name: &str, sweeps: &[StartSweep]) -> LinkRow {
+    let max = |f: &dyn Fn(&StartSweep) -> f64| sweeps.iter().map(f).fold(0.0f64, f64::max);
+    let largest = |f: fn(&TwinPoint) -> f64| max(&|s| s.points.iter().map(|p| f(p).abs()).fold(0.0f64, f64::max));
+    let share_of_bound = sweeps
+        .iter()
+        .map(|s| largest_share_of_bound(&s.points))
+        .fold((0.0f64, 0.0f64), |w, s| (w.0.max(s.0), w.1.max(s.1)));
     let mostly_precise = sweeps.iter().all(|s| {
-        let imprecise = s.1.iter().filter(|p| !measured_to_target(&p.standard_error)).count();
-        imprecise as f64 <= IMPRECISE_SHARE * s.1.len() as f64
+        let imprecise = s.points.iter().filter(|p| !measured_to_target(&p.standard_error)).count();
+        imprecise as f64 <= IMPRECISE_SHARE * s.points.len() as f64
     });
-    let (systematic, systematic_hz) = systematic_difference(sweeps.iter().map(|s| s.1.as_slice()));
-    let dropped = sweeps.iter().map(|s| s.0.dropped).max().unwrap_or(0);
+    let (systematic, systematic_hz) = systematic_difference(sweeps.iter().map(|s| s.points.as_slice()));
+    let dropped = sweeps.iter().map(|s| s.sweep.dropped).max().unwrap_or(0);
     LinkRow {
         point: name.to_string(),
         starts: sweeps.len(),
-        samples: sweeps.iter().map(|s| s.0.samples).min().unwrap_or(0),
+        samples: sweeps.iter().map(|s| s.sweep.samples).min().unwrap_or(0),
         dropped,
-        bytes_per_s: max(&|s| s.0.link_bytes_per_s),
-        capacity_bytes_per_s: max(&|s| s.2),
+        bytes_per_s: max(&|s| s.sweep.link_bytes_per_s),
+        capacity_bytes_per_s: max(&|s| s.capacity),
         difference_db: largest(|p| p.difference_db),
         difference_deg: largest(|p| p.difference_deg),
         share_of_bound,
         systematic,
         systematic_hz,
-        measurement_time_s: max(&|s| s.0.measurement_time_s),
+        measurement_time_s: max(&|s| s.sweep.measurement_time_s),
         met: !sweeps.is_empty()
             && dropped == GOAL_DROPPED
-            && sweeps.iter().all(|s| s.0.corrupt_frames == 0 && s.3)
+            && sweeps.iter().all(|s| s.sweep.corrupt_frames == 0 && s.complete)
             && mostly_precise
             && share_of_bound.0 <= 1.0
             && share_of_bound.1 <= 1.0
@@ -219,11 +222,8 @@ fn link_row(
 /// frequency every sweep has, the mean difference's size less two of its standard errors (the
 /// spread over the sweeps over √n): what the start states show beyond their own noise, the
 /// largest over the frequencies. A single sweep cannot tell it: 0.
-pub fn systematic_difference<'a>(
-    sweeps: impl Iterator<Item = &'a [crate::sweep::device_report::TwinPoint]> + Clone,
-) -> ((f64, f64), (f64, f64)) {
+pub fn systematic_difference<'a>(sweeps: impl Iterator<Item = &'a [TwinPoint]> + Clone) -> ((f64, f64), (f64, f64)) {
     use crate::analysis::response_point::same_frequency;
-    use crate::sweep::device_report::TwinPoint;
     let mut worst = ((0.0f64, 0.0f64), (f64::NAN, f64::NAN));
     let (Some(first), n) = (sweeps.clone().next(), sweeps.clone().count()) else { return worst };
     if n < 2 {
@@ -342,5 +342,88 @@ impl DeviceBenchArgs {
         }
         println!("  goal on every row: {}", if ok { "met" } else { "NOT met" });
         Ok(ok)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::analysis::response_point::ResponsePoint;
+    use crate::sweep::standard_error::ResponseStandardError;
+
+    fn point(frequency: f64, db: f64, deg: f64) -> TwinPoint {
+        let r = ResponsePoint { frequency, gain_db: 0.0, phase_deg: 0.0, quality: 1.0 };
+        TwinPoint {
+            frequency,
+            drive: r,
+            twin: r,
+            difference_db: db,
+            difference_deg: deg,
+            limited_share: 0.0,
+            standard_error: ResponseStandardError { gain_db: 0.03, phase_deg: 0.2, ..ResponseStandardError::unknown() },
+        }
+    }
+
+    /// A frequency whose differences over the starts sit on one side by more than their noise
+    /// shows as systematic (its mean less two standard errors of the mean, from the spread
+    /// over the starts); noise that averages out shows as none; one sweep cannot tell.
+    #[test]
+    fn the_systematic_difference_is_what_the_starts_share_beyond_their_noise() {
+        // 100 Hz: 0.1 dB ± 0.02 dB, alternating (mean 0.1, sample SD 0.02·√(8/7)); 200 Hz: ±1°
+        // about 0 in phase.
+        let sweeps: Vec<Vec<TwinPoint>> = (0..8)
+            .map(|k| {
+                let sign = if k % 2 == 0 { 1.0 } else { -1.0 };
+                vec![point(100.0, 0.1 + 0.02 * sign, 0.0), point(200.0, 0.0, sign)]
+            })
+            .collect();
+        let ((db, deg), (db_hz, _)) = systematic_difference(sweeps.iter().map(|s| s.as_slice()));
+        let sd = 0.02 * (8.0f64 / 7.0).sqrt();
+        assert!((db - (0.1 - 2.0 * sd / 8.0f64.sqrt())).abs() < 1e-12, "{db}");
+        assert_eq!(db_hz, 100.0);
+        assert_eq!(deg, 0.0);
+        // The same frequency's bias, negative, reads the same size.
+        let negative: Vec<Vec<TwinPoint>> =
+            sweeps.iter().map(|s| s.iter().map(|p| point(p.frequency, -p.difference_db, 0.0)).collect()).collect();
+        assert!((systematic_difference(negative.iter().map(|s| s.as_slice())).0 .0 - db).abs() < 1e-12);
+        // A single sweep: nothing to tell a bias from noise with.
+        assert_eq!(systematic_difference(sweeps[..1].iter().map(|s| s.as_slice())).0, (0.0, 0.0));
+    }
+
+    /// The drawn start states are reproducible: the same seed lags the same requests by the
+    /// same ticks (the drive's time after the same writes is the same), another seed not.
+    #[test]
+    fn a_lagging_drive_runs_on_reproducibly_from_its_seed() {
+        use crate::virtual_drive::in_process::InProcessDrive;
+        use crate::virtual_drive::simulator::{VirtualDrive, VirtualDriveSettings};
+        use std::io::Write;
+        let time_after_writes = |seed: Option<u64>| {
+            let c = crate::fmu::configuration::configuration(&Default::default()).unwrap();
+            let settings = VirtualDriveSettings {
+                defaults: c.control,
+                plant: c.plant,
+                line: LineSettings::default(),
+                faults: vec![],
+            };
+            let drive = VirtualDrive::power_on(&settings, crate::virtual_drive::flash::FileFlash::in_memory()).unwrap();
+            let mut port = InProcessDrive::new(drive);
+            if let Some(seed) = seed {
+                port.lag_requests(REQUEST_LAG_S, seed);
+            }
+            let mut times = Vec::new();
+            for _ in 0..20 {
+                port.write_all(&[0]).unwrap();
+                times.push(port.drive.time());
+            }
+            times
+        };
+        assert_eq!(time_after_writes(None), vec![0.0; 20]);
+        let (a, b) = (time_after_writes(Some(3)), time_after_writes(Some(3)));
+        assert_eq!(a, b);
+        assert_ne!(a, time_after_writes(Some(4)));
+        // Each lag within half a second, and they vary (not one fixed step).
+        let steps: Vec<f64> = a.windows(2).map(|w| w[1] - w[0]).collect();
+        assert!(a[0] <= REQUEST_LAG_S + 1e-9 && steps.iter().all(|&s| (0.0..=REQUEST_LAG_S + 1e-9).contains(&s)));
+        assert!(steps.iter().any(|&s| s < 0.1 * REQUEST_LAG_S) && steps.iter().any(|&s| s > 0.5 * REQUEST_LAG_S));
     }
 }

@@ -79,8 +79,14 @@ impl DeviceCase {
     }
 }
 
-/// One axis identified on a fresh virtual drive with the plant of `parameters`.
-fn identify_case(fmu: &Fmu, parameters: &BTreeMap<String, Value>, out: &Path) -> Result<DeviceIdentification> {
+/// One axis identified on a fresh virtual drive with the plant of `parameters`, the drive
+/// running on between requests from a start state drawn from `seed` (as for `servo bench
+/// device`).
+fn identify_case(
+    fmu: &Fmu,
+    parameters: &BTreeMap<String, Value>,
+    (out, seed): (&Path, u64),
+) -> Result<DeviceIdentification> {
     let c = configuration(parameters)?;
     let vd =
         VirtualDriveSettings { defaults: c.control, plant: c.plant, line: LineSettings::default(), faults: vec![] };
@@ -88,6 +94,7 @@ fn identify_case(fmu: &Fmu, parameters: &BTreeMap<String, Value>, out: &Path) ->
     let mut session = DriveSession::open(DeviceLink::new(InProcessDrive::new(drive), ANSWER_TIMEOUT))?;
     session.baud = LineSettings::default().baud;
     session.commission_with_defaults()?;
+    session.link.port_mut().lag_requests(crate::device::bench::REQUEST_LAG_S, seed);
     let request = DeviceIdentRequest { axis: "x", parameters, amplitude: AMPLITUDE };
     identify_on_device(
         &*fmu.as_twin_of(&session.params_for_twin()?)?,
@@ -122,7 +129,7 @@ pub fn bench(fmu: &Fmu, out: &Path, mut progress: impl FnMut(f64)) -> Result<Vec
             };
             p.insert(name::plant_acceleration_noise_std.into(), Value::Float(noise_std));
             let dir = out.join(format!("{label}_{}", if snr_db.is_some() { "noise" } else { "clean" }));
-            let report = identify_case(fmu, &p, &dir)?;
+            let report = identify_case(fmu, &p, (&dir, cases.len() as u64 + 1))?;
             cases.push(DeviceCase { hz: *hz, noise_std, snr_db, report });
         }
     }
