@@ -27,9 +27,11 @@ pub fn section(root: &Path) -> Option<Section> {
         let (dropped, lost) = (j["drive"]["dropped"].as_u64(), j["drive"]["corrupt_frames"].as_u64());
         s.verdicts.push((
             format!(
-                "sweep over the link: drive vs twin {:.3} dB, {:.2} deg (≤ {} dB, {} deg); samples dropped {}, frames lost {}; line use {:.0} %",
+                "sweep over the link: drive vs twin {:.3} dB, {:.2} deg (each point within the converter's {} dB, {} deg plus {} dB, {} deg, or plus 5 of its standard errors); samples dropped {}, frames lost {}; line use {:.0} %",
                 db.unwrap_or(f64::NAN),
                 deg.unwrap_or(f64::NAN),
+                crate::device::bench::QUANTISATION.0,
+                crate::device::bench::QUANTISATION.1,
                 crate::device::bench::GOAL_DB,
                 crate::device::bench::GOAL_DEG,
                 dropped.unwrap_or(0),

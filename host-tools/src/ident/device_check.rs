@@ -10,7 +10,8 @@
 //!
 //! What it shows: the drive runs the correction it was sent, as the twin says it should (each
 //! run within `circle::device::GOAL_COUNTS` of its twin on the motor, within
-//! `device_machine_end::GOAL_DB`/`GOAL_DEG` at the machine end), what the correction does to
+//! `device_machine_end::GOAL_FLOOR` of the response plus `GOAL_STANDARD_ERRORS` standard errors
+//! at the machine end), what the correction does to
 //! the motor's figure, and that it brings this axis's machine-end response to the other axes'
 //! (one drive is one axis: the others are the FMU check's).
 

@@ -20,7 +20,7 @@ use crate::fmu::runner::Fmu;
 use crate::fmu::scenario::Value;
 use crate::ident::bench::DAMPING;
 use crate::ident::device_check::{check_on_device, TuneDeviceCheck};
-use crate::ident::device_machine_end::{GOAL_FLOOR, GOAL_STANDARD_ERRORS};
+use crate::ident::device_machine_end::{share_of_bound, GOAL_FLOOR, GOAL_STANDARD_ERRORS};
 use crate::ident::identification::{absorber_parameters, true_anti_resonance, AxisModel};
 use crate::ident::tuning::{tune, write, Method};
 use crate::paths::{default_fmu, default_out};
@@ -68,7 +68,8 @@ pub struct TuneDeviceCase {
     pub machine_end: (f64, f64),
     pub machine_end_relative: (f64, f64),
     /// Machine end drive − twin as a share of its bound (`GOAL_FLOOR` + `GOAL_STANDARD_ERRORS`
-    /// standard errors), largest over both runs and frequencies (at most 1).
+    /// standard errors), largest over both runs and frequencies (at most 1; infinite where a
+    /// difference is not a number).
     pub machine_end_share_of_bound: f64,
     /// The sine's amplitude (rad: lowered from the default where the accelerometer would clip).
     pub amplitude: f64,
@@ -162,7 +163,7 @@ pub fn bench(fmu: &Fmu, out: &Path, mut progress: impl FnMut(f64)) -> Result<Vec
                     machine_end_share_of_bound: [&m.without, &m.with]
                         .iter()
                         .flat_map(|run| &run.points)
-                        .map(|p| p.relative_difference / (GOAL_FLOOR + GOAL_STANDARD_ERRORS * p.standard_error))
+                        .map(|p| share_of_bound(p.relative_difference, p.standard_error))
                         .fold(0.0, f64::max),
                     amplitude: m.amplitude,
                     versus_other: m.without.largest_versus_other_axes.zip(m.with.largest_versus_other_axes),

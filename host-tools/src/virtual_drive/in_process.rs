@@ -32,7 +32,9 @@ impl<F: ParamFlash> InProcessDrive<F> {
     /// writes reaches it, the draws reproducible from `seed`. A drive behind a real line runs
     /// freely between the host's requests, so the state an experiment starts from (the
     /// rotor's angle, the tick's phase, the converter's noise, how long a ride lasted) varies
-    /// from run to run; this brings that variety into a deterministic run.
+    /// from run to run; this brings that variety into a deterministic run. What the host
+    /// paces by polling (a velocity ramp of tens of milliseconds) then comes in coarser steps,
+    /// as it does from `servo virtual-drive --speed max`.
     pub fn lag_requests(&mut self, max_s: f64, seed: u64) {
         self.request_lag_ticks = (max_s * crate::virtual_drive::board::TICK_HZ as f64).round() as u32;
         // Never 0: xorshift would stay there.
@@ -118,4 +120,50 @@ pub fn commissioned_session(
     session.baud = baud;
     session.commission_with_defaults()?;
     Ok(session)
+}
+
+#[cfg(test)]
+mod tests {
+    /// The drawn start states are reproducible: the same seed lags the same requests by the
+    /// same ticks (the drive's time after the same writes is the same), another seed not.
+    #[test]
+    fn a_lagging_drive_runs_on_reproducibly_from_its_seed() {
+        use crate::virtual_drive::in_process::InProcessDrive;
+        use crate::virtual_drive::simulator::{VirtualDrive, VirtualDriveSettings};
+        use std::io::Write;
+        let time_after_writes = |seed: Option<u64>| {
+            let c = crate::fmu::configuration::configuration(&Default::default()).unwrap();
+            let settings = VirtualDriveSettings {
+                defaults: c.control,
+                plant: c.plant,
+                line: crate::virtual_drive::uart::LineSettings::default(),
+                faults: vec![],
+            };
+            let drive = VirtualDrive::power_on(&settings, crate::virtual_drive::flash::FileFlash::in_memory()).unwrap();
+            let mut port = InProcessDrive::new(drive);
+            if let Some(seed) = seed {
+                port.lag_requests(crate::device::bench::REQUEST_LAG_S, seed);
+            }
+            let mut times = Vec::new();
+            for _ in 0..20 {
+                port.write_all(&[0]).unwrap();
+                times.push(port.drive.time());
+            }
+            times
+        };
+        assert_eq!(time_after_writes(None), vec![0.0; 20]);
+        let (a, b) = (time_after_writes(Some(3)), time_after_writes(Some(3)));
+        assert_eq!(a, b);
+        assert_ne!(a, time_after_writes(Some(4)));
+        // Each lag within half a second, and they vary (not one fixed step).
+        let steps: Vec<f64> = a.windows(2).map(|w| w[1] - w[0]).collect();
+        assert!(
+            a[0] <= crate::device::bench::REQUEST_LAG_S + 1e-9
+                && steps.iter().all(|&s| (0.0..=crate::device::bench::REQUEST_LAG_S + 1e-9).contains(&s))
+        );
+        assert!(
+            steps.iter().any(|&s| s < 0.1 * crate::device::bench::REQUEST_LAG_S)
+                && steps.iter().any(|&s| s > 0.5 * crate::device::bench::REQUEST_LAG_S)
+        );
+    }
 }
