@@ -382,8 +382,8 @@ mod tests {
         // 100 Hz: 0.1 dB ± 0.02 dB, alternating (mean 0.1, sample SD 0.02·√(8/7)); 200 Hz: ±1°
         // about 0 in phase.
         let sweeps: Vec<Vec<TwinPoint>> = (0..8)
-            .map(|k| {
-                let sign = if k % 2 == 0 { 1.0 } else { -1.0 };
+            .map(|k: u32| {
+                let sign = if k.is_multiple_of(2) { 1.0 } else { -1.0 };
                 vec![point(100.0, 0.1 + 0.02 * sign, 0.0), point(200.0, 0.0, sign)]
             })
             .collect();
@@ -423,8 +423,9 @@ mod tests {
     #[test]
     fn a_row_is_met_only_where_every_start_is_within_its_bounds() {
         let (db, deg) = difference_bound(&point(0.0, 0.0, 0.0).standard_error);
-        let within =
-            |k: usize| vec![point(100.0, 0.5 * db * if k % 2 == 0 { 1.0 } else { -1.0 }, 0.0), point(200.0, 0.0, 0.0)];
+        let within = |k: usize| {
+            vec![point(100.0, 0.5 * db * if k.is_multiple_of(2) { 1.0 } else { -1.0 }, 0.0), point(200.0, 0.0, 0.0)]
+        };
         let sweeps: Vec<StartSweep> = (0..4).map(|k| start(within(k))).collect();
         assert!(link_row("velocity", &sweeps).met);
         let mut one_beyond: Vec<StartSweep> = (0..4).map(|k| start(within(k))).collect();
