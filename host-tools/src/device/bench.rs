@@ -37,8 +37,8 @@ pub const PRECISION: (f64, f64) = (0.03, 0.2);
 
 /// The systematic difference the drive's current converter makes at a point (dB, degrees),
 /// added to every point's bound: over 16 start states a point, the means stand out of their
-/// noise by up to 0.10 dB (1.67 kHz, velocity command; the mean itself 0.115 dB) and 0.28°
-/// (1.9 and 2.6 kHz), which `servo bench device` holds to this.
+/// noise by up to 0.10 dB (1.67 kHz, velocity command; the mean itself 0.115 dB) and 0.32°
+/// (1.9–2.6 kHz), which `servo bench device` holds to this.
 pub const QUANTISATION: (f64, f64) = (0.14, 0.5);
 
 /// The bound a point's drive–twin difference is held to (dB, degrees): [`QUANTISATION`] plus
@@ -115,7 +115,7 @@ pub struct DeviceBenchArgs {
     /// request reaches it (as behind a real line, where the host polls at
     /// its own pace), so the rotor's angle, the ride's length, the tick's phase and the
     /// converter's noise differ from sweep to sweep
-    #[arg(long, default_value_t = 8, value_parser = clap::value_parser!(u32).range(2..=64))]
+    #[arg(long, default_value_t = 12, value_parser = clap::value_parser!(u32).range(2..=64))]
     pub starts: u32,
     #[command(flatten)]
     pub common: Common,
