@@ -353,10 +353,13 @@ fn tune_into(fmu: &Fmu, machine: &Machine, goal: &MarginGoal, on_drive: bool, ro
         let j = super::design::rigid_inertia_of(&true_plant, period);
         starts.push(super::design::Design { tuning: d.tuning, margins: on_truth, inertia: j });
     }
+    // A start the search found on its own grid can miss the margins by a hair on the finer
+    // one the oracle is held on (machine 21 of the 40-machine virtual-drive draw: 45.06° there,
+    // 44.998° here, and no oracle at all): such a start is first brought onto them.
     let sampled_truth = SampledPlant::new(&true_plant, period, 4000, &features);
     let oracle = starts
         .iter()
-        .filter_map(|s| refine_on(&sampled_truth, goal, s, None))
+        .filter_map(|s| refine_on(&sampled_truth, goal, &onto_margins(&sampled_truth, goal, s)?, None))
         .max_by(|a, b| a.margins.bandwidth_hz.total_cmp(&b.margins.bandwidth_hz));
     row.oracle_bandwidth_hz = oracle.map_or(f64::NAN, |o| o.margins.bandwidth_hz);
     row.oracle_tuning = oracle.map(|o| o.tuning);
@@ -470,6 +473,13 @@ impl AutotuneBenchArgs {
             100.0 * least(&|r| r.bandwidth_hz / r.oracle_bandwidth_hz),
             80.0,
             "%",
+        );
+        // A machine without an oracle has no ratio above: counted here, not passed over.
+        rec.equal(
+            "machines whose oracle the search on the true plant did not find",
+            finished().filter(|r| !r.oracle_bandwidth_hz.is_finite()).count() as f64,
+            0.0,
+            "machines",
         );
         rec.equal(
             "verification missed where measured",
@@ -593,5 +603,68 @@ impl AutotuneBenchArgs {
             ));
         }
         Ok(passed)
+    }
+}
+
+/// `start` as it is where it keeps `goal` on `plant`, else with its gains (proportional and
+/// integral alike) lowered in steps of 0.2 %, at most 10 %, until it does: a loop at its
+/// margins on one frequency grid can miss them by a hair on a finer one. None where no such
+/// step keeps them.
+fn onto_margins(
+    plant: &SampledPlant,
+    goal: &MarginGoal,
+    start: &super::design::Design,
+) -> Option<super::design::Design> {
+    (0..=50).find_map(|k| {
+        let scale = 1.0 - 0.002 * k as f64;
+        let tuning = VelocityTuning { kp: start.tuning.kp * scale, ki: start.tuning.ki * scale, ..start.tuning };
+        let margins = super::margins::margins(&plant.hz, &plant.loop_of(&tuning)).filter(|m| goal.held_by(m))?;
+        Some(super::design::Design { tuning, margins, inertia: start.inertia })
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::autotune::design::Design;
+    use crate::autotune::mechanics::Mechanics;
+
+    /// A loop at its margins is taken as it is; one whose gain is a few percent too high for
+    /// them is brought onto them with its gains lowered alike (the same PI corner), within a
+    /// step of the margins; one far beyond them is not (the oracle then has no start there).
+    #[test]
+    fn a_start_a_hair_off_its_margins_is_brought_onto_them() {
+        let params = control_core::Params::default();
+        let drive = DriveDynamics::as_configured(&params);
+        let period = params.rates.velocity_period() as f64;
+        let goal = MarginGoal::named("standard").unwrap();
+        let m = Mechanics::two_inertia(1.5e-4, 1e-4, 300.0, 0.02);
+        let plant = |f: f64| crate::autotune::loop_plant(&drive, &m, f);
+        let d = design(&plant, period, &goal, &SearchGrid::STANDARD, &m.features_hz()).unwrap();
+        let fine = SampledPlant::new(&plant, period, 4000, &m.features_hz());
+        let at = onto_margins(&fine, &goal, &d).expect("the design, or a hair under it, keeps its margins");
+        assert!(goal.held_by(&at.margins) && at.tuning.kp <= d.tuning.kp && at.tuning.kp >= 0.98 * d.tuning.kp);
+        // 3 % too much gain: lowered in 0.2 % steps to the first that keeps the margins.
+        let high =
+            Design { tuning: VelocityTuning { kp: 1.03 * at.tuning.kp, ki: 1.03 * at.tuning.ki, ..at.tuning }, ..at };
+        assert!(!fine.margins_of(&high.tuning).is_some_and(|m| goal.held_by(&m)), "the test's start misses nothing");
+        let back = onto_margins(&fine, &goal, &high).expect("brought back onto the margins");
+        assert!(goal.held_by(&back.margins));
+        assert!(
+            (back.tuning.ki / back.tuning.kp - at.tuning.ki / at.tuning.kp).abs() < 1e-9 * at.tuning.ki / at.tuning.kp
+        );
+        let one_step_more = VelocityTuning { kp: back.tuning.kp / 0.998, ki: back.tuning.ki / 0.998, ..back.tuning };
+        let kp_scale = back.tuning.kp / high.tuning.kp;
+        assert!(kp_scale >= 0.9 - 1e-12);
+        if kp_scale < 1.0 {
+            assert!(
+                !fine.margins_of(&one_step_more).is_some_and(|m| goal.held_by(&m)),
+                "not the first step that keeps them"
+            );
+        }
+        // Twice the gain: beyond what 10 % lower brings back.
+        let far =
+            Design { tuning: VelocityTuning { kp: 2.0 * at.tuning.kp, ki: 2.0 * at.tuning.ki, ..at.tuning }, ..at };
+        assert!(onto_margins(&fine, &goal, &far).is_none());
     }
 }
