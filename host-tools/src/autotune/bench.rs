@@ -360,6 +360,7 @@ fn tune_into(fmu: &Fmu, machine: &Machine, goal: &MarginGoal, on_drive: bool, ro
     let oracle = starts
         .iter()
         .filter_map(|s| refine_on(&sampled_truth, goal, &onto_margins(&sampled_truth, goal, s)?, None))
+        .filter(|o| o.margins.bandwidth_hz.is_finite())
         .max_by(|a, b| a.margins.bandwidth_hz.total_cmp(&b.margins.bandwidth_hz));
     row.oracle_bandwidth_hz = oracle.map_or(f64::NAN, |o| o.margins.bandwidth_hz);
     row.oracle_tuning = oracle.map(|o| o.tuning);
@@ -607,15 +608,17 @@ impl AutotuneBenchArgs {
 }
 
 /// `start` as it is where it keeps `goal` on `plant`, else with its gains (proportional and
-/// integral alike) lowered in steps of 0.2 %, at most 10 %, until it does: a loop at its
-/// margins on one frequency grid can miss them by a hair on a finer one. None where no such
-/// step keeps them.
+/// integral alike) lowered in steps of 0.2 %, at most 2 %, until it does: a loop at its
+/// margins on one frequency grid can miss them by a hair on a finer one. Only a hair: a loop
+/// whose closed-loop dip was lifted just over −3 dB falls back under it a few percent lower,
+/// and an oracle refined from there would be too low. None where no such step keeps them
+/// (the machine is then counted as without an oracle).
 fn onto_margins(
     plant: &SampledPlant,
     goal: &MarginGoal,
     start: &super::design::Design,
 ) -> Option<super::design::Design> {
-    (0..=50).find_map(|k| {
+    (0..=10).find_map(|k| {
         let scale = 1.0 - 0.002 * k as f64;
         let tuning = VelocityTuning { kp: start.tuning.kp * scale, ki: start.tuning.ki * scale, ..start.tuning };
         let margins = super::margins::margins(&plant.hz, &plant.loop_of(&tuning)).filter(|m| goal.held_by(m))?;
@@ -629,9 +632,10 @@ mod tests {
     use crate::autotune::design::Design;
     use crate::autotune::mechanics::Mechanics;
 
-    /// A loop at its margins is taken as it is; one whose gain is a few percent too high for
-    /// them is brought onto them with its gains lowered alike (the same PI corner), within a
-    /// step of the margins; one far beyond them is not (the oracle then has no start there).
+    /// A loop at its margins is taken as it is; one whose gain is a hair too high for them is
+    /// brought onto them with its gains lowered alike (the same PI corner), at the first step
+    /// that keeps them, and refines from there; one beyond 2 % is not (the oracle then has no
+    /// start there).
     #[test]
     fn a_start_a_hair_off_its_margins_is_brought_onto_them() {
         let params = control_core::Params::default();
@@ -643,28 +647,21 @@ mod tests {
         let d = design(&plant, period, &goal, &SearchGrid::STANDARD, &m.features_hz()).unwrap();
         let fine = SampledPlant::new(&plant, period, 4000, &m.features_hz());
         let at = onto_margins(&fine, &goal, &d).expect("the design, or a hair under it, keeps its margins");
-        assert!(goal.held_by(&at.margins) && at.tuning.kp <= d.tuning.kp && at.tuning.kp >= 0.98 * d.tuning.kp);
-        // 3 % too much gain: lowered in 0.2 % steps to the first that keeps the margins.
-        let high =
-            Design { tuning: VelocityTuning { kp: 1.03 * at.tuning.kp, ki: 1.03 * at.tuning.ki, ..at.tuning }, ..at };
-        assert!(!fine.margins_of(&high.tuning).is_some_and(|m| goal.held_by(&m)), "the test's start misses nothing");
+        assert!(at.tuning.kp >= 0.98 * d.tuning.kp, "{:?} from {:?}", at.tuning, d.tuning);
+        // 1.5 % too much gain: lowered to the first 0.2 % step that keeps the margins.
+        let scaled = |t: &VelocityTuning, s: f64| VelocityTuning { kp: s * t.kp, ki: s * t.ki, ..*t };
+        let high = Design { tuning: scaled(&at.tuning, 1.015), ..at };
+        let keeps = |t: &VelocityTuning| fine.margins_of(t).is_some_and(|m| goal.held_by(&m));
+        assert!(!keeps(&high.tuning), "the test's start misses nothing");
         let back = onto_margins(&fine, &goal, &high).expect("brought back onto the margins");
-        assert!(goal.held_by(&back.margins));
+        let scale = back.tuning.kp / high.tuning.kp;
+        assert!(scale <= 0.998 + 1e-12 && (back.tuning.ki / high.tuning.ki - scale).abs() < 1e-12);
+        assert!(!keeps(&scaled(&high.tuning, scale + 0.002)), "not the first step that keeps them");
         assert!(
-            (back.tuning.ki / back.tuning.kp - at.tuning.ki / at.tuning.kp).abs() < 1e-9 * at.tuning.ki / at.tuning.kp
+            refine_on(&fine, &goal, &back, None).is_some_and(|r| r.margins.bandwidth_hz >= back.margins.bandwidth_hz)
         );
-        let one_step_more = VelocityTuning { kp: back.tuning.kp / 0.998, ki: back.tuning.ki / 0.998, ..back.tuning };
-        let kp_scale = back.tuning.kp / high.tuning.kp;
-        assert!(kp_scale >= 0.9 - 1e-12);
-        if kp_scale < 1.0 {
-            assert!(
-                !fine.margins_of(&one_step_more).is_some_and(|m| goal.held_by(&m)),
-                "not the first step that keeps them"
-            );
-        }
-        // Twice the gain: beyond what 10 % lower brings back.
-        let far =
-            Design { tuning: VelocityTuning { kp: 2.0 * at.tuning.kp, ki: 2.0 * at.tuning.ki, ..at.tuning }, ..at };
+        // 10 % too much: beyond what 2 % lower brings back.
+        let far = Design { tuning: scaled(&at.tuning, 1.1), ..at };
         assert!(onto_margins(&fine, &goal, &far).is_none());
     }
 }
