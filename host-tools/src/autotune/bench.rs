@@ -621,7 +621,7 @@ fn onto_margins(
     (0..=10).find_map(|k| {
         let scale = 1.0 - 0.002 * k as f64;
         let tuning = VelocityTuning { kp: start.tuning.kp * scale, ki: start.tuning.ki * scale, ..start.tuning };
-        let margins = super::margins::margins(&plant.hz, &plant.loop_of(&tuning)).filter(|m| goal.held_by(m))?;
+        let margins = plant.margins_of(&tuning).filter(|m| goal.held_by(m))?;
         Some(super::design::Design { tuning, margins, inertia: start.inertia })
     })
 }

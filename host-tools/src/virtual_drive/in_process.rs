@@ -8,6 +8,7 @@ use std::io::{ErrorKind, Read, Write};
 
 use drive_application::board::ParamFlash;
 
+use crate::random::XorShift64Star;
 use crate::virtual_drive::simulator::VirtualDrive;
 use crate::virtual_drive::uart::Wire;
 
@@ -17,15 +18,14 @@ const TICKS_PER_WAIT: usize = 16;
 pub struct InProcessDrive<F: ParamFlash> {
     pub drive: VirtualDrive<F>,
     pub wire: Wire,
-    /// Ticks the drive runs on, at most, before a write from the host reaches it (0: none),
-    /// drawn from `lag_state` (see [`InProcessDrive::lag_requests`]).
-    request_lag_ticks: u32,
-    lag_state: u64,
+    /// The most ticks the drive runs on before a write from the host reaches it, and the
+    /// generator the lags are drawn from (None: no lag; see [`InProcessDrive::lag_requests`]).
+    request_lag: Option<(u64, XorShift64Star)>,
 }
 
 impl<F: ParamFlash> InProcessDrive<F> {
     pub fn new(drive: VirtualDrive<F>) -> Self {
-        Self { drive, wire: Wire::default(), request_lag_ticks: 0, lag_state: 0x9e37_79b9_7f4a_7c15 }
+        Self { drive, wire: Wire::default(), request_lag: None }
     }
 
     /// Let the drive run on for a drawn 0 to `max_s` of its time before each of the host's
@@ -36,9 +36,8 @@ impl<F: ParamFlash> InProcessDrive<F> {
     /// paces by polling (a velocity ramp of tens of milliseconds) then comes in coarser steps,
     /// as it does from `servo virtual-drive --speed max`.
     pub fn lag_requests(&mut self, max_s: f64, seed: u64) {
-        self.request_lag_ticks = (max_s * crate::virtual_drive::board::TICK_HZ as f64).round() as u32;
-        // Never 0: xorshift would stay there.
-        self.lag_state = seed.wrapping_mul(0x9e37_79b9_7f4a_7c15) | 1;
+        let ticks = (max_s * crate::virtual_drive::board::TICK_HZ as f64).round() as u64;
+        self.request_lag = (ticks > 0).then(|| (ticks, XorShift64Star::from_seed(seed)));
     }
 
     /// Let the drive run for `seconds` with nothing read (bytes it sends are kept).
@@ -78,14 +77,9 @@ impl<F: ParamFlash> Read for InProcessDrive<F> {
 
 impl<F: ParamFlash> Write for InProcessDrive<F> {
     fn write(&mut self, buf: &[u8]) -> std::io::Result<usize> {
-        if self.request_lag_ticks > 0 {
-            // xorshift64*: a few bits of a lag, reproducible from the seed.
-            let mut x = self.lag_state;
-            x ^= x >> 12;
-            x ^= x << 25;
-            x ^= x >> 27;
-            self.lag_state = x;
-            let lag = (x.wrapping_mul(0x2545_f491_4f6c_dd1d) >> 32) % (self.request_lag_ticks as u64 + 1);
+        if let Some((ticks, rng)) = &mut self.request_lag {
+            // The draw's high bits (the generator's best).
+            let lag = (rng.next() >> 32) % (*ticks + 1);
             for _ in 0..lag {
                 self.drive.tick(&mut self.wire);
             }
