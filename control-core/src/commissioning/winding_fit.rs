@@ -57,6 +57,19 @@ impl WindingFit {
     /// Not the other way round: on a slow winding the current's sign follows the current
     /// itself, and the regressor would take the decay's share.
     pub fn winding(&self, tick: f32) -> Option<Winding> {
+        self.winding_in_order(tick, [2, 3])
+    }
+
+    /// [`Self::winding`] the other way round: the fit with the dead-time regressor first, the
+    /// first-order one where it finds none. For a winding that settles within the tick, whose
+    /// current the chips take to about zero (`Commissioning::d_winding`): the regressor then
+    /// takes the flips the sensors' noise makes there, which the first-order fit reads as a
+    /// pole a little too slow.
+    pub fn winding_with_dead_time(&self, tick: f32) -> Option<Winding> {
+        self.winding_in_order(tick, [3, 2])
+    }
+
+    fn winding_in_order(&self, tick: f32, order: [usize; 2]) -> Option<Winding> {
         if self.sums.samples() < 16.0 {
             return None;
         }
@@ -71,7 +84,7 @@ impl WindingFit {
             let ratio = if decay < 1e-3 { 1.0 / (1.0 + decay * (0.5 + decay / 3.0)) } else { decay / -libm::logf(a) };
             Some(Winding { inductance: tick * ratio / b, resistance: decay / b })
         };
-        fitted(2).or_else(|| fitted(3))
+        fitted(order[0]).or_else(|| fitted(order[1]))
     }
 
     /// Where [`Self::winding`] finds none on a winding whose current settles within the tick:
