@@ -975,7 +975,8 @@ impl Commissioning {
                     }
                     if let Some(previous) = self.last_current {
                         // What the holds' dead time leaves (a winding faster than a tick flips
-                        // it within the tick) fitted where the first-order fit alone fails.
+                        // it within the tick), fitted beside the winding: first on the d axis
+                        // (`d_winding`), where the first-order fit alone fails on the q axis.
                         self.fit.add_with_dead_time(previous, axis_current, applied, self.dead_time_shape);
                     }
                 }
@@ -1326,19 +1327,19 @@ impl Commissioning {
     }
 
     /// The d winding from its stage's fit: the one with the inverter's dead-time voltage
-    /// fitted beside it (`WindingFit::winding_with_dead_time`) where that finds a winding
-    /// settling within a tick, else the first-order one. The chips take the d current from
-    /// about the test current to about none, and on a winding that settles within the tick it
-    /// gets there: the sensors' noise then moves the phase currents across zero and the
-    /// dead-time voltage flips with them, which reads as a pole a little too slow (over the
-    /// drawn motors, an inductance up to 3.3 % high at a third of a tick; with the dead time
-    /// fitted, 1.6 %). On a slower winding the first-order fit is kept (`WindingFit::winding`).
+    /// fitted beside it (`WindingFit::winding_with_dead_time`) where that finds a plausible
+    /// winding settling within a tick (its pole under `1/e`), else the first-order one. The
+    /// chips take the d current from about the test current to about none, and on a winding
+    /// that settles within the tick it gets there: the sensors' noise then moves the phase
+    /// currents across zero and the dead-time voltage flips with them, which the first-order
+    /// fit reads as a pole a little too slow (its inductance a few percent high at a third of
+    /// a tick). On a slower winding the d current keeps its sign, the dead-time regressor
+    /// hardly varies, and the first-order fit is kept (`WindingFit::winding`).
     fn d_winding(&self) -> Option<Winding> {
         let tick = self.settings.tick_period;
-        self.fit
-            .winding_with_dead_time(tick)
-            .filter(|w| w.inductance < w.resistance * tick)
-            .or_else(|| self.fit.winding(tick))
+        let settles_within_tick =
+            |w: &Winding| w.resistance > 1e-3 && w.resistance < 100.0 && w.inductance < w.resistance * tick;
+        self.fit.winding_with_dead_time(tick).filter(settles_within_tick).or_else(|| self.fit.winding(tick))
     }
 
     /// The chips' size on the measured axis of `stage` (V): around the voltage that holds half

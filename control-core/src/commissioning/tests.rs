@@ -140,7 +140,7 @@ fn a_weak_magnet_on_a_winding_faster_than_the_tick_gives_its_flux_linkage() {
     assert!(errors.iter().all(|(_, e)| e.abs() < 0.01), "flux linkage errors (Lq/Ld, error): {errors:?}");
 }
 
-/// Windings that settle within a third to a half of a tick, on a strong magnet and on a weak
+/// Windings that settle within 0.35 to 0.6 of a tick, on a strong magnet and on a weak
 /// one, with sensor errors, dead time and noise: the d chips take the current from about the
 /// test current to about none, where the inverter's dead-time voltage flips with the phase
 /// currents' signs, and the first-order fit's inductance reads 2 to 4 % high here. With the

@@ -44,7 +44,8 @@ impl WindingFit {
     /// phase currents' signs at the tick's start. Where the chips swing the phase currents
     /// through zero on a winding faster than a tick, the flips of that voltage follow the
     /// current and read as extra resistance (a decay past what any branch gives) unless they
-    /// are fitted.
+    /// are fitted; where they take the current to about zero and the sensors' noise flips
+    /// its sign there, as a pole a little too slow.
     pub fn add_with_dead_time(&mut self, previous: f32, next: f32, voltage: f32, shape: f32) {
         let (i0, v0) = *self.origin.get_or_insert((previous, voltage));
         self.sums.add([previous - i0, voltage - v0, shape], next - previous);
@@ -57,34 +58,33 @@ impl WindingFit {
     /// Not the other way round: on a slow winding the current's sign follows the current
     /// itself, and the regressor would take the decay's share.
     pub fn winding(&self, tick: f32) -> Option<Winding> {
-        self.winding_in_order(tick, [2, 3])
+        self.fitted(tick, 2).or_else(|| self.fitted(tick, 3))
     }
 
-    /// [`Self::winding`] the other way round: the fit with the dead-time regressor first, the
-    /// first-order one where it finds none. For a winding that settles within the tick, whose
-    /// current the chips take to about zero (`Commissioning::d_winding`): the regressor then
-    /// takes the flips the sensors' noise makes there, which the first-order fit reads as a
-    /// pole a little too slow.
+    /// The fit with the dead-time regressor alone (`None` where it finds no winding, or where
+    /// the regressor does not vary apart from the others). For a winding that settles within
+    /// the tick, whose current the chips take to about zero (`Commissioning::d_winding`): the
+    /// regressor then takes the flips the sensors' noise makes there, which the first-order
+    /// fit reads as a pole a little too slow.
     pub fn winding_with_dead_time(&self, tick: f32) -> Option<Winding> {
-        self.winding_in_order(tick, [3, 2])
+        self.fitted(tick, 3)
     }
 
-    fn winding_in_order(&self, tick: f32, order: [usize; 2]) -> Option<Winding> {
+    /// The winding of the fit of the first `terms` regressors (2: the first-order fit; 3: with
+    /// the dead-time regressor).
+    fn fitted(&self, tick: f32, terms: usize) -> Option<Winding> {
         if self.sums.samples() < 16.0 {
             return None;
         }
-        let fitted = |terms: usize| {
-            let [minus_decay, b, ..] = self.sums.coefficients(terms)?;
-            let decay = -minus_decay;
-            if !(decay > 0.0 && decay < 1.0 && b > 0.0) {
-                return None;
-            }
-            let a = 1.0 - decay;
-            // (1 − a)/(−ln a): 1/(1 + (1−a)/2 + (1−a)²/3 …) near a = 1, where ln a loses digits.
-            let ratio = if decay < 1e-3 { 1.0 / (1.0 + decay * (0.5 + decay / 3.0)) } else { decay / -libm::logf(a) };
-            Some(Winding { inductance: tick * ratio / b, resistance: decay / b })
-        };
-        fitted(order[0]).or_else(|| fitted(order[1]))
+        let [minus_decay, b, ..] = self.sums.coefficients(terms)?;
+        let decay = -minus_decay;
+        if !(decay > 0.0 && decay < 1.0 && b > 0.0) {
+            return None;
+        }
+        let a = 1.0 - decay;
+        // (1 − a)/(−ln a): 1/(1 + (1−a)/2 + (1−a)²/3 …) near a = 1, where ln a loses digits.
+        let ratio = if decay < 1e-3 { 1.0 / (1.0 + decay * (0.5 + decay / 3.0)) } else { decay / -libm::logf(a) };
+        Some(Winding { inductance: tick * ratio / b, resistance: decay / b })
     }
 
     /// Where [`Self::winding`] finds none on a winding whose current settles within the tick:
