@@ -111,10 +111,12 @@ pub struct DeviceBenchArgs {
     #[arg(long, default_value_t = 921_600, value_parser = crate::device::link::baud_rate)]
     pub baud: u32,
     /// Start states per injection point (2 or more: the systematic difference is told from
-    /// their spread): beyond the first, the drive runs on for up to half a second before each
-    /// request reaches it (as behind a real line, where the host polls at
-    /// its own pace), so the rotor's angle, the ride's length, the tick's phase and the
-    /// converter's noise differ from sweep to sweep
+    /// their spread): beyond the first, the rotor stands at another angle at power-up (so
+    /// that commissioning leaves the axis at another electrical angle, where the current
+    /// converter's gain differs) and the drive runs on for up to half a second before each
+    /// request reaches it (as behind a real line, where the host polls at its own pace), so
+    /// the ride's length, the tick's phase and the converter's noise differ too; each start
+    /// has its own twin (its drive's commissioned parameters on the same machine)
     #[arg(long, default_value_t = 12, value_parser = clap::value_parser!(u32).range(2..=64))]
     pub starts: u32,
     #[command(flatten)]
@@ -126,10 +128,27 @@ pub struct DeviceBenchArgs {
 /// runs about half a second between two polls).
 pub const REQUEST_LAG_S: f64 = 0.5;
 
+/// The machine of start `k`: the shipped one for the first start; for the others the rotor
+/// stands at another angle at power-up (spread over a turn by the golden ratio), so that
+/// commissioning leaves the axis at another electrical angle. The current converter's gain on
+/// a small sine depends on that angle: a systematic difference told at one angle alone is
+/// that angle's (on the shipped machine, 0.3° at its own angle and up to 0.86° at others).
+fn start_parameters(k: u32) -> std::collections::BTreeMap<String, crate::fmu::scenario::Value> {
+    let mut parameters = std::collections::BTreeMap::new();
+    if k > 0 {
+        let turn = (k as f64 * 0.618_033_988_749_894_9).fract();
+        let angle =
+            crate::fmu::configuration::configuration(&parameters).map(|c| c.plant.rotor_start_angle).unwrap_or(0.0)
+                + std::f64::consts::TAU * turn;
+        parameters.insert("plant.rotor_start_angle".to_string(), crate::fmu::scenario::Value::Float(angle));
+    }
+    parameters
+}
+
 pub fn bench(fmu: &Fmu, baud: u32, starts: u32, mut progress: impl FnMut(f64)) -> Result<Vec<LinkRow>> {
     let mut rows = Vec::new();
     let points = [("velocity", 2.0), ("torque", 0.2), ("feedback", 2.0)];
-    let runs = (points.len() * (starts as usize + 1)) as f64;
+    let runs = (points.len() * 2 * starts as usize) as f64;
     let mut done = 0.0;
     for (name, amplitude) in points {
         let point = match name {
@@ -138,10 +157,9 @@ pub fn bench(fmu: &Fmu, baud: u32, starts: u32, mut progress: impl FnMut(f64)) -
             _ => control_core::excitation::InjectionPoint::VelocityFeedback,
         };
         let settings = control_core::phase_shifted_sweep::SweepParams { point, amplitude, ..Default::default() };
-        let run = SweepRun { settings, parameters: Default::default(), velocity: 50.0 };
-        let mut twin = None;
         let mut sweeps = Vec::new();
         for k in 0..starts {
+            let run = SweepRun { settings, parameters: start_parameters(k), velocity: 50.0 };
             let mut session = crate::virtual_drive::in_process::commissioned_session(
                 &run.parameters,
                 LineSettings { baud, ..LineSettings::default() },
@@ -154,12 +172,11 @@ pub fn bench(fmu: &Fmu, baud: u32, starts: u32, mut progress: impl FnMut(f64)) -
             let capacity = session.link.port().drive.line_capacity();
             let d = sweep_on_drive(&mut session, &run, |f| progress((done + f) / runs))?;
             done += 1.0;
-            if twin.is_none() {
-                let twin_of = fmu.as_twin_of(&session.params_for_twin()?)?;
-                twin = Some(twin_sweep(&twin_of, &run, |f| progress((done + f) / runs))?.0);
-                done += 1.0;
-            }
-            let twin = twin.as_deref().unwrap_or_default();
+            // The twin of this start's drive: its commissioned parameters on the same machine.
+            let twin_of = fmu.as_twin_of(&session.params_for_twin()?)?;
+            let twin = twin_sweep(&twin_of, &run, |f| progress((done + f) / runs))?.0;
+            done += 1.0;
+            let twin = twin.as_slice();
             let (compared, _) = compare_with_twin(&d, twin);
             // Every point of the plan (and its extra frequency) compared on both sides.
             let complete = !compared.is_empty()
