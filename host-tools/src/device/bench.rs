@@ -132,7 +132,7 @@ pub const REQUEST_LAG_S: f64 = 0.5;
 /// stands at another angle at power-up (spread over a turn by the golden ratio), so that
 /// commissioning leaves the axis at another electrical angle. The current converter's gain on
 /// a small sine depends on that angle: a systematic difference told at one angle alone is
-/// that angle's (on the shipped machine, 0.3° at its own angle and up to 0.86° at others).
+/// that angle's (on the shipped machine, 0.3–0.9° of phase above 1 kHz, by the angle).
 fn start_parameters(k: u32) -> std::collections::BTreeMap<String, crate::fmu::scenario::Value> {
     let mut parameters = std::collections::BTreeMap::new();
     if k > 0 {
