@@ -137,9 +137,7 @@ fn start_parameters(k: u32) -> std::collections::BTreeMap<String, crate::fmu::sc
     let mut parameters = std::collections::BTreeMap::new();
     if k > 0 {
         let turn = (k as f64 * 0.618_033_988_749_894_9).fract();
-        let angle =
-            crate::fmu::configuration::configuration(&parameters).map(|c| c.plant.rotor_start_angle).unwrap_or(0.0)
-                + std::f64::consts::TAU * turn;
+        let angle = servo_axis::plant::PlantParams::default().rotor_start_angle + std::f64::consts::TAU * turn;
         parameters.insert("plant.rotor_start_angle".to_string(), crate::fmu::scenario::Value::Float(angle));
     }
     parameters
@@ -164,8 +162,8 @@ pub fn bench(fmu: &Fmu, baud: u32, starts: u32, mut progress: impl FnMut(f64)) -
                 &run.parameters,
                 LineSettings { baud, ..LineSettings::default() },
             )?;
-            // The first start as the bench always ran it; the others with the drive running on
-            // between requests.
+            // The first start on the shipped machine, answered at once; the others with the
+            // drive running on between requests.
             if k > 0 {
                 session.link.port_mut().lag_requests(REQUEST_LAG_S, k as u64);
             }
