@@ -8,23 +8,18 @@
 
 use core::f32::consts::TAU;
 
-/// Running sums of one pass: the vector's angle (rad, from the pass's start) against the
-/// counts (from the sequence's first count).
+/// The statistics of one pass: the vector's angle (rad, from the pass's start) against the
+/// counts (from the sequence's first count), as means and co-moments updated one sample at a
+/// time (Welford): the counts' scatter about the pass's line is a small share of their spread
+/// over a pass, which raw sums of squares would lose in f32.
 #[derive(Clone, Copy, Debug, Default)]
 pub struct Pass {
     n: f32,
-    angle: f32,
-    counts: f32,
-    angle2: f32,
-    angle_counts: f32,
     /// The vector's angle at the pass's start (rad).
     start: f32,
     /// Smallest and largest count seen.
     lowest: i32,
     highest: i32,
-    /// The means and co-moments of the angles and counts, updated one sample at a time
-    /// (Welford): the counts' scatter about the fitted line is a small share of their spread
-    /// over a pass, which the raw sums above would lose in f32.
     mean_angle: f32,
     mean_counts: f32,
     angle_moment: f32,
@@ -41,10 +36,6 @@ impl Pass {
         let x = angle - self.start;
         let y = counts as f32;
         self.n += 1.0;
-        self.angle += x;
-        self.counts += y;
-        self.angle2 += x * x;
-        self.angle_counts += x * y;
         self.lowest = self.lowest.min(counts);
         self.highest = self.highest.max(counts);
         let dx = x - self.mean_angle;
@@ -56,34 +47,30 @@ impl Pass {
         self.counts_moment += dy * (y - self.mean_counts);
     }
 
-    /// The variance of the counts about the pass's fitted line (counts²): the rotor's swing
-    /// on the turning vector (0 for fewer than three samples).
-    pub fn scatter(&self) -> f32 {
-        if self.n < 3.0 || !(self.angle_moment > 0.0) {
+    /// The variance of the counts (counts²) about a line of `slope` counts per radian through
+    /// the pass's means: about the exact counts per electrical radian, the rotor's swing on
+    /// the turning vector. (About the pass's own fitted line a swing of a couple of periods
+    /// would lose the share the fitted slope leans into it.) 0 for fewer than three samples.
+    pub fn scatter_about(&self, slope: f32) -> f32 {
+        if self.n < 3.0 {
             return 0.0;
         }
-        let residual = self.counts_moment - self.cross_moment * self.cross_moment / self.angle_moment;
+        let residual = self.counts_moment - 2.0 * slope * self.cross_moment + slope * slope * self.angle_moment;
         (residual / self.n).max(0.0)
     }
 
     /// Counts per electrical radian: the fitted line's slope.
     fn slope(&self) -> Option<f32> {
-        if self.n < 2.0 {
+        if self.n < 2.0 || !(self.angle_moment > 0.0) {
             return None;
         }
-        let (mx, my) = (self.angle / self.n, self.counts / self.n);
-        let sxx = self.angle2 / self.n - mx * mx;
-        if !(sxx > 0.0) {
-            return None;
-        }
-        Some((self.angle_counts / self.n - mx * my) / sxx)
+        Some(self.cross_moment / self.angle_moment)
     }
 
     /// The counts at the vector's angle 0 on a line of `slope` (counts per electrical radian)
     /// through the pass's means.
     fn intercept(&self, slope: f32) -> f32 {
-        let n = self.n.max(1.0);
-        self.counts / n + slope * (-self.start - self.angle / n)
+        self.mean_counts + slope * (-self.start - self.mean_angle)
     }
 
     /// Counts the rotor moved over the pass.
@@ -133,8 +120,7 @@ pub fn align(
         return Err(AlignmentError::EncoderStill { counts: travel });
     };
     // Less than an eighth of the counts a single pole pair's turn would give.
-    let swept = forward.angle2 / forward.n.max(1.0);
-    if (travel as f32) < 0.125 * counts_per_rev as f32 / max_pole_pairs as f32 || !(swept > 0.0) {
+    if (travel as f32) < 0.125 * counts_per_rev as f32 / max_pole_pairs as f32 {
         return Err(AlignmentError::EncoderStill { counts: travel });
     }
     if !(k1 * k2 > 0.0 && (k1 - k2).abs() <= 0.2 * k1.abs().max(k2.abs())) {
@@ -209,7 +195,7 @@ mod tests {
     }
 
     /// A rotor swinging on the turning vector by ±0.3 rad (electrical) about its lag: the
-    /// counts' scatter about the pass's line is the swing's variance, `A²/2`, in counts, over
+    /// counts' scatter about the exact counts-per-radian line is the swing's variance, `A²/2`, in counts, over
     /// 20 000 samples of counts in the tens of thousands; a rotor that follows without a
     /// swing scatters by its counter's steps alone (a twelfth of a count², which f32 moments
     /// of counts spread over two turns resolve only to within a few counts²).
@@ -226,8 +212,9 @@ mod tests {
             still.add(theta, libm::floorf((theta - 0.1) * per_radian) as i32 + 5000);
         }
         let want = 0.5 * amplitude * amplitude * per_radian * per_radian;
-        assert!((pass.scatter() / want - 1.0).abs() < 0.01, "{} vs {want}", pass.scatter());
-        assert!(still.scatter() < 1e-4 * want, "{} vs {want}", still.scatter());
+        let (swinging, still) = (pass.scatter_about(per_radian), still.scatter_about(per_radian));
+        assert!((swinging / want - 1.0).abs() < 0.01, "{swinging} vs {want}");
+        assert!(still < 1e-4 * want, "{still} vs {want}");
     }
 
     #[test]

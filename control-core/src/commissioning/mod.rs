@@ -47,7 +47,7 @@
 //!    The rotor swings on the vector (the magnet's torque a spring on its inertia); the lines'
 //!    intercepts and the back-EMF's mean need a few of its periods in a pass (4 Hz or more at
 //!    the test current: a heavy load on a weak magnet needs a higher test current). The
-//!    swing's variance about the lag (the counts' scatter about each pass's line) takes the
+//!    swing's variance about the lag (the counts' scatter about the exact line) takes the
 //!    mean of `cos δ` below `cos` of the mean lag, which the flux linkage takes into account.
 //! 4. **d-axis inductance.** Chips around the voltage of half the test current on the rotor's
 //!    d axis (read from the encoder each tick; the d current keeps its sign) and the fit
@@ -105,7 +105,7 @@ use current_loop_design::{BandwidthSearch, StepResponse, STEP_SAMPLES};
 use encoder_alignment::{align, Pass};
 use free_rotor_fit::FreeRotorFit;
 use swing_damping::SwingDamping;
-use winding_fit::WindingFit;
+use winding_fit::{inductance_in_range, resistance_in_range, WindingFit};
 
 /// What the sequence needs to know before it starts: nothing of the motor.
 #[derive(Clone, Copy, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
@@ -704,10 +704,7 @@ impl Commissioning {
                     // the phase currents' signs at the next tick's start.
                     self.dead_time_shape = dead_time_per_volt([ia, ib, ic], frame).d;
                     if self.ticks >= PROBE_FIT_PERIODS * period {
-                        let plausible = |w: &Winding| {
-                            w.resistance > 1e-3 && w.resistance < 100.0 && w.inductance > 1e-6 && w.inductance < 1.0
-                        };
-                        let free_rotor = self.q_fit.winding(s.tick_period).filter(plausible);
+                        let free_rotor = self.q_fit.winding(s.tick_period).filter(Winding::in_range);
                         // The fits in turn: the free rotor's, the first-order one, and where a
                         // light rotor on a strong magnet sticks and slips under the chips so
                         // that neither finds a winding, the free rotor's high-passed; last, on
@@ -717,12 +714,12 @@ impl Commissioning {
                         // winding.
                         let found = free_rotor
                             .or_else(|| self.fit.winding(s.tick_period))
-                            .or_else(|| self.probe_high_passed.winding(s.tick_period).filter(plausible))
-                            .or_else(|| self.fit.settled_within_tick(s.tick_period).filter(plausible));
+                            .or_else(|| self.probe_high_passed.winding(s.tick_period).filter(Winding::in_range))
+                            .or_else(|| self.fit.settled_within_tick(s.tick_period).filter(Winding::in_range));
                         let Some(w) = found else {
                             return self.fail(CommissioningFault::Inductance { axis: 'd' });
                         };
-                        if !(w.resistance > 1e-3 && w.resistance < 100.0 && w.inductance > 1e-6 && w.inductance < 1.0) {
+                        if !w.in_range() {
                             return self.fail(CommissioningFault::OutOfRange {
                                 quantity: MeasuredQuantity::Winding,
                                 value: w.resistance,
@@ -865,7 +862,7 @@ impl Commissioning {
                         self.held_low = mean_v;
                         let (dv, di) = (self.high.0 - mean_v, self.high.1 - mean_i);
                         let r = dv / di;
-                        if !(r > 1e-3 && r < 100.0) {
+                        if !resistance_in_range(r) {
                             return self.fail(CommissioningFault::OutOfRange {
                                 quantity: MeasuredQuantity::Resistance,
                                 value: r,
@@ -1012,7 +1009,7 @@ impl Commissioning {
                     let Some(w) = fitted else {
                         return self.fail(CommissioningFault::Inductance { axis });
                     };
-                    if !(w.inductance > 1e-6 && w.inductance < 1.0) {
+                    if !inductance_in_range(w.inductance) {
                         return self.fail(CommissioningFault::OutOfRange {
                             quantity: MeasuredQuantity::Inductance,
                             value: w.inductance,
@@ -1234,7 +1231,7 @@ impl Commissioning {
         };
         let [high, low] = &self.hold_windows;
         let r = (voltage(high) - voltage(low)) / (high.current - low.current);
-        if !(r > 1e-3 && r < 100.0) {
+        if !resistance_in_range(r) {
             return Err(CommissioningFault::OutOfRange { quantity: MeasuredQuantity::Resistance, value: r });
         }
         Ok(r)
@@ -1295,13 +1292,14 @@ impl Commissioning {
         let sampled = sin * sin * excess(self.ld) + cos * cos * excess(lq);
         let inductive = 2.0 * omega * current * (along + sampled);
         // The swing about the lag (its variance `v` from the counts' scatter about each pass's
-        // line) takes the mean of `cos δ` under `cos` of the mean lag: `cos δ·(1 − v/2 + v²/16)`
+        // line of the exact counts per radian) takes the mean of `cos δ` under `cos` of the mean lag: `cos δ·(1 − v/2 + v²/16)`
         // (the last term a sine's). A heavy rotor on a weak magnet, whose swing at the test
         // current is slow (4 Hz), keeps much of what the pass's start excites: ±0.46 rad over
         // a forward pass gives a flux linkage 3.7 % low without this.
         let radians_per_count = TAU * a.pole_pairs as f32 / s.counts_per_rev as f32;
+        let counts_per_radian = (if a.reversed { -1.0 } else { 1.0 }) / radians_per_count;
         let mean_cos = |p: &Pass| {
-            let v = (p.scatter() * radians_per_count * radians_per_count).min(0.5);
+            let v = (p.scatter_about(counts_per_radian) * radians_per_count * radians_per_count).min(0.5);
             1.0 - 0.5 * v + v * v / 16.0
         };
         let swept = mean_cos(&self.forward) + mean_cos(&self.backward);
@@ -1340,8 +1338,8 @@ impl Commissioning {
     }
 
     /// The d winding from its stage's fit: the one with the inverter's dead-time voltage
-    /// fitted beside it (`WindingFit::winding_with_dead_time`) where that finds a plausible
-    /// winding settling within a tick (its pole under `1/e`), else the first-order one. The
+    /// fitted beside it (`WindingFit::winding_with_dead_time`) where that finds a winding
+    /// within the part's range settling within a tick (its pole under `1/e`), else the first-order one. The
     /// chips take the d current from about the test current to about none, and on a winding
     /// that settles within the tick it gets there: the sensors' noise then moves the phase
     /// currents across zero and the dead-time voltage flips with them, which the first-order
@@ -1350,8 +1348,7 @@ impl Commissioning {
     /// hardly varies, and the first-order fit is kept (`WindingFit::winding`).
     fn d_winding(&self) -> Option<Winding> {
         let tick = self.settings.tick_period;
-        let settles_within_tick =
-            |w: &Winding| w.resistance > 1e-3 && w.resistance < 100.0 && w.inductance < w.resistance * tick;
+        let settles_within_tick = |w: &Winding| w.in_range() && w.inductance < w.resistance * tick;
         self.fit.winding_with_dead_time(tick).filter(settles_within_tick).or_else(|| self.fit.winding(tick))
     }
 
@@ -1439,7 +1436,7 @@ impl Commissioning {
     /// an implausible inductance).
     fn resistance_off(&self, w: &Option<Winding>) -> f32 {
         match w {
-            Some(w) if w.inductance > 1e-6 && w.inductance < 1.0 => libm::fabsf(w.resistance / self.resistance - 1.0),
+            Some(w) if inductance_in_range(w.inductance) => libm::fabsf(w.resistance / self.resistance - 1.0),
             _ => f32::INFINITY,
         }
     }

@@ -30,6 +30,23 @@ pub struct Winding {
     pub resistance: f32,
 }
 
+/// A resistance within the part's range: 1 mΩ to 100 Ω (a measurement outside it is refused).
+pub fn resistance_in_range(ohms: f32) -> bool {
+    ohms > 1e-3 && ohms < 100.0
+}
+
+/// An inductance within the part's range: 1 µH to 1 H.
+pub fn inductance_in_range(henries: f32) -> bool {
+    henries > 1e-6 && henries < 1.0
+}
+
+impl Winding {
+    /// Resistance and inductance both within the part's range.
+    pub fn in_range(&self) -> bool {
+        resistance_in_range(self.resistance) && inductance_in_range(self.inductance)
+    }
+}
+
 impl WindingFit {
     /// One tick: the current now (`previous`), the current a tick later (`next`) and the
     /// voltage applied in between (asked for a tick before `previous` was read).
