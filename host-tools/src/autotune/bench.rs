@@ -475,6 +475,17 @@ impl AutotuneBenchArgs {
             80.0,
             "%",
         );
+        rec.equal(
+            "machines under 80 % of the oracle's bandwidth",
+            finished().filter(|r| r.bandwidth_hz < 0.8 * r.oracle_bandwidth_hz).count() as f64,
+            0.0,
+            "machines",
+        );
+        rec.info(
+            "bandwidth over the oracle's (median)",
+            100.0 * median(&|r| r.bandwidth_hz / r.oracle_bandwidth_hz),
+            "%",
+        );
         // A machine without an oracle has no ratio above: counted here, not passed over.
         rec.equal(
             "machines whose oracle the search on the true plant did not find",
