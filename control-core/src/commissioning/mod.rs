@@ -1292,8 +1292,8 @@ impl Commissioning {
         let sampled = sin * sin * excess(self.ld) + cos * cos * excess(lq);
         let inductive = 2.0 * omega * current * (along + sampled);
         // The swing about the lag (its variance `v` from the counts' scatter about each pass's
-        // line of the exact counts per radian) takes the mean of `cos δ` under `cos` of the mean lag: `cos δ·(1 − v/2 + v²/16)`
-        // (the last term a sine's). A heavy rotor on a weak magnet, whose swing at the test
+        // line of the exact counts per radian) takes the mean of `cos δ` under `cos` of the
+        // mean lag: `cos δ·(1 − v/2 + v²/16)` (the last term a sine's). A heavy rotor on a weak magnet, whose swing at the test
         // current is slow (4 Hz), keeps much of what the pass's start excites: ±0.46 rad over
         // a forward pass gives a flux linkage 3.7 % low without this.
         let radians_per_count = TAU * a.pole_pairs as f32 / s.counts_per_rev as f32;
@@ -1339,8 +1339,8 @@ impl Commissioning {
 
     /// The d winding from its stage's fit: the one with the inverter's dead-time voltage
     /// fitted beside it (`WindingFit::winding_with_dead_time`) where that finds a winding
-    /// within the part's range settling within a tick (its pole under `1/e`), else the first-order one. The
-    /// chips take the d current from about the test current to about none, and on a winding
+    /// within the part's range settling within a tick (its pole under `1/e`), else the
+    /// first-order one. The chips take the d current from about the test current to about none, and on a winding
     /// that settles within the tick it gets there: the sensors' noise then moves the phase
     /// currents across zero and the dead-time voltage flips with them, which the first-order
     /// fit reads as a pole a little too slow (its inductance a few percent high at a third of

@@ -30,7 +30,8 @@ pub struct Winding {
     pub resistance: f32,
 }
 
-/// A resistance within the part's range: 1 mΩ to 100 Ω (a measurement outside it is refused).
+/// A resistance within the part's range: 1 mΩ to 100 Ω (a fit outside it is passed over for
+/// the next, a measurement outside it refused).
 pub fn resistance_in_range(ohms: f32) -> bool {
     ohms > 1e-3 && ohms < 100.0
 }
