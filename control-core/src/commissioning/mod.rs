@@ -15,6 +15,8 @@
 //!    On a winding that settles within the tick, whose pole no fit tells from the inverter's
 //!    dead-time voltage under binary chips, the winding's gain and a third of a tick
 //!    (`WindingFit::settled_within_tick`).
+//!    Where none finds a winding (a light rotor a quarter turn or so from angle 0 turns with
+//!    the chips, most torque there), once more on the axis a quarter turn on.
 //!    The resistance is rough: the loop's integral corner is kept to a third of its bandwidth.
 //!    No current at the highest voltage: an open phase.
 //! 2. **Resistance.** The current loop ramps the current to the test current while the vector
@@ -318,6 +320,11 @@ const PROBE_SHARE: f32 = 0.3;
 const PROBE_FLOOR: f32 = 0.02;
 const PROBE_DEGREE: u32 = 8;
 const PROBE_FIT_PERIODS: u32 = 8;
+/// The probe's axis (rad, electrical) when its first run, on angle 0, found no winding: a
+/// light rotor on a strong magnet that stands a quarter turn or so from angle 0 takes the most
+/// torque from the chips and turns with them, and its back-EMF, beside a winding that settles
+/// within the tick, leaves no fit a winding; a quarter turn on, the chips barely turn it.
+const PROBE_RETRY_AXIS: f32 = 0.5 * core::f32::consts::PI;
 /// Chips of each inductance stage (an M-sequence of degree 12), after a few ticks' start.
 const CHIP_DEGREE: u32 = 12;
 const CHIP_SETTLING_TICKS: u32 = 64;
@@ -530,6 +537,9 @@ pub struct Commissioning {
     q_lowpass: f32,
     /// The q stage's first run's winding, while a second turns the rotor (`Q_RETRY_AGREEMENT`).
     first_q: Option<Winding>,
+    /// The probe runs again on the axis a quarter of an electrical turn on
+    /// ([`PROBE_RETRY_AXIS`]): its first run found no winding.
+    probe_retried: bool,
     /// What was measured, kept while the rotor is braked to rest.
     result: Option<MeasuredMotor>,
 }
@@ -560,6 +570,7 @@ impl Commissioning {
             bias_now: 0.0,
             q_lowpass: 0.0,
             first_q: None,
+            probe_retried: false,
             test_current: settings.test_current,
             last_count: 0,
             still_ticks: 0,
@@ -717,7 +728,16 @@ impl Commissioning {
                             .or_else(|| self.probe_high_passed.winding(s.tick_period).filter(Winding::in_range))
                             .or_else(|| self.fit.settled_within_tick(s.tick_period).filter(Winding::in_range));
                         let Some(w) = found else {
-                            return self.fail(CommissioningFault::Inductance { axis: 'd' });
+                            if self.probe_retried {
+                                return self.fail(CommissioningFault::Inductance { axis: 'd' });
+                            }
+                            // Once more on the axis a quarter turn on, the chips as they are
+                            // (the probe's stage again: a period to settle, then the fit).
+                            self.probe_retried = true;
+                            self.angle = PROBE_RETRY_AXIS;
+                            self.peak = 0.0;
+                            self.next_stage(Stage::Probe);
+                            return self.output(i.bus_voltage, 0.0);
                         };
                         if !w.in_range() {
                             return self.fail(CommissioningFault::OutOfRange {

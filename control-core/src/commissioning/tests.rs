@@ -176,6 +176,43 @@ fn a_d_winding_faster_than_the_tick_is_found_with_its_dead_time() {
     }
 }
 
+/// Light rotors (mechanical time constants of 14–21 µs) on windings that settle within about
+/// half a tick, under strong magnets, standing a quarter of an electrical turn from the
+/// probe's first axis: its chips make the most torque there and turn the rotor, whose
+/// back-EMF beside the winding leaves no fit a winding (the first-order fit's pole reads
+/// −0.6). The probe runs again a quarter turn on (`PROBE_RETRY_AXIS`), where the chips hardly
+/// turn the rotor, and the stages after it measure the motor within every goal.
+#[test]
+fn a_light_rotor_turned_by_the_probes_chips_is_probed_a_quarter_turn_on() {
+    // (pole pairs, R, Ld, Lq, flux linkage, rotor inertia, Coulomb friction, counts per turn,
+    // reversed)
+    let motors = [
+        (7u32, 1.112, 24.6e-6, 30.5e-6, 0.0730, 8.26e-6, 0.0767, 16384u32, true),
+        (11, 1.209, 42.7e-6, 51.3e-6, 0.0342, 2.64e-6, 0.0564, 4096, false),
+    ];
+    for (pole_pairs, resistance, ld, lq, flux_linkage, inertia, coulomb, counts_per_rev, reversed) in motors {
+        for electrical in [0.5 * std::f64::consts::PI, 1.5 * std::f64::consts::PI] {
+            check(MotorTruth {
+                pole_pairs,
+                resistance,
+                ld,
+                lq,
+                flux_linkage,
+                inertia,
+                coulomb,
+                counts_per_rev,
+                start_angle: electrical / pole_pairs as f64,
+                reversed,
+                sensor_offset: [0.005, -0.004],
+                sensor_gain: [0.999, 1.002],
+                dead_time_volts: 0.05,
+                noise: 0.002,
+                ..MotorTruth::default_motor()
+            });
+        }
+    }
+}
+
 #[test]
 fn motors_across_the_range_are_found() {
     for (pole_pairs, resistance, l, cpr) in
