@@ -16,7 +16,8 @@
 //!    dead-time voltage under binary chips, the winding's gain and a third of a tick
 //!    (`WindingFit::settled_within_tick`).
 //!    Where none finds a winding (a light rotor a quarter turn or so from angle 0 turns with
-//!    the chips, most torque there), once more on the axis a quarter turn on.
+//!    the chips, most torque there), once more on the axis a quarter turn on, its chips grown
+//!    again from an eighth of their size.
 //!    The resistance is rough: the loop's integral corner is kept to a third of its bandwidth.
 //!    No current at the highest voltage: an open phase.
 //! 2. **Resistance.** The current loop ramps the current to the test current while the vector
@@ -325,6 +326,8 @@ const PROBE_FIT_PERIODS: u32 = 8;
 /// torque from the chips and turns with them, and its back-EMF, beside a winding that settles
 /// within the tick, leaves no fit a winding; a quarter turn on, the chips barely turn it.
 const PROBE_RETRY_AXIS: f32 = 0.5 * core::f32::consts::PI;
+/// The retry's chips start at this share of the first run's last ones.
+const PROBE_RETRY_SHRINK: f32 = 0.125;
 /// Chips of each inductance stage (an M-sequence of degree 12), after a few ticks' start.
 const CHIP_DEGREE: u32 = 12;
 const CHIP_SETTLING_TICKS: u32 = 64;
@@ -731,10 +734,13 @@ impl Commissioning {
                             if self.probe_retried {
                                 return self.fail(CommissioningFault::Inductance { axis: 'd' });
                             }
-                            // Once more on the axis a quarter turn on, the chips as they are
-                            // (the probe's stage again: a period to settle, then the fit).
+                            // Once more on the axis a quarter turn on (the probe's stage again),
+                            // the chips an eighth of their size to grow from: the rotor's motion
+                            // held their current down on the first axis, by up to eight times
+                            // on the drawn motors.
                             self.probe_retried = true;
                             self.angle = PROBE_RETRY_AXIS;
+                            self.chip_size *= PROBE_RETRY_SHRINK;
                             self.peak = 0.0;
                             self.next_stage(Stage::Probe);
                             return self.output(i.bus_voltage, 0.0);
@@ -782,6 +788,11 @@ impl Commissioning {
                         }
                     } else if self.peak < PROBE_FLOOR * s.test_current {
                         return self.fail(CommissioningFault::OpenPhase { amps: self.peak });
+                    } else if self.probe_retried && self.peak > PROBE_SHARE * PROBE_GROWTH * s.test_current {
+                        // The retry's chips, though shrunk, drive a current over the share
+                        // (the rotor's motion held it down by more on the first axis): scaled
+                        // to the share (the winding answers in proportion), a period to settle.
+                        self.chip_size *= PROBE_SHARE * s.test_current / self.peak;
                     } else {
                         self.fit = WindingFit::default();
                         self.q_fit = FreeRotorFit::default();
