@@ -92,6 +92,24 @@ pub struct Alignment {
     pub lag: f32,
 }
 
+impl Alignment {
+    /// The counts per electrical radian of an encoder of `counts_per_rev` on this motor,
+    /// signed as the counter runs against the electrical angle.
+    pub fn counts_per_radian(&self, counts_per_rev: u32) -> f32 {
+        exact_counts_per_radian(counts_per_rev, self.pole_pairs as f32, self.reversed)
+    }
+}
+
+/// `counts_per_rev` over `pole_pairs` electrical turns of 2π, negative for a reversed counter.
+fn exact_counts_per_radian(counts_per_rev: u32, pole_pairs: f32, reversed: bool) -> f32 {
+    let exact = counts_per_rev as f32 / (pole_pairs * TAU);
+    if reversed {
+        -exact
+    } else {
+        exact
+    }
+}
+
 /// Why the passes give no alignment.
 #[derive(Clone, Copy, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
 pub enum AlignmentError {
@@ -142,9 +160,9 @@ pub fn align(
     // the passes' mean intercept, each on the line of the exact counts per radian through its
     // pass's means (a swing that bends a fitted slope by a few percent would move a fitted
     // intercept, extrapolated to the angle 0 turns away, by as much of the pass's angle).
-    let exact = counts_per_rev as f32 / (pole_pairs * TAU);
-    let sign = if reversed { -1.0 } else { 1.0 };
-    let (c1, c2) = (forward.intercept(sign * exact), backward.intercept(sign * exact));
+    let signed = exact_counts_per_radian(counts_per_rev, pole_pairs, reversed);
+    let (exact, sign) = (signed.abs(), if reversed { -1.0 } else { 1.0 });
+    let (c1, c2) = (forward.intercept(signed), backward.intercept(signed));
     let cpr = counts_per_rev as i64;
     // The start count within a revolution keeps the numbers small.
     let start = (start_count as i64).rem_euclid(cpr) as f32;
@@ -220,7 +238,7 @@ mod tests {
             assert!(still < 1e-4 * want, "{still} vs {want}");
             // The pass's own fitted line takes part of a slow swing.
             let fitted = pass.scatter_about(pass.slope().unwrap());
-            let lost = 6.0 / (core::f32::consts::PI * periods).powi(2);
+            let lost = 6.0 / ((core::f32::consts::PI * periods) * (core::f32::consts::PI * periods));
             assert!((fitted / (want * (1.0 - lost)) - 1.0).abs() < 0.01, "{periods} periods: {fitted} vs {want}");
         }
     }

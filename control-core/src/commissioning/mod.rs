@@ -50,8 +50,9 @@
 //!    The rotor swings on the vector (the magnet's torque a spring on its inertia); the lines'
 //!    intercepts and the back-EMF's mean need a few of its periods in a pass (4 Hz or more at
 //!    the test current: a heavy load on a weak magnet needs a higher test current). The
-//!    swing's variance about the lag (the counts' scatter about the exact line) takes the
-//!    mean of `cos δ` below `cos` of the mean lag, which the flux linkage takes into account.
+//!    swing's variance about the lag (the counts' scatter about the line of the exact counts
+//!    per radian) takes the mean of `cos δ` below `cos` of the mean lag, which the flux
+//!    linkage takes into account.
 //! 4. **d-axis inductance.** Chips around the voltage of half the test current on the rotor's
 //!    d axis (read from the encoder each tick; the d current keeps its sign) and the fit
 //!    again, the q current held at zero by the loop meanwhile (a rotor still swinging from the
@@ -737,10 +738,12 @@ impl Commissioning {
                             // Once more on the axis a quarter turn on (the probe's stage again),
                             // the chips an eighth of their size to grow from: the rotor's motion
                             // held their current down on the first axis, by up to eight times
-                            // on the drawn motors.
+                            // on the drawn motors. No voltage this tick: the last chip, at its
+                            // full size, would meet the winding alone on the new axis.
                             self.probe_retried = true;
                             self.angle = PROBE_RETRY_AXIS;
                             self.chip_size *= PROBE_RETRY_SHRINK;
+                            (self.voltage, self.last_chip) = (0.0, 0.0);
                             self.peak = 0.0;
                             self.next_stage(Stage::Probe);
                             return self.output(i.bus_voltage, 0.0);
@@ -788,11 +791,6 @@ impl Commissioning {
                         }
                     } else if self.peak < PROBE_FLOOR * s.test_current {
                         return self.fail(CommissioningFault::OpenPhase { amps: self.peak });
-                    } else if self.probe_retried && self.peak > PROBE_SHARE * PROBE_GROWTH * s.test_current {
-                        // The retry's chips, though shrunk, drive a current over the share
-                        // (the rotor's motion held it down by more on the first axis): scaled
-                        // to the share (the winding answers in proportion), a period to settle.
-                        self.chip_size *= PROBE_SHARE * s.test_current / self.peak;
                     } else {
                         self.fit = WindingFit::default();
                         self.q_fit = FreeRotorFit::default();
@@ -1324,11 +1322,12 @@ impl Commissioning {
         let inductive = 2.0 * omega * current * (along + sampled);
         // The swing about the lag (its variance `v` from the counts' scatter about each pass's
         // line of the exact counts per radian) takes the mean of `cos δ` under `cos` of the
-        // mean lag: `cos δ·(1 − v/2 + v²/16)` (the last term a sine's). A heavy rotor on a weak magnet, whose swing at the test
-        // current is slow (4 Hz), keeps much of what the pass's start excites: ±0.46 rad over
-        // a forward pass gives a flux linkage 3.7 % low without this.
-        let radians_per_count = TAU * a.pole_pairs as f32 / s.counts_per_rev as f32;
-        let counts_per_radian = (if a.reversed { -1.0 } else { 1.0 }) / radians_per_count;
+        // mean lag: `cos δ·(1 − v/2 + v²/16)` (the last term a sine's). A heavy rotor on a
+        // weak magnet, whose swing at the test current is slow (4 Hz), keeps much of what the
+        // pass's start excites: ±0.46 rad over a forward pass gives a flux linkage 3.7 % low
+        // without this.
+        let counts_per_radian = a.counts_per_radian(s.counts_per_rev);
+        let radians_per_count = 1.0 / counts_per_radian;
         let mean_cos = |p: &Pass| {
             let v = (p.scatter_about(counts_per_radian) * radians_per_count * radians_per_count).min(0.5);
             1.0 - 0.5 * v + v * v / 16.0
@@ -1371,11 +1370,11 @@ impl Commissioning {
     /// The d winding from its stage's fit: the one with the inverter's dead-time voltage
     /// fitted beside it (`WindingFit::winding_with_dead_time`) where that finds a winding
     /// within the part's range settling within a tick (its pole under `1/e`), else the
-    /// first-order one. The chips take the d current from about the test current to about none, and on a winding
-    /// that settles within the tick it gets there: the sensors' noise then moves the phase
-    /// currents across zero and the dead-time voltage flips with them, which the first-order
-    /// fit reads as a pole a little too slow (its inductance a few percent high at a third of
-    /// a tick). On a slower winding the d current keeps its sign, the dead-time regressor
+    /// first-order one. The chips take the d current from about the test current to about
+    /// none, and on a winding that settles within the tick it gets there: the sensors' noise
+    /// then moves the phase currents across zero and the dead-time voltage flips with them,
+    /// which the first-order fit reads as a pole a little too slow (its inductance a few
+    /// percent high at a third of a tick). On a slower winding the d current keeps its sign, the dead-time regressor
     /// hardly varies, and the first-order fit is kept (`WindingFit::winding`).
     fn d_winding(&self) -> Option<Winding> {
         let tick = self.settings.tick_period;
