@@ -161,7 +161,7 @@ pub fn align(
     // pass's means (a swing that bends a fitted slope by a few percent would move a fitted
     // intercept, extrapolated to the angle 0 turns away, by as much of the pass's angle).
     let signed = exact_counts_per_radian(counts_per_rev, pole_pairs, reversed);
-    let (exact, sign) = (signed.abs(), if reversed { -1.0 } else { 1.0 });
+    let (exact, sign) = (signed.abs(), signed.signum());
     let (c1, c2) = (forward.intercept(signed), backward.intercept(signed));
     let cpr = counts_per_rev as i64;
     // The start count within a revolution keeps the numbers small.

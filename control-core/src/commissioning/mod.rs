@@ -1374,8 +1374,9 @@ impl Commissioning {
     /// none, and on a winding that settles within the tick it gets there: the sensors' noise
     /// then moves the phase currents across zero and the dead-time voltage flips with them,
     /// which the first-order fit reads as a pole a little too slow (its inductance a few
-    /// percent high at a third of a tick). On a slower winding the d current keeps its sign, the dead-time regressor
-    /// hardly varies, and the first-order fit is kept (`WindingFit::winding`).
+    /// percent high at a third of a tick). On a slower winding the d current keeps its sign,
+    /// the dead-time regressor hardly varies, and the first-order fit is kept
+    /// (`WindingFit::winding`).
     fn d_winding(&self) -> Option<Winding> {
         let tick = self.settings.tick_period;
         let settles_within_tick = |w: &Winding| w.in_range() && w.inductance < w.resistance * tick;

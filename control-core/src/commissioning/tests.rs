@@ -24,6 +24,13 @@ fn commission(truth: MotorTruth, settings: CommissioningSettings) -> (Commission
     (c.status(), 160_000, motor)
 }
 
+/// The test motor with these constants (pole pairs, R, Ld, Lq, flux linkage, rotor inertia,
+/// Coulomb friction), the default motor's otherwise.
+fn motor_with(constants: (u32, f64, f64, f64, f64, f64, f64)) -> MotorTruth {
+    let (pole_pairs, resistance, ld, lq, flux_linkage, inertia, coulomb) = constants;
+    MotorTruth { pole_pairs, resistance, ld, lq, flux_linkage, inertia, coulomb, ..MotorTruth::default_motor() }
+}
+
 fn settings(truth: &MotorTruth) -> CommissioningSettings {
     CommissioningSettings::for_encoder(truth.counts_per_rev, TICK)
 }
@@ -147,19 +154,12 @@ fn a_weak_magnet_on_a_winding_faster_than_the_tick_gives_its_flux_linkage() {
 /// dead time fitted beside it (`Commissioning::d_winding`), within 1 %.
 #[test]
 fn a_d_winding_faster_than_the_tick_is_found_with_its_dead_time() {
-    for (pole_pairs, resistance, ld, lq, flux_linkage, inertia, coulomb, cpr) in [
-        (2u32, 1.214, 26.6e-6, 35.6e-6, 0.0977, 2.28e-5, 0.0293, 1024u32),
-        (2, 0.571, 21.2e-6, 23.7e-6, 0.0086, 1.5e-4, 0.0026, 1024),
-        (10, 0.825, 21.0e-6, 25.0e-6, 0.0847, 2.0e-4, 0.03, 4096),
+    for (constants, cpr) in [
+        ((2u32, 1.214, 26.6e-6, 35.6e-6, 0.0977, 2.28e-5, 0.0293), 1024u32),
+        ((2, 0.571, 21.2e-6, 23.7e-6, 0.0086, 1.5e-4, 0.0026), 1024),
+        ((10, 0.825, 21.0e-6, 25.0e-6, 0.0847, 2.0e-4, 0.03), 4096),
     ] {
         let truth = MotorTruth {
-            pole_pairs,
-            resistance,
-            ld,
-            lq,
-            flux_linkage,
-            inertia,
-            coulomb,
             counts_per_rev: cpr,
             start_angle: 2.63,
             reversed: true,
@@ -167,10 +167,11 @@ fn a_d_winding_faster_than_the_tick_is_found_with_its_dead_time() {
             sensor_gain: [1.002, 1.0015],
             dead_time_volts: 0.05,
             noise: 0.002,
-            ..MotorTruth::default_motor()
+            ..motor_with(constants)
         };
         let (status, _, _) = commission(truth, settings(&truth));
         let CommissioningStatus::Done(m) = status else { panic!("{status:?} for {truth:?}") };
+        let ld = truth.ld;
         let error = m.ld as f64 / ld - 1.0;
         assert!(error.abs() < 0.01, "Ld {} vs {ld}: {error:.4} ({m:?}, {truth:?})", m.ld);
     }
@@ -185,30 +186,23 @@ fn a_d_winding_faster_than_the_tick_is_found_with_its_dead_time() {
 /// the stages after it measure the motor within every goal.
 #[test]
 fn a_light_rotor_turned_by_the_probes_chips_is_probed_a_quarter_turn_on() {
-    // (pole pairs, R, Ld, Lq, flux linkage, rotor inertia, Coulomb friction, counts per turn,
-    // reversed)
+    // ((pole pairs, R, Ld, Lq, flux linkage, rotor inertia, Coulomb friction), counts per
+    // turn, reversed)
     let motors = [
-        (7u32, 1.112, 24.6e-6, 30.5e-6, 0.0730, 8.26e-6, 0.0767, 16384u32, true),
-        (11, 1.209, 42.7e-6, 51.3e-6, 0.0342, 2.64e-6, 0.0564, 4096, false),
+        ((7u32, 1.112, 24.6e-6, 30.5e-6, 0.0730, 8.26e-6, 0.0767), 16384u32, true),
+        ((11, 1.209, 42.7e-6, 51.3e-6, 0.0342, 2.64e-6, 0.0564), 4096, false),
     ];
-    for (pole_pairs, resistance, ld, lq, flux_linkage, inertia, coulomb, counts_per_rev, reversed) in motors {
+    for (constants, counts_per_rev, reversed) in motors {
         for electrical in [0.5 * std::f64::consts::PI, 1.5 * std::f64::consts::PI] {
             let truth = MotorTruth {
-                pole_pairs,
-                resistance,
-                ld,
-                lq,
-                flux_linkage,
-                inertia,
-                coulomb,
                 counts_per_rev,
-                start_angle: electrical / pole_pairs as f64,
+                start_angle: electrical / constants.0 as f64,
                 reversed,
                 sensor_offset: [0.005, -0.004],
                 sensor_gain: [0.999, 1.002],
                 dead_time_volts: 0.05,
                 noise: 0.002,
-                ..MotorTruth::default_motor()
+                ..motor_with(constants)
             };
             // The probe's stages alone: it ran twice, its phase currents on both axes well
             // within the test current (its d current grows to a third of it; the rotor's
@@ -605,21 +599,9 @@ fn light_rotors_that_stick_under_the_q_chips_are_turned_through_them() {
         (10, 0.926, 2.676e-5, 3.858e-5, 0.0807, 1.7e-5, 0.121),
         (7, 3.16, 6.605e-5, 8.1635e-5, 0.08945, 6.69e-6, 0.094),
     ];
-    for (pole_pairs, resistance, ld, lq, flux_linkage, inertia, coulomb) in motors {
+    for constants in motors {
         for start_angle in [0.4, 2.9] {
-            let truth = MotorTruth {
-                pole_pairs,
-                resistance,
-                ld,
-                lq,
-                flux_linkage,
-                inertia,
-                coulomb,
-                start_angle,
-                noise: 0.002,
-                counts_per_rev: 2000,
-                ..MotorTruth::default_motor()
-            };
+            let truth = MotorTruth { start_angle, noise: 0.002, counts_per_rev: 2000, ..motor_with(constants) };
             let motor = q_inductance_within_two_percent(truth);
             let turns = motor.excursion * truth.pole_pairs as f64 / std::f64::consts::TAU;
             assert!(turns < 2.0, "{turns} electrical turns");
