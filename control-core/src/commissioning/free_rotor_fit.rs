@@ -74,6 +74,19 @@ impl FreeRotorFit {
     /// The winding at `tick` (s); `None` when the sums do not determine one (too few samples,
     /// no excitation, or poles no resistance–inductance–capacitance branch gives).
     pub fn winding(&self, tick: f32) -> Option<Winding> {
+        self.branch(tick).map(|(winding, _)| winding)
+    }
+
+    /// The rotor's mechanical time constant as the chips saw it (s): `R/κ`, the sum of the
+    /// branch's two time constants (`−1/s₁ − 1/s₂`); `R·J/(1.5·p²·ψ²·sin²δ)` for a rotor
+    /// standing `δ` from the chips' axis (the torque and the back-EMF along it both go with
+    /// `sin δ`). Infinite for a rotor that does not move; `None` where [`Self::winding`] is.
+    pub fn motional_time_constant(&self, tick: f32) -> Option<f32> {
+        self.branch(tick).map(|(_, time_constant)| time_constant)
+    }
+
+    /// The winding and the motional time constant.
+    fn branch(&self, tick: f32) -> Option<(Winding, f32)> {
         if self.sums.samples() < 16.0 {
             return None;
         }
@@ -85,7 +98,7 @@ impl FreeRotorFit {
         let sum = 1.0 + c0 + c1;
         // (p₁ + p₂)² − 4p₁p₂, written so that a rotor at rest (c0 → 0) loses no digits.
         let discriminant = (1.0 - c1) * (1.0 - c1) + c0 * (2.0 * (1.0 + c1) + c0);
-        let (inductance_times_c, log_sum) = if discriminant >= 0.0 {
+        let (inductance_times_c, log_sum, log_product) = if discriminant >= 0.0 {
             let root = libm::sqrtf(discriminant);
             let high = 0.5 * (sum + root);
             let low = c1 / high;
@@ -97,17 +110,23 @@ impl FreeRotorFit {
             let log_low = libm::logf(low);
             let span = log_high - log_low;
             let ratio = if span > 1e-4 { root / span } else { high };
-            (tick * ratio, log_high + log_low)
+            (tick * ratio, log_high + log_low, log_high * log_low)
         } else {
             // Complex poles r·e^{±jθ}: L·c = T·r·sin θ/θ.
             let r = libm::sqrtf(c1);
             let theta = libm::acosf(crate::limit(0.5 * sum / r, -1.0, 1.0));
             let ratio = if theta > 1e-4 { libm::sinf(theta) / theta } else { 1.0 };
-            (tick * r * ratio, 2.0 * libm::logf(r))
+            let log_r = libm::logf(r);
+            (tick * r * ratio, 2.0 * log_r, log_r * log_r + theta * theta)
         };
         let inductance = inductance_times_c / c;
         let resistance = -inductance * log_sum / tick;
-        (inductance > 0.0 && inductance.is_finite() && resistance > 0.0).then_some(Winding { inductance, resistance })
+        // −(1/s₁ + 1/s₂) = −T·(ln p₁ + ln p₂)/(ln p₁·ln p₂): a pole at 1 (no motion) makes it
+        // infinite, a pole outside the unit circle (no branch of this kind) negative.
+        let time_constant = -tick * log_sum / log_product;
+        let time_constant = if time_constant > 0.0 { time_constant } else { f32::INFINITY };
+        (inductance > 0.0 && inductance.is_finite() && resistance > 0.0)
+            .then_some((Winding { inductance, resistance }, time_constant))
     }
 }
 
@@ -154,6 +173,13 @@ mod tests {
             let w = fit.winding(tick as f32).expect("a fit");
             assert!((w.inductance as f64 / l - 1.0).abs() < 0.01, "R {r} L {l} κ {kappa}: {w:?}");
             assert!((w.resistance as f64 / r - 1.0).abs() < 0.02, "R {r} L {l} κ {kappa}: {w:?}");
+            // The motional time constant R/κ (a rotor at rest: none within a second).
+            let time_constant = fit.motional_time_constant(tick as f32).unwrap() as f64;
+            if kappa > 0.0 {
+                assert!((time_constant * kappa / r - 1.0).abs() < 0.05, "R {r} L {l} κ {kappa}: {time_constant} s");
+            } else {
+                assert!(time_constant > 1.0, "R {r} L {l}: {time_constant} s");
+            }
             if kappa > 1e4 {
                 let f = first_order.winding(tick as f32).unwrap();
                 assert!((f.inductance as f64 / l - 1.0).abs() > 0.1, "{f:?}");

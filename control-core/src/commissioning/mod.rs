@@ -24,7 +24,12 @@
 //!    turns half an electrical turn back to the fixed angle, fastest at the start and slowing
 //!    to rest (the rotor, wherever it stands, is pulled in while the current is small: on a
 //!    vector that stood still, a rotor at its unstable equilibrium would stay there, held by
-//!    friction, and fall at the full current later), holds it and then half of it, the
+//!    friction, and fall at the full current later). A light rotor, which the probe's chips
+//!    turned (its mechanical time constant as they saw it under half a millisecond), could
+//!    still chase that vector on its unstable side and fall at half the test current: its
+//!    vector sweeps one way from three quarters of a turn back to angle 0 at 0.22 of the
+//!    test current, and the current then grows on the still vector. The loop holds the test
+//!    current and then half of it, the
 //!    rotor's swing on the vector damped until shortly before the first hold has settled
 //!    (`swing_damping`); `R = ΔV/ΔI` between the two holds (the sensors' offsets and the
 //!    inverter's dead-time voltage, the same at both, drop out). The third phase's current not
@@ -92,6 +97,42 @@ mod winding_fit;
 
 #[cfg(test)]
 mod motor_model;
+/// The ramp's vector angle (rad, electrical) and current (a share of the test current) at
+/// `x` of its time. The vector turns back half an electrical turn as the current grows, to
+/// rest at angle 0: a rotor that stood near the vector's unstable equilibrium would sit there
+/// while friction holds it and fall later at the full current; the turning vector pulls every
+/// rotor in while the current is still small. It turns fastest at the start, where the current
+/// is least (`(1 − x)²`): a rotor ahead of it by more than a quarter turn, which chases it on
+/// the unstable side, is passed while the current is small and falls back to it then, instead
+/// of chasing it until it stops near the antipode and falls at half the test current or more
+/// (over 3 000 drawn motors, a vector that starts from rest left 7 at 1.12–1.54 times the test
+/// current). A light rotor can still chase it that far: [`light_ramp`].
+fn ramp(x: f32) -> (f32, f32) {
+    (RAMP_TURN * (1.0 - x) * (1.0 - x), x)
+}
+
+/// The light rotor's ramp (`LIGHT_ROTOR_S`): the vector sweeps back from three quarters of an
+/// electrical turn to a quarter (`(1 − y)²`, fastest at the start) while its current grows to a
+/// low share of the test current, then turns the last quarter turn to angle 0 at that current,
+/// and the current then grows on the still vector. A light rotor follows a vector that turns
+/// one way only: wherever it stood, it is caught and drawn to angle 0 at the low current, and
+/// no rotor stands near the antipode when the current grows. A heavy rotor on a weak magnet
+/// swings too slowly at the low current to follow the sweep in its time: it takes [`ramp`].
+fn light_ramp(x: f32) -> (f32, f32) {
+    use core::f32::consts::FRAC_PI_2;
+    let finished = LIGHT_SWEEP_SHARE + LIGHT_FINISH_SHARE;
+    if x < LIGHT_SWEEP_SHARE {
+        let y = x / LIGHT_SWEEP_SHARE;
+        (FRAC_PI_2 + 2.0 * FRAC_PI_2 * (1.0 - y) * (1.0 - y), LIGHT_SWEEP_CURRENT * (4.0 * y).min(1.0))
+    } else if x < finished {
+        let z = (x - LIGHT_SWEEP_SHARE) / LIGHT_FINISH_SHARE;
+        (FRAC_PI_2 * (1.0 - z) * (1.0 - z), LIGHT_SWEEP_CURRENT)
+    } else {
+        let w = (x - finished) / (1.0 - finished);
+        (0.0, LIGHT_SWEEP_CURRENT + (1.0 - LIGHT_SWEEP_CURRENT) * w)
+    }
+}
+
 #[cfg(test)]
 mod tests;
 
@@ -299,6 +340,16 @@ const AVERAGED_S: f32 = 0.05;
 const RAMP_S: f32 = 0.3;
 /// The vector's turn over the ramp (rad, electrical).
 const RAMP_TURN: f32 = core::f32::consts::PI;
+/// A rotor whose mechanical time constant the probe's chips saw
+/// ([`FreeRotorFit::motional_time_constant`]) is under this (s) is light: its ramp sweeps the
+/// vector at a low current first ([`LIGHT_SWEEP_CURRENT`], a share of the test current) three
+/// quarters of an electrical turn back to a quarter turn short of angle 0 over the first
+/// [`LIGHT_SWEEP_SHARE`] of the ramp, then the last quarter turn over the next
+/// [`LIGHT_FINISH_SHARE`], and ramps the current on the still vector over the rest.
+const LIGHT_ROTOR_S: f32 = 5e-4;
+const LIGHT_SWEEP_CURRENT: f32 = 0.22;
+const LIGHT_SWEEP_SHARE: f32 = 0.4;
+const LIGHT_FINISH_SHARE: f32 = 0.2;
 /// The rotor counts as still when its count has not changed for this long (s); the first
 /// hold waits for it at most `STILL_WAIT_S`.
 const STILL_S: f32 = 0.03;
@@ -544,6 +595,8 @@ pub struct Commissioning {
     /// The probe runs again on the axis a quarter of an electrical turn on
     /// ([`PROBE_RETRY_AXIS`]): its first run found no winding.
     probe_retried: bool,
+    /// The probe's chips turned the rotor as a light one ([`LIGHT_ROTOR_S`]).
+    light_rotor: bool,
     /// What was measured, kept while the rotor is braked to rest.
     result: Option<MeasuredMotor>,
 }
@@ -575,6 +628,7 @@ impl Commissioning {
             q_lowpass: 0.0,
             first_q: None,
             probe_retried: false,
+            light_rotor: false,
             test_current: settings.test_current,
             last_count: 0,
             still_ticks: 0,
@@ -755,6 +809,13 @@ impl Commissioning {
                             });
                         }
                         self.probe_inductance = w.inductance;
+                        // The mechanical time constant the chips saw, where a free rotor's
+                        // fit found the winding.
+                        let seen = [&self.q_fit, &self.probe_high_passed].into_iter().find_map(|fit| {
+                            let time_constant = fit.motional_time_constant(s.tick_period)?;
+                            fit.winding(s.tick_period).filter(Winding::in_range).map(|_| time_constant)
+                        });
+                        self.light_rotor = seen.is_some_and(|time_constant| time_constant < LIGHT_ROTOR_S);
                         // Within what the voltage allows on this winding, with room for the
                         // loop to act.
                         self.test_current = s.test_current.min(0.7 * s.max_voltage / w.resistance);
@@ -807,7 +868,9 @@ impl Commissioning {
             }
             Stage::Ramp => {
                 let share = self.ticks as f32 / self.ticks_of(RAMP_S) as f32;
-                self.voltage = self.current_pi.d(self.test_current * share.min(1.0) - current.d);
+                let x = share.min(1.0);
+                let (angle, current_share) = if self.light_rotor { light_ramp(x) } else { ramp(x) };
+                self.voltage = self.current_pi.d(self.test_current * current_share - current.d);
                 // The frame's turn (rad per tick, the last tick's) puts `ω·L·i_d` on the q
                 // voltage beside the rotor's back-EMF.
                 let turning = self.speed / s.tick_period * self.probe_inductance * current.d;
@@ -815,21 +878,7 @@ impl Commissioning {
                 // The damping grows with the current's square (the spring's energy): at a
                 // small current its full share would hold a rotor on a strong magnet creeping
                 // far behind the turning vector, to break free later at a larger current.
-                q_voltage = self.current_pi.q(damping * share * share - current.q);
-                // The vector turns back half an electrical turn as the current grows, to rest
-                // at angle 0: a rotor that stood near the vector's unstable equilibrium would
-                // sit there while friction holds it and fall later at the full current; the
-                // turning vector pulls every rotor in while the current is still small. It
-                // turns fastest at the start, where the current is least (`(1 − x)²`): a
-                // rotor ahead of it by more than a quarter turn, which chases it on the
-                // unstable side, is passed while the current is small and falls back to it
-                // then, instead of chasing it until it stops near the antipode and falls at
-                // half the test current or more (over 3 000 drawn motors, a vector that
-                // starts from rest left 7 at 1.12–1.54 times the test current, this one 3 at
-                // 1.16–1.19; on the test model a band of one or two 15° steps of start angles
-                // still falls on a light rotor, with either profile).
-                let x = share.min(1.0);
-                let angle = RAMP_TURN * (1.0 - x) * (1.0 - x);
+                q_voltage = self.current_pi.q(damping * current_share * current_share - current.q);
                 self.speed = angle - self.angle;
                 self.angle = angle;
                 if share >= 1.0 {
