@@ -25,15 +25,14 @@
 //!    to rest (the rotor, wherever it stands, is pulled in while the current is small: on a
 //!    vector that stood still, a rotor at its unstable equilibrium would stay there, held by
 //!    friction, and fall at the full current later). A light rotor, which the probe's chips
-//!    turned (its mechanical time constant as they saw it under half a millisecond), could
-//!    still chase that vector on its unstable side and fall at half the test current: its
-//!    vector sweeps one way from three quarters of a turn back to angle 0 at 0.22 of the
-//!    test current, and the current then grows on the still vector. The loop holds the test
-//!    current and then half of it, the
-//!    rotor's swing on the vector damped until shortly before the first hold has settled
-//!    (`swing_damping`); `R = ΔV/ΔI` between the two holds (the sensors' offsets and the
-//!    inverter's dead-time voltage, the same at both, drop out). The third phase's current not
-//!    the other two's mean: a phase is missing.
+//!    turned (the probe ran again, or the rotor's mechanical time constant as they saw it is
+//!    under half a millisecond), could still chase that vector on its unstable side and fall at
+//!    half the test current: its vector sweeps one way from three quarters of a turn back to
+//!    angle 0 at 0.22 of the test current, and the current then grows on the still vector. The
+//!    loop holds the test current and then half of it, the rotor's swing on the vector damped
+//!    until shortly before the first hold has settled (`swing_damping`); `R = ΔV/ΔI` between
+//!    the two holds (the sensors' offsets and the inverter's dead-time voltage, the same at
+//!    both, drop out). The third phase's current not the other two's mean: a phase is missing.
 //! 3. **Encoder.** The loop holds the test current on a vector that turns slowly forward by a
 //!    few electrical turns and back; the rotor follows. Counts against the vector's angle give
 //!    the direction, the pole pairs and the electrical angle at count 0 (`encoder_alignment`).
@@ -97,42 +96,6 @@ mod winding_fit;
 
 #[cfg(test)]
 mod motor_model;
-/// The ramp's vector angle (rad, electrical) and current (a share of the test current) at
-/// `x` of its time. The vector turns back half an electrical turn as the current grows, to
-/// rest at angle 0: a rotor that stood near the vector's unstable equilibrium would sit there
-/// while friction holds it and fall later at the full current; the turning vector pulls every
-/// rotor in while the current is still small. It turns fastest at the start, where the current
-/// is least (`(1 − x)²`): a rotor ahead of it by more than a quarter turn, which chases it on
-/// the unstable side, is passed while the current is small and falls back to it then, instead
-/// of chasing it until it stops near the antipode and falls at half the test current or more
-/// (over 3 000 drawn motors, a vector that starts from rest left 7 at 1.12–1.54 times the test
-/// current). A light rotor can still chase it that far: [`light_ramp`].
-fn ramp(x: f32) -> (f32, f32) {
-    (RAMP_TURN * (1.0 - x) * (1.0 - x), x)
-}
-
-/// The light rotor's ramp (`LIGHT_ROTOR_S`): the vector sweeps back from three quarters of an
-/// electrical turn to a quarter (`(1 − y)²`, fastest at the start) while its current grows to a
-/// low share of the test current, then turns the last quarter turn to angle 0 at that current,
-/// and the current then grows on the still vector. A light rotor follows a vector that turns
-/// one way only: wherever it stood, it is caught and drawn to angle 0 at the low current, and
-/// no rotor stands near the antipode when the current grows. A heavy rotor on a weak magnet
-/// swings too slowly at the low current to follow the sweep in its time: it takes [`ramp`].
-fn light_ramp(x: f32) -> (f32, f32) {
-    use core::f32::consts::FRAC_PI_2;
-    let finished = LIGHT_SWEEP_SHARE + LIGHT_FINISH_SHARE;
-    if x < LIGHT_SWEEP_SHARE {
-        let y = x / LIGHT_SWEEP_SHARE;
-        (FRAC_PI_2 + 2.0 * FRAC_PI_2 * (1.0 - y) * (1.0 - y), LIGHT_SWEEP_CURRENT * (4.0 * y).min(1.0))
-    } else if x < finished {
-        let z = (x - LIGHT_SWEEP_SHARE) / LIGHT_FINISH_SHARE;
-        (FRAC_PI_2 * (1.0 - z) * (1.0 - z), LIGHT_SWEEP_CURRENT)
-    } else {
-        let w = (x - finished) / (1.0 - finished);
-        (0.0, LIGHT_SWEEP_CURRENT + (1.0 - LIGHT_SWEEP_CURRENT) * w)
-    }
-}
-
 #[cfg(test)]
 mod tests;
 
@@ -338,10 +301,10 @@ const AVERAGED_S: f32 = 0.05;
 /// The current's ramp to the test current (s): slow beside the rotor's swing on the vector,
 /// which it then follows nearly at rest.
 const RAMP_S: f32 = 0.3;
-/// The vector's turn over the ramp (rad, electrical).
+/// The vector's turn over the ramp of a rotor that is not light (rad, electrical).
 const RAMP_TURN: f32 = core::f32::consts::PI;
-/// A rotor whose mechanical time constant the probe's chips saw
-/// ([`FreeRotorFit::motional_time_constant`]) is under this (s) is light: its ramp sweeps the
+/// A rotor whose mechanical time constant the probe's chips saw ([`FreeRotorFit::branch`]) is
+/// under this (s), or that made the probe run again, is light: its ramp sweeps the
 /// vector at a low current first ([`LIGHT_SWEEP_CURRENT`], a share of the test current) three
 /// quarters of an electrical turn back to a quarter turn short of angle 0 over the first
 /// [`LIGHT_SWEEP_SHARE`] of the ramp, then the last quarter turn over the next
@@ -350,6 +313,47 @@ const LIGHT_ROTOR_S: f32 = 5e-4;
 const LIGHT_SWEEP_CURRENT: f32 = 0.22;
 const LIGHT_SWEEP_SHARE: f32 = 0.4;
 const LIGHT_FINISH_SHARE: f32 = 0.2;
+/// The share of the light rotor's sweep over which its current grows to
+/// [`LIGHT_SWEEP_CURRENT`]: a rotor standing just ahead of the sweep's start is pulled along
+/// before the vector has run half a turn from it.
+const LIGHT_CURRENT_RISE: f32 = 0.25;
+
+/// The ramp's vector angle (rad, electrical) and current (a share of the test current) at
+/// `x` of its time. The vector turns back half an electrical turn as the current grows, to
+/// rest at angle 0: a rotor that stood near the vector's unstable equilibrium would sit there
+/// while friction holds it and fall later at the full current; the turning vector pulls every
+/// rotor in while the current is still small. It turns fastest at the start, where the current
+/// is least (`(1 − x)²`): a rotor ahead of it by more than a quarter turn, which chases it on
+/// the unstable side, is passed while the current is small and falls back to it then, instead
+/// of chasing it until it stops near the antipode and falls at half the test current or more
+/// (over 3 000 drawn motors, a vector that starts from rest left 7 at 1.12–1.54 times the test
+/// current). A light rotor can still chase it that far: [`light_ramp`].
+fn ramp(x: f32) -> (f32, f32) {
+    (RAMP_TURN * (1.0 - x) * (1.0 - x), x)
+}
+
+/// The light rotor's ramp (`LIGHT_ROTOR_S`): the vector sweeps back from three quarters of an
+/// electrical turn to a quarter (`(1 − y)²`, fastest at the start), its current growing to a
+/// low share of the test current over the sweep's first quarter and held there, then turns the
+/// last quarter turn to angle 0 at that current, and the current then grows on the still
+/// vector. A light rotor follows a vector that turns
+/// one way only: wherever it stood, it is caught and drawn to angle 0 at the low current, and
+/// no rotor stands near the antipode when the current grows. A heavy rotor on a weak magnet
+/// swings too slowly at the low current to follow the sweep in its time: it takes [`ramp`].
+fn light_ramp(x: f32) -> (f32, f32) {
+    use core::f32::consts::FRAC_PI_2;
+    let finished = LIGHT_SWEEP_SHARE + LIGHT_FINISH_SHARE;
+    if x < LIGHT_SWEEP_SHARE {
+        let y = x / LIGHT_SWEEP_SHARE;
+        (FRAC_PI_2 + 2.0 * FRAC_PI_2 * (1.0 - y) * (1.0 - y), LIGHT_SWEEP_CURRENT * (y / LIGHT_CURRENT_RISE).min(1.0))
+    } else if x < finished {
+        let z = (x - LIGHT_SWEEP_SHARE) / LIGHT_FINISH_SHARE;
+        (FRAC_PI_2 * (1.0 - z) * (1.0 - z), LIGHT_SWEEP_CURRENT)
+    } else {
+        let w = (x - finished) / (1.0 - finished);
+        (0.0, LIGHT_SWEEP_CURRENT + (1.0 - LIGHT_SWEEP_CURRENT) * w)
+    }
+}
 /// The rotor counts as still when its count has not changed for this long (s); the first
 /// hold waits for it at most `STILL_WAIT_S`.
 const STILL_S: f32 = 0.03;
@@ -773,7 +777,13 @@ impl Commissioning {
                     // the phase currents' signs at the next tick's start.
                     self.dead_time_shape = dead_time_per_volt([ia, ib, ic], frame).d;
                     if self.ticks >= PROBE_FIT_PERIODS * period {
-                        let free_rotor = self.q_fit.winding(s.tick_period).filter(Winding::in_range);
+                        // A free rotor's fit gives the rotor's mechanical time constant as the
+                        // chips saw it beside the winding.
+                        let free_rotor = |fit: &FreeRotorFit| {
+                            let (w, time_constant) = fit.branch(s.tick_period)?;
+                            w.in_range().then_some((w, Some(time_constant)))
+                        };
+                        let without_rotor = |w: Winding| (w, None);
                         // The fits in turn: the free rotor's, the first-order one, and where a
                         // light rotor on a strong magnet sticks and slips under the chips so
                         // that neither finds a winding, the free rotor's high-passed; last, on
@@ -781,11 +791,13 @@ impl Commissioning {
                         // dead time's flips, its gain and a third of a tick. The loop closed on
                         // it needs the inductance roughly; the stages after it measure the
                         // winding.
-                        let found = free_rotor
-                            .or_else(|| self.fit.winding(s.tick_period))
-                            .or_else(|| self.probe_high_passed.winding(s.tick_period).filter(Winding::in_range))
-                            .or_else(|| self.fit.settled_within_tick(s.tick_period).filter(Winding::in_range));
-                        let Some(w) = found else {
+                        let found = free_rotor(&self.q_fit)
+                            .or_else(|| self.fit.winding(s.tick_period).map(without_rotor))
+                            .or_else(|| free_rotor(&self.probe_high_passed))
+                            .or_else(|| {
+                                self.fit.settled_within_tick(s.tick_period).filter(Winding::in_range).map(without_rotor)
+                            });
+                        let Some((w, time_constant)) = found else {
                             if self.probe_retried {
                                 return self.fail(CommissioningFault::Inductance { axis: 'd' });
                             }
@@ -809,13 +821,11 @@ impl Commissioning {
                             });
                         }
                         self.probe_inductance = w.inductance;
-                        // The mechanical time constant the chips saw, where a free rotor's
-                        // fit found the winding.
-                        let seen = [&self.q_fit, &self.probe_high_passed].into_iter().find_map(|fit| {
-                            let time_constant = fit.motional_time_constant(s.tick_period)?;
-                            fit.winding(s.tick_period).filter(Winding::in_range).map(|_| time_constant)
-                        });
-                        self.light_rotor = seen.is_some_and(|time_constant| time_constant < LIGHT_ROTOR_S);
+                        // A light rotor: the chips turned it, as far as a retry (on the first
+                        // axis) or a short time constant (`sin²` of its angle from this one
+                        // lengthens it) shows.
+                        self.light_rotor =
+                            self.probe_retried || time_constant.is_some_and(|seconds| seconds < LIGHT_ROTOR_S);
                         // Within what the voltage allows on this winding, with room for the
                         // loop to act.
                         self.test_current = s.test_current.min(0.7 * s.max_voltage / w.resistance);
