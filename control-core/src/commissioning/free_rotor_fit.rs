@@ -19,6 +19,17 @@
 use super::regression::Regression;
 use super::winding_fit::Winding;
 
+/// What the fit found: the winding and the rotor's motion beside it.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Branch {
+    pub winding: Winding,
+    /// The rotor's mechanical time constant as the chips saw it (s): `R/κ`, the sum of the
+    /// branch's two time constants (`−1/s₁ − 1/s₂`); `R·J/(1.5·p²·ψ²·sin²δ)` for a rotor
+    /// standing `δ` from the chips' axis (the torque and the back-EMF along it both go with
+    /// `sin δ`). Infinite for a rotor that does not move.
+    pub time_constant: f32,
+}
+
 #[derive(Clone, Copy, Debug, Default)]
 pub struct FreeRotorFit {
     /// The first current (the samples are taken relative to it).
@@ -74,19 +85,32 @@ impl FreeRotorFit {
     /// The winding at `tick` (s); `None` when the sums do not determine one (too few samples,
     /// no excitation, or poles no resistance–inductance–capacitance branch gives).
     pub fn winding(&self, tick: f32) -> Option<Winding> {
-        self.branch(tick).map(|(winding, _)| winding)
+        self.branch(tick).map(|branch| branch.winding)
     }
 
-    /// The winding, and the rotor's mechanical time constant as the chips saw it (s): `R/κ`,
-    /// the sum of the branch's two time constants (`−1/s₁ − 1/s₂`); `R·J/(1.5·p²·ψ²·sin²δ)`
-    /// for a rotor standing `δ` from the chips' axis (the torque and the back-EMF along it both
-    /// go with `sin δ`). Infinite for a rotor that does not move.
-    pub fn branch(&self, tick: f32) -> Option<(Winding, f32)> {
+    /// The winding and the rotor's motion beside it.
+    pub fn branch(&self, tick: f32) -> Option<Branch> {
+        self.branch_less_noise(tick, 0.0)
+    }
+
+    /// The branch with the bias of white sensor noise of `variance` (A², on the fitted axis's
+    /// current) on every sample taken out.
+    pub fn branch_less_noise(&self, tick: f32, variance: f32) -> Option<Branch> {
         if self.sums.samples() < 16.0 {
             return None;
         }
+        // The noise's autocovariance at lags 0, 1, 2 once differenced as the samples are.
+        let [r0, r1, r2] = match self.differences {
+            0 => [1.0, 0.0, 0.0],
+            1 => [2.0, -1.0, 0.0],
+            _ => [6.0, -4.0, 1.0],
+        }
+        .map(|r: f32| r * variance);
+        // Regressors e[k], e[k] − e[k−1] and the response e[k+1] − e[k] of the noise e.
+        let noise_xx = [[r0, r0 - r1, 0.0], [r0 - r1, 2.0 * (r0 - r1), 0.0], [0.0; 3]];
+        let noise_xy = [r1 - r0, 2.0 * r1 - r0 - r2, 0.0];
         // y = c0·i[k] + c1·(i[k] − i[k−1]) + c·Δv: c0 = −(1 − p₁)(1 − p₂), c1 = p₁p₂.
-        let [c0, c1, c] = self.sums.coefficients(3)?;
+        let [c0, c1, c] = self.sums.coefficients_less(3, noise_xx, noise_xy)?;
         if !(c1 > 0.0 && c1 < 1.0 && c > 0.0) {
             return None;
         }
@@ -121,7 +145,7 @@ impl FreeRotorFit {
         let time_constant = -tick * log_sum / log_product;
         let time_constant = if time_constant > 0.0 { time_constant } else { f32::INFINITY };
         (inductance > 0.0 && inductance.is_finite() && resistance > 0.0)
-            .then_some((Winding { inductance, resistance }, time_constant))
+            .then_some(Branch { winding: Winding { inductance, resistance }, time_constant })
     }
 }
 
@@ -169,7 +193,7 @@ mod tests {
             assert!((w.inductance as f64 / l - 1.0).abs() < 0.01, "R {r} L {l} κ {kappa}: {w:?}");
             assert!((w.resistance as f64 / r - 1.0).abs() < 0.02, "R {r} L {l} κ {kappa}: {w:?}");
             // The motional time constant R/κ (a rotor at rest: far above a light rotor's).
-            let time_constant = fit.branch(tick as f32).unwrap().1 as f64;
+            let time_constant = fit.branch(tick as f32).unwrap().time_constant as f64;
             if kappa > 0.0 {
                 assert!((time_constant * kappa / r - 1.0).abs() < 0.05, "R {r} L {l} κ {kappa}: {time_constant} s");
             } else {

@@ -4,7 +4,8 @@
 //! within the test current throughout (a tenth over it at most, in the current loop's
 //! transients) and the voltage within the highest voltage and the bus's circle.
 //!
-//! The sequence, each stage on the previous one's result:
+//! The sequence, each stage on the previous one's result, after 16 ms at zero voltage that
+//! read the current sensors' noise (`sensor_noise`: the q fit on a slow winding takes it out):
 //! 1. **Probe.** Pseudo-random voltage chips of zero mean on a fixed angle (0), their size
 //!    growing from a millivolt by a quarter a period (two such steps a period while their
 //!    current would stay under a fiftieth of the test current) while the current stays under
@@ -66,8 +67,8 @@
 //!    the held d-axis voltage, and the fit. The chips' q current turns the rotor, whose
 //!    back-EMF the free rotor's fit takes (`free_rotor_fit`), on the samples' differences on a
 //!    winding of a tick or more, where a rotor sticking and slipping on its friction acts
-//!    least; on a faster winding where the rotor's motion shows, on their second differences
-//!    (`q_winding`). Where no fit finds a winding, or the fit's resistance lies 3 % or more
+//!    least, the sensors' noise taken out (`noise_matched`); on a faster winding where the
+//!    rotor's motion shows, on their second differences (`q_winding`). Where no fit finds a winding, or the fit's resistance lies 3 % or more
 //!    off the holds' (the rotor's motion shows), on a winding of up to four ticks (a light
 //!    rotor on a strong magnet reverses with each chip and sticks on its friction), the
 //!    stage runs once more: a constant q voltage three times the chips', ramped in first,
@@ -91,6 +92,7 @@ mod current_loop_design;
 mod encoder_alignment;
 mod free_rotor_fit;
 mod regression;
+mod sensor_noise;
 mod swing_damping;
 mod winding_fit;
 
@@ -112,6 +114,7 @@ use crate::trigonometry::sin_cos;
 use current_loop_design::{BandwidthSearch, StepResponse, STEP_SAMPLES};
 use encoder_alignment::{align, Pass};
 use free_rotor_fit::FreeRotorFit;
+use sensor_noise::SensorNoise;
 use swing_damping::SwingDamping;
 use winding_fit::{inductance_in_range, resistance_in_range, WindingFit};
 
@@ -291,8 +294,16 @@ pub enum Stage {
     InductanceQ,
     CurrentStep,
     StepAnalysis,
+    /// The first stage: the current sensors read at zero voltage (`sensor_noise`).
+    SensorNoise,
 }
 
+/// The current sensors' reading at zero voltage before the probe (s).
+const SENSOR_NOISE_S: f32 = 0.016;
+/// The range around the noise's variance read at zero voltage (its shares) searched for the
+/// one that gives a slow q winding's free-rotor fit the holds' resistance, and the bisections.
+const NOISE_SEARCH: [f32; 2] = [0.6, 1.5];
+const NOISE_BISECTIONS: u32 = 16;
 /// The vector's acceleration to the alignment speed and its braking (s).
 const ALIGNMENT_ACCELERATION_S: f32 = 0.25;
 /// Ticks of each hold: the first part settles, the last part is averaged.
@@ -601,6 +612,8 @@ pub struct Commissioning {
     probe_retried: bool,
     /// The probe's chips turned the rotor as a light one ([`LIGHT_ROTOR_S`]).
     light_rotor: bool,
+    /// The current sensors' noise, read before the probe.
+    sensor_noise: SensorNoise,
     /// What was measured, kept while the rotor is braked to rest.
     result: Option<MeasuredMotor>,
 }
@@ -619,7 +632,7 @@ impl Commissioning {
         settings.validate()?;
         Ok(Self {
             settings,
-            status: CommissioningStatus::Running(Stage::Probe),
+            status: CommissioningStatus::Running(Stage::SensorNoise),
             ticks: 0,
             voltage: 0.0,
             angle: 0.0,
@@ -674,6 +687,7 @@ impl Commissioning {
             last_chip: 0.0,
             applied_chip: 0.0,
             last_current: None,
+            sensor_noise: SensorNoise::default(),
             result: None,
         })
     }
@@ -763,6 +777,13 @@ impl Commissioning {
         let current = park(clarke(ia, ib), sin, cos);
         let mut q_voltage = 0.0;
         match stage {
+            Stage::SensorNoise => {
+                self.sensor_noise.add(ia, ib);
+                self.voltage = 0.0;
+                if self.ticks >= self.ticks_of(SENSOR_NOISE_S) {
+                    self.next_stage(Stage::Probe);
+                }
+            }
             Stage::Probe | Stage::ProbeFit => {
                 let period = self.chips.period();
                 self.peak = self.peak.max(current.d.abs());
@@ -780,8 +801,8 @@ impl Commissioning {
                         // A free rotor's fit gives the rotor's mechanical time constant as the
                         // chips saw it beside the winding.
                         let free_rotor = |fit: &FreeRotorFit| {
-                            let (w, time_constant) = fit.branch(s.tick_period)?;
-                            w.in_range().then_some((w, Some(time_constant)))
+                            let branch = fit.branch(s.tick_period)?;
+                            branch.winding.in_range().then_some((branch.winding, Some(branch.time_constant)))
                         };
                         let without_rotor = |w: Winding| (w, None);
                         // The fits in turn: the free rotor's, the first-order one, and where a
@@ -1508,7 +1529,18 @@ impl Commissioning {
     fn q_winding(&self, first_order: Option<Winding>) -> Option<Winding> {
         let tick = self.settings.tick_period;
         let off = |w: &Option<Winding>| self.resistance_off(w);
-        let free_rotor = self.q_fit.winding(tick);
+        // On a slow winding the high-passed fit's current changes are small beside the
+        // sensors' noise: its bias is taken out (`sensor_noise`).
+        let free_rotor = if self.slow_q_winding() {
+            let variance = if self.q_bias > 0.0 {
+                self.sensor_noise.turning_variance()
+            } else {
+                self.sensor_noise.q_variance(self.angle)
+            };
+            self.noise_matched(variance)
+        } else {
+            self.q_fit.winding(tick)
+        };
         if !self.slow_q_winding() && off(&first_order) >= RESISTANCE_AGREEMENT && off(&free_rotor).is_finite() {
             let twice = self.q_fit_twice.winding(tick);
             if off(&twice) < DIFFERENCES_AGREEMENT {
@@ -1520,6 +1552,34 @@ impl Commissioning {
         } else {
             first_order
         }
+    }
+
+    /// The slow q winding's free-rotor fit with the sensors' noise taken out. The noise's
+    /// variance read at zero voltage is known to a tenth or so (its 256 readings), and the
+    /// fit's resistance, which shows at the low frequencies the differences weigh least, moves
+    /// by the winding's own over a tenth of it (its inductance by a few tenths of a percent):
+    /// the variance within [`NOISE_SEARCH`] of the one read that gives the holds' resistance
+    /// is taken, where there is one, else the one read.
+    fn noise_matched(&self, read: f32) -> Option<Winding> {
+        let tick = self.settings.tick_period;
+        let resistance_at = |variance: f32| self.q_fit.branch_less_noise(tick, variance).map(|b| b.winding.resistance);
+        let fallback = || self.q_fit.branch_less_noise(tick, read).map(|b| b.winding);
+        let (mut low, mut high) = (NOISE_SEARCH[0] * read, NOISE_SEARCH[1] * read);
+        // More noise taken out reads less resistance, down to none (no winding at all): the
+        // holds' lies between the ends.
+        let above = |variance: f32| resistance_at(variance).is_some_and(|r| r >= self.resistance);
+        if !(read > 0.0 && above(low) && !above(high)) {
+            return fallback();
+        }
+        for _ in 0..NOISE_BISECTIONS {
+            let middle = 0.5 * (low + high);
+            if above(middle) {
+                low = middle;
+            } else {
+                high = middle;
+            }
+        }
+        self.q_fit.branch_less_noise(tick, low).map(|b| b.winding)
     }
 
     /// How far a fit's resistance lies off the holds' (a share; infinite for no winding or

@@ -39,6 +39,13 @@ impl<const N: usize> Regression<N> {
     /// The coefficients of the first `terms` regressors (the rest 0); `None` when a regressor
     /// does not vary independently of the others (a pivot a millionth of its own variance).
     pub fn coefficients(&self, terms: usize) -> Option<[f32; N]> {
+        self.coefficients_less(terms, [[0.0; N]; N], [0.0; N])
+    }
+
+    /// The coefficients with `noise_xx` taken off the regressors' covariances and `noise_xy`
+    /// off their covariances with the response: what white sensor noise on the regressors
+    /// and the response adds to them in expectation, which would otherwise bias the fit.
+    pub fn coefficients_less(&self, terms: usize, noise_xx: [[f32; N]; N], noise_xy: [f32; N]) -> Option<[f32; N]> {
         let terms = terms.min(N);
         let n = self.n;
         let mean = |s: f32| s / n;
@@ -46,9 +53,9 @@ impl<const N: usize> Regression<N> {
         let mut rhs = [0.0f32; N];
         for j in 0..terms {
             for k in 0..terms {
-                m[j][k] = mean(self.sxx[j][k]) - mean(self.sx[j]) * mean(self.sx[k]);
+                m[j][k] = mean(self.sxx[j][k]) - mean(self.sx[j]) * mean(self.sx[k]) - noise_xx[j][k];
             }
-            rhs[j] = mean(self.sxy[j]) - mean(self.sx[j]) * mean(self.sy);
+            rhs[j] = mean(self.sxy[j]) - mean(self.sx[j]) * mean(self.sy) - noise_xy[j];
         }
         // A covariance matrix is symmetric and positive definite: elimination needs no pivots.
         let own: [f32; N] = core::array::from_fn(|j| m[j][j].abs());
