@@ -28,7 +28,8 @@ use crate::ranges::{check_position, Quantity, RangeError};
 use crate::response_correction::CorrectionParams;
 use crate::stop_sequence::{Refusal, SequenceEvent};
 
-/// Protocol version 14: the telemetry carries every tick's torque command summed
+/// Protocol version 15: commissioning's first stage reads the current sensors' noise
+/// (`Stage::SensorNoise` in the telemetry's commissioning state). Version 14: the telemetry carries every tick's torque command summed
 /// (`Telemetry::torque_command_sum`), so that a host reading it now and then gets the exact
 /// mean torque between two readings. Version 13: the parameters carry a second torque-command
 /// notch (`TorqueFilters::notch2_hz`, `notch2_q`, `notch2_depth`). Version 12: what commissioning measured carries the test current it drove
@@ -55,7 +56,7 @@ use crate::stop_sequence::{Refusal, SequenceEvent};
 /// board's PWM rate are refused with that rate; version 4: `SaveParams`, and the answer to `Hello` says where the
 /// drive's parameters came from at boot; version 3: CRC-32C instead of CRC-16, trailing bytes
 /// refused, range refusals).
-pub const VERSION: u16 = 14;
+pub const VERSION: u16 = 15;
 /// Largest encoded frame, COBS body without its terminator (a full parameter set fits with
 /// room to spare).
 pub const MAX_FRAME: usize = 1024;

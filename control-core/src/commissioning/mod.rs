@@ -66,16 +66,17 @@
 //! 5. **q-axis inductance.** Chips on the rotor's q axis (now known from the encoder) beside
 //!    the held d-axis voltage, and the fit. The chips' q current turns the rotor, whose
 //!    back-EMF the free rotor's fit takes (`free_rotor_fit`), on the samples' differences on a
-//!    winding of a tick or more, where a rotor sticking and slipping on its friction acts
-//!    least, the sensors' noise taken out (`noise_matched`); on a faster winding where the
-//!    rotor's motion shows, on their second differences (`q_winding`). Where no fit finds a winding, or the fit's resistance lies 3 % or more
-//!    off the holds' (the rotor's motion shows), on a winding of up to four ticks (a light
-//!    rotor on a strong magnet reverses with each chip and sticks on its friction), the
-//!    stage runs once more: a constant q voltage three times the chips', ramped in first,
-//!    turns the rotor one way throughout (at most 1¼ electrical turns over the stage, by the
-//!    flux linkage the passes give), the frame following the rotor, so that its friction is a
-//!    constant torque, which no chip reverses (`turning_bias`). Of the two runs, the one whose
-//!    resistance agrees with the holds' is kept.
+//!    winding of a tick or more, where a rotor sticking and slipping on its friction acts least
+//!    (on a winding of more than four ticks the sensors' noise taken out: `noise_matched`); on
+//!    a faster winding where the rotor's motion shows, on their second differences
+//!    (`q_winding`). Where no fit finds a winding, or the fit's resistance lies 3 % or more off
+//!    the holds' (the rotor's motion shows), on a winding of up to four ticks (a light rotor on
+//!    a strong magnet reverses with each chip and sticks on its friction), the stage runs once
+//!    more: a constant q voltage three times the chips', ramped in first, turns the rotor one
+//!    way throughout (at most 1¼ electrical turns over the stage, by the flux linkage the
+//!    passes give), the frame following the rotor, so that its friction is a constant torque,
+//!    which no chip reverses (`turning_bias`). Of the two runs, the one whose resistance agrees
+//!    with the holds' is kept.
 //! 6. **Current loop.** The PI for the stated bandwidth from `R` and `L_q` (the torque's axis;
 //!    `current_loop_design`), the drive's gains for both axes. The design is checked on the d
 //!    axis, the rotor's own (where a current makes no torque and the rotor stays still), with
@@ -1525,19 +1526,19 @@ impl Commissioning {
     /// first-order fit cannot take reads as extra resistance; on a slow winding that a few
     /// hertz of pull and friction hold, the free rotor's model is the one that errs); where
     /// neither resistance is plausible, the first-order fit's (`None`, or a winding the caller
-    /// refuses as out of range).
+    /// refuses as out of range). On a winding of more than [`Q_TURNING_TICKS`] the free
+    /// rotor's fit has the sensors' noise taken out (`noise_matched`), its resistance then
+    /// the holds' wherever the noise read allows: it is kept wherever it finds a winding.
     fn q_winding(&self, first_order: Option<Winding>) -> Option<Winding> {
         let tick = self.settings.tick_period;
         let off = |w: &Option<Winding>| self.resistance_off(w);
-        // On a slow winding the high-passed fit's current changes are small beside the
-        // sensors' noise: its bias is taken out (`sensor_noise`).
-        let free_rotor = if self.slow_q_winding() {
-            let variance = if self.q_bias > 0.0 {
-                self.sensor_noise.turning_variance()
-            } else {
-                self.sensor_noise.q_variance(self.angle)
-            };
-            self.noise_matched(variance)
+        // On a winding slower than the stage turns the rotor on (`Q_TURNING_TICKS`) the
+        // high-passed fit's current changes are small beside the sensors' noise: its bias is
+        // taken out (`sensor_noise`). That fit's resistance then agrees with the holds' by
+        // construction, so the windings whose q stage may run once more, on the resistances'
+        // agreement, keep the fit as it is.
+        let free_rotor = if self.ld > Q_TURNING_TICKS * self.resistance * tick {
+            self.noise_matched(self.sensor_noise.q_variance(self.angle))
         } else {
             self.q_fit.winding(tick)
         };

@@ -58,6 +58,7 @@ impl<const N: usize> Regression<N> {
             rhs[j] = mean(self.sxy[j]) - mean(self.sx[j]) * mean(self.sy) - noise_xy[j];
         }
         // A covariance matrix is symmetric and positive definite: elimination needs no pivots.
+        // With noise taken off it may not be: a pivot that is not positive refuses the fit.
         let own: [f32; N] = core::array::from_fn(|j| m[j][j].abs());
         for col in 0..terms {
             if !(m[col][col] > 1e-6 * own[col]) {
