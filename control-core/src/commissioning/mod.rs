@@ -5,7 +5,8 @@
 //! transients) and the voltage within the highest voltage and the bus's circle.
 //!
 //! The sequence, each stage on the previous one's result, after 16 ms at zero voltage that
-//! read the current sensors' noise (`sensor_noise`: the q fit on a slow winding takes it out):
+//! read the current sensors' noise (`sensor_noise`: the q fit on a winding of more than four
+//! ticks takes it out):
 //! 1. **Probe.** Pseudo-random voltage chips of zero mean on a fixed angle (0), their size
 //!    growing from a millivolt by a quarter a period (two such steps a period while their
 //!    current would stay under a fiftieth of the test current) while the current stays under
@@ -1527,8 +1528,9 @@ impl Commissioning {
     /// hertz of pull and friction hold, the free rotor's model is the one that errs); where
     /// neither resistance is plausible, the first-order fit's (`None`, or a winding the caller
     /// refuses as out of range). On a winding of more than [`Q_TURNING_TICKS`] the free
-    /// rotor's fit has the sensors' noise taken out (`noise_matched`), its resistance then
-    /// the holds' wherever the noise read allows: it is kept wherever it finds a winding.
+    /// rotor's fit has the sensors' noise taken out (`noise_matched`): where a variance in its
+    /// range gives the holds' resistance, that fit agrees with the holds' by construction and
+    /// is kept.
     fn q_winding(&self, first_order: Option<Winding>) -> Option<Winding> {
         let tick = self.settings.tick_period;
         let off = |w: &Option<Winding>| self.resistance_off(w);
@@ -1556,11 +1558,11 @@ impl Commissioning {
     }
 
     /// The slow q winding's free-rotor fit with the sensors' noise taken out. The noise's
-    /// variance read at zero voltage is known to a tenth or so (its 256 readings), and the
-    /// fit's resistance, which shows at the low frequencies the differences weigh least, moves
-    /// by the winding's own over a tenth of it (its inductance by a few tenths of a percent):
-    /// the variance within [`NOISE_SEARCH`] of the one read that gives the holds' resistance
-    /// is taken, where there is one, else the one read.
+    /// variance read at zero voltage is known to a tenth or so (16 ms of readings, 256 at
+    /// 16 kHz), and the fit's resistance, which shows at the low frequencies the differences
+    /// weigh least, moves by the winding's own over a tenth of it (its inductance by a few
+    /// tenths of a percent): the variance within [`NOISE_SEARCH`] of the one read that gives
+    /// the holds' resistance is taken, where there is one, else the one read.
     fn noise_matched(&self, read: f32) -> Option<Winding> {
         let tick = self.settings.tick_period;
         let resistance_at = |variance: f32| self.q_fit.branch_less_noise(tick, variance).map(|b| b.winding.resistance);
