@@ -29,8 +29,8 @@ use crate::response_correction::CorrectionParams;
 use crate::stop_sequence::{Refusal, SequenceEvent};
 
 /// Protocol version 15: commissioning's first stage reads the current sensors' noise
-/// (`Stage::SensorNoise` in the telemetry's commissioning state). Version 14: the telemetry carries every tick's torque command summed
-/// (`Telemetry::torque_command_sum`), so that a host reading it now and then gets the exact
+/// (`Stage::SensorNoise` in the telemetry's commissioning state). Version 14: the telemetry
+/// carries every tick's torque command summed (`Telemetry::torque_command_sum`), so that a host reading it now and then gets the exact
 /// mean torque between two readings. Version 13: the parameters carry a second torque-command
 /// notch (`TorqueFilters::notch2_hz`, `notch2_q`, `notch2_depth`). Version 12: what commissioning measured carries the test current it drove
 /// (`MeasuredMotor::test_current`). Version 11: commissioning ([`Request::Commission`], [`Request::StopCommissioning`],

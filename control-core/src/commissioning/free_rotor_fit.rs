@@ -286,25 +286,15 @@ mod tests {
     /// A slow winding (0.069 Ω, 495 µH: 114 ticks) in series with a light rotor's motion
     /// (κ = 4 600 Ω/s, a 15 µs rotor), under ±0.32 V chips, its current read with 2 mA of white
     /// noise and fitted high-passed: the noise, in the regressors and the response alike,
-    /// reads the plain fit's resistance several times the winding's (5.3 times here), which
+    /// reads the plain fit's resistance several times the winding's (5.5 times here), which
     /// the sequence's choice between its fits goes by; with the noise's variance taken out,
-    /// the resistance is within a fifth (17 % here) and the inductance within 0.5 %.
+    /// the resistance is within a fifth (5 % here) and the inductance within 0.5 %.
     #[test]
     fn the_sensors_noise_is_taken_out_of_a_slow_windings_fit() {
         let (tick, r, l, kappa, sigma) = (62.5e-6f64, 0.069, 4.95e-4, 4600.0, 0.002f64);
         let mut fit = FreeRotorFit::high_passed();
         let mut chips = crate::m_sequence::MSequence::new(12).unwrap();
-        let mut state = 0x9E37_79B9_7F4A_7C15u64;
-        let mut gaussian = || {
-            let mut sum = 0.0f64;
-            for _ in 0..12 {
-                state ^= state << 13;
-                state ^= state >> 7;
-                state ^= state << 17;
-                sum += (state >> 11) as f64 / (1u64 << 53) as f64;
-            }
-            sum - 6.0
-        };
+        let mut noise = super::super::motor_model::Gaussian::new(0x9E37_79B9_7F4A_7C15);
         let (mut i, mut q, mut v) = (0.0f64, 0.0f64, 0.0f64);
         let sub = 64;
         let h = tick / sub as f64;
@@ -315,7 +305,7 @@ mod tests {
                 q += h * im;
                 i += h * (v - r * im - kappa * qm) / l;
             }
-            fit.add((i + sigma * gaussian()) as f32, v as f32);
+            fit.add((i + sigma * noise.next()) as f32, v as f32);
             v = 0.32 * chips.next_chip() as f64;
         }
         let plain = fit.branch(tick as f32).unwrap().winding;

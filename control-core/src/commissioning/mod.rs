@@ -349,10 +349,10 @@ fn ramp(x: f32) -> (f32, f32) {
 /// electrical turn to a quarter (`(1 − y)²`, fastest at the start), its current growing to a
 /// low share of the test current over the sweep's first quarter and held there, then turns the
 /// last quarter turn to angle 0 at that current, and the current then grows on the still
-/// vector. A light rotor follows a vector that turns
-/// one way only: wherever it stood, it is caught and drawn to angle 0 at the low current, and
-/// no rotor stands near the antipode when the current grows. A heavy rotor on a weak magnet
-/// swings too slowly at the low current to follow the sweep in its time: it takes [`ramp`].
+/// vector. A light rotor follows a vector that turns one way only: wherever it stood, it is
+/// caught and drawn to angle 0 at the low current, and no rotor stands near the antipode when
+/// the current grows. A heavy rotor on a weak magnet swings too slowly at the low current to
+/// follow the sweep in its time: it takes [`ramp`].
 fn light_ramp(x: f32) -> (f32, f32) {
     use core::f32::consts::FRAC_PI_2;
     let finished = LIGHT_SWEEP_SHARE + LIGHT_FINISH_SHARE;
@@ -1495,6 +1495,12 @@ impl Commissioning {
         self.ld > self.resistance * self.settings.tick_period
     }
 
+    /// A winding of up to [`Q_TURNING_TICKS`] (the d axis's time constant, measured): its q
+    /// stage may run once more turning the rotor (`turning_bias`).
+    fn q_may_turn(&self) -> bool {
+        !(self.ld > Q_TURNING_TICKS * self.resistance * self.settings.tick_period)
+    }
+
     /// The q chips' size (V). Their current is zero-mean and makes torque, which a rotor's
     /// friction resists: the rotor then sticks and slips, which no linear fit follows, unless
     /// the chips' torque stands well above the friction's. So the chips are as large as the
@@ -1539,7 +1545,7 @@ impl Commissioning {
         // taken out (`sensor_noise`). That fit's resistance then agrees with the holds' by
         // construction, so the windings whose q stage may run once more, on the resistances'
         // agreement, keep the fit as it is.
-        let free_rotor = if self.ld > Q_TURNING_TICKS * self.resistance * tick {
+        let free_rotor = if !self.q_may_turn() {
             self.noise_matched(self.sensor_noise.q_variance(self.angle))
         } else {
             self.q_fit.winding(tick)
@@ -1565,14 +1571,13 @@ impl Commissioning {
     /// the holds' resistance is taken, where there is one, else the one read.
     fn noise_matched(&self, read: f32) -> Option<Winding> {
         let tick = self.settings.tick_period;
-        let resistance_at = |variance: f32| self.q_fit.branch_less_noise(tick, variance).map(|b| b.winding.resistance);
-        let fallback = || self.q_fit.branch_less_noise(tick, read).map(|b| b.winding);
+        let winding_at = |variance: f32| self.q_fit.branch_less_noise(tick, variance).map(|b| b.winding);
         let (mut low, mut high) = (NOISE_SEARCH[0] * read, NOISE_SEARCH[1] * read);
         // More noise taken out reads less resistance, down to none (no winding at all): the
         // holds' lies between the ends.
-        let above = |variance: f32| resistance_at(variance).is_some_and(|r| r >= self.resistance);
+        let above = |variance: f32| winding_at(variance).is_some_and(|w| w.resistance >= self.resistance);
         if !(read > 0.0 && above(low) && !above(high)) {
-            return fallback();
+            return winding_at(read);
         }
         for _ in 0..NOISE_BISECTIONS {
             let middle = 0.5 * (low + high);
@@ -1582,7 +1587,7 @@ impl Commissioning {
                 high = middle;
             }
         }
-        self.q_fit.branch_less_noise(tick, low).map(|b| b.winding)
+        winding_at(low)
     }
 
     /// How far a fit's resistance lies off the holds' (a share; infinite for no winding or
@@ -1635,7 +1640,7 @@ impl Commissioning {
     /// it beside the held d voltage and the chips; elsewhere the stage holds its frame and
     /// adds nothing (a weak magnet's rotor hardly moves under the chips).
     fn turning_bias(&self, bus_voltage: f32) -> f32 {
-        if self.ld > Q_TURNING_TICKS * self.resistance * self.settings.tick_period {
+        if !self.q_may_turn() {
             return 0.0;
         }
         let Ok(psi) = self.flux_with(self.ld) else { return 0.0 };

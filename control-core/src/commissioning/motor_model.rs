@@ -70,6 +70,28 @@ impl MotorTruth {
     }
 }
 
+/// Reproducible unit-variance Gaussian samples (Box–Muller on xorshift64) for the test motor's
+/// sensor noise and the fits' tests.
+pub struct Gaussian(u64);
+
+impl Gaussian {
+    /// From a non-zero seed.
+    pub fn new(seed: u64) -> Self {
+        Self(seed)
+    }
+
+    pub fn next(&mut self) -> f64 {
+        let mut uniform = || {
+            self.0 ^= self.0 << 13;
+            self.0 ^= self.0 >> 7;
+            self.0 ^= self.0 << 17;
+            ((self.0 >> 11) as f64 + 0.5) / (1u64 << 53) as f64
+        };
+        let (u1, u2) = (uniform(), uniform());
+        (-2.0 * u1.ln()).sqrt() * (TAU * u2).cos()
+    }
+}
+
 pub struct MotorModel {
     pub truth: MotorTruth,
     tick: f64,
@@ -80,7 +102,7 @@ pub struct MotorModel {
     angle: f64,
     /// The voltage the drive asked for on the last tick (stator frame, V), applied over this one.
     pending: (f64, f64),
-    rng: u64,
+    rng: Gaussian,
     /// Largest |mechanical angle| moved from the start (rad), and the largest |speed|.
     pub excursion: f64,
     pub top_speed: f64,
@@ -99,7 +121,7 @@ impl MotorModel {
             speed: 0.0,
             angle: truth.start_angle,
             pending: (0.0, 0.0),
-            rng: 0x2545_F491_4F6C_DD1D,
+            rng: Gaussian::new(0x2545_F491_4F6C_DD1D),
             excursion: 0.0,
             top_speed: 0.0,
             peak_current: 0.0,
@@ -126,17 +148,6 @@ impl MotorModel {
         [a, b, -a - b]
     }
 
-    fn gaussian(&mut self) -> f64 {
-        let mut uniform = || {
-            self.rng ^= self.rng << 13;
-            self.rng ^= self.rng >> 7;
-            self.rng ^= self.rng << 17;
-            ((self.rng >> 11) as f64 + 0.5) / (1u64 << 53) as f64
-        };
-        let (u1, u2) = (uniform(), uniform());
-        (-2.0 * u1.ln()).sqrt() * (TAU * u2).cos()
-    }
-
     /// What the drive reads at the start of a tick: phase currents a and b (A) and the
     /// encoder's counter.
     pub fn sample(&mut self) -> ([f32; 2], i32) {
@@ -144,7 +155,7 @@ impl MotorModel {
         let t = self.truth;
         let mut read = [0.0f32; 2];
         for (k, i) in [a, b].into_iter().enumerate() {
-            let n = if t.noise > 0.0 { t.noise * self.gaussian() } else { 0.0 };
+            let n = if t.noise > 0.0 { t.noise * self.rng.next() } else { 0.0 };
             read[k] = (i * t.sensor_gain[k] + t.sensor_offset[k] + n) as f32;
         }
         // A quadrature counter: whole counts in its own direction.

@@ -64,18 +64,8 @@ mod tests {
     /// its q components), within 5 %.
     #[test]
     fn the_phases_noise_is_carried_to_an_axis() {
-        let mut state = 0x2545_F491_4F6C_DD1Du64;
-        let mut gaussian = || {
-            // Irwin–Hall: twelve uniforms less 6, unit variance.
-            let mut sum = 0.0f32;
-            for _ in 0..12 {
-                state ^= state << 13;
-                state ^= state >> 7;
-                state ^= state << 17;
-                sum += (state >> 40) as f32 / (1u64 << 24) as f32;
-            }
-            sum - 6.0
-        };
+        let mut noise = super::super::motor_model::Gaussian::new(0x2545_F491_4F6C_DD1D);
+        let mut gaussian = || noise.next() as f32;
         let (sa, sb) = (0.002f32, 0.003f32);
         let angles = [0.0f32, 0.5 * core::f32::consts::PI, 1.0, 2.5];
         let mut noise = SensorNoise::default();

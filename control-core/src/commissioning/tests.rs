@@ -534,18 +534,28 @@ fn the_q_chips_stay_finite_and_within_the_voltage_left_beside_the_held_d_voltage
     }
 }
 
+/// Runs the sequence on `truth` while `going` holds for it (called before each tick): the
+/// sequence and the motor then. The sequence ending meanwhile is a failure.
+fn run_while(truth: MotorTruth, mut going: impl FnMut(&Commissioning) -> bool) -> (Commissioning, MotorModel) {
+    let mut motor = MotorModel::new(truth, TICK as f64);
+    let mut c = Commissioning::new(settings(&truth)).unwrap();
+    while going(&c) {
+        let (phase_currents, encoder_count) = motor.sample();
+        let inputs = CommissioningInputs { phase_currents, encoder_count, bus_voltage: 48.0 };
+        let Some(v) = c.step(&inputs) else { panic!("{:?} ({truth:?})", c.status()) };
+        motor.apply(v.alpha, v.beta);
+    }
+    (c, motor)
+}
+
 /// Runs the sequence on `truth` until the probe's fit begins: the sequence (in its fit), the
 /// ticks the probe's climb took, and the largest phase current meanwhile (A).
 fn probe(truth: MotorTruth) -> (Commissioning, u32, f64) {
-    let mut motor = MotorModel::new(truth, TICK as f64);
-    let mut c = Commissioning::new(settings(&truth)).unwrap();
     let mut ticks = 0u32;
-    while matches!(c.status(), CommissioningStatus::Running(Stage::SensorNoise | Stage::Probe)) {
+    let (c, motor) = run_while(truth, |c| {
         ticks += (c.status() == CommissioningStatus::Running(Stage::Probe)) as u32;
-        let (phase_currents, encoder_count) = motor.sample();
-        let v = c.step(&CommissioningInputs { phase_currents, encoder_count, bus_voltage: 48.0 }).unwrap();
-        motor.apply(v.alpha, v.beta);
-    }
+        matches!(c.status(), CommissioningStatus::Running(Stage::SensorNoise | Stage::Probe))
+    });
     (c, ticks, motor.peak_current)
 }
 
@@ -614,15 +624,7 @@ fn light_rotors_that_stick_under_the_q_chips_are_turned_through_them() {
 
 /// Whether the sequence takes the light rotor's ramp (`light_ramp`) on this motor.
 fn takes_the_light_ramp(truth: MotorTruth) -> bool {
-    let mut motor = MotorModel::new(truth, TICK as f64);
-    let mut c = Commissioning::new(settings(&truth)).unwrap();
-    while c.status() != CommissioningStatus::Running(Stage::Ramp) {
-        let (phase_currents, encoder_count) = motor.sample();
-        let inputs = CommissioningInputs { phase_currents, encoder_count, bus_voltage: 48.0 };
-        let Some(v) = c.step(&inputs) else { panic!("{:?} before the ramp ({truth:?})", c.status()) };
-        motor.apply(v.alpha, v.beta);
-    }
-    c.light_rotor
+    run_while(truth, |c| c.status() != CommissioningStatus::Running(Stage::Ramp)).0.light_rotor
 }
 
 /// Light rotors on strong magnets (mechanical time constants of 11.5 and 24.4 µs: seed 2's
