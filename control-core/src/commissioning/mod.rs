@@ -980,10 +980,7 @@ impl Commissioning {
                             });
                         }
                         self.resistance = r;
-                        // What the held voltage carries beyond `R·I`: the inverter's dead-time
-                        // voltage, `4/3` of each phase's on the vector at phase a.
-                        let error = self.high.0 - r * self.high.1;
-                        self.dead_time = crate::limit(0.75 * error, 0.0, 0.25 * s.max_voltage);
+                        self.dead_time = dead_time_of_hold(self.high.0 - r * self.high.1, s.max_voltage);
                         self.start_alignment();
                     }
                 }
@@ -1128,6 +1125,15 @@ impl Commissioning {
                     }
                     if stage == Stage::InductanceD {
                         self.ld = w.inductance;
+                        // The holds read again without the swing's back-EMF, for the q stage's
+                        // dead time and resistance (the flux linkage the passes give with
+                        // `L_q = L_d`; where that or the resistance is not found, the holds'
+                        // stand, and the q stage's end reports it).
+                        if let Ok((r, dead_time)) =
+                            self.flux_with(self.ld).and_then(|psi| self.holds_without_swing(psi))
+                        {
+                            (self.resistance, self.dead_time) = (r, dead_time);
+                        }
                         self.start_chips(Stage::InductanceQ, 0.0);
                     } else {
                         self.lq = w.inductance;
@@ -1329,12 +1335,23 @@ impl Commissioning {
     }
 
     /// The resistance again from the holds, without the back-EMF of a rotor that still swung
-    /// on the vector while they were averaged: on the vector's d axis (angle 0) its mean over
-    /// a window is `ψ·(cos θ_end − cos θ_start)/T`, the rotor's electrical angle `θ` at the
-    /// window's ends now known from the encoder (a rotor at rest leaves the first value).
+    /// on the vector while they were averaged (`holds_without_swing`, the flux linkage
+    /// measured).
     fn resistance_without_swing(&self) -> Result<f32, CommissioningFault> {
-        let Some(a) = self.alignment else { return Ok(self.resistance) };
-        let psi = self.flux_linkage;
+        self.holds_without_swing(self.flux_linkage).map(|(r, _)| r)
+    }
+
+    /// The resistance (Ω) and the inverter's dead-time voltage (V) from the holds, without the
+    /// back-EMF of a rotor that still swung on the vector while they were averaged, for a flux
+    /// linkage `psi`: on the vector's d axis (angle 0) that back-EMF's mean over a window is
+    /// `ψ·(cos θ_end − cos θ_start)/T`, the rotor's electrical angle `θ` at the window's ends
+    /// now known from the encoder (a rotor at rest leaves the holds' values). A heavy rotor on
+    /// a weak magnet swings for seconds on its vector at a few hertz; its back-EMF, a few
+    /// percent of a small resistance's voltage, reads in the high hold's voltage beyond
+    /// `R·I` as dead time (half as much again on a bench motor: the q fits of a winding
+    /// faster than a tick then take a dead time the inverter does not have).
+    fn holds_without_swing(&self, psi: f32) -> Result<(f32, f32), CommissioningFault> {
+        let Some(a) = self.alignment else { return Ok((self.resistance, self.dead_time)) };
         let voltage = |w: &HoldWindow| {
             let first = w.first.unwrap_or(w.last);
             let change = libm::cosf(self.rotor_angle(&a, w.last)) - libm::cosf(self.rotor_angle(&a, first));
@@ -1345,7 +1362,7 @@ impl Commissioning {
         if !resistance_in_range(r) {
             return Err(CommissioningFault::OutOfRange { quantity: MeasuredQuantity::Resistance, value: r });
         }
-        Ok(r)
+        Ok((r, dead_time_of_hold(voltage(high) - r * high.current, self.settings.max_voltage)))
     }
 
     /// The voltage (vector's frame, V) that makes up the inverter's dead-time error for a
@@ -1668,6 +1685,13 @@ impl Commissioning {
             CHIP_SETTLING_TICKS
         }
     }
+}
+
+/// The inverter's dead-time voltage per phase (V) from what a hold's voltage on the vector at
+/// phase a carries beyond `R·I` (`error`): `4/3` of each phase's there. Within a quarter of the
+/// highest voltage (`max_voltage`), and not below none.
+fn dead_time_of_hold(error: f32, max_voltage: f32) -> f32 {
+    crate::limit(0.75 * error, 0.0, 0.25 * max_voltage)
 }
 
 /// The inverter's dead-time voltage per volt of dead time (each phase short by it against its
