@@ -248,22 +248,43 @@ impl Digest {
 
 /// Replay every scenario; returns (ticks, digest). Events apply before the tick they carry.
 pub fn replay(bytes: &[u8]) -> Result<(u64, u64), VectorError> {
-    replay_with(SliceSource::new(bytes), Work::StepAndDigest)
+    replay_with(SliceSource::new(bytes), Work::StepAndDigest, None).map(|(ticks, digest, _)| (ticks, digest))
 }
 
 /// [`replay`] of the bytes `source` gives.
 pub fn replay_from(source: impl VectorSource) -> Result<(u64, u64), VectorError> {
-    replay_with(source, Work::StepAndDigest)
+    replay_with(source, Work::StepAndDigest, None).map(|(ticks, digest, _)| (ticks, digest))
+}
+
+/// A tick of a replay: what its `Axis::step` took on the replay's clock, and which tick it was
+/// (counted from the first scenario's first).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct TimedTick {
+    pub clocks: u64,
+    pub tick: u64,
+}
+
+/// How many of a timed replay's longest ticks it keeps.
+pub const LONGEST_TICKS: usize = 4;
+
+/// [`replay_from`] with each `Axis::step` timed on `clock` (a free-running counter read before
+/// and after it; the decoding, the events and the digest are not timed): ticks, digest and the
+/// [`LONGEST_TICKS`] longest ticks, longest first.
+pub fn replay_timed(
+    source: impl VectorSource,
+    clock: &mut dyn FnMut() -> u64,
+) -> Result<(u64, u64, [TimedTick; LONGEST_TICKS]), VectorError> {
+    replay_with(source, Work::StepAndDigest, Some(clock))
 }
 
 /// Replay without digesting the outputs (to measure what the core itself costs).
 pub fn replay_only(bytes: &[u8]) -> Result<u64, VectorError> {
-    replay_with(SliceSource::new(bytes), Work::Step).map(|(ticks, _)| ticks)
+    replay_with(SliceSource::new(bytes), Work::Step, None).map(|(ticks, ..)| ticks)
 }
 
 /// Decode the inputs without stepping the axis (the decoding's share of the cost).
 pub fn decode_only(bytes: &[u8]) -> Result<u64, VectorError> {
-    replay_with(SliceSource::new(bytes), Work::Decode).map(|(ticks, _)| ticks)
+    replay_with(SliceSource::new(bytes), Work::Decode, None).map(|(ticks, ..)| ticks)
 }
 
 #[derive(Clone, Copy, PartialEq, Eq)]
@@ -273,7 +294,12 @@ enum Work {
     StepAndDigest,
 }
 
-fn replay_with(source: impl VectorSource, work: Work) -> Result<(u64, u64), VectorError> {
+fn replay_with(
+    source: impl VectorSource,
+    work: Work,
+    mut clock: Option<&mut dyn FnMut() -> u64>,
+) -> Result<(u64, u64, [TimedTick; LONGEST_TICKS]), VectorError> {
+    let mut longest = [TimedTick::default(); LONGEST_TICKS];
     let mut r = Reader { source, at: 0 };
     if &r.take::<4>()? != MAGIC {
         return Err(VectorError::Magic);
@@ -337,7 +363,16 @@ fn replay_with(source: impl VectorSource, work: Work) -> Result<(u64, u64), Vect
                 digest.f32(inputs.phase_currents[0] + commands.velocity);
                 continue;
             }
+            let started = clock.as_mut().map(|c| c());
             let pwm = axis.step(&inputs, &commands);
+            if let (Some(c), Some(started)) = (clock.as_mut(), started) {
+                let timed = TimedTick { clocks: c().wrapping_sub(started), tick: total + tick as u64 };
+                // Into its place among the longest (the shortest of them drops out).
+                if let Some(at) = longest.iter().position(|t| timed.clocks > t.clocks) {
+                    longest.copy_within(at..LONGEST_TICKS - 1, at + 1);
+                    longest[at] = timed;
+                }
+            }
             if work == Work::Step {
                 digest.bytes(&[pwm.enabled as u8]);
                 continue;
@@ -394,7 +429,7 @@ fn replay_with(source: impl VectorSource, work: Work) -> Result<(u64, u64), Vect
         }
         total += ticks as u64;
     }
-    Ok((total, digest.0))
+    Ok((total, digest.0, longest))
 }
 
 #[cfg(test)]

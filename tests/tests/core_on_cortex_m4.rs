@@ -6,8 +6,9 @@
 //! Needs the firmware toolchain and QEMU; `scripts/fw` installs them (apt) on first use.
 
 use host_tools::bench::firmware::{
-    all_features_recordings, build, commissioning_recording, drive_image_size, drive_image_stack, encode,
-    interrupts_off_on_cortex_m4, recordings, replay_on_cortex_m4, replay_streamed_on_cortex_m4, sections,
+    all_features_recordings, build, commissioning_recording, commissioning_recordings, drive_image_size,
+    drive_image_stack, encode, interrupts_off_on_cortex_m4, recordings, replay_on_cortex_m4,
+    replay_streamed_on_cortex_m4, sections,
 };
 use host_tools::paths::workspace_root;
 
@@ -57,7 +58,10 @@ fn a_whole_commissioning_gives_the_same_bits_on_a_cortex_m4() {
     let bytes = encode(&[rec]);
     assert!(bytes.len() > 960 * 1024, "{} bytes: streamed, not in flash", bytes.len());
     let r = replay_streamed_on_cortex_m4(&bytes, "commissioning-vectors").unwrap();
-    eprintln!("commissioning vectors: {} ticks, host digest {}, target: {}", r.ticks, r.host_digest, r.target);
+    eprintln!(
+        "commissioning vectors: {} ticks, host digest {}, target: {}, longest ticks {:?}",
+        r.ticks, r.host_digest, r.target, r.longest_ticks
+    );
     assert_eq!(r.ticks, 83_200);
     assert!(r.identical, "the Cortex-M4 replay differs from the host's: {r:?}");
     // A corrupt stream is told apart: the same bytes with a phase current's exponent bit
@@ -68,6 +72,32 @@ fn a_whole_commissioning_gives_the_same_bits_on_a_cortex_m4() {
     flipped[header + 40_000 * control_core::golden_vectors::TICK_BYTES + 3] ^= 0x01;
     let other = control_core::golden_vectors::replay(&flipped).map(|(_, d)| format!("{d:016x}"));
     assert_ne!(other.ok(), Some(r.host_digest.clone()));
+}
+
+/// Whole commissionings of drawn motors whose sequences take the paths the default motor's
+/// does not (the q fit's noise matching on a slow winding under the sensors' noise; the
+/// probe's retry, the light ramp, the q stage turning the rotor and the second differences'
+/// fit on a light rotor): the same bits on the Cortex-M4, and no tick of any commissioning
+/// (the default motor's too) over 5 000 instructions, under half a 16 kHz tick's cycles on
+/// the G474 at 170 MHz (the stage ends' fits and the noise matching's bisection spread over
+/// ticks, sines and cosines in f32 only, the encoder's angle in 32-bit arithmetic: the step
+/// analysis's sines and cosines in `libm`'s f64 kernels took 253 000 instructions in one tick).
+#[test]
+fn drawn_motors_commission_with_the_same_bits_and_no_tick_over_5000_instructions_on_a_cortex_m4() {
+    for (name, rec, status) in commissioning_recordings().unwrap() {
+        assert!(
+            matches!(status, control_core::commissioning::CommissioningStatus::Done(_)),
+            "{name}: the commissioning did not finish: {status:?}"
+        );
+        let r = replay_streamed_on_cortex_m4(&encode(&[rec]), "commissioning-vectors").unwrap();
+        eprintln!("{name}: host digest {}, target: {}, longest ticks {:?}", r.host_digest, r.target, r.longest_ticks);
+        assert!(r.identical, "{name}: the Cortex-M4 replay differs from the host's: {r:?}");
+        let longest = r.longest_ticks.first().expect("the replay's longest tick");
+        assert!(longest.instructions <= 5000.0, "{name}: {longest:?}");
+        // Every tick timed: more than one long tick is seen (the stage ends), and none is
+        // free.
+        assert!(r.longest_ticks.len() == 4 && r.longest_ticks[3].instructions > 500.0, "{name}: {r:?}");
+    }
 }
 
 #[test]

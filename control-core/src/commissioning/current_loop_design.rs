@@ -23,8 +23,8 @@ use core::f32::consts::TAU;
 /// (H) sampled every `tick` (s), for a closed-loop bandwidth of `bandwidth_hz`.
 pub fn design(resistance: f32, inductance: f32, tick: f32, bandwidth_hz: f32) -> (f32, f32) {
     let theta = TAU * bandwidth_hz * tick;
-    let (s1, c1) = (libm::sinf(theta), libm::cosf(theta));
-    let (s2, c2) = (libm::sinf(2.0 * theta), libm::cosf(2.0 * theta));
+    let (s1, c1) = crate::trigonometry::sin_cos(theta);
+    let (s2, c2) = crate::trigonometry::sin_cos(2.0 * theta);
     let (x, y) = (c2 - c1, s2 - s1);
     let g = x + libm::sqrtf(2.0 * x * x + y * y);
     let a = libm::expf(-resistance * tick / inductance);
@@ -80,16 +80,22 @@ impl StepResponse {
         (STEP_SAMPLES - tail..STEP_SAMPLES).map(|k| self.mean(k)).sum::<f32>() / tail as f32
     }
 
-    /// `|H(θ)|` over its value at rest.
+    /// `|H(θ)|` over its value at rest. The sum's phasor `e^{−jθk}` is turned by `e^{−jθ}` from
+    /// one sample to the next (one sine and cosine a call, in f32 only: `libm`'s evaluate in
+    /// f64, which the Cortex-M4F does in software, and one pair a sample took a quarter of a
+    /// million instructions in one tick); over the 64 samples it drifts by a few parts in
+    /// 10⁶.
     pub fn gain_at(&self, theta: f32) -> f32 {
         let (mut re, mut im, mut last) = (0.0f32, 0.0f32, 0.0f32);
+        let (turn_sin, turn_cos) = crate::trigonometry::sin_cos(theta);
+        let (mut sin, mut cos) = (0.0f32, 1.0f32);
         for k in 0..STEP_SAMPLES {
             let s = self.mean(k);
             let h = s - last;
             last = s;
-            let (sin, cos) = (libm::sinf(theta * k as f32), libm::cosf(theta * k as f32));
             re += h * cos;
             im -= h * sin;
+            (sin, cos) = (sin * turn_cos + cos * turn_sin, cos * turn_cos - sin * turn_sin);
         }
         libm::sqrtf(re * re + im * im) / self.settled()
     }

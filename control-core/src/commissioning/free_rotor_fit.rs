@@ -134,7 +134,7 @@ impl FreeRotorFit {
             // Complex poles r·e^{±jθ}: L·c = T·r·sin θ/θ.
             let r = libm::sqrtf(c1);
             let theta = libm::acosf(crate::limit(0.5 * sum / r, -1.0, 1.0));
-            let ratio = if theta > 1e-4 { libm::sinf(theta) / theta } else { 1.0 };
+            let ratio = if theta > 1e-4 { crate::trigonometry::sin(theta) / theta } else { 1.0 };
             let log_r = libm::logf(r);
             (tick * r * ratio, 2.0 * log_r, log_r * log_r + theta * theta)
         };

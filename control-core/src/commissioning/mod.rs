@@ -68,7 +68,7 @@
 //!    the held d-axis voltage, and the fit. The chips' q current turns the rotor, whose
 //!    back-EMF the free rotor's fit takes (`free_rotor_fit`), on the samples' differences on a
 //!    winding of a tick or more, where a rotor sticking and slipping on its friction acts least
-//!    (on a winding of more than four ticks the sensors' noise taken out: `noise_matched`); on
+//!    (on a winding of more than four ticks the sensors' noise taken out: `noise_matching`); on
 //!    a faster winding where the rotor's motion shows, on their second differences
 //!    (`q_winding`). Where no fit finds a winding, or the fit's resistance lies 3 % or more off
 //!    the holds' (the rotor's motion shows), on a winding of up to four ticks (a light rotor on
@@ -93,6 +93,7 @@
 mod current_loop_design;
 mod encoder_alignment;
 mod free_rotor_fit;
+mod noise_matching;
 mod regression;
 mod sensor_noise;
 mod swing_damping;
@@ -116,6 +117,7 @@ use crate::trigonometry::sin_cos;
 use current_loop_design::{BandwidthSearch, StepResponse, STEP_SAMPLES};
 use encoder_alignment::{align, Pass};
 use free_rotor_fit::FreeRotorFit;
+use noise_matching::NoiseMatching;
 use sensor_noise::SensorNoise;
 use swing_damping::SwingDamping;
 use winding_fit::{inductance_in_range, resistance_in_range, WindingFit};
@@ -302,10 +304,6 @@ pub enum Stage {
 
 /// The current sensors' reading at zero voltage before the probe (s).
 const SENSOR_NOISE_S: f32 = 0.016;
-/// The range around the noise's variance read at zero voltage (its shares) searched for the
-/// one that gives a slow q winding's free-rotor fit the holds' resistance, and the bisections.
-const NOISE_SEARCH: [f32; 2] = [0.6, 1.5];
-const NOISE_BISECTIONS: u32 = 16;
 /// The vector's acceleration to the alignment speed and its braking (s).
 const ALIGNMENT_ACCELERATION_S: f32 = 0.25;
 /// Ticks of each hold: the first part settles, the last part is averaged.
@@ -614,8 +612,12 @@ pub struct Commissioning {
     probe_retried: bool,
     /// The probe's chips turned the rotor as a light one ([`LIGHT_ROTOR_S`]).
     light_rotor: bool,
-    /// The current sensors' noise, read before the probe.
+    /// The current sensors' noise, read before the probe, and a slow q winding's search for
+    /// the variance its fit takes out (`noise_matching`), once its chips have ended.
     sensor_noise: SensorNoise,
+    noise_matching: Option<NoiseMatching>,
+    /// Ticks an inductance stage has spent on its end's work (`choose_winding` and after).
+    finishing: u32,
     /// What was measured, kept while the rotor is braked to rest.
     result: Option<MeasuredMotor>,
 }
@@ -690,6 +692,8 @@ impl Commissioning {
             applied_chip: 0.0,
             last_current: None,
             sensor_noise: SensorNoise::default(),
+            noise_matching: None,
+            finishing: 0,
             result: None,
         })
     }
@@ -734,10 +738,13 @@ impl Commissioning {
 
     /// The rotor's electrical angle from the encoder, once aligned.
     fn rotor_angle(&self, a: &Alignment, count: i32) -> f32 {
-        let cpr = self.settings.counts_per_rev as i64;
-        let raw = (count as i64).rem_euclid(cpr);
+        // In 32 bits, whose division the Cortex-M4 has in hardware (64-bit remainders are a
+        // library call of a few hundred instructions each): the counts per revolution (at
+        // most 2²⁴) times the pole pairs (at most 64) stay under 2³⁰.
+        let cpr = self.settings.counts_per_rev;
+        let raw = count.rem_euclid(cpr as i32) as u32;
         let corrected = if a.reversed { (cpr - raw) % cpr } else { raw };
-        let turns = ((corrected * a.pole_pairs as i64) % cpr) as f32 / cpr as f32;
+        let turns = ((corrected * a.pole_pairs) % cpr) as f32 / cpr as f32;
         TAU * turns + a.offset
     }
 
@@ -1073,7 +1080,8 @@ impl Commissioning {
                 // tick's start (the chips swing some phase currents through zero, where it
                 // flips; its constant part goes to the fits' intercepts).
                 let applied = self.applied_chip - self.dead_time_along_axis;
-                if self.ticks > settling {
+                let chips_end = settling + self.chips.period();
+                if self.ticks > settling && self.ticks <= chips_end {
                     if stage == Stage::InductanceQ {
                         self.q_fit.add(axis_current, applied);
                         if !self.slow_q_winding() {
@@ -1091,62 +1099,65 @@ impl Commissioning {
                 self.dead_time_shape = if stage == Stage::InductanceD { unit.d } else { unit.q };
                 self.dead_time_along_axis = self.dead_time * self.dead_time_shape;
                 self.last_current = Some(axis_current);
-                if self.ticks >= settling + self.chips.period() {
-                    let axis = if stage == Stage::InductanceD { 'd' } else { 'q' };
-                    let first_order =
-                        if stage == Stage::InductanceD { self.d_winding() } else { self.fit.winding(s.tick_period) };
-                    let mut fitted =
-                        if stage == Stage::InductanceQ { self.q_winding(first_order) } else { first_order };
-                    if stage == Stage::InductanceQ {
-                        let off = self.resistance_off(&fitted);
-                        if self.q_bias == 0.0 {
-                            // No winding, or one whose resistance the rotor's motion bends,
-                            // under chips that the rotor may reverse with: once more with the
-                            // rotor turned through them, where it can be (`turning_bias`).
-                            let bias = if off >= Q_RETRY_AGREEMENT { self.turning_bias(i.bus_voltage) } else { 0.0 };
-                            if bias > 0.0 {
-                                self.first_q = fitted;
-                                self.start_chips(Stage::InductanceQ, bias);
-                                return self.output(i.bus_voltage, 0.0);
+                if self.ticks >= chips_end && stage == Stage::InductanceQ && !self.q_may_turn() {
+                    // A slow q winding's noise matching, one fit's solve a tick: the d current
+                    // held, no q voltage.
+                    let tick = s.tick_period;
+                    let read = self.sensor_noise.q_variance(self.angle);
+                    let matching = self.noise_matching.get_or_insert_with(|| NoiseMatching::new(read));
+                    let fit = &self.q_fit;
+                    if matching
+                        .advance(|v| fit.branch_less_noise(tick, v).map(|b| b.winding), self.resistance)
+                        .is_none()
+                    {
+                        return self.hold_between(stage, current.q, i.bus_voltage);
+                    }
+                }
+                if self.ticks >= chips_end {
+                    // The stage's end, its work spread over ticks (a few fits' solves a tick at
+                    // most, on the Cortex-M4F a few thousand instructions): the winding's
+                    // choice; then on the d axis the holds read again, on the q axis the flux
+                    // linkage, the resistance and the current loop's design, one a tick, the d
+                    // current held meanwhile.
+                    let finishing = self.finishing;
+                    self.finishing += 1;
+                    match (stage, finishing) {
+                        (_, 0) => {
+                            if let Err(fault) = self.choose_winding(stage, i.bus_voltage) {
+                                return self.fail(fault);
                             }
-                        } else if self.resistance_off(&self.first_q) < off {
-                            // Of the two runs, the one whose resistance agrees with the holds'.
-                            fitted = self.first_q;
+                            return self.hold_between(stage, current.q, i.bus_voltage);
                         }
-                    }
-                    let Some(w) = fitted else {
-                        return self.fail(CommissioningFault::Inductance { axis });
-                    };
-                    if !inductance_in_range(w.inductance) {
-                        return self.fail(CommissioningFault::OutOfRange {
-                            quantity: MeasuredQuantity::Inductance,
-                            value: w.inductance,
-                        });
-                    }
-                    if stage == Stage::InductanceD {
-                        self.ld = w.inductance;
-                        // The holds read again without the swing's back-EMF, for the q stage's
-                        // dead time and resistance (the flux linkage the passes give with
-                        // `L_q = L_d`; where that or the resistance is not found, the holds'
-                        // stand, and the q stage's end reports it).
-                        if let Ok((r, dead_time)) =
-                            self.flux_with(self.ld).and_then(|psi| self.holds_without_swing(psi))
-                        {
-                            (self.resistance, self.dead_time) = (r, dead_time);
+                        (Stage::InductanceD, _) => {
+                            // The holds read again without the swing's back-EMF, for the q
+                            // stage's dead time and resistance (the flux linkage the passes
+                            // give with `L_q = L_d`; where that or the resistance is not found,
+                            // the holds' stand, and the q stage's end reports it).
+                            if let Ok((r, dead_time)) =
+                                self.flux_with(self.ld).and_then(|psi| self.holds_without_swing(psi))
+                            {
+                                (self.resistance, self.dead_time) = (r, dead_time);
+                            }
+                            self.start_chips(Stage::InductanceQ, 0.0);
                         }
-                        self.start_chips(Stage::InductanceQ, 0.0);
-                    } else {
-                        self.lq = w.inductance;
-                        match self.flux_from_back_emf() {
-                            Ok(psi) => self.flux_linkage = psi,
-                            Err(fault) => return self.fail(fault),
+                        (_, 1) => {
+                            match self.flux_from_back_emf() {
+                                Ok(psi) => self.flux_linkage = psi,
+                                Err(fault) => return self.fail(fault),
+                            }
+                            return self.hold_between(stage, current.q, i.bus_voltage);
                         }
-                        match self.resistance_without_swing() {
-                            Ok(r) => self.resistance = r,
-                            Err(fault) => return self.fail(fault),
+                        (_, 2) => {
+                            match self.resistance_without_swing() {
+                                Ok(r) => self.resistance = r,
+                                Err(fault) => return self.fail(fault),
+                            }
+                            return self.hold_between(stage, current.q, i.bus_voltage);
                         }
-                        self.start_current_step();
-                        return self.output(i.bus_voltage, 0.0);
+                        _ => {
+                            self.start_current_step();
+                            return self.output(i.bus_voltage, 0.0);
+                        }
                     }
                 }
                 let volts = self.chip_volts(stage, i.bus_voltage);
@@ -1354,7 +1365,7 @@ impl Commissioning {
         let Some(a) = self.alignment else { return Ok((self.resistance, self.dead_time)) };
         let voltage = |w: &HoldWindow| {
             let first = w.first.unwrap_or(w.last);
-            let change = libm::cosf(self.rotor_angle(&a, w.last)) - libm::cosf(self.rotor_angle(&a, first));
+            let change = sin_cos(self.rotor_angle(&a, w.last)).1 - sin_cos(self.rotor_angle(&a, first)).1;
             w.voltage - psi * change / w.seconds
         };
         let [high, low] = &self.hold_windows;
@@ -1369,8 +1380,10 @@ impl Commissioning {
     /// current on the vector at `angle` (each phase short by `dead_time` against its current's
     /// sign; the common mode drops out).
     fn dead_time_compensation(&self, angle: f32) -> Dq {
-        let third = TAU / 3.0;
-        self.phase_dead_time([libm::cosf(angle), libm::cosf(angle - third), libm::cosf(angle + third)], angle)
+        // cos(angle ∓ 2π/3) from one sine and cosine (f32 only: it runs every tick).
+        let (sin, cos) = sin_cos(angle);
+        let (half, root) = (0.5 * cos, 0.866_025_4 * sin);
+        self.phase_dead_time([cos, root - half, -root - half], angle)
     }
 
     /// The inverter's dead-time voltage (what each phase falls short by against its current)
@@ -1398,7 +1411,7 @@ impl Commissioning {
         // voltage from the q voltage.
         let r = self.resistance;
         let (f_voltage, b_voltage) = (f.0 - r * f.2, b.0 - r * b.2);
-        let (sin, cos) = (libm::sinf(a.lag), libm::cosf(a.lag));
+        let (sin, cos) = sin_cos(a.lag);
         // In the vector's frame the magnet's flux is `ψ·e^{−jδ}`, the rotor lagging by `δ`:
         // its q voltage is `ψ·(ω − dδ/dt)·cos δ`, whose mean over a window is `ψ·(ω·cos δ −
         // Δsin δ/T)`. The rotor swings on the vector (a spring of the magnet's torque), so the
@@ -1407,7 +1420,7 @@ impl Commissioning {
         let swing = |p: &BackEmf, window: f32| {
             let lag_at = |(angle, count): (f32, i32)| angle - self.rotor_angle(&a, count);
             let first = p.first.unwrap_or(p.last);
-            (libm::sinf(lag_at(p.last)) - libm::sinf(lag_at(first))) / window
+            (crate::trigonometry::sin(lag_at(p.last)) - crate::trigonometry::sin(lag_at(first))) / window
         };
         let (swing_f, swing_b) = (swing(&self.back_emf[0], f.3), swing(&self.back_emf[1], b.3));
         // The armature's flux along the current, and what the tick's sampling adds: the loop
@@ -1464,6 +1477,62 @@ impl Commissioning {
         self.step = StepResponse::default();
         self.voltage = self.held_low;
         self.next_stage(Stage::CurrentStep);
+    }
+
+    /// The winding an inductance stage's fits give once its chips have ended: on the d axis
+    /// `d_winding`, on the q axis `q_winding`, where a first run that found none (or one whose
+    /// resistance the rotor's motion bends) starts the stage again with the rotor turned
+    /// through the chips (`turning_bias`), and a second keeps the run whose resistance agrees
+    /// with the holds'. Kept as `ld` or `lq`; refused by name where there is none or it lies
+    /// outside the part's range.
+    fn choose_winding(&mut self, stage: Stage, bus_voltage: f32) -> Result<(), CommissioningFault> {
+        let tick = self.settings.tick_period;
+        let axis = if stage == Stage::InductanceD { 'd' } else { 'q' };
+        let first_order = if stage == Stage::InductanceD { self.d_winding() } else { self.fit.winding(tick) };
+        let mut fitted = if stage == Stage::InductanceQ { self.q_winding(first_order) } else { first_order };
+        if stage == Stage::InductanceQ {
+            let off = self.resistance_off(&fitted);
+            if self.q_bias == 0.0 {
+                // No winding, or one whose resistance the rotor's motion bends, under chips
+                // that the rotor may reverse with: once more with the rotor turned through
+                // them, where it can be (`turning_bias`).
+                let bias = if off >= Q_RETRY_AGREEMENT { self.turning_bias(bus_voltage) } else { 0.0 };
+                if bias > 0.0 {
+                    self.first_q = fitted;
+                    self.start_chips(Stage::InductanceQ, bias);
+                    return Ok(());
+                }
+            } else if self.resistance_off(&self.first_q) < off {
+                // Of the two runs, the one whose resistance agrees with the holds'.
+                fitted = self.first_q;
+            }
+        }
+        let Some(w) = fitted else {
+            return Err(CommissioningFault::Inductance { axis });
+        };
+        if !inductance_in_range(w.inductance) {
+            return Err(CommissioningFault::OutOfRange { quantity: MeasuredQuantity::Inductance, value: w.inductance });
+        }
+        if stage == Stage::InductanceD {
+            self.ld = w.inductance;
+        } else {
+            self.lq = w.inductance;
+        }
+        Ok(())
+    }
+
+    /// A tick between an inductance stage's chips and what follows them: the held d voltage,
+    /// and on the d stage its q loop holding the q current at zero (the rotor may still swing
+    /// on the vector), on the q stage no q voltage.
+    fn hold_between(&mut self, stage: Stage, q_current: f32, bus_voltage: f32) -> Option<AlphaBeta> {
+        self.voltage = self.held_low;
+        let q_voltage = if stage == Stage::InductanceD {
+            let room = 0.9 * self.room_beside(bus_voltage, self.voltage);
+            self.current_pi.q.update(-q_current, room.min(self.current_pi.limit)).value
+        } else {
+            0.0
+        };
+        self.output(bus_voltage, q_voltage)
     }
 
     /// The d winding from its stage's fit: the one with the inverter's dead-time voltage
@@ -1551,9 +1620,9 @@ impl Commissioning {
     /// hertz of pull and friction hold, the free rotor's model is the one that errs); where
     /// neither resistance is plausible, the first-order fit's (`None`, or a winding the caller
     /// refuses as out of range). On a winding of more than [`Q_TURNING_TICKS`] the free
-    /// rotor's fit has the sensors' noise taken out (`noise_matched`): where a variance in its
-    /// range gives the holds' resistance, that fit agrees with the holds' by construction and
-    /// is kept.
+    /// rotor's fit has the sensors' noise taken out (`noise_matching`, one solve a tick once
+    /// the chips have ended): where a variance in its range gives the holds' resistance, that
+    /// fit agrees with the holds' by construction and is kept.
     fn q_winding(&self, first_order: Option<Winding>) -> Option<Winding> {
         let tick = self.settings.tick_period;
         let off = |w: &Option<Winding>| self.resistance_off(w);
@@ -1563,7 +1632,7 @@ impl Commissioning {
         // construction, so the windings whose q stage may run once more, on the resistances'
         // agreement, keep the fit as it is.
         let free_rotor = if !self.q_may_turn() {
-            self.noise_matched(self.sensor_noise.q_variance(self.angle))
+            self.noise_matching.and_then(|m| m.result()).flatten()
         } else {
             self.q_fit.winding(tick)
         };
@@ -1578,33 +1647,6 @@ impl Commissioning {
         } else {
             first_order
         }
-    }
-
-    /// The slow q winding's free-rotor fit with the sensors' noise taken out. The noise's
-    /// variance read at zero voltage is known to a tenth or so (16 ms of readings, 256 at
-    /// 16 kHz), and the fit's resistance, which shows at the low frequencies the differences
-    /// weigh least, moves by the winding's own over a tenth of it (its inductance by a few
-    /// tenths of a percent): the variance within [`NOISE_SEARCH`] of the one read that gives
-    /// the holds' resistance is taken, where there is one, else the one read.
-    fn noise_matched(&self, read: f32) -> Option<Winding> {
-        let tick = self.settings.tick_period;
-        let winding_at = |variance: f32| self.q_fit.branch_less_noise(tick, variance).map(|b| b.winding);
-        let (mut low, mut high) = (NOISE_SEARCH[0] * read, NOISE_SEARCH[1] * read);
-        // More noise taken out reads less resistance, down to none (no winding at all): the
-        // holds' lies between the ends.
-        let above = |variance: f32| winding_at(variance).is_some_and(|w| w.resistance >= self.resistance);
-        if !(read > 0.0 && above(low) && !above(high)) {
-            return winding_at(read);
-        }
-        for _ in 0..NOISE_BISECTIONS {
-            let middle = 0.5 * (low + high);
-            if above(middle) {
-                low = middle;
-            } else {
-                high = middle;
-            }
-        }
-        winding_at(low)
     }
 
     /// How far a fit's resistance lies off the holds' (a share; infinite for no winding or
@@ -1627,6 +1669,8 @@ impl Commissioning {
             FreeRotorFit::default()
         };
         self.q_fit_twice = FreeRotorFit::high_passed_twice();
+        self.noise_matching = None;
+        self.finishing = 0;
         if stage == Stage::InductanceD {
             // The d stage's q loop starts from nothing (its integrator held the passes'
             // back-EMF, in the vector's frame).

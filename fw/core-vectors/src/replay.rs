@@ -63,16 +63,32 @@ pub fn run() -> bool {
     ok
 }
 
+/// The streamed replay, each tick's step timed: its digest, and the longest ticks with the
+/// calibration that turns their clocks into instructions.
 fn run_streamed(path: &str) -> bool {
     let mut line = Line::new();
+    core_vectors::clock::start();
+    let passes: u32 = 100_000;
+    let calibration = core_vectors::clock::calibrate(passes);
     let ok = match core_vectors::semihosting::HostFile::open(path) {
         None => {
             let _ = writeln!(line, "core-vectors error cannot open {path}");
             false
         }
-        Some(file) => match control_core::golden_vectors::replay_from(Streamed(file)) {
-            Ok((ticks, digest)) => {
+        Some(file) => match control_core::golden_vectors::replay_timed(Streamed(file), &mut core_vectors::clock::ticks) {
+            Ok((ticks, digest, longest)) => {
                 let _ = writeln!(line, "core-vectors ticks {ticks} digest {digest:016x}");
+                for t in longest {
+                    let mut cost = Line::new();
+                    let _ = writeln!(
+                        cost,
+                        "core-vectors longest tick {} clock {} calibration {calibration} for {} instructions",
+                        t.tick,
+                        t.clocks,
+                        2 * passes
+                    );
+                    write(cost.as_str(""));
+                }
                 true
             }
             Err(e) => {

@@ -144,6 +144,16 @@ pub fn draw(rng: &mut XorShift64Star, min_mechanical_time_constant: f64) -> Plan
     }
 }
 
+/// Motor `motor` of the bench's draw for `seed` (the default least mechanical time constant).
+pub fn drawn_motor(seed: u64, motor: usize) -> PlantParams {
+    let mut rng = XorShift64Star::from_seed(seed);
+    let mut plant = draw(&mut rng, MIN_MECHANICAL_TIME_CONSTANT);
+    for _ in 0..motor {
+        plant = draw(&mut rng, MIN_MECHANICAL_TIME_CONSTANT);
+    }
+    plant
+}
+
 /// Commission one drawn motor on the plant.
 pub fn commission_one(plant: &PlantParams) -> MotorRow {
     let mut control =

@@ -17,6 +17,7 @@ use control_core::golden_vectors::{
 use control_core::stop_sequence::SequenceEvent;
 use control_core::Mode;
 use serde::Serialize;
+use servo_axis::plant::PlantParams;
 use servo_axis::simulation::{AxisSimulation, SimulationConfig, UserInputs};
 
 use crate::bench::elf_sections::{section_headers, ALLOC};
@@ -171,8 +172,36 @@ pub fn all_features_recordings() -> Vec<Recording> {
 /// end, and how it ended on the host: about 3 MB of vectors, streamed to the target
 /// ([`replay_streamed_on_cortex_m4`]).
 pub fn commissioning_recording() -> Result<(Recording, CommissioningStatus)> {
+    commissioning_recording_on(&PlantParams::default())
+}
+
+/// Drawn motors of `servo bench commission` (seed, motor) whose commissioning takes the paths
+/// the default motor does not: seed 17's motor 65 (a slow winding under the sensors' noise:
+/// the q fit's noise matching), seed 36's motor 46 (a light rotor on a winding faster than a
+/// tick: the probe run again a quarter turn on, the light ramp, the q stage run again turning
+/// the rotor, the second differences' fit).
+pub const COMMISSIONED_BENCH_MOTORS: [(u64, usize); 2] = [(17, 65), (36, 46)];
+
+/// [`commissioning_recording`] on the default plant and on each of
+/// [`COMMISSIONED_BENCH_MOTORS`]: a name for each, its recording and how it ended.
+pub fn commissioning_recordings() -> Result<Vec<(String, Recording, CommissioningStatus)>> {
+    let mut out = Vec::new();
+    let (rec, status) = commissioning_recording()?;
+    out.push(("the default motor".to_string(), rec, status));
+    for (seed, motor) in COMMISSIONED_BENCH_MOTORS {
+        let plant = crate::bench::commission_bench::drawn_motor(seed, motor);
+        let (rec, status) = commissioning_recording_on(&plant)?;
+        out.push((format!("seed {seed}'s motor {motor} of servo bench commission"), rec, status));
+    }
+    Ok(out)
+}
+
+/// [`commissioning_recording`] on `plant` (its encoder's counts per revolution the preset's).
+pub fn commissioning_recording_on(plant: &PlantParams) -> Result<(Recording, CommissioningStatus)> {
     const SECONDS: f64 = 5.2;
-    let config = SimulationConfig { control: preset(0).unwrap(), ..Default::default() };
+    let control = preset(0).unwrap();
+    let plant = PlantParams { encoder_counts_per_rev: control.encoder_counts_per_rev, ..*plant };
+    let config = SimulationConfig { control, plant, ..Default::default() };
     let mut sim = AxisSimulation::new(&config).map_err(|e| anyhow::anyhow!("{e}"))?;
     let rest = inputs(Mode::Torque);
     sim.apply_mode(&rest);
@@ -215,6 +244,16 @@ pub struct CoreReplay {
     /// replay with the output digest.
     pub instructions_per_tick: Option<f64>,
     pub instructions_per_tick_with_digest: Option<f64>,
+    /// The streamed replay's longest ticks, longest first: each one's index and the
+    /// instructions `Axis::step` took on it (empty for a replay from flash).
+    pub longest_ticks: Vec<LongTick>,
+}
+
+/// A long tick of a streamed replay on the Cortex-M4.
+#[derive(Clone, Copy, Debug, Serialize)]
+pub struct LongTick {
+    pub tick: u64,
+    pub instructions: f64,
 }
 
 /// One vector file is built into the binary at a time: callers in parallel (tests) take turns
@@ -233,7 +272,8 @@ pub fn replay_on_cortex_m4(bytes: &[u8], name: &str) -> Result<CoreReplay> {
 }
 
 /// [`replay_on_cortex_m4`] for a vector file larger than the target's flash: the target reads
-/// it from the host through semihosting as it replays (the digest only, no cost figures).
+/// it from the host through semihosting as it replays (the digest and the longest tick, each
+/// tick's step timed apart from the reading).
 pub fn replay_streamed_on_cortex_m4(bytes: &[u8], name: &str) -> Result<CoreReplay> {
     let _turn = ONE_AT_A_TIME.lock().unwrap_or_else(|e| e.into_inner());
     let file = vector_file(bytes, name)?;
@@ -285,13 +325,19 @@ fn run_replay(bytes: &[u8]) -> Result<CoreReplay> {
     }
     let expected = format!("core-vectors ticks {ticks} digest {digest:016x}");
     let target = text.lines().find(|l| l.contains("digest")).unwrap_or("").trim().to_string();
-    let (mut core, mut whole) = (None, None);
-    if let Some(cost) = text.lines().find(|l| l.contains("calibration")) {
-        let w: Vec<f64> = cost.split_whitespace().filter_map(|x| x.parse().ok()).collect();
-        if let [clock, core_clocks, calibration, instructions] = w[..] {
-            let per_tick = |c: f64| c * instructions / calibration / ticks as f64;
-            core = Some(per_tick(core_clocks));
-            whole = Some(per_tick(clock));
+    let (mut core, mut whole, mut longest_ticks) = (None, None, Vec::new());
+    let numbers = |line: &str| -> Vec<f64> { line.split_whitespace().filter_map(|x| x.parse().ok()).collect() };
+    for line in text.lines().filter(|l| l.contains("calibration")) {
+        match numbers(line)[..] {
+            [tick, clocks, calibration, instructions] if line.contains("longest tick") => {
+                longest_ticks.push(LongTick { tick: tick as u64, instructions: clocks * instructions / calibration });
+            }
+            [clock, core_clocks, calibration, instructions] => {
+                let per_tick = |c: f64| c * instructions / calibration / ticks as f64;
+                core = Some(per_tick(core_clocks));
+                whole = Some(per_tick(clock));
+            }
+            _ => {}
         }
     }
     Ok(CoreReplay {
@@ -301,6 +347,7 @@ fn run_replay(bytes: &[u8]) -> Result<CoreReplay> {
         target,
         instructions_per_tick: core,
         instructions_per_tick_with_digest: whole,
+        longest_ticks,
     })
 }
 
