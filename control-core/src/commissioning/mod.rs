@@ -612,9 +612,10 @@ pub struct Commissioning {
     probe_retried: bool,
     /// The probe's chips turned the rotor as a light one ([`LIGHT_ROTOR_S`]).
     light_rotor: bool,
-    /// The current sensors' noise, read before the probe, and a slow q winding's search for
-    /// the variance its fit takes out (`noise_matching`), once its chips have ended.
+    /// The current sensors' noise, read before the probe.
     sensor_noise: SensorNoise,
+    /// A slow q winding's search for the noise variance its fit takes out (`noise_matching`),
+    /// once its chips have ended.
     noise_matching: Option<NoiseMatching>,
     /// Ticks an inductance stage has spent on its end's work (`choose_winding` and after).
     finishing: u32,
@@ -1099,19 +1100,22 @@ impl Commissioning {
                 self.dead_time_shape = if stage == Stage::InductanceD { unit.d } else { unit.q };
                 self.dead_time_along_axis = self.dead_time * self.dead_time_shape;
                 self.last_current = Some(axis_current);
-                if self.ticks >= chips_end && stage == Stage::InductanceQ && !self.q_may_turn() {
-                    // A slow q winding's noise matching, one fit's solve a tick: the d current
-                    // held, no q voltage.
+                let searching = self.noise_matching.is_none_or(|m| m.result().is_none());
+                if self.ticks >= chips_end
+                    && stage == Stage::InductanceQ
+                    && self.finishing == 0
+                    && !self.q_may_turn()
+                    && searching
+                {
+                    // A slow q winding's noise matching, one fit's solve a tick (the winding's
+                    // choice on the tick after the last): the d current held, no q voltage.
                     let tick = s.tick_period;
-                    let read = self.sensor_noise.q_variance(self.angle);
-                    let matching = self.noise_matching.get_or_insert_with(|| NoiseMatching::new(read));
+                    let (sensor_noise, angle) = (&self.sensor_noise, self.angle);
+                    let matching =
+                        self.noise_matching.get_or_insert_with(|| NoiseMatching::new(sensor_noise.q_variance(angle)));
                     let fit = &self.q_fit;
-                    if matching
-                        .advance(|v| fit.branch_less_noise(tick, v).map(|b| b.winding), self.resistance)
-                        .is_none()
-                    {
-                        return self.hold_between(stage, current.q, i.bus_voltage);
-                    }
+                    matching.advance(|v| fit.branch_less_noise(tick, v).map(|b| b.winding), self.resistance);
+                    return self.hold_between(stage, current.q, i.bus_voltage);
                 }
                 if self.ticks >= chips_end {
                     // The stage's end, its work spread over ticks (a few fits' solves a tick at
@@ -1129,6 +1133,8 @@ impl Commissioning {
                             return self.hold_between(stage, current.q, i.bus_voltage);
                         }
                         (Stage::InductanceD, _) => {
+                            // (The q stage starts here, and this tick's output is still the d
+                            // stage's: a d chip, the first of the q stage's sequence.)
                             // The holds read again without the swing's back-EMF, for the q
                             // stage's dead time and resistance (the flux linkage the passes
                             // give with `L_q = L_d`; where that or the resistance is not found,

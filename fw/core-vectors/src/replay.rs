@@ -9,7 +9,7 @@ use core_vectors::semihosting::{write, Line};
 static VECTORS: &[u8] = include_bytes!(env!("CORE_VECTORS_FILE"));
 
 /// A vector file streamed from the host as it is replayed (`CORE_VECTORS_STREAM`, its path):
-/// for files larger than the flash (a whole commissioning), the digest only.
+/// for files larger than the flash (a whole commissioning), the digest and the longest ticks.
 struct Streamed(core_vectors::semihosting::HostFile);
 
 impl control_core::golden_vectors::VectorSource for Streamed {
@@ -75,7 +75,8 @@ fn run_streamed(path: &str) -> bool {
             let _ = writeln!(line, "core-vectors error cannot open {path}");
             false
         }
-        Some(file) => match control_core::golden_vectors::replay_timed(Streamed(file), &mut core_vectors::clock::ticks) {
+        Some(file) => match control_core::golden_vectors::replay_timed(Streamed(file), &mut core_vectors::clock::ticks)
+        {
             Ok((ticks, digest, longest)) => {
                 let _ = writeln!(line, "core-vectors ticks {ticks} digest {digest:016x}");
                 for t in longest {
