@@ -151,7 +151,8 @@ impl AutotuneReport<'_> {
                 "tuned": figures(&r.tuned),
                 "before": figures(&r.before),
                 "measured_step": {"overshoot_percent": r.measured.overshoot_percent,
-                                  "settling_time_s": r.measured.settling_time_s},
+                                  "settling_time_s": r.measured.settling_time_s,
+                                  "rms_difference_from_predicted": r.step_difference()},
             },
         })
     }
@@ -259,10 +260,11 @@ impl AutotuneReport<'_> {
             format!("settles in {:.1} ms", 1e3 * ms.settling_time_s)
         };
         println!(
-            "  velocity step: {} predicted (before: {}); on the twin overshoot {:.1} %, {measured_settling}",
+            "  velocity step: {} predicted (before: {}); on the twin overshoot {:.1} %, {measured_settling}, {:.1} % of the step from the prediction (RMS)",
             step(r, period),
             step(b, period),
-            ms.overshoot_percent
+            ms.overshoot_percent,
+            100.0 * self.responses.step_difference()
         );
         println!("  load step at the motor: {} (before: {})", load(r), load(b));
         println!("  drive time {:.1} s", self.drive_time_s());

@@ -60,6 +60,37 @@ impl Responses {
         })
     }
 
+    /// How far the step measured on the twin lies from the predicted one: the root mean square
+    /// of their difference over the span, per unit step, at the measured samples (the
+    /// prediction, sampled every velocity period, interpolated between its samples). The whole
+    /// waveform, where the settling time is when a noisy estimate last crosses ±2 %: on a
+    /// lightly damped tail a cycle more or less inside the band moves it by a period. NaN
+    /// where the prediction is unstable or no measured sample lies within it.
+    pub fn step_difference(&self) -> f64 {
+        let (predicted, measured) = (&self.tuned, &self.measured);
+        let (t, y) = (&predicted.time, &predicted.command_step);
+        if !predicted.stable || t.len() < 2 {
+            return f64::NAN;
+        }
+        let at = |time: f64| {
+            let k = t.partition_point(|&s| s <= time).clamp(1, t.len() - 1);
+            let share = (time - t[k - 1]) / (t[k] - t[k - 1]);
+            y[k - 1] + share * (y[k] - y[k - 1])
+        };
+        let last = t[t.len() - 1];
+        let differences: Vec<f64> = measured
+            .time
+            .iter()
+            .zip(&measured.response)
+            .filter(|(time, _)| **time <= last)
+            .map(|(time, v)| v - at(*time))
+            .collect();
+        if differences.is_empty() {
+            return f64::NAN;
+        }
+        (differences.iter().map(|d| d * d).sum::<f64>() / differences.len() as f64).sqrt()
+    }
+
     /// step.svg and disturbance.svg in `out`.
     pub fn plot(&self, out: &Path) -> Result<()> {
         let trace = |t: &[f64], y: &[f64], name: &str| {
@@ -146,4 +177,47 @@ pub fn plot_loops(
         &[("designed", &designed_t), ("from the open loop measured on the twin", &measured_t)],
         Some((margins.bandwidth_hz, "bandwidth")),
     )
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn prediction(time: Vec<f64>, command_step: Vec<f64>) -> StepPrediction {
+        StepPrediction {
+            time,
+            command_step,
+            disturbance_step: vec![],
+            overshoot_percent: 0.0,
+            settling_time_s: 0.0,
+            disturbance_peak: 0.0,
+            disturbance_recovery_s: 0.0,
+            stable: true,
+        }
+    }
+
+    /// A measured step on a finer grid than the prediction's: the prediction is interpolated
+    /// at the measured times (a ramp's own samples give no difference), an offset of 0.1 of
+    /// the step reads 0.1, the samples past the prediction's span do not count, and an
+    /// unstable prediction gives NaN.
+    #[test]
+    fn the_measured_step_is_compared_with_the_prediction_at_its_own_samples() {
+        let predicted = prediction((0..11).map(|k| k as f64 * 0.01).collect(), (0..11).map(|k| k as f64).collect());
+        let measured = |offset: f64| {
+            let time: Vec<f64> = (0..=40).map(|k| k as f64 * 0.003).collect();
+            let response = time.iter().map(|t| t * 100.0 + if *t <= 0.1 { offset } else { 50.0 }).collect();
+            MeasuredStep { time, response, overshoot_percent: 0.0, settling_time_s: 0.0, drive_time_s: 0.0 }
+        };
+        let of = |offset: f64, stable: bool| {
+            Responses {
+                tuned: StepPrediction { stable, ..predicted.clone() },
+                before: predicted.clone(),
+                measured: measured(offset),
+            }
+            .step_difference()
+        };
+        assert!(of(0.0, true) < 1e-9, "{}", of(0.0, true));
+        assert!((of(0.1, true) - 0.1).abs() < 1e-9, "{}", of(0.1, true));
+        assert!(of(0.0, false).is_nan());
+    }
 }
