@@ -65,7 +65,8 @@
 //!    passes would drive its back-EMF through the winding). On a winding that settles within
 //!    the tick, the fit with the inverter's dead-time voltage beside it (`d_winding`).
 //! 5. **q-axis inductance.** Chips on the rotor's q axis (now known from the encoder) beside
-//!    the held d-axis voltage, and the fit. The chips' q current turns the rotor, whose
+//!    the held d-axis voltage (shaped on a winding of more than 256 ticks: `q_shaping`), and
+//!    the fit. The chips' q current turns the rotor, whose
 //!    back-EMF the free rotor's fit takes (`free_rotor_fit`), on the samples' differences on a
 //!    winding of a tick or more, where a rotor sticking and slipping on its friction acts least
 //!    (on a winding of more than four ticks the sensors' noise taken out: `noise_matching`); on
@@ -423,6 +424,10 @@ const Q_BIAS_SMOOTHING_S: f32 = 0.002;
 /// The q chips' current peak on a winding slower than a tick, a share of the test current
 /// (`q_chip_volts`).
 const Q_CHIP_PEAK: f32 = 0.65;
+/// A q winding slower than this (ticks: the d axis's time constant, measured) has its chips
+/// shaped (`q_shaping`), over this many shapings tried.
+const Q_SHAPED_TICKS: f32 = 256.0;
+const Q_SHAPINGS: u32 = 16;
 /// On a winding faster than a tick, the first-order fit's resistance this far off the holds'
 /// (a share) says the rotor's motion shows in the q stage, and the second differences' fit is
 /// taken if its own resistance lies within [`DIFFERENCES_AGREEMENT`] of the holds' (`q_winding`).
@@ -619,6 +624,9 @@ pub struct Commissioning {
     noise_matching: Option<NoiseMatching>,
     /// Ticks an inductance stage has spent on its end's work (`choose_winding` and after).
     finishing: u32,
+    /// The q chips' shaping once chosen (`q_shaping`), and the last chip's sign.
+    q_shaping: Option<f32>,
+    last_sign: f32,
     /// What was measured, kept while the rotor is braked to rest.
     result: Option<MeasuredMotor>,
 }
@@ -695,6 +703,8 @@ impl Commissioning {
             sensor_noise: SensorNoise::default(),
             noise_matching: None,
             finishing: 0,
+            q_shaping: None,
+            last_sign: 0.0,
             result: None,
         })
     }
@@ -1166,8 +1176,17 @@ impl Commissioning {
                         }
                     }
                 }
+                // A slow winding's q chips shaped (`q_shaping`), chosen on the stage's first
+                // chip.
+                let shaped = stage == Stage::InductanceQ && self.q_bias == 0.0 && self.slow_q_winding();
+                if shaped && self.q_shaping.is_none() {
+                    self.q_shaping = Some(self.q_shaping(i.bus_voltage));
+                }
                 let volts = self.chip_volts(stage, i.bus_voltage);
-                let chip = volts * self.chips.next_chip() as f32;
+                let sign = self.chips.next_chip() as f32;
+                let shaping = if shaped { self.q_shaping.unwrap_or(0.0) } else { 0.0 };
+                let chip = volts * (sign - shaping * self.last_sign);
+                self.last_sign = sign;
                 // The q stage's constant voltage, ramped from 0 over its settling while the
                 // rotor's acceleration (its current: the voltage's over `R` times the rotor's
                 // mechanical time constant over the ramp) stays within its share; a heavy rotor
@@ -1602,10 +1621,65 @@ impl Commissioning {
     /// stays within 3.5 of them over a record, and within `V/R` whatever the record. Within
     /// nine tenths of the voltage the held d voltage leaves (the vector is never scaled down,
     /// which would scale the fitted chips with it).
+    /// Shaped chips (`q_shaping`: each less `β` times the one before) swing the voltage by up
+    /// to `(1 + β)·V`, which stays within that room.
     fn q_chip_volts(&self, bus_voltage: f32) -> f32 {
+        let room = 0.9 * self.room_beside(bus_voltage, self.held_low);
+        let shaping = self.q_shaping.unwrap_or(0.0);
+        if shaping > 0.0 {
+            return self.shaped_chip_volts(shaping, room);
+        }
         let x = self.resistance * self.settings.tick_period / self.ld;
         let peak_per_volt = crate::limit(3.5 * libm::sqrtf(libm::tanhf(0.5 * x)), 0.0, 1.0) / self.resistance;
-        (Q_CHIP_PEAK * self.test_current / peak_per_volt).min(0.9 * self.room_beside(bus_voltage, self.held_low))
+        (Q_CHIP_PEAK * self.test_current / peak_per_volt).min(room)
+    }
+
+    /// The chips' size (V) shaped by `shaping` (`β`) within `room` (V): the q current's peak
+    /// [`Q_CHIP_PEAK`] of the test current. Under chips `V·(c[k] − β·c[k−1])` the sampled
+    /// winding's current has the impulse response `b·(1, (a − β), (a − β)·a, …)` per volt
+    /// (`a = e^{−RT/L}`, `b = (1 − a)/R`): a standard deviation of
+    /// `b·√(1 + (a − β)²/(1 − a²))` per volt, within 3.5 of them over a record, and within
+    /// `b·(1 + |a − β|/(1 − a))` whatever the record (`V/R` unshaped, `b·V` at `β = a`, where
+    /// the current follows the chips themselves).
+    fn shaped_chip_volts(&self, shaping: f32, room: f32) -> f32 {
+        let x = self.resistance * self.settings.tick_period / self.ld;
+        // 1 − a to f32's precision on a winding of millions of ticks.
+        let decay = -libm::expm1f(-x);
+        let a = 1.0 - decay;
+        let b = decay / self.resistance;
+        let d = a - shaping;
+        let spread = libm::sqrtf(1.0 + d * d / (decay * (1.0 + a)));
+        let peak_per_volt = (3.5 * b * spread).min(b * (1.0 + libm::fabsf(d) / decay));
+        (Q_CHIP_PEAK * self.test_current / peak_per_volt).min(room / (1.0 + shaping))
+    }
+
+    /// The q chips' shaping `β` on a winding slower than [`Q_SHAPED_TICKS`] (0 elsewhere):
+    /// each chip less `β` times the one before. Unshaped ±V chips drive a slow winding's current
+    /// on a random walk that the current's peak bounds: their voltage, and with it the current's
+    /// change from tick to tick that the fit reads beside the sensors' noise, is a few times
+    /// the winding's resistive voltage at the peak current. Shaping takes the chips' low
+    /// frequencies down and leaves their high ones (at `β` = `a`, the winding's pole, the
+    /// current follows the chips themselves, its random walk gone): for the same peak the
+    /// chips may be many times larger, up to the room the held d voltage leaves. Of
+    /// [`Q_SHAPINGS`] shapings from none to `a`, the one whose chips swing the voltage most
+    /// from tick to tick (`(1 + β)·V`); the low frequencies keep what the largest of them
+    /// leaves, the winding's resistance and the rotor's motion show there.
+    fn q_shaping(&self, bus_voltage: f32) -> f32 {
+        let tick = self.settings.tick_period;
+        if !(self.ld > Q_SHAPED_TICKS * self.resistance * tick) {
+            return 0.0;
+        }
+        let room = 0.9 * self.room_beside(bus_voltage, self.held_low);
+        let a = libm::expf(-self.resistance * tick / self.ld);
+        let mut best = (0.0f32, 0.0f32);
+        for k in 1..=Q_SHAPINGS {
+            let shaping = a * k as f32 / Q_SHAPINGS as f32;
+            let swing = (1.0 + shaping) * self.shaped_chip_volts(shaping, room);
+            if swing > best.1 {
+                best = (shaping, swing);
+            }
+        }
+        best.0
     }
 
     /// The q winding from the fits of its stage (`first_order` the first-order fit's). The
@@ -1677,6 +1751,8 @@ impl Commissioning {
         self.q_fit_twice = FreeRotorFit::high_passed_twice();
         self.noise_matching = None;
         self.finishing = 0;
+        self.q_shaping = None;
+        self.last_sign = 0.0;
         if stage == Stage::InductanceD {
             // The d stage's q loop starts from nothing (its integrator held the passes'
             // back-EMF, in the vector's frame).
