@@ -77,11 +77,12 @@ fn a_whole_commissioning_gives_the_same_bits_on_a_cortex_m4() {
 /// Whole commissionings of drawn motors whose sequences take the paths the default motor's
 /// does not (the q fit's noise matching on a slow winding under the sensors' noise; the
 /// probe's retry, the light ramp, the q stage turning the rotor and the second differences'
-/// fit on a light rotor): the same bits on the Cortex-M4, and no tick of any commissioning
-/// (the default motor's too) over 5 000 instructions, under half a 16 kHz tick's cycles on
-/// the G474 at 170 MHz (the stage ends' fits and the noise matching's bisection spread over
-/// ticks, sines and cosines in f32 only, the encoder's angle in 32-bit arithmetic: the step
-/// analysis's sines and cosines in `libm`'s f64 kernels took 253 000 instructions in one tick).
+/// fit on a light rotor; the shaped q chips of a winding of 1 600 ticks): the same bits on the
+/// Cortex-M4, and no tick of any commissioning (the default motor's too) over 5 000
+/// instructions, under half a 16 kHz tick's cycles on the G474 at 170 MHz (the stage ends'
+/// fits and the noise matching's bisection spread over ticks, sines and cosines in f32 only,
+/// the encoder's angle in 32-bit arithmetic: the step analysis's sines and cosines in `libm`'s
+/// f64 kernels took 253 000 instructions in one tick).
 #[test]
 fn drawn_motors_commission_with_the_same_bits_and_no_tick_over_5000_instructions_on_a_cortex_m4() {
     for (name, rec, status) in commissioning_recordings().unwrap() {

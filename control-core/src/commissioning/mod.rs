@@ -1642,15 +1642,18 @@ impl Commissioning {
     /// `b·(1 + |a − β|/(1 − a))` whatever the record (`V/R` unshaped, `b·V` at `β = a`, where
     /// the current follows the chips themselves).
     fn shaped_chip_volts(&self, shaping: f32, room: f32) -> f32 {
-        let x = self.resistance * self.settings.tick_period / self.ld;
-        // 1 − a to f32's precision on a winding of millions of ticks.
-        let decay = -libm::expm1f(-x);
-        let a = 1.0 - decay;
-        let b = decay / self.resistance;
-        let d = a - shaping;
-        let spread = libm::sqrtf(1.0 + d * d / (decay * (1.0 + a)));
-        let peak_per_volt = (3.5 * b * spread).min(b * (1.0 + libm::fabsf(d) / decay));
+        let w = self.sampled_winding();
+        let d = w.pole - shaping;
+        let spread = crate::square_root::sqrt(1.0 + d * d / (w.decay * (1.0 + w.pole)));
+        let peak_per_volt = (3.5 * w.gain * spread).min(w.gain * (1.0 + libm::fabsf(d) / w.decay));
         (Q_CHIP_PEAK * self.test_current / peak_per_volt).min(room / (1.0 + shaping))
+    }
+
+    /// The d winding sampled every tick: its pole `a = e^{−RT/L}`, `1 − a` (to f32's precision
+    /// on a winding of millions of ticks) and its gain `b = (1 − a)/R`.
+    fn sampled_winding(&self) -> SampledWinding {
+        let decay = -libm::expm1f(-self.resistance * self.settings.tick_period / self.ld);
+        SampledWinding { pole: 1.0 - decay, decay, gain: decay / self.resistance }
     }
 
     /// The q chips' shaping `β` on a winding slower than [`Q_SHAPED_TICKS`] (0 elsewhere):
@@ -1670,7 +1673,9 @@ impl Commissioning {
             return 0.0;
         }
         let room = 0.9 * self.room_beside(bus_voltage, self.held_low);
-        let a = libm::expf(-self.resistance * tick / self.ld);
+        let a = self.sampled_winding().pole;
+        // Once, on the stage's first chip: sixteen sizes of a few tens of instructions each on
+        // the Cortex-M4F (the square root its instruction).
         let mut best = (0.0f32, 0.0f32);
         for k in 1..=Q_SHAPINGS {
             let shaping = a * k as f32 / Q_SHAPINGS as f32;
@@ -1811,6 +1816,14 @@ impl Commissioning {
             CHIP_SETTLING_TICKS
         }
     }
+}
+
+/// A winding sampled every tick (`Commissioning::sampled_winding`).
+#[derive(Clone, Copy, Debug)]
+struct SampledWinding {
+    pole: f32,
+    decay: f32,
+    gain: f32,
 }
 
 /// The inverter's dead-time voltage per phase (V) from what a hold's voltage on the vector at
