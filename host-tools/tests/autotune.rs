@@ -89,16 +89,17 @@ fn autotune_tunes_a_machine_it_does_not_ship_and_the_true_plant_keeps_the_margin
     }
     let j: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
     // The step measured on the twin is the predicted one: overshoot within 5 points, the
-    // waveform within 5 % of the step (RMS over the 150 ms followed; here a loop that lifts the
-    // anti-resonance's dip with its integrator, whose tail rings for a hundred milliseconds:
-    // the settling time, when a noisy estimate last leaves ±2 %, moves by a period of that
-    // ring with a cycle more or less inside the band, and is not compared), and the prediction
-    // settles within the span.
+    // waveform within 5 % of the step (RMS over the 150 ms followed), and both settled within
+    // them, the measured one within half as long again as the prediction (here a loop that
+    // lifts the anti-resonance's dip with its integrator, whose tail rings for a hundred
+    // milliseconds: the settling time, when a noisy estimate last leaves ±2 %, moves by a
+    // period of that ring with a cycle more or less inside the band).
     let r = &j["responses"];
     let f = |a: &str, b: &str| r[a][b].as_f64().unwrap_or(f64::NAN);
     assert!((f("measured_step", "overshoot_percent") - f("tuned", "overshoot_percent")).abs() <= 5.0, "{r}");
     assert!(f("measured_step", "rms_difference_from_predicted") <= 0.05, "{r}");
-    assert!(f("tuned", "settling_time_s") < 0.15, "{r}");
+    let (settle, predicted) = (f("measured_step", "settling_time_s"), f("tuned", "settling_time_s"));
+    assert!(predicted < 0.15 && settle <= 1.5 * predicted, "{r}");
     let config = configuration(&parameters).unwrap();
     let truth = Mechanics::of_plant(&config.plant);
     let fitted: Mechanics = serde_json::from_value(j["calibration"]["mechanics"].clone()).unwrap();

@@ -428,6 +428,9 @@ const Q_CHIP_PEAK: f32 = 0.65;
 /// shaped (`q_shaping`), over this many shapings tried.
 const Q_SHAPED_TICKS: f32 = 256.0;
 const Q_SHAPINGS: u32 = 16;
+// The turned q run's chips are sized unshaped (`turning_bias`): no winding it runs on is
+// shaped.
+const _: () = assert!(Q_TURNING_TICKS < Q_SHAPED_TICKS);
 /// On a winding faster than a tick, the first-order fit's resistance this far off the holds'
 /// (a share) says the rotor's motion shows in the q stage, and the second differences' fit is
 /// taken if its own resistance lies within [`DIFFERENCES_AGREEMENT`] of the holds' (`q_winding`).
@@ -1144,7 +1147,9 @@ impl Commissioning {
                         }
                         (Stage::InductanceD, _) => {
                             // (The q stage starts here, and this tick's output is still the d
-                            // stage's: a d chip, the first of the q stage's sequence.)
+                            // stage's: a d chip, the first of the q stage's sequence, whose
+                            // sign the q stage's first chip is shaped against; within the room
+                            // and the settling ticks.)
                             // The holds read again without the swing's back-EMF, for the q
                             // stage's dead time and resistance (the flux linkage the passes
                             // give with `L_q = L_d`; where that or the resistance is not found,
@@ -1627,7 +1632,7 @@ impl Commissioning {
         let room = 0.9 * self.room_beside(bus_voltage, self.held_low);
         let shaping = self.q_shaping.unwrap_or(0.0);
         if shaping > 0.0 {
-            return self.shaped_chip_volts(shaping, room);
+            return self.shaped_chip_volts(self.sampled_winding(), shaping, room);
         }
         let x = self.resistance * self.settings.tick_period / self.ld;
         let peak_per_volt = crate::limit(3.5 * libm::sqrtf(libm::tanhf(0.5 * x)), 0.0, 1.0) / self.resistance;
@@ -1641,8 +1646,7 @@ impl Commissioning {
     /// `b·√(1 + (a − β)²/(1 − a²))` per volt, within 3.5 of them over a record, and within
     /// `b·(1 + |a − β|/(1 − a))` whatever the record (`V/R` unshaped, `b·V` at `β = a`, where
     /// the current follows the chips themselves).
-    fn shaped_chip_volts(&self, shaping: f32, room: f32) -> f32 {
-        let w = self.sampled_winding();
+    fn shaped_chip_volts(&self, w: SampledWinding, shaping: f32, room: f32) -> f32 {
         let d = w.pole - shaping;
         let spread = crate::square_root::sqrt(1.0 + d * d / (w.decay * (1.0 + w.pole)));
         let peak_per_volt = (3.5 * w.gain * spread).min(w.gain * (1.0 + libm::fabsf(d) / w.decay));
@@ -1664,27 +1668,24 @@ impl Commissioning {
     /// frequencies down and leaves their high ones (at `β` = `a`, the winding's pole, the
     /// current follows the chips themselves, its random walk gone): for the same peak the
     /// chips may be many times larger, up to the room the held d voltage leaves. Of
-    /// [`Q_SHAPINGS`] shapings from none to `a`, the one whose chips swing the voltage most
-    /// from tick to tick (`(1 + β)·V`); the low frequencies keep what the largest of them
-    /// leaves, the winding's resistance and the rotor's motion show there.
+    /// [`Q_SHAPINGS`] shapings from none to `a`, the chips' largest swing from tick to tick
+    /// (`(1 + β)·V`) is found, and the least shaping whose swing lies within a ten-thousandth
+    /// of it is taken: where the room limits the chips many reach it, and the least keeps the
+    /// most of the chips' low frequencies, where the winding's resistance and the rotor's
+    /// motion show.
     fn q_shaping(&self, bus_voltage: f32) -> f32 {
         let tick = self.settings.tick_period;
         if !(self.ld > Q_SHAPED_TICKS * self.resistance * tick) {
             return 0.0;
         }
         let room = 0.9 * self.room_beside(bus_voltage, self.held_low);
-        let a = self.sampled_winding().pole;
-        // Once, on the stage's first chip: sixteen sizes of a few tens of instructions each on
-        // the Cortex-M4F (the square root its instruction).
-        let mut best = (0.0f32, 0.0f32);
-        for k in 1..=Q_SHAPINGS {
-            let shaping = a * k as f32 / Q_SHAPINGS as f32;
-            let swing = (1.0 + shaping) * self.shaped_chip_volts(shaping, room);
-            if swing > best.1 {
-                best = (shaping, swing);
-            }
-        }
-        best.0
+        let w = self.sampled_winding();
+        // Once, on the stage's first chip: thirty-two sizes of a few tens of instructions each
+        // on the Cortex-M4F (the square root its instruction).
+        let shapings = (1..=Q_SHAPINGS).map(|k| w.pole * k as f32 / Q_SHAPINGS as f32);
+        let swing = |shaping: f32| (1.0 + shaping) * self.shaped_chip_volts(w, shaping, room);
+        let largest = shapings.clone().map(swing).fold(0.0f32, f32::max);
+        shapings.clone().find(|&shaping| swing(shaping) >= (1.0 - 1e-4) * largest).unwrap_or(0.0)
     }
 
     /// The q winding from the fits of its stage (`first_order` the first-order fit's). The

@@ -196,28 +196,37 @@ mod tests {
         }
     }
 
-    /// A measured step on a finer grid than the prediction's: the prediction is interpolated
-    /// at the measured times (a ramp's own samples give no difference), an offset of 0.1 of
-    /// the step reads 0.1, the samples past the prediction's span do not count, and an
-    /// unstable prediction gives NaN.
+    /// A measured step on a finer grid than the prediction's (a parabola sampled every 10 ms):
+    /// the prediction is interpolated between its samples at the measured times (half-way
+    /// between two samples, their mean), an offset of 0.1 of the step reads 0.1, the samples
+    /// past the prediction's span do not count, and an unstable prediction, one of a single
+    /// sample or none within its span give NaN.
     #[test]
     fn the_measured_step_is_compared_with_the_prediction_at_its_own_samples() {
-        let predicted = prediction((0..11).map(|k| k as f64 * 0.01).collect(), (0..11).map(|k| k as f64).collect());
-        let measured = |offset: f64| {
-            let time: Vec<f64> = (0..=40).map(|k| k as f64 * 0.003).collect();
-            let response = time.iter().map(|t| t * 100.0 + if *t <= 0.1 { offset } else { 50.0 }).collect();
-            MeasuredStep { time, response, overshoot_percent: 0.0, settling_time_s: 0.0, drive_time_s: 0.0 }
+        let predicted =
+            prediction((0..11).map(|k| k as f64 * 0.01).collect(), (0..11).map(|k| (k * k) as f64).collect());
+        // Between samples k and k + 1 the interpolated prediction is k² + (2k + 1)·share.
+        let interpolated = |t: f64| {
+            let k = ((t / 0.01).floor() as usize).min(9);
+            let share = t / 0.01 - k as f64;
+            (k * k) as f64 + (2 * k + 1) as f64 * share
         };
-        let of = |offset: f64, stable: bool| {
-            Responses {
-                tuned: StepPrediction { stable, ..predicted.clone() },
-                before: predicted.clone(),
-                measured: measured(offset),
-            }
-            .step_difference()
+        let measured = |offset: f64, times: Vec<f64>| {
+            let response =
+                times.iter().map(|&t| if t <= 0.1 + 1e-12 { interpolated(t) + offset } else { 1e3 }).collect();
+            MeasuredStep { time: times, response, overshoot_percent: 0.0, settling_time_s: 0.0, drive_time_s: 0.0 }
         };
-        assert!(of(0.0, true) < 1e-9, "{}", of(0.0, true));
-        assert!((of(0.1, true) - 0.1).abs() < 1e-9, "{}", of(0.1, true));
-        assert!(of(0.0, false).is_nan());
+        let fine: Vec<f64> = (0..=40).map(|k| k as f64 * 0.003).collect();
+        let of = |tuned: &StepPrediction, measured: MeasuredStep| {
+            Responses { tuned: tuned.clone(), before: predicted.clone(), measured }.step_difference()
+        };
+        assert!(of(&predicted, measured(0.0, fine.clone())) < 1e-9);
+        assert!((of(&predicted, measured(0.1, fine.clone())) - 0.1).abs() < 1e-9);
+        // Half-way between samples 3 and 4 (9 and 16): 12.5.
+        let half_way = MeasuredStep { response: vec![12.5], ..measured(0.0, vec![0.035]) };
+        assert!(of(&predicted, half_way) < 1e-9);
+        assert!(of(&StepPrediction { stable: false, ..predicted.clone() }, measured(0.0, fine.clone())).is_nan());
+        assert!(of(&prediction(vec![0.0], vec![0.0]), measured(0.0, fine.clone())).is_nan());
+        assert!(of(&predicted, measured(0.0, vec![0.2, 0.3])).is_nan());
     }
 }
