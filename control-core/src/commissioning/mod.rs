@@ -1113,12 +1113,11 @@ impl Commissioning {
                 self.dead_time_shape = if stage == Stage::InductanceD { unit.d } else { unit.q };
                 self.dead_time_along_axis = self.dead_time * self.dead_time_shape;
                 self.last_current = Some(axis_current);
-                let searching = self.noise_matching.is_none_or(|m| m.result().is_none());
                 if self.ticks >= chips_end
                     && stage == Stage::InductanceQ
                     && self.finishing == 0
                     && !self.q_may_turn()
-                    && searching
+                    && self.noise_matching.is_none_or(|m| m.result().is_none())
                 {
                     // A slow q winding's noise matching, one fit's solve a tick (the winding's
                     // choice on the tick after the last): the d current held, no q voltage.
@@ -1348,6 +1347,13 @@ impl Commissioning {
         libm::sqrtf((limit * limit - d * d).max(0.0))
     }
 
+    /// Nine tenths of the room beside the held d voltage (V): what the q stage's chips and
+    /// the ticks between the inductance stages take on the q axis, the vector never scaled
+    /// down.
+    fn room_beside_held(&self, bus_voltage: f32) -> f32 {
+        0.9 * self.room_beside(bus_voltage, self.held_low)
+    }
+
     /// The vector's turn under a current loop designed from the resistance and the probe's
     /// inductance (`start_current_loop`), its integrators starting from the held voltage.
     fn start_alignment(&mut self) {
@@ -1399,11 +1405,12 @@ impl Commissioning {
             w.voltage - psi * change / w.seconds
         };
         let [high, low] = &self.hold_windows;
-        let r = (voltage(high) - voltage(low)) / (high.current - low.current);
+        let high_voltage = voltage(high);
+        let r = (high_voltage - voltage(low)) / (high.current - low.current);
         if !resistance_in_range(r) {
             return Err(CommissioningFault::OutOfRange { quantity: MeasuredQuantity::Resistance, value: r });
         }
-        Ok((r, dead_time_of_hold(voltage(high) - r * high.current, self.settings.max_voltage)))
+        Ok((r, dead_time_of_hold(high_voltage - r * high.current, self.settings.max_voltage)))
     }
 
     /// The voltage (vector's frame, V) that makes up the inverter's dead-time error for a
@@ -1557,7 +1564,7 @@ impl Commissioning {
     fn hold_between(&mut self, stage: Stage, q_current: f32, bus_voltage: f32) -> Option<AlphaBeta> {
         self.voltage = self.held_low;
         let q_voltage = if stage == Stage::InductanceD {
-            let room = 0.9 * self.room_beside(bus_voltage, self.voltage);
+            let room = self.room_beside_held(bus_voltage);
             self.current_pi.q.update(-q_current, room.min(self.current_pi.limit)).value
         } else {
             0.0
@@ -1626,10 +1633,11 @@ impl Commissioning {
     /// stays within 3.5 of them over a record, and within `V/R` whatever the record. Within
     /// nine tenths of the voltage the held d voltage leaves (the vector is never scaled down,
     /// which would scale the fitted chips with it).
+    ///
     /// Shaped chips (`q_shaping`: each less `β` times the one before) swing the voltage by up
     /// to `(1 + β)·V`, which stays within that room.
     fn q_chip_volts(&self, bus_voltage: f32) -> f32 {
-        let room = 0.9 * self.room_beside(bus_voltage, self.held_low);
+        let room = self.room_beside_held(bus_voltage);
         let shaping = self.q_shaping.unwrap_or(0.0);
         if shaping > 0.0 {
             return self.shaped_chip_volts(self.sampled_winding(), shaping, room);
@@ -1678,7 +1686,7 @@ impl Commissioning {
         if !(self.ld > Q_SHAPED_TICKS * self.resistance * tick) {
             return 0.0;
         }
-        let room = 0.9 * self.room_beside(bus_voltage, self.held_low);
+        let room = self.room_beside_held(bus_voltage);
         let w = self.sampled_winding();
         // Once, on the stage's first chip: thirty-two sizes of a few tens of instructions each
         // on the Cortex-M4F (the square root its instruction).
@@ -1799,7 +1807,7 @@ impl Commissioning {
         let flux = psi + 0.5 * self.ld * self.test_current;
         let turning = Q_TURNS * TAU * flux / seconds;
         // The voltage beside the held d voltage takes the constant and the chips.
-        let room = 0.9 * self.room_beside(bus_voltage, self.held_low) / (1.0 + 1.0 / Q_BIAS_OVER_CHIP);
+        let room = self.room_beside_held(bus_voltage) / (1.0 + 1.0 / Q_BIAS_OVER_CHIP);
         let bias = (Q_BIAS_OVER_CHIP * Q_TURNING_CHIP_SHARE * volts).min(turning).min(room);
         if bias >= Q_BIAS_OVER_CHIP * Q_LEAST_CHIP_SHARE * volts && bias.is_finite() {
             bias

@@ -26,10 +26,7 @@ pub fn run() -> bool {
     core_vectors::clock::start();
     // Calibration: a loop of known length (2 instructions per pass).
     let passes: u32 = 100_000;
-    let c0 = core_vectors::clock::ticks();
-    // SAFETY: a register-only countdown loop.
-    unsafe { core::arch::asm!("1:", "subs {0}, {0}, #1", "bne 1b", inout(reg) passes => _, options(nostack)) };
-    let calibration = core_vectors::clock::ticks() - c0;
+    let calibration = core_vectors::clock::calibrate(passes);
     let before = core_vectors::clock::ticks();
     let result = replay(VECTORS);
     let clocks = core_vectors::clock::ticks() - before;

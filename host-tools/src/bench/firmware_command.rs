@@ -58,8 +58,7 @@ fn bench_firmware(args: &FirmwareBenchArgs) -> Result<bool> {
     let longest = |r: &crate::bench::firmware::CoreReplay| {
         r.longest_ticks.first().map(|t| t.instructions).filter(|x| x.is_finite()).unwrap_or(f64::INFINITY)
     };
-    let commissioning_tick =
-        commissionings.iter().map(|(_, _, r)| longest(r)).fold(0.0, |a: f64, b| if b > a { b } else { a });
+    let commissioning_tick = commissionings.iter().map(|(_, _, r)| longest(r)).fold(0.0, f64::max);
     let commissioning_tick_goal = commissioning_tick <= COMMISSIONING_TICK_GOAL;
     pb.set_position(900);
     let off = interrupts_off_on_cortex_m4()?;
