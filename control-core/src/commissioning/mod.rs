@@ -32,7 +32,8 @@
 //!    half the test current: its vector sweeps one way from three quarters of a turn back to
 //!    angle 0 at 0.22 of the test current, and the current then grows on the still vector. The
 //!    loop holds the test current and then half of it, the rotor's swing on the vector damped
-//!    until shortly before the first hold has settled (`swing_damping`); `R = ΔV/ΔI` between
+//!    until shortly before the first hold has settled, or until it is still where it swings back
+//!    through the vector (`swing_damping`); `R = ΔV/ΔI` between
 //!    the two holds (the sensors' offsets and the inverter's dead-time voltage, the same at
 //!    both, drop out). The third phase's current not the other two's mean: a phase is missing.
 //! 3. **Encoder.** The loop holds the test current on a vector that turns slowly forward by a
@@ -581,6 +582,10 @@ pub struct Commissioning {
     dead_time: f32,
     /// The probe's inductance (H): the alignment's current loop is designed with it.
     probe_inductance: f32,
+    /// The probe's resistance (Ω), as its fit gave it (the loop's design may take less).
+    probe_resistance: f32,
+    /// The first hold's d voltage and current summed while its damping runs.
+    swing_hold: (f32, f32),
     /// The current loop of the alignment (in the vector's frame) and the damping of the
     /// rotor's swing on its vector (the q current it asks for).
     current_pi: DqPi,
@@ -688,6 +693,8 @@ impl Commissioning {
             lq: 0.0,
             dead_time: 0.0,
             probe_inductance: 0.0,
+            probe_resistance: 0.0,
+            swing_hold: (0.0, 0.0),
             current_pi: DqPi::default(),
             swing: SwingDamping::default(),
             chips: match MSequence::new(PROBE_DEGREE) {
@@ -759,7 +766,15 @@ impl Commissioning {
         let raw = count.rem_euclid(cpr as i32) as u32;
         let corrected = if a.reversed { (cpr - raw) % cpr } else { raw };
         let turns = ((corrected * a.pole_pairs) % cpr) as f32 / cpr as f32;
-        TAU * turns + a.offset
+        // The middle of the count (`encoder_alignment`: a count n stands for [n, n + 1) in the
+        // counter's own direction, and the reversed counter's corrected count is its interval's
+        // upper end): the rotor lies within half a count of it. A frame that follows the rotor
+        // on a count's end sits up to a count behind or ahead of it, always the same way: its
+        // d current pulls the rotor over that end, where the frame steps a count on, and on
+        // little friction the rotor runs as a stepper motor does (30 electrical turns for a
+        // 12-pole-pair rotor on 1 024 counts, 0.7 % friction, over the d chips and the step).
+        let half = if a.reversed { -0.5 } else { 0.5 };
+        TAU * (turns + half * a.pole_pairs as f32 / cpr as f32) + a.offset
     }
 
     /// One tick: the readings in, the stator-frame voltage for the next tick out (`None`: the
@@ -864,7 +879,7 @@ impl Commissioning {
                                 value: w.resistance,
                             });
                         }
-                        self.probe_inductance = w.inductance;
+                        (self.probe_inductance, self.probe_resistance) = (w.inductance, w.resistance);
                         // A light rotor: the chips turned it, as far as a retry (on the first
                         // axis) or a short time constant (`sin²` of its angle from this one
                         // lengthens it) shows.
@@ -950,7 +965,26 @@ impl Commissioning {
                 // the averaging run undamped.
                 let damping = self.swing.reference(current.q, 0.0, s.tick_period);
                 let damped = stage == Stage::HoldHigh && self.ticks + self.ticks_of(RELEASE_S) < hold - averaged;
-                q_voltage = self.current_pi.q(if damped { damping } else { 0.0 } - current.q);
+                // A rotor that swings back through the vector (a heavy rotor on a weak magnet
+                // with little friction, whose winding damps it far under critical) is damped
+                // until the wait sees it still, and more strongly where it swings back under
+                // the damping (`SwingDamping::raise`); one that creeps to the vector is
+                // released as above, and damped again as the winding damps it where it then
+                // swings back.
+                let waiting = stage == Stage::HoldHigh && self.ticks <= hold - averaged;
+                if waiting {
+                    self.swing.observe(i.encoder_count, damped || self.swing.reversed());
+                }
+                if damped {
+                    self.swing_hold.0 += self.voltage;
+                    self.swing_hold.1 += current.d;
+                } else if waiting {
+                    // The swing reversed under the winding's damping: raised from here on.
+                    let hold_resistance = self.swing_hold.0 / self.swing_hold.1;
+                    self.swing.raise(self.probe_resistance.min(hold_resistance));
+                }
+                let swinging = waiting && self.swing.reversed();
+                q_voltage = self.current_pi.q(if damped || swinging { damping } else { 0.0 } - current.q);
                 // The back-EMF of a rotor still swinging on the vector would bias the voltage:
                 // the first hold waits for it to stop before it averages.
                 self.count_still(i.encoder_count);

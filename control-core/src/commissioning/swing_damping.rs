@@ -16,7 +16,11 @@
 //! rotor's back-EMF would bias the holds. So the damping stops shortly before the first hold
 //! waits for a still rotor: a rotor still creeping (held off the vector by the damping's own
 //! current) then takes the rest of the way at once, which the wait sees, and friction or the
-//! damping before has left it little to swing with. The passes that turn the vector start from a
+//! damping before has left it little to swing with. A winding's damping can also be far under
+//! critical (a heavy rotor on a weak magnet: a tenth of critical on a 4 Hz swing), and with
+//! little friction such a rotor swings back through the vector for seconds: where the encoder
+//! sees the swing turn back (by [`REVERSAL_COUNTS`]) before the wait ends, the damping goes on
+//! until the wait sees the rotor still. A creeping rotor does not turn back. The passes that turn the vector start from a
 //! rotor at rest and are not damped: their smooth start and stop excite little swing, and a
 //! damping current's transient as the turn's back-EMF rises would drag the rotor more.
 
@@ -30,6 +34,17 @@ const ESTIMATE_SHARE_OF_LOOP: f32 = 0.2;
 const ESTIMATE_SHARE_OF_WINDING: f32 = 0.5;
 /// The damping current's limit (a share of the test current).
 const CURRENT_SHARE: f32 = 0.4;
+/// A swing reverses where the encoder turns back by this many counts from its last turning
+/// point (a count or two of jitter on a rotor at rest is none).
+const REVERSAL_COUNTS: i32 = 3;
+/// Once raised, the damping's gain over the winding's own doubles at each reversal, up to
+/// this; the resistance it then estimates the back-EMF with is this share of the least of the
+/// probe's and the hold's (`raise`).
+const MOST_GAIN: f32 = 8.0;
+const RAISED_RESISTANCE_SHARE: f32 = 0.9;
+/// The estimate's time constant must be under this share of the swing's half period for the
+/// damping to be raised (a lag of about 10° at the swing).
+const LAG_SHARE: f32 = 0.1;
 
 #[derive(Clone, Copy, Debug, Default)]
 pub(super) struct SwingDamping {
@@ -44,6 +59,19 @@ pub(super) struct SwingDamping {
     /// The low-pass's gain per tick and the filtered back-EMF estimate (V).
     smoothing: f32,
     estimate: f32,
+    /// The swing on the encoder: the count at its last turning point (none before the first
+    /// count), its direction since (±1, 0 before the first move) and the reversals seen.
+    turning_point: Option<i32>,
+    direction: i32,
+    reversals: u32,
+    /// The damping's gain over the winding's own, and the reversal it was raised at.
+    gain: f32,
+    raised_at: u32,
+    /// Ticks since the last reversal (or the first count), and between the last two.
+    since_reversal: u32,
+    half_period: u32,
+    /// Reversals while the damping was on.
+    damped_reversals: u32,
 }
 
 impl SwingDamping {
@@ -56,7 +84,7 @@ impl SwingDamping {
             .min(ESTIMATE_SHARE_OF_WINDING * resistance / inductance);
         // The exact first-order step (stable at any tick).
         let smoothing = 1.0 - libm::expf(-corner * tick);
-        Self { resistance, inductance, limit: CURRENT_SHARE * test_current, smoothing, ..Self::default() }
+        Self { resistance, inductance, limit: CURRENT_SHARE * test_current, smoothing, gain: 1.0, ..Self::default() }
     }
 
     /// The q current to ask for this tick (A) from the q current read now; `turning` (V) is the
@@ -70,12 +98,65 @@ impl SwingDamping {
             - self.resistance * 0.5 * (q_current + previous)
             - self.inductance * (q_current - previous) / tick;
         self.estimate += self.smoothing * (back_emf - self.estimate);
-        let reference = -self.estimate / self.resistance;
+        if self.gain > 1.0 {
+            let doublings = self.reversals.saturating_sub(self.raised_at).min(3) as i32;
+            self.gain = libm::ldexpf(2.0, doublings).min(MOST_GAIN);
+        }
+        let reference = -self.gain * self.estimate / self.resistance;
         // No winding measured (a resistance of 0): no damping.
         if !reference.is_finite() {
             return 0.0;
         }
         crate::limit(reference, -self.limit, self.limit)
+    }
+
+    /// The encoder's count this tick: a reversal where it turns back by [`REVERSAL_COUNTS`]
+    /// from its last turning point.
+    pub(super) fn observe(&mut self, count: i32, damped: bool) {
+        self.since_reversal = self.since_reversal.saturating_add(1);
+        let turning_point = *self.turning_point.get_or_insert(count);
+        let from_turn = count.wrapping_sub(turning_point);
+        if from_turn.signum() == self.direction {
+            // Further the same way: the turning point follows.
+            self.turning_point = Some(count);
+        } else if from_turn.abs() >= REVERSAL_COUNTS {
+            // The first move, or back from the turning point.
+            if self.direction != 0 {
+                self.reversals += 1;
+                self.damped_reversals += damped as u32;
+                self.half_period = self.since_reversal;
+            }
+            self.since_reversal = 0;
+            self.direction = from_turn.signum();
+            self.turning_point = Some(count);
+        }
+    }
+
+    /// Whether the swing has reversed: a rotor that swings through the vector (a heavy rotor
+    /// on a weak magnet with little friction), where one that creeps to it under a damping
+    /// beyond critical does not.
+    pub(super) fn reversed(&self) -> bool {
+        self.reversals > 0
+    }
+
+    /// For a swing that reversed under the winding's own damping (under critical: a rotor that
+    /// only rings once the damping is released, after creeping, is not), a
+    /// damping twice the winding's, doubled at each reversal after (up to [`MOST_GAIN`]),
+    /// estimating the back-EMF with a resistance under `resistance` (the least of the probe's
+    /// and the hold's d voltage over its current, which the inverter's dead time raises). Raised by `g`, the damping takes `g·e/(g·R − (g − 1)·R̂)` for a back-EMF
+    /// `e` on a winding of `R` estimated as `R̂`: where `R̂` is over `R·g/(g − 1)` it feeds the
+    /// swing; under `R`, a little less damping than asked. Nothing where the swing has not
+    /// reversed or the resistance is not a positive number, and where the estimate's low-pass
+    /// lags the swing (its time constant over [`LAG_SHARE`] of the swing's half period: a slow
+    /// winding's, whose corner is under its `R/L`): a damping that lags, raised, drives the
+    /// swing it lags.
+    pub(super) fn raise(&mut self, resistance: f32) {
+        let resistance = RAISED_RESISTANCE_SHARE * resistance;
+        let lags = (self.half_period as f32) * LAG_SHARE * self.smoothing < 1.0;
+        let under_critical = self.damped_reversals > 0;
+        if under_critical && !lags && self.gain == 1.0 && resistance > 0.0 && resistance.is_finite() {
+            (self.resistance, self.gain, self.raised_at) = (resistance, 2.0, self.reversals);
+        }
     }
 
     /// The q voltage asked for on this call (it drives the current between the next reading
@@ -129,5 +210,45 @@ mod tests {
         assert!(undamped > 0.5, "undamped: {undamped}");
         assert!(damped < 1e-3, "damped: {damped}");
         assert!(current < 0.4 * 2.0 * 1.5, "{current} A");
+    }
+
+    /// The encoder's turning points: a jitter of two counts either way is no reversal, a swing
+    /// back by three or more is one. The damping is raised only where the swing reversed
+    /// while it was on (a swing that reverses once released is a creeping rotor's ringing), on
+    /// a positive resistance, a tenth under the one given, and not where the estimate's
+    /// low-pass lags the swing (a slow winding's).
+    #[test]
+    fn a_swing_reverses_by_three_counts_and_is_raised_only_where_it_reversed_under_the_damping() {
+        let tick = 1.0 / 16_000.0;
+        let swing = |d: &mut SwingDamping, damped: bool| {
+            for k in 0..400 {
+                d.observe(k / 10, damped);
+            }
+            for k in 0..400 {
+                d.observe(40 - k / 10, damped);
+            }
+        };
+        let mut d = SwingDamping::new(0.5, 1e-4, 2.0, 1500.0, tick);
+        for c in [0, 1, 2, 1, 0, 2, 1, 0, -1, 0] {
+            d.observe(c, true);
+        }
+        assert!(!d.reversed(), "{d:?}");
+        swing(&mut d, false);
+        assert!(d.reversed());
+        d.raise(0.5);
+        assert_eq!(d.gain, 1.0, "reversed with the damping off: not raised");
+        swing(&mut d, true);
+        for r in [f32::NAN, 0.0, -1.0] {
+            d.raise(r);
+            assert_eq!(d.gain, 1.0, "{r}");
+        }
+        d.raise(0.5);
+        assert_eq!((d.gain, d.resistance), (2.0, 0.45));
+        // A slow winding (0.13 s): its estimate lags a swing of 25 ms half periods.
+        let mut slow = SwingDamping::new(0.06, 8e-3, 2.0, 1500.0, tick);
+        swing(&mut slow, true);
+        swing(&mut slow, true);
+        slow.raise(0.06);
+        assert!(slow.reversed() && slow.gain == 1.0, "{slow:?}");
     }
 }

@@ -15,8 +15,9 @@ use crate::random::XorShift64Star;
 /// (time constant at least a third of a tick), flux linkage 2–100 mWb (at least the armature's
 /// flux at the test current), rotor inertia 2·10⁻⁶–2·10⁻⁴ kg·m² (the rotor's swing on the
 /// commissioning's vector at 4 Hz or more; the rotor's mechanical time constant
-/// `R·J/(1.5·p²·ψ²)` at least `--min-mechanical-time-constant`), any start angle and either encoder direction,
-/// sensor offsets, gain errors, dead time and noise on. Goals: R, Ld, Lq and flux linkage within
+/// `R·J/(1.5·p²·ψ²)` at least `--min-mechanical-time-constant`), Coulomb friction 0.5–5 % of
+/// the test current's torque, any start angle and either encoder direction, sensor offsets,
+/// gain errors, dead time and noise on. Goals: R, Ld, Lq and flux linkage within
 /// 3 %, electrical offset within 1°, direction and pole pairs right every time, current-loop
 /// bandwidth within 10 % of the target and overshoot ≤ 10 %, at most 5 s of drive time, the
 /// rotor within two electrical turns of where it stood and the current within 1.1 times the
@@ -118,8 +119,7 @@ pub fn draw(rng: &mut XorShift64Star, min_mechanical_time_constant: f64) -> Plan
             // A stiff coupling to a light load (a motor on the bench): 1 kHz.
             shaft_stiffness: load_inertia * (std::f64::consts::TAU * 1000.0).powi(2),
             shaft_damping: 2.0 * 0.05 * (load_inertia * load_inertia * (std::f64::consts::TAU * 1000.0).powi(2)).sqrt(),
-            // A twentieth of the test current's torque.
-            motor_coulomb: 0.05 * 1.5 * pole_pairs as f64 * flux_linkage * TEST_CURRENT,
+            motor_coulomb: 0.0,
             motor_viscous: 2e-5,
             load_coulomb: 0.0,
             load_viscous: 0.0,
@@ -134,6 +134,7 @@ pub fn draw(rng: &mut XorShift64Star, min_mechanical_time_constant: f64) -> Plan
             tick: TICK,
             ..PlantParams::default()
         };
+        p.motor_coulomb = friction_share(p.noise_seed) * 1.5 * pole_pairs as f64 * flux_linkage * TEST_CURRENT;
         // Sub-steps enough for the plant's explicit terms.
         while p.validate().is_err() && p.substeps < 64 {
             p.substeps *= 2;
@@ -143,6 +144,19 @@ pub fn draw(rng: &mut XorShift64Star, min_mechanical_time_constant: f64) -> Plan
         }
     }
 }
+
+/// The Coulomb friction's share of the test current's torque, log-uniform from
+/// [`LEAST_FRICTION`] to [`MOST_FRICTION`]: a motor's bearings and seals, from a large motor's
+/// half percent to a small one's few percent. Drawn from the motor's own noise seed, so that
+/// the draw's other values (and motors) stay what they are for a seed.
+fn friction_share(noise_seed: u64) -> f64 {
+    let u = (XorShift64Star::from_seed(noise_seed).next() >> 11) as f64 / (1u64 << 53) as f64;
+    LEAST_FRICTION * (MOST_FRICTION / LEAST_FRICTION).powf(u)
+}
+
+/// The drawn Coulomb friction's range, as shares of the test current's torque.
+pub const LEAST_FRICTION: f64 = 0.005;
+pub const MOST_FRICTION: f64 = 0.05;
 
 /// Motor `motor` of the bench's draw for `seed` (the default least mechanical time constant).
 pub fn drawn_motor(seed: u64, motor: usize) -> PlantParams {
