@@ -63,9 +63,9 @@ fn a_small_draw_commissions_within_the_figures_row_by_row_and_names_each_refusal
 
 /// Motors of the bench's draws on slow windings (7–68 ticks) under light rotors (mechanical
 /// time constants of 10–27 µs) on strong magnets: the q chips' torque turns the rotor, which
-/// sticks and slips on its friction at each reversal. With chips peaking at half the test current these read their q inductance
-/// 3.1–3.7 % off; with chips at 0.65 of it, within 3 %, each commissioning's phase current
-/// within 1.1 times the test current.
+/// sticks and slips on its friction at each reversal. With chips peaking at half the test
+/// current these read their q inductance 3.1–3.7 % off; with chips at 0.65 of it, within 3 %,
+/// each commissioning's phase current within 1.1 times the test current.
 #[test]
 fn light_rotors_on_strong_magnets_with_friction_give_their_q_inductance_within_3_percent() {
     for (seed, motor) in [(14, 55), (23, 56), (26, 59)] {
@@ -128,7 +128,8 @@ fn heavy_rotors_on_weak_magnets_with_little_friction_are_found() {
     for (seed, motor) in [(23, 65), (31, 32)] {
         let r = &commissioned_row(seed, motor);
         let errors: Vec<f64> = r["errors"].as_array().unwrap().iter().map(|v| v.as_f64().unwrap()).collect();
-        assert!(errors.iter().all(|e| *e <= 0.03), "seed {seed} motor {motor}: R, Ld, Lq, flux {errors:?} ({r})");
+        let at = format!("seed {seed} motor {motor}");
+        assert!(errors.iter().all(|e| *e <= 0.03), "{at}: R, Ld, Lq, flux {errors:?} ({r})");
         assert!(r["offset_deg"].as_f64().unwrap() <= 1.0, "seed {seed} motor {motor}: offset ({r})");
         assert!(r["found_right"] == true, "seed {seed} motor {motor}: direction or pole pairs ({r})");
     }

@@ -772,7 +772,9 @@ impl Commissioning {
         // on a count's end sits up to a count behind or ahead of it, always the same way: its
         // d current pulls the rotor over that end, where the frame steps a count on, and on
         // little friction the rotor runs as a stepper motor does (30 electrical turns for a
-        // 12-pole-pair rotor on 1 024 counts, 0.7 % friction, over the d chips and the step).
+        // 12-pole-pair rotor on 1 024 counts, 0.65 % friction, over the d chips and the step).
+        // Every frame the sequence reads from the encoder takes it (the d chips, the current
+        // step, the q stage's held and turned frames, the holds read again, the passes' lag).
         let half = if a.reversed { -0.5 } else { 0.5 };
         TAU * (turns + half * a.pole_pairs as f32 / cpr as f32) + a.offset
     }
@@ -801,8 +803,8 @@ impl Commissioning {
         // swings would turn the held d current into the measured q current), unless the stage
         // turns the rotor (`turning_bias`): then the rotor's, read each tick.
         // The d-axis chips and the current step run on the rotor's own frame, read from the
-        // encoder each tick (as the drive's loop does): a rotor that drifts or swings (a load on
-        // a soft shaft, no friction) then takes no torque from the d current.
+        // encoder each tick at the middle of its count (`rotor_angle`): a rotor that drifts or
+        // swings (a load on a soft shaft, no friction) then takes no torque from the d current.
         if matches!(stage, Stage::CurrentStep | Stage::InductanceD)
             || (stage == Stage::InductanceQ && self.q_bias > 0.0)
         {

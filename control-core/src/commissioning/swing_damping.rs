@@ -20,7 +20,10 @@
 //! critical (a heavy rotor on a weak magnet: a tenth of critical on a 4 Hz swing), and with
 //! little friction such a rotor swings back through the vector for seconds: where the encoder
 //! sees the swing turn back (by [`REVERSAL_COUNTS`]) before the wait ends, the damping goes on
-//! until the wait sees the rotor still. A creeping rotor does not turn back. The passes that turn the vector start from a
+//! until the wait sees the rotor still, raised where it turns back under the damping
+//! ([`SwingDamping::raise`]). A creeping rotor does not turn back while it creeps; released, it
+//! may ring on its friction, and is then damped as its winding damps it (and raised where it
+//! turns back again under that damping). The passes that turn the vector start from a
 //! rotor at rest and are not damped: their smooth start and stop excite little swing, and a
 //! damping current's transient as the turn's back-EMF rises would drag the rotor more.
 
@@ -43,7 +46,7 @@ const REVERSAL_COUNTS: i32 = 3;
 const MOST_GAIN: f32 = 8.0;
 const RAISED_RESISTANCE_SHARE: f32 = 0.9;
 /// The estimate's time constant must be under this share of the swing's half period for the
-/// damping to be raised (a lag of about 10° at the swing).
+/// damping to be raised (a lag of at most about 17° at the swing).
 const LAG_SHARE: f32 = 0.1;
 
 #[derive(Clone, Copy, Debug, Default)]
@@ -67,7 +70,7 @@ pub(super) struct SwingDamping {
     /// The damping's gain over the winding's own, and the reversal it was raised at.
     gain: f32,
     raised_at: u32,
-    /// Ticks since the last reversal (or the first count), and between the last two.
+    /// Ticks since the last reversal (or the first move), and between the last two.
     since_reversal: u32,
     half_period: u32,
     /// Reversals while the damping was on.
@@ -139,13 +142,15 @@ impl SwingDamping {
         self.reversals > 0
     }
 
-    /// For a swing that reversed under the winding's own damping (under critical: a rotor that
-    /// only rings once the damping is released, after creeping, is not), a
-    /// damping twice the winding's, doubled at each reversal after (up to [`MOST_GAIN`]),
-    /// estimating the back-EMF with a resistance under `resistance` (the least of the probe's
-    /// and the hold's d voltage over its current, which the inverter's dead time raises). Raised by `g`, the damping takes `g·e/(g·R − (g − 1)·R̂)` for a back-EMF
-    /// `e` on a winding of `R` estimated as `R̂`: where `R̂` is over `R·g/(g − 1)` it feeds the
-    /// swing; under `R`, a little less damping than asked. Nothing where the swing has not
+    /// For a swing that reversed under the winding's own damping (under critical), a damping
+    /// asked at twice the winding's, doubled at each reversal after (up to [`MOST_GAIN`]),
+    /// estimating the back-EMF with a resistance [`RAISED_RESISTANCE_SHARE`] of `resistance`
+    /// (the least of the probe's and the hold's d voltage over its current, which the
+    /// inverter's dead time raises). Asked at `g`, the damping takes `g·e/(g·R − (g − 1)·R̂)`
+    /// of a back-EMF `e` on a winding of `R` estimated as `R̂`: where `R̂` is over
+    /// `R·g/(g − 1)` it feeds the swing (at `g` = 8 with `R̂` = 0.9 of the resistance given,
+    /// where that is over 1.27 times the winding's); at `R̂ = 0.9·R`, 1.8, 3.1 and 4.7 times the
+    /// winding's damping for `g` = 2, 4 and 8. Nothing where the swing has not
     /// reversed or the resistance is not a positive number, and where the estimate's low-pass
     /// lags the swing (its time constant over [`LAG_SHARE`] of the swing's half period: a slow
     /// winding's, whose corner is under its `R/L`): a damping that lags, raised, drives the
