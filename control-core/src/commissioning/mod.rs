@@ -983,7 +983,7 @@ impl Commissioning {
                 } else if waiting {
                     // The swing reversed under the winding's damping: raised from here on.
                     let hold_resistance = self.swing_hold.0 / self.swing_hold.1;
-                    self.swing.raise(self.probe_resistance.min(hold_resistance));
+                    self.swing.raise(self.probe_resistance, hold_resistance);
                 }
                 let swinging = waiting && self.swing.reversed();
                 q_voltage = self.current_pi.q(if damped || swinging { damping } else { 0.0 } - current.q);

@@ -45,6 +45,9 @@ const REVERSAL_COUNTS: i32 = 3;
 /// probe's and the hold's (`raise`).
 const MOST_GAIN: f32 = 8.0;
 const RAISED_RESISTANCE_SHARE: f32 = 0.9;
+/// The probe's and the hold's resistances must agree within this factor for the damping to be
+/// raised.
+const RESISTANCES_AGREE: f32 = 1.5;
 /// The estimate's time constant must be under this share of the swing's half period for the
 /// damping to be raised (a lag of at most about 17° at the swing).
 const LAG_SHARE: f32 = 0.1;
@@ -144,9 +147,12 @@ impl SwingDamping {
 
     /// For a swing that reversed under the winding's own damping (under critical), a damping
     /// asked at twice the winding's, doubled at each reversal after (up to [`MOST_GAIN`]),
-    /// estimating the back-EMF with a resistance [`RAISED_RESISTANCE_SHARE`] of `resistance`
-    /// (the least of the probe's and the hold's d voltage over its current, which the
-    /// inverter's dead time raises). Asked at `g`, the damping takes `g·e/(g·R − (g − 1)·R̂)`
+    /// estimating the back-EMF with a resistance [`RAISED_RESISTANCE_SHARE`] of the least of
+    /// the probe's and the hold's (its d voltage over its current, which the inverter's dead
+    /// time raises), where the two agree within [`RESISTANCES_AGREE`]: where they do not, one of
+    /// them is far off (a probe a jittering rotor misled, a dead time large beside a small
+    /// resistance's voltage), and a damping raised on it could feed the swing, or ring on its
+    /// own loop through the estimate (`R − R̂` of the current it asks for). Asked at `g`, the damping takes `g·e/(g·R − (g − 1)·R̂)`
     /// of a back-EMF `e` on a winding of `R` estimated as `R̂`: where `R̂` is over
     /// `R·g/(g − 1)` it feeds the swing (at `g` = 8 with `R̂` = 0.9 of the resistance given,
     /// where that is over 1.27 times the winding's); at `R̂ = 0.9·R`, 1.8, 3.1 and 4.7 times the
@@ -155,8 +161,12 @@ impl SwingDamping {
     /// lags the swing (its time constant over [`LAG_SHARE`] of the swing's half period: a slow
     /// winding's, whose corner is under its `R/L`): a damping that lags, raised, drives the
     /// swing it lags.
-    pub(super) fn raise(&mut self, resistance: f32) {
-        let resistance = RAISED_RESISTANCE_SHARE * resistance;
+    pub(super) fn raise(&mut self, probe: f32, hold: f32) {
+        let readings = probe > 0.0 && hold > 0.0 && probe.is_finite() && hold.is_finite();
+        if !(readings && probe.max(hold) <= RESISTANCES_AGREE * probe.min(hold)) {
+            return;
+        }
+        let resistance = RAISED_RESISTANCE_SHARE * probe.min(hold);
         let lags = (self.half_period as f32) * LAG_SHARE * self.smoothing < 1.0;
         let under_critical = self.damped_reversals > 0;
         if under_critical && !lags && self.gain == 1.0 && resistance > 0.0 && resistance.is_finite() {
@@ -220,8 +230,8 @@ mod tests {
     /// The encoder's turning points: a jitter of two counts either way is no reversal, a swing
     /// back by three or more is one. The damping is raised only where the swing reversed
     /// while it was on (a swing that reverses once released is a creeping rotor's ringing), on
-    /// a positive resistance, a tenth under the one given, and not where the estimate's
-    /// low-pass lags the swing (a slow winding's).
+    /// a tenth under the least of two positive resistances that agree within a factor of 1.5,
+    /// and not where the estimate's low-pass lags the swing (a slow winding's).
     #[test]
     fn a_swing_reverses_by_three_counts_and_is_raised_only_where_it_reversed_under_the_damping() {
         let tick = 1.0 / 16_000.0;
@@ -240,20 +250,20 @@ mod tests {
         assert!(!d.reversed(), "{d:?}");
         swing(&mut d, false);
         assert!(d.reversed());
-        d.raise(0.5);
+        d.raise(0.5, 0.5);
         assert_eq!(d.gain, 1.0, "reversed with the damping off: not raised");
         swing(&mut d, true);
-        for r in [f32::NAN, 0.0, -1.0] {
-            d.raise(r);
-            assert_eq!(d.gain, 1.0, "{r}");
+        for (probe, hold) in [(f32::NAN, 0.5), (0.5, f32::NAN), (0.0, 0.5), (0.5, -1.0), (0.5, 0.76), (1.6, 1.0)] {
+            d.raise(probe, hold);
+            assert_eq!(d.gain, 1.0, "{probe} {hold}");
         }
-        d.raise(0.5);
+        d.raise(0.55, 0.5);
         assert_eq!((d.gain, d.resistance), (2.0, 0.45));
         // A slow winding (0.13 s): its estimate lags a swing of 25 ms half periods.
         let mut slow = SwingDamping::new(0.06, 8e-3, 2.0, 1500.0, tick);
         swing(&mut slow, true);
         swing(&mut slow, true);
-        slow.raise(0.06);
+        slow.raise(0.06, 0.06);
         assert!(slow.reversed() && slow.gain == 1.0, "{slow:?}");
     }
 }
