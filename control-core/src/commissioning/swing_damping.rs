@@ -39,7 +39,7 @@ const ESTIMATE_SHARE_OF_WINDING: f32 = 0.5;
 const CURRENT_SHARE: f32 = 0.4;
 /// A swing reverses where the encoder turns back by this many counts from its last turning
 /// point (a count or two of jitter on a rotor at rest is none).
-const REVERSAL_COUNTS: i32 = 3;
+const REVERSAL_COUNTS: u32 = 3;
 /// Once raised, the damping's gain over the winding's own doubles at each reversal, up to
 /// this; the resistance it then estimates the back-EMF with is this share of the least of the
 /// probe's and the hold's (`raise`).
@@ -125,7 +125,7 @@ impl SwingDamping {
         if from_turn.signum() == self.direction {
             // Further the same way: the turning point follows.
             self.turning_point = Some(count);
-        } else if from_turn.abs() >= REVERSAL_COUNTS {
+        } else if from_turn.unsigned_abs() >= REVERSAL_COUNTS {
             // The first move, or back from the turning point.
             if self.direction != 0 {
                 self.reversals += 1;
@@ -152,12 +152,13 @@ impl SwingDamping {
     /// time raises), where the two agree within [`RESISTANCES_AGREE`]: where they do not, one of
     /// them is far off (a probe a jittering rotor misled, a dead time large beside a small
     /// resistance's voltage), and a damping raised on it could feed the swing, or ring on its
-    /// own loop through the estimate (`R − R̂` of the current it asks for). Asked at `g`, the damping takes `g·e/(g·R − (g − 1)·R̂)`
-    /// of a back-EMF `e` on a winding of `R` estimated as `R̂`: where `R̂` is over
-    /// `R·g/(g − 1)` it feeds the swing (at `g` = 8 with `R̂` = 0.9 of the resistance given,
-    /// where that is over 1.27 times the winding's); at `R̂ = 0.9·R`, 1.8, 3.1 and 4.7 times the
-    /// winding's damping for `g` = 2, 4 and 8. Nothing where the swing has not
-    /// reversed or the resistance is not a positive number, and where the estimate's low-pass
+    /// own loop through the estimate (`R − R̂` of the current it asks for). Asked at `g`, the
+    /// damping takes `g·e/(g·R − (g − 1)·R̂)` of a back-EMF `e` on a winding of `R` estimated
+    /// as `R̂`: where `R̂` is over `R·g/(g − 1)` it feeds the swing (at `g` = 8 with `R̂` = 0.9
+    /// of the resistance given, where that is over 1.27 times the winding's); at `R̂ = 0.9·R`,
+    /// 1.8, 3.1 and 4.7 times the winding's damping for `g` = 2, 4 and 8. Nothing where the
+    /// swing has not reversed or the resistance is not a positive number, and where the
+    /// estimate's low-pass
     /// lags the swing (its time constant over [`LAG_SHARE`] of the swing's half period: a slow
     /// winding's, whose corner is under its `R/L`): a damping that lags, raised, drives the
     /// swing it lags.
