@@ -23,11 +23,16 @@ impl XorShift64Star {
         self.next() % n
     }
 
+    /// A number in [0, 1): the top 53 bits of the next word.
+    pub fn uniform(&mut self) -> f64 {
+        (self.next() >> 11) as f64 / (1u64 << 53) as f64
+    }
+
     /// A number log-uniform over lo..hi (0 < lo < hi), rounded to three significant digits so
     /// that a printed draw can be run again by hand, and kept within lo..=hi (where a bound has
     /// more digits the rounding could step past it).
     pub fn log_uniform_3_digits(&mut self, lo: f64, hi: f64) -> f64 {
-        let u = (self.next() >> 11) as f64 / (1u64 << 53) as f64;
+        let u = self.uniform();
         let x = (lo.ln() + u * (hi.ln() - lo.ln())).exp();
         let scale = 10f64.powi(2 - x.log10().floor() as i32);
         ((x * scale).round() / scale).clamp(lo, hi)

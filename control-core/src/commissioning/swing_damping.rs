@@ -70,9 +70,8 @@ pub(super) struct SwingDamping {
     turning_point: Option<i32>,
     direction: i32,
     reversals: u32,
-    /// The damping's gain over the winding's own, and the reversal it was raised at.
-    gain: f32,
-    raised_at: u32,
+    /// The reversal the damping was raised at (`raise`; none: the winding's own).
+    raised_at: Option<u32>,
     /// Ticks since the last reversal (or the first move), and between the last two.
     since_reversal: u32,
     half_period: u32,
@@ -90,7 +89,7 @@ impl SwingDamping {
             .min(ESTIMATE_SHARE_OF_WINDING * resistance / inductance);
         // The exact first-order step (stable at any tick).
         let smoothing = 1.0 - libm::expf(-corner * tick);
-        Self { resistance, inductance, limit: CURRENT_SHARE * test_current, smoothing, gain: 1.0, ..Self::default() }
+        Self { resistance, inductance, limit: CURRENT_SHARE * test_current, smoothing, ..Self::default() }
     }
 
     /// The q current to ask for this tick (A) from the q current read now; `turning` (V) is the
@@ -104,11 +103,7 @@ impl SwingDamping {
             - self.resistance * 0.5 * (q_current + previous)
             - self.inductance * (q_current - previous) / tick;
         self.estimate += self.smoothing * (back_emf - self.estimate);
-        if self.gain > 1.0 {
-            let doublings = self.reversals.saturating_sub(self.raised_at).min(3) as i32;
-            self.gain = libm::ldexpf(2.0, doublings).min(MOST_GAIN);
-        }
-        let reference = -self.gain * self.estimate / self.resistance;
+        let reference = -self.gain() * self.estimate / self.resistance;
         // No winding measured (a resistance of 0): no damping.
         if !reference.is_finite() {
             return 0.0;
@@ -170,8 +165,17 @@ impl SwingDamping {
         let resistance = RAISED_RESISTANCE_SHARE * probe.min(hold);
         let lags = (self.half_period as f32) * LAG_SHARE * self.smoothing < 1.0;
         let under_critical = self.damped_reversals > 0;
-        if under_critical && !lags && self.gain == 1.0 && resistance > 0.0 && resistance.is_finite() {
-            (self.resistance, self.gain, self.raised_at) = (resistance, 2.0, self.reversals);
+        if under_critical && !lags && self.raised_at.is_none() {
+            (self.resistance, self.raised_at) = (resistance, Some(self.reversals));
+        }
+    }
+
+    /// The damping's gain over the winding's own: 1, or once raised 2, doubled at each
+    /// reversal after, up to [`MOST_GAIN`].
+    fn gain(&self) -> f32 {
+        match self.raised_at {
+            None => 1.0,
+            Some(at) => libm::ldexpf(2.0, self.reversals.saturating_sub(at).min(3) as i32).min(MOST_GAIN),
         }
     }
 
@@ -252,19 +256,19 @@ mod tests {
         swing(&mut d, false);
         assert!(d.reversed());
         d.raise(0.5, 0.5);
-        assert_eq!(d.gain, 1.0, "reversed with the damping off: not raised");
+        assert_eq!(d.gain(), 1.0, "reversed with the damping off: not raised");
         swing(&mut d, true);
         for (probe, hold) in [(f32::NAN, 0.5), (0.5, f32::NAN), (0.0, 0.5), (0.5, -1.0), (0.5, 0.76), (1.6, 1.0)] {
             d.raise(probe, hold);
-            assert_eq!(d.gain, 1.0, "{probe} {hold}");
+            assert_eq!(d.gain(), 1.0, "{probe} {hold}");
         }
         d.raise(0.55, 0.5);
-        assert_eq!((d.gain, d.resistance), (2.0, 0.45));
+        assert_eq!((d.gain(), d.resistance), (2.0, 0.45));
         // A slow winding (0.13 s): its estimate lags a swing of 25 ms half periods.
         let mut slow = SwingDamping::new(0.06, 8e-3, 2.0, 1500.0, tick);
         swing(&mut slow, true);
         swing(&mut slow, true);
         slow.raise(0.06, 0.06);
-        assert!(slow.reversed() && slow.gain == 1.0, "{slow:?}");
+        assert!(slow.reversed() && slow.gain() == 1.0, "{slow:?}");
     }
 }

@@ -87,7 +87,7 @@ pub const MIN_MECHANICAL_TIME_CONSTANT: f64 = 10e-6;
 /// the arguments' notes).
 pub fn draw(rng: &mut XorShift64Star, min_mechanical_time_constant: f64) -> PlantParams {
     loop {
-        let mut u = || (rng.next() >> 11) as f64 / (1u64 << 53) as f64;
+        let mut u = || rng.uniform();
         let log = |u: f64, lo: f64, hi: f64| lo * (hi / lo).powf(u);
         let pole_pairs = 1 + (u() * 12.0) as u32;
         let resistance = log(u(), 0.05, 10.0);
@@ -150,8 +150,7 @@ pub fn draw(rng: &mut XorShift64Star, min_mechanical_time_constant: f64) -> Plan
 /// half percent to a small one's few percent. Drawn from the motor's own noise seed, so that
 /// the draw's other values (and motors) stay what they are for a seed.
 fn friction_share(noise_seed: u64) -> f64 {
-    let u = (XorShift64Star::from_seed(noise_seed).next() >> 11) as f64 / (1u64 << 53) as f64;
-    LEAST_FRICTION * (MOST_FRICTION / LEAST_FRICTION).powf(u)
+    LEAST_FRICTION * (MOST_FRICTION / LEAST_FRICTION).powf(XorShift64Star::from_seed(noise_seed).uniform())
 }
 
 /// The drawn Coulomb friction's range, as shares of the test current's torque.

@@ -132,7 +132,7 @@ impl Uart {
 
     /// A number in [0, 1).
     fn uniform(&mut self) -> f64 {
-        (self.random.next() >> 11) as f64 / (1u64 << 53) as f64
+        self.random.uniform()
     }
 
     fn maybe_corrupt(&mut self, b: u8) -> u8 {
