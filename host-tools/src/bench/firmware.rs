@@ -177,11 +177,11 @@ pub fn commissioning_recording() -> Result<(Recording, CommissioningStatus)> {
 
 /// Drawn motors of `servo bench commission` (seed, motor) whose commissioning takes the paths
 /// the default motor does not: seed 17's motor 65 (a slow winding under the sensors' noise:
-/// the q fit's noise matching), seed 36's motor 46 (a light rotor on a winding faster than a
+/// the q fit's noise matching), seed 20's motor 65 (a light rotor on a winding faster than a
 /// tick: the probe run again a quarter turn on, the light ramp, the q stage run again turning
 /// the rotor, the second differences' fit), seed 27's motor 14 (a winding of 1 600 ticks: the
 /// q chips shaped).
-pub const COMMISSIONED_BENCH_MOTORS: [(u64, usize); 3] = [(17, 65), (36, 46), (27, 14)];
+pub const COMMISSIONED_BENCH_MOTORS: [(u64, usize); 3] = [(17, 65), (20, 65), (27, 14)];
 
 /// [`commissioning_recording`] on the default plant and on each of
 /// [`COMMISSIONED_BENCH_MOTORS`]: a name for each, its recording and how it ended.
