@@ -130,8 +130,8 @@ fn heavy_rotors_on_weak_magnets_with_little_friction_are_found() {
         let errors: Vec<f64> = r["errors"].as_array().unwrap().iter().map(|v| v.as_f64().unwrap()).collect();
         let at = format!("seed {seed} motor {motor}");
         assert!(errors.iter().all(|e| *e <= 0.03), "{at}: R, Ld, Lq, flux {errors:?} ({r})");
-        assert!(r["offset_deg"].as_f64().unwrap() <= 1.0, "seed {seed} motor {motor}: offset ({r})");
-        assert!(r["found_right"] == true, "seed {seed} motor {motor}: direction or pole pairs ({r})");
+        assert!(r["offset_deg"].as_f64().unwrap() <= 1.0, "{at}: offset ({r})");
+        assert!(r["found_right"] == true, "{at}: direction or pole pairs ({r})");
     }
 }
 

@@ -153,10 +153,9 @@ impl SwingDamping {
     /// of the resistance given, where that is over 1.27 times the winding's); at `R̂ = 0.9·R`,
     /// 1.8, 3.1 and 4.7 times the winding's damping for `g` = 2, 4 and 8. Nothing where the
     /// swing has not reversed or the resistance is not a positive number, and where the
-    /// estimate's low-pass
-    /// lags the swing (its time constant over [`LAG_SHARE`] of the swing's half period: a slow
-    /// winding's, whose corner is under its `R/L`): a damping that lags, raised, drives the
-    /// swing it lags.
+    /// estimate's low-pass lags the swing (its time constant over [`LAG_SHARE`] of the swing's
+    /// half period: a slow winding's, whose corner is under its `R/L`): a damping that lags,
+    /// raised, drives the swing it lags.
     pub(super) fn raise(&mut self, probe: f32, hold: f32) {
         let readings = probe > 0.0 && hold > 0.0 && probe.is_finite() && hold.is_finite();
         if !(readings && probe.max(hold) <= RESISTANCES_AGREE * probe.min(hold)) {

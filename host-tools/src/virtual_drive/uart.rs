@@ -130,13 +130,8 @@ impl Uart {
         self.fill();
     }
 
-    /// A number in [0, 1).
-    fn uniform(&mut self) -> f64 {
-        self.random.uniform()
-    }
-
     fn maybe_corrupt(&mut self, b: u8) -> u8 {
-        if self.corrupt_rate > 0.0 && self.uniform() < self.corrupt_rate {
+        if self.corrupt_rate > 0.0 && self.random.uniform() < self.corrupt_rate {
             self.counters.corrupted += 1;
             b ^ 1 << self.random.below(8)
         } else {
