@@ -32,7 +32,7 @@ use num_complex::Complex64;
 use serde::{Deserialize, Serialize};
 
 use super::margins::{log_grid, margins, Margins};
-use super::refinement::{dip, lift_dip_on, reach_hz, refine_on, restore_on};
+use super::refinement::{dip, lift_dip_on, reach_hz, refine_on, restore_on, FLOOR_HEADROOM_DB};
 use super::reserve::Reserve;
 use super::sampled_plant::SampledPlant;
 use super::velocity_controller::{Notch, VelocityTuning};
@@ -218,7 +218,7 @@ pub fn design(
     let restored = near_misses
         .iter()
         .take(RESTORED_NEAR_MISSES)
-        .filter_map(|(c, _)| restore_on(&sampled, goal, c, NEAR_MISS_KEPT_REACH))
+        .filter_map(|(c, _)| restore_on(&sampled, goal, c, NEAR_MISS_KEPT_REACH, FLOOR_HEADROOM_DB))
         .map(|(d, floor)| (d, Some(floor)));
     let widest = refined.chain(lifted).chain(restored).max_by(|a, b| by_bandwidth(&a.0, &b.0));
     // Where that loop falls short of the farthest near misses' reach, a second notch below
@@ -235,7 +235,7 @@ pub fn design(
                     .map(move |n2| Design { tuning: VelocityTuning { notch, notch2: Some(n2), ..c.tuning }, ..c })
             })
         })
-        .filter_map(|start| restore_on(&sampled, goal, &start, NEAR_MISS_KEPT_REACH))
+        .filter_map(|start| restore_on(&sampled, goal, &start, NEAR_MISS_KEPT_REACH, FLOOR_HEADROOM_DB))
         .map(|(d, floor)| (d, Some(floor)));
     let (widest, floor) = widest.into_iter().chain(shaped).max_by(|a, b| by_bandwidth(&a.0, &b.0))?;
     // The widest polished: its compass search restarted from it with the first steps again

@@ -258,16 +258,22 @@ pub fn lift_dip_on(plant: &SampledPlant, goal: &MarginGoal, start: &Design) -> O
 }
 
 /// `start`, a loop that misses `goal` on `plant` by a little or dips below −3 dB within its
-/// reach ([`reach_hz`]), moved onto the margins with its closed loop kept [`FLOOR_HEADROOM_DB`]
-/// over −3 dB up to `keep` of its reach: a compass search for the least shortfall (Ms over
+/// reach ([`reach_hz`]), moved onto the margins with its closed loop kept `headroom_db`
+/// ([`FLOOR_HEADROOM_DB`] but where told otherwise) over −3 dB up to `keep` of its reach: a compass search for the least shortfall (Ms over
 /// its limit, the phase and gain margins under theirs and the closed loop's floor under its
 /// target, in units of 0.01, 1°, 0.1 dB and 0.01 alike) among stable loops that reach that
 /// far, then refined for bandwidth with the floor kept. `None` when no such loop keeps it all.
-pub fn restore_on(plant: &SampledPlant, goal: &MarginGoal, start: &Design, keep: f64) -> Option<(Design, Floor)> {
+pub fn restore_on(
+    plant: &SampledPlant,
+    goal: &MarginGoal,
+    start: &Design,
+    keep: f64,
+    headroom_db: f64,
+) -> Option<(Design, Floor)> {
     let f = &plant.hz;
     let (c, x) = Coordinates::of(start);
     let reach = reach_hz(f, &plant.loop_of(&start.tuning));
-    let floor: Floor = (keep * reach, std::f64::consts::FRAC_1_SQRT_2 * 10f64.powf(FLOOR_HEADROOM_DB / 20.0));
+    let floor: Floor = (keep * reach, std::f64::consts::FRAC_1_SQRT_2 * 10f64.powf(headroom_db / 20.0));
     let shortfall = |m: &Margins, l: &[Complex64]| {
         (m.sensitivity_peak - goal.sensitivity_peak).max(0.0)
             + 0.01 * (goal.phase_margin_deg - m.phase_margin_deg).max(0.0)
@@ -371,7 +377,7 @@ mod tests {
         assert!(!goal.held_by(&start_margins), "the start misses the margins: {start_margins:?}");
         assert!(start_margins.bandwidth_hz < fr && reach_hz(&sampled.hz, &l) > 3.0 * fr, "{start_margins:?}");
         let start = Design { tuning, margins: start_margins, inertia };
-        let (d, (up_to, least)) = restore_on(&sampled, &goal, &start, 0.8).expect("restored");
+        let (d, (up_to, least)) = restore_on(&sampled, &goal, &start, 0.8, FLOOR_HEADROOM_DB).expect("restored");
         assert!(goal.held_by(&d.margins) && d.margins.bandwidth_hz > 5.0 * fr, "{:?}", d.margins);
         let dense = margins_of(&d.tuning, &plant, period, 20_000, &m.features_hz()).unwrap();
         assert!(goal.held_by(&dense) && dense.bandwidth_hz > 5.0 * fr, "{dense:?}");
