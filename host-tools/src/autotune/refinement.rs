@@ -259,10 +259,11 @@ pub fn lift_dip_on(plant: &SampledPlant, goal: &MarginGoal, start: &Design) -> O
 
 /// `start`, a loop that misses `goal` on `plant` by a little or dips below −3 dB within its
 /// reach ([`reach_hz`]), moved onto the margins with its closed loop kept `headroom_db` over
-/// −3 dB (the search's own is [`FLOOR_HEADROOM_DB`]) up to `keep` of its reach: a compass search for the least shortfall (Ms over
-/// its limit, the phase and gain margins under theirs and the closed loop's floor under its
-/// target, in units of 0.01, 1°, 0.1 dB and 0.01 alike) among stable loops that reach that
-/// far, then refined for bandwidth with the floor kept. `None` when no such loop keeps it all.
+/// −3 dB (the search's own is [`FLOOR_HEADROOM_DB`]) up to `keep` of its reach: a compass
+/// search for the least shortfall (Ms over its limit, the phase and gain margins under theirs
+/// and the closed loop's floor under its target, in units of 0.01, 1°, 0.1 dB and 0.01 alike)
+/// among stable loops that reach that far, then refined for bandwidth with the floor kept.
+/// `None` when no such loop keeps it all.
 pub fn restore_on(
     plant: &SampledPlant,
     goal: &MarginGoal,
