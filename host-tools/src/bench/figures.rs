@@ -206,16 +206,24 @@ pub fn utc_date(secs: u64) -> String {
     format!("{year:04}-{month:02}-{day:02} {hour:02}:{minute:02} UTC")
 }
 
-/// The command line as typed, with `servo` for the binary's path.
+/// The command line that re-runs this bench: as typed, with `servo` for the binary's path.
 pub fn invoked_command() -> String {
+    rerun_command(std::env::args().skip(1))
+}
+
+/// `servo` and `args`, less the output folder (`--out DIR` or `--out=DIR`: where the files
+/// go, not what is measured, and often a scratch folder of the machine that ran it), quoted
+/// where a word is empty or holds a space.
+fn rerun_command(args: impl IntoIterator<Item = String>) -> String {
     let mut words = vec!["servo".to_string()];
-    words.extend(std::env::args().skip(1).map(|a| {
-        if a.is_empty() || a.contains(char::is_whitespace) {
-            format!("'{a}'")
-        } else {
-            a
+    let mut args = args.into_iter();
+    while let Some(a) = args.next() {
+        if a == "--out" {
+            args.next();
+        } else if !a.starts_with("--out=") {
+            words.push(if a.is_empty() || a.contains(char::is_whitespace) { format!("'{a}'") } else { a });
         }
-    }));
+    }
     words.join(" ")
 }
 
@@ -402,6 +410,23 @@ pub fn read_dir(dir: &Path) -> Result<Vec<BenchFigures>> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// The command shown beside the figures re-runs the bench: the output folder is left out,
+    /// every other word kept in its order, quoted where it is empty or holds a space.
+    #[test]
+    fn the_rerun_command_leaves_out_the_output_folder() {
+        let words = |s: &str| s.split(' ').map(String::from).collect::<Vec<_>>();
+        assert_eq!(
+            rerun_command(words("bench autotune --plants 200 --out /tmp/at/p200 --jobs 2")),
+            "servo bench autotune --plants 200 --jobs 2"
+        );
+        assert_eq!(rerun_command(words("bench calibrate --out=/tmp/x --seed 3")), "servo bench calibrate --seed 3");
+        assert_eq!(rerun_command(words("bench device --out")), "servo bench device");
+        assert_eq!(
+            rerun_command(["sweep".into(), "--set".into(), "a = 1".into(), "".into()]),
+            "servo sweep --set 'a = 1' ''"
+        );
+    }
 
     #[test]
     fn dates_and_numbers() {
