@@ -206,7 +206,8 @@ pub fn utc_date(secs: u64) -> String {
     format!("{year:04}-{month:02}-{day:02} {hour:02}:{minute:02} UTC")
 }
 
-/// The command line that re-runs this bench: as typed, with `servo` for the binary's path.
+/// The command line that re-runs this bench: as typed, with `servo` for the binary's path and
+/// without its output folder ([`rerun_command`]).
 pub fn invoked_command() -> String {
     rerun_command(std::env::args().skip(1))
 }
