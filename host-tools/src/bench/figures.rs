@@ -214,7 +214,7 @@ pub fn invoked_command() -> String {
 
 /// `servo` and `args`, less the output folder (`--out DIR` or `--out=DIR`: where the files
 /// go, not what is measured, and often a scratch folder of the machine that ran it), quoted
-/// where a word is empty or holds a space.
+/// where a word is empty or holds white space.
 fn rerun_command(args: impl IntoIterator<Item = String>) -> String {
     let mut words = vec!["servo".to_string()];
     let mut args = args.into_iter();
@@ -413,7 +413,7 @@ mod tests {
     use super::*;
 
     /// The command shown beside the figures re-runs the bench: the output folder is left out,
-    /// every other word kept in its order, quoted where it is empty or holds a space.
+    /// every other word kept in its order, quoted where it is empty or holds white space.
     #[test]
     fn the_rerun_command_leaves_out_the_output_folder() {
         let words = |s: &str| s.split(' ').map(String::from).collect::<Vec<_>>();
