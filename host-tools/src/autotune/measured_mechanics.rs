@@ -151,13 +151,7 @@ impl MeasuredMechanics {
     /// [`FLOOR_HEADROOM_DB`] over −3 dB up to four fifths of its reach, or where that fails
     /// with less headroom ([`MOVED_HEADROOMS_DB`]).
     pub(crate) fn moved_from_goal(&self, goal: &MarginGoal, reserved: &MarginGoal) -> Option<Design> {
-        let model = |f: f64| self.model(f);
-        let sampled = SampledPlant::new(
-            &model,
-            self.period(),
-            SearchGrid::STANDARD.grid_points,
-            &self.calibration.mechanics.features_hz(),
-        );
+        let sampled = self.sampled_model();
         let at_goal = {
             let mut cache = self.at_goal.lock().unwrap_or_else(|e| e.into_inner());
             match cache.as_ref() {
@@ -173,6 +167,39 @@ impl MeasuredMechanics {
             .iter()
             .find_map(|&headroom| restore_on(&sampled, reserved, &at_goal, NEAR_MISS_KEPT_REACH, headroom))
             .map(|(d, _)| d)
+    }
+
+    /// The calibrated model on the search's grid.
+    fn sampled_model(&self) -> SampledPlant {
+        let model = |f: f64| self.model(f);
+        let features = self.calibration.mechanics.features_hz();
+        SampledPlant::new(&model, self.period(), SearchGrid::STANDARD.grid_points, &features)
+    }
+
+    /// For tests: the mechanics measured with `params` as `points` and calibrated as
+    /// `calibration`, no readings or drive time kept.
+    #[cfg(test)]
+    pub(crate) fn of_sweep(params: Params, points: Vec<PlantPoint>, calibration: Calibration) -> Self {
+        MeasuredMechanics {
+            params,
+            drive: DriveDynamics::as_configured(&params),
+            during: VelocityTuning::of_params(&params),
+            readings: Vec::new(),
+            points,
+            calibration,
+            drive_time_s: 0.0,
+            at_goal: Default::default(),
+        }
+    }
+
+    /// For tests: `mechanics` behind `drive` swept without noise as the torque-point sweep
+    /// sweeps them (40 points, 5 Hz to 3 kHz).
+    #[cfg(test)]
+    pub(crate) fn noiseless_sweep(drive: &DriveDynamics, mechanics: &super::mechanics::Mechanics) -> Vec<PlantPoint> {
+        super::margins::log_grid(5.0, 3000.0, 40)
+            .into_iter()
+            .map(|hz| PlantPoint { hz, response: drive.around_machine(hz) * mechanics.motor_velocity_per_torque(hz) })
+            .collect()
     }
 
     /// Whether `design` keeps `goal` on every machine at the ends of the calibration's
@@ -230,7 +257,6 @@ impl MeasuredMechanics {
 mod tests {
     use super::*;
     use crate::autotune::bench::draw_with_absorbers;
-    use crate::autotune::margins::log_grid;
     use crate::autotune::mechanics::Mechanics;
     use crate::fmu::configuration::configuration;
 
@@ -246,7 +272,6 @@ mod tests {
         let machine = draw_with_absorbers(40, 1)[10];
         assert_eq!((machine.inertia_ratio, machine.resonance_hz), (0.92, 171.0), "{machine:?}");
         let c = configuration(&machine.parameters()).unwrap();
-        let drive = DriveDynamics::as_configured(&c.control);
         let m = Mechanics {
             motor_inertia: 5.01678e-5,
             load_inertia: 5.09103e-5,
@@ -265,20 +290,9 @@ mod tests {
             rigid: false,
             uncertainty: None,
         };
-        let mechanics = MeasuredMechanics {
-            params: c.control,
-            drive,
-            during: VelocityTuning::of_params(&c.control),
-            readings: Vec::new(),
-            // The sweep's band (5 Hz to 3 kHz), as the calibrated model gives it.
-            points: log_grid(5.0, 3000.0, 40)
-                .into_iter()
-                .map(|hz| PlantPoint { hz, response: drive.around_machine(hz) * m.motor_velocity_per_torque(hz) })
-                .collect(),
-            calibration,
-            drive_time_s: 0.0,
-            at_goal: Default::default(),
-        };
+        // The sweep's band, as the calibrated model gives it.
+        let points = MeasuredMechanics::noiseless_sweep(&DriveDynamics::as_configured(&c.control), &m);
+        let mechanics = MeasuredMechanics::of_sweep(c.control, points, calibration);
         let fa = m.highest_anti_resonance_hz();
         let goal = MarginGoal::named("standard").unwrap();
         let reserved = goal.with_reserve(Reserve::Tight);
@@ -287,14 +301,13 @@ mod tests {
         let d = mechanics.design(&goal, "standard", Reserve::Tight).unwrap();
         // The loop at the goal (found by the design above), moved with each headroom.
         let at_goal = mechanics.at_goal.lock().unwrap().unwrap().1.unwrap();
-        let model = |f: f64| mechanics.model(f);
-        let sampled = SampledPlant::new(&model, mechanics.period(), SearchGrid::STANDARD.grid_points, &m.features_hz());
+        let sampled = mechanics.sampled_model();
         let moved = |headroom| restore_on(&sampled, &reserved, &at_goal, NEAR_MISS_KEPT_REACH, headroom);
         assert!(moved(FLOOR_HEADROOM_DB).is_none());
         let (half, _) = moved(0.5 * FLOOR_HEADROOM_DB).expect("moved with half the headroom");
         assert_eq!(half.tuning, d.tuning);
-        let dense =
-            margins_of(&d.tuning, &|f| mechanics.model(f), mechanics.period(), 20_000, &m.features_hz()).unwrap();
+        let model = |f: f64| mechanics.model(f);
+        let dense = margins_of(&d.tuning, &model, mechanics.period(), 20_000, &m.features_hz()).unwrap();
         assert!(reserved.held_by(&dense) && dense.bandwidth_hz > 5.0 * fa, "{dense:?} {d:?}");
         let (period, true_drive, truth) = machine.axis();
         let true_plant = |f: f64| loop_plant(&true_drive, &truth, f);

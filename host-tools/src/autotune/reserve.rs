@@ -158,10 +158,9 @@ mod tests {
 
     use super::*;
     use crate::autotune::bench::{DrawnAbsorber, Machine};
-    use crate::autotune::calibration::{calibrate, PlantPoint};
+    use crate::autotune::calibration::calibrate;
     use crate::autotune::design::margins_of;
     use crate::autotune::drive_dynamics::DriveDynamics;
-    use crate::autotune::margins::log_grid;
     use crate::autotune::mechanics::Mechanics;
     use crate::autotune::velocity_controller::{Notch, VelocityTuning};
     use crate::fmu::configuration::configuration;
@@ -171,22 +170,9 @@ mod tests {
     fn measured(machine: Machine) -> MeasuredMechanics {
         let c = configuration(&machine.parameters()).unwrap();
         let drive = DriveDynamics::as_configured(&c.control);
-        let truth = Mechanics::of_plant(&c.plant);
-        let points: Vec<PlantPoint> = log_grid(5.0, 3000.0, 40)
-            .into_iter()
-            .map(|hz| PlantPoint { hz, response: drive.around_machine(hz) * truth.motor_velocity_per_torque(hz) })
-            .collect();
+        let points = MeasuredMechanics::noiseless_sweep(&drive, &Mechanics::of_plant(&c.plant));
         let calibration = calibrate(&points, &drive).unwrap();
-        MeasuredMechanics {
-            params: c.control,
-            drive,
-            during: VelocityTuning::of_params(&c.control),
-            readings: Vec::new(),
-            points,
-            calibration,
-            drive_time_s: 0.0,
-            at_goal: Default::default(),
-        }
+        MeasuredMechanics::of_sweep(c.control, points, calibration)
     }
 
     /// A light load on a 142 Hz shaft (seed 1's machine 168): its widest loop lifts the
