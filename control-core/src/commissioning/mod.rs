@@ -33,8 +33,11 @@
 //!    angle 0 at 0.22 of the test current, and the current then grows on the still vector. The
 //!    loop holds the test current and then half of it, the rotor's swing on the vector damped
 //!    until shortly before the first hold has settled, or until it is still where it swings back
-//!    through the vector (`swing_damping`); `R = ΔV/ΔI` between
-//!    the two holds (the sensors' offsets and the inverter's dead-time voltage, the same at
+//!    through the vector (`swing_damping`); a swing back is also damped by the held current,
+//!    weakened to a quarter from each turning point the encoder sees to the swing's centre
+//!    (`spring_weakening`: it needs no sign, no pole pairs and no back-EMF, where a weak magnet's
+//!    winding barely damps the swing and its back-EMF is lost in the errors). `R = ΔV/ΔI`
+//!    between the two holds (the sensors' offsets and the inverter's dead-time voltage, the same at
 //!    both, drop out). The third phase's current not the other two's mean: a phase is missing.
 //! 3. **Encoder.** The loop holds the test current on a vector that turns slowly forward by a
 //!    few electrical turns and back; the rotor follows. Counts against the vector's angle give
@@ -98,6 +101,7 @@ mod free_rotor_fit;
 mod noise_matching;
 mod regression;
 mod sensor_noise;
+mod spring_weakening;
 mod swing_damping;
 mod winding_fit;
 
@@ -121,6 +125,7 @@ use encoder_alignment::{align, Pass};
 use free_rotor_fit::FreeRotorFit;
 use noise_matching::NoiseMatching;
 use sensor_noise::SensorNoise;
+use spring_weakening::SpringWeakening;
 use swing_damping::SwingDamping;
 use winding_fit::{inductance_in_range, resistance_in_range, WindingFit};
 
@@ -371,6 +376,12 @@ fn light_ramp(x: f32) -> (f32, f32) {
 /// hold waits for it at most `STILL_WAIT_S`.
 const STILL_S: f32 = 0.03;
 const STILL_WAIT_S: f32 = 1.0;
+/// The held current is weakened on a swinging rotor (`spring_weakening`) only until this long
+/// before the wait's end at the latest: a winding's transient as its current comes back (`L·di/dt`
+/// on a slow winding) would bias the hold's voltage.
+const STRONG_END_S: f32 = 0.25;
+/// The held current's share moves by at most 1 in this long (s).
+const SHARE_RAMP_S: f32 = 2e-3;
 /// The swing's damping ends this long before the first hold's wait for a still rotor: a rotor
 /// the damping held creeping takes the rest of its way then, and the wait sees it move.
 const RELEASE_S: f32 = 0.04;
@@ -590,6 +601,10 @@ pub struct Commissioning {
     /// rotor's swing on its vector (the q current it asks for).
     current_pi: DqPi,
     swing: SwingDamping,
+    /// The held current's weakening on a swinging rotor's way back to the vector.
+    weakening: SpringWeakening,
+    /// The share of the test current the first hold asks for (1 but where weakened).
+    held_share: f32,
     chips: MSequence,
     fit: WindingFit,
     q_fit: FreeRotorFit,
@@ -697,6 +712,8 @@ impl Commissioning {
             swing_hold: (0.0, 0.0),
             current_pi: DqPi::default(),
             swing: SwingDamping::default(),
+            weakening: SpringWeakening::default(),
+            held_share: 1.0,
             chips: match MSequence::new(PROBE_DEGREE) {
                 Ok(m) => m,
                 Err(_) => MSequence::DEGREE_15,
@@ -958,8 +975,6 @@ impl Commissioning {
                 }
             }
             Stage::HoldHigh | Stage::HoldLow => {
-                let target = if stage == Stage::HoldHigh { self.test_current } else { 0.5 * self.test_current };
-                let voltage = self.current_pi.d(target - current.d);
                 let (hold, averaged) = (self.ticks_of(HOLD_S), self.ticks_of(AVERAGED_S));
                 // The swing damped until shortly before the first hold's settling ends
                 // (`swing_damping`): a rotor creeping under a damping far beyond critical takes
@@ -987,9 +1002,28 @@ impl Commissioning {
                 }
                 let swinging = waiting && self.swing.reversed();
                 q_voltage = self.current_pi.q(if damped || swinging { damping } else { 0.0 } - current.q);
+                // A swing that reversed is also damped by the held current's strength: weakened
+                // from each turning point to the swing's centre (`spring_weakening`).
+                if waiting {
+                    self.weakening.observe(i.encoder_count);
+                }
+                let late = self.waited + self.ticks_of(STRONG_END_S) >= self.ticks_of(STILL_WAIT_S);
+                let weakened = swinging && !late && self.weakening.weakened();
+                // The share ramped: a step, beside the q damping's current, would take the
+                // current loop's overshoot over the test current.
+                let aim = if weakened { self.weakening.share() } else { 1.0 };
+                let most_step = s.tick_period / SHARE_RAMP_S;
+                self.held_share += crate::limit(aim - self.held_share, -most_step, most_step);
+                let share = self.held_share;
+                let target = if stage == Stage::HoldHigh { share * self.test_current } else { 0.5 * self.test_current };
+                let voltage = self.current_pi.d(target - current.d);
                 // The back-EMF of a rotor still swinging on the vector would bias the voltage:
-                // the first hold waits for it to stop before it averages.
+                // the first hold waits for it to stop before it averages (a rotor that stands
+                // on a weakened hold is not yet at rest).
                 self.count_still(i.encoder_count);
+                if weakened {
+                    self.still_ticks = 0;
+                }
                 if stage == Stage::HoldHigh
                     && self.ticks == hold - averaged
                     && self.still_ticks < self.ticks_of(STILL_S)

@@ -17,15 +17,17 @@
 //! waits for a still rotor: a rotor still creeping (held off the vector by the damping's own
 //! current) then takes the rest of the way at once, which the wait sees, and friction or the
 //! damping before has left it little to swing with. A winding's damping can also be far under
-//! critical (a heavy rotor on a weak magnet: a tenth of critical on a 4 Hz swing), and with
-//! little friction such a rotor swings back through the vector for seconds: where the encoder
-//! sees the swing turn back (by [`REVERSAL_COUNTS`]) before the wait ends, the damping goes on
-//! until the wait sees the rotor still, raised where it turns back under the damping
-//! ([`SwingDamping::raise`]). A creeping rotor does not turn back while it creeps; released, it
-//! may ring on its friction, and is then damped as its winding damps it (and raised where it
-//! turns back again under that damping). The passes that turn the vector start from a
-//! rotor at rest and are not damped: their smooth start and stop excite little swing, and a
-//! damping current's transient as the turn's back-EMF rises would drag the rotor more.
+//! critical (a heavy rotor on a weak magnet: a tenth of critical on a 4 Hz swing, a few
+//! thousandths on a weak magnet on a large resistance), and with little friction such a rotor
+//! swings back through the vector for seconds: where the encoder sees the swing turn back (by
+//! [`REVERSAL_COUNTS`]) before the wait ends, the damping goes on until the wait sees the rotor
+//! still, raised where it turns back under the damping ([`SwingDamping::raise`]); the held
+//! current weakened from each of its turning points to its centre damps it too, whatever the
+//! winding (`spring_weakening`). A creeping rotor does not turn back while it creeps; released,
+//! it may ring on its friction, and is then damped as its winding damps it (and raised where it
+//! turns back again under that damping). The passes that turn the vector start from a rotor at
+//! rest and are not damped: their smooth start and stop excite little swing, and a damping
+//! current's transient as the turn's back-EMF rises would drag the rotor more.
 
 use core::f32::consts::TAU;
 
