@@ -76,13 +76,17 @@
 //!    (on a winding of more than four ticks the sensors' noise taken out: `noise_matching`); on
 //!    a faster winding where the rotor's motion shows, on their second differences
 //!    (`q_winding`). Where no fit finds a winding, or the fit's resistance lies 3 % or more off
-//!    the holds' (the rotor's motion shows), on a winding of up to four ticks (a light rotor on
-//!    a strong magnet reverses with each chip and sticks on its friction), the stage runs once
-//!    more: a constant q voltage three times the chips', ramped in first, turns the rotor one
-//!    way throughout (at most 1¼ electrical turns over the stage, by the flux linkage the
-//!    passes give), the frame following the rotor, so that its friction is a constant torque,
-//!    which no chip reverses (`turning_bias`). Of the two runs, the one whose resistance agrees
-//!    with the holds' is kept.
+//!    the holds' (the rotor's motion shows), or the free rotor's fit and the second
+//!    differences' disagree on the inductance by a tenth or more (the rotor sticks and slips:
+//!    each fit bends differently, their resistances may still agree), on a winding of up to
+//!    four ticks (a light rotor on a strong magnet reverses with each chip and sticks on its
+//!    friction), the stage runs once more: a constant q voltage three times the chips', ramped
+//!    in first, turns the rotor one way throughout (at most 1¼ electrical turns over the
+//!    stage, by the flux linkage the passes give), the frame following the rotor, so that its
+//!    friction is a constant torque, which no chip reverses (`turning_bias`); on it the free
+//!    rotor's fit is taken where its resistance agrees within 3 % and at most half as far off
+//!    as the second differences'. Of the two runs, the one whose resistance agrees with the holds' is kept; where the
+//!    first run's fits disagreed, the turned run's (where it finds a winding).
 //! 6. **Current loop.** The PI for the stated bandwidth from `R` and `L_q` (the torque's axis;
 //!    `current_loop_design`), the drive's gains for both axes. The design is checked on the d
 //!    axis, the rotor's own (where a current makes no torque and the rotor stays still), with
@@ -420,6 +424,9 @@ const Q_LEAST_CHIP_SHARE: f32 = 0.15;
 /// The q stage runs once more turning the rotor where its fit's resistance lies this far (a
 /// share) or more off the holds' (the rotor's motion shows), or no fit finds a winding.
 const Q_RETRY_AGREEMENT: f32 = 0.03;
+/// The q stage runs once more turning the rotor too where its free-rotor fit and its second
+/// differences' disagree on the inductance by this share or more (the rotor sticks and slips).
+const Q_FITS_AGREEMENT: f32 = 0.1;
 /// The slowest winding (its time constant in ticks) whose q stage turns the rotor.
 const Q_TURNING_TICKS: f32 = 4.0;
 /// The electrical turns the constant voltage may turn the rotor over the stage.
@@ -447,6 +454,9 @@ const _: () = assert!(Q_TURNING_TICKS < Q_SHAPED_TICKS);
 /// (a share) says the rotor's motion shows in the q stage, and the second differences' fit is
 /// taken if its own resistance lies within [`DIFFERENCES_AGREEMENT`] of the holds' (`q_winding`).
 const RESISTANCE_AGREEMENT: f32 = 0.03;
+/// On the turned q run, the free rotor's fit is taken over the second differences' where its
+/// resistance lies at most this share as far off the holds' (`q_winding`).
+const TURNED_FREE_ROTOR_SHARE: f32 = 0.5;
 /// How far (a share) the second differences' fit's own resistance may lie off the holds' for
 /// its inductance to be taken (`q_winding`): a check that the fit found a winding, not of its
 /// resistance, which the second differences leave poorly determined (the resistance shows at
@@ -635,6 +645,8 @@ pub struct Commissioning {
     q_lowpass: f32,
     /// The q stage's first run's winding, while a second turns the rotor (`Q_RETRY_AGREEMENT`).
     first_q: Option<Winding>,
+    /// The second run turned the rotor because the first run's fits disagreed.
+    q_fits_disagreed: bool,
     /// The probe runs again on the axis a quarter of an electrical turn on
     /// ([`PROBE_RETRY_AXIS`]): its first run found no winding.
     probe_retried: bool,
@@ -680,6 +692,7 @@ impl Commissioning {
             bias_now: 0.0,
             q_lowpass: 0.0,
             first_q: None,
+            q_fits_disagreed: false,
             probe_retried: false,
             light_rotor: false,
             test_current: settings.test_current,
@@ -1603,13 +1616,15 @@ impl Commissioning {
                 // No winding, or one whose resistance the rotor's motion bends, under chips
                 // that the rotor may reverse with: once more with the rotor turned through
                 // them, where it can be (`turning_bias`).
-                let bias = if off >= Q_RETRY_AGREEMENT { self.turning_bias(bus_voltage) } else { 0.0 };
+                let disagree = self.q_fits_disagree();
+                let bias = if off >= Q_RETRY_AGREEMENT || disagree { self.turning_bias(bus_voltage) } else { 0.0 };
                 if bias > 0.0 {
                     self.first_q = fitted;
+                    self.q_fits_disagreed = disagree && off < Q_RETRY_AGREEMENT;
                     self.start_chips(Stage::InductanceQ, bias);
                     return Ok(());
                 }
-            } else if self.resistance_off(&self.first_q) < off {
+            } else if (fitted.is_none() || !self.q_fits_disagreed) && self.resistance_off(&self.first_q) < off {
                 // Of the two runs, the one whose resistance agrees with the holds'.
                 fitted = self.first_q;
             }
@@ -1786,7 +1801,11 @@ impl Commissioning {
     /// refuses as out of range). On a winding of more than [`Q_TURNING_TICKS`] the free
     /// rotor's fit has the sensors' noise taken out (`noise_matching`, one solve a tick once
     /// the chips have ended): where a variance in its range gives the holds' resistance, that
-    /// fit agrees with the holds' by construction and is kept.
+    /// fit agrees with the holds' by construction and is kept. On the run that turns the
+    /// rotor through the chips (its friction a constant torque, which the free rotor's model
+    /// holds), the free rotor's fit where its resistance lies within [`RESISTANCE_AGREEMENT`]
+    /// of the holds' and at most [`TURNED_FREE_ROTOR_SHARE`] as far off as the second
+    /// differences'; otherwise as above.
     fn q_winding(&self, first_order: Option<Winding>) -> Option<Winding> {
         let tick = self.settings.tick_period;
         let off = |w: &Option<Winding>| self.resistance_off(w);
@@ -1800,6 +1819,15 @@ impl Commissioning {
         } else {
             self.q_fit.winding(tick)
         };
+        // On the run that turns the rotor, its friction a constant torque: the free rotor's
+        // model holds, and its fit is taken where its resistance agrees with the holds' within
+        // `RESISTANCE_AGREEMENT` and at most half as far off as the second differences'.
+        if self.q_bias > 0.0 {
+            let (free, twice) = (off(&free_rotor), off(&self.q_fit_twice.winding(tick)));
+            if free < RESISTANCE_AGREEMENT && free < TURNED_FREE_ROTOR_SHARE * twice {
+                return free_rotor;
+            }
+        }
         if !self.slow_q_winding() && off(&first_order) >= RESISTANCE_AGREEMENT && off(&free_rotor).is_finite() {
             let twice = self.q_fit_twice.winding(tick);
             if off(&twice) < DIFFERENCES_AGREEMENT {
@@ -1810,6 +1838,22 @@ impl Commissioning {
             free_rotor
         } else {
             first_order
+        }
+    }
+
+    /// Whether the q stage's free-rotor fit and its second differences' disagree on the
+    /// inductance by [`Q_FITS_AGREEMENT`] or more, on a winding whose q stage may turn the
+    /// rotor: a rotor that sticks and slips on its friction bends each differently, where the
+    /// resistances may still agree with the holds' (Lq 7–8 % low on the bench's 15–36 µs
+    /// rotors on 0.4–0.7-tick windings).
+    fn q_fits_disagree(&self) -> bool {
+        let tick = self.settings.tick_period;
+        if self.slow_q_winding() || !self.q_may_turn() {
+            return false;
+        }
+        match (self.q_fit.winding(tick), self.q_fit_twice.winding(tick)) {
+            (Some(a), Some(b)) => !(libm::fabsf(a.inductance / b.inductance - 1.0) < Q_FITS_AGREEMENT),
+            _ => false,
         }
     }
 
