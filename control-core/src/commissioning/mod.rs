@@ -1609,14 +1609,14 @@ impl Commissioning {
         let tick = self.settings.tick_period;
         let axis = if stage == Stage::InductanceD { 'd' } else { 'q' };
         let first_order = if stage == Stage::InductanceD { self.d_winding() } else { self.fit.winding(tick) };
-        let mut fitted = if stage == Stage::InductanceQ { self.q_winding(first_order) } else { first_order };
+        let (mut fitted, disagree) =
+            if stage == Stage::InductanceQ { self.q_winding(first_order) } else { (first_order, false) };
         if stage == Stage::InductanceQ {
             let off = self.resistance_off(&fitted);
             if self.q_bias == 0.0 {
-                // No winding, or one whose resistance the rotor's motion bends, under chips
-                // that the rotor may reverse with: once more with the rotor turned through
-                // them, where it can be (`turning_bias`).
-                let disagree = self.q_fits_disagree();
+                // No winding, or one whose resistance the rotor's motion bends, or fits its
+                // motion bends apart, under chips that the rotor may reverse with: once more
+                // with the rotor turned through them, where it can be (`turning_bias`).
                 let bias = if off >= Q_RETRY_AGREEMENT || disagree { self.turning_bias(bus_voltage) } else { 0.0 };
                 if bias > 0.0 {
                     self.first_q = fitted;
@@ -1805,8 +1805,12 @@ impl Commissioning {
     /// rotor through the chips (its friction a constant torque, which the free rotor's model
     /// holds), the free rotor's fit where its resistance lies within [`RESISTANCE_AGREEMENT`]
     /// of the holds' and at most [`TURNED_FREE_ROTOR_SHARE`] as far off as the second
-    /// differences'; otherwise as above.
-    fn q_winding(&self, first_order: Option<Winding>) -> Option<Winding> {
+    /// differences'; otherwise as above. Beside it, whether the free rotor's fit and the
+    /// second differences' disagree on the inductance by [`Q_FITS_AGREEMENT`] or more on a
+    /// winding whose q stage may turn the rotor (one that sticks and slips on its friction
+    /// bends each differently, where their resistances may still agree with the holds': Lq
+    /// 7–8 % low on the bench's 15–36 µs rotors on 0.4–0.7-tick windings).
+    fn q_winding(&self, first_order: Option<Winding>) -> (Option<Winding>, bool) {
         let tick = self.settings.tick_period;
         let off = |w: &Option<Winding>| self.resistance_off(w);
         // On a winding slower than the stage turns the rotor on (`Q_TURNING_TICKS`) the
@@ -1819,42 +1823,30 @@ impl Commissioning {
         } else {
             self.q_fit.winding(tick)
         };
+        // Each fit solved once (the stage's end is one tick: three solves at most).
+        let twice = if self.slow_q_winding() { None } else { self.q_fit_twice.winding(tick) };
+        let disagree = self.q_may_turn()
+            && match (free_rotor, twice) {
+                (Some(a), Some(b)) => !(libm::fabsf(a.inductance / b.inductance - 1.0) < Q_FITS_AGREEMENT),
+                _ => false,
+            };
         // On the run that turns the rotor, its friction a constant torque: the free rotor's
         // model holds, and its fit is taken where its resistance agrees with the holds' within
         // `RESISTANCE_AGREEMENT` and at most half as far off as the second differences'.
         if self.q_bias > 0.0 {
-            let (free, twice) = (off(&free_rotor), off(&self.q_fit_twice.winding(tick)));
-            if free < RESISTANCE_AGREEMENT && free < TURNED_FREE_ROTOR_SHARE * twice {
-                return free_rotor;
+            let free = off(&free_rotor);
+            if free < RESISTANCE_AGREEMENT && free < TURNED_FREE_ROTOR_SHARE * off(&twice) {
+                return (free_rotor, disagree);
             }
         }
-        if !self.slow_q_winding() && off(&first_order) >= RESISTANCE_AGREEMENT && off(&free_rotor).is_finite() {
-            let twice = self.q_fit_twice.winding(tick);
-            if off(&twice) < DIFFERENCES_AGREEMENT {
-                return twice;
-            }
+        if !self.slow_q_winding()
+            && off(&first_order) >= RESISTANCE_AGREEMENT
+            && off(&free_rotor).is_finite()
+            && off(&twice) < DIFFERENCES_AGREEMENT
+        {
+            return (twice, disagree);
         }
-        if off(&free_rotor) < off(&first_order) {
-            free_rotor
-        } else {
-            first_order
-        }
-    }
-
-    /// Whether the q stage's free-rotor fit and its second differences' disagree on the
-    /// inductance by [`Q_FITS_AGREEMENT`] or more, on a winding whose q stage may turn the
-    /// rotor: a rotor that sticks and slips on its friction bends each differently, where the
-    /// resistances may still agree with the holds' (Lq 7–8 % low on the bench's 15–36 µs
-    /// rotors on 0.4–0.7-tick windings).
-    fn q_fits_disagree(&self) -> bool {
-        let tick = self.settings.tick_period;
-        if self.slow_q_winding() || !self.q_may_turn() {
-            return false;
-        }
-        match (self.q_fit.winding(tick), self.q_fit_twice.winding(tick)) {
-            (Some(a), Some(b)) => !(libm::fabsf(a.inductance / b.inductance - 1.0) < Q_FITS_AGREEMENT),
-            _ => false,
-        }
+        (if off(&free_rotor) < off(&first_order) { free_rotor } else { first_order }, disagree)
     }
 
     /// How far a fit's resistance lies off the holds' (a share; infinite for no winding or
