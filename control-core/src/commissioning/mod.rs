@@ -647,6 +647,9 @@ pub struct Commissioning {
     first_q: Option<Winding>,
     /// The second run turned the rotor because the first run's fits disagreed.
     q_fits_disagreed: bool,
+    /// The q stage's second differences' fit (none on a slow winding), solved on its end's
+    /// first tick.
+    q_twice: Option<Winding>,
     /// The probe runs again on the axis a quarter of an electrical turn on
     /// ([`PROBE_RETRY_AXIS`]): its first run found no winding.
     probe_retried: bool,
@@ -693,6 +696,7 @@ impl Commissioning {
             q_lowpass: 0.0,
             first_q: None,
             q_fits_disagreed: false,
+            q_twice: None,
             probe_retried: false,
             light_rotor: false,
             test_current: settings.test_current,
@@ -1220,6 +1224,14 @@ impl Commissioning {
                     // current held meanwhile.
                     let finishing = self.finishing;
                     self.finishing += 1;
+                    // On the q axis the second differences' fit a tick before the winding's
+                    // choice (which solves the other two).
+                    if stage == Stage::InductanceQ && finishing == 0 {
+                        let slow = self.slow_q_winding();
+                        self.q_twice = if slow { None } else { self.q_fit_twice.winding(s.tick_period) };
+                        return self.hold_between(stage, current.q, i.bus_voltage);
+                    }
+                    let finishing = if stage == Stage::InductanceQ { finishing - 1 } else { finishing };
                     match (stage, finishing) {
                         (_, 0) => {
                             if let Err(fault) = self.choose_winding(stage, i.bus_voltage) {
@@ -1823,8 +1835,8 @@ impl Commissioning {
         } else {
             self.q_fit.winding(tick)
         };
-        // Each fit solved once (the stage's end is one tick: three solves at most).
-        let twice = if self.slow_q_winding() { None } else { self.q_fit_twice.winding(tick) };
+        // Each fit solved once, the second differences' on the tick before (`q_twice`).
+        let twice = self.q_twice;
         let disagree = self.q_may_turn()
             && match (free_rotor, twice) {
                 (Some(a), Some(b)) => !(libm::fabsf(a.inductance / b.inductance - 1.0) < Q_FITS_AGREEMENT),
