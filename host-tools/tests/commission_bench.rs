@@ -144,9 +144,8 @@ fn heavy_rotors_on_weak_magnets_with_little_friction_are_found() {
 /// current's torque; seed 4's motor 85: 7 pole pairs, 89 mWb, 36 µs, 0.4 tick, 1.8 %): under
 /// zero-mean q chips the rotor sticks and slips on its friction at each reversal, and the
 /// second differences' fit, whose resistance agrees with the holds', read Lq 8.0 % and 6.6 %
-/// low (without friction, within 1 %). Its free-rotor fit disagreed with it by 45 % and 17 %:
-/// run again with the rotor turned through the chips, the fit whose resistance agrees best
-/// with the holds', within 3 %.
+/// low (without friction, within 1 %). The free rotor's fit read 31 % and 15 % under it: run
+/// again with the rotor turned through the chips (its friction a constant torque), within 3 %.
 #[test]
 fn light_rotors_whose_q_fits_disagree_are_turned_through_the_chips() {
     for (seed, motor) in [(36, 46), (4, 85)] {

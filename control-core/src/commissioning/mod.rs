@@ -75,18 +75,19 @@
 //!    winding of a tick or more, where a rotor sticking and slipping on its friction acts least
 //!    (on a winding of more than four ticks the sensors' noise taken out: `noise_matching`); on
 //!    a faster winding where the rotor's motion shows, on their second differences
-//!    (`q_winding`). Where no fit finds a winding, or the fit's resistance lies 3 % or more off
-//!    the holds' (the rotor's motion shows), or the free rotor's fit and the second
-//!    differences' disagree on the inductance by a tenth or more (the rotor sticks and slips:
-//!    each fit bends differently, their resistances may still agree), on a winding of up to
-//!    four ticks (a light rotor on a strong magnet reverses with each chip and sticks on its
-//!    friction), the stage runs once more: a constant q voltage three times the chips', ramped
-//!    in first, turns the rotor one way throughout (at most 1¼ electrical turns over the
-//!    stage, by the flux linkage the passes give), the frame following the rotor, so that its
-//!    friction is a constant torque, which no chip reverses (`turning_bias`); on it the free
-//!    rotor's fit is taken where its resistance agrees within 3 % and at most half as far off
-//!    as the second differences'. Of the two runs, the one whose resistance agrees with the holds' is kept; where the
-//!    first run's fits disagreed, the turned run's (where it finds a winding).
+//!    (`q_winding`). Where no fit finds a winding, or the fit's resistance lies 3 % or more
+//!    off the holds' (the rotor's motion shows), or the second differences' fit is taken and
+//!    the free rotor's disagrees with it on the inductance by a tenth or more (the rotor
+//!    sticks and slips: each fit bends differently, their resistances may still agree), on a
+//!    winding of up to four ticks (a light rotor on a strong magnet reverses with each chip
+//!    and sticks on its friction), the stage runs once more: a constant q voltage three times
+//!    the chips', ramped in first, turns the rotor one way throughout (at most 1¼ electrical
+//!    turns over the stage, by the flux linkage the passes give), the frame following the
+//!    rotor, so that its friction is a constant torque, which no chip reverses
+//!    (`turning_bias`); on it the free rotor's fit is taken where its resistance agrees within
+//!    3 % and at most half as far off as the second differences'. Of the two runs, the one
+//!    whose resistance agrees with the holds' is kept; where the first run's fits disagreed,
+//!    the turned run's where its resistance agrees within 3 %.
 //! 6. **Current loop.** The PI for the stated bandwidth from `R` and `L_q` (the torque's axis;
 //!    `current_loop_design`), the drive's gains for both axes. The design is checked on the d
 //!    axis, the rotor's own (where a current makes no torque and the rotor stays still), with
@@ -381,8 +382,9 @@ fn light_ramp(x: f32) -> (f32, f32) {
 const STILL_S: f32 = 0.03;
 const STILL_WAIT_S: f32 = 1.0;
 /// The held current is weakened on a swinging rotor (`spring_weakening`) only until this long
-/// before the wait's end at the latest: a winding's transient as its current comes back (`L·di/dt`
-/// on a slow winding) would bias the hold's voltage.
+/// before the wait's longest end; the wait sees the rotor still at the full current (for
+/// `STILL_S` after its ramp back) before the holds average: a winding's transient as its
+/// current comes back (`L·di/dt` on a slow winding) would bias the hold's voltage.
 const STRONG_END_S: f32 = 0.25;
 /// The held current's share moves by at most 1 in this long (s).
 const SHARE_RAMP_S: f32 = 2e-3;
@@ -1010,8 +1012,11 @@ impl Commissioning {
                     self.swing.observe(i.encoder_count, damped || self.swing.reversed());
                 }
                 if damped {
-                    self.swing_hold.0 += self.voltage;
-                    self.swing_hold.1 += current.d;
+                    // At the full current only (a weakened hold's is not the holds').
+                    if self.held_share == 1.0 {
+                        self.swing_hold.0 += self.voltage;
+                        self.swing_hold.1 += current.d;
+                    }
                 } else if waiting {
                     // The swing reversed under the winding's damping: raised from here on.
                     let hold_resistance = self.swing_hold.0 / self.swing_hold.1;
@@ -1038,7 +1043,7 @@ impl Commissioning {
                 // the first hold waits for it to stop before it averages (a rotor that stands
                 // on a weakened hold is not yet at rest).
                 self.count_still(i.encoder_count);
-                if weakened {
+                if self.held_share < 1.0 {
                     self.still_ticks = 0;
                 }
                 if stage == Stage::HoldHigh
@@ -1636,8 +1641,10 @@ impl Commissioning {
                     self.start_chips(Stage::InductanceQ, bias);
                     return Ok(());
                 }
-            } else if (fitted.is_none() || !self.q_fits_disagreed) && self.resistance_off(&self.first_q) < off {
-                // Of the two runs, the one whose resistance agrees with the holds'.
+            } else if (!self.q_fits_disagreed || off >= Q_RETRY_AGREEMENT) && self.resistance_off(&self.first_q) < off {
+                // Of the two runs, the one whose resistance agrees with the holds'; where the
+                // first run's fits disagreed, the turned run's where its resistance agrees
+                // within `Q_RETRY_AGREEMENT`.
                 fitted = self.first_q;
             }
         }
@@ -1817,11 +1824,12 @@ impl Commissioning {
     /// rotor through the chips (its friction a constant torque, which the free rotor's model
     /// holds), the free rotor's fit where its resistance lies within [`RESISTANCE_AGREEMENT`]
     /// of the holds' and at most [`TURNED_FREE_ROTOR_SHARE`] as far off as the second
-    /// differences'; otherwise as above. Beside it, whether the free rotor's fit and the
-    /// second differences' disagree on the inductance by [`Q_FITS_AGREEMENT`] or more on a
-    /// winding whose q stage may turn the rotor (one that sticks and slips on its friction
-    /// bends each differently, where their resistances may still agree with the holds': Lq
-    /// 7–8 % low on the bench's 15–36 µs rotors on 0.4–0.7-tick windings).
+    /// differences'; otherwise as above. Beside it, where the second differences' fit is
+    /// taken on a winding whose q stage may turn the rotor, whether the free rotor's fit
+    /// disagrees with it on the inductance by [`Q_FITS_AGREEMENT`] or more, both plausible (a
+    /// rotor that sticks and slips on its friction bends each differently, where their
+    /// resistances may still agree with the holds': Lq 6.6–8 % low on the bench's 15–36 µs
+    /// rotors on 0.4–0.7-tick windings).
     fn q_winding(&self, first_order: Option<Winding>) -> (Option<Winding>, bool) {
         let tick = self.settings.tick_period;
         let off = |w: &Option<Winding>| self.resistance_off(w);
@@ -1837,9 +1845,13 @@ impl Commissioning {
         };
         // Each fit solved once, the second differences' on the tick before (`q_twice`).
         let twice = self.q_twice;
+        // Where the second differences' fit is the one taken (below), both it and the free
+        // rotor's plausible windings.
         let disagree = self.q_may_turn()
             && match (free_rotor, twice) {
-                (Some(a), Some(b)) => !(libm::fabsf(a.inductance / b.inductance - 1.0) < Q_FITS_AGREEMENT),
+                (Some(a), Some(b)) if inductance_in_range(a.inductance) && inductance_in_range(b.inductance) => {
+                    !(libm::fabsf(a.inductance / b.inductance - 1.0) < Q_FITS_AGREEMENT)
+                }
                 _ => false,
             };
         // On the run that turns the rotor, its friction a constant torque: the free rotor's
@@ -1848,7 +1860,7 @@ impl Commissioning {
         if self.q_bias > 0.0 {
             let free = off(&free_rotor);
             if free < RESISTANCE_AGREEMENT && free < TURNED_FREE_ROTOR_SHARE * off(&twice) {
-                return (free_rotor, disagree);
+                return (free_rotor, false);
             }
         }
         if !self.slow_q_winding()
@@ -1858,7 +1870,7 @@ impl Commissioning {
         {
             return (twice, disagree);
         }
-        (if off(&free_rotor) < off(&first_order) { free_rotor } else { first_order }, disagree)
+        (if off(&free_rotor) < off(&first_order) { free_rotor } else { first_order }, false)
     }
 
     /// How far a fit's resistance lies off the holds' (a share; infinite for no winding or

@@ -786,7 +786,7 @@ fn the_slowest_windings_give_their_q_inductance_under_shaped_chips() {
 /// 32: 2 pole pairs, 3.1 mWb on 1.4 Ω), as drawn and with the encoder the other way: the
 /// ramp leaves them swinging ±100° electrical and more. Weakened at its turning points
 /// (`spring_weakening`), the swing is small by the passes. Held at the full current, seed 23's
-/// swung on through the first hold's wait and the passes, and its flux linkage read 41 % low;
+/// swung on through the first hold's wait and the passes, and its flux linkage read 42 % low;
 /// seed 31's took 5.1 s.
 #[test]
 fn a_swing_the_winding_barely_damps_is_weakened_to_rest_whichever_way_the_encoder_counts() {

@@ -180,8 +180,11 @@ pub fn commissioning_recording() -> Result<(Recording, CommissioningStatus)> {
 /// the q fit's noise matching), seed 20's motor 65 (a light rotor on a winding faster than a
 /// tick: the probe run again a quarter turn on, the light ramp, the q stage run again turning
 /// the rotor, the second differences' fit), seed 27's motor 14 (a winding of 1 600 ticks: the
-/// q chips shaped).
-pub const COMMISSIONED_BENCH_MOTORS: [(u64, usize); 3] = [(17, 65), (20, 65), (27, 14)];
+/// q chips shaped), seed 23's motor 82 (a heavy rotor on a weak magnet that its winding barely
+/// damps: the first hold's current weakened at the swing's turning points), seed 36's motor
+/// 46 (a light rotor on a 0.7-tick winding: the q stage run again turning the rotor where its
+/// two fits disagree).
+pub const COMMISSIONED_BENCH_MOTORS: [(u64, usize); 5] = [(17, 65), (20, 65), (27, 14), (23, 82), (36, 46)];
 
 /// [`commissioning_recording`] on the default plant and on each of
 /// [`COMMISSIONED_BENCH_MOTORS`]: a name for each, its recording and how it ended.

@@ -98,14 +98,14 @@ fn bench_firmware(args: &FirmwareBenchArgs) -> Result<bool> {
             "KiB",
         )
         .equal(
-            "golden vectors, the every-feature run and four whole commissionings, Cortex-M4 (QEMU) vs host: runs that differ",
+            "golden vectors, the every-feature run and six whole commissionings, Cortex-M4 (QEMU) vs host: runs that differ",
             ([&vectors, &all].iter().filter(|r| !r.identical).count()
                 + commissionings.iter().filter(|(_, _, r)| !r.identical).count()) as f64,
             0.0,
             "",
         )
         .at_most(
-            "the longest tick of a commissioning (default motor and three drawn ones), instructions",
+            "the longest tick of a commissioning (default motor and five drawn ones), instructions",
             commissioning_tick,
             COMMISSIONING_TICK_GOAL,
             "",
