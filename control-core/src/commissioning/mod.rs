@@ -649,8 +649,7 @@ pub struct Commissioning {
     first_q: Option<Winding>,
     /// The second run turned the rotor because the first run's fits disagreed.
     q_fits_disagreed: bool,
-    /// The q stage's second differences' fit (none on a slow winding), solved on its end's
-    /// first tick.
+    /// The q stage's second differences' fit (none on a slow winding), solved at its end.
     q_twice: Option<Winding>,
     /// The probe runs again on the axis a quarter of an electrical turn on
     /// ([`PROBE_RETRY_AXIS`]): its first run found no winding.
@@ -1229,14 +1228,12 @@ impl Commissioning {
                     // current held meanwhile.
                     let finishing = self.finishing;
                     self.finishing += 1;
-                    // On the q axis the second differences' fit a tick before the winding's
-                    // choice (which solves the other two).
+                    // On the q axis the second differences' fit beside the winding's choice
+                    // (which solves the other two): three solves in the tick at most.
                     if stage == Stage::InductanceQ && finishing == 0 {
                         let slow = self.slow_q_winding();
                         self.q_twice = if slow { None } else { self.q_fit_twice.winding(s.tick_period) };
-                        return self.hold_between(stage, current.q, i.bus_voltage);
                     }
-                    let finishing = if stage == Stage::InductanceQ { finishing - 1 } else { finishing };
                     match (stage, finishing) {
                         (_, 0) => {
                             if let Err(fault) = self.choose_winding(stage, i.bus_voltage) {
@@ -1843,7 +1840,7 @@ impl Commissioning {
         } else {
             self.q_fit.winding(tick)
         };
-        // Each fit solved once, the second differences' on the tick before (`q_twice`).
+        // Each fit solved once (the second differences' in `q_twice`).
         let twice = self.q_twice;
         // Where the second differences' fit is the one taken (below), both it and the free
         // rotor's plausible windings.
