@@ -649,8 +649,6 @@ pub struct Commissioning {
     first_q: Option<Winding>,
     /// The second run turned the rotor because the first run's fits disagreed.
     q_fits_disagreed: bool,
-    /// The q stage's second differences' fit (none on a slow winding), solved at its end.
-    q_twice: Option<Winding>,
     /// The probe runs again on the axis a quarter of an electrical turn on
     /// ([`PROBE_RETRY_AXIS`]): its first run found no winding.
     probe_retried: bool,
@@ -697,7 +695,6 @@ impl Commissioning {
             q_lowpass: 0.0,
             first_q: None,
             q_fits_disagreed: false,
-            q_twice: None,
             probe_retried: false,
             light_rotor: false,
             test_current: settings.test_current,
@@ -1228,12 +1225,6 @@ impl Commissioning {
                     // current held meanwhile.
                     let finishing = self.finishing;
                     self.finishing += 1;
-                    // On the q axis the second differences' fit beside the winding's choice
-                    // (which solves the other two): three solves in the tick at most.
-                    if stage == Stage::InductanceQ && finishing == 0 {
-                        let slow = self.slow_q_winding();
-                        self.q_twice = if slow { None } else { self.q_fit_twice.winding(s.tick_period) };
-                    }
                     match (stage, finishing) {
                         (_, 0) => {
                             if let Err(fault) = self.choose_winding(stage, i.bus_voltage) {
@@ -1840,8 +1831,8 @@ impl Commissioning {
         } else {
             self.q_fit.winding(tick)
         };
-        // Each fit solved once (the second differences' in `q_twice`).
-        let twice = self.q_twice;
+        // Each fit solved once: three solves in the stage's last tick at most.
+        let twice = if self.slow_q_winding() { None } else { self.q_fit_twice.winding(tick) };
         // Where the second differences' fit is the one taken (below), both it and the free
         // rotor's plausible windings.
         let disagree = self.q_may_turn()

@@ -17,8 +17,9 @@
 //! swing that shrinks by the same ratio each half swing, as an ideal weakening makes it), from
 //! the last two (midway) before that. A centre misread by `e` gives back `(1 − s)·(1 − cos e)`
 //! of the spring at the full current: the swing still shrinks while `e` is under its
-//! amplitude. A rotor that friction holds off the centre at the weak current is strengthened
-//! after [`WEAKENED_HALF_PERIODS`] of the swing's last half period.
+//! amplitude. A rotor that friction holds off the centre at the weak current, or that creeps
+//! there, is strengthened once its count stalls or its way takes too long
+//! ([`WEAKENED_OVER_STRONG_QUARTER`]).
 
 /// The held current's share from a turning point to the centre. The swing's decay per second,
 /// `−ln s / (1 + 1/√s)` of its frequency's, is best at `s` = 0.07; at a quarter it is 83 %
