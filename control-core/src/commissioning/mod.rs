@@ -474,6 +474,17 @@ const STEP_OVERSHOOT_LIMIT: f32 = 0.5;
 /// `STEP_CYCLES` times.
 const STEP_CYCLES: u32 = 8;
 
+/// How far behind the rotor the current step's frame follows it (s): each tick it moves
+/// `T/STEP_FRAME_LAG_S` of the way to the rotor's angle. The d current pulls the rotor toward
+/// the frame, a spring of stiffness `k`; an anchor that follows the rotor at a speed
+/// proportional to the spring's stretch is a dashpot in series with it, which takes the
+/// swing's energy: a rotor of inertia `J` swings on `s² + s/τ + k/J` (damped critically where
+/// `√(k/J) = 1/(2τ)`, 17 rad/s, the slow swing of a heavy rotor on a weak magnet; a faster
+/// one decays at `1/(2τ)`, a slower one at `τ·k/J`). A still rotor takes no torque
+/// (the frame reaches it), and a rotor the q stage left standing off its frame on friction
+/// finds the frame on it from the step's first tick, so the step sees the d axis alone.
+const STEP_FRAME_LAG_S: f32 = 0.03;
+
 /// One hold's averaging window: the mean voltage asked for (V) and current (A) on the vector's
 /// d axis, its length (s), and the encoder's count at its first and last tick.
 #[derive(Clone, Copy, Debug, Default)]
@@ -834,14 +845,24 @@ impl Commissioning {
         // angle where the stage began (held there: a frame that followed the rotor's small
         // swings would turn the held d current into the measured q current), unless the stage
         // turns the rotor (`turning_bias`): then the rotor's, read each tick.
-        // The d-axis chips and the current step run on the rotor's own frame, read from the
-        // encoder each tick at the middle of its count (`rotor_angle`): a rotor that drifts or
-        // swings (a load on a soft shaft, no friction) then takes no torque from the d current.
-        if matches!(stage, Stage::CurrentStep | Stage::InductanceD)
-            || (stage == Stage::InductanceQ && self.q_bias > 0.0)
-        {
+        // The d-axis chips run on the rotor's own frame, read from the encoder each tick at the
+        // middle of its count (`rotor_angle`): a rotor that drifts or swings (a load on a soft
+        // shaft, no friction) then takes no torque from the d current. The current step's
+        // frame starts on the rotor and follows it [`STEP_FRAME_LAG_S`] behind: the swing the
+        // q stage's held frame leaves (the chips push the rotor off it, and at the stage's end
+        // it runs back through it) is braked rather than let run on.
+        let lags = stage == Stage::CurrentStep;
+        if lags || stage == Stage::InductanceD || (stage == Stage::InductanceQ && self.q_bias > 0.0) {
             if let Some(a) = self.alignment {
-                self.angle = self.rotor_angle(&a, i.encoder_count);
+                let rotor = self.rotor_angle(&a, i.encoder_count);
+                self.angle = if lags && self.ticks > 1 {
+                    let lag = rotor - self.angle;
+                    let lag = lag - TAU * libm::floorf(lag / TAU + 0.5);
+                    let angle = self.angle + (s.tick_period / STEP_FRAME_LAG_S).min(1.0) * lag;
+                    angle - TAU * libm::floorf(angle / TAU)
+                } else {
+                    rotor
+                };
             }
         }
         let frame = self.angle;

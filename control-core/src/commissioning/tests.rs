@@ -822,3 +822,46 @@ fn a_swing_the_winding_barely_damps_is_weakened_to_rest_whichever_way_the_encode
         }
     }
 }
+
+/// A heavy rotor on a weak magnet (the bench's seed 29 motor 31: 5 pole pairs, 2.1 mWb on
+/// 0.28 Ω, the shorted winding's brake a third of a second) that the q stage's chips push off
+/// its held frame: at the stage's end it runs back through the frame at full speed. The
+/// current step's frame, following it 30 ms behind, brakes it: the sequence's last wait for
+/// a still rotor (0.06 s here) ends within 0.15 s, the whole within 4.6 s. With the frame on
+/// the rotor, the rotor runs on through the step and the wait takes 0.34 s here (4.77 s in
+/// all; on the bench's plant, with its load on a shaft, 0.61 s and 5.08 s).
+#[test]
+fn the_swing_the_q_stage_leaves_is_braked_by_the_current_steps_frame() {
+    let truth = MotorTruth {
+        pole_pairs: 5,
+        resistance: 0.2813,
+        ld: 7.620e-4,
+        lq: 9.333e-4,
+        flux_linkage: 2.145e-3,
+        inertia: 1.974e-4,
+        coulomb: 2.161e-4,
+        start_angle: 0.6195,
+        counts_per_rev: 4096,
+        ..MotorTruth::default_motor()
+    };
+    for reversed in [false, true] {
+        let truth = MotorTruth { reversed, ..truth };
+        let mut motor = MotorModel::new(truth, TICK as f64);
+        let mut c = Commissioning::new(settings(&truth)).unwrap();
+        let (mut ticks, mut waited) = (0u32, 0u32);
+        while let CommissioningStatus::Running(stage) = c.status() {
+            let (phase_currents, encoder_count) = motor.sample();
+            let inputs = CommissioningInputs { phase_currents, encoder_count, bus_voltage: 48.0 };
+            if let Some(v) = c.step(&inputs) {
+                motor.apply(v.alpha, v.beta);
+            }
+            ticks += 1;
+            waited += (stage == Stage::StepAnalysis) as u32;
+            assert!(ticks < 160_000, "{truth:?}");
+        }
+        let CommissioningStatus::Done(m) = c.status() else { panic!("{:?} ({truth:?})", c.status()) };
+        assert!((m.flux_linkage as f64 / truth.flux_linkage - 1.0).abs() < 0.03, "{m:?}");
+        let (waited, total) = (waited as f32 * TICK, ticks as f32 * TICK);
+        assert!(waited < 0.15 && total < 4.6, "the last wait {waited} s, {total} s in all ({truth:?})");
+    }
+}
