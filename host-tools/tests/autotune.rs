@@ -89,8 +89,9 @@ fn autotune_tunes_a_machine_it_does_not_ship_and_the_true_plant_keeps_the_margin
     }
     let j: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
     // The step measured on the twin is the predicted one: overshoot within 5 points, the
-    // waveform within 5 % of the step (RMS over the 150 ms followed), and both settled within
-    // them, the measured one within half as long again as the prediction (here a loop that
+    // waveform within 5 % of the step (RMS over the prediction's 150 ms; the twin's step is
+    // followed for 300 ms), and both settled, the prediction within its 150 ms and the
+    // measured one within half as long again as the prediction (here a loop that
     // lifts the anti-resonance's dip with its integrator, whose tail rings for a hundred
     // milliseconds: the settling time, when a noisy estimate last leaves ±2 %, moves by a
     // period of that ring with a cycle more or less inside the band).

@@ -24,8 +24,8 @@ pub struct MeasuredStep {
     /// The velocity estimate's change per unit step.
     pub response: Vec<f64>,
     pub overshoot_percent: f64,
-    /// When the response last leaves ±2 % of the step (s; NaN where it had not settled by the
-    /// end of the span).
+    /// When the response last leaves ±2 % of the step and one step of the velocity estimate
+    /// (s; NaN where it had not settled by the end of the span).
     pub settling_time_s: f64,
     /// Drive time of the run: the ride to the step and the span after it (s).
     pub drive_time_s: f64,
@@ -88,6 +88,37 @@ pub fn step_on_fmu(
         bail!("the step's trace is empty");
     }
     let overshoot_percent = 100.0 * (response.iter().copied().fold(f64::NEG_INFINITY, f64::max) - 1.0).max(0.0);
-    let settling_time_s = super::prediction::settled_after(&time, &response, |y| (y - 1.0).abs() > 0.02);
+    // The estimate moves in steps of one count per velocity period: a response ringing within
+    // ±2 % reads up to a step further out. The band is ±2 % and one step.
+    let band = 0.02 + reading_step(&response);
+    let settling_time_s = super::prediction::settled_after(&time, &response, |y| (y - 1.0).abs() > band);
     Ok(MeasuredStep { time, response, overshoot_percent, settling_time_s, drive_time_s: stop_time })
+}
+
+/// The smallest step between two of `response`'s distinct readings (readings within a
+/// millionth of one another count as one; 0 where there are not two): a count of the encoder
+/// per velocity period, per unit step.
+fn reading_step(response: &[f64]) -> f64 {
+    let mut levels: Vec<f64> = response.iter().copied().filter(|y| y.is_finite()).collect();
+    levels.sort_by(f64::total_cmp);
+    let step = levels.windows(2).map(|w| w[1] - w[0]).filter(|d| *d > 1e-6).fold(f64::INFINITY, f64::min);
+    if step.is_finite() {
+        step
+    } else {
+        0.0
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::reading_step;
+
+    #[test]
+    fn the_reading_step_is_the_least_gap_between_distinct_readings() {
+        let q = 0.0096;
+        let readings: Vec<f64> = [0, 3, 1, 1, 5, 2, 2].iter().map(|k| 0.97 + q * *k as f64).collect();
+        assert!((reading_step(&readings) - q).abs() < 1e-9);
+        assert_eq!(reading_step(&[1.0, 1.0, f64::NAN]), 0.0);
+        assert_eq!(reading_step(&[]), 0.0);
+    }
 }
