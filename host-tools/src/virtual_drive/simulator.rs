@@ -167,6 +167,11 @@ impl<F: ParamFlash> VirtualDrive<F> {
         self.uart.counters
     }
 
+    /// The line corrupts each byte, each way, with probability `rate` from now on.
+    pub fn set_line_corrupt_rate(&mut self, rate: f64) {
+        self.uart.set_corrupt_rate(rate);
+    }
+
     pub fn line_capacity(&self) -> f64 {
         self.uart.capacity()
     }

@@ -74,6 +74,12 @@ impl Uart {
         }
     }
 
+    /// From now on each byte, each way, is corrupted with probability `rate` (the same random
+    /// sequence carries on).
+    pub fn set_corrupt_rate(&mut self, rate: f64) {
+        self.corrupt_rate = rate;
+    }
+
     /// Bytes a second the line carries each way.
     pub fn capacity(&self) -> f64 {
         self.bytes_per_second
