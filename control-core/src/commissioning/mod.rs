@@ -6,7 +6,7 @@
 //!
 //! The sequence, each stage on the previous one's result, after 16 ms at zero voltage that
 //! read the current sensors' noise (`sensor_noise`: the q fit on a winding of more than four
-//! ticks takes it out):
+//! ticks takes it out) and their offsets (taken off every reading after):
 //! 1. **Probe.** Pseudo-random voltage chips of zero mean on a fixed angle (0), their size
 //!    growing from a millivolt by a quarter a period (two such steps a period while their
 //!    current would stay under a fiftieth of the test current) while the current stays under
@@ -667,6 +667,9 @@ pub struct Commissioning {
     light_rotor: bool,
     /// The current sensors' noise, read before the probe.
     sensor_noise: SensorNoise,
+    /// The current sensors' offsets (A, phases a and b), read with their noise and taken off
+    /// every reading after it.
+    sensor_offsets: [f32; 2],
     /// A slow q winding's search for the noise variance its fit takes out (`noise_matching`),
     /// once its chips have ended.
     noise_matching: Option<NoiseMatching>,
@@ -754,6 +757,7 @@ impl Commissioning {
             applied_chip: 0.0,
             last_current: None,
             sensor_noise: SensorNoise::default(),
+            sensor_offsets: [0.0; 2],
             noise_matching: None,
             finishing: 0,
             q_shaping: None,
@@ -837,6 +841,10 @@ impl Commissioning {
         if peak > self.settings.overcurrent {
             return self.fail(CommissioningFault::Overcurrent { amps: peak });
         }
+        // The currents less the sensors' offsets (`sensor_noise`; none while they are read).
+        let [offset_a, offset_b] = self.sensor_offsets;
+        let (ia, ib) = (ia - offset_a, ib - offset_b);
+        let ic = -(ia + ib);
         let start = *self.start_count.get_or_insert(i.encoder_count);
         let relative = i.encoder_count.wrapping_sub(start);
         self.ticks += 1;
@@ -874,6 +882,7 @@ impl Commissioning {
                 self.sensor_noise.add(ia, ib);
                 self.voltage = 0.0;
                 if self.ticks >= self.ticks_of(SENSOR_NOISE_S) {
+                    self.sensor_offsets = self.sensor_noise.offsets();
                     self.next_stage(Stage::Probe);
                 }
             }
