@@ -841,7 +841,8 @@ impl Commissioning {
         if peak > self.settings.overcurrent {
             return self.fail(CommissioningFault::Overcurrent { amps: peak });
         }
-        // The currents less the sensors' offsets (`sensor_noise`; none while they are read).
+        // The currents less the sensors' offsets (`sensor_noise`; none while they are read). The
+        // trip above takes the readings as they are: a few milliamps of offset beside its level.
         let [offset_a, offset_b] = self.sensor_offsets;
         let (ia, ib) = (ia - offset_a, ib - offset_b);
         let ic = -(ia + ib);

@@ -10,8 +10,10 @@
 //! carried through the Clarke and Park transforms to an axis, give the fit the noise's variance
 //! on that axis to take out (`FreeRotorFit::branch_less_noise`).
 //!
-//! The readings' means are the sensors' offsets (no current flows: the rotor is at rest and the
-//! bridge at zero voltage shorts the winding), which the sequence takes off every reading after.
+//! The readings' means are the sensors' offsets, which the sequence takes off every reading
+//! after: it starts from a drive at rest, so at zero voltage no current flows but what the
+//! current loop held against the offsets before it, a few milliamps decaying over the winding's
+//! time constant (on a winding slower than the readings, less of the offsets is taken off).
 //! Left in, an offset `o` on a winding of resistance `R` reads as a voltage `R·o` in the holds,
 //! beside the inverter's dead-time voltage that the holds give the q fits: 5 mA on 7.3 Ω is
 //! 37 mV, three quarters of the twin's dead time, and the q fits of a winding faster than a tick

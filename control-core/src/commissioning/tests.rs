@@ -199,7 +199,7 @@ fn a_d_winding_faster_than_the_tick_is_found_with_its_dead_time() {
 /// bench's seed 36 motor 65 and seed 7 motor 10), with current-sensor offsets of 5 mA, the
 /// most the bench draws: left in the readings, an offset reads in the holds as a voltage
 /// `R·o` beside the inverter's dead-time voltage (three quarters of it here), which the q fits
-/// of a winding faster than a tick take as the inverter's: Lq moved by 1–6 % with the
+/// of a winding faster than a tick take as the inverter's: Lq moved by 1.8–3.1 % with the
 /// offsets' signs. Taken off with the sensors' offsets read at zero voltage (`sensor_noise`),
 /// the offsets move Lq by under 0.3 % from what the same motor gives without them.
 #[test]
