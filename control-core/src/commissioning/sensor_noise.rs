@@ -31,16 +31,14 @@ pub(super) struct SensorNoise {
     last: Option<[f32; 2]>,
     /// The sums of the changes' products (aa, bb, ab).
     products: [f32; 3],
-    /// The readings' sums (a, b) and count.
+    /// The readings' sums (a, b); their count is one more than the changes' once one is in.
     sums: [f32; 2],
-    readings: f32,
 }
 
 impl SensorNoise {
     pub(super) fn add(&mut self, a: f32, b: f32) {
         self.sums[0] += a;
         self.sums[1] += b;
-        self.readings += 1.0;
         if let Some([a0, b0]) = self.last.replace([a, b]) {
             let (da, db) = (a - a0, b - b0);
             self.differences += 1.0;
@@ -61,10 +59,11 @@ impl SensorNoise {
 
     /// The sensors' offsets (a, b; A): the readings' means; zero before any reading.
     pub(super) fn offsets(&self) -> [f32; 2] {
-        if self.readings < 1.0 {
+        if self.last.is_none() {
             return [0.0; 2];
         }
-        self.sums.map(|sum| sum / self.readings)
+        let readings = self.differences + 1.0;
+        self.sums.map(|sum| sum / readings)
     }
 
     /// The noise's variance on the q axis of the frame at `angle` (rad, electrical; A²).
