@@ -223,7 +223,8 @@ pub fn design(
     let widest = refined.chain(lifted).chain(restored).max_by(|a, b| by_bandwidth(&a.0, &b.0));
     // Where that loop falls short of the farthest near misses' reach, a second notch below
     // their crossover shapes the loop's phase there (see `shaping_notches`), and each such
-    // near miss is moved onto the margins with it.
+    // near miss is moved onto the margins with it: the two of the farthest reach, and the
+    // next ones in turn until one reaches (see `SHAPED_NEAR_MISSES`).
     let short_of = |reach: f64| widest.is_none_or(|(w, _)| w.margins.bandwidth_hz < NEAR_MISS_KEPT_REACH * reach);
     let mut shaped = Vec::new();
     let (mut tried, mut reached) = (0, false);
@@ -369,12 +370,12 @@ impl Ladders<'_> {
 /// miss is moved that far turns on a compass search's path, not on how far it reaches: on the
 /// calibrated model of the absorbers draw's machine 37 of 40 over the virtual drive (a load
 /// of 2.9 times the motor on a 64 Hz shaft, an absorber at 49 Hz) the two near misses of the
-/// farthest reach (327 and 321 Hz) move onto no loop wider than 28 Hz, the third and fifth
-/// onto 740 and 748 Hz; with the winding's resistance and inductance 0.02 % and 0.9 % nearer
+/// farthest reach (327 and 321 Hz) move onto no loop wider than 28 Hz, the third onto
+/// 741 Hz; with the winding's resistance and inductance 0.02 % and 0.9 % nearer
 /// the truth in the model, the first two move onto 754 and 732 Hz.
 const SHAPED_NEAR_MISSES: usize = 2;
 
-/// The most near misses that get a shaping notch ([`SHAPED_NEAR_MISSES`]).
+/// The most near misses that get a shaping notch, in all ([`SHAPED_NEAR_MISSES`]).
 const SHAPED_NEAR_MISSES_AT_MOST: usize = 6;
 
 /// The second notches tried to shape a near miss's loop: centres at a few shares of its

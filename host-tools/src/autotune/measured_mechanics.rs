@@ -163,16 +163,18 @@ impl MeasuredMechanics {
                 }
             }
         }?;
-        Self::moved_on(&sampled, &at_goal, reserved)
+        Self::moved_on_sampled(&sampled, &at_goal, reserved)
     }
 
     /// `design` moved onto the `reserved` margins on the calibrated model as a loop at the
     /// goal is ([`Self::moved_from_goal`]); `None` where it cannot keep them.
     pub(crate) fn moved_onto(&self, design: &Design, reserved: &MarginGoal) -> Option<Design> {
-        Self::moved_on(&self.sampled_model(), design, reserved)
+        Self::moved_on_sampled(&self.sampled_model(), design, reserved)
     }
 
-    fn moved_on(sampled: &SampledPlant, design: &Design, reserved: &MarginGoal) -> Option<Design> {
+    /// `design` moved onto the `reserved` margins on `sampled` (the calibrated model on the
+    /// search's grid): with the closed loop held [`MOVED_HEADROOMS_DB`] over −3 dB in turn.
+    fn moved_on_sampled(sampled: &SampledPlant, design: &Design, reserved: &MarginGoal) -> Option<Design> {
         MOVED_HEADROOMS_DB
             .iter()
             .find_map(|&headroom| restore_on(sampled, reserved, design, NEAR_MISS_KEPT_REACH, headroom))

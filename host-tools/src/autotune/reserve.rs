@@ -117,8 +117,11 @@ impl<V> CloseDesign<V> {
 /// ([`MeasuredMechanics::moved_onto`]). Over the virtual drive the close designs of the
 /// absorbers draw's machines 15 and 37 of 40 read 44.7° of phase margin on the drive; the full
 /// reserve's search found 73 Hz on machine 15 and a loop whose `Ms` read 1.604 on machine 37;
-/// stepped back, 743 and 730 Hz held their verification, and machine 19 of the plain draw
-/// (its close design reading 41.7° where the loop hovers at `|L|` ≈ 1 near 120 Hz) 594 Hz.
+/// stepped back, 743 and 730 Hz on the model held their verification, and machine 19 of the
+/// plain draw (its close design reading 41.7° where the loop hovers at `|L|` ≈ 1 near 120 Hz)
+/// 594 Hz. The wider loop is not always the one that verifies: the absorbers draw's machine 19
+/// has its stepped-back loop read 40.1° on the drive, where the full reserve's own, narrower
+/// design verifies.
 /// An error of `check` ends the attempt.
 pub fn design_and_verify<V>(
     mechanics: &MeasuredMechanics,
