@@ -591,19 +591,18 @@ mod tests {
         assert!(goal.held_by(&dense), "{dense:?}");
     }
 
-    /// A shaft whose loops past the resonance keep the phase margin only on a knife's edge
-    /// (seed 1's machine 30 on the default axis: load 0.91 times the motor, shaft at 52 Hz,
-    /// ζ 0.016; its loops with one notch past the resonance keep about 45.5° and no more).
-    /// Without a shaping notch the design with the full reserve (48°) stays below the
-    /// resonance; with one, a broad shallow notch well above the shaft's resonance and below the crossover
-    /// shapes the loop's phase, and the design reaches past ten times the resonance. Checked
-    /// on a 20 000-point grid: the margins held, and the closed loop over −3 dB from 0.5 Hz up
-    /// to its bandwidth.
+    /// A lightly damped shaft whose loops past the resonance keep the phase margin only with
+    /// a shaping notch (seed 1's machine 65 of 200 on the default axis: load 0.98 times the
+    /// motor, shaft at 54.5 Hz, ζ 0.010). Without a shaping notch the design with the full
+    /// reserve (48°) stays below the resonance; with one, a broad shallow notch well above the
+    /// shaft's resonance and below the crossover shapes the loop's phase, and the design
+    /// reaches past ten times the resonance. Checked on a 20 000-point grid: the margins
+    /// held, and the closed loop over −3 dB from 0.5 Hz up to its bandwidth.
     #[test]
-    fn a_shaping_notch_takes_a_knife_edge_shaft_past_its_resonance() {
+    fn a_shaping_notch_takes_a_lightly_damped_shaft_past_its_resonance() {
         use crate::autotune::bench::Machine;
         use crate::autotune::margins::log_grid;
-        let machine = Machine { inertia_ratio: 0.911, resonance_hz: 52.1, damping_ratio: 0.0157, absorber: None };
+        let machine = Machine { inertia_ratio: 0.98, resonance_hz: 54.5, damping_ratio: 0.0101, absorber: None };
         let (period, drive, m) = machine.axis();
         let (fr, _) = m.resonance_hz();
         let plant = |f: f64| crate::autotune::loop_plant(&drive, &m, f);
@@ -740,6 +739,9 @@ mod tests {
             resistance: 0.2999332547187805,
             inductance: 0.0005042956909164786,
             torque_gain: 1.0,
+            torque_constant: 0.1,
+            back_emf: 0.4 / 6.0,
+            back_emf_feedforward: 0.4 / 6.0,
         };
         let m = Mechanics {
             motor_inertia: 5.001457150322367e-5,

@@ -33,13 +33,15 @@ use mechanics::Mechanics;
 /// The plant from the current loop's per-tick torque reference to the velocity estimate: the
 /// drive's part times the machine's.
 pub fn plant_response(drive: &DriveDynamics, mechanics: &Mechanics, f: f64) -> Complex64 {
-    drive.around_machine(f) * mechanics.motor_velocity_per_torque(f)
+    drive.plant(f, mechanics)
 }
 
 /// A torque at the motor (a load step, N·m) to the velocity estimate: the machine's motor
-/// velocity per torque behind the estimate (no current loop or command hold on that path).
+/// velocity per torque behind the estimate, with what the back-EMF path leaves of it (no
+/// command hold on that path).
 pub fn disturbance_response(drive: &DriveDynamics, mechanics: &Mechanics, f: f64) -> Complex64 {
-    drive.velocity_estimate(f) * mechanics.motor_velocity_per_torque(f)
+    let m = mechanics.motor_velocity_per_torque(f);
+    drive.velocity_estimate(f) * m * drive.back_emf_path(f, m)
 }
 
 /// The plant the velocity loop drives: [`plant_response`] behind the command's hold over the
