@@ -74,6 +74,13 @@ impl DriveDynamics {
         Self::new(params, plant.resistance, plant.lq, back_emf, gain)
     }
 
+    /// For tests: this drive with a feed-forward that takes all of the back-EMF off (the
+    /// model without its back-EMF path).
+    #[cfg(test)]
+    pub(crate) fn without_back_emf(self) -> Self {
+        Self { back_emf: 0.0, back_emf_feedforward: 0.0, ..self }
+    }
+
     /// The closed current loop, reference → current, sampled every tick: the winding
     /// `b/(z − a)` (`a = e^{−RT/L}`, `b = (1 − a)/R`), one tick of computation delay, the PI
     /// `kp + ki·T·z/(z − 1)`.
