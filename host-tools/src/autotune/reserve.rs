@@ -61,9 +61,10 @@ impl Reserve {
 /// design must keep the goal: the axes' ends of the 99.7 % confidence ellipsoid of the
 /// two-inertia fit's four parameters (χ² of 16 on four degrees of freedom; 97.5 % with an
 /// absorber's three more). The ends of the axes, not the whole ellipsoid: a margin's worst
-/// direction can lie between them. Over the virtual drive the calibrated model of seed 1's
-/// machine 21 of 40 (shaft 450 Hz, ratio 0.26) is 0.2° optimistic on the tight design, an
-/// error the axes' ends three standard deviations out do not cover and four do.
+/// direction can lie between them. Over the virtual drive, with a drive model that left out
+/// the back-EMF path, the calibrated model of seed 1's machine 21 of 40 (shaft 450 Hz, ratio
+/// 0.26) was 0.2° optimistic on the tight design, an error the axes' ends three standard
+/// deviations out do not cover and four do.
 pub const TIGHT_SIGMAS: f64 = 4.0;
 
 /// What became of the close design.
@@ -114,14 +115,14 @@ impl<V> CloseDesign<V> {
 /// design keeps the close reserve, the full reserve's design checked by `check`, whose
 /// outcome then stands whether it held or not; the full reserve's design is the wider of its
 /// own and the missed close design moved onto its margins
-/// ([`MeasuredMechanics::moved_onto`]). Over the virtual drive the close designs of the
-/// absorbers draw's machines 15 and 37 of 40 read 44.7° of phase margin on the drive; the full
-/// reserve's search found 73 Hz on machine 15 and a loop whose `Ms` read 1.604 on machine 37;
-/// stepped back, 743 and 730 Hz on the model held their verification, and machine 19 of the
-/// plain draw (its close design reading 41.7° where the loop hovers at `|L|` ≈ 1 near 120 Hz)
-/// 594 Hz. The wider loop is not always the one that verifies: the absorbers draw's machine 19
-/// has its stepped-back loop read 40.1° on the drive, where the full reserve's own, narrower
-/// design verifies.
+/// ([`MeasuredMechanics::moved_onto`]). The search with the full reserve can land under a
+/// load's dip where the close design lies past it: over the virtual drive, with a drive model
+/// that left out the back-EMF path, the close designs of the absorbers draw's machines 15 and
+/// 37 of 40 read 44.7° of phase margin on the drive, the full reserve's search found 73 Hz on
+/// machine 15, and stepped back, 743 and 730 Hz on the model held their verification. The
+/// wider loop is not always the one that verifies (on that model the absorbers draw's machine
+/// 19 had its stepped-back loop read 40.1° on the drive, where the full reserve's own,
+/// narrower design verified).
 /// An error of `check` ends the attempt.
 pub fn design_and_verify<V>(
     mechanics: &MeasuredMechanics,
