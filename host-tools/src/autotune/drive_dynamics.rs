@@ -116,10 +116,10 @@ impl DriveDynamics {
 
     /// Velocity estimate over the current loop's torque reference (set every tick), without
     /// the machine's own response: the current loop with the back-EMF path the machine
-    /// `motor_velocity_per_torque` closes around it ([`Self::back_emf_path`]), the torque between two current samples (the
-    /// current nearly linear over a tick: the samples' linear interpolation, `sinc²(πfT)`
-    /// without a phase), the estimate's mean over the velocity period
-    /// (`(1 − e^{−sT_v})/(sT_v)`), the torque gain.
+    /// `motor_velocity_per_torque` closes around it ([`Self::back_emf_path`]), the torque
+    /// between two current samples (the current nearly linear over a tick: the samples'
+    /// linear interpolation, `sinc²(πfT)` without a phase), the estimate's mean over the
+    /// velocity period (`(1 − e^{−sT_v})/(sT_v)`), the torque gain.
     pub fn around_machine(&self, f: f64, motor_velocity_per_torque: Complex64) -> Complex64 {
         let x = 0.5 * std::f64::consts::TAU * f * self.tick;
         let sinc = if x < 1e-9 { 1.0 } else { x.sin() / x };

@@ -275,8 +275,8 @@ mod tests {
     /// Seed 1's machine 10 of the absorbers draw (a load of 0.92 times the motor on a 171 Hz
     /// shaft, ζ 0.061, an absorber on the load) as the bench calibrated it behind a drive
     /// whose feed-forward takes all of the back-EMF off: no absorber fitted, the load inertia
-    /// 10.7 % off. The search with the tight reserve stays under the
-    /// model's anti-resonance; the loop at the goal cannot be moved onto the reserve with the
+    /// 10.7 % off. The search with the tight reserve stays under the model's anti-resonance;
+    /// the loop at the goal cannot be moved onto the reserve with the
     /// search's floor headroom and can with half of it, and the design then reaches past five
     /// times the anti-resonance, keeps the reserve on a dense grid and the bench's goals on
     /// the true machine, absorber and all.
