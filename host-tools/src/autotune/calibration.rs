@@ -167,8 +167,8 @@ pub fn calibrate(points: &[PlantPoint], drive: &DriveDynamics) -> anyhow::Result
     }
     let low = points.iter().map(|p| p.hz).fold(f64::INFINITY, f64::min);
     let high = points.iter().map(|p| p.hz).fold(0.0, f64::max);
-    // The rigid body's inertia from the lowest points (a start: the back-EMF path, under 0.1 %
-    // there, left out).
+    // The rigid body's inertia from the lowest points (a start: the back-EMF path left out,
+    // under 0.1 % there with the decoupling, up to about a tenth without it; the fit has it).
     let mut lowest: Vec<&PlantPoint> = points.iter().collect();
     lowest.sort_by(|a, b| a.hz.total_cmp(&b.hz));
     let j: f64 = {

@@ -27,10 +27,10 @@ pub struct DriveDynamics {
     pub torque_gain: f64,
     /// The drive's torque constant (N·m/A): the current reference per torque asked for.
     pub torque_constant: f64,
-    /// The winding's back-EMF per motor speed, `p·ψ` (V·s/rad), and the part the current
-    /// loop's feed-forward takes off from its velocity estimate (`p·ψ` as the drive knows it,
-    /// 0 without the decoupling).
+    /// The winding's back-EMF per motor speed, `p·ψ` (V·s/rad).
     pub back_emf: f64,
+    /// The back-EMF per estimated speed the current loop's feed-forward takes off (`p·ψ` as
+    /// the drive knows it, 0 without the decoupling).
     pub back_emf_feedforward: f64,
 }
 
@@ -99,7 +99,8 @@ impl DriveDynamics {
     /// takes off `p·ψ̂` times the velocity estimate, held until the next estimate and applied
     /// over the tick after it is computed (`E·H·e^{−sT}·(1 − e^{−sT})/(sT)`). The rest drives
     /// `1/(R + sL)` against the loop's sensitivity `1 − T_i`, a current whose torque the
-    /// machine turns into speed (`motor_velocity_per_torque`, per torque the drive asks for):
+    /// machine turns into speed (`motor_velocity_per_torque`, per N·m of the model's torque: the
+    /// drive's with `torque_gain` 1, the machine's own with the true torque gain):
     /// `1/(1 + (1 − T_i)·(p·ψ − p·ψ̂·F)/(R + sL)·k_t·m)`. Between 200 and 800 Hz it takes
     /// 0.5–1.5 % off a default motor's current (more behind slower current loops).
     pub fn back_emf_path(&self, f: f64, motor_velocity_per_torque: Complex64) -> Complex64 {

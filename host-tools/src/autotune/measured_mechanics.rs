@@ -273,7 +273,7 @@ mod tests {
     use crate::fmu::configuration::configuration;
 
     /// Seed 1's machine 10 of the absorbers draw (a load of 0.92 times the motor on a 171 Hz
-    /// shaft, ζ 0.061, an absorber on the load) as the bench calibrated it behind a drive
+    /// shaft, ζ 0.061, an absorber on the load) as the bench calibrated it through a model
     /// whose feed-forward takes all of the back-EMF off: no absorber fitted, the load inertia
     /// 10.7 % off. The search with the tight reserve stays under the model's anti-resonance;
     /// the loop at the goal cannot be moved onto the reserve with the
