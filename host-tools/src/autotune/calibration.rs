@@ -142,7 +142,7 @@ fn residuals(points: &[PlantPoint], drive: &DriveDynamics, theta: &[f64]) -> Vec
     let m = mechanics_of(theta, 0.0);
     let mut r = Vec::with_capacity(2 * points.len());
     for p in points {
-        let model = drive.plant(p.hz, &m);
+        let model = super::plant_response(drive, &m, p.hz);
         let e = (p.response / model).ln();
         r.push(e.re);
         r.push(e.im);
@@ -400,7 +400,10 @@ mod tests {
     fn noisy_points(truth: &Mechanics, drive: &DriveDynamics, noise: &mut impl FnMut() -> f64) -> Vec<PlantPoint> {
         crate::autotune::margins::log_grid(10.0, 3000.0, 41)
             .into_iter()
-            .map(|hz| PlantPoint { hz, response: drive.plant(hz, truth) * Complex64::new(1.0 + noise(), noise()) })
+            .map(|hz| PlantPoint {
+                hz,
+                response: crate::autotune::plant_response(drive, truth, hz) * Complex64::new(1.0 + noise(), noise()),
+            })
             .collect()
     }
 

@@ -9,8 +9,6 @@
 
 use num_complex::Complex64;
 
-use super::mechanics::Mechanics;
-
 /// The drive's side of the plant, from its parameters and the winding it drives.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct DriveDynamics {
@@ -129,13 +127,6 @@ impl DriveDynamics {
             * (sinc * sinc)
             * self.velocity_estimate(f)
             * self.torque_gain
-    }
-
-    /// Velocity estimate over the current loop's torque reference on `mechanics`: the drive's
-    /// part ([`Self::around_machine`]) times the machine's motor velocity per torque.
-    pub fn plant(&self, f: f64, mechanics: &Mechanics) -> Complex64 {
-        let m = mechanics.motor_velocity_per_torque(f);
-        self.around_machine(f, m) * m
     }
 
     /// The velocity estimate over the motor's velocity: its mean over the velocity period,

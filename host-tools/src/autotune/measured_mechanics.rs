@@ -210,7 +210,7 @@ impl MeasuredMechanics {
     pub(crate) fn noiseless_sweep(drive: &DriveDynamics, mechanics: &super::mechanics::Mechanics) -> Vec<PlantPoint> {
         super::margins::log_grid(5.0, 3000.0, 40)
             .into_iter()
-            .map(|hz| PlantPoint { hz, response: drive.plant(hz, mechanics) })
+            .map(|hz| PlantPoint { hz, response: super::plant_response(drive, mechanics, hz) })
             .collect()
     }
 

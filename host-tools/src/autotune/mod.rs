@@ -33,7 +33,8 @@ use mechanics::Mechanics;
 /// The plant from the current loop's per-tick torque reference to the velocity estimate: the
 /// drive's part times the machine's.
 pub fn plant_response(drive: &DriveDynamics, mechanics: &Mechanics, f: f64) -> Complex64 {
-    drive.plant(f, mechanics)
+    let m = mechanics.motor_velocity_per_torque(f);
+    drive.around_machine(f, m) * m
 }
 
 /// A torque at the motor (a load step, N·m) to the velocity estimate: the machine's motor
