@@ -26,11 +26,11 @@ use crate::sweep::torque_limit::TorqueLimits;
 pub trait AxisUnderTest {
     /// The drive parameters a run of `parameters` runs with.
     fn params(&mut self, parameters: &BTreeMap<String, Value>) -> Result<Params>;
-    /// A stepped-sine sweep at `point` of `amplitude`, riding at `velocity` rad/s.
+    /// A stepped-sine sweep of `settings` (its point, amplitude and frequencies), riding at
+    /// `velocity` rad/s.
     fn sweep(
         &mut self,
-        point: InjectionPoint,
-        amplitude: f64,
+        settings: &SweepParams,
         parameters: &BTreeMap<String, Value>,
         velocity: f64,
     ) -> Result<MeasuredSweep>;
@@ -56,12 +56,11 @@ impl AxisUnderTest for OnFmu<'_> {
 
     fn sweep(
         &mut self,
-        point: InjectionPoint,
-        amplitude: f64,
+        settings: &SweepParams,
         parameters: &BTreeMap<String, Value>,
         velocity: f64,
     ) -> Result<MeasuredSweep> {
-        sweep_on_fmu(self.0, point, amplitude, parameters, velocity)
+        sweep_on_fmu(self.0, settings, parameters, velocity)
     }
 
     fn constant_speeds(
@@ -93,13 +92,12 @@ impl<T: DrivePort> AxisUnderTest for OnDrive<'_, T> {
 
     fn sweep(
         &mut self,
-        point: InjectionPoint,
-        amplitude: f64,
+        settings: &SweepParams,
         parameters: &BTreeMap<String, Value>,
         velocity: f64,
     ) -> Result<MeasuredSweep> {
         crate::fmu::runner::refuse_drive_owned(parameters.keys())?;
-        let settings = SweepParams { point, amplitude: amplitude as f32, ..Default::default() };
+        let (settings, point) = (*settings, settings.point);
         let run = SweepRun { settings, parameters: parameters.clone(), velocity };
         let sweep = crate::sweep::device::sweep_on_drive(self.session, &run, |_| {})
             .with_context(|| format!("the sweep on the drive at {}", self.port))?;

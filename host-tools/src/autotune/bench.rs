@@ -223,7 +223,7 @@ pub struct MachineRow {
 /// The torque-point sweep on the twin: its readings (`Y/U` at each frequency).
 pub fn measure(fmu: &Fmu, parameters: &BTreeMap<String, Value>) -> Result<Vec<ResponsePoint>> {
     let torque = control_core::excitation::InjectionPoint::TorqueCommand;
-    Ok(super::sweep_on_fmu(fmu, torque, 0.2, parameters, crate::sweep::bench::VELOCITY)?.points)
+    Ok(super::sweep_on_fmu(fmu, &super::sweep_settings(torque, 0.2), parameters, crate::sweep::bench::VELOCITY)?.points)
 }
 
 /// Design and check one machine, measured on the FMU or (`on_drive`) a virtual drive.
@@ -303,7 +303,7 @@ fn tune_into(fmu: &Fmu, machine: &Machine, goal: &MarginGoal, on_drive: bool, ro
     // Designed and verified where it was measured (the full reserve where the close one misses).
     let verified = design_and_verify(&measured, goal, "chosen", |d, position| {
         let tuned = with_tuning(&parameters, &d.tuning, Some(position));
-        let v = verify(target, &tuned, crate::sweep::bench::VELOCITY, goal)?;
+        let v = verify(target, &tuned, crate::sweep::bench::VELOCITY, goal, &|f| measured.open_loop(&d.tuning, f))?;
         let held = v.passed;
         Ok((v, held))
     })?;

@@ -131,7 +131,8 @@ impl AutotuneArgs {
                 pb.set_position(400);
                 let verified = design_and_verify(&mechanics, &goal, &self.margin, |design, position| {
                     let tuned = with_tuning(&parameters, &design.tuning, Some(position));
-                    let twin = verify(&mut OnFmu(&fmu), &tuned, self.velocity, &goal)?;
+                    let predicted = |f: f64| mechanics.open_loop(&design.tuning, f);
+                    let twin = verify(&mut OnFmu(&fmu), &tuned, self.velocity, &goal, &predicted)?;
                     let held = twin.passed;
                     Ok((twin, held))
                 })?;
@@ -234,12 +235,13 @@ impl AutotuneArgs {
         // measured with the tuning. The full reserve's design where the close one misses.
         let verified = design_and_verify(&mechanics, goal, &self.margin, |design, position| {
             let twin_tuned = with_tuning(&on_twin, &design.tuning, Some(position));
-            let twin = verify(&mut OnFmu(&twin_fmu), &twin_tuned, self.velocity, goal)?;
+            let predicted = |f: f64| mechanics.open_loop(&design.tuning, f);
+            let twin = verify(&mut OnFmu(&twin_fmu), &twin_tuned, self.velocity, goal, &predicted)?;
             if !twin.passed {
                 return Ok(((twin, None), false));
             }
             let tuned = with_tuning(parameters, &design.tuning, Some(position));
-            let on_drive = verify(&mut drive, &tuned, self.velocity, goal)?;
+            let on_drive = verify(&mut drive, &tuned, self.velocity, goal, &predicted)?;
             let held = on_drive.passed;
             Ok(((twin, Some(on_drive)), held))
         })?;

@@ -71,7 +71,7 @@ pub fn measure_mechanics(
     check_torque_amplitude(amplitude)?;
     let params = target.params(parameters)?;
     let sweep = target
-        .sweep(InjectionPoint::TorqueCommand, amplitude, parameters, velocity)
+        .sweep(&super::sweep_settings(InjectionPoint::TorqueCommand, amplitude), parameters, velocity)
         .with_context(|| format!("the torque-point sweep on {}", target.name()))?;
     check_linear(&sweep, amplitude)?;
     let drive = DriveDynamics::as_configured(&params);
@@ -95,6 +95,11 @@ impl MeasuredMechanics {
     /// The calibrated loop plant (command hold, drive, machine) at `f` Hz.
     pub fn model(&self, f: f64) -> Complex64 {
         loop_plant(&self.drive, &self.calibration.mechanics, f)
+    }
+
+    /// The velocity loop's open loop with `tuning` on the calibrated model at `f` Hz.
+    pub fn open_loop(&self, tuning: &VelocityTuning, f: f64) -> Complex64 {
+        tuning.response(f, self.period()) * self.model(f)
     }
 
     /// The velocity loop's period (s).
@@ -242,7 +247,7 @@ impl MeasuredMechanics {
     /// The position loop per unit gain around `tuning` on the calibrated model.
     pub fn position_loop_per_gain(&self, tuning: &VelocityTuning, f: f64) -> Complex64 {
         let closed = |f: f64| {
-            let l = tuning.response(f, self.period()) * self.model(f);
+            let l = self.open_loop(tuning, f);
             l / (1.0 + l)
         };
         position_loop_per_gain(&closed, &|f| self.drive.velocity_estimate(f), &PositionRates::of(&self.params), f)

@@ -51,6 +51,15 @@ pub fn loop_plant(drive: &DriveDynamics, mechanics: &Mechanics, f: f64) -> Compl
     drive.command_hold(f) * plant_response(drive, mechanics, f)
 }
 
+/// A stepped-sine sweep's settings at `point` with `amplitude` over the default frequencies
+/// (10 Hz to 3 kHz, see [`SweepParams::default`](control_core::phase_shifted_sweep::SweepParams)).
+pub fn sweep_settings(
+    point: control_core::excitation::InjectionPoint,
+    amplitude: f64,
+) -> control_core::phase_shifted_sweep::SweepParams {
+    control_core::phase_shifted_sweep::SweepParams { point, amplitude: amplitude as f32, ..Default::default() }
+}
+
 /// The measured points of a torque-point sweep turned into the plant [`plant_response`]
 /// models, taking out the path the velocity loop running during the sweep (`during`) closes
 /// beside U ([`DriveDynamics::plant_of_torque_sweep`]).
@@ -84,18 +93,15 @@ pub struct MeasuredSweep {
     pub torque_limit: f64,
 }
 
-/// A sweep at `point` with `amplitude` on the FMU (a drive's twin or the plant of
-/// `parameters`), riding at `velocity` rad/s.
+/// A sweep of `settings` on the FMU (a drive's twin or the plant of `parameters`), riding at
+/// `velocity` rad/s.
 pub fn sweep_on_fmu(
     fmu: &crate::fmu::runner::Fmu,
-    point: control_core::excitation::InjectionPoint,
-    amplitude: f64,
+    settings: &control_core::phase_shifted_sweep::SweepParams,
     parameters: &std::collections::BTreeMap<String, crate::fmu::scenario::Value>,
     velocity: f64,
 ) -> anyhow::Result<MeasuredSweep> {
-    let settings =
-        control_core::phase_shifted_sweep::SweepParams { point, amplitude: amplitude as f32, ..Default::default() };
-    let run = crate::fmu::sweep_run::SweepRun { settings, parameters: parameters.clone(), velocity };
+    let run = crate::fmu::sweep_run::SweepRun { settings: *settings, parameters: parameters.clone(), velocity };
     let trace = run.run(fmu, |_| {})?;
     let points = crate::sweep::measurement::stream_results(&trace, &run.settings)?;
     let limits = crate::sweep::torque_limit::TorqueLimits::of(&run.params_on(fmu)?, &run.settings);

@@ -91,7 +91,7 @@ impl AutotuneReport<'_> {
             &[("measured (torque-point sweep)", &measured_plant), ("calibrated model", &model_points)],
             None,
         )?;
-        let designed = |f: f64| d.tuning.response(f, period) * mech.model(f);
+        let designed = |f: f64| mech.open_loop(&d.tuning, f);
         let predicted: Vec<ResponsePoint> =
             dense.iter().map(|&f| ResponsePoint::from_complex(f, designed(f), 1.0)).collect();
         // The open loop as measured where it was finally verified: the drive's, else the twin's.
