@@ -102,15 +102,27 @@ impl DriveDynamics {
     /// `1/(1 + (1 − T_i)·(p·ψ − p·ψ̂·F)/(R + sL)·k_t·m)`. Between 200 and 800 Hz it takes
     /// 0.5–1.5 % off a default motor's current (more behind slower current loops).
     pub fn back_emf_path(&self, f: f64, motor_velocity_per_torque: Complex64) -> Complex64 {
+        self.back_emf_path_around(f, motor_velocity_per_torque, self.current_loop(f), self.velocity_estimate(f))
+    }
+
+    /// [`Self::back_emf_path`] with the closed current loop and the velocity estimate at `f`
+    /// already computed (by [`Self::around_machine`], which takes both again).
+    fn back_emf_path_around(
+        &self,
+        f: f64,
+        motor_velocity_per_torque: Complex64,
+        current_loop: Complex64,
+        velocity_estimate: Complex64,
+    ) -> Complex64 {
         let s = Complex64::new(0.0, std::f64::consts::TAU * f);
         let delay = (-s * self.tick).exp();
         let zero_order_hold =
             if f * self.tick < 1e-12 { Complex64::new(1.0, 0.0) } else { (1.0 - delay) / (s * self.tick) };
-        let fed_forward = self.velocity_estimate(f) * self.command_hold(f) * delay * zero_order_hold;
+        let fed_forward = velocity_estimate * self.command_hold(f) * delay * zero_order_hold;
         let residual = self.back_emf - self.back_emf_feedforward * fed_forward;
         let winding = 1.0 / (self.resistance + s * self.inductance);
         let speed_per_current = motor_velocity_per_torque * self.torque_constant * self.torque_gain;
-        1.0 / (1.0 + (1.0 - self.current_loop(f)) * winding * residual * speed_per_current)
+        1.0 / (1.0 + (1.0 - current_loop) * winding * residual * speed_per_current)
     }
 
     /// Velocity estimate over the current loop's torque reference (set every tick), without
@@ -122,10 +134,11 @@ impl DriveDynamics {
     pub fn around_machine(&self, f: f64, motor_velocity_per_torque: Complex64) -> Complex64 {
         let x = 0.5 * std::f64::consts::TAU * f * self.tick;
         let sinc = if x < 1e-9 { 1.0 } else { x.sin() / x };
-        self.current_loop(f)
-            * self.back_emf_path(f, motor_velocity_per_torque)
+        let (current_loop, velocity_estimate) = (self.current_loop(f), self.velocity_estimate(f));
+        current_loop
+            * self.back_emf_path_around(f, motor_velocity_per_torque, current_loop, velocity_estimate)
             * (sinc * sinc)
-            * self.velocity_estimate(f)
+            * velocity_estimate
             * self.torque_gain
     }
 
