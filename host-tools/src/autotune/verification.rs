@@ -124,12 +124,13 @@ const HIDDEN_MS_SHARE: f64 = 1.01;
 
 /// Where between the measured `points` (increasing frequency) the loop may keep less margin
 /// than they show: every gap whose margins (the phase margin interpolated at a crossover
-/// between its two points, the `|1/(1 + L)|` of either where it peaks) come within [`PHASE_MARGIN_SLACK_DEG`] or
-/// [`NEAR_SHARE_OF_MS`] of `goal`'s, and every gap where `predicted` (the design's loop on the
-/// calibrated model), read densely, keeps less than its values at the two points show (a
-/// phase that dips between them, a crossover pair or a sensitivity peak between them) and
-/// comes as near the goal. Neighbouring gaps make one band, measured [`CLOSER_SPACING`]
-/// apart between the points that bound it.
+/// between its two points, the `|1/(1 + L)|` of either where it peaks) come within
+/// [`PHASE_MARGIN_SLACK_DEG`] or [`NEAR_SHARE_OF_MS`] of `goal`'s, and every gap where
+/// `predicted` (the design's loop on the calibrated model), read densely, keeps less than its
+/// values at the two points show (a phase that dips between them, a crossover pair or a
+/// sensitivity peak between them) and comes as near the goal. Neighbouring gaps make one
+/// band, measured [`CLOSER_SPACING`] apart between the points that bound it (at most
+/// [`CLOSER_MOST_POINTS`]: a wider band is measured wider apart).
 pub fn closer_looks(points: &[ResponsePoint], predicted: &dyn Fn(f64) -> Complex64, goal: &MarginGoal) -> Vec<Band> {
     // NaN (no crossover) compares false: not near.
     let near = |(pm, ms): (f64, f64)| {
