@@ -107,20 +107,20 @@ pub struct Band {
 
 /// A closer look's spacing: neighbouring frequencies at most this ratio apart (1.5 %: the
 /// default sweep's 15.7 % in ten).
-const CLOSER_SPACING: f64 = 1.015;
+pub const CLOSER_SPACING: f64 = 1.015;
 /// Points a closer look takes at most (one band).
-const CLOSER_MOST_POINTS: u32 = 40;
+pub const CLOSER_MOST_POINTS: u32 = 40;
 /// The model's loop is read at so many frequencies across each gap between measured points.
-const MODEL_READINGS_PER_GAP: usize = 16;
+pub const MODEL_READINGS_PER_GAP: usize = 16;
 /// A gap whose phase margin is less than this over the goal's is looked at closer (deg).
-const PHASE_MARGIN_SLACK_DEG: f64 = 5.0;
+pub const PHASE_MARGIN_SLACK_DEG: f64 = 5.0;
 /// A gap whose `|1/(1 + L)|` reaches this share of the goal's Ms is looked at closer.
-const NEAR_SHARE_OF_MS: f64 = 0.95;
+pub const NEAR_SHARE_OF_MS: f64 = 0.95;
 /// The model's loop hides a margin between two points when, read densely, its phase margin
 /// there is this much less than the points' interpolation shows (deg), or its Ms this share
 /// more.
-const HIDDEN_PHASE_DEG: f64 = 0.5;
-const HIDDEN_MS_SHARE: f64 = 1.01;
+pub const HIDDEN_PHASE_DEG: f64 = 0.5;
+pub const HIDDEN_MS_SHARE: f64 = 1.01;
 
 /// Where between the measured `points` (increasing frequency) the loop may keep less margin
 /// than they show: every gap whose margins (the phase margin interpolated at a crossover
