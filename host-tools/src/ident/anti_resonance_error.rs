@@ -12,7 +12,7 @@
 use num_complex::Complex64;
 use serde::{Deserialize, Serialize};
 
-use crate::ident::identification::{fit_rational, within_notch_surroundings, Factor, Measured};
+use crate::ident::identification::{fit_rational_near, within_notch_surroundings, Factor, Measured, RationalFit};
 use crate::random::XorShift64Star;
 
 /// Refits per identification.
@@ -42,8 +42,9 @@ fn normal(rng: &mut XorShift64Star) -> f64 {
 }
 
 /// The relative standard errors of `zero`, the anti-resonance fitted over `band` with orders
-/// (`nb`, `na`): [`RESAMPLES`] refits of the response plus complex normal noise of each
-/// frequency's standard error, the zero pair nearest `zero` taken from each, the RMS of their
+/// (`nb`, `na`) as `fit`: [`RESAMPLES`] refits of the response plus complex normal noise of
+/// each frequency's standard error (each started from the linearised solution and from `fit`),
+/// the zero pair nearest `zero` taken from each, the RMS of their
 /// relative differences from `zero`. None when the measurement has no scatter (an exact
 /// response); [`FactorError::UNDETERMINED`] when more than a quarter of the refits fail or
 /// give no complex zero pair within the notch's surroundings (the spread of the others would
@@ -53,6 +54,7 @@ pub fn anti_resonance_error(
     band: (f64, f64),
     (nb, na): (usize, usize),
     zero: Factor,
+    fit: &RationalFit,
 ) -> Option<FactorError> {
     if !m.standard_error.iter().any(|&e| e > 0.0) {
         return None;
@@ -71,7 +73,7 @@ pub fn anti_resonance_error(
             })
             .collect();
         let perturbed = Measured { response, ..m.clone() };
-        let Ok(fit) = fit_rational(&perturbed, band, nb, na) else { continue };
+        let Ok(fit) = fit_rational_near(&perturbed, band, nb, na, Some(fit)) else { continue };
         let (zeros, _) = fit.zeros();
         let Some(z) = zeros
             .iter()
@@ -114,10 +116,12 @@ mod tests {
             standard_error: vec![0.0; frequencies.len()],
         };
         let band = (18.0, 360.0);
-        assert_eq!(anti_resonance_error(&exact, band, (3, 4), zero), None);
+        let fit = crate::ident::identification::fit_rational(&exact, band, 3, 4).unwrap();
+        assert_eq!(anti_resonance_error(&exact, band, (3, 4), zero, &fit), None);
         let with = |relative: f64| {
             let standard_error = response.iter().map(|h| relative * h.norm()).collect();
-            anti_resonance_error(&Measured { standard_error, ..exact.clone() }, band, (3, 4), zero).expect("scatter")
+            anti_resonance_error(&Measured { standard_error, ..exact.clone() }, band, (3, 4), zero, &fit)
+                .expect("scatter")
         };
         let (small, large) = (with(0.002), with(0.008));
         assert!(small.frequency > 0.0 && small.frequency < 1e-3, "{small:?}");

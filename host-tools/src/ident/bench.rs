@@ -275,4 +275,46 @@ mod tests {
         let wr = (base.shaft_stiffness * (1.0 / base.motor_inertia + 1.0 / base.load_inertia)).sqrt();
         assert!(analytic_response(&base, wr / std::f64::consts::TAU).norm() > 1e9);
     }
+
+    /// The anti-resonance fitted to the analytic plant's response under white noise is
+    /// unbiased: a well-damped absorber (damping 0.15, a notch under 3 dB deep) at 23.1 Hz,
+    /// forty noise realisations of a tenth of the notch's level on every frequency (the found
+    /// frequencies scatter by 0.3 %). The linearised (Sanathanan–Koerner) solution alone lies
+    /// 0.69 % high on average here; the mean's own standard error is 0.05 %.
+    #[test]
+    fn the_fitted_anti_resonance_is_unbiased_under_noise() {
+        let hz = 23.1;
+        let plant = axis_with_absorber(hz, 0.15);
+        let truth = true_anti_resonance(plant.absorber_inertia, plant.absorber_stiffness, plant.absorber_damping);
+        let df = 1000.0 / 2047.0;
+        let frequencies: Vec<f64> = (11..1024).map(|k| k as f64 * df).collect();
+        let exact: Vec<Complex64> = frequencies.iter().map(|&f| analytic_response(&plant, f)).collect();
+        let noise = 0.1 * exact.iter().map(|h| h.norm()).fold(f64::INFINITY, f64::min);
+        let mut rng = crate::random::XorShift64Star(7);
+        let mut normal = move || {
+            let mut uniform = || ((rng.next() >> 11) as f64 + 0.5) / (1u64 << 53) as f64;
+            let (a, b) = (uniform(), uniform());
+            (-2.0 * a.ln()).sqrt() * (std::f64::consts::TAU * b).cos()
+        };
+        let n = frequencies.len();
+        let errors: Vec<f64> = (0..40)
+            .map(|_| {
+                let response = exact.iter().map(|h| h + noise * Complex64::new(normal(), normal())).collect();
+                let m = Measured {
+                    frequencies: frequencies.clone(),
+                    response,
+                    input_power: vec![1.0; n],
+                    standard_error: vec![0.0; n],
+                };
+                let fit = crate::ident::identification::fit_rational(&m, (0.3 * hz, 6.0 * hz), 3, 4).unwrap();
+                let zeros = fit.zeros().0;
+                let z = zeros.iter().min_by(|a, b| (a.hz - hz).abs().total_cmp(&(b.hz - hz).abs())).unwrap();
+                z.hz / truth.hz - 1.0
+            })
+            .collect();
+        let mean = errors.iter().sum::<f64>() / errors.len() as f64;
+        let spread = (errors.iter().map(|e| (e - mean).powi(2)).sum::<f64>() / (errors.len() - 1) as f64).sqrt();
+        assert!(spread > 0.001 && spread < 0.006, "{spread}");
+        assert!(mean.abs() < 0.0015, "mean {:.3} %, spread {:.3} %", mean * 100.0, spread * 100.0);
+    }
 }

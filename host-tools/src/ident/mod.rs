@@ -13,6 +13,7 @@ pub mod device_machine_end;
 pub mod identification;
 pub mod index;
 pub mod model_file;
+pub mod output_error_fit;
 pub mod report;
 pub mod response_model;
 pub mod tune_device_bench;
