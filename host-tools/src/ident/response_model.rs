@@ -16,7 +16,8 @@
 //! the other axes' lag on every axis, alike for all.
 //!
 //! A model is a ratio of second-order factors with unit DC gain, fitted to the measured
-//! response by Levy's linearised least squares with Sanathanan–Koerner reweighting; pairs of
+//! response by Levy's linearised least squares with Sanathanan–Koerner reweighting and the
+//! output error's minimisation from there ([`fit_rational`]); pairs of
 //! real roots become factors with damping ≥ 1. The order is chosen from the candidates that
 //! the correction filter can hold (stable poles, left-half-plane zeros, below the position
 //! loop's Nyquist frequency) by the smallest worst-case error over the fit band.
