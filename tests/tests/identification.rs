@@ -58,15 +58,18 @@ fn saturated_torque_is_refused_with_the_reason() {
 }
 
 /// Absorbers tuned next to the axis's own mode (208–215 Hz on this axis): the resonance masks
-/// the zero, the notch is 2–3 dB deep, and at 20 dB SNR the fit cannot place the zero. The
-/// identification says so (undetermined, with the refits' spread, refused because the fitted
-/// zero lies outside the notch, or no clear notch at all) and never reports a value off the truth: before, a
-/// 208 Hz absorber was reported at 362 Hz and a 218 Hz one at 265 Hz, both with exit status 0.
+/// the zero and the notch is 2–3 dB deep at 20 dB SNR. The identification finds the zero
+/// within the goals, says it cannot (undetermined, with the refits' spread, refused because
+/// the fitted zero lies outside the notch, or no clear notch at all), and never reports a
+/// value off the truth: once, a 208 Hz absorber was reported at 362 Hz and a 218 Hz one at
+/// 265 Hz, both with exit status 0. The output-error fit finds the zero on some of these
+/// cases (checked against the truth: the test fails where none is found).
 #[test]
 fn a_masked_anti_resonance_is_reported_as_such_never_as_a_wrong_value() {
     let fmu = load_fmu();
     let out = std::env::temp_dir().join(format!("servo-ident-masked-{}", std::process::id()));
     let mut told = (0, 0);
+    let mut found = 0;
     for (hz, seed) in [(205.0, 1), (208.0, 1), (208.0, 3), (218.0, 1), (218.0, 2), (220.0, 3)] {
         let mut p = absorber_parameters(hz, 0.05, LOAD);
         p.insert("plant.noise_seed".into(), Value::Int(seed));
@@ -76,6 +79,7 @@ fn a_masked_anti_resonance_is_reported_as_such_never_as_a_wrong_value() {
                 let t = truth(hz);
                 assert!(((z.hz - t.hz) / t.hz).abs() <= 0.01, "{hz} Hz: reported {z:?}, truth {t:?}");
                 assert!(((z.damping - t.damping) / t.damping).abs() <= 0.2, "{hz} Hz: reported {z:?}, truth {t:?}");
+                found += 1;
             }
             (None, Some(why), _) => {
                 assert!(why.contains("does not explain the notch"), "{hz} Hz: {why}");
@@ -92,5 +96,5 @@ fn a_masked_anti_resonance_is_reported_as_such_never_as_a_wrong_value() {
             }
         }
     }
-    assert!(told.0 >= 1 && told.1 >= 1, "both outcomes exercised: {told:?}");
+    assert!(found >= 1, "no masked zero found (refused, undetermined: {told:?}): the value checks did not run");
 }

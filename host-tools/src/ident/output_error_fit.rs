@@ -42,12 +42,16 @@ fn criterion(points: &[(f64, Complex64)], weights: &[f64], nb: usize, theta: &[f
 /// `theta` moved by Levenberg–Marquardt steps to a lower weighted output error over `points`
 /// (normalised frequency x, measured H) with `weights`; a step is kept only where it lowers
 /// the criterion, so the result is never worse than `theta` by it. Returns `theta` unchanged
-/// where no step lowers it or the criterion is not finite. Returns the criterion beside it.
+/// where no step lowers it or the criterion is not finite. Returns the criterion beside it
+/// (NaN where `theta` does not hold `nb + 1 + na` coefficients).
 pub fn refined(points: &[(f64, Complex64)], weights: &[f64], nb: usize, na: usize, theta: &[f64]) -> (Vec<f64>, f64) {
     let unknowns = nb + 1 + na;
     let mut theta = theta.to_vec();
+    if theta.len() != unknowns {
+        return (theta, f64::NAN);
+    }
     let mut cost = criterion(points, weights, nb, &theta);
-    if !cost.is_finite() || theta.len() != unknowns {
+    if !cost.is_finite() {
         return (theta, cost);
     }
     let mut lambda = 1e-3;
