@@ -58,14 +58,13 @@ pub fn verify(
     let mut points = sweep.points;
     let mut limited_points = sweep.voltage_limited + sweep.torque_limited;
     let mut drive_time_s = sweep.drive_time_s;
-    for band in closer_looks(&points, predicted, goal) {
-        let settings = SweepParams {
-            start_hz: band.start_hz as f32,
-            stop_hz: band.stop_hz as f32,
-            points: band.points,
-            extra_hz: 0.0,
-            ..standard
-        };
+    let bands = closer_looks(&points, predicted, goal);
+    let base_rate_hz = match bands.is_empty() {
+        true => 0.0,
+        false => target.params(tuned)?.rates.current_loop_hz,
+    };
+    for band in bands {
+        let settings = band_settings(&standard, &band, base_rate_hz);
         let closer = target.sweep(&settings, tuned, velocity).with_context(|| {
             format!(
                 "the closer look at {:.0}–{:.0} Hz with the new gains on {}",
@@ -104,6 +103,35 @@ pub struct Band {
     pub stop_hz: f64,
     pub points: u32,
 }
+
+/// The sweep settings of a closer look at `band`: `standard`'s, over the band's frequencies,
+/// with a time budget of the share of `standard`'s its points make of `standard`'s
+/// frequencies, or [`BAND_BUDGET_OVER_SHORTEST`] times the band's shortest schedule (no
+/// record extended) at the loop's `base_rate_hz` where that is longer. The budget lets a
+/// record run past its cap of extensions while the sweep still ends within it, and bounds the
+/// sweep where its shortest schedule fits it: inherited whole, it would let a band of a few
+/// points run as long as the standard sweep (9.9 s); one its shortest schedule does not fit
+/// would leave the records' caps alone to bound the band (51 s for 40 points at 20–40 Hz).
+pub fn band_settings(standard: &SweepParams, band: &Band, base_rate_hz: f32) -> SweepParams {
+    let frequencies = standard.points + u32::from(standard.extra_hz > 0.0);
+    let share = band.points as f32 / frequencies.max(1) as f32;
+    let settings = SweepParams {
+        start_hz: band.start_hz as f32,
+        stop_hz: band.stop_hz as f32,
+        points: band.points,
+        extra_hz: 0.0,
+        ..*standard
+    };
+    let shortest = settings.total_ticks(base_rate_hz) as f32 / base_rate_hz;
+    SweepParams {
+        time_budget_s: (standard.time_budget_s * share).max(BAND_BUDGET_OVER_SHORTEST * shortest),
+        ..settings
+    }
+}
+
+/// A closer look's time budget is at least its shortest schedule times this (room for its
+/// noisy records to run to the precision).
+pub const BAND_BUDGET_OVER_SHORTEST: f32 = 1.5;
 
 /// A closer look's spacing: neighbouring frequencies at most this ratio apart (1.5 %: the
 /// default sweep's 15.7 % in ten).
@@ -209,6 +237,40 @@ mod tests {
     use crate::calibrate::friction_runs::FrictionRuns;
     use control_core::Params;
     use std::f64::consts::TAU;
+
+    /// A closer look's time budget follows its points and always holds its shortest schedule
+    /// (so the core's budget bound keeps the band within it): a band of five points near a
+    /// 350 Hz crossover gets its share of the standard sweep's 9.9 s, or one and a half times
+    /// its shortest schedule; forty points at 20–40 Hz, whose records at their caps could run
+    /// 51 s, get one and a half times their shortest schedule. Every band passes the core's
+    /// validation.
+    #[test]
+    fn a_closer_look_has_a_budget_it_can_keep() {
+        let params = Params::default();
+        let rate = params.rates.current_loop_hz;
+        let standard = sweep_settings(InjectionPoint::VelocityFeedback, FEEDBACK_AMPLITUDE);
+        let seconds = |ticks: u64| ticks as f32 / rate;
+        let frequencies = standard.points + u32::from(standard.extra_hz > 0.0);
+        for band in [
+            Band { start_hz: 330.0, stop_hz: 370.0, points: 5 },
+            Band { start_hz: 20.0, stop_hz: 40.0, points: CLOSER_MOST_POINTS },
+            Band { start_hz: 500.0, stop_hz: 500.0, points: 1 },
+        ] {
+            let settings = band_settings(&standard, &band, rate);
+            assert_eq!(settings.validate(rate, params.rates.velocity_divider), Ok(()), "{band:?}");
+            let shortest = seconds(settings.total_ticks(rate));
+            let share = standard.time_budget_s * band.points as f32 / frequencies as f32;
+            let budget = settings.time_budget_s;
+            assert!(budget >= shortest, "{band:?}: budget {budget} s, shortest {shortest} s");
+            assert!(budget <= share.max(BAND_BUDGET_OVER_SHORTEST * shortest) * 1.0001, "{band:?}: {budget} s");
+            // Bounded well below what the records' caps alone allow, and the standard budget.
+            let caps = seconds(SweepParams { time_budget_s: 0.0, ..settings }.max_total_ticks(rate));
+            assert!(budget < caps, "{band:?}: budget {budget} s, caps {caps} s");
+            if band.points <= 5 {
+                assert!(budget < 0.25 * standard.time_budget_s, "{band:?}: {budget} s");
+            }
+        }
+    }
 
     /// An axis whose open loop is `loop_gain`, read exactly at each sweep's frequencies (the
     /// core's frequency plan), one second of drive time a sweep.
