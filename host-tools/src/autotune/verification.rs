@@ -58,11 +58,14 @@ pub fn verify(
     let mut points = sweep.points;
     let mut limited_points = sweep.voltage_limited + sweep.torque_limited;
     let mut drive_time_s = sweep.drive_time_s;
-    let bands = closer_looks(&points, predicted, goal);
-    let base_rate_hz = if bands.is_empty() { 0.0 } else { target.params(tuned)?.rates.current_loop_hz };
-    let all_points: u32 = bands.iter().map(|b| b.points).sum();
-    for band in bands {
-        let settings = band_settings(&standard, &band, all_points, base_rate_hz);
+    for band in closer_looks(&points, predicted, goal) {
+        let settings = SweepParams {
+            start_hz: band.start_hz as f32,
+            stop_hz: band.stop_hz as f32,
+            points: band.points,
+            extra_hz: 0.0,
+            ..standard
+        };
         let closer = target.sweep(&settings, tuned, velocity).with_context(|| {
             format!(
                 "the closer look at {:.0}–{:.0} Hz with the new gains on {}",
@@ -101,42 +104,6 @@ pub struct Band {
     pub stop_hz: f64,
     pub points: u32,
 }
-
-/// The sweep settings of a closer look at `band`, one of the closer looks that measure
-/// `all_points` frequencies in all: `standard`'s, over the band's frequencies, with the
-/// share of `standard`'s time budget its points make of `all_points` (the closer looks
-/// together take one standard sweep's budget; a single band the whole of it), or
-/// [`BAND_BUDGET_OVER_SHORTEST`] times the band's shortest schedule (the core's own: no
-/// record extended, each wait for the next frequency's peak at its bound) at the loop's
-/// `base_rate_hz` where that is longer; none where `standard` has none. The budget counts
-/// from the band's first frequency and lets a record run past its cap of extensions, and
-/// its settling check discard half blocks, while the sweep still ends within it; where the
-/// shortest schedule fits it, the band ends within it. A budget shared by points among every
-/// frequency of the standard sweep instead (nine points in 24–28 Hz: 2.2 s) cut the settling
-/// of a ringing loop over the virtual drive (machine 3 of 40: its close design then missed,
-/// and the full reserve's took a second verification, 52.6 s of drive time against 45.4).
-pub fn band_settings(standard: &SweepParams, band: &Band, all_points: u32, base_rate_hz: f32) -> SweepParams {
-    let share = band.points as f32 / all_points.max(band.points).max(1) as f32;
-    let settings = SweepParams {
-        start_hz: band.start_hz as f32,
-        stop_hz: band.stop_hz as f32,
-        points: band.points,
-        extra_hz: 0.0,
-        ..*standard
-    };
-    if standard.time_budget_s <= 0.0 {
-        return settings;
-    }
-    let shortest = settings.shortest_ticks(&settings.plan(), base_rate_hz) as f32 / base_rate_hz;
-    SweepParams {
-        time_budget_s: (standard.time_budget_s * share).max(BAND_BUDGET_OVER_SHORTEST * shortest),
-        ..settings
-    }
-}
-
-/// A closer look's time budget is at least its shortest schedule times this (room for its
-/// noisy records to run to the precision).
-pub const BAND_BUDGET_OVER_SHORTEST: f32 = 1.5;
 
 /// A closer look's spacing: neighbouring frequencies at most this ratio apart (1.5 %: the
 /// default sweep's 15.7 % in ten).
@@ -242,49 +209,6 @@ mod tests {
     use crate::calibrate::friction_runs::FrictionRuns;
     use control_core::Params;
     use std::f64::consts::TAU;
-
-    /// The closer looks share one standard sweep's time budget by their points, and each
-    /// band's holds the core's shortest schedule (so the core's budget bound keeps the band
-    /// within it): a single band gets the whole 9.9 s; of five bands (5 points near 350 Hz, 40
-    /// at 20–40 Hz, 1 at 500 Hz, 9 in a 10–11.6 Hz gap, 5 at 60–70 Hz), the small ones get
-    /// their share and the 10–11.6 Hz gap, whose share its shortest schedule does not fit, one
-    /// and a half times that schedule. Every band passes the core's validation.
-    #[test]
-    fn the_closer_looks_share_a_budget_each_can_keep() {
-        let params = Params::default();
-        let rate = params.rates.current_loop_hz;
-        let standard = sweep_settings(InjectionPoint::VelocityFeedback, FEEDBACK_AMPLITUDE);
-        let alone = Band { start_hz: 24.0, stop_hz: 28.0, points: 9 };
-        assert_eq!(band_settings(&standard, &alone, 9, rate).time_budget_s, standard.time_budget_s);
-        let bands = [
-            Band { start_hz: 330.0, stop_hz: 370.0, points: 5 },
-            Band { start_hz: 20.0, stop_hz: 40.0, points: CLOSER_MOST_POINTS },
-            Band { start_hz: 500.0, stop_hz: 500.0, points: 1 },
-            Band { start_hz: 10.0, stop_hz: 11.6, points: 9 },
-            Band { start_hz: 60.0, stop_hz: 70.0, points: 5 },
-        ];
-        let all: u32 = bands.iter().map(|b| b.points).sum();
-        let mut floors = 0;
-        let mut total = 0.0;
-        for band in bands {
-            let settings = band_settings(&standard, &band, all, rate);
-            assert_eq!(settings.validate(rate, params.rates.velocity_divider), Ok(()), "{band:?}");
-            let shortest_ticks = settings.shortest_ticks(&settings.plan(), rate);
-            let shortest = shortest_ticks as f32 / rate;
-            let share = standard.time_budget_s * band.points as f32 / all as f32;
-            let budget = settings.time_budget_s;
-            assert!(settings.budget_ticks(rate) >= shortest_ticks, "{band:?}: {budget} s, shortest {shortest} s");
-            assert!(budget <= share.max(BAND_BUDGET_OVER_SHORTEST * shortest) * 1.0001, "{band:?}: {budget} s");
-            floors += usize::from(share < shortest);
-            total += budget.max(share) - share;
-        }
-        assert_eq!(floors, 1, "one band's share does not hold its shortest schedule");
-        // Beyond the standard budget only by what the floors add.
-        assert!(total > 0.0 && total < standard.time_budget_s, "{total}");
-        // Without a budget on the standard sweep, none on a band.
-        let unbudgeted = SweepParams { time_budget_s: 0.0, ..standard };
-        assert_eq!(band_settings(&unbudgeted, &alone, 9, rate).time_budget_s, 0.0);
-    }
 
     /// An axis whose open loop is `loop_gain`, read exactly at each sweep's frequencies (the
     /// core's frequency plan), one second of drive time a sweep.
