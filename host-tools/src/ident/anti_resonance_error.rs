@@ -35,7 +35,7 @@ impl FactorError {
 }
 
 /// A normal deviate (Box–Muller on two uniforms in (0, 1)).
-fn normal(rng: &mut XorShift64Star) -> f64 {
+pub(crate) fn normal(rng: &mut XorShift64Star) -> f64 {
     let uniform = |rng: &mut XorShift64Star| ((rng.next() >> 11) as f64 + 0.5) / (1u64 << 53) as f64;
     let (u1, u2) = (uniform(rng), uniform(rng));
     (-2.0 * u1.ln()).sqrt() * (std::f64::consts::TAU * u2).cos()

@@ -293,11 +293,7 @@ mod tests {
         let exact: Vec<Complex64> = frequencies.iter().map(|&f| analytic_response(&plant, f)).collect();
         let noise = 0.1 * exact.iter().map(|h| h.norm()).fold(f64::INFINITY, f64::min);
         let mut rng = crate::random::XorShift64Star(7);
-        let mut normal = move || {
-            let mut uniform = || ((rng.next() >> 11) as f64 + 0.5) / (1u64 << 53) as f64;
-            let (a, b) = (uniform(), uniform());
-            (-2.0 * a.ln()).sqrt() * (std::f64::consts::TAU * b).cos()
-        };
+        let mut normal = move || crate::ident::anti_resonance_error::normal(&mut rng);
         let n = frequencies.len();
         let errors: Vec<(f64, f64)> = (0..40)
             .map(|_| {

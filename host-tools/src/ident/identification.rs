@@ -384,7 +384,7 @@ fn least_squares(mut a: DMatrix<f64>, b: DVector<f64>) -> Result<(Vec<f64>, f64)
 }
 
 /// Polynomial in s = jx at x.
-fn poly_at(c: &[f64], x: f64) -> Complex64 {
+pub(crate) fn poly_at(c: &[f64], x: f64) -> Complex64 {
     let s = Complex64::new(0.0, x);
     c.iter().rev().fold(Complex64::default(), |acc, &ci| acc * s + ci)
 }
@@ -798,8 +798,8 @@ mod tests {
         assert!(masked.model.anti_resonance.is_none(), "{n:?}: {:?}", masked.model);
         let why = masked.undetermined.expect("the reason");
         assert!(why.contains("does not determine") && why.contains("masks it"), "{why}");
-        // The standard error it names lies between the one-standard-error promise and the rule.
-        // Both standard errors it names are within the promise at one standard error.
+        // The frequency's standard error it names lies between the rule's limit and the
+        // promise at one standard error, and the damping's within the promise at one.
         let named = |after: &str| -> f64 {
             why.split(after).nth(1).and_then(|t| t.split(' ').next()).unwrap().parse().unwrap()
         };

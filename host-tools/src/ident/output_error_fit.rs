@@ -12,6 +12,8 @@
 use nalgebra::{DMatrix, DVector};
 use num_complex::Complex64;
 
+use crate::ident::identification::poly_at as polynomial;
+
 /// Most Levenberg–Marquardt steps tried.
 const MOST_STEPS: usize = 60;
 /// The steps end where a step lowers the criterion by less than this share of it.
@@ -20,12 +22,6 @@ const RELATIVE_TOLERANCE: f64 = 1e-12;
 /// (jx)^i.
 fn power(x: f64, i: usize) -> Complex64 {
     Complex64::new(0.0, x).powu(i as u32)
-}
-
-/// Polynomial with coefficients `c` (lowest power first) at s = jx.
-fn polynomial(c: &[f64], x: f64) -> Complex64 {
-    let s = Complex64::new(0.0, x);
-    c.iter().rev().fold(Complex64::default(), |acc, &ci| acc * s + ci)
 }
 
 /// The criterion for `theta` = (b₀ … b_nb, a₁ … a_na), a₀ = 1.
